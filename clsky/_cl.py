@@ -1,0 +1,267 @@
+"""OpenCL plumbing: device choice, the one program loader, and the engine base class.
+
+Kernel sources live in ``kernels/`` (shipped as the ``clsky.kernels`` resource package). A program is
+an ordered list of those files plus, where needed, generated declarations (:class:`Source`); nothing
+uses ``#include``. Programs are cached in-process by (context, sources, sorted options); PyOpenCL
+caches the compiled binaries on disk.
+
+Device choice (:func:`default_device`): ``PYOPENCL_CTX`` if set; else a GPU; else the fastest PoCL
+build (PoCL 3.1+ vectorises about 4-5x better than the 3.0-rc2 pip build, see ``shared/pocl.md``);
+else any CPU device.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import importlib.resources
+import os
+import pathlib
+import re
+import threading
+
+import numpy as np
+
+try:
+    import pyopencl as cl
+    import pyopencl.characterize
+    import pyopencl.cltypes
+    import pyopencl.tools
+except ImportError as error:  # pragma: no cover - exercised only on broken installs
+    raise ImportError("clsky needs pyopencl: pip install pyopencl (and an OpenCL driver, see README)") from error
+
+__all__ = ["KernelBuildError", "NoDeviceError", "Source", "Engine", "list_devices", "default_device",
+           "make_context", "real_vector_dtype", "check_dtype", "INSTALL_HINT"]
+
+INSTALL_HINT = ("install a CPU OpenCL driver: as root `apt-get install pocl-opencl-icd` (fast PoCL 3.1), "
+                "or `pip install 'pyopencl[pocl]'` (PoCL pip build)")
+
+
+class KernelBuildError(RuntimeError):
+    """An OpenCL program failed to build; the message names files, options and device."""
+
+
+class NoDeviceError(RuntimeError):
+    """No usable OpenCL device (or none with the requested precision)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Source:
+    """Generated OpenCL C text placed among the kernel files of a program (e.g. a struct declaration)."""
+
+    label: str
+    text: str
+
+
+# Devices ----------------------------------------------------------------------------------------------
+
+def _pocl_version(platform) -> tuple[int, ...]:
+    match = re.search(r"PoCL (\d+)\.(\d+)", platform.version)
+    return tuple(int(g) for g in match.groups()) if match else ()
+
+
+def _release_rank(platform) -> int:
+    """Release builds before release candidates of the same version (3.0 < 3.0-rc2 would be wrong)."""
+    return 0 if re.search(r"-rc\d", platform.version) else 1
+
+
+def _device_rank(device) -> tuple:
+    is_gpu = bool(device.type & cl.device_type.GPU)
+    platform = device.platform
+    return (is_gpu, _pocl_version(platform), _release_rank(platform), device.max_compute_units)
+
+
+def _all_devices():
+    try:
+        platforms = cl.get_platforms()
+    except cl.Error:
+        return []
+    return [d for p in platforms for d in p.get_devices()]
+
+
+def has_fp64(device) -> bool:
+    return bool(pyopencl.characterize.has_double_support(device))
+
+
+def default_device():
+    """The device clsky uses when ``PYOPENCL_CTX`` is not set (see module docstring)."""
+    devices = _all_devices()
+    if not devices:
+        raise NoDeviceError(f"no OpenCL device found; {INSTALL_HINT}")
+    return max(devices, key=_device_rank)
+
+
+def make_context(dtype=np.float64):
+    """A context on the chosen device; NoDeviceError if that device lacks fp64 when float64 is asked."""
+    if os.environ.get("PYOPENCL_CTX"):
+        try:
+            context = cl.create_some_context(interactive=False)
+        except (cl.Error, RuntimeError, ValueError) as error:
+            raise NoDeviceError(f"PYOPENCL_CTX={os.environ['PYOPENCL_CTX']!r} selects no device: {error}; "
+                                f"run `clsky devices` to list them") from error
+    else:
+        context = cl.Context([default_device()])
+    check_dtype(context.devices[0], dtype)
+    return context
+
+
+def check_dtype(device, dtype):
+    """Raise TypeError for a dtype other than float32/float64, NoDeviceError for float64 without fp64."""
+    dtype = np.dtype(dtype)
+    if dtype not in (np.float32, np.float64):
+        raise TypeError(f"dtype must be float32 or float64, got {dtype}")
+    if dtype == np.float64 and not has_fp64(device):
+        raise NoDeviceError(f"device {device.name!r} has no double precision (cl_khr_fp64); use "
+                            f"dtype=float32 or {INSTALL_HINT}")
+
+
+def list_devices():
+    """Every platform/device as a list of dicts (name, platform, version, fp64, chosen)."""
+    devices = _all_devices()
+    chosen = None
+    if os.environ.get("PYOPENCL_CTX"):
+        try:
+            chosen = make_context(np.float32).devices[0]
+        except NoDeviceError:
+            chosen = None
+    elif devices:
+        chosen = default_device()
+    return [{"platform": d.platform.name, "platform_version": d.platform.version, "device": d.name,
+             "device_version": d.version, "type": cl.device_type.to_string(d.type),
+             "compute_units": d.max_compute_units, "fp64": has_fp64(d), "chosen": d == chosen}
+            for d in devices]
+
+
+# Programs ---------------------------------------------------------------------------------------------
+
+@functools.lru_cache(maxsize=1)
+def kernel_directory():
+    """Where the ``.cl`` files are: the installed ``clsky.kernels`` resources, or, when clsky runs
+    from a source checkout (the package directory shadows the installed one), ``kernels/`` beside it."""
+    try:
+        return importlib.resources.files("clsky.kernels")
+    except ModuleNotFoundError:
+        checkout = pathlib.Path(__file__).resolve().parent.parent / "kernels"
+        if checkout.is_dir():
+            return checkout
+        raise KernelBuildError("the OpenCL sources (clsky.kernels) are not installed; reinstall clsky") from None
+
+
+def _kernel_text(name: str) -> str:
+    return kernel_directory().joinpath(name).read_text(encoding="utf-8")
+
+
+_program_cache: dict = {}
+_program_cache_lock = threading.Lock()
+
+
+def build_program(context, sources, options=()):
+    """Build (or fetch from the in-process cache) the program made of ``sources`` in order.
+
+    Each item of ``sources`` is a file name in ``kernels/`` or a :class:`Source`.
+    """
+    options = tuple(sorted(options))
+    key = (context.int_ptr, tuple(sources), options)
+    with _program_cache_lock:
+        if key in _program_cache:
+            return _program_cache[key]
+    parts = []
+    for item in sources:
+        label, text = (item.label, item.text) if isinstance(item, Source) else (item, _kernel_text(item))
+        parts.append(f"/* ---- {label} ---- */\n#line 1\n{text}\n")
+    names = [s.label if isinstance(s, Source) else s for s in sources]
+    try:
+        program = cl.Program(context, "".join(parts)).build(options=list(options))
+    except cl.Error as error:
+        device = context.devices[0]
+        raise KernelBuildError(f"building {names} with options {list(options)} on {device.name!r} "
+                               f"({device.platform.version}) failed:\n{error}") from error
+    with _program_cache_lock:
+        _program_cache[key] = program
+    return program
+
+
+def real_vector_dtype(dtype, width: int):
+    """NumPy dtype of the OpenCL vector ``real<width>`` for ``dtype`` (float32 or float64)."""
+    base = "double" if np.dtype(dtype) == np.float64 else "float"
+    return getattr(pyopencl.cltypes, f"{base}{width}")
+
+
+@functools.lru_cache(maxsize=None)
+def _struct(device, name, fields, dtype_str):
+    dtype = np.dtype([(fname, ftype) for fname, ftype in fields])
+    dtype, declaration = pyopencl.tools.match_dtype_to_c_struct(device, name, dtype)
+    dtype = pyopencl.tools.get_or_register_dtype(f"{name}_{dtype_str}", dtype)
+    return dtype, declaration
+
+
+def struct_dtype(device, name, fields, dtype):
+    """(NumPy dtype, C declaration) of a struct, matched to the device's layout.
+
+    ``fields`` is a tuple of (name, numpy dtype) pairs; the declaration is generated from it, so the C
+    and NumPy views can never drift apart.
+    """
+    return _struct(device, name, tuple(fields), np.dtype(dtype).name)
+
+
+# Engine -----------------------------------------------------------------------------------------------
+
+class Engine:
+    """Owns one OpenCL program: builds it once and fetches every kernel once.
+
+    Subclasses set :attr:`sources` and may extend :meth:`build_options`. Calls are not thread-safe: use
+    one engine per thread.
+
+    Parameters
+    ----------
+    ctx : pyopencl.Context, optional
+        Defaults to :func:`make_context`.
+    dtype : numpy dtype
+        float64 (default) or float32: the kernels' ``real`` type.
+    profile : bool
+        Keep (label, event) pairs of every launch in :attr:`events`.
+    fast_math : bool
+        Build with ``-cl-fast-relaxed-math`` (opt-in: it implies finite-math-only).
+    """
+
+    sources: tuple = ()
+
+    def __init__(self, ctx=None, dtype=np.float64, profile=False, fast_math=False):
+        self.dtype = np.dtype(dtype)
+        self.ctx = ctx if ctx is not None else make_context(self.dtype)
+        self.device = self.ctx.devices[0]
+        check_dtype(self.device, self.dtype)
+        self.fast_math = bool(fast_math)
+        properties = cl.command_queue_properties.PROFILING_ENABLE if profile else 0
+        self.queue = cl.CommandQueue(self.ctx, properties=properties)
+        self.profile = profile
+        self.events: list = []
+        self.program = build_program(self.ctx, self.program_sources(), self.build_options())
+        self.kernels = {k.function_name: k for k in self.program.all_kernels()}
+
+    def program_sources(self):
+        return self.sources
+
+    def build_options(self) -> list[str]:
+        options = ["-DREAL_IS_DOUBLE=1"] if self.dtype == np.float64 else []
+        if self.fast_math:
+            options.append("-cl-fast-relaxed-math")
+        return options
+
+    def real(self, value):
+        return self.dtype.type(value)
+
+    def _record(self, label, event):
+        if self.profile:
+            self.events.append((label, event))
+        return event
+
+    def close(self):
+        self.queue.finish()
+        self.kernels = {}
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

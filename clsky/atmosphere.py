@@ -1,0 +1,225 @@
+"""Atmosphere parameters: a validated, immutable description of the planet, its air and its sun.
+
+Two presets share one atmosphere and differ only in the Rayleigh phase function:
+
+``atmosphere-plus``
+    The constants of the Atmosphere Plus notes (after Elek 2009) with the notes' *modified* Rayleigh
+    phase 0.8 (7/5 + c^2/2), an artistic choice whose mean over the sphere is 1.2533, not 1.
+``physical``
+    The same atmosphere with the true Rayleigh phase 3/4 (1 + c^2).
+
+All lengths are in metres, scattering coefficients in 1/m, wavelengths in nanometres.
+
+References
+----------
+Elek, O. (2009). Rendering parametrizable planetary atmospheres with multiple scattering in real time.
+Proc. CESCG. Nishita, T. et al. (1993). Display of the earth taking into account atmospheric
+scattering. SIGGRAPH '93, doi:10.1145/166117.166140. ``shared/physics.md`` (constants and the notes'
+typos: N_R = 2.545e25 m^-3, not 2.454e25).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "AtmosphereParameters",
+    "PRESETS",
+    "preset",
+    "rayleigh_scattering_coefficient",
+    "RAYLEIGH_PHASE_METHODS",
+    "MIE_PHASE_METHODS",
+]
+
+#: Rayleigh phase functions the kernels know, name -> index passed to OpenCL.
+RAYLEIGH_PHASE_METHODS = {"rayleigh": 0, "modified_atmosphereplus": 1}
+#: Mie phase functions the kernels know, name -> index passed to OpenCL.
+MIE_PHASE_METHODS = {"cornette_shanks": 0}
+
+
+def rayleigh_scattering_coefficient(refractive_index, number_density, wavelengths_nm):
+    """Rayleigh scattering coefficient of air.
+
+    Parameters
+    ----------
+    refractive_index : float
+        Refractive index of air at sea level n (1.0003 in the notes).
+    number_density : float
+        Molecular number density at sea level N [1/m^3] (2.545e25).
+    wavelengths_nm : array_like
+        Wavelengths [nm].
+
+    Returns
+    -------
+    numpy.ndarray
+        beta_R = 8 pi^3 (n^2 - 1)^2 / (3 N lambda^4) [1/m], one per wavelength.
+
+    Notes
+    -----
+    Nishita et al. (1993), eq. 2 (with the King factor omitted, as the notes do).
+
+    Examples
+    --------
+    >>> rayleigh_scattering_coefficient(1.0003, 2.545e25, [650, 510, 475]).round(10)
+    array([6.554e-06, 1.7293e-05, 2.2982e-05])
+    """
+    wavelength_m = np.asarray(wavelengths_nm, dtype=np.float64) * 1e-9
+    n2m1 = refractive_index**2 - 1.0
+    return 8.0 * math.pi**3 * n2m1**2 / (3.0 * number_density * wavelength_m**4)
+
+
+def _as_rgb(name: str, value) -> tuple[float, float, float]:
+    array = np.asarray(value, dtype=np.float64)
+    if array.shape != (3,):
+        raise ValueError(f"{name} must have 3 values (r, g, b), got shape {array.shape}")
+    return tuple(float(v) for v in array)
+
+
+@dataclasses.dataclass(frozen=True)
+class AtmosphereParameters:
+    """Planet, air and sun of a simulated sky. Immutable; every field is checked on creation.
+
+    Parameters
+    ----------
+    planet_radius : float
+        Rp [m], > 0.
+    top_radius : float
+        Ra [m], radius of the top of the atmosphere, > Rp.
+    rayleigh_scale_height, mie_scale_height : float
+        H_R, H_M [m], > 0: densities are rho(h) = exp(-h / H).
+    rayleigh_scattering : tuple of 3 floats
+        beta_R at the three wavelengths [1/m], >= 0 (Rayleigh extinction equals scattering).
+    mie_scattering : float
+        beta_M [1/m], >= 0, wavelength independent.
+    mie_extinction_ratio : float
+        beta_M / beta_M^e in (0, 1]: the notes' 0.9 gives beta_M^e = beta_M / 0.9.
+    mie_g : float
+        Cornette-Shanks asymmetry in the notes' sign convention, |g| < 1; negative g peaks toward the sun.
+    rayleigh_phase : str
+        One of :data:`RAYLEIGH_PHASE_METHODS`.
+    mie_phase : str
+        One of :data:`MIE_PHASE_METHODS`.
+    wavelengths : tuple of 3 floats
+        The r, g, b wavelengths [nm], > 0 (documentation of beta_R; not used by the kernels).
+    solar_irradiance, spectral_to_rgb : tuple of 3 floats
+        Factors of the incident light, >= 0.
+    exposure : float
+        Exposure factor of the incident light, > 0.
+    """
+
+    planet_radius: float = 6_371_000.0
+    top_radius: float = 6_471_000.0
+    rayleigh_scale_height: float = 8_000.0
+    mie_scale_height: float = 1_200.0
+    rayleigh_scattering: tuple = (6.55e-6, 1.73e-5, 2.30e-5)
+    mie_scattering: float = 2e-6
+    mie_extinction_ratio: float = 0.9
+    mie_g: float = -0.85
+    rayleigh_phase: str = "modified_atmosphereplus"
+    mie_phase: str = "cornette_shanks"
+    wavelengths: tuple = (650.0, 510.0, 475.0)
+    solar_irradiance: tuple = (0.1526, 0.191, 0.208)
+    spectral_to_rgb: tuple = (133.3209, 88.51855, 112.7552)
+    exposure: float = 1.0
+
+    def __post_init__(self):
+        for name in ("rayleigh_scattering", "wavelengths", "solar_irradiance", "spectral_to_rgb"):
+            object.__setattr__(self, name, _as_rgb(name, getattr(self, name)))
+        for name in ("planet_radius", "top_radius", "rayleigh_scale_height", "mie_scale_height",
+                     "mie_scattering", "mie_extinction_ratio", "mie_g", "exposure"):
+            value = getattr(self, name)
+            if isinstance(value, (bool, np.bool_)) or not np.isscalar(value):
+                raise ValueError(f"{name} must be a real number, got {value!r}")
+            object.__setattr__(self, name, float(value))
+
+        def check(name, ok, valid_range):
+            values = np.atleast_1d(getattr(self, name))
+            if not (np.all(np.isfinite(values)) and ok(values)):
+                raise ValueError(f"{name} must be {valid_range}, got {getattr(self, name)!r}")
+
+        check("planet_radius", lambda v: v > 0, "a finite radius > 0 m")
+        check("top_radius", lambda v: v > self.planet_radius,
+              f"finite and > planet_radius ({self.planet_radius:g} m)")
+        check("rayleigh_scale_height", lambda v: v > 0, "finite and > 0 m")
+        check("mie_scale_height", lambda v: v > 0, "finite and > 0 m")
+        check("rayleigh_scattering", lambda v: np.all(v >= 0), "finite and >= 0 1/m")
+        check("mie_scattering", lambda v: v >= 0, "finite and >= 0 1/m")
+        check("mie_extinction_ratio", lambda v: (v > 0) & (v <= 1), "in (0, 1]")
+        check("mie_g", lambda v: np.abs(v) < 1, "in (-1, 1)")
+        check("wavelengths", lambda v: np.all(v > 0), "finite and > 0 nm")
+        check("solar_irradiance", lambda v: np.all(v >= 0), "finite and >= 0")
+        check("spectral_to_rgb", lambda v: np.all(v >= 0), "finite and >= 0")
+        check("exposure", lambda v: v > 0, "finite and > 0")
+        if self.rayleigh_phase not in RAYLEIGH_PHASE_METHODS:
+            raise ValueError(f"rayleigh_phase must be one of {sorted(RAYLEIGH_PHASE_METHODS)}, "
+                             f"got {self.rayleigh_phase!r}")
+        if self.mie_phase not in MIE_PHASE_METHODS:
+            raise ValueError(f"mie_phase must be one of {sorted(MIE_PHASE_METHODS)}, got {self.mie_phase!r}")
+
+    # Derived quantities -----------------------------------------------------------------------------
+    @property
+    def atmosphere_height(self) -> float:
+        """Ha = Ra - Rp [m]."""
+        return self.top_radius - self.planet_radius
+
+    @property
+    def mie_extinction(self) -> float:
+        """beta_M^e = beta_M / ratio [1/m]."""
+        return self.mie_scattering / self.mie_extinction_ratio
+
+    @property
+    def incident_light(self) -> np.ndarray:
+        """I_I = irradiance * exposure * spectral-to-RGB, one value per channel (r, g, b)."""
+        return (np.array(self.solar_irradiance) * self.exposure * np.array(self.spectral_to_rgb))
+
+    # Construction and identity ----------------------------------------------------------------------
+    @classmethod
+    def from_refractive_index(cls, refractive_index=1.0003, number_density=2.545e25,
+                              wavelengths=(650.0, 510.0, 475.0), **fields):
+        """Parameters whose beta_R is derived from n, N and the wavelengths
+        (:func:`rayleigh_scattering_coefficient`)."""
+        beta = rayleigh_scattering_coefficient(refractive_index, number_density, wavelengths)
+        return cls(rayleigh_scattering=tuple(beta), wavelengths=tuple(wavelengths), **fields)
+
+    def replace(self, **changes) -> "AtmosphereParameters":
+        """A copy with some fields changed (validated again)."""
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-serialisable dictionary of every field."""
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "AtmosphereParameters":
+        """Inverse of :meth:`to_dict`; unknown fields raise ValueError."""
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(data) - known
+        if unknown:
+            raise ValueError(f"unknown atmosphere fields: {sorted(unknown)}")
+        return cls(**data)
+
+    def digest(self) -> str:
+        """SHA-256 of the canonical JSON of every field: identifies the atmosphere of a saved table."""
+        text = json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(text.encode()).hexdigest()
+
+
+#: Named presets (see module docstring).
+PRESETS = {
+    "atmosphere-plus": AtmosphereParameters(),
+    "physical": AtmosphereParameters(rayleigh_phase="rayleigh"),
+}
+
+
+def preset(name: str) -> AtmosphereParameters:
+    """The preset called ``name``; ValueError lists the valid names."""
+    try:
+        return PRESETS[name]
+    except KeyError:
+        raise ValueError(f"preset must be one of {sorted(PRESETS)}, got {name!r}") from None

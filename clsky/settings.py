@@ -1,0 +1,117 @@
+"""Numerical settings of a scattering table: the knobs users trade speed for accuracy with."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+__all__ = ["TableSettings", "MAPPINGS", "SAMPLINGS", "SUN_TRANSMITTANCE_METHODS", "MIE_LAYOUTS"]
+
+#: Texture mappings of the 3D table, name -> index passed to OpenCL (mapping.cl).
+MAPPINGS = {"linear": 0, "nonlinear": 1}
+#: Node placement along rays: uniform, or Keller & Bohn's (i/n)^3 (view) and (i/n)^2 (sun).
+SAMPLINGS = ("uniform", "keller_bohn")
+#: How the sunlight's transmittance to a sample is found: re-marched, or read from a 2D table.
+SUN_TRANSMITTANCE_METHODS = ("march", "table")
+#: Channels stored per cell: Rayleigh r, g, b + Mie r, g, b, or the notes' Rayleigh r, g, b + one Mie.
+MIE_LAYOUTS = {"per-wavelength": 6, "notes": 4}
+
+_MAX_CELLS = 2**31 // 8   # keeps every flat index (times channels) inside a signed 32-bit int
+
+
+def _check_int(name, value, low, high):
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{name} must be an integer in [{low}, {high}], got {value!r}")
+    if not low <= value <= high:
+        raise ValueError(f"{name} must be in [{low}, {high}], got {value}")
+    return int(value)
+
+
+def _check_choice(name, value, choices):
+    if value not in choices:
+        raise ValueError(f"{name} must be one of {sorted(choices)}, got {value!r}")
+    return value
+
+
+@dataclasses.dataclass(frozen=True)
+class TableSettings:
+    """How a scattering table is discretised and computed.
+
+    Parameters
+    ----------
+    size : (W, H, D)
+        Nodes along altitude, view zenith and sun zenith; each in [2, 4096] (default 32 x 256 x 32).
+    mapping : {'nonlinear', 'linear'}
+        Texture mapping of the axes (mapping.cl).
+    view_steps, sun_steps : int
+        Trapezoid steps along the view ray and along each sun ray, in [1, 4096] (default 30 each).
+    sampling : {'uniform', 'keller_bohn'}
+        Node placement along rays.
+    sun_transmittance : {'march', 'table'}
+        Re-march every sun ray, or read a 2D column-density table of ``transmittance_size`` nodes.
+    transmittance_size : (TW, TH)
+        Nodes of that 2D table along altitude and zenith cosine, each in [2, 4096].
+    mie_layout : {'per-wavelength', 'notes'}
+        6 channels (Mie per wavelength, default) or the notes' 4 (one Mie channel, the mean of the three).
+    dtype : {'float64', 'float32'}
+        Precision of the kernels.
+    """
+
+    size: tuple = (32, 256, 32)
+    mapping: str = "nonlinear"
+    view_steps: int = 30
+    sun_steps: int = 30
+    sampling: str = "uniform"
+    sun_transmittance: str = "march"
+    transmittance_size: tuple = (64, 256)
+    mie_layout: str = "per-wavelength"
+    dtype: str = "float64"
+
+    def __post_init__(self):
+        object.__setattr__(self, "size", self._check_size("size", self.size, 3))
+        object.__setattr__(self, "transmittance_size",
+                           self._check_size("transmittance_size", self.transmittance_size, 2))
+        if int(np.prod(self.size)) > _MAX_CELLS:
+            raise ValueError(f"size must have at most {_MAX_CELLS} cells, got {self.size}")
+        object.__setattr__(self, "view_steps", _check_int("view_steps", self.view_steps, 1, 4096))
+        object.__setattr__(self, "sun_steps", _check_int("sun_steps", self.sun_steps, 1, 4096))
+        _check_choice("mapping", self.mapping, MAPPINGS)
+        _check_choice("sampling", self.sampling, SAMPLINGS)
+        _check_choice("sun_transmittance", self.sun_transmittance, SUN_TRANSMITTANCE_METHODS)
+        _check_choice("mie_layout", self.mie_layout, MIE_LAYOUTS)
+        try:
+            dtype = np.dtype(self.dtype)
+        except TypeError:
+            dtype = None
+        if dtype not in (np.float32, np.float64):
+            raise ValueError(f"dtype must be 'float64' or 'float32', got {self.dtype!r}")
+        object.__setattr__(self, "dtype", dtype.name)
+
+    @staticmethod
+    def _check_size(name, value, count):
+        try:
+            items = tuple(value)
+        except TypeError:
+            raise ValueError(f"{name} must be {count} integers, got {value!r}") from None
+        if len(items) != count:
+            raise ValueError(f"{name} must be {count} integers, got {value!r}")
+        return tuple(_check_int(f"{name}[{i}]", v, 2, 4096) for i, v in enumerate(items))
+
+    @property
+    def channels(self) -> int:
+        return MIE_LAYOUTS[self.mie_layout]
+
+    def replace(self, **changes) -> "TableSettings":
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict:
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "TableSettings":
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(data) - known
+        if unknown:
+            raise ValueError(f"unknown table settings: {sorted(unknown)}")
+        return cls(**data)

@@ -1,0 +1,89 @@
+"""The single-scattering 3D table on OpenCL (``kernels/single.cl``).
+
+NumPy twin: :func:`clsky.reference.single_scattering`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pyopencl.array as cla
+
+from . import _atmosphere_cl, _cl
+from .atmosphere import AtmosphereParameters
+from .settings import MAPPINGS, TableSettings
+from .transmittance import COMMON_SOURCES, TransmittanceEngine
+
+__all__ = ["SingleScatteringEngine"]
+
+#: Cells per work-item along the altitude axis (real8 arithmetic; see kernels/single.cl).
+VECTOR_WIDTH = 8
+
+
+class SingleScatteringEngine(_cl.Engine):
+    """Builds single-scattering tables for the loop counts and sampling of ``settings``.
+
+    One engine serves any atmosphere, table size and mapping: those are per-call values; the loop
+    counts, sampling and sun-transmittance method are compiled in. The precision is ``settings.dtype``.
+
+    Parameters
+    ----------
+    settings : TableSettings
+    ctx, profile, fast_math
+        See :class:`clsky._cl.Engine`.
+    """
+
+    def __init__(self, settings: TableSettings = TableSettings(), ctx=None, profile=False, fast_math=False):
+        self.settings = settings
+        super().__init__(ctx, np.dtype(settings.dtype), profile, fast_math)
+        self._transmittance = None
+        if settings.sun_transmittance == "table":
+            self._transmittance = TransmittanceEngine(self.ctx, self.dtype, profile, fast_math,
+                                                      steps=settings.sun_steps, sampling=settings.sampling)
+
+    def program_sources(self):
+        declaration = _atmosphere_cl.declaration(self.ctx.devices[0], self.dtype)
+        return ("real.cl", declaration) + COMMON_SOURCES[1:] + ("mapping.cl", "single.cl")
+
+    def build_options(self):
+        s = self.settings
+        options = super().build_options() + [f"-DN_VIEW={s.view_steps}", f"-DN_SUN={s.sun_steps}",
+                                             f"-DVECTOR_WIDTH={VECTOR_WIDTH}"]
+        if s.sampling == "keller_bohn":
+            options.append("-DKELLER_BOHN_SAMPLING=1")
+        if s.sun_transmittance == "table":
+            options.append("-DSUN_TRANSMITTANCE_TABLE=1")
+        return options
+
+    def compute(self, atmosphere: AtmosphereParameters, size=None, mapping=None):
+        """The single-scattering table.
+
+        Parameters
+        ----------
+        atmosphere : AtmosphereParameters
+        size : (W, H, D), optional
+            Defaults to ``settings.size``.
+        mapping : {'nonlinear', 'linear'}, optional
+            Defaults to ``settings.mapping``.
+
+        Returns
+        -------
+        numpy.ndarray, shape (D, H, W, 6), float64
+            Ibar^(1) [1/sr] per cell: Rayleigh r, g, b, Mie r, g, b (flat index x + y W + z W H).
+        """
+        settings = self.settings.replace(size=size or self.settings.size, mapping=mapping or self.settings.mapping)
+        width, height, depth = settings.size
+        atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
+        if self._transmittance is not None:
+            tw, th = settings.transmittance_size
+            sun_table_d = self._transmittance.column_density_table(atmosphere, (tw, th), queue_only=True)
+            self._transmittance.queue.finish()    # built on the other engine's queue: wait for it
+        else:
+            tw = th = 2
+            sun_table_d = cla.zeros(self.queue, 8, self.dtype)
+        table_d = cla.empty(self.queue, (depth, height, width, 6), self.dtype)
+        event = self.kernels["single_scattering"](
+            self.queue, (-(-width // VECTOR_WIDTH), height, depth), None, atmosphere_d,
+            np.int32(width), np.int32(height), np.int32(depth), np.int32(MAPPINGS[settings.mapping]),
+            sun_table_d.data, np.int32(tw), np.int32(th), table_d.data)
+        self._record("single_scattering", event)
+        return table_d.get().astype(np.float64)

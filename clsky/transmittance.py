@@ -1,0 +1,111 @@
+"""Optical depth and transmittance along segments, and the 2D column-density table (OpenCL).
+
+Kernels: ``kernels/transmittance.cl``. NumPy twins: :func:`clsky.reference.optical_depth` and
+:func:`clsky.reference.transmittance_table`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
+
+from . import _atmosphere_cl, _cl
+from .atmosphere import AtmosphereParameters
+from .settings import SAMPLINGS, _check_choice, _check_int
+
+__all__ = ["TransmittanceEngine", "check_segments"]
+
+COMMON_SOURCES = ("real.cl", "geometry.cl", "column.cl", "transmittance_table.cl")
+
+
+def check_segments(atmosphere, altitude, cos_zenith, length):
+    """Broadcast and check segment arrays; ValueError names the bad parameter and its range."""
+    altitude, cos_zenith, length = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64)
+                                                         for a in (altitude, cos_zenith, length)))
+    checks = (("altitude", altitude, 0.0, atmosphere.atmosphere_height, "m"),
+              ("cos_zenith", cos_zenith, -1.0, 1.0, ""),
+              ("length", length, 0.0, 2 * atmosphere.top_radius, "m"))
+    for name, values, low, high, unit in checks:
+        if not np.all(np.isfinite(values) & (values >= low) & (values <= high)):
+            raise ValueError(f"{name} must be finite and in [{low:g}, {high:g}] {unit}".rstrip())
+    return altitude, cos_zenith, length
+
+
+class TransmittanceEngine(_cl.Engine):
+    """Optical depth along segments by the trapezoidal rule, and the 2D column-density table.
+
+    Parameters
+    ----------
+    steps : int
+        Trapezoid steps per segment (default 30, as Bruneton & Neyret), in [1, 4096].
+    sampling : {'uniform', 'keller_bohn'}
+        Uniform nodes, or Keller & Bohn's nodes t_j = d (j/n)^2.
+    ctx, dtype, profile, fast_math
+        See :class:`clsky._cl.Engine`.
+    """
+
+    def __init__(self, ctx=None, dtype=np.float64, profile=False, fast_math=False, *, steps=30,
+                 sampling="uniform"):
+        self.steps = _check_int("steps", steps, 1, 4096)
+        self.sampling = _check_choice("sampling", sampling, SAMPLINGS)
+        super().__init__(ctx, dtype, profile, fast_math)
+
+    def program_sources(self):
+        declaration = _atmosphere_cl.declaration(self.ctx.devices[0], self.dtype)
+        return ("real.cl", declaration) + COMMON_SOURCES[1:] + ("transmittance.cl",)
+
+    def build_options(self):
+        options = super().build_options() + [f"-DN_SUN={self.steps}"]
+        if self.sampling == "keller_bohn":
+            options.append("-DKELLER_BOHN_SAMPLING=1")
+        return options
+
+    def optical_depth(self, atmosphere: AtmosphereParameters, altitude, cos_zenith, length):
+        """Optical depth of segments, per wavelength.
+
+        Parameters
+        ----------
+        atmosphere : AtmosphereParameters
+        altitude : array_like
+            Altitude of the segment's start [m], in [0, Ha].
+        cos_zenith : array_like
+            Cosine of the segment direction's zenith angle at its start, in [-1, 1].
+        length : array_like
+            Segment length [m], in [0, 2 Ra]. The caller keeps the segment above the ground.
+
+        Returns
+        -------
+        numpy.ndarray, shape broadcast + (3,)
+            tau for r, g, b (dimensionless).
+        """
+        altitude, cos_zenith, length = check_segments(atmosphere, altitude, cos_zenith, length)
+        shape = altitude.shape
+        n = altitude.size
+        inputs = [cla.to_device(self.queue, np.ascontiguousarray(a.ravel(), dtype=self.dtype))
+                  for a in (altitude, cos_zenith, length)]
+        tau_d = cla.empty(self.queue, (max(n, 1), 3), self.dtype)
+        atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
+        if n:
+            event = self.kernels["optical_depth"](self.queue, (n,), None, atmosphere_d, np.int32(n),
+                                                  *(a.data for a in inputs), tau_d.data)
+            self._record("optical_depth", event)
+        return tau_d.get()[:n].reshape(shape + (3,)).astype(np.float64)
+
+    def transmittance(self, atmosphere, altitude, cos_zenith, length):
+        """exp(-optical_depth) per wavelength; same parameters as :meth:`optical_depth`."""
+        return np.exp(-self.optical_depth(atmosphere, altitude, cos_zenith, length))
+
+    def column_density_table(self, atmosphere: AtmosphereParameters, size=(64, 256), queue_only=False):
+        """The 2D table of column densities (C_R, C_M) [m] from each node to the top of the atmosphere.
+
+        Axes in ``kernels/transmittance_table.cl``. Returns an array of shape (TH, TW, 2) (or, with
+        ``queue_only``, the device array, for use by other kernels of the same context).
+        """
+        tw, th = (_check_int(f"size[{i}]", v, 2, 4096) for i, v in enumerate(size))
+        table_d = cla.empty(self.queue, (th, tw, 2), self.dtype)
+        atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
+        event = self.kernels["transmittance_table"](self.queue, (tw, th), None, atmosphere_d,
+                                                    np.int32(tw), np.int32(th), table_d.data)
+        self._record("transmittance_table", event)
+        return table_d if queue_only else table_d.get()

@@ -1,0 +1,59 @@
+/* real.cl -- precision prelude shared by every clsky program.
+ *
+ * -DREAL_IS_DOUBLE=1 selects double precision (clsky's default); otherwise float32. Shared code uses
+ * only `real`, `real2`, `real3`, `real4`, `real8` and the R(x) literal macro, never `float` or `1.0f`.
+ */
+#ifdef REAL_IS_DOUBLE
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+typedef double real;
+typedef double2 real2;
+typedef double3 real3;
+typedef double4 real4;
+typedef double8 real8;
+#define R(x) ((real)(x))
+#define REAL_EPSILON DBL_EPSILON
+#define REAL_TINY DBL_MIN
+#else
+typedef float real;
+typedef float2 real2;
+typedef float3 real3;
+typedef float4 real4;
+typedef float8 real8;
+#define R(x) ((real)(x##f))
+#define REAL_EPSILON FLT_EPSILON
+#define REAL_TINY FLT_MIN
+#endif
+
+#define PI_REAL R(3.14159265358979323846)
+
+/* realv: the type the geometry and column helpers compute in. -DVECTOR_WIDTH=8 makes every work-item
+ * handle 8 cells at once in real8 arithmetic, which PoCL maps onto AVX-512 (see shared/pocl.md: it
+ * does not vectorise the scalar loops across work-items by itself). maskv holds comparison results
+ * (-1 true in vectors, 1 true in scalars); select() accepts both. */
+#ifndef VECTOR_WIDTH
+#define VECTOR_WIDTH 1
+#endif
+#if VECTOR_WIDTH == 8
+typedef real8 realv;
+#define LANE_INDEX ((realv)(R(0.0), R(1.0), R(2.0), R(3.0), R(4.0), R(5.0), R(6.0), R(7.0)))
+#ifdef REAL_IS_DOUBLE
+typedef long8 maskv;
+#else
+typedef int8 maskv;
+#endif
+#elif VECTOR_WIDTH == 1
+typedef real realv;
+typedef int maskv;
+#define LANE_INDEX R(0.0)
+#else
+#error "VECTOR_WIDTH must be 1 or 8"
+#endif
+#define V(x) ((realv)(R(x)))
+/* SELECT(a, b, m): b where mask m is true, else a (select() is ambiguous for scalar double) */
+#if VECTOR_WIDTH == 1
+#define SELECT(a, b, m) ((m) ? (b) : (a))
+#else
+#define SELECT(a, b, m) select((a), (b), (m))
+#endif
+/* lane k of a realv */
+#define LANE(v, k) (((real *)&(v))[k])
