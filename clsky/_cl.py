@@ -83,6 +83,12 @@ def has_fp64(device) -> bool:
     return bool(pyopencl.characterize.has_double_support(device))
 
 
+def describe_device(device) -> str:
+    """Short name of a device with its platform version, e.g. 'pthread-skylake-avx512 (PoCL 3.1+debian)'."""
+    match = re.search(r"PoCL [^ ]+", device.platform.version)
+    return f"{device.name} ({match.group(0) if match else device.platform.version.strip()})"
+
+
 def default_device():
     """The device clsky uses when ``PYOPENCL_CTX`` is not set (see module docstring)."""
     devices = _all_devices()

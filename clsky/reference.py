@@ -232,3 +232,55 @@ def single_scattering(atmosphere: AtmosphereParameters, settings: TableSettings 
         out[part] = _single_scattering_cells(atmosphere, settings, altitudes[x[part]], cos_view[y[part]],
                                              cos_sun[z[part]], sun_table)
     return out.reshape(depth, height, width, 6)
+
+
+# Table lookup (kernels/lookup.cl) ----------------------------------------------------------------
+
+def enter_atmosphere(atmosphere, altitude, cos_view, cos_sun, cos_scatter):
+    """Moves observers above the atmosphere to where their view ray enters it.
+
+    Returns (altitude, cos_view, cos_sun, inside) with ``inside`` False where the ray misses the
+    atmosphere.
+    """
+    ra = atmosphere.top_radius
+    r = atmosphere.planet_radius + altitude
+    above = r > ra
+    outside = (r - ra) * (r + ra)
+    discriminant = r * cos_view * r * cos_view - outside
+    inside = ~above | ((cos_view < 0.0) & (discriminant >= 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d = outside / (np.sqrt(np.maximum(discriminant, 0.0)) - r * cos_view)
+    return (np.where(above, atmosphere.atmosphere_height, altitude),
+            np.where(above, np.clip((r * cos_view + d) / ra, -1.0, 1.0), cos_view),
+            np.where(above, np.clip((r * cos_sun + d * cos_scatter) / ra, -1.0, 1.0), cos_sun),
+            inside)
+
+
+def lookup(atmosphere: AtmosphereParameters, data, altitude, cos_view, cos_sun, cos_scatter,
+           mapping="nonlinear"):
+    """Radiance from a table; twin of ``TableLookupEngine.radiance`` (same parameters and result)."""
+    from .mapping import altitude_to_u, cos_to_v
+    from .phase import mie_phase, rayleigh_phase
+
+    depth, height, width, channels = data.shape
+    altitude, cos_view, cos_sun, cos_scatter = np.broadcast_arrays(
+        *(np.asarray(a, dtype=np.float64) for a in (altitude, cos_view, cos_sun, cos_scatter)))
+    nu = np.clip(cos_scatter, -1.0, 1.0)
+    h, mu_v, mu_s, inside = enter_atmosphere(atmosphere, altitude, cos_view, cos_sun, nu)
+    position = []
+    for coordinate, n in ((altitude_to_u(h, atmosphere.atmosphere_height, mapping), width),
+                          (cos_to_v(mu_v, mapping), height), (cos_to_v(mu_s, mapping), depth)):
+        f = coordinate * (n - 1)
+        lower = np.clip(f.astype(np.int64), 0, n - 2)
+        position.append((lower, f - lower))
+    (x0, ax), (y0, ay), (z0, az) = position
+    ibar = np.zeros(h.shape + (channels,))
+    for dx in (0, 1):
+        for dy in (0, 1):
+            for dz in (0, 1):
+                weight = (ax if dx else 1 - ax) * (ay if dy else 1 - ay) * (az if dz else 1 - az)
+                ibar += weight[..., None] * data[z0 + dz, y0 + dy, x0 + dx]
+    ibar *= inside[..., None]
+    mie = ibar[..., 3:6] if channels == 6 else ibar[..., 3:4]
+    return np.asarray(atmosphere.incident_light) * (rayleigh_phase(atmosphere, nu)[..., None] * ibar[..., 0:3]
+                                                    + mie_phase(atmosphere, nu)[..., None] * mie)

@@ -17,6 +17,8 @@ __all__ = ["SingleScatteringEngine"]
 
 #: Cells per work-item along the altitude axis (real8 arithmetic; see kernels/single.cl).
 VECTOR_WIDTH = 8
+#: Sun-zenith layers per kernel launch (progress is reported between launches).
+SLAB_LAYERS = 4
 
 
 class SingleScatteringEngine(_cl.Engine):
@@ -54,7 +56,7 @@ class SingleScatteringEngine(_cl.Engine):
             options.append("-DSUN_TRANSMITTANCE_TABLE=1")
         return options
 
-    def compute(self, atmosphere: AtmosphereParameters, size=None, mapping=None):
+    def compute(self, atmosphere: AtmosphereParameters, size=None, mapping=None, progress=None):
         """The single-scattering table.
 
         Parameters
@@ -64,6 +66,8 @@ class SingleScatteringEngine(_cl.Engine):
             Defaults to ``settings.size``.
         mapping : {'nonlinear', 'linear'}, optional
             Defaults to ``settings.mapping``.
+        progress : callable, optional
+            Called as ``progress(done, total)`` after each slab of sun-zenith layers.
 
         Returns
         -------
@@ -81,9 +85,16 @@ class SingleScatteringEngine(_cl.Engine):
             tw = th = 2
             sun_table_d = cla.zeros(self.queue, 8, self.dtype)
         table_d = cla.empty(self.queue, (depth, height, width, 6), self.dtype)
-        event = self.kernels["single_scattering"](
-            self.queue, (-(-width // VECTOR_WIDTH), height, depth), None, atmosphere_d,
-            np.int32(width), np.int32(height), np.int32(depth), np.int32(MAPPINGS[settings.mapping]),
-            sun_table_d.data, np.int32(tw), np.int32(th), table_d.data)
-        self._record("single_scattering", event)
+        kernel = self.kernels["single_scattering"]
+        slabs = range(0, depth, SLAB_LAYERS)
+        for done, z_offset in enumerate(slabs, start=1):
+            slab = min(SLAB_LAYERS, depth - z_offset)
+            event = kernel(self.queue, (-(-width // VECTOR_WIDTH), height, slab), None, atmosphere_d,
+                           np.int32(width), np.int32(height), np.int32(depth), np.int32(z_offset),
+                           np.int32(MAPPINGS[settings.mapping]), sun_table_d.data, np.int32(tw),
+                           np.int32(th), table_d.data)
+            self._record("single_scattering", event)
+            if progress is not None:
+                event.wait()
+                progress(done, len(slabs))
         return table_d.get().astype(np.float64)

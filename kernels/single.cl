@@ -15,7 +15,8 @@
  * ground-hitting view ray lies on the ground at altitude exactly 0.
  *
  * Each work-item computes VECTOR_WIDTH cells along the altitude axis (x = VECTOR_WIDTH gx + lane), all
- * branch-free in realv arithmetic. Global size (ceil(W / VECTOR_WIDTH), H, D).
+ * branch-free in realv arithmetic. Global size (ceil(W / VECTOR_WIDTH), H, slab): a launch covers the
+ * sun-zenith layers z_offset .. z_offset + slab - 1 (the host launches slabs to report progress).
  *
  * Output: 6 reals per cell at index i = x + y W + z W H: Rayleigh r, g, b, then Mie r, g, b [1/sr].
  * Requires real.cl, atmosphere_t, geometry.cl, column.cl, transmittance_table.cl, mapping.cl.
@@ -35,13 +36,13 @@ inline real view_node(const int i)
 }
 
 __kernel void single_scattering(__constant const atmosphere_t *atm, const int width, const int height,
-                                const int depth, const int mapping,
+                                const int depth, const int z_offset, const int mapping,
                                 __global const real *sun_table, const int tw, const int th,
                                 __global real *table)
 {
     const int gx = get_global_id(0);
     const int y = get_global_id(1);
-    const int z = get_global_id(2);
+    const int z = get_global_id(2) + z_offset;
     if (gx * VECTOR_WIDTH >= width || y >= height || z >= depth)
         return;
 

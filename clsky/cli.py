@@ -1,0 +1,162 @@
+"""Command line: ``clsky devices`` and ``clsky table``.
+
+Thin by design: parse, build the configuration objects, call the library, write. Bad arguments give
+one line on stderr and exit status 2; ``--verbose`` shows tracebacks of unexpected errors.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+from . import __version__
+
+EXIT_USAGE = 2
+EXIT_FAILURE = 1
+
+
+class UsageError(Exception):
+    """A bad command-line value: reported in one line, exit status 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line instead of argparse's usage block
+        raise UsageError(message)
+
+
+def _progress_bar(mode, description, unit):
+    """A tqdm-driven ``progress(done, total)`` callable (or None), writing to stderr."""
+    if mode == "none":
+        return None, lambda: None
+    from tqdm import tqdm
+
+    bar = tqdm(desc=description, unit=unit, leave=(mode == "leave"), file=sys.stderr, dynamic_ncols=True)
+
+    def update(done, total):
+        bar.total = total
+        bar.n = done
+        bar.refresh()
+
+    return update, bar.close
+
+
+def _add_table_arguments(parser):
+    from .atmosphere import PRESETS
+    from .settings import MAPPINGS, MIE_LAYOUTS, SAMPLINGS, SUN_TRANSMITTANCE_METHODS
+
+    physics = parser.add_argument_group("atmosphere")
+    physics.add_argument("--preset", default="atmosphere-plus", choices=sorted(PRESETS),
+                         help="atmosphere preset (default: %(default)s)")
+    grid = parser.add_argument_group("table")
+    grid.add_argument("--size", nargs=3, type=int, metavar=("W", "H", "D"), default=[32, 256, 32],
+                      help="nodes along altitude, view zenith, sun zenith (default: 32 256 32)")
+    grid.add_argument("--mapping", default="nonlinear", choices=sorted(MAPPINGS))
+    grid.add_argument("--mie-layout", default="per-wavelength", choices=sorted(MIE_LAYOUTS))
+    numerics = parser.add_argument_group("numerics")
+    numerics.add_argument("--dtype", default="float64", choices=["float64", "float32"])
+    numerics.add_argument("--view-steps", type=int, default=30, help="trapezoid steps per view ray")
+    numerics.add_argument("--sun-steps", type=int, default=30, help="trapezoid steps per sun ray")
+    numerics.add_argument("--sampling", default="uniform", choices=list(SAMPLINGS))
+    numerics.add_argument("--sun-transmittance", default="march", choices=list(SUN_TRANSMITTANCE_METHODS))
+    numerics.add_argument("--transmittance-size", nargs=2, type=int, metavar=("TW", "TH"), default=[64, 256])
+    numerics.add_argument("--backend", default="opencl", choices=["opencl", "numpy"])
+    numerics.add_argument("--fast-math", action="store_true", help="build kernels with -cl-fast-relaxed-math")
+    output = parser.add_argument_group("output")
+    output.add_argument("-o", "--output", default="table.npz", help="table file (.npz, default: %(default)s)")
+    output.add_argument("--raw", metavar="NAME", help="also export NAME.bin (float32) + NAME.json for GPU engines")
+    output.add_argument("--force", action="store_true", help="overwrite existing output files")
+    output.add_argument("--progress", default="leave", choices=["display", "leave", "none"])
+
+
+def build_parser():
+    parser = _Parser(prog="clsky", description="Daylight and twilight skies: precomputed scattering on OpenCL.")
+    parser.add_argument("--version", action="version", version=f"clsky {__version__}")
+    parser.add_argument("--verbose", action="store_true", help="show tracebacks of unexpected errors")
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    commands.add_parser("devices", help="list OpenCL platforms and devices, and the one clsky uses")
+    table = commands.add_parser("table", help="compute a scattering table and save it")
+    _add_table_arguments(table)
+    return parser
+
+
+def run_devices(args):
+    from ._cl import INSTALL_HINT, list_devices
+
+    devices = list_devices()
+    if not devices:
+        print(f"no OpenCL device found; {INSTALL_HINT}")
+        return EXIT_FAILURE
+    for d in devices:
+        mark = "*" if d["chosen"] else " "
+        print(f"{mark} {d['device']} [{d['type']}, {d['compute_units']} compute units, "
+              f"fp64 {'yes' if d['fp64'] else 'no'}]\n    platform: {d['platform']} "
+              f"({d['platform_version']}), {d['device_version']}")
+    print("* = used by clsky (override with PYOPENCL_CTX)")
+    return 0
+
+
+def run_table(args):
+    import pathlib
+
+    from .atmosphere import preset
+    from .settings import TableSettings
+    from .table import ScatteringTable
+
+    settings = TableSettings(size=tuple(args.size), mapping=args.mapping, view_steps=args.view_steps,
+                             sun_steps=args.sun_steps, sampling=args.sampling,
+                             sun_transmittance=args.sun_transmittance,
+                             transmittance_size=tuple(args.transmittance_size), mie_layout=args.mie_layout,
+                             dtype=args.dtype)
+    output = pathlib.Path(args.output)
+    if output.suffix != ".npz":
+        raise UsageError(f"--output must end in .npz, got {args.output!r}")
+    targets = [output] + ([pathlib.Path(args.raw).with_suffix(s) for s in (".bin", ".json")] if args.raw else [])
+    for target in targets:
+        if target.exists() and not args.force:
+            raise UsageError(f"{target} exists; use --force to overwrite it")
+        if not target.parent.is_dir():
+            raise UsageError(f"output directory {target.parent} does not exist")
+    progress, close = _progress_bar(args.progress, "single scattering", "slab")
+    start = time.perf_counter()
+    try:
+        table = ScatteringTable.build(preset(args.preset), settings, backend=args.backend,
+                                      fast_math=args.fast_math, progress=progress)
+    finally:
+        close()
+    table.save(output, overwrite=args.force)
+    if args.raw:
+        table.export_raw(args.raw, overwrite=args.force)
+    width, height, depth = settings.size
+    print(f"table {width}x{height}x{depth} {settings.dtype} ({args.preset}, {table.metadata['device']}): "
+          f"built in {table.metadata['build_seconds']:.2f} s, total {time.perf_counter() - start:.2f} s "
+          f"-> {output}")
+    return 0
+
+
+COMMANDS = {"devices": run_devices, "table": run_table}
+
+
+def main(argv=None):
+    from ._cl import KernelBuildError, NoDeviceError
+
+    verbose = "--verbose" in (sys.argv[1:] if argv is None else argv)
+    try:
+        args = build_parser().parse_args(argv)
+        return COMMANDS[args.command](args)
+    except UsageError as error:
+        print(f"clsky: error: {error}", file=sys.stderr)
+        return EXIT_USAGE
+    except (ValueError, FileExistsError) as error:
+        if verbose:
+            raise
+        print(f"clsky: error: {error}", file=sys.stderr)
+        return EXIT_USAGE
+    except (NoDeviceError, KernelBuildError, OSError) as error:
+        if verbose:
+            raise
+        print(f"clsky: error: {str(error).splitlines()[0]}", file=sys.stderr)
+        return EXIT_FAILURE
+    except KeyboardInterrupt:
+        print("clsky: interrupted", file=sys.stderr)
+        return 130

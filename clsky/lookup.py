@@ -1,0 +1,83 @@
+"""Radiance from a scattering table on OpenCL (``kernels/lookup.cl``).
+
+NumPy twin: :func:`clsky.reference.lookup`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pyopencl.array as cla
+
+from . import _atmosphere_cl, _cl
+from .atmosphere import AtmosphereParameters
+from .settings import MAPPINGS, MIE_LAYOUTS, _check_choice
+
+__all__ = ["TableLookupEngine", "check_queries"]
+
+
+def check_queries(altitude, cos_view, cos_sun, cos_scatter):
+    """Broadcast and check lookup queries; ValueError names the bad parameter and its range."""
+    arrays = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64)
+                                   for a in (altitude, cos_view, cos_sun, cos_scatter)))
+    names = ("altitude", "cos_view", "cos_sun", "cos_scatter")
+    ranges = ((0.0, np.inf), (-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0))
+    for name, values, (low, high) in zip(names, arrays, ranges):
+        if not np.all(np.isfinite(values) & (values >= low) & (values <= high)):
+            raise ValueError(f"{name} must be finite and in [{low:g}, {high:g}]")
+    return arrays
+
+
+def check_table_data(data):
+    """The (D, H, W, C) array of a table, C in {6, 4}, each axis >= 2."""
+    data = np.asarray(data)
+    if data.ndim != 4 or data.shape[3] not in MIE_LAYOUTS.values() or min(data.shape[:3]) < 2:
+        raise ValueError(f"table data must have shape (D, H, W, 6 or 4) with D, H, W >= 2, got {data.shape}")
+    return data
+
+
+class TableLookupEngine(_cl.Engine):
+    """Trilinear lookups in a scattering table, phase functions at the true scattering angle."""
+
+    sources = ("geometry.cl", "mapping.cl", "phase.cl", "lookup.cl")
+
+    def program_sources(self):
+        return ("real.cl", _atmosphere_cl.declaration(self.ctx.devices[0], self.dtype)) + self.sources
+
+    def radiance(self, atmosphere: AtmosphereParameters, data, altitude, cos_view, cos_sun, cos_scatter,
+                 mapping="nonlinear"):
+        """Radiance I = I_I (F_R Ibar_R + F_M Ibar_M) for each query.
+
+        Parameters
+        ----------
+        atmosphere : AtmosphereParameters
+            The table's atmosphere (phase functions, I_I, radii).
+        data : numpy.ndarray, shape (D, H, W, C)
+            Table values (C = 6, or 4 in the notes' layout).
+        altitude : array_like
+            Observer altitude [m], >= 0 (above the atmosphere: seen from space).
+        cos_view, cos_sun, cos_scatter : array_like
+            Cosines of the view zenith, the sun zenith and the scattering angle dot(Sun, V).
+        mapping : {'nonlinear', 'linear'}
+            The table's texture mapping.
+
+        Returns
+        -------
+        numpy.ndarray, broadcast shape + (3,)
+            Radiance r, g, b (HDR, before exposure tone mapping).
+        """
+        data = check_table_data(data)
+        _check_choice("mapping", mapping, MAPPINGS)
+        queries = check_queries(altitude, cos_view, cos_sun, cos_scatter)
+        shape, n = queries[0].shape, queries[0].size
+        depth, height, width, channels = data.shape
+        table_d = cla.to_device(self.queue, np.ascontiguousarray(data, dtype=self.dtype))
+        queries_d = [cla.to_device(self.queue, np.ascontiguousarray(q.ravel(), dtype=self.dtype)) for q in queries]
+        radiance_d = cla.empty(self.queue, (max(n, 1), 3), self.dtype)
+        atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
+        if n:
+            event = self.kernels["lookup"](
+                self.queue, (n,), None, atmosphere_d, table_d.data, np.int32(width), np.int32(height),
+                np.int32(depth), np.int32(channels), np.int32(MAPPINGS[mapping]), np.int32(n),
+                *(q.data for q in queries_d), radiance_d.data)
+            self._record("lookup", event)
+        return radiance_d.get()[:n].reshape(shape + (3,)).astype(np.float64)

@@ -1,0 +1,55 @@
+"""Phase functions (NumPy), mirroring ``kernels/phase.cl``. None carries the 1/(4 pi): each averages to
+1 over the sphere, except the notes' modified Rayleigh (mean 1.2533, an artistic choice).
+
+Argument: c = cos(theta) = dot(Sun, V); c = 1 looks straight at the sun.
+
+References
+----------
+Cornette, W. M. & Shanks, J. G. (1992). Physically reasonable analytic expression for the
+single-scattering phase function. Applied Optics 31(16), 3152, doi:10.1364/AO.31.003152.
+``shared/physics.md`` (sign convention of g: the notes' g = -0.85 with "+2 g c" peaks toward the sun).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["rayleigh", "rayleigh_modified_atmosphereplus", "mie_cornette_shanks",
+           "RAYLEIGH_PHASES", "MIE_PHASES", "rayleigh_phase", "mie_phase"]
+
+
+def rayleigh(c):
+    """True Rayleigh phase 3/4 (1 + c^2); mean 1 over the sphere."""
+    c = np.asarray(c, dtype=np.float64)
+    return 0.75 * (1.0 + c * c)
+
+
+def rayleigh_modified_atmosphereplus(c):
+    """The Atmosphere Plus notes' 0.8 (7/5 + c^2 / 2); mean 1.2533 over the sphere (not 1)."""
+    c = np.asarray(c, dtype=np.float64)
+    return 0.8 * (1.4 + 0.5 * c * c)
+
+
+def mie_cornette_shanks(c, g):
+    """Cornette-Shanks 3(1-g^2) / (2(2+g^2)) (1+c^2) / (1+g^2+2gc)^(3/2), notes' sign convention.
+
+    With g < 0 (notes: -0.85) the forward lobe points at the sun (c = 1).
+    """
+    c = np.asarray(c, dtype=np.float64)
+    g2 = g * g
+    return 1.5 * (1.0 - g2) / (2.0 + g2) * (1.0 + c * c) / (1.0 + g2 + 2.0 * g * c) ** 1.5
+
+
+#: Registries, keyed by AtmosphereParameters.rayleigh_phase / .mie_phase.
+RAYLEIGH_PHASES = {"rayleigh": rayleigh, "modified_atmosphereplus": rayleigh_modified_atmosphereplus}
+MIE_PHASES = {"cornette_shanks": mie_cornette_shanks}
+
+
+def rayleigh_phase(atmosphere, c):
+    """The Rayleigh phase function chosen by ``atmosphere``, at cosine c."""
+    return RAYLEIGH_PHASES[atmosphere.rayleigh_phase](c)
+
+
+def mie_phase(atmosphere, c):
+    """The Mie phase function chosen by ``atmosphere``, at cosine c."""
+    return MIE_PHASES[atmosphere.mie_phase](c, atmosphere.mie_g)

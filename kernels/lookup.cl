@@ -1,0 +1,74 @@
+/* lookup.cl -- kernel of clsky/lookup.py: radiance from the 3D scattering table.
+ *
+ *   I = I_I (F_R(cos theta) Ibar_R + F_M(cos theta) Ibar_M)            (physics.md, "Rendering")
+ * with Ibar interpolated trilinearly in texture space (u, v, w) (mapping.cl) and the phase functions
+ * evaluated at the true scattering angle cos theta = dot(Sun, V) (phase.cl).
+ *
+ * Inputs per query: observer altitude h [m] (>= 0; above Ha the observer looks from space: the view
+ * ray is moved to where it enters the atmosphere, and a ray that misses it sees no sky), cosines of
+ * the view zenith, sun zenith and scattering angle. Table: channels per cell CHANNELS = 6 (Rayleigh
+ * r, g, b, Mie r, g, b) or 4 (the notes' Rayleigh r, g, b + one Mie), cell index x + y W + z W H.
+ * Output: radiance r, g, b per query. Built with VECTOR_WIDTH 1.
+ * Requires real.cl, atmosphere_t, geometry.cl, mapping.cl, phase.cl.
+ */
+
+/* Moves an observer above the atmosphere to the entry point of its view ray. Returns 0 if the ray
+ * misses the atmosphere. h, mu_v and mu_s are updated in place (nu does not change along a ray). */
+inline int enter_atmosphere(__constant const atmosphere_t *atm, real *h, real *mu_v, real *mu_s, const real nu)
+{
+    const real ra = atm->top_radius;
+    const real r = atm->planet_radius + *h;
+    if (r <= ra)
+        return 1;
+    const real outside = (r - ra) * (r + ra);                 /* r^2 - Ra^2 > 0 */
+    const real discriminant = r * *mu_v * r * *mu_v - outside;
+    if (*mu_v >= R(0.0) || discriminant < R(0.0))
+        return 0;
+    const real d = outside / (sqrt(discriminant) - r * *mu_v); /* near root, cancellation-free */
+    *mu_v = clamp((r * *mu_v + d) / ra, R(-1.0), R(1.0));
+    *mu_s = clamp((r * *mu_s + d * nu) / ra, R(-1.0), R(1.0));
+    *h = ra - atm->planet_radius;
+    return 1;
+}
+
+inline int lower_node(const real f, const int n)
+{
+    return clamp((int)f, 0, n - 2);
+}
+
+__kernel void lookup(__constant const atmosphere_t *atm, __global const real *table,
+                     const int width, const int height, const int depth, const int channels,
+                     const int mapping, const int n,
+                     __global const real *altitude, __global const real *cos_view,
+                     __global const real *cos_sun, __global const real *cos_scatter,
+                     __global real *radiance)
+{
+    const int i = get_global_id(0);
+    if (i >= n)
+        return;
+    real h = altitude[i], mu_v = cos_view[i], mu_s = cos_sun[i];
+    const real nu = clamp(cos_scatter[i], R(-1.0), R(1.0));
+    real ibar[6] = {R(0.0), R(0.0), R(0.0), R(0.0), R(0.0), R(0.0)};
+    if (enter_atmosphere(atm, &h, &mu_v, &mu_s, nu)) {
+        const real ha = atm->top_radius - atm->planet_radius;
+        const real fx = MAPPING_U(h, mapping, ha) * (real)(width - 1);
+        const real fy = MAPPING_V(mu_v, mapping) * (real)(height - 1);
+        const real fz = MAPPING_V(mu_s, mapping) * (real)(depth - 1);
+        const int x0 = lower_node(fx, width), y0 = lower_node(fy, height), z0 = lower_node(fz, depth);
+        const real ax = fx - (real)x0, ay = fy - (real)y0, az = fz - (real)z0;
+        for (int corner = 0; corner < 8; ++corner) {
+            const int dx = corner & 1, dy = (corner >> 1) & 1, dz = corner >> 2;
+            const real weight = (dx ? ax : R(1.0) - ax) * (dy ? ay : R(1.0) - ay) * (dz ? az : R(1.0) - az);
+            const size_t cell = (size_t)(x0 + dx) + (size_t)width * ((size_t)(y0 + dy) + (size_t)height * (size_t)(z0 + dz));
+            for (int c = 0; c < channels; ++c)
+                ibar[c] += weight * table[cell * channels + c];
+        }
+    }
+    const real f_r = phase_rayleigh(atm, nu);
+    const real f_m = phase_mie(atm, nu);
+    const int mie = 3;                       /* first Mie channel */
+    const int mie_stride = channels == 6;    /* 6 channels: Mie per wavelength; 4: one Mie channel */
+    radiance[3 * i] = atm->incident_light.x * (f_r * ibar[0] + f_m * ibar[mie]);
+    radiance[3 * i + 1] = atm->incident_light.y * (f_r * ibar[1] + f_m * ibar[mie + mie_stride]);
+    radiance[3 * i + 2] = atm->incident_light.z * (f_r * ibar[2] + f_m * ibar[mie + 2 * mie_stride]);
+}
