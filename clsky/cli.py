@@ -92,7 +92,7 @@ def run_devices(args):
         print(f"{mark} {d['device']} [{d['type']}, {d['compute_units']} compute units, "
               f"fp64 {'yes' if d['fp64'] else 'no'}]\n    platform: {d['platform']} "
               f"({d['platform_version']}), {d['device_version']}")
-    print("* = used by clsky (override with PYOPENCL_CTX)")
+    print("(*: the device clsky uses; choose another with PYOPENCL_CTX)")
     return 0
 
 

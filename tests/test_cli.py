@@ -1,0 +1,62 @@
+"""The command line: clsky devices and clsky table, run as a user would (a subprocess)."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from clsky import ScatteringTable
+
+
+def clsky(*args, cwd):
+    return subprocess.run([sys.executable, "-m", "clsky", *args], cwd=cwd, capture_output=True, text=True)
+
+
+def test_devices_lists_the_chosen_device(tmp_path):
+    result = clsky("devices", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    chosen = [line for line in result.stdout.splitlines() if line.startswith("* ")]
+    assert len(chosen) == 1
+    assert "fp64 yes" in chosen[0]
+
+
+def test_table_writes_a_loadable_file_and_raw_export(tmp_path):
+    result = clsky("table", "--preset", "physical", "--size", "8", "16", "6", "-o", "sky.npz", "--raw", "sky",
+                   "--progress", "none", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    summary = result.stdout.strip().splitlines()
+    assert len(summary) == 1 and "built in" in summary[0] and "8x16x6" in summary[0]
+    table = ScatteringTable.load(tmp_path / "sky.npz")
+    assert table.settings.size == (8, 16, 6)
+    assert (tmp_path / "sky.bin").stat().st_size == 8 * 16 * 6 * 6 * 4
+    assert np.isfinite(table.data).all() and (table.data >= 0).all()
+
+
+def test_table_refuses_to_overwrite_without_force(tmp_path):
+    (tmp_path / "sky.npz").write_bytes(b"precious")
+    result = clsky("table", "--size", "8", "8", "4", "-o", "sky.npz", "--progress", "none", cwd=tmp_path)
+    assert result.returncode == 2
+    assert "--force" in result.stderr
+    assert (tmp_path / "sky.npz").read_bytes() == b"precious"
+    result = clsky("table", "--size", "8", "8", "4", "-o", "sky.npz", "--progress", "none", "--force", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+
+
+@pytest.mark.parametrize("args,named", [
+    (["--size", "1", "16", "6"], "size[0]"),
+    (["--size", "8", "16"], "--size"),
+    (["--view-steps", "0"], "view_steps"),
+    (["--preset", "venus"], "--preset"),
+    (["--dtype", "float16"], "--dtype"),
+    (["-o", "sky.txt"], "--output"),
+    (["-o", "missing/sky.npz"], "directory"),
+    (["--transmittance-size", "1", "8"], "transmittance_size"),
+])
+def test_bad_arguments_one_line_exit_2(tmp_path, args, named):
+    result = clsky("table", "--progress", "none", *args, cwd=tmp_path)
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("clsky: error:") and named in lines[0]
+    assert list(tmp_path.iterdir()) == []

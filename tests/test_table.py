@@ -1,0 +1,122 @@
+"""ScatteringTable as a product: build, save/load round trip, refusals, raw export, atomic writes."""
+
+import json
+
+import numpy as np
+import pytest
+
+from clsky import ScatteringTable, TableFormatError, TableSettings, preset
+from clsky.table import FORMAT_VERSION
+
+SETTINGS = TableSettings(size=(8, 16, 6))
+
+
+@pytest.fixture(scope="module")
+def table():
+    return ScatteringTable.build("physical", SETTINGS)
+
+
+def test_opencl_and_numpy_backends_agree(table):
+    twin = ScatteringTable.build("physical", SETTINGS, backend="numpy")
+    # kernel vs twin, see test_single_twin.py for the justification of 1e-12
+    np.testing.assert_allclose(table.data, twin.data, rtol=1e-12, atol=1e-14 * twin.data.max())
+
+
+def test_notes_layout_averages_mie(table):
+    notes = ScatteringTable.build("physical", SETTINGS.replace(mie_layout="notes"))
+    assert notes.data.shape == (6, 16, 8, 4)
+    np.testing.assert_array_equal(notes.data[..., :3], table.data[..., :3])
+    np.testing.assert_allclose(notes.data[..., 3], table.data[..., 3:].mean(axis=-1), rtol=1e-15)
+
+
+def test_save_load_round_trip(table, tmp_path):
+    path = table.save(tmp_path / "sky.npz")
+    loaded = ScatteringTable.load(path)
+    np.testing.assert_array_equal(loaded.data, table.data)
+    assert loaded.atmosphere == table.atmosphere
+    assert loaded.settings == table.settings
+    assert loaded.parameters_hash == table.parameters_hash
+    assert loaded.metadata["backend"] == "opencl"
+
+
+def test_save_never_overwrites_silently(table, tmp_path):
+    path = table.save(tmp_path / "sky.npz")
+    before = path.read_bytes()
+    other = ScatteringTable.build("atmosphere-plus", SETTINGS)
+    with pytest.raises(FileExistsError, match="exists"):
+        other.save(path)
+    assert path.read_bytes() == before
+    other.save(path, overwrite=True)
+    assert ScatteringTable.load(path).atmosphere == preset("atmosphere-plus")
+
+
+def test_interrupted_save_leaves_no_file(table, tmp_path, monkeypatch):
+    def fail(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(np, "savez_compressed", fail)
+    with pytest.raises(KeyboardInterrupt):
+        table.save(tmp_path / "sky.npz")
+    assert list(tmp_path.iterdir()) == []
+
+
+def rewrite(path, **changes):
+    with np.load(path) as archive:
+        contents = {key: archive[key] for key in archive.files}
+    contents.update(changes)
+    np.savez(path, **contents)
+
+
+def test_wrong_version_is_refused(table, tmp_path):
+    path = table.save(tmp_path / "sky.npz")
+    rewrite(path, format_version=np.int64(FORMAT_VERSION + 1))
+    with pytest.raises(TableFormatError, match="version"):
+        ScatteringTable.load(path)
+
+
+def test_wrong_shape_is_refused(table, tmp_path):
+    path = table.save(tmp_path / "sky.npz")
+    rewrite(path, data=table.data[:, :, :-1])
+    with pytest.raises(TableFormatError, match="shape"):
+        ScatteringTable.load(path)
+
+
+def test_edited_parameters_are_refused(table, tmp_path):
+    path = table.save(tmp_path / "sky.npz")
+    atmosphere = table.atmosphere.to_dict() | {"mie_g": -0.7}
+    rewrite(path, atmosphere=json.dumps(atmosphere))
+    with pytest.raises(TableFormatError, match="hash"):
+        ScatteringTable.load(path)
+
+
+def test_not_a_table_is_refused(tmp_path):
+    path = tmp_path / "junk.npz"
+    path.write_bytes(b"not a zip file")
+    with pytest.raises(TableFormatError, match="not a clsky table"):
+        ScatteringTable.load(path)
+
+
+def test_raw_export_layout(table, tmp_path):
+    binary, header = table.export_raw(tmp_path / "sky")
+    description = json.loads(header.read_text())
+    values = np.fromfile(binary, dtype="<f4")
+    size = description["size"]
+    w, h, d, c = size["W"], size["H"], size["D"], size["channels"]
+    assert (w, h, d, c) == (8, 16, 6, 6)
+    assert values.size == w * h * d * c
+    # index i = x + y W + z W H, channels innermost
+    x, y, z, channel = 5, 11, 3, 4
+    assert values[(x + y * w + z * w * h) * c + channel] == np.float32(table.data[z, y, x, channel])
+    assert description["channels"][channel] == "mie_g"
+    assert description["parameters_hash"] == table.parameters_hash
+    with pytest.raises(FileExistsError):
+        table.export_raw(tmp_path / "sky")
+
+
+def test_invalid_build_arguments(table):
+    with pytest.raises(ValueError, match="backend"):
+        ScatteringTable.build("physical", SETTINGS, backend="cuda")
+    with pytest.raises(ValueError, match="preset"):
+        ScatteringTable.build("mars", SETTINGS)
+    with pytest.raises(ValueError, match=r"\.npz"):
+        table.save("sky.txt")

@@ -1,0 +1,54 @@
+"""A normal (non-editable) install ships the kernels: build a wheel, install it into an empty
+directory, and build every OpenCL program from that installed copy in a fresh interpreter."""
+
+import os
+import pathlib
+import subprocess
+import sys
+import textwrap
+import zipfile
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+
+BUILD_EVERY_PROGRAM = textwrap.dedent("""
+    import pathlib, sys
+    import clsky, clsky._cl as cl_
+    from clsky.lookup import TableLookupEngine
+    from clsky.settings import TableSettings
+    from clsky.single import SingleScatteringEngine
+    from clsky.transmittance import TransmittanceEngine
+    installed = pathlib.Path(sys.argv[1]).resolve()
+    assert pathlib.Path(clsky.__file__).resolve().is_relative_to(installed), clsky.__file__
+    source = pathlib.Path(str(cl_.kernel_directory().joinpath("single.cl"))).resolve()
+    assert source.is_relative_to(installed), source
+    for dtype in ("float64", "float32"):
+        TransmittanceEngine(dtype=dtype)
+        TransmittanceEngine(dtype=dtype, sampling="keller_bohn")
+        TableLookupEngine(dtype=dtype)
+        for sun in ("march", "table"):
+            SingleScatteringEngine(TableSettings(dtype=dtype, sun_transmittance=sun, sampling="keller_bohn"))
+            SingleScatteringEngine(TableSettings(dtype=dtype, sun_transmittance=sun))
+    table = clsky.ScatteringTable.build("physical", TableSettings(size=(8, 8, 4)))
+    assert (table.data >= 0).all()
+    print("built every program from", cl_.kernel_directory())
+""")
+
+
+def test_wheel_ships_kernels_and_builds_every_program(tmp_path):
+    wheels = tmp_path / "wheels"
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(wheels), str(ROOT)],
+                   check=True, cwd=tmp_path)
+    (wheel,) = wheels.glob("clsky-*.whl")
+    names = zipfile.ZipFile(wheel).namelist()
+    kernel_files = sorted(p.name for p in (ROOT / "kernels").glob("*.cl"))
+    assert sorted(n.split("/")[-1] for n in names if n.startswith("clsky/kernels/")) == kernel_files
+    target = tmp_path / "site"
+    subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(target),
+                    str(wheel)], check=True, cwd=tmp_path)
+    environment = dict(os.environ, PYTHONPATH=str(target))
+    result = subprocess.run([sys.executable, "-c", BUILD_EVERY_PROGRAM, str(target)], cwd=tmp_path,
+                            env=environment, capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert "built every program" in result.stdout
