@@ -1,0 +1,164 @@
+"""Shared fixtures and the per-dtype tolerance table of the clsky tests.
+
+Device choice: ``PYOPENCL_TEST`` (PyOpenCL's test convention, e.g. ``PYOPENCL_TEST=portable``) if set,
+else :func:`clsky._cl.make_context` (``PYOPENCL_CTX``, else a GPU, else the fastest PoCL). Engines
+compile OpenCL (about 1 s the first time), so they are built once per session and cached by their
+compile-time settings.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+
+import numpy as np
+import pyopencl as cl
+import pytest
+
+from clsky import TableSettings
+from clsky._cl import NoDeviceError, has_fp64, make_context
+from clsky.single import SingleScatteringEngine
+from clsky.transmittance import TransmittanceEngine
+
+
+# Tolerances ---------------------------------------------------------------------------------------
+
+@dataclasses.dataclass(frozen=True)
+class Tolerance:
+    """``assert_allclose(actual, desired, rtol=rtol, atol=atol_scale * max|desired|)``."""
+
+    rtol: float
+    atol_scale: float
+
+    def atol(self, desired) -> float:
+        """Absolute tolerance scaled to the largest magnitude of ``desired``."""
+        return self.atol_scale * float(np.max(np.abs(desired), initial=0.0))
+
+
+#: Kernel against its float64 NumPy twin, per kernel dtype and quantity. float64: the kernels and the
+#: twins evaluate the same formulas at the same nodes, so they differ only by summation order and FMA
+#: contraction: a few ulps per operation, amplified by exp(-x) with x = h/H up to ~83 (Mie at the top)
+#: or tau up to ~30, i.e. <= ~1e-14 relative (measured: 4e-14 worst, column table). float32 kernels are
+#: compared with the float64 twin (style.md): the unit roundoff 6e-8 times the same amplification
+#: gives ~1e-5; the measured worst cases are in the comments.
+TOLERANCES = {
+    "float64": {
+        "optical_depth": Tolerance(rtol=1e-12, atol_scale=1e-14),
+        "column_density_table": Tolerance(rtol=1e-12, atol_scale=1e-14),
+        "single_scattering": Tolerance(rtol=1e-12, atol_scale=1e-14),
+        "single_scattering_table": Tolerance(rtol=1e-12, atol_scale=1e-14),
+    },
+    "float32": {
+        # measured 2.2e-6 relative on random segments with tau up to 12: rtol 1e-5 (style.md start).
+        "optical_depth": Tolerance(rtol=1e-5, atol_scale=1e-6),
+        # Loosened: radii r = Rp + h are quantised to 0.5 m in float32 (ulp of 6.4e6), so nodes near
+        # the ground shift by up to ~0.25-0.5 m, i.e. dC_M/C_M ~ 0.5 m / H_M (1200 m) ~ 4e-4 on the
+        # tangent rays of the table's horizon row. Measured: 7e-4 relative (altitude 25 m, horizon).
+        "column_density_table": Tolerance(rtol=2e-3, atol_scale=1e-6),
+        # Marched sun rays: measured 6.7e-7 relative beside an atol of 1e-7 x max; largest relative
+        # errors sit where T is small (tau ~ 10-30 x a few ulps ~ 1e-5). rtol 2e-5, atol 1e-6 x max.
+        "single_scattering": Tolerance(rtol=2e-5, atol_scale=1e-6),
+        # Sun transmittance from the float32 column table inherits its 7e-4 near-horizon error
+        # (times tau ~ 0.5-7): measured 3.2e-4 relative (sun on the horizon, observer on the ground,
+        # view just above the horizon; Keller & Bohn sampling, 5/4 steps). rtol 1e-3.
+        "single_scattering_table": Tolerance(rtol=1e-3, atol_scale=1e-6),
+    },
+}
+
+
+def max_error_report(actual, desired, label=""):
+    """One line with the largest absolute and relative errors and where they occur (for the log)."""
+    actual = np.asarray(actual, dtype=np.float64)
+    desired = np.asarray(desired, dtype=np.float64)
+    error = np.abs(actual - desired)
+    if error.size == 0:
+        return f"{label}: empty"
+    where_abs = np.unravel_index(np.argmax(error), error.shape)
+    nonzero = np.abs(desired) > 0
+    relative = np.where(nonzero, error / np.where(nonzero, np.abs(desired), 1.0), 0.0)
+    where_rel = np.unravel_index(np.argmax(relative), relative.shape)
+    scale = float(np.max(np.abs(desired)))
+    return (f"{label}: max abs error {error[where_abs]:.3g} ({error[where_abs] / scale if scale else 0:.3g}"
+            f" of max) at {tuple(int(i) for i in where_abs)}; max rel error {relative[where_rel]:.3g} at "
+            f"{tuple(int(i) for i in where_rel)} (value {desired[where_rel]:.4g})")
+
+
+# OpenCL context and engines -----------------------------------------------------------------------
+
+def _test_context():
+    if os.environ.get("PYOPENCL_TEST"):
+        from pyopencl.tools import get_test_platforms_and_devices
+
+        _, devices = get_test_platforms_and_devices()[0]
+        return cl.Context([devices[0]])
+    return make_context(np.float32)
+
+
+@pytest.fixture(scope="session")
+def cl_context():
+    """One OpenCL context for the whole session (skips the OpenCL tests when there is no device)."""
+    try:
+        return _test_context()
+    except (NoDeviceError, cl.Error) as error:
+        pytest.skip(f"no OpenCL device: {error}")
+
+
+@pytest.fixture(scope="session")
+def fp64_available(cl_context):
+    """Whether the session's device supports double precision."""
+    return has_fp64(cl_context.devices[0])
+
+
+def require_dtype(context, dtype):
+    """Skip the calling test when ``dtype`` is float64 and the device has no fp64."""
+    if np.dtype(dtype) == np.float64 and not has_fp64(context.devices[0]):
+        pytest.skip(f"{context.devices[0].name} has no double precision")
+
+
+@pytest.fixture(params=["float64", "float32"])
+def dtype(request, cl_context):
+    """Kernel precision; float64 is skipped on devices without cl_khr_fp64."""
+    require_dtype(cl_context, request.param)
+    return request.param
+
+
+@pytest.fixture(scope="session")
+def single_engine(cl_context):
+    """``single_engine(settings)``: a cached SingleScatteringEngine compiled for ``settings``.
+
+    Size and mapping are per-call values (pass them to ``compute``), so they are not part of the key.
+    """
+    cache = {}
+
+    def get(settings: TableSettings) -> SingleScatteringEngine:
+        require_dtype(cl_context, settings.dtype)
+        key = settings.replace(size=(2, 2, 2), mapping="nonlinear", mie_layout="per-wavelength")
+        if key not in cache:
+            cache[key] = SingleScatteringEngine(key, ctx=cl_context)
+        return cache[key]
+
+    yield get
+    for engine in cache.values():
+        engine.close()
+
+
+@pytest.fixture(scope="session")
+def transmittance_engine(cl_context):
+    """``transmittance_engine(steps=30, sampling='uniform', dtype='float64')``: a cached engine."""
+    cache = {}
+
+    def get(steps=30, sampling="uniform", dtype="float64") -> TransmittanceEngine:
+        require_dtype(cl_context, dtype)
+        key = (steps, sampling, np.dtype(dtype).name)
+        if key not in cache:
+            cache[key] = TransmittanceEngine(cl_context, np.dtype(dtype), steps=steps, sampling=sampling)
+        return cache[key]
+
+    yield get
+    for engine in cache.values():
+        engine.close()
+
+
+def compute_single(engine_factory, atmosphere, settings: TableSettings):
+    """The OpenCL single-scattering table of ``settings`` (size and mapping included)."""
+    return engine_factory(settings).compute(atmosphere, size=settings.size, mapping=settings.mapping)
