@@ -55,12 +55,15 @@ TOLERANCES = {
         # the ground shift by up to ~0.25-0.5 m, i.e. dC_M/C_M ~ 0.5 m / H_M (1200 m) ~ 4e-4 on the
         # tangent rays of the table's horizon row. Measured: 7e-4 relative (altitude 25 m, horizon).
         "column_density_table": Tolerance(rtol=2e-3, atol_scale=1e-6),
-        # Marched sun rays: measured 6.7e-7 relative beside an atol of 1e-7 x max; largest relative
-        # errors sit where T is small (tau ~ 10-30 x a few ulps ~ 1e-5). rtol 2e-5, atol 1e-6 x max.
-        "single_scattering": Tolerance(rtol=2e-5, atol_scale=1e-6),
+        # Marched sun rays: tau up to ~100 (one trapezoid step over 1000 km paths, or 20x Rayleigh near
+        # the horizon) times the float32 relative error of tau (~1e-6: radii r = Rp + h rounded to 0.5 m)
+        # gives ~1e-4. Measured on the (9, 33, 7) variants: 6.2e-5 (view_steps = sun_steps = 1, dense),
+        # < 1e-6 beside the atol for 30 steps. rtol 1e-4, atol 1e-6 x max. NOT met on grids with nodes
+        # near the ground and the horizon: see test_single_twin.py::test_near_ground_grid_matches_twin.
+        "single_scattering": Tolerance(rtol=1e-4, atol_scale=1e-6),
         # Sun transmittance from the float32 column table inherits its 7e-4 near-horizon error
-        # (times tau ~ 0.5-7): measured 3.2e-4 relative (sun on the horizon, observer on the ground,
-        # view just above the horizon; Keller & Bohn sampling, 5/4 steps). rtol 1e-3.
+        # (times tau ~ 0.5-7): measured 1.9e-4 relative beside the atol (sun on the horizon, observer
+        # on the ground, view just above the horizon; Keller & Bohn sampling, 5/4 steps). rtol 1e-3.
         "single_scattering_table": Tolerance(rtol=1e-3, atol_scale=1e-6),
     },
 }

@@ -15,7 +15,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from clsky import PRESETS, AtmosphereParameters, TableSettings, preset
-from clsky.atmosphere import rayleigh_scattering_coefficient
+from clsky.atmosphere import MIE_PHASE_METHODS, rayleigh_scattering_coefficient
 
 SCALAR_FIELDS = ("planet_radius", "top_radius", "rayleigh_scale_height", "mie_scale_height",
                  "mie_scattering", "mie_extinction_ratio", "mie_g", "exposure")
@@ -259,7 +259,8 @@ def _changed_value(field, value):
     if field == "rayleigh_phase":
         return "rayleigh" if value != "rayleigh" else "modified_atmosphereplus"
     if field == "mie_phase":
-        return None    # only one Mie phase exists: nothing to change to
+        others = sorted(set(MIE_PHASE_METHODS) - {value})
+        return others[0] if others else None     # today only one Mie phase exists
     if field in ("mie_g",):
         return value / 2
     if field == "mie_extinction_ratio":
