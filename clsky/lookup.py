@@ -10,7 +10,7 @@ import pyopencl.array as cla
 
 from . import _atmosphere_cl, _cl
 from .atmosphere import AtmosphereParameters
-from .settings import MAPPINGS, MIE_LAYOUTS, _check_choice
+from .settings import MAPPINGS, _check_choice
 
 __all__ = ["TableLookupEngine", "check_queries"]
 
@@ -27,11 +27,16 @@ def check_queries(altitude, cos_view, cos_sun, cos_scatter):
     return arrays
 
 
+#: Channels per cell a table may have: factored (6, or the notes' 4), plus 3 phased higher orders.
+TABLE_CHANNELS = (6, 4, 9, 7)
+
+
 def check_table_data(data):
-    """The (D, H, W, C) array of a table, C in {6, 4}, each axis >= 2."""
+    """The (D, H, W, C) array of a table, C in :data:`TABLE_CHANNELS`, each axis >= 2."""
     data = np.asarray(data)
-    if data.ndim != 4 or data.shape[3] not in MIE_LAYOUTS.values() or min(data.shape[:3]) < 2:
-        raise ValueError(f"table data must have shape (D, H, W, 6 or 4) with D, H, W >= 2, got {data.shape}")
+    if data.ndim != 4 or data.shape[3] not in TABLE_CHANNELS or min(data.shape[:3]) < 2:
+        raise ValueError(f"table data must have shape (D, H, W, C) with C in {TABLE_CHANNELS} and "
+                         f"D, H, W >= 2, got {data.shape}")
     return data
 
 
@@ -52,7 +57,8 @@ class TableLookupEngine(_cl.Engine):
         atmosphere : AtmosphereParameters
             The table's atmosphere (phase functions, I_I, radii).
         data : numpy.ndarray, shape (D, H, W, C)
-            Table values (C = 6, or 4 in the notes' layout).
+            Table values: C = 6 (or the notes' 4) factored channels, plus 3 phased higher orders in
+            the physical mode (C = 9 or 7).
         altitude : array_like
             Observer altitude [m], >= 0 (above the atmosphere: seen from space).
         cos_view, cos_sun, cos_scatter : array_like

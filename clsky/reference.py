@@ -23,7 +23,8 @@ from .settings import TableSettings
 __all__ = [
     "horizon_cos", "distance_to_top", "distance_to_ground", "altitude_along",
     "quadrature_nodes", "column_density", "optical_depth", "transmittance",
-    "transmittance_table", "column_density_from_table", "single_scattering",
+    "transmittance_table", "column_density_from_table", "single_scattering", "enter_atmosphere",
+    "lookup", "gather", "trilinear", "scatter",
 ]
 
 _TINY = np.finfo(np.float64).tiny
@@ -163,47 +164,76 @@ def _trapezoid_along_view(values, half_steps):
     return np.sum((values[:, :-1] + values[:, 1:]) * half_steps, axis=1)
 
 
+class _ViewRays:
+    """Nodes along the view rays of cells (h0, mu_v, mu_s), as in single.cl and multiple.cl.
+
+    Arrays have shape (cells, N_VIEW + 1): distance s, altitude h, radius r, the sun and view cosines
+    at each node, densities, the column densities from the observer, and the trapezoid half steps
+    (cells, N_VIEW).
+    """
+
+    def __init__(self, atmosphere, settings, h0, mu_v, mu_s):
+        rp, ra = atmosphere.planet_radius, atmosphere.top_radius
+        h0, mu_v, mu_s = (np.asarray(a, dtype=np.float64)[:, None] for a in (h0, mu_v, mu_s))
+        r0 = rp + h0
+        nu = mu_v * mu_s + np.sqrt(np.maximum(1.0 - mu_v * mu_v, 0.0) * np.maximum(1.0 - mu_s * mu_s, 0.0))
+        hits_ground = mu_v < horizon_cos(r0, rp)
+        length = np.where(hits_ground, distance_to_ground(r0, mu_v, rp), distance_to_top(r0, mu_v, ra))
+        nodes = quadrature_nodes(settings.view_steps, settings.sampling, power=3)
+        self.s = length * nodes
+        self.h = altitude_along(h0, r0, mu_v, self.s, rp)
+        self.h[:, -1] = np.where(hits_ground[:, 0], 0.0, self.h[:, -1])   # a ground hit ends on the ground
+        self.r = rp + self.h
+        self.mu_sun = (r0 * mu_s + self.s * nu) / self.r                   # dot(P, Sun) / |P|
+        self.mu_view = (r0 * mu_v + self.s) / self.r                       # dot(P, V) / |P|
+        self.density_r = np.exp(-self.h / atmosphere.rayleigh_scale_height)
+        self.density_m = np.exp(-self.h / atmosphere.mie_scale_height)
+        self.half_steps = 0.5 * length * np.diff(nodes)
+        self.view_r = np.zeros_like(self.h)
+        self.view_m = np.zeros_like(self.h)
+        np.cumsum((self.density_r[:, :-1] + self.density_r[:, 1:]) * self.half_steps, axis=1, out=self.view_r[:, 1:])
+        np.cumsum((self.density_m[:, :-1] + self.density_m[:, 1:]) * self.half_steps, axis=1, out=self.view_m[:, 1:])
+
+    def integrate(self, atmosphere, transmittance, weight_r, weight_m):
+        """beta_s / (4 pi) * trapezoid of rho_s * transmittance * weight_s: (cells, 6).
+
+        transmittance: (cells, nodes, 3); weight_r, weight_m: broadcastable to it.
+        """
+        half_steps = self.half_steps[..., None]
+        sum_r = _trapezoid_along_view(self.density_r[..., None] * transmittance * weight_r, half_steps)
+        sum_m = _trapezoid_along_view(self.density_m[..., None] * transmittance * weight_m, half_steps)
+        beta = np.asarray(atmosphere.rayleigh_scattering)
+        return np.concatenate([beta * (1.0 / (4.0 * math.pi)) * sum_r,
+                               (atmosphere.mie_scattering / (4.0 * math.pi)) * sum_m], axis=1)
+
+
 def _single_scattering_cells(atmosphere, settings, h0, mu_v, mu_s, sun_table):
     """Ibar^(1) of the cells given by 1D arrays (h0, mu_v, mu_s); returns (n, 6)."""
-    rp, ra = atmosphere.planet_radius, atmosphere.top_radius
-    h0, mu_v, mu_s = (a[:, None] for a in (h0, mu_v, mu_s))
-    r0 = rp + h0
-    nu = mu_v * mu_s + np.sqrt(np.maximum(1.0 - mu_v * mu_v, 0.0) * np.maximum(1.0 - mu_s * mu_s, 0.0))
-    hits_ground = mu_v < horizon_cos(r0, rp)
-    length = np.where(hits_ground, distance_to_ground(r0, mu_v, rp), distance_to_top(r0, mu_v, ra))
-
-    nodes = quadrature_nodes(settings.view_steps, settings.sampling, power=3)
-    s = length * nodes                                          # (n, N_VIEW + 1)
-    h = altitude_along(h0, r0, mu_v, s, rp)
-    h[:, -1] = np.where(hits_ground[:, 0], 0.0, h[:, -1])     # last node of a ground hit: on the ground
-    r = rp + h
-    mu_sun_here = (r0 * mu_s + s * nu) / r
-    lit = mu_sun_here >= horizon_cos(r, rp)
-    density_r = np.exp(-h / atmosphere.rayleigh_scale_height)
-    density_m = np.exp(-h / atmosphere.mie_scale_height)
-
-    half_steps = 0.5 * length * np.diff(nodes)                  # (n, N_VIEW)
-    cumulative = np.zeros_like(h)
-    view_r = cumulative.copy()
-    view_m = cumulative.copy()
-    np.cumsum((density_r[:, :-1] + density_r[:, 1:]) * half_steps, axis=1, out=view_r[:, 1:])
-    np.cumsum((density_m[:, :-1] + density_m[:, 1:]) * half_steps, axis=1, out=view_m[:, 1:])
-
+    rays = _ViewRays(atmosphere, settings, h0, mu_v, mu_s)
+    lit = rays.mu_sun >= horizon_cos(rays.r, atmosphere.planet_radius)
     if sun_table is None:
-        sun_length = np.where(lit, distance_to_top(r, mu_sun_here, ra), 0.0)
-        sun_r, sun_m = column_density(atmosphere, h, mu_sun_here, sun_length, settings.sun_steps,
+        sun_length = np.where(lit, distance_to_top(rays.r, rays.mu_sun, atmosphere.top_radius), 0.0)
+        sun_r, sun_m = column_density(atmosphere, rays.h, rays.mu_sun, sun_length, settings.sun_steps,
                                       settings.sampling)
     else:
-        sun_r, sun_m = column_density_from_table(atmosphere, sun_table, h, mu_sun_here)
-
-    transmittance = np.exp(-_optical_depth_of(atmosphere, view_r + sun_r, view_m + sun_m))
+        sun_r, sun_m = column_density_from_table(atmosphere, sun_table, rays.h, rays.mu_sun)
+    transmittance = np.exp(-_optical_depth_of(atmosphere, rays.view_r + sun_r, rays.view_m + sun_m))
     transmittance *= lit[..., None]                             # (n, N_VIEW + 1, 3)
-    half_steps = half_steps[..., None]
-    sum_r = _trapezoid_along_view(density_r[..., None] * transmittance, half_steps)
-    sum_m = _trapezoid_along_view(density_m[..., None] * transmittance, half_steps)
-    beta = np.asarray(atmosphere.rayleigh_scattering)
-    return np.concatenate([beta * (1.0 / (4.0 * math.pi)) * sum_r,
-                           (atmosphere.mie_scattering / (4.0 * math.pi)) * sum_m], axis=1)
+    return rays.integrate(atmosphere, transmittance, 1.0, 1.0)
+
+
+def _cells_in_chunks(settings, per_cell, function):
+    """Evaluate function(x, y, z) -> (n, 6) over every cell, in chunks; returns (D, H, W, 6)."""
+    width, height, depth = settings.size
+    cells = width * height * depth
+    index = np.arange(cells)
+    x, y, z = index % width, (index // width) % height, index // (width * height)
+    chunk = max(1, CHUNK_ELEMENTS // per_cell)
+    out = np.empty((cells, 6))
+    for start in range(0, cells, chunk):
+        part = slice(start, start + chunk)
+        out[part] = function(x[part], y[part], z[part])
+    return out.reshape(depth, height, width, 6)
 
 
 def single_scattering(atmosphere: AtmosphereParameters, settings: TableSettings = TableSettings()):
@@ -214,24 +244,15 @@ def single_scattering(atmosphere: AtmosphereParameters, settings: TableSettings 
     numpy.ndarray, shape (D, H, W, 6)
         Ibar^(1) [1/sr]: Rayleigh r, g, b, Mie r, g, b, per cell (see ``kernels/single.cl``).
     """
-    width, height, depth = settings.size
     altitudes, cos_view, cos_sun = grid_coordinates(settings.size, atmosphere.atmosphere_height,
                                                     settings.mapping)
     sun_table = None
     if settings.sun_transmittance == "table":
         sun_table = transmittance_table(atmosphere, settings.transmittance_size, settings.sun_steps,
                                         settings.sampling)
-    cells = width * height * depth
-    index = np.arange(cells)
-    x, y, z = index % width, (index // width) % height, index // (width * height)
-    per_cell = (settings.view_steps + 1) * (settings.sun_steps + 1)
-    chunk = max(1, CHUNK_ELEMENTS // per_cell)
-    out = np.empty((cells, 6))
-    for start in range(0, cells, chunk):
-        part = slice(start, start + chunk)
-        out[part] = _single_scattering_cells(atmosphere, settings, altitudes[x[part]], cos_view[y[part]],
-                                             cos_sun[z[part]], sun_table)
-    return out.reshape(depth, height, width, 6)
+    return _cells_in_chunks(settings, (settings.view_steps + 1) * (settings.sun_steps + 1),
+                            lambda x, y, z: _single_scattering_cells(atmosphere, settings, altitudes[x],
+                                                                     cos_view[y], cos_sun[z], sun_table))
 
 
 # Table lookup (kernels/lookup.cl) ----------------------------------------------------------------
@@ -281,6 +302,62 @@ def lookup(atmosphere: AtmosphereParameters, data, altitude, cos_view, cos_sun, 
                 weight = (ax if dx else 1 - ax) * (ay if dy else 1 - ay) * (az if dz else 1 - az)
                 ibar += weight[..., None] * data[z0 + dz, y0 + dy, x0 + dx]
     ibar *= inside[..., None]
-    mie = ibar[..., 3:6] if channels == 6 else ibar[..., 3:4]
+    factored = channels - 3 if channels in (7, 9) else channels
+    mie = ibar[..., 3:6] if factored == 6 else ibar[..., 3:4]
+    multiple = ibar[..., factored:factored + 3] if factored < channels else 0.0
     return np.asarray(atmosphere.incident_light) * (rayleigh_phase(atmosphere, nu)[..., None] * ibar[..., 0:3]
-                                                    + mie_phase(atmosphere, nu)[..., None] * mie)
+                                                    + mie_phase(atmosphere, nu)[..., None] * mie + multiple)
+
+
+# Multiple scattering (kernels/multiple.cl) ---------------------------------------------------------
+
+def gather(matrices, table_in):
+    """Gbar[z, i, x, c] = sum_j M[c // 3][(z,) i, j] Ibar[z, j, x, c]; twin of ``MultipleScatteringEngine.gather``.
+
+    matrices: (2, H, H) or (2, D, H, H), the Rayleigh and Mie operators; table_in: (D, H, W, 6).
+    """
+    depth, height, width, _ = table_in.shape
+    out = np.empty_like(table_in)
+    for species, channels in enumerate((slice(0, 3), slice(3, 6))):
+        columns = table_in[..., channels].reshape(depth, height, width * 3)
+        out[..., channels] = np.matmul(matrices[species], columns).reshape(depth, height, width, 3)
+    return out
+
+
+def trilinear(table, fx, fy, fz):
+    """Trilinear interpolation of table (D, H, W, C) at node coordinates (fx, fy, fz): (..., C)."""
+    depth, height, width, _ = table.shape
+    x0 = np.clip(fx.astype(np.int64), 0, width - 2)
+    y0 = np.clip(fy.astype(np.int64), 0, height - 2)
+    z0 = np.clip(fz.astype(np.int64), 0, depth - 2)
+    ax, ay, az = (fx - x0)[..., None], (fy - y0)[..., None], (fz - z0)[..., None]
+    value = 0.0
+    for dx, wx in ((0, 1.0 - ax), (1, ax)):
+        for dy, wy in ((0, 1.0 - ay), (1, ay)):
+            for dz, wz in ((0, 1.0 - az), (1, az)):
+                value = value + wx * wy * wz * table[z0 + dz, y0 + dy, x0 + dx]
+    return value
+
+
+def scatter(atmosphere: AtmosphereParameters, settings: TableSettings, gathered):
+    """Next order from a gathered table; twin of ``MultipleScatteringEngine.scatter``.
+
+    Ibar_s^(k)(lambda) = beta_s / (4 pi) Integral Gbar_s(P) rho_s(h(P)) T(P, Pa) ds, channels Rayleigh
+    r, g, b and Mie r, g, b in and out; shape (D, H, W, 6).
+    """
+    from .mapping import altitude_to_u, cos_to_v
+
+    width, height, depth = settings.size
+    altitudes, cos_view, cos_sun = grid_coordinates(settings.size, atmosphere.atmosphere_height,
+                                                    settings.mapping)
+
+    def cells(x, y, z):
+        rays = _ViewRays(atmosphere, settings, altitudes[x], cos_view[y], cos_sun[z])
+        g = trilinear(gathered,
+                      altitude_to_u(rays.h, atmosphere.atmosphere_height, settings.mapping) * (width - 1),
+                      cos_to_v(rays.mu_view, settings.mapping) * (height - 1),
+                      cos_to_v(rays.mu_sun, settings.mapping) * (depth - 1))
+        transmittance = np.exp(-_optical_depth_of(atmosphere, rays.view_r, rays.view_m))
+        return rays.integrate(atmosphere, transmittance, g[..., 0:3], g[..., 3:6])
+
+    return _cells_in_chunks(settings, (settings.view_steps + 1) * 8 * 6, cells)

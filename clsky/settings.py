@@ -6,7 +6,8 @@ import dataclasses
 
 import numpy as np
 
-__all__ = ["TableSettings", "MAPPINGS", "SAMPLINGS", "SUN_TRANSMITTANCE_METHODS", "MIE_LAYOUTS"]
+__all__ = ["TableSettings", "MAPPINGS", "SAMPLINGS", "SUN_TRANSMITTANCE_METHODS", "MIE_LAYOUTS",
+           "SCATTERING_MODES"]
 
 #: Texture mappings of the 3D table, name -> index passed to OpenCL (mapping.cl).
 MAPPINGS = {"linear": 0, "nonlinear": 1}
@@ -14,6 +15,8 @@ MAPPINGS = {"linear": 0, "nonlinear": 1}
 SAMPLINGS = ("uniform", "keller_bohn")
 #: How the sunlight's transmittance to a sample is found: re-marched, or read from a 2D table.
 SUN_TRANSMITTANCE_METHODS = ("march", "table")
+#: Schemes for the orders k >= 2 (see clsky/orders.py).
+SCATTERING_MODES = ("atmosphere-plus", "physical")
 #: Channels stored per cell: Rayleigh r, g, b + Mie r, g, b, or the notes' Rayleigh r, g, b + one Mie.
 MIE_LAYOUTS = {"per-wavelength": 6, "notes": 4}
 
@@ -56,6 +59,19 @@ class TableSettings:
         6 channels (Mie per wavelength, default) or the notes' 4 (one Mie channel, the mean of the three).
     dtype : {'float64', 'float32'}
         Precision of the kernels.
+    mode : {'atmosphere-plus', 'physical'}
+        Scheme of the higher orders (clsky/orders.py): the notes' factored chains, or the consistent
+        scheme with cross terms and each event's own phase.
+    orders : 'auto' or int
+        'auto' iterates until an order adds less than ``order_tolerance`` (at most ``max_orders``);
+        an integer K in [1, 1000] computes exactly the orders 1..K (1: single scattering only).
+    order_tolerance : float
+        In (0, 1): the stopping criterion of 'auto' (default 1e-4, defined in clsky/orders.py).
+    max_orders : int
+        In [2, 1000]: the most orders 'auto' computes (default 100).
+    gather_theta_steps, gather_phi_steps : int
+        Trapezoid steps of the sphere integral of the gather over Theta in [0, pi] and Phi in
+        [0, 2 pi], each in [2, 8192] (defaults 256 and 128).
     """
 
     size: tuple = (32, 256, 32)
@@ -67,6 +83,12 @@ class TableSettings:
     transmittance_size: tuple = (64, 256)
     mie_layout: str = "per-wavelength"
     dtype: str = "float64"
+    mode: str = "atmosphere-plus"
+    orders: object = "auto"
+    order_tolerance: float = 1e-4
+    max_orders: int = 100
+    gather_theta_steps: int = 256
+    gather_phi_steps: int = 128
 
     def __post_init__(self):
         object.__setattr__(self, "size", self._check_size("size", self.size, 3))
@@ -80,6 +102,17 @@ class TableSettings:
         _check_choice("sampling", self.sampling, SAMPLINGS)
         _check_choice("sun_transmittance", self.sun_transmittance, SUN_TRANSMITTANCE_METHODS)
         _check_choice("mie_layout", self.mie_layout, MIE_LAYOUTS)
+        _check_choice("mode", self.mode, SCATTERING_MODES)
+        if self.orders != "auto":
+            object.__setattr__(self, "orders", _check_int("orders", self.orders, 1, 1000))
+        object.__setattr__(self, "max_orders", _check_int("max_orders", self.max_orders, 2, 1000))
+        object.__setattr__(self, "gather_theta_steps", _check_int("gather_theta_steps", self.gather_theta_steps, 2, 8192))
+        object.__setattr__(self, "gather_phi_steps", _check_int("gather_phi_steps", self.gather_phi_steps, 2, 8192))
+        tolerance = self.order_tolerance
+        if isinstance(tolerance, (bool, np.bool_)) or not isinstance(tolerance, (int, float, np.floating)) \
+                or not 0.0 < tolerance < 1.0:
+            raise ValueError(f"order_tolerance must be a number in (0, 1), got {tolerance!r}")
+        object.__setattr__(self, "order_tolerance", float(tolerance))
         try:
             dtype = np.dtype(self.dtype)
         except TypeError:
@@ -99,8 +132,20 @@ class TableSettings:
         return tuple(_check_int(f"{name}[{i}]", v, 2, 4096) for i, v in enumerate(items))
 
     @property
-    def channels(self) -> int:
+    def factored_channels(self) -> int:
+        """Channels of the factored part (Rayleigh r, g, b + Mie per wavelength, or the notes' one Mie)."""
         return MIE_LAYOUTS[self.mie_layout]
+
+    @property
+    def has_multiple_block(self) -> bool:
+        """True when the table carries 3 channels of higher orders with their phase applied (physical
+        mode with orders beyond the first)."""
+        return self.mode == "physical" and self.orders != 1
+
+    @property
+    def channels(self) -> int:
+        """Channels per cell of the table: the factored part, plus 3 in the physical mode's multiple block."""
+        return self.factored_channels + (3 if self.has_multiple_block else 0)
 
     def replace(self, **changes) -> "TableSettings":
         return dataclasses.replace(self, **changes)

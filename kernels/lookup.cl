@@ -6,8 +6,10 @@
  *
  * Inputs per query: observer altitude h [m] (>= 0; above Ha the observer looks from space: the view
  * ray is moved to where it enters the atmosphere, and a ray that misses it sees no sky), cosines of
- * the view zenith, sun zenith and scattering angle. Table: channels per cell CHANNELS = 6 (Rayleigh
- * r, g, b, Mie r, g, b) or 4 (the notes' Rayleigh r, g, b + one Mie), cell index x + y W + z W H.
+ * the view zenith, sun zenith and scattering angle. Table: `channels` per cell, cell index
+ * x + y W + z W H: 6 (Rayleigh r, g, b, Mie r, g, b) or 4 (the notes' Rayleigh r, g, b + one Mie),
+ * factored (the phase is applied here); the physical mode appends 3 channels (9 or 7 in all) holding
+ * the higher orders with their phase already applied, added as I_I Lbar.
  * Output: radiance r, g, b per query. Built with VECTOR_WIDTH 1.
  * Requires real.cl, atmosphere_t, geometry.cl, mapping.cl, phase.cl.
  */
@@ -48,7 +50,7 @@ __kernel void lookup(__constant const atmosphere_t *atm, __global const real *ta
         return;
     real h = altitude[i], mu_v = cos_view[i], mu_s = cos_sun[i];
     const real nu = clamp(cos_scatter[i], R(-1.0), R(1.0));
-    real ibar[6] = {R(0.0), R(0.0), R(0.0), R(0.0), R(0.0), R(0.0)};
+    real ibar[9] = {R(0.0), R(0.0), R(0.0), R(0.0), R(0.0), R(0.0), R(0.0), R(0.0), R(0.0)};
     if (enter_atmosphere(atm, &h, &mu_v, &mu_s, nu)) {
         const real ha = atm->top_radius - atm->planet_radius;
         const real fx = MAPPING_U(h, mapping, ha) * (real)(width - 1);
@@ -66,9 +68,13 @@ __kernel void lookup(__constant const atmosphere_t *atm, __global const real *ta
     }
     const real f_r = phase_rayleigh(atm, nu);
     const real f_m = phase_mie(atm, nu);
-    const int mie = 3;                       /* first Mie channel */
-    const int mie_stride = channels == 6;    /* 6 channels: Mie per wavelength; 4: one Mie channel */
-    radiance[3 * i] = atm->incident_light.x * (f_r * ibar[0] + f_m * ibar[mie]);
-    radiance[3 * i + 1] = atm->incident_light.y * (f_r * ibar[1] + f_m * ibar[mie + mie_stride]);
-    radiance[3 * i + 2] = atm->incident_light.z * (f_r * ibar[2] + f_m * ibar[mie + 2 * mie_stride]);
+    const int factored = (channels == 7 || channels == 9) ? channels - 3 : channels;
+    const int mie = 3;                          /* first Mie channel */
+    const int mie_stride = factored == 6;       /* Mie per wavelength, or the notes' one Mie channel */
+    const int multiple = factored < channels;   /* the physical mode's phased higher orders follow */
+    radiance[3 * i] = atm->incident_light.x * (f_r * ibar[0] + f_m * ibar[mie] + (multiple ? ibar[factored] : R(0.0)));
+    radiance[3 * i + 1] = atm->incident_light.y * (f_r * ibar[1] + f_m * ibar[mie + mie_stride]
+                                                   + (multiple ? ibar[factored + 1] : R(0.0)));
+    radiance[3 * i + 2] = atm->incident_light.z * (f_r * ibar[2] + f_m * ibar[mie + 2 * mie_stride]
+                                                   + (multiple ? ibar[factored + 2] : R(0.0)));
 }

@@ -49,6 +49,12 @@ typedef int maskv;
 #error "VECTOR_WIDTH must be 1 or 8"
 #endif
 #define V(x) ((realv)(R(x)))
+/* mask type of real8 comparisons */
+#ifdef REAL_IS_DOUBLE
+typedef long8 maskv8;
+#else
+typedef int8 maskv8;
+#endif
 /* SELECT(a, b, m): b where mask m is true, else a (select() is ambiguous for scalar double) */
 #if VECTOR_WIDTH == 1
 #define SELECT(a, b, m) ((m) ? (b) : (a))

@@ -1,0 +1,202 @@
+"""Multiple scattering: the gather operator, and the OpenCL engine that applies it and scatters.
+
+The gather at a point integrates the previous order over the sphere (physics.md):
+    Gbar(h, mu_v, mu_s) = Integral_{4 pi} F(dot(omega, V)) Ibar(h, omega, mu_s) d omega.
+The 3D table has no azimuth, so Ibar depends on omega only through its zenith cosine cos(Theta), and
+the 2D trapezoid over (Theta, Phi) factors into one matrix over the view-zenith axis:
+    M[i, j] = sum_a wT_a sin(Theta_a) K(i, a) P(a, j),
+    K(i, a) = sum_b wP_b F(cos(Theta_a) mu_i + sin(Theta_a) sqrt(1 - mu_i^2) cos(Phi_b)),
+with trapezoid weights wT (Theta in [0, pi]) and wP (Phi in [0, 2 pi]), and P the linear interpolation
+in texture space from the view nodes to cos(Theta_a) (as the lookup does). M is computed once per grid,
+quadrature and phase function; the gather is then a batched matrix product, so a fine quadrature
+(default 256 x 128 nodes) costs nothing per order.
+
+In the ``physical`` mode the first gather sees the single-scattered light with its own phase at the
+true angle to the sun; averaged over the azimuth of V (the table has none), the Phi integrals of the
+two phase functions separate:
+    M_{s,s'}(z)[i, j] = sum_a wT_a sin(Theta_a) K_s(i, a) K_s'(z, a) / (2 pi) P(a, j),
+where K_s'(z, a) is K of the second phase at the sun node z.
+
+NumPy twins of the kernels: :func:`clsky.reference.gather` and :func:`clsky.reference.scatter`.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+import pyopencl.array as cla
+
+from . import _atmosphere_cl, _cl
+from .atmosphere import AtmosphereParameters
+from .mapping import cos_to_v, grid_coordinates
+from .phase import MIE_PHASES, RAYLEIGH_PHASES
+from .settings import MAPPINGS, TableSettings
+
+__all__ = ["gather_quadrature", "phase_azimuth_integrals", "gather_matrix", "gather_matrices",
+           "first_gather_matrices", "MultipleScatteringEngine", "SPECIES"]
+
+SPECIES = ("rayleigh", "mie")
+VECTOR_WIDTH = 8
+#: Rows of the gather computed per work-item (kernels/multiple.cl, GATHER_ROWS).
+GATHER_ROWS = 4
+
+
+def gather_quadrature(theta_steps, phi_steps):
+    """Trapezoid nodes and weights over Theta in [0, pi] and Phi in [0, 2 pi].
+
+    Returns (theta, theta_weights, phi, phi_weights), each weight vector summing to pi and 2 pi.
+    """
+    theta = np.linspace(0.0, math.pi, theta_steps + 1)
+    phi = np.linspace(0.0, 2.0 * math.pi, phi_steps + 1)
+    theta_weights = np.full(theta_steps + 1, math.pi / theta_steps)
+    phi_weights = np.full(phi_steps + 1, 2.0 * math.pi / phi_steps)
+    theta_weights[[0, -1]] *= 0.5
+    phi_weights[[0, -1]] *= 0.5
+    return theta, theta_weights, phi, phi_weights
+
+
+def _phase(atmosphere, species):
+    if species == "rayleigh":
+        return RAYLEIGH_PHASES[atmosphere.rayleigh_phase]
+    return functools.partial(MIE_PHASES[atmosphere.mie_phase], g=atmosphere.mie_g)
+
+
+def phase_azimuth_integrals(phase, cosines, theta, phi, phi_weights):
+    """K(i, a) = sum_b wP_b F(cos(Theta_a) c_i + sin(Theta_a) sqrt(1 - c_i^2) cos(Phi_b)).
+
+    The azimuthal integral of a phase function between a direction of zenith cosine c_i and the
+    directions (Theta_a, Phi_b); shape (len(cosines), len(theta)).
+    """
+    sines = np.sqrt(np.maximum(1.0 - cosines * cosines, 0.0))
+    k = np.zeros((cosines.size, theta.size))
+    for cos_phi, weight in zip(np.cos(phi), phi_weights):       # few hundred steps; each step is whole-array
+        k += weight * phase(np.cos(theta) * cosines[:, None] + np.sin(theta) * sines[:, None] * cos_phi)
+    return k
+
+
+def interpolation_matrix(cosines, height, mapping):
+    """P(a, j): weights of view nodes j in the linear (texture-space) interpolation at cosines[a]."""
+    f = cos_to_v(cosines, mapping) * (height - 1)
+    lower = np.clip(f.astype(np.int64), 0, height - 2)
+    alpha = f - lower
+    p = np.zeros((cosines.size, height))
+    rows = np.arange(cosines.size)
+    np.add.at(p, (rows, lower), 1.0 - alpha)
+    np.add.at(p, (rows, lower + 1), alpha)
+    return p
+
+
+@functools.lru_cache(maxsize=16)
+def _gather_parts(atmosphere: AtmosphereParameters, settings: TableSettings):
+    theta, theta_weights, phi, phi_weights = gather_quadrature(settings.gather_theta_steps,
+                                                               settings.gather_phi_steps)
+    _, cos_view, cos_sun = grid_coordinates(settings.size, atmosphere.atmosphere_height, settings.mapping)
+    p = interpolation_matrix(np.cos(theta), settings.size[1], settings.mapping)
+    weights = theta_weights * np.sin(theta)
+    view = {s: phase_azimuth_integrals(_phase(atmosphere, s), cos_view, theta, phi, phi_weights) for s in SPECIES}
+    sun = {s: phase_azimuth_integrals(_phase(atmosphere, s), cos_sun, theta, phi, phi_weights) for s in SPECIES}
+    return p, weights, view, sun
+
+
+def gather_matrix(atmosphere: AtmosphereParameters, settings: TableSettings, species):
+    """M (H, H) of one species' phase function: Gbar[:, j-axis] = M @ Ibar (see module docstring)."""
+    p, weights, view, _ = _gather_parts(atmosphere, settings)
+    return (view[species] * weights) @ p
+
+
+def gather_matrices(atmosphere, settings):
+    """{species: M} for the Rayleigh and Mie phase functions."""
+    return {s: gather_matrix(atmosphere, settings, s) for s in SPECIES}
+
+
+def first_gather_matrices(atmosphere, settings):
+    """{(s, s'): M_{s,s'} of shape (D, H, H)}: the physical mode's first gather (module docstring)."""
+    p, weights, view, sun = _gather_parts(atmosphere, settings)
+    return {(s, s2): np.matmul(view[s][None] * (weights * sun[s2] / (2.0 * math.pi))[:, None, :], p)
+            for s in SPECIES for s2 in SPECIES}
+
+
+class MultipleScatteringEngine(_cl.Engine):
+    """Applies gather matrices and scatters gathered tables along view rays (``kernels/multiple.cl``).
+
+    Parameters
+    ----------
+    settings : TableSettings
+        Its view_steps, sampling and dtype are compiled in.
+    ctx, profile, fast_math
+        See :class:`clsky._cl.Engine`.
+    """
+
+    def __init__(self, settings: TableSettings = TableSettings(), ctx=None, profile=False, fast_math=False):
+        self.settings = settings
+        super().__init__(ctx, np.dtype(settings.dtype), profile, fast_math)
+
+    def program_sources(self):
+        declaration = _atmosphere_cl.declaration(self.ctx.devices[0], self.dtype)
+        return ("real.cl", declaration, "geometry.cl", "mapping.cl", "multiple.cl")
+
+    def build_options(self):
+        s = self.settings
+        options = super().build_options() + [f"-DN_VIEW={s.view_steps}", f"-DVECTOR_WIDTH={VECTOR_WIDTH}"]
+        if s.sampling == "keller_bohn":
+            options.append("-DKELLER_BOHN_SAMPLING=1")
+        return options
+
+    def to_device(self, table):
+        """A host table (D, H, W, 6) as a padded device table (D, H, W, 8) (channels 6, 7 zero)."""
+        table = np.asarray(table)
+        if table.ndim != 4 or table.shape[3] != 6:
+            raise ValueError(f"table must have shape (D, H, W, 6), got {table.shape}")
+        padded = np.zeros(table.shape[:3] + (8,), dtype=self.dtype)
+        padded[..., :6] = table
+        return cla.to_device(self.queue, padded)
+
+    def gather(self, matrices, table, out=None, accumulate=False):
+        """out[z, i, x, c] (+)= sum_j M[c // 3][(z,) i, j] table[z, j, x, c].
+
+        Parameters
+        ----------
+        matrices : array (2, H, H) or (2, D, H, H)
+            Rayleigh and Mie gather matrices (optionally one per sun node).
+        table : host array (D, H, W, 6) or padded device array (D, H, W, 8)
+        out : padded device array (D, H, W, 8), optional
+        accumulate : bool
+            Add to ``out`` instead of overwriting it.
+
+        Returns the padded device array ``out``.
+        """
+        table_d = table if isinstance(table, cla.Array) else self.to_device(table)
+        depth, height, width, _ = table_d.shape
+        matrices = np.asarray(matrices)
+        if matrices.shape not in ((2, height, height), (2, depth, height, height)):
+            raise ValueError(f"matrices must have shape (2, H, H) or (2, D, H, H) with D, H = {depth}, "
+                             f"{height}, got {matrices.shape}")
+        matrices_d = cla.to_device(self.queue, np.ascontiguousarray(matrices, dtype=self.dtype))
+        if out is None:
+            out = cla.empty(self.queue, table_d.shape, self.dtype)
+            accumulate = False
+        per_node = matrices.ndim == 4
+        event = self.kernels["gather"](
+            self.queue, (width, -(-height // GATHER_ROWS), depth), None, matrices_d.data,
+            np.int32(matrices.size // 2), np.int32(height * height if per_node else 0), table_d.data,
+            out.data, np.int32(accumulate), np.int32(width), np.int32(height), np.int32(depth))
+        self._record("gather", event)
+        return out
+
+    def scatter(self, atmosphere: AtmosphereParameters, gathered, combine_species=False):
+        """Next order from a gathered table, as a padded device array (D, H, W, 8).
+
+        With ``combine_species`` (physical mode) channels 0-2 and 3-5 both hold Rayleigh + Mie.
+        """
+        gathered_d = gathered if isinstance(gathered, cla.Array) else self.to_device(gathered)
+        depth, height, width, _ = gathered_d.shape
+        out = cla.empty(self.queue, gathered_d.shape, self.dtype)
+        atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
+        event = self.kernels["scatter"](
+            self.queue, (-(-width // VECTOR_WIDTH), height, depth), None, atmosphere_d, np.int32(width),
+            np.int32(height), np.int32(depth), np.int32(MAPPINGS[self.settings.mapping]),
+            np.int32(bool(combine_species)), gathered_d.data, out.data)
+        self._record("scatter", event)
+        return out

@@ -1,0 +1,192 @@
+"""The host orchestrator: single scattering, then the orders k = 2, 3, ... until they converge.
+
+Two schemes (``TableSettings.mode``):
+
+``atmosphere-plus``
+    The notes' factored scheme exactly: the Rayleigh and Mie chains stay apart,
+    Gbar_s^(k) = Integral F_s(dot(omega, V)) Ibar_s^(k) d omega and
+    Ibar_s^(k+1) = beta_s / (4 pi) Integral Gbar_s^(k) rho_s T ds; the renderer applies the phase of the
+    first event, F_s(cos theta), to the sum over all orders. Approximations (from the notes): no
+    azimuth, no Rayleigh <-> Mie cross terms, the first event's phase applied to every order.
+
+``physical``
+    A consistent scheme on the same grid. The radiance of order k arriving from omega is gathered by
+    both species, each with its own phase: Gbar_s^(k) = Integral F_s(dot(omega, V)) L^(k)(omega) d omega
+    and L^(k+1) = sum_s beta_s / (4 pi) Integral Gbar_s^(k) rho_s T ds. For k = 1, L^(1) carries the exact
+    phase to the sun, F_R(nu) Ibar_R^(1) + F_M(nu) Ibar_M^(1); the orders k >= 2 are stored with their
+    phase applied (3 channels, r, g, b) and averaged over the azimuth between view and sun, while single
+    scattering stays factored so that the renderer applies its exact phase. Remaining approximations:
+    (1) the table has no azimuth: higher orders are azimuth averages, and every order is computed in
+    the canonical frame (sun and view in one vertical plane) along the ray; (2) the ground is black;
+    (3) quadrature and interpolation errors of the grid (view/sun steps, trilinear lookups).
+
+Stopping rule of ``orders="auto"``: after each order k >= 2, for every channel c, the *bright part* is
+the set of cells whose running sum S_c is at least :data:`BRIGHT_FRACTION` (1 %) of its maximum over
+the table; the order's relative addition is max over channels and bright cells of A_c / S_c, where A
+is what order k added. The iteration stops when that falls below ``order_tolerance`` (converged) or
+when ``max_orders`` orders have been computed (not converged: reported so). In the physical mode the
+running sum per wavelength is Ibar_R^(1) + Ibar_M^(1) + sum_{k>=2} L^(k) (single scattering counted with
+phase 1, its mean over the sphere).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Callable
+
+import numpy as np
+
+from .atmosphere import AtmosphereParameters
+from .multiple import SPECIES, first_gather_matrices, gather_matrices
+from .settings import TableSettings
+
+__all__ = ["OrdersResult", "compute_orders", "BRIGHT_FRACTION", "relative_addition"]
+
+#: Cells whose running sum reaches this fraction of the channel's maximum form the "bright part".
+BRIGHT_FRACTION = 1e-2
+
+
+@dataclasses.dataclass
+class OrdersResult:
+    """Every order's table, their combination, and the record of the iteration.
+
+    Attributes
+    ----------
+    orders : list of numpy.ndarray
+        orders[0] is single scattering (D, H, W, 6), factored. Later orders: (D, H, W, 6) factored
+        (atmosphere-plus) or (D, H, W, 3) with the phase applied (physical).
+    record : dict
+        mode, tolerance, max_orders, converged, reason, per-order relative additions and shares,
+        seconds.
+    """
+
+    orders: list
+    record: dict
+
+    def combined(self, mode):
+        """The table's channels: factored sum (atmosphere-plus), or single + sum of higher orders."""
+        if mode == "atmosphere-plus":
+            return np.sum(self.orders, axis=0)
+        if len(self.orders) == 1:
+            return self.orders[0]
+        return np.concatenate([self.orders[0], np.sum(self.orders[1:], axis=0)], axis=-1)
+
+
+def relative_addition(added, running_sum):
+    """max over channels and bright cells of added / running_sum (see module docstring)."""
+    peak = running_sum.reshape(-1, running_sum.shape[-1]).max(axis=0)
+    bright = (running_sum >= BRIGHT_FRACTION * peak) & (running_sum > 0)
+    if not bright.any():
+        return 0.0
+    return float(np.max(added[bright] / running_sum[bright]))
+
+
+def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, backend="opencl", ctx=None,
+                   fast_math=False, progress: Callable[[str, int, int], None] | None = None) -> OrdersResult:
+    """Single scattering and the higher orders (see module docstring).
+
+    Parameters
+    ----------
+    atmosphere : AtmosphereParameters
+    settings : TableSettings
+        ``mode``, ``orders``, ``order_tolerance``, ``max_orders`` and the gather quadrature matter here.
+    backend : {'opencl', 'numpy'}
+    progress : callable, optional
+        ``progress(stage, done, total)``: stage 'single' with slabs, then 'orders' with orders done.
+    """
+    start = time.perf_counter()
+    if backend == "opencl":
+        from .multiple import MultipleScatteringEngine
+        from .single import SingleScatteringEngine
+
+        single_engine = SingleScatteringEngine(settings, ctx=ctx, fast_math=fast_math)
+        engine = MultipleScatteringEngine(settings, ctx=single_engine.ctx, fast_math=fast_math)
+        single = single_engine.compute(atmosphere, progress=None if progress is None else
+                                       (lambda done, total: progress("single", done, total)))
+
+        def gather(terms):
+            out = None
+            for matrices, table in terms:
+                out = engine.gather(matrices, table, out=out, accumulate=out is not None)
+            return out
+
+        def scatter(gathered):
+            new_d = engine.scatter(atmosphere, gathered, combine_species=settings.mode == "physical")
+            return new_d, new_d.get()[..., :6].astype(np.float64)
+    else:
+        from . import reference
+
+        single = reference.single_scattering(atmosphere, settings)
+        if progress is not None:
+            progress("single", 1, 1)
+
+        def gather(terms):
+            return sum(reference.gather(matrices, table) for matrices, table in terms)
+
+        def scatter(gathered):
+            new = reference.scatter(atmosphere, settings, gathered)
+            if settings.mode == "physical":
+                new = np.concatenate([new[..., :3] + new[..., 3:]] * 2, axis=-1)
+            return new, new
+
+    orders = [single]
+    additions, converged, reason = [], False, "orders=1: single scattering only"
+    wanted = settings.max_orders if settings.orders == "auto" else settings.orders
+    if wanted > 1:
+        per_species = gather_matrices(atmosphere, settings)
+        same_species = np.stack([per_species[s] for s in SPECIES])          # (2, H, H): channel c -> c // 3
+        if settings.mode == "physical":
+            first = first_gather_matrices(atmosphere, settings)
+            direct = np.stack([first[("rayleigh", "rayleigh")], first[("mie", "mie")]])
+            crossed = np.stack([first[("rayleigh", "mie")], first[("mie", "rayleigh")]])
+            swapped = np.concatenate([single[..., 3:], single[..., :3]], axis=-1)
+            terms = [(direct, single), (crossed, swapped)]
+            running = single[..., :3] + single[..., 3:]
+        else:
+            terms = [(same_species, single)]
+            running = single.copy()
+        for k in range(2, wanted + 1):
+            # the next gather reads the new order where it is (on the device for OpenCL)
+            next_input, new = scatter(gather(terms))
+            terms = [(same_species, next_input)]
+            if settings.mode == "physical":
+                new = new[..., :3]
+            orders.append(new)
+            running = running + new
+            additions.append(relative_addition(new, running))
+            if progress is not None:
+                progress("orders", k, wanted)
+            if settings.orders == "auto" and additions[-1] < settings.order_tolerance:
+                converged = True
+                reason = (f"converged: order {k} added at most {additions[-1]:.2e} of the running sum in "
+                          f"the bright part (tolerance {settings.order_tolerance:g})")
+                break
+        else:
+            if settings.orders == "auto":
+                reason = (f"not converged: stopped at max_orders = {settings.max_orders}; the last order "
+                          f"added {additions[-1]:.2e} (tolerance {settings.order_tolerance:g})")
+            else:
+                reason = f"orders={settings.orders} requested; the last order added {additions[-1]:.2e}"
+    result = OrdersResult(orders, {})
+    result.record = {
+        "mode": settings.mode, "orders": len(orders), "requested": settings.orders,
+        "tolerance": settings.order_tolerance, "max_orders": settings.max_orders,
+        "converged": converged, "reason": reason, "relative_additions": additions,
+        "shares": order_shares(orders, settings.mode), "seconds": time.perf_counter() - start,
+    }
+    return result
+
+
+def order_shares(orders, mode):
+    """Share of each order in the total, per wavelength (r, g, b), summed over all cells.
+
+    Factored channels count Rayleigh + Mie (phase taken as 1, its mean over the sphere). Returns a list
+    of [r, g, b] fractions, one per order, summing to 1 per wavelength.
+    """
+    def per_wavelength(order):
+        return (order[..., :3] + order[..., 3:6] if order.shape[-1] == 6 else order).reshape(-1, 3).sum(axis=0)
+
+    totals = np.array([per_wavelength(o) for o in orders])
+    grand = totals.sum(axis=0)
+    return (totals / np.where(grand > 0, grand, 1.0)).tolist()
