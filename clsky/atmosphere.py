@@ -74,11 +74,16 @@ def rayleigh_scattering_coefficient(refractive_index, number_density, wavelength
     return 8.0 * math.pi**3 * n2m1**2 / (3.0 * number_density * wavelength_m**4)
 
 
+def _is_real_number(value) -> bool:
+    """A real number: int or float (NumPy's too), but not a bool, a string or a complex."""
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+
+
 def _as_rgb(name: str, value) -> tuple[float, float, float]:
-    array = np.asarray(value, dtype=np.float64)
-    if array.shape != (3,):
-        raise ValueError(f"{name} must have 3 values (r, g, b), got shape {array.shape}")
-    return tuple(float(v) for v in array)
+    items = tuple(value) if isinstance(value, (tuple, list, np.ndarray)) else None
+    if items is None or len(items) != 3 or not all(_is_real_number(v) for v in items):
+        raise ValueError(f"{name} must be 3 real numbers (r, g, b), got {value!r}")
+    return tuple(float(v) for v in items)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -134,7 +139,7 @@ class AtmosphereParameters:
         for name in ("planet_radius", "top_radius", "rayleigh_scale_height", "mie_scale_height",
                      "mie_scattering", "mie_extinction_ratio", "mie_g", "exposure"):
             value = getattr(self, name)
-            if isinstance(value, (bool, np.bool_)) or not np.isscalar(value):
+            if not _is_real_number(value):
                 raise ValueError(f"{name} must be a real number, got {value!r}")
             object.__setattr__(self, name, float(value))
 
@@ -156,10 +161,10 @@ class AtmosphereParameters:
         check("solar_irradiance", lambda v: np.all(v >= 0), "finite and >= 0")
         check("spectral_to_rgb", lambda v: np.all(v >= 0), "finite and >= 0")
         check("exposure", lambda v: v > 0, "finite and > 0")
-        if self.rayleigh_phase not in RAYLEIGH_PHASE_METHODS:
+        if not isinstance(self.rayleigh_phase, str) or self.rayleigh_phase not in RAYLEIGH_PHASE_METHODS:
             raise ValueError(f"rayleigh_phase must be one of {sorted(RAYLEIGH_PHASE_METHODS)}, "
                              f"got {self.rayleigh_phase!r}")
-        if self.mie_phase not in MIE_PHASE_METHODS:
+        if not isinstance(self.mie_phase, str) or self.mie_phase not in MIE_PHASE_METHODS:
             raise ValueError(f"mie_phase must be one of {sorted(MIE_PHASE_METHODS)}, got {self.mie_phase!r}")
 
     # Derived quantities -----------------------------------------------------------------------------

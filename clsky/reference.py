@@ -34,22 +34,24 @@ CHUNK_ELEMENTS = 2**22
 
 # Geometry (kernels/geometry.cl) -------------------------------------------------------------------
 
-def horizon_cos(r, planet_radius):
-    """Cosine of the horizon's zenith angle seen from radius r [m]: -sqrt((r - Rp)(r + Rp)) / r."""
-    return -np.sqrt(np.maximum((r - planet_radius) * (r + planet_radius), 0.0)) / r
+def horizon_cos(h, planet_radius):
+    """Cosine of the horizon's zenith angle seen from altitude h [m]: -sqrt(h (2 Rp + h)) / (Rp + h)."""
+    return -np.sqrt(np.maximum(h * (2.0 * planet_radius + h), 0.0)) / (planet_radius + h)
 
 
-def distance_to_top(r, mu, top_radius):
-    """Length [m] from radius r <= Ra along direction cosine mu to the sphere Ra."""
-    inside = np.maximum((top_radius - r) * (top_radius + r), 0.0)
+def distance_to_top(h, mu, planet_radius, top_radius):
+    """Length [m] from altitude h <= Ha along direction cosine mu to the sphere Ra."""
+    r = planet_radius + h
+    inside = np.maximum(((top_radius - planet_radius) - h) * (top_radius + r), 0.0)
     root = np.sqrt(inside + r * mu * r * mu)
     with np.errstate(divide="ignore", over="ignore", invalid="ignore"):   # in the discarded branch
         return np.where(mu > 0.0, inside / np.maximum(r * mu + root, _TINY), root - r * mu)
 
 
-def distance_to_ground(r, mu, planet_radius):
-    """Length [m] from radius r along mu (below the horizon) to the sphere Rp."""
-    above = np.maximum((r - planet_radius) * (r + planet_radius), 0.0)
+def distance_to_ground(h, mu, planet_radius):
+    """Length [m] from altitude h along mu (below the horizon) to the sphere Rp."""
+    r = planet_radius + h
+    above = np.maximum(h * (2.0 * planet_radius + h), 0.0)
     root = np.sqrt(np.maximum(r * mu * r * mu - above, 0.0))
     with np.errstate(over="ignore"):   # only where mu is above the horizon, which callers discard
         return above / np.maximum(root - r * mu, _TINY)
@@ -127,7 +129,7 @@ def transmittance_table_nodes(atmosphere, size):
     u = np.arange(tw) / (tw - 1)
     v = (np.arange(th) / (th - 1))[:, None]
     h = np.broadcast_to(u * u * atmosphere.atmosphere_height, (th, tw))
-    mu_h = horizon_cos(atmosphere.planet_radius + h, atmosphere.planet_radius)
+    mu_h = horizon_cos(h, atmosphere.planet_radius)
     return h, mu_h + (1.0 - mu_h) * (v * v)
 
 
@@ -137,7 +139,7 @@ def transmittance_table(atmosphere: AtmosphereParameters, size=(64, 256), steps=
     Twin of ``TransmittanceEngine.column_density_table``.
     """
     h, mu = transmittance_table_nodes(atmosphere, size)
-    length = distance_to_top(atmosphere.planet_radius + h, mu, atmosphere.top_radius)
+    length = distance_to_top(h, mu, atmosphere.planet_radius, atmosphere.top_radius)
     return np.stack(column_density(atmosphere, h, mu, length, steps, sampling), axis=-1)
 
 
@@ -145,7 +147,7 @@ def column_density_from_table(atmosphere, table, altitude, cos_zenith):
     """Bilinear lookup of (C_R, C_M) in a table from :func:`transmittance_table`."""
     th, tw, _ = table.shape
     h = np.asarray(altitude, dtype=np.float64)
-    mu_h = horizon_cos(atmosphere.planet_radius + h, atmosphere.planet_radius)
+    mu_h = horizon_cos(h, atmosphere.planet_radius)
     fx = np.sqrt(np.clip(h / atmosphere.atmosphere_height, 0.0, 1.0)) * (tw - 1)
     fy = np.sqrt(np.clip((cos_zenith - mu_h) / (1.0 - mu_h), 0.0, 1.0)) * (th - 1)
     x0 = np.minimum(fx.astype(np.int64), tw - 2)
@@ -177,8 +179,8 @@ class _ViewRays:
         h0, mu_v, mu_s = (np.asarray(a, dtype=np.float64)[:, None] for a in (h0, mu_v, mu_s))
         r0 = rp + h0
         nu = mu_v * mu_s + np.sqrt(np.maximum(1.0 - mu_v * mu_v, 0.0) * np.maximum(1.0 - mu_s * mu_s, 0.0))
-        hits_ground = mu_v < horizon_cos(r0, rp)
-        length = np.where(hits_ground, distance_to_ground(r0, mu_v, rp), distance_to_top(r0, mu_v, ra))
+        hits_ground = mu_v < horizon_cos(h0, rp)
+        length = np.where(hits_ground, distance_to_ground(h0, mu_v, rp), distance_to_top(h0, mu_v, rp, ra))
         nodes = quadrature_nodes(settings.view_steps, settings.sampling, power=3)
         self.s = length * nodes
         self.h = altitude_along(h0, r0, mu_v, self.s, rp)
@@ -210,9 +212,9 @@ class _ViewRays:
 def _single_scattering_cells(atmosphere, settings, h0, mu_v, mu_s, sun_table):
     """Ibar^(1) of the cells given by 1D arrays (h0, mu_v, mu_s); returns (n, 6)."""
     rays = _ViewRays(atmosphere, settings, h0, mu_v, mu_s)
-    lit = rays.mu_sun >= horizon_cos(rays.r, atmosphere.planet_radius)
+    lit = rays.mu_sun >= horizon_cos(rays.h, atmosphere.planet_radius)
     if sun_table is None:
-        sun_length = np.where(lit, distance_to_top(rays.r, rays.mu_sun, atmosphere.top_radius), 0.0)
+        sun_length = np.where(lit, distance_to_top(rays.h, rays.mu_sun, atmosphere.planet_radius, atmosphere.top_radius), 0.0)
         sun_r, sun_m = column_density(atmosphere, rays.h, rays.mu_sun, sun_length, settings.sun_steps,
                                       settings.sampling)
     else:

@@ -32,7 +32,7 @@ def _check_int(name, value, low, high):
 
 
 def _check_choice(name, value, choices):
-    if value not in choices:
+    if not isinstance(value, str) or value not in choices:
         raise ValueError(f"{name} must be one of {sorted(choices)}, got {value!r}")
     return value
 
@@ -114,7 +114,7 @@ class TableSettings:
             raise ValueError(f"order_tolerance must be a number in (0, 1), got {tolerance!r}")
         object.__setattr__(self, "order_tolerance", float(tolerance))
         try:
-            dtype = np.dtype(self.dtype)
+            dtype = None if self.dtype is None else np.dtype(self.dtype)   # np.dtype(None) is float64
         except TypeError:
             dtype = None
         if dtype not in (np.float32, np.float64):

@@ -9,26 +9,32 @@
  * Requires real.cl.
  */
 
-/* Cosine of the zenith angle of the horizon seen from radius r: rays with mu < horizon_cos hit the
- * planet. -sqrt(1 - (Rp/r)^2), written as -sqrt((r - Rp)(r + Rp)) / r. */
-inline realv horizon_cos(const realv r, const real planet_radius)
+/* Every helper takes the altitude h = r - Rp [m] rather than the radius: in float32, r = Rp + h rounds
+ * h to 0.5 m at 6.4e6 m, so differences of squared radii are formed from h directly:
+ * r^2 - Rp^2 = h (2 Rp + h) and Ra^2 - r^2 = (Ha - h)(Ra + r). */
+
+/* Cosine of the zenith angle of the horizon seen from altitude h: rays with mu < horizon_cos hit the
+ * planet. -sqrt(1 - (Rp/r)^2) = -sqrt(h (2 Rp + h)) / (Rp + h). */
+inline realv horizon_cos(const realv h, const real planet_radius)
 {
-    return -sqrt(fmax((r - planet_radius) * (r + planet_radius), R(0.0))) / r;
+    return -sqrt(fmax(h * (R(2.0) * planet_radius + h), R(0.0))) / (planet_radius + h);
 }
 
-/* Length [m] from radius r <= Ra along mu to the top of the atmosphere Ra. */
-inline realv distance_to_top(const realv r, const realv mu, const real top_radius)
+/* Length [m] from altitude h <= Ha along mu to the top of the atmosphere Ra. */
+inline realv distance_to_top(const realv h, const realv mu, const real planet_radius, const real top_radius)
 {
-    const realv inside = fmax((top_radius - r) * (top_radius + r), R(0.0));   /* Ra^2 - r^2 >= 0 */
+    const realv r = planet_radius + h;
+    const realv inside = fmax(((top_radius - planet_radius) - h) * (top_radius + r), R(0.0));   /* Ra^2 - r^2 */
     const realv root = sqrt(inside + r * mu * r * mu);
     /* mu > 0: -r mu + root would cancel; use the conjugate form instead. */
     return SELECT(root - r * mu, inside / fmax(r * mu + root, REAL_TINY), mu > R(0.0));
 }
 
-/* Length [m] from radius r along mu (< horizon_cos) to the ground. */
-inline realv distance_to_ground(const realv r, const realv mu, const real planet_radius)
+/* Length [m] from altitude h along mu (< horizon_cos) to the ground. */
+inline realv distance_to_ground(const realv h, const realv mu, const real planet_radius)
 {
-    const realv above = fmax((r - planet_radius) * (r + planet_radius), R(0.0));   /* r^2 - Rp^2 */
+    const realv r = planet_radius + h;
+    const realv above = fmax(h * (R(2.0) * planet_radius + h), R(0.0));   /* r^2 - Rp^2 */
     const realv root = sqrt(fmax(r * mu * r * mu - above, R(0.0)));
     return above / fmax(root - r * mu, REAL_TINY);     /* = -r mu - root, without cancellation */
 }

@@ -109,9 +109,9 @@ __kernel void scatter(__constant const atmosphere_t *atm, const int width, const
     const realv r0 = rp + h0;
     const real nu = mu_v * mu_s + sqrt(fmax(R(1.0) - mu_v * mu_v, R(0.0)) * fmax(R(1.0) - mu_s * mu_s, R(0.0)));
 
-    const maskv hits_ground = isless((realv)(mu_v), horizon_cos(r0, rp));
-    const realv length = SELECT(distance_to_top(r0, (realv)(mu_v), atm->top_radius),
-                                distance_to_ground(r0, (realv)(mu_v), rp), hits_ground);
+    const maskv hits_ground = isless((realv)(mu_v), horizon_cos(h0, rp));
+    const realv length = SELECT(distance_to_top(h0, (realv)(mu_v), rp, atm->top_radius),
+                                distance_to_ground(h0, (realv)(mu_v), rp), hits_ground);
 
     const real inv_hr = R(1.0) / atm->rayleigh_scale_height;
     const real inv_hm = R(1.0) / atm->mie_scale_height;

@@ -58,9 +58,9 @@ __kernel void single_scattering(__constant const atmosphere_t *atm, const int wi
     /* cos(phi - delta), the scattering-angle cosine of the canonical frame */
     const real nu = mu_v * mu_s + sqrt(fmax(R(1.0) - mu_v * mu_v, R(0.0)) * fmax(R(1.0) - mu_s * mu_s, R(0.0)));
 
-    const maskv hits_ground = isless((realv)(mu_v), horizon_cos(r0, rp));
-    const realv length = SELECT(distance_to_top(r0, (realv)(mu_v), atm->top_radius),
-                                distance_to_ground(r0, (realv)(mu_v), rp), hits_ground);
+    const maskv hits_ground = isless((realv)(mu_v), horizon_cos(h0, rp));
+    const realv length = SELECT(distance_to_top(h0, (realv)(mu_v), rp, atm->top_radius),
+                                distance_to_ground(h0, (realv)(mu_v), rp), hits_ground);
 
     const real inv_hr = R(1.0) / atm->rayleigh_scale_height;
     const real inv_hm = R(1.0) / atm->mie_scale_height;
@@ -82,7 +82,7 @@ __kernel void single_scattering(__constant const atmosphere_t *atm, const int wi
             h = SELECT(h, V(0.0), hits_ground);
         const realv r = rp + h;
         const realv mu_sun_here = (r0 * mu_s + s * nu) / r;     /* dot(P, Sun) / |P| */
-        const maskv lit = isgreaterequal(mu_sun_here, horizon_cos(r, rp));
+        const maskv lit = isgreaterequal(mu_sun_here, horizon_cos(h, rp));
         const realv density_r = exp(-h * inv_hr), density_m = exp(-h * inv_hm);
         const realv half_step = R(0.5) * length * (node - node_previous);
         if (i > 0) {
@@ -94,7 +94,7 @@ __kernel void single_scattering(__constant const atmosphere_t *atm, const int wi
         column_density_from_table(atm, sun_table, tw, th, h, mu_sun_here, &sun_r, &sun_m);
 #else
         /* in the shadow the march would cross the planet: give it zero length, then discard */
-        const realv sun_length = SELECT(V(0.0), distance_to_top(r, mu_sun_here, atm->top_radius), lit);
+        const realv sun_length = SELECT(V(0.0), distance_to_top(h, mu_sun_here, rp, atm->top_radius), lit);
         column_density(atm, h, mu_sun_here, sun_length, &sun_r, &sun_m);
 #endif
         const realv column_r = view_r + sun_r, column_m = view_m + sun_m;

@@ -31,7 +31,7 @@ __kernel void transmittance_table(__constant const atmosphere_t *atm, const int 
         return;
     realv h, mu, column_r, column_m;
     transmittance_table_node(atm, x, y, tw, th, &h, &mu);
-    column_density(atm, h, mu, distance_to_top(atm->planet_radius + h, mu, atm->top_radius),
+    column_density(atm, h, mu, distance_to_top(h, mu, atm->planet_radius, atm->top_radius),
                    &column_r, &column_m);
     table[2 * (x + y * tw)] = column_r;
     table[2 * (x + y * tw) + 1] = column_m;

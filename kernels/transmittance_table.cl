@@ -2,7 +2,7 @@
  *
  * Axes (TW x TH nodes, index x + y TW, two channels (C_R, C_M) [m] per node):
  *   altitude     u = sqrt(h / Ha)                                          (x = u (TW - 1))
- *   zenith cos   v = sqrt((mu - mu_h) / (1 - mu_h)), mu_h = horizon_cos(r)  (y = v (TH - 1))
+ *   zenith cos   v = sqrt((mu - mu_h) / (1 - mu_h)), mu_h = horizon_cos(h)  (y = v (TH - 1))
  * so that nodes crowd near the ground and near the horizon, where the columns change fastest. Rays
  * below the horizon hit the planet and are never looked up (the caller decides the shadow first).
  * Replaces re-marching each sun ray (2 N_SUN exponentials per sample) by one bilinear lookup.
@@ -16,7 +16,7 @@ inline void transmittance_table_node(__constant const atmosphere_t *atm, const i
     const real u = (real)x / (real)(tw - 1);
     const real v = (real)y / (real)(th - 1);
     *h = (realv)(u * u * (atm->top_radius - atm->planet_radius));
-    const realv mu_h = horizon_cos(atm->planet_radius + *h, atm->planet_radius);
+    const realv mu_h = horizon_cos(*h, atm->planet_radius);
     *mu = mu_h + (R(1.0) - mu_h) * (v * v);
 }
 
@@ -26,7 +26,7 @@ inline void column_density_from_table(__constant const atmosphere_t *atm, __glob
                                       realv *column_r, realv *column_m)
 {
     const real ha = atm->top_radius - atm->planet_radius;
-    const realv mu_h = horizon_cos(atm->planet_radius + h, atm->planet_radius);
+    const realv mu_h = horizon_cos(h, atm->planet_radius);
     const realv fx = sqrt(clamp(h / ha, R(0.0), R(1.0))) * (real)(tw - 1);
     const realv fy = sqrt(clamp((mu - mu_h) / (R(1.0) - mu_h), R(0.0), R(1.0))) * (real)(th - 1);
     realv c_r, c_m;

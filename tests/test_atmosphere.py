@@ -117,26 +117,20 @@ def test_numpy_scalars_are_accepted_and_stored_as_float():
     assert all(type(v) is float for v in atmosphere.rayleigh_scattering)
 
 
-# Validation gaps found while writing these tests (see the report): each case is invalid, yet
-# accepted or rejected with a message that does not name the field.
-@pytest.mark.xfail(strict=True, reason="library bug: a bool inside a 3-vector is silently taken as 1.0/0.0, "
-                                       "although bool scalars are rejected")
+# Validation gaps found while writing these tests (fixed since): each case is invalid, and was
+# accepted or rejected with a message that did not name the field.
 @pytest.mark.parametrize("field", RGB_FIELDS)
 def test_bool_inside_rgb_raises_naming_the_field(field):
     with raises_naming(field):
         AtmosphereParameters(**{field: (True, 1.0, 1.0)})
 
 
-@pytest.mark.xfail(strict=True, reason="library bug: a numeric string ('6371000') passes as a real number "
-                                       "(np.isscalar(str) is True, then float() parses it)")
 @pytest.mark.parametrize("field", SCALAR_FIELDS)
 def test_string_scalar_raises_naming_the_field(field):
     with raises_naming(field):
         AtmosphereParameters(**{field: str(getattr(AtmosphereParameters(), field))})
 
 
-@pytest.mark.xfail(strict=True, reason="library bug: _as_rgb lets NumPy's ValueError through for ragged or "
-                                       "non-numeric 3-vectors, so the message does not name the field")
 @pytest.mark.parametrize("value", [((1.0, 2.0), (3.0,), 4.0), ("a", "b", "c"), "abc"])
 def test_unconvertible_rgb_raises_naming_the_field(value):
     with raises_naming("rayleigh_scattering"):
@@ -380,8 +374,6 @@ def test_invalid_table_settings_raise_naming_the_field(field, value, named):
         TableSettings(**{field: value})
 
 
-@pytest.mark.xfail(strict=True, reason="library bug: TableSettings(dtype=None) is accepted as float64 "
-                                       "(np.dtype(None) is float64)")
 def test_dtype_none_raises_naming_the_field():
     with raises_naming("dtype"):
         TableSettings(dtype=None)

@@ -100,19 +100,12 @@ def test_one_engine_serves_any_size_and_mapping(single_engine):
                              f"per-call {settings.size} {settings.mapping}")
 
 
-FLOAT32_NEAR_GROUND_BUG = (
-    "library bug (float32 only): the kernels form r = Rp + h in float32, which rounds altitudes to 0.5 m "
-    "near 6.4e6 m; horizon_cos, distance_to_ground and the shadow test then work on that rounded altitude "
-    "(physics.md asks for these in double precision). On grids with nodes 100-400 m above the ground and "
-    "view directions just below the horizon the float32 table is off by 2.4e-4 of its maximum "
-    "(7.7e-4 relative); 3.1e-4 and 6.5% relative (twilight cell) on the default 32 x 256 x 32 grid.")
-
-
-@pytest.mark.parametrize("precision", ["float64", pytest.param("float32", marks=pytest.mark.xfail(
-    strict=True, reason=FLOAT32_NEAR_GROUND_BUG))])
+@pytest.mark.parametrize("precision", ["float64", "float32"])
 def test_near_ground_grid_matches_twin(single_engine, cl_context, precision):
     """The default grid's altitude nodes (W = 32: 104 m, 416 m, ...) with 64 view directions, sun at the
-    nadir and the zenith: rays that graze the ground are ill-conditioned, a stress test of the geometry."""
+    nadir and the zenith: rays that graze the ground are ill-conditioned, a stress test of the geometry.
+    (float32 failed here while the helpers took radii r = Rp + h, which rounds h to 0.5 m; they now
+    take the altitude.)"""
     require_dtype(cl_context, precision)
     settings = TableSettings(size=(32, 64, 2), dtype=precision)
     atmosphere = preset("atmosphere-plus")
@@ -141,16 +134,15 @@ def random_segments(atmosphere, count=3000, seed=0):
     altitude = rng.uniform(0.0, atmosphere.atmosphere_height, count)
     altitude[: count // 3] = rng.uniform(0.0, 3000.0, count // 3)           # near the ground, where Mie lives
     cos_zenith = rng.uniform(-1.0, 1.0, count)
-    r = rp + altitude
-    hits_ground = cos_zenith < reference.horizon_cos(r, rp)
-    full = np.where(hits_ground, reference.distance_to_ground(r, cos_zenith, rp),
-                    reference.distance_to_top(r, cos_zenith, ra))
+    hits_ground = cos_zenith < reference.horizon_cos(altitude, rp)
+    full = np.where(hits_ground, reference.distance_to_ground(altitude, cos_zenith, rp),
+                    reference.distance_to_top(altitude, cos_zenith, rp, ra))
     length = full * rng.uniform(0.0, 1.0, count)
     length[: count // 10] = full[: count // 10]                                 # whole paths
     edges_altitude = [0.0, 0.0, 0.0, atmosphere.atmosphere_height, atmosphere.atmosphere_height, 50_000.0]
     edges_cos = [1.0, 0.0, -1.0, -1.0, 0.0, 1.0]
-    edges_length = [atmosphere.atmosphere_height, reference.distance_to_top(rp, 0.0, ra), 0.0,
-                    atmosphere.atmosphere_height, reference.distance_to_top(ra, 0.0, ra), 0.0]
+    edges_length = [atmosphere.atmosphere_height, reference.distance_to_top(0.0, 0.0, rp, ra), 0.0,
+                    atmosphere.atmosphere_height, reference.distance_to_top(ra - rp, 0.0, rp, ra), 0.0]
     return (np.concatenate([altitude, edges_altitude]), np.concatenate([cos_zenith, edges_cos]),
             np.concatenate([length, edges_length]))
 
