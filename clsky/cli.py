@@ -25,25 +25,48 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(message)
 
 
-def _progress_bar(mode, description, unit):
-    """A tqdm-driven ``progress(done, total)`` callable (or None), writing to stderr."""
+STAGE_LABELS = {"single": ("single scattering", "slab"), "orders": ("scattering orders", "order")}
+
+
+def _progress_bar(mode):
+    """A tqdm-driven ``progress(stage, done, total)`` callable (or None) and its closer; one bar per
+    stage, on stderr. The orders' total is unknown when they iterate to convergence: the bar counts."""
     if mode == "none":
         return None, lambda: None
     from tqdm import tqdm
 
-    bar = tqdm(desc=description, unit=unit, leave=(mode == "leave"), file=sys.stderr, dynamic_ncols=True)
+    bars = {}
 
-    def update(done, total):
-        bar.total = total
+    def update(stage, done, total):
+        if stage not in bars:
+            for bar in bars.values():
+                bar.close()
+            label, unit = STAGE_LABELS.get(stage, (stage, "step"))
+            bars[stage] = tqdm(desc=label, unit=unit, leave=(mode == "leave"), file=sys.stderr, dynamic_ncols=True,
+                               total=None if stage == "orders" else total)
+        bar = bars[stage]
         bar.n = done
         bar.refresh()
 
-    return update, bar.close
+    def close():
+        for bar in bars.values():
+            bar.close()
+
+    return update, close
+
+
+def _orders(text):
+    if text == "auto":
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid value {text!r}: an integer K >= 1 or 'auto'") from None
 
 
 def _add_table_arguments(parser):
     from .atmosphere import PRESETS
-    from .settings import MAPPINGS, MIE_LAYOUTS, SAMPLINGS, SUN_TRANSMITTANCE_METHODS
+    from .settings import MAPPINGS, MIE_LAYOUTS, SAMPLINGS, SCATTERING_MODES, SUN_TRANSMITTANCE_METHODS
 
     physics = parser.add_argument_group("atmosphere")
     physics.add_argument("--preset", default="atmosphere-plus", choices=sorted(PRESETS),
@@ -53,6 +76,16 @@ def _add_table_arguments(parser):
                       help="nodes along altitude, view zenith, sun zenith (default: 32 256 32)")
     grid.add_argument("--mapping", default="nonlinear", choices=sorted(MAPPINGS))
     grid.add_argument("--mie-layout", default="per-wavelength", choices=sorted(MIE_LAYOUTS))
+    orders = parser.add_argument_group("scattering orders")
+    orders.add_argument("--orders", type=_orders, default="auto",
+                        help="K: compute orders 1..K (1 = single scattering); auto: until converged (default)")
+    orders.add_argument("--mode", default="atmosphere-plus", choices=list(SCATTERING_MODES),
+                        help="scheme of the higher orders (default: %(default)s)")
+    orders.add_argument("--order-tolerance", type=float, default=1e-4,
+                        help="auto stops when an order adds less than this (default: %(default)g)")
+    orders.add_argument("--max-orders", type=int, default=100, help="most orders auto computes (default: 100)")
+    orders.add_argument("--gather-steps", nargs=2, type=int, metavar=("THETA", "PHI"), default=[256, 128],
+                        help="trapezoid steps of the gather's sphere integral (default: 256 128)")
     numerics = parser.add_argument_group("numerics")
     numerics.add_argument("--dtype", default="float64", choices=["float64", "float32"])
     numerics.add_argument("--view-steps", type=int, default=30, help="trapezoid steps per view ray")
@@ -107,7 +140,9 @@ def run_table(args):
                              sun_steps=args.sun_steps, sampling=args.sampling,
                              sun_transmittance=args.sun_transmittance,
                              transmittance_size=tuple(args.transmittance_size), mie_layout=args.mie_layout,
-                             dtype=args.dtype)
+                             dtype=args.dtype, mode=args.mode, orders=args.orders,
+                             order_tolerance=args.order_tolerance, max_orders=args.max_orders,
+                             gather_theta_steps=args.gather_steps[0], gather_phi_steps=args.gather_steps[1])
     output = pathlib.Path(args.output)
     if output.suffix != ".npz":
         raise UsageError(f"--output must end in .npz, got {args.output!r}")
@@ -117,7 +152,7 @@ def run_table(args):
             raise UsageError(f"{target} exists; use --force to overwrite it")
         if not target.parent.is_dir():
             raise UsageError(f"output directory {target.parent} does not exist")
-    progress, close = _progress_bar(args.progress, "single scattering", "slab")
+    progress, close = _progress_bar(args.progress)
     start = time.perf_counter()
     try:
         table = ScatteringTable.build(preset(args.preset), settings, backend=args.backend,
@@ -128,9 +163,13 @@ def run_table(args):
     if args.raw:
         table.export_raw(args.raw, overwrite=args.force)
     width, height, depth = settings.size
-    print(f"table {width}x{height}x{depth} {settings.dtype} ({args.preset}, {table.metadata['device']}): "
-          f"built in {table.metadata['build_seconds']:.2f} s, total {time.perf_counter() - start:.2f} s "
-          f"-> {output}")
+    record = table.orders_record
+    print(f"table {width}x{height}x{depth} {settings.dtype} ({args.preset}, mode {settings.mode}, "
+          f"{record['orders']} orders, {'converged' if record['converged'] else 'not converged'}; "
+          f"{table.metadata['device']}): built in {table.metadata['build_seconds']:.2f} s, "
+          f"total {time.perf_counter() - start:.2f} s -> {output}")
+    if settings.orders == "auto" and not record["converged"]:
+        print(f"clsky: warning: {record['reason']}", file=sys.stderr)
     return 0
 
 

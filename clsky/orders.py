@@ -37,6 +37,7 @@ from typing import Callable
 
 import numpy as np
 
+from . import _cl
 from .atmosphere import AtmosphereParameters
 from .multiple import SPECIES, first_gather_matrices, gather_matrices
 from .settings import TableSettings
@@ -96,6 +97,8 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         ``progress(stage, done, total)``: stage 'single' with slabs, then 'orders' with orders done.
     """
     start = time.perf_counter()
+    if backend not in ("opencl", "numpy"):
+        raise ValueError(f"backend must be one of ['opencl', 'numpy'], got {backend!r}")
     if backend == "opencl":
         from .multiple import MultipleScatteringEngine
         from .single import SingleScatteringEngine
@@ -104,6 +107,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         engine = MultipleScatteringEngine(settings, ctx=single_engine.ctx, fast_math=fast_math)
         single = single_engine.compute(atmosphere, progress=None if progress is None else
                                        (lambda done, total: progress("single", done, total)))
+        device = _cl.describe_device(single_engine.device)
 
         def gather(terms):
             out = None
@@ -118,6 +122,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         from . import reference
 
         single = reference.single_scattering(atmosphere, settings)
+        device = "numpy"
         if progress is not None:
             progress("single", 1, 1)
 
@@ -174,6 +179,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         "tolerance": settings.order_tolerance, "max_orders": settings.max_orders,
         "converged": converged, "reason": reason, "relative_additions": additions,
         "shares": order_shares(orders, settings.mode), "seconds": time.perf_counter() - start,
+        "device": device,
     }
     return result
 

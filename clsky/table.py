@@ -1,8 +1,10 @@
 """The scattering table as a product: build, look up, save, load, export for GPU engines.
 
-File format (``.npz``, :data:`FORMAT_VERSION`): arrays ``data`` (D, H, W, C) float64 or float32,
-``format_version``, and JSON strings ``atmosphere``, ``settings``, ``metadata`` and ``parameters_hash``
-(SHA-256 of the atmosphere and settings). :meth:`ScatteringTable.load` refuses a file whose version,
+File format (``.npz``, uncompressed: compression saves little on these values and costs seconds;
+:data:`FORMAT_VERSION`): arrays ``data`` (D, H, W, C) at full precision, ``order_1``, ``order_2``, ...
+(every scattering order, stored as float32 for inspection), ``format_version``, and JSON strings
+``atmosphere``, ``settings``, ``metadata``, ``orders_record`` (how the iteration stopped) and
+``parameters_hash`` (SHA-256 of the atmosphere and settings). :meth:`ScatteringTable.load` refuses a file whose version,
 hash or shape does not match, with a clear error.
 
 Raw export (:meth:`ScatteringTable.export_raw`): ``<name>.bin`` holds little-endian float32 values,
@@ -32,10 +34,13 @@ from .settings import MIE_LAYOUTS, TableSettings
 __all__ = ["ScatteringTable", "TableFormatError", "FORMAT_VERSION", "BACKENDS", "atomic_write",
            "CHANNEL_NAMES"]
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 BACKENDS = ("opencl", "numpy")
+_MULTIPLE_NAMES = ("multiple_r", "multiple_g", "multiple_b")
 CHANNEL_NAMES = {6: ("rayleigh_r", "rayleigh_g", "rayleigh_b", "mie_r", "mie_g", "mie_b"),
                  4: ("rayleigh_r", "rayleigh_g", "rayleigh_b", "mie")}
+CHANNEL_NAMES[9] = CHANNEL_NAMES[6] + _MULTIPLE_NAMES
+CHANNEL_NAMES[7] = CHANNEL_NAMES[4] + _MULTIPLE_NAMES
 
 
 class TableFormatError(ValueError):
@@ -75,9 +80,12 @@ def parameters_hash(atmosphere: AtmosphereParameters, settings: TableSettings) -
 
 
 def to_layout(data6, mie_layout):
-    """Per-wavelength (D, H, W, 6) values in the requested layout (the notes' layout averages Mie)."""
+    """Factored per-wavelength (D, H, W, 6) values in the requested layout (the notes' layout averages
+    the three Mie channels into one); channels after the sixth (the physical mode's phased higher
+    orders) are kept as they are."""
     if mie_layout == "notes":
-        return np.concatenate([data6[..., :3], data6[..., 3:].mean(axis=-1, keepdims=True)], axis=-1)
+        return np.concatenate([data6[..., :3], data6[..., 3:6].mean(axis=-1, keepdims=True), data6[..., 6:]],
+                              axis=-1)
     return data6
 
 
@@ -90,15 +98,25 @@ class ScatteringTable:
     atmosphere : AtmosphereParameters
     settings : TableSettings
     data : numpy.ndarray, shape (D, H, W, C)
-        Ibar per cell [1/sr], without I_I and phase: channels :data:`CHANNEL_NAMES` [C].
+        Per cell [1/sr], without I_I: channels :data:`CHANNEL_NAMES` [C]. The factored channels
+        (Ibar summed over orders in the atmosphere-plus mode, single scattering in the physical mode)
+        carry no phase; the physical mode's 3 last channels hold the higher orders, phase applied.
     metadata : dict
         Provenance: clsky version, backend, device, build seconds.
+    orders : tuple of numpy.ndarray
+        Every order's table (float64 when built, float32 when loaded from a file): order 1 (D, H, W, 6) factored; higher orders (D, H, W, 6)
+        factored (atmosphere-plus) or (D, H, W, 3) phased (physical). See :mod:`clsky.orders`.
+    orders_record : dict
+        How the iteration went: orders computed, converged or not and why, each order's relative
+        addition and share.
     """
 
     atmosphere: AtmosphereParameters
     settings: TableSettings
     data: np.ndarray
     metadata: dict = dataclasses.field(default_factory=dict)
+    orders: tuple = ()
+    orders_record: dict = dataclasses.field(default_factory=dict)
 
     def __post_init__(self):
         width, height, depth = self.settings.size
@@ -112,7 +130,7 @@ class ScatteringTable:
     def build(cls, atmosphere: AtmosphereParameters | str = "atmosphere-plus",
               settings: TableSettings | None = None, backend="opencl", ctx=None, fast_math=False,
               progress: Callable[[int, int], None] | None = None) -> "ScatteringTable":
-        """Compute the single-scattering table.
+        """Compute the table: single scattering, then the orders ``settings`` asks for.
 
         Parameters
         ----------
@@ -124,37 +142,31 @@ class ScatteringTable:
         fast_math : bool
             Build kernels with -cl-fast-relaxed-math (opt-in).
         progress : callable, optional
-            ``progress(done, total)`` as the work advances.
+            ``progress(stage, done, total)`` as the work advances (see :func:`clsky.orders.compute_orders`).
 
         Examples
         --------
-        >>> table = ScatteringTable.build("physical", TableSettings(size=(8, 16, 8)))
+        >>> table = ScatteringTable.build("physical", TableSettings(size=(8, 16, 8), mode="physical"))
         >>> table.data.shape
-        (8, 16, 8, 6)
+        (8, 16, 8, 9)
+        >>> table.orders_record["converged"]
+        True
         """
         if isinstance(atmosphere, str):
             atmosphere = preset(atmosphere)
         settings = settings or TableSettings()
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
+        from .orders import compute_orders
+
         start = time.perf_counter()
-        if backend == "opencl":
-            from .single import SingleScatteringEngine
-
-            with SingleScatteringEngine(settings, ctx=ctx, fast_math=fast_math) as engine:
-                data6 = engine.compute(atmosphere, progress=progress)
-                device = _cl.describe_device(engine.device)
-        else:
-            from . import reference
-
-            data6 = reference.single_scattering(atmosphere, settings)
-            device = "numpy"
-            if progress is not None:
-                progress(1, 1)
+        result = compute_orders(atmosphere, settings, backend=backend, ctx=ctx, fast_math=fast_math,
+                                progress=progress)
         seconds = time.perf_counter() - start
-        metadata = {"clsky_version": __version__, "backend": backend, "device": device,
+        metadata = {"clsky_version": __version__, "backend": backend, "device": result.record.pop("device"),
                     "build_seconds": seconds, "fast_math": bool(fast_math)}
-        return cls(atmosphere, settings, to_layout(data6, settings.mie_layout), metadata)
+        return cls(atmosphere, settings, to_layout(result.combined(settings.mode), settings.mie_layout),
+                   metadata, tuple(result.orders), result.record)
 
     # Using ----------------------------------------------------------------------------------------
     @property
@@ -200,11 +212,14 @@ class ScatteringTable:
             raise ValueError(f"path must end in .npz, got {str(path)!r}")
         with atomic_write(path, overwrite) as temporary:
             with open(temporary, "wb") as stream:
-                np.savez_compressed(
+                orders = {f"order_{k}": np.asarray(order, dtype=np.float32)
+                          for k, order in enumerate(self.orders, start=1)}
+                np.savez(
                     stream, data=self.data, format_version=np.int64(FORMAT_VERSION),
                     atmosphere=json.dumps(self.atmosphere.to_dict()),
                     settings=json.dumps(self.settings.to_dict()),
-                    metadata=json.dumps(self.metadata), parameters_hash=self.parameters_hash)
+                    metadata=json.dumps(self.metadata), orders_record=json.dumps(self.orders_record),
+                    parameters_hash=self.parameters_hash, **orders)
         return path
 
     @classmethod
@@ -216,7 +231,8 @@ class ScatteringTable:
                 contents = {key: archive[key] for key in archive.files}
         except (OSError, ValueError) as error:
             raise TableFormatError(f"{path} is not a clsky table file: {error}") from error
-        required = {"data", "format_version", "atmosphere", "settings", "metadata", "parameters_hash"}
+        required = {"data", "format_version", "atmosphere", "settings", "metadata", "parameters_hash",
+                    "orders_record"}
         missing = required - set(contents)
         if missing:
             raise TableFormatError(f"{path} is not a clsky table file (missing {sorted(missing)})")
@@ -232,7 +248,9 @@ class ScatteringTable:
         if parameters_hash(atmosphere, settings) != str(contents["parameters_hash"]):
             raise TableFormatError(f"{path}: parameters hash does not match its parameters (corrupted "
                                    f"or edited file)")
-        return cls(atmosphere, settings, contents["data"], json.loads(str(contents["metadata"])))
+        orders = tuple(contents[f"order_{k}"] for k in range(1, len(contents) + 1) if f"order_{k}" in contents)
+        return cls(atmosphere, settings, contents["data"], json.loads(str(contents["metadata"])), orders,
+                   json.loads(str(contents["orders_record"])))
 
     def export_raw(self, path, overwrite=False):
         """Write ``<path>.bin`` (float32 values) and ``<path>.json`` (layout header) for GPU engines.
@@ -264,8 +282,10 @@ class ScatteringTable:
                 "linear": {"u": "h/Ha", "v": "0.5*(cos_view+1)", "w": "0.5*(cos_sun+1)"},
                 "nodes": "u = x/(W-1), v = y/(H-1), w = z/(D-1)",
             },
-            "radiance": ("I = I_I * (F_R(cos theta) * Ibar_R + F_M(cos theta) * Ibar_M), "
-                         "Ibar interpolated trilinearly in (u, v, w)"),
+            "radiance": ("I = I_I * (F_R(cos theta) * Ibar_R + F_M(cos theta) * Ibar_M [+ multiple]), "
+                         "all channels interpolated trilinearly in (u, v, w); the multiple_* channels "
+                         "(physical mode) already include their phase"),
+            "orders_record": self.orders_record,
             "incident_light": list(self.atmosphere.incident_light),
             "atmosphere": self.atmosphere.to_dict(),
             "settings": self.settings.to_dict(),
