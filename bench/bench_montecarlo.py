@@ -1,0 +1,74 @@
+"""Physics check: table radiance against the independent Monte Carlo path tracer (clsky.montecarlo).
+
+For a handful of (altitude, view, sun) cases in the solar vertical plane (azimuth 0, where the 3D
+table's canonical frame is exact for single scattering), compares the table's radiance with the Monte
+Carlo estimate and its standard error, for both scattering modes, at converged quadrature settings
+(the physics) and at the default settings (what the defaults cost). Prints the table and writes it
+into README.md.
+
+Usage: python bench/bench_montecarlo.py [--photons N] [--no-readme]
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+
+import numpy as np
+
+from _report import machine, write_readme_section
+
+import clsky
+from clsky import montecarlo
+
+#: (altitude [m], cos view zenith, sun zenith [deg]); azimuth 0 (sun and view in one vertical plane)
+CASES = [(0.0, 1.0, 30.0), (0.0, 0.5, 60.0), (0.0, 0.1, 80.0), (0.0, 0.7, 0.0), (5000.0, -0.3, 45.0),
+         (0.0, 0.2, 70.0)]
+#: Quadrature at which the table no longer depends on it: halving every count (100 view steps, 300 sun
+#: steps, 64 x 256 transmittance table) changes these cases' radiance by at most 0.11 % (measured).
+CONVERGED = dict(view_steps=200, sun_steps=600, sun_transmittance="table", transmittance_size=(128, 512),
+                 sampling="keller_bohn")
+
+
+def compare(table, atmosphere, photons):
+    rows = []
+    for altitude, cos_view, sun_zenith in CASES:
+        cos_sun = np.cos(np.radians(sun_zenith))
+        nu = cos_view * cos_sun + np.sqrt((1 - cos_view**2) * (1 - cos_sun**2))
+        value = table.radiance(altitude, cos_view, cos_sun, nu) / atmosphere.incident_light
+        mc, error = montecarlo.sky_radiance(atmosphere, altitude, cos_view, cos_sun, 0.0, photons=photons, seed=1)
+        rows.append(((altitude, cos_view, sun_zenith), value, mc, error))
+    return rows
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--photons", type=int, default=200_000, help="paths per channel and case")
+    parser.add_argument("--no-readme", action="store_true")
+    args = parser.parse_args()
+
+    lines = [f"Monte Carlo: {args.photons} paths per channel and case; measured {datetime.date.today()} on "
+             f"{machine()}. Deviation = table / MC - 1 per channel (r, g, b) [%], and in units of the MC "
+             f"standard error. Converged quadrature: {CONVERGED}; default: 30 + 30 uniform trapezoid "
+             f"steps. Every table: 32 x 256 x 32, orders until 1e-4.", "",
+             "| mode (preset) | quadrature | altitude [m] | cos view | sun zenith [deg] | deviation [%] | "
+             "deviation [SE] |", "|---|---|---:|---:|---:|---|---|"]
+    for mode in ("physical", "atmosphere-plus"):
+        atmosphere = clsky.preset(mode)
+        for label, settings in (("converged", CONVERGED), ("default", {})):
+            table = clsky.ScatteringTable.build(atmosphere, clsky.TableSettings(mode=mode, **settings))
+            for (altitude, cos_view, sun_zenith), value, mc, error in compare(table, atmosphere, args.photons):
+                deviation = ", ".join(f"{d:+.1f}" for d in 100 * (value / mc - 1))
+                sigmas = ", ".join(f"{s:+.1f}" for s in (value - mc) / error)
+                lines.append(f"| {mode} | {label} | {altitude:.0f} | {cos_view:.2f} | {sun_zenith:.0f} | "
+                             f"{deviation} | {sigmas} |")
+                print(lines[-1], flush=True)
+    markdown = "\n".join(lines)
+    if not args.no_readme:
+        write_readme_section("montecarlo", markdown)
+    else:
+        print(markdown)
+
+
+if __name__ == "__main__":
+    main()
