@@ -33,6 +33,7 @@ from .atmosphere import AtmosphereParameters
 from .mapping import cos_to_v, grid_coordinates
 from .phase import MIE_PHASES, RAYLEIGH_PHASES
 from .settings import MAPPINGS, TableSettings
+from .transmittance import COMMON_SOURCES
 
 __all__ = ["gather_quadrature", "phase_azimuth_integrals", "gather_matrix", "gather_matrices",
            "first_gather_matrices", "MultipleScatteringEngine", "SPECIES"]
@@ -135,11 +136,12 @@ class MultipleScatteringEngine(_cl.Engine):
 
     def program_sources(self):
         declaration = _atmosphere_cl.declaration(self.ctx.devices[0], self.dtype)
-        return ("real.cl", declaration, "geometry.cl", "mapping.cl", "multiple.cl")
+        return ("real.cl", declaration) + COMMON_SOURCES[1:] + ("mapping.cl", "view_ray.cl", "multiple.cl")
 
     def build_options(self):
         s = self.settings
-        options = super().build_options() + [f"-DN_VIEW={s.view_steps}", f"-DVECTOR_WIDTH={VECTOR_WIDTH}"]
+        options = super().build_options() + [f"-DN_VIEW={s.view_steps}", f"-DN_SUN={s.sun_steps}",
+                                             f"-DVECTOR_WIDTH={VECTOR_WIDTH}"]
         if s.sampling == "keller_bohn":
             options.append("-DKELLER_BOHN_SAMPLING=1")
         return options

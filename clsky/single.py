@@ -44,7 +44,7 @@ class SingleScatteringEngine(_cl.Engine):
 
     def program_sources(self):
         declaration = _atmosphere_cl.declaration(self.ctx.devices[0], self.dtype)
-        return ("real.cl", declaration) + COMMON_SOURCES[1:] + ("mapping.cl", "single.cl")
+        return ("real.cl", declaration) + COMMON_SOURCES[1:] + ("mapping.cl", "view_ray.cl", "single.cl")
 
     def build_options(self):
         s = self.settings

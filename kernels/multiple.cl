@@ -13,7 +13,8 @@
  * with Gbar looked up trilinearly (texture space) at the altitude, view and sun cosines of each node
  * P. Channels of Gbar and of the result: Rayleigh r, g, b, Mie r, g, b, padded to 8 (one real8 per
  * cell: a trilinear lookup is 8 vector loads).
- * Requires real.cl, atmosphere_t, geometry.cl, mapping.cl (scatter also VECTOR_WIDTH, N_VIEW).
+ * Requires real.cl, atmosphere_t, geometry.cl, column.cl, transmittance_table.cl, mapping.cl,
+ * view_ray.cl.
  */
 
 /* out[z, i, p] (+)= sum_j M[c / 3][(z)][i][j] in[z, j, p] over the rows p = 8 x + c of a padded table
@@ -59,35 +60,10 @@ __kernel void gather(__global const real *matrices, const int species_stride, co
     }
 }
 
-#ifdef N_VIEW
-inline real view_node(const int i)
-{
-    const real x = (real)i / (real)N_VIEW;
-#ifdef KELLER_BOHN_SAMPLING
-    return x * x * x;
-#else
-    return x;
-#endif
-}
-
-/* Trilinear lookup in a padded table (D, H, W, 8) at node coordinates (fx, fy, fz). */
-inline real8 lookup8(__global const real *table, const int width, const int height, const int depth,
-                     const real fx, const real fy, const real fz)
-{
-    const int x0 = clamp((int)fx, 0, width - 2), y0 = clamp((int)fy, 0, height - 2), z0 = clamp((int)fz, 0, depth - 2);
-    const real ax = fx - (real)x0, ay = fy - (real)y0, az = fz - (real)z0;
-    const size_t base = (size_t)x0 + (size_t)width * ((size_t)y0 + (size_t)height * (size_t)z0);
-    const size_t dy = (size_t)width, dz = (size_t)width * (size_t)height;
-    const real8 c00 = (R(1.0) - ax) * vload8(base, table) + ax * vload8(base + 1, table);
-    const real8 c10 = (R(1.0) - ax) * vload8(base + dy, table) + ax * vload8(base + dy + 1, table);
-    const real8 c01 = (R(1.0) - ax) * vload8(base + dz, table) + ax * vload8(base + dz + 1, table);
-    const real8 c11 = (R(1.0) - ax) * vload8(base + dy + dz, table) + ax * vload8(base + dy + dz + 1, table);
-    return (R(1.0) - az) * ((R(1.0) - ay) * c00 + ay * c10) + az * ((R(1.0) - ay) * c01 + ay * c11);
-}
-
 /* Global size (ceil(W / VECTOR_WIDTH), H, D): VECTOR_WIDTH cells along the altitude axis per item.
  * gathered and table are padded (D, H, W, 8). combine_species != 0 (physical mode) writes
- * Rayleigh + Mie per wavelength into channels 0-2 and again 3-5 (the next gather's input). */
+ * Rayleigh + Mie per wavelength into channels 0-2 and again 3-5 (the next gather's input).
+ * Requires view_ray.cl (and so N_VIEW). */
 __kernel void scatter(__constant const atmosphere_t *atm, const int width, const int height,
                       const int depth, const int mapping, const int combine_species,
                       __global const real *gathered, __global real *table)
@@ -98,69 +74,19 @@ __kernel void scatter(__constant const atmosphere_t *atm, const int width, const
     if (gx * VECTOR_WIDTH >= width || y >= height || z >= depth)
         return;
 
-    const real rp = atm->planet_radius;
-    const real ha = atm->top_radius - rp;
+    const real ha = atm->top_radius - atm->planet_radius;
     const realv u = fmin((real)(gx * VECTOR_WIDTH) + LANE_INDEX, (real)(width - 1)) / (real)(width - 1);
     const real v = (real)y / (real)(height - 1);
     const real w = (real)z / (real)(depth - 1);
     const realv h0 = MAPPING_ALTITUDE(u, mapping, ha);
     const real mu_v = MAPPING_COS(v, mapping);
     const real mu_s = MAPPING_COS(w, mapping);
-    const realv r0 = rp + h0;
     const real nu = mu_v * mu_s + sqrt(fmax(R(1.0) - mu_v * mu_v, R(0.0)) * fmax(R(1.0) - mu_s * mu_s, R(0.0)));
-
-    const maskv hits_ground = isless((realv)(mu_v), horizon_cos(h0, rp));
-    const realv length = SELECT(distance_to_top(h0, (realv)(mu_v), rp, atm->top_radius),
-                                distance_to_ground(h0, (realv)(mu_v), rp), hits_ground);
-
-    const real inv_hr = R(1.0) / atm->rayleigh_scale_height;
-    const real inv_hm = R(1.0) / atm->mie_scale_height;
-    const real4 beta = atm->beta_rayleigh;
-    const real beta_me = atm->beta_mie_extinction;
-    realv view_r = V(0.0), view_m = V(0.0);
-    realv last_density_r = V(0.0), last_density_m = V(0.0);
-    /* The trapezoid sum_i (f_(i-1) + f_i) h_i / 2 is accumulated as sum_i f_i (h_i + h_(i+1)) / 2, so that
-     * each lane's 6 channels (Rayleigh r, g, b, Mie r, g, b) are one real8 FMA per node. */
     real8 sum[VECTOR_WIDTH];
-    for (int k = 0; k < VECTOR_WIDTH; ++k)
-        sum[k] = (real8)(R(0.0));
-    real node_previous = R(0.0);
+    integrate_gathered(atm, h0, (realv)(mu_v), (realv)(mu_s), (realv)(nu), gathered, width, height, depth,
+                       mapping, sum);
 
-    for (int i = 0; i <= N_VIEW; ++i) {
-        const real node = view_node(i);
-        const real node_next = i < N_VIEW ? view_node(i + 1) : node;
-        const realv s = length * node;
-        realv h = altitude_along(h0, r0, (realv)(mu_v), s, rp);
-        if (i == N_VIEW)
-            h = SELECT(h, V(0.0), hits_ground);
-        const realv inv_r = R(1.0) / (rp + h);
-        const realv mu_view_here = clamp((r0 * mu_v + s) * inv_r, R(-1.0), R(1.0));
-        const realv mu_sun_here = clamp((r0 * mu_s + s * nu) * inv_r, R(-1.0), R(1.0));
-        const realv density_r = exp(-h * inv_hr), density_m = exp(-h * inv_hm);
-        if (i > 0) {
-            const realv half_step = R(0.5) * length * (node - node_previous);
-            view_r += (last_density_r + density_r) * half_step;
-            view_m += (last_density_m + density_m) * half_step;
-        }
-        const realv weight = R(0.5) * length * ((node - node_previous) + (node_next - node));
-        const realv t0 = exp(-(beta.x * view_r + beta_me * view_m));
-        const realv t1 = exp(-(beta.y * view_r + beta_me * view_m));
-        const realv t2 = exp(-(beta.z * view_r + beta_me * view_m));
-        const realv wr = weight * density_r, wm = weight * density_m;
-        const realv fr0 = wr * t0, fr1 = wr * t1, fr2 = wr * t2, fm0 = wm * t0, fm1 = wm * t1, fm2 = wm * t2;
-        const realv fx = MAPPING_U(h, mapping, ha) * (real)(width - 1);
-        const realv fy = MAPPING_V(mu_view_here, mapping) * (real)(height - 1);
-        const realv fz = MAPPING_V(mu_sun_here, mapping) * (real)(depth - 1);
-        for (int k = 0; k < VECTOR_WIDTH; ++k) {
-            const real8 factor = (real8)(LANE(fr0, k), LANE(fr1, k), LANE(fr2, k), LANE(fm0, k), LANE(fm1, k),
-                                         LANE(fm2, k), R(0.0), R(0.0));
-            sum[k] += factor * lookup8(gathered, width, height, depth, LANE(fx, k), LANE(fy, k), LANE(fz, k));
-        }
-        last_density_r = density_r;
-        last_density_m = density_m;
-        node_previous = node;
-    }
-
+    const real4 beta = atm->beta_rayleigh;
     const real scale = R(1.0) / (R(4.0) * PI_REAL);
     const real8 coefficient = (real8)(beta.x, beta.y, beta.z, atm->beta_mie, atm->beta_mie, atm->beta_mie,
                                       R(0.0), R(0.0)) * scale;
@@ -174,4 +100,3 @@ __kernel void scatter(__constant const atmosphere_t *atm, const int width, const
         vstore8(value, (size_t)xk + (size_t)width * ((size_t)y + (size_t)height * (size_t)z), table);
     }
 }
-#endif

@@ -1,0 +1,177 @@
+/* view_ray.cl -- integrals along view rays, shared by the table kernels (single.cl, multiple.cl) and
+ * the per-pixel renderer (render.cl).
+ *
+ * A view ray leaves an observer at altitude h0 (inside the atmosphere) along a direction whose zenith
+ * cosine is mu_v; the sun's zenith cosine there is mu_s and nu = dot(V, Sun). At distance s along the
+ * ray (physics.md; Bruneton & Neyret 2008, sec. 4):
+ *   r(s)^2 = r0^2 + 2 r0 mu_v s + s^2,   mu_view(s) = (r0 mu_v + s) / r,   mu_sun(s) = (r0 mu_s + s nu) / r,
+ * so the integrals depend on (h0, mu_v, mu_s, nu) only: the 3D table uses the canonical
+ * nu = cos(phi - delta), the renderer the true one.
+ *
+ * Trapezoidal rule over N_VIEW + 1 nodes s_i = L f(i / N_VIEW), f(x) = x, or x^3 with
+ * -DKELLER_BOHN_SAMPLING; the last node of a ground-hitting ray lies at altitude exactly 0.
+ * Works on realv. Requires real.cl, atmosphere_t, geometry.cl, column.cl, transmittance_table.cl,
+ * mapping.cl.
+ */
+#ifndef N_VIEW
+#error "N_VIEW (number of trapezoid steps along a view ray) must be defined"
+#endif
+
+inline real view_node(const int i)
+{
+    const real x = (real)i / (real)N_VIEW;
+#ifdef KELLER_BOHN_SAMPLING
+    return x * x * x;
+#else
+    return x;
+#endif
+}
+
+/* Length [m] of the view ray to the top of the atmosphere or to the ground (*hits_ground). */
+inline realv view_ray_length(__constant const atmosphere_t *atm, const realv h0, const realv mu_v, maskv *hits_ground)
+{
+    const real rp = atm->planet_radius;
+    *hits_ground = isless(mu_v, horizon_cos(h0, rp));
+    return SELECT(distance_to_top(h0, mu_v, rp, atm->top_radius), distance_to_ground(h0, mu_v, rp), *hits_ground);
+}
+
+/* Single scattering along the ray: sum[0..2] = Integral rho_R T dt (r, g, b), sum[3..5] the same with
+ * rho_M, T = T(Pc, P) T(P, Pa), zero where P is in the planet's shadow (decided from P's altitude and
+ * sun cosine against the local horizon, never from rounding). Multiply by beta_s / (4 pi) for Ibar. */
+inline void integrate_single(__constant const atmosphere_t *atm, const realv h0, const realv mu_v,
+                             const realv mu_s, const realv nu, __global const real *sun_table,
+                             const int tw, const int th, realv *sum)
+{
+    const real rp = atm->planet_radius;
+    const realv r0 = rp + h0;
+    maskv hits_ground;
+    const realv length = view_ray_length(atm, h0, mu_v, &hits_ground);
+    const real inv_hr = R(1.0) / atm->rayleigh_scale_height;
+    const real inv_hm = R(1.0) / atm->mie_scale_height;
+    const real4 beta = atm->beta_rayleigh;
+    const real beta_me = atm->beta_mie_extinction;
+    realv view_r = V(0.0), view_m = V(0.0);                 /* column densities from the observer */
+    realv last_density_r = V(0.0), last_density_m = V(0.0);
+    realv last[6];
+    for (int c = 0; c < 6; ++c) {
+        last[c] = V(0.0);
+        sum[c] = V(0.0);
+    }
+    real node_previous = R(0.0);
+
+    for (int i = 0; i <= N_VIEW; ++i) {
+        const real node = view_node(i);
+        const realv s = length * node;
+        realv h = altitude_along(h0, r0, mu_v, s, rp);
+        if (i == N_VIEW)
+            h = SELECT(h, V(0.0), hits_ground);
+        const realv r = rp + h;
+        const realv mu_sun_here = (r0 * mu_s + s * nu) / r;     /* dot(P, Sun) / |P| */
+        const maskv lit = isgreaterequal(mu_sun_here, horizon_cos(h, rp));
+        const realv density_r = exp(-h * inv_hr), density_m = exp(-h * inv_hm);
+        const realv half_step = R(0.5) * length * (node - node_previous);
+        if (i > 0) {
+            view_r += (last_density_r + density_r) * half_step;
+            view_m += (last_density_m + density_m) * half_step;
+        }
+        realv sun_r, sun_m;
+#ifdef SUN_TRANSMITTANCE_TABLE
+        column_density_from_table(atm, sun_table, tw, th, h, mu_sun_here, &sun_r, &sun_m);
+#else
+        /* in the shadow the march would cross the planet: give it zero length, then discard */
+        const realv sun_length = SELECT(V(0.0), distance_to_top(h, mu_sun_here, rp, atm->top_radius), lit);
+        column_density(atm, h, mu_sun_here, sun_length, &sun_r, &sun_m);
+#endif
+        const realv column_r = view_r + sun_r, column_m = view_m + sun_m;
+        const realv t0 = SELECT(V(0.0), exp(-(beta.x * column_r + beta_me * column_m)), lit);
+        const realv t1 = SELECT(V(0.0), exp(-(beta.y * column_r + beta_me * column_m)), lit);
+        const realv t2 = SELECT(V(0.0), exp(-(beta.z * column_r + beta_me * column_m)), lit);
+        realv f[6];
+        f[0] = density_r * t0; f[1] = density_r * t1; f[2] = density_r * t2;
+        f[3] = density_m * t0; f[4] = density_m * t1; f[5] = density_m * t2;
+        for (int c = 0; c < 6; ++c) {
+            if (i > 0)
+                sum[c] += (last[c] + f[c]) * half_step;
+            last[c] = f[c];
+        }
+        last_density_r = density_r;
+        last_density_m = density_m;
+        node_previous = node;
+    }
+}
+
+/* Trilinear lookup in a padded table (D, H, W, 8) at node coordinates (fx, fy, fz). */
+inline real8 lookup8(__global const real *table, const int width, const int height, const int depth,
+                     const real fx, const real fy, const real fz)
+{
+    const int x0 = clamp((int)fx, 0, width - 2), y0 = clamp((int)fy, 0, height - 2), z0 = clamp((int)fz, 0, depth - 2);
+    const real ax = fx - (real)x0, ay = fy - (real)y0, az = fz - (real)z0;
+    const size_t base = (size_t)x0 + (size_t)width * ((size_t)y0 + (size_t)height * (size_t)z0);
+    const size_t dy = (size_t)width, dz = (size_t)width * (size_t)height;
+    const real8 c00 = (R(1.0) - ax) * vload8(base, table) + ax * vload8(base + 1, table);
+    const real8 c10 = (R(1.0) - ax) * vload8(base + dy, table) + ax * vload8(base + dy + 1, table);
+    const real8 c01 = (R(1.0) - ax) * vload8(base + dz, table) + ax * vload8(base + dz + 1, table);
+    const real8 c11 = (R(1.0) - ax) * vload8(base + dy + dz, table) + ax * vload8(base + dy + dz + 1, table);
+    return (R(1.0) - az) * ((R(1.0) - ay) * c00 + ay * c10) + az * ((R(1.0) - ay) * c01 + ay * c11);
+}
+
+/* In-scattering of a gathered table along the ray, per lane k:
+ *   sum[k].s012 = Integral rho_R T(P, Pa) Gbar_R dt (r, g, b), sum[k].s345 the same with rho_M, Gbar_M
+ * with Gbar (padded (D, H, W, 8), the table's grid and mapping) looked up trilinearly at each node's
+ * altitude, view and sun cosines. The trapezoid sum_i (f_(i-1) + f_i) h_i / 2 is accumulated as
+ * sum_i f_i (h_i + h_(i+1)) / 2, so that each lane's 6 channels are one real8 FMA per node. */
+inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h0, const realv mu_v,
+                               const realv mu_s, const realv nu, __global const real *gathered,
+                               const int width, const int height, const int depth, const int mapping,
+                               real8 *sum)
+{
+    const real rp = atm->planet_radius;
+    const real ha = atm->top_radius - rp;
+    const realv r0 = rp + h0;
+    maskv hits_ground;
+    const realv length = view_ray_length(atm, h0, mu_v, &hits_ground);
+    const real inv_hr = R(1.0) / atm->rayleigh_scale_height;
+    const real inv_hm = R(1.0) / atm->mie_scale_height;
+    const real4 beta = atm->beta_rayleigh;
+    const real beta_me = atm->beta_mie_extinction;
+    realv view_r = V(0.0), view_m = V(0.0);
+    realv last_density_r = V(0.0), last_density_m = V(0.0);
+    for (int k = 0; k < VECTOR_WIDTH; ++k)
+        sum[k] = (real8)(R(0.0));
+    real node_previous = R(0.0);
+
+    for (int i = 0; i <= N_VIEW; ++i) {
+        const real node = view_node(i);
+        const real node_next = i < N_VIEW ? view_node(i + 1) : node;
+        const realv s = length * node;
+        realv h = altitude_along(h0, r0, mu_v, s, rp);
+        if (i == N_VIEW)
+            h = SELECT(h, V(0.0), hits_ground);
+        const realv inv_r = R(1.0) / (rp + h);
+        const realv mu_view_here = clamp((r0 * mu_v + s) * inv_r, R(-1.0), R(1.0));
+        const realv mu_sun_here = clamp((r0 * mu_s + s * nu) * inv_r, R(-1.0), R(1.0));
+        const realv density_r = exp(-h * inv_hr), density_m = exp(-h * inv_hm);
+        if (i > 0) {
+            const realv half_step = R(0.5) * length * (node - node_previous);
+            view_r += (last_density_r + density_r) * half_step;
+            view_m += (last_density_m + density_m) * half_step;
+        }
+        const realv weight = R(0.5) * length * ((node - node_previous) + (node_next - node));
+        const realv t0 = exp(-(beta.x * view_r + beta_me * view_m));
+        const realv t1 = exp(-(beta.y * view_r + beta_me * view_m));
+        const realv t2 = exp(-(beta.z * view_r + beta_me * view_m));
+        const realv wr = weight * density_r, wm = weight * density_m;
+        const realv fr0 = wr * t0, fr1 = wr * t1, fr2 = wr * t2, fm0 = wm * t0, fm1 = wm * t1, fm2 = wm * t2;
+        const realv fx = MAPPING_U(h, mapping, ha) * (real)(width - 1);
+        const realv fy = MAPPING_V(mu_view_here, mapping) * (real)(height - 1);
+        const realv fz = MAPPING_V(mu_sun_here, mapping) * (real)(depth - 1);
+        for (int k = 0; k < VECTOR_WIDTH; ++k) {
+            const real8 factor = (real8)(LANE(fr0, k), LANE(fr1, k), LANE(fr2, k), LANE(fm0, k), LANE(fm1, k),
+                                         LANE(fm2, k), R(0.0), R(0.0));
+            sum[k] += factor * lookup8(gathered, width, height, depth, LANE(fx, k), LANE(fy, k), LANE(fz, k));
+        }
+        last_density_r = density_r;
+        last_density_m = density_m;
+        node_previous = node;
+    }
+}
