@@ -60,10 +60,15 @@ class OrdersResult:
     record : dict
         mode, tolerance, max_orders, converged, reason, per-order relative additions and shares,
         seconds.
+    gathered : numpy.ndarray (D, H, W, 6) or None
+        Sum of the gathered in-scatter tables Gbar_s^(k) (Rayleigh r, g, b, Mie r, g, b) whose
+        scatter produced the orders 2..K: the per-pixel ray march integrates it along the true ray
+        to add the higher orders. None for single scattering only.
     """
 
     orders: list
     record: dict
+    gathered: np.ndarray | None = None
 
     def combined(self, mode):
         """The table's channels: factored sum (atmosphere-plus), or single + sum of higher orders."""
@@ -115,6 +120,9 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
                 out = engine.gather(matrices, table, out=out, accumulate=out is not None)
             return out
 
+        def to_host(gathered):
+            return gathered.get()[..., :6].astype(np.float64)
+
         def scatter(gathered):
             new_d = engine.scatter(atmosphere, gathered, combine_species=settings.mode == "physical")
             return new_d, new_d.get()[..., :6].astype(np.float64)
@@ -129,6 +137,9 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         def gather(terms):
             return sum(reference.gather(matrices, table) for matrices, table in terms)
 
+        def to_host(gathered):
+            return gathered
+
         def scatter(gathered):
             new = reference.scatter(atmosphere, settings, gathered)
             if settings.mode == "physical":
@@ -136,6 +147,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
             return new, new
 
     orders = [single]
+    gathered_sum = None
     additions, converged, reason = [], False, "orders=1: single scattering only"
     wanted = settings.max_orders if settings.orders == "auto" else settings.orders
     if wanted > 1:
@@ -153,7 +165,9 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
             running = single.copy()
         for k in range(2, wanted + 1):
             # the next gather reads the new order where it is (on the device for OpenCL)
-            next_input, new = scatter(gather(terms))
+            gathered = gather(terms)
+            gathered_sum = gathered.copy() if gathered_sum is None else gathered_sum + gathered
+            next_input, new = scatter(gathered)
             terms = [(same_species, next_input)]
             if settings.mode == "physical":
                 new = new[..., :3]
@@ -173,7 +187,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
                           f"added {additions[-1]:.2e} (tolerance {settings.order_tolerance:g})")
             else:
                 reason = f"orders={settings.orders} requested; the last order added {additions[-1]:.2e}"
-    result = OrdersResult(orders, {})
+    result = OrdersResult(orders, {}, None if gathered_sum is None else to_host(gathered_sum))
     result.record = {
         "mode": settings.mode, "orders": len(orders), "requested": settings.orders,
         "tolerance": settings.order_tolerance, "max_orders": settings.max_orders,

@@ -24,7 +24,7 @@ __all__ = [
     "horizon_cos", "distance_to_top", "distance_to_ground", "altitude_along",
     "quadrature_nodes", "column_density", "optical_depth", "transmittance",
     "transmittance_table", "column_density_from_table", "single_scattering", "enter_atmosphere",
-    "lookup", "gather", "trilinear", "scatter",
+    "lookup", "gather", "trilinear", "scatter", "render_table", "render_raymarch",
 ]
 
 _TINY = np.finfo(np.float64).tiny
@@ -167,18 +167,22 @@ def _trapezoid_along_view(values, half_steps):
 
 
 class _ViewRays:
-    """Nodes along the view rays of cells (h0, mu_v, mu_s), as in single.cl and multiple.cl.
+    """Nodes along view rays (h0, mu_v, mu_s, nu), as in view_ray.cl (nu defaults to the table's
+    canonical cos(phi - delta)).
 
     Arrays have shape (cells, N_VIEW + 1): distance s, altitude h, radius r, the sun and view cosines
     at each node, densities, the column densities from the observer, and the trapezoid half steps
     (cells, N_VIEW).
     """
 
-    def __init__(self, atmosphere, settings, h0, mu_v, mu_s):
+    def __init__(self, atmosphere, settings, h0, mu_v, mu_s, nu=None):
         rp, ra = atmosphere.planet_radius, atmosphere.top_radius
         h0, mu_v, mu_s = (np.asarray(a, dtype=np.float64)[:, None] for a in (h0, mu_v, mu_s))
         r0 = rp + h0
-        nu = mu_v * mu_s + np.sqrt(np.maximum(1.0 - mu_v * mu_v, 0.0) * np.maximum(1.0 - mu_s * mu_s, 0.0))
+        if nu is None:   # the canonical frame of the 3D table: cos(phi - delta)
+            nu = mu_v * mu_s + np.sqrt(np.maximum(1.0 - mu_v * mu_v, 0.0) * np.maximum(1.0 - mu_s * mu_s, 0.0))
+        else:
+            nu = np.asarray(nu, dtype=np.float64)[:, None]
         hits_ground = mu_v < horizon_cos(h0, rp)
         length = np.where(hits_ground, distance_to_ground(h0, mu_v, rp), distance_to_top(h0, mu_v, rp, ra))
         nodes = quadrature_nodes(settings.view_steps, settings.sampling, power=3)
@@ -209,9 +213,9 @@ class _ViewRays:
                                (atmosphere.mie_scattering / (4.0 * math.pi)) * sum_m], axis=1)
 
 
-def _single_scattering_cells(atmosphere, settings, h0, mu_v, mu_s, sun_table):
-    """Ibar^(1) of the cells given by 1D arrays (h0, mu_v, mu_s); returns (n, 6)."""
-    rays = _ViewRays(atmosphere, settings, h0, mu_v, mu_s)
+def _single_scattering_cells(atmosphere, settings, h0, mu_v, mu_s, sun_table, nu=None):
+    """Ibar^(1) along the rays given by 1D arrays (h0, mu_v, mu_s[, nu]); returns (n, 6)."""
+    rays = _ViewRays(atmosphere, settings, h0, mu_v, mu_s, nu)
     lit = rays.mu_sun >= horizon_cos(rays.h, atmosphere.planet_radius)
     if sun_table is None:
         sun_length = np.where(lit, distance_to_top(rays.h, rays.mu_sun, atmosphere.planet_radius, atmosphere.top_radius), 0.0)
@@ -341,25 +345,91 @@ def trilinear(table, fx, fy, fz):
     return value
 
 
+def _gathered_along(atmosphere, ray_settings, gathered, grid_settings, h0, mu_v, mu_s, nu=None):
+    """beta_s / (4 pi) Integral rho_s T(P, Pa) Gbar_s(P) ds along rays (n, 6); Gbar on grid_settings' grid."""
+    from .mapping import altitude_to_u, cos_to_v
+
+    width, height, depth = grid_settings.size
+    rays = _ViewRays(atmosphere, ray_settings, h0, mu_v, mu_s, nu)
+    g = trilinear(gathered,
+                  altitude_to_u(rays.h, atmosphere.atmosphere_height, grid_settings.mapping) * (width - 1),
+                  cos_to_v(rays.mu_view, grid_settings.mapping) * (height - 1),
+                  cos_to_v(rays.mu_sun, grid_settings.mapping) * (depth - 1))
+    transmittance = np.exp(-_optical_depth_of(atmosphere, rays.view_r, rays.view_m))
+    return rays.integrate(atmosphere, transmittance, g[..., 0:3], g[..., 3:6])
+
+
 def scatter(atmosphere: AtmosphereParameters, settings: TableSettings, gathered):
     """Next order from a gathered table; twin of ``MultipleScatteringEngine.scatter``.
 
     Ibar_s^(k)(lambda) = beta_s / (4 pi) Integral Gbar_s(P) rho_s(h(P)) T(P, Pa) ds, channels Rayleigh
     r, g, b and Mie r, g, b in and out; shape (D, H, W, 6).
     """
-    from .mapping import altitude_to_u, cos_to_v
-
-    width, height, depth = settings.size
     altitudes, cos_view, cos_sun = grid_coordinates(settings.size, atmosphere.atmosphere_height,
                                                     settings.mapping)
 
     def cells(x, y, z):
-        rays = _ViewRays(atmosphere, settings, altitudes[x], cos_view[y], cos_sun[z])
-        g = trilinear(gathered,
-                      altitude_to_u(rays.h, atmosphere.atmosphere_height, settings.mapping) * (width - 1),
-                      cos_to_v(rays.mu_view, settings.mapping) * (height - 1),
-                      cos_to_v(rays.mu_sun, settings.mapping) * (depth - 1))
-        transmittance = np.exp(-_optical_depth_of(atmosphere, rays.view_r, rays.view_m))
-        return rays.integrate(atmosphere, transmittance, g[..., 0:3], g[..., 3:6])
+        return _gathered_along(atmosphere, settings, gathered, settings, altitudes[x], cos_view[y], cos_sun[z])
 
     return _cells_in_chunks(settings, (settings.view_steps + 1) * 8 * 6, cells)
+
+
+# Per-pixel rendering (kernels/render.cl) ---------------------------------------------------------
+
+def _pixel_geometry(atmosphere, directions, sun_direction, altitude):
+    """Flattened (mu_v, nu), the entered (h, mu_v, mu_s), the inside mask and the observer's mu_v."""
+    directions = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    mu_v = np.clip(directions[:, 2], -1.0, 1.0)
+    nu = np.clip(directions @ np.asarray(sun_direction, dtype=np.float64), -1.0, 1.0)
+    h = np.full(mu_v.shape, float(altitude))
+    mu_s = np.full(mu_v.shape, float(sun_direction[2]))
+    h_in, mu_v_in, mu_s_in, inside = enter_atmosphere(atmosphere, h, mu_v, mu_s, nu)
+    return mu_v, nu, h_in, mu_v_in, mu_s_in, inside
+
+
+def _sun_disc(atmosphere, mu_v, nu, altitude, sun_radiance, cos_sun_radius):
+    visible = (nu >= cos_sun_radius) & (mu_v >= horizon_cos(float(altitude), atmosphere.planet_radius))
+    return visible[:, None] * np.asarray(sun_radiance, dtype=np.float64)
+
+
+def render_table(atmosphere, data, mapping, directions, sun_direction, altitude, sun_radiance, cos_sun_radius):
+    """Twin of ``SkyRenderer.render_table``: lookup radiance per direction plus the sun disc; (..., 3)."""
+    shape = np.shape(directions)[:-1]
+    mu_v, nu, h, mu_v_in, mu_s_in, inside = _pixel_geometry(atmosphere, directions, sun_direction, altitude)
+    sky = lookup(atmosphere, data, h, mu_v_in, mu_s_in, nu, mapping) * inside[:, None]
+    return (sky + _sun_disc(atmosphere, mu_v, nu, altitude, sun_radiance, cos_sun_radius)).reshape(shape + (3,))
+
+
+def render_raymarch(atmosphere, ray_settings, directions, sun_direction, altitude, sun_radiance, cos_sun_radius,
+                    gathered=None, grid_settings=None, physical=True):
+    """Twin of ``SkyRenderer.render_raymarch``; (..., 3).
+
+    Single scattering along each pixel's ray with the true nu (quadrature of ``ray_settings``), plus,
+    with ``gathered`` (D, H, W, 6) on the grid of ``grid_settings``, the higher orders: the phase is
+    inside Gbar in the physical mode, applied per species here in the atmosphere-plus mode.
+    """
+    from .phase import mie_phase, rayleigh_phase
+
+    shape = np.shape(directions)[:-1]
+    mu_v, nu, h, mu_v_in, mu_s_in, inside = _pixel_geometry(atmosphere, directions, sun_direction, altitude)
+    sun_table = None
+    if ray_settings.sun_transmittance == "table":
+        sun_table = transmittance_table(atmosphere, ray_settings.transmittance_size, ray_settings.sun_steps,
+                                        ray_settings.sampling)
+    f_r = rayleigh_phase(atmosphere, nu)[:, None]
+    f_m = mie_phase(atmosphere, nu)[:, None]
+    per_pixel = (ray_settings.view_steps + 1) * max(ray_settings.sun_steps + 1, 48)
+    chunk = max(1, CHUNK_ELEMENTS // per_pixel)
+    sky = np.empty((mu_v.size, 3))
+    for start in range(0, mu_v.size, chunk):
+        part = slice(start, start + chunk)
+        ibar = _single_scattering_cells(atmosphere, ray_settings, h[part], mu_v_in[part], mu_s_in[part], sun_table,
+                                        nu[part])
+        value = f_r[part] * ibar[:, :3] + f_m[part] * ibar[:, 3:]
+        if gathered is not None:
+            more = _gathered_along(atmosphere, ray_settings, gathered, grid_settings, h[part], mu_v_in[part],
+                                   mu_s_in[part], nu[part])
+            value += (more[:, :3] + more[:, 3:]) if physical else (f_r[part] * more[:, :3] + f_m[part] * more[:, 3:])
+        sky[part] = value
+    sky *= np.asarray(atmosphere.incident_light) * inside[:, None]
+    return (sky + _sun_disc(atmosphere, mu_v, nu, altitude, sun_radiance, cos_sun_radius)).reshape(shape + (3,))

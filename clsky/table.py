@@ -2,7 +2,8 @@
 
 File format (``.npz``, uncompressed: compression saves little on these values and costs seconds;
 :data:`FORMAT_VERSION`): arrays ``data`` (D, H, W, C) at full precision, ``order_1``, ``order_2``, ...
-(every scattering order, stored as float32 for inspection), ``format_version``, and JSON strings
+(every scattering order, stored as float32 for inspection), ``gathered`` (the sum of the gathered
+in-scatter tables, for the ray march; absent for single scattering), ``format_version``, and JSON strings
 ``atmosphere``, ``settings``, ``metadata``, ``orders_record`` (how the iteration stopped) and
 ``parameters_hash`` (SHA-256 of the atmosphere and settings). :meth:`ScatteringTable.load` refuses a file whose version,
 hash or shape does not match, with a clear error.
@@ -109,6 +110,9 @@ class ScatteringTable:
     orders_record : dict
         How the iteration went: orders computed, converged or not and why, each order's relative
         addition and share.
+    gathered : numpy.ndarray (D, H, W, 6) or None
+        Sum of the gathered in-scatter tables of the orders (:class:`clsky.orders.OrdersResult`), for
+        the per-pixel ray march; None when only single scattering was computed.
     """
 
     atmosphere: AtmosphereParameters
@@ -117,6 +121,7 @@ class ScatteringTable:
     metadata: dict = dataclasses.field(default_factory=dict)
     orders: tuple = ()
     orders_record: dict = dataclasses.field(default_factory=dict)
+    gathered: np.ndarray | None = None
 
     def __post_init__(self):
         width, height, depth = self.settings.size
@@ -166,7 +171,7 @@ class ScatteringTable:
         metadata = {"clsky_version": __version__, "backend": backend, "device": result.record.pop("device"),
                     "build_seconds": seconds, "fast_math": bool(fast_math)}
         return cls(atmosphere, settings, to_layout(result.combined(settings.mode), settings.mie_layout),
-                   metadata, tuple(result.orders), result.record)
+                   metadata, tuple(result.orders), result.record, result.gathered)
 
     # Using ----------------------------------------------------------------------------------------
     @property
@@ -219,7 +224,8 @@ class ScatteringTable:
                     atmosphere=json.dumps(self.atmosphere.to_dict()),
                     settings=json.dumps(self.settings.to_dict()),
                     metadata=json.dumps(self.metadata), orders_record=json.dumps(self.orders_record),
-                    parameters_hash=self.parameters_hash, **orders)
+                    parameters_hash=self.parameters_hash, **orders,
+                    **({} if self.gathered is None else {"gathered": self.gathered}))
         return path
 
     @classmethod
@@ -250,7 +256,7 @@ class ScatteringTable:
                                    f"or edited file)")
         orders = tuple(contents[f"order_{k}"] for k in range(1, len(contents) + 1) if f"order_{k}" in contents)
         return cls(atmosphere, settings, contents["data"], json.loads(str(contents["metadata"])), orders,
-                   json.loads(str(contents["orders_record"])))
+                   json.loads(str(contents["orders_record"])), contents.get("gathered"))
 
     def export_raw(self, path, overwrite=False):
         """Write ``<path>.bin`` (float32 values) and ``<path>.json`` (layout header) for GPU engines.

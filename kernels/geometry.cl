@@ -46,3 +46,22 @@ inline realv altitude_along(const realv h0, const realv r0, const realv mu, cons
     const realv excess = fmax(h0 * (R(2.0) * planet_radius + h0) + s * (R(2.0) * r0 * mu + s), R(0.0));
     return excess / (sqrt(planet_radius * planet_radius + excess) + planet_radius);
 }
+
+/* Moves observers above the atmosphere (h > Ha) to the entry point of their view ray, in place: h,
+ * mu_v and mu_s at the entry (nu = dot(V, Sun) does not change along a ray). Returns the mask of rays
+ * that see the atmosphere (every ray of an observer inside it). Branch-free; logical operators give
+ * 1 / 0 on scalars and -1 / 0 on vectors, as select() expects. */
+inline maskv enter_atmosphere(const real planet_radius, const real top_radius, realv *h, realv *mu_v,
+                              realv *mu_s, const realv nu)
+{
+    const realv r = planet_radius + *h;
+    const maskv above = isgreater(*h, top_radius - planet_radius);
+    const realv outside = fmax((r - top_radius) * (r + top_radius), R(0.0));        /* r^2 - Ra^2 */
+    const realv discriminant = r * *mu_v * r * *mu_v - outside;
+    const maskv enters = isless(*mu_v, R(0.0)) && isgreaterequal(discriminant, R(0.0));
+    const realv d = outside / fmax(sqrt(fmax(discriminant, R(0.0))) - r * *mu_v, REAL_TINY);   /* near root */
+    *mu_s = SELECT(*mu_s, clamp((r * *mu_s + d * nu) / top_radius, R(-1.0), R(1.0)), above);
+    *mu_v = SELECT(*mu_v, clamp((r * *mu_v + d) / top_radius, R(-1.0), R(1.0)), above);
+    *h = SELECT(*h, (realv)(top_radius - planet_radius), above);
+    return !above || enters;
+}

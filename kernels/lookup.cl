@@ -10,34 +10,47 @@
  * x + y W + z W H: 6 (Rayleigh r, g, b, Mie r, g, b) or 4 (the notes' Rayleigh r, g, b + one Mie),
  * factored (the phase is applied here); the physical mode appends 3 channels (9 or 7 in all) holding
  * the higher orders with their phase already applied, added as I_I Lbar.
- * Output: radiance r, g, b per query. Built with VECTOR_WIDTH 1.
+ * Output: radiance r, g, b per query. The `lookup` kernel is built with VECTOR_WIDTH 1.
  * Requires real.cl, atmosphere_t, geometry.cl, mapping.cl, phase.cl.
  */
-
-/* Moves an observer above the atmosphere to the entry point of its view ray. Returns 0 if the ray
- * misses the atmosphere. h, mu_v and mu_s are updated in place (nu does not change along a ray). */
-inline int enter_atmosphere(__constant const atmosphere_t *atm, real *h, real *mu_v, real *mu_s, const real nu)
-{
-    const real ra = atm->top_radius;
-    const real r = atm->planet_radius + *h;
-    if (r <= ra)
-        return 1;
-    const real outside = (r - ra) * (r + ra);                 /* r^2 - Ra^2 > 0 */
-    const real discriminant = r * *mu_v * r * *mu_v - outside;
-    if (*mu_v >= R(0.0) || discriminant < R(0.0))
-        return 0;
-    const real d = outside / (sqrt(discriminant) - r * *mu_v); /* near root, cancellation-free */
-    *mu_v = clamp((r * *mu_v + d) / ra, R(-1.0), R(1.0));
-    *mu_s = clamp((r * *mu_s + d * nu) / ra, R(-1.0), R(1.0));
-    *h = ra - atm->planet_radius;
-    return 1;
-}
 
 inline int lower_node(const real f, const int n)
 {
     return clamp((int)f, 0, n - 2);
 }
 
+/* Radiance r, g, b at (h, mu_v, mu_s, nu) for an observer inside the atmosphere (see the header). */
+inline real3 table_radiance(__constant const atmosphere_t *atm, __global const real *table, const int width,
+                            const int height, const int depth, const int channels, const int mapping,
+                            const real h, const real mu_v, const real mu_s, const real nu)
+{
+    real ibar[9] = {R(0.0), R(0.0), R(0.0), R(0.0), R(0.0), R(0.0), R(0.0), R(0.0), R(0.0)};
+    const real ha = atm->top_radius - atm->planet_radius;
+    const real fx = MAPPING_U(h, mapping, ha) * (real)(width - 1);
+    const real fy = MAPPING_V(mu_v, mapping) * (real)(height - 1);
+    const real fz = MAPPING_V(mu_s, mapping) * (real)(depth - 1);
+    const int x0 = lower_node(fx, width), y0 = lower_node(fy, height), z0 = lower_node(fz, depth);
+    const real ax = fx - (real)x0, ay = fy - (real)y0, az = fz - (real)z0;
+    for (int corner = 0; corner < 8; ++corner) {
+        const int dx = corner & 1, dy = (corner >> 1) & 1, dz = corner >> 2;
+        const real weight = (dx ? ax : R(1.0) - ax) * (dy ? ay : R(1.0) - ay) * (dz ? az : R(1.0) - az);
+        const size_t cell = (size_t)(x0 + dx) + (size_t)width * ((size_t)(y0 + dy) + (size_t)height * (size_t)(z0 + dz));
+        for (int c = 0; c < channels; ++c)
+            ibar[c] += weight * table[cell * channels + c];
+    }
+    const real f_r = phase_rayleigh(atm, nu);
+    const real f_m = phase_mie(atm, nu);
+    const int factored = (channels == 7 || channels == 9) ? channels - 3 : channels;
+    const int mie = 3;                          /* first Mie channel */
+    const int mie_stride = factored == 6;       /* Mie per wavelength, or the notes' one Mie channel */
+    const int multiple = factored < channels;   /* the physical mode's phased higher orders follow */
+    return atm->incident_light.xyz * (real3)(
+        f_r * ibar[0] + f_m * ibar[mie] + (multiple ? ibar[factored] : R(0.0)),
+        f_r * ibar[1] + f_m * ibar[mie + mie_stride] + (multiple ? ibar[factored + 1] : R(0.0)),
+        f_r * ibar[2] + f_m * ibar[mie + 2 * mie_stride] + (multiple ? ibar[factored + 2] : R(0.0)));
+}
+
+#if VECTOR_WIDTH == 1   /* render.cl includes this file for table_radiance, with VECTOR_WIDTH 8 */
 __kernel void lookup(__constant const atmosphere_t *atm, __global const real *table,
                      const int width, const int height, const int depth, const int channels,
                      const int mapping, const int n,
@@ -50,31 +63,11 @@ __kernel void lookup(__constant const atmosphere_t *atm, __global const real *ta
         return;
     real h = altitude[i], mu_v = cos_view[i], mu_s = cos_sun[i];
     const real nu = clamp(cos_scatter[i], R(-1.0), R(1.0));
-    real ibar[9] = {R(0.0), R(0.0), R(0.0), R(0.0), R(0.0), R(0.0), R(0.0), R(0.0), R(0.0)};
-    if (enter_atmosphere(atm, &h, &mu_v, &mu_s, nu)) {
-        const real ha = atm->top_radius - atm->planet_radius;
-        const real fx = MAPPING_U(h, mapping, ha) * (real)(width - 1);
-        const real fy = MAPPING_V(mu_v, mapping) * (real)(height - 1);
-        const real fz = MAPPING_V(mu_s, mapping) * (real)(depth - 1);
-        const int x0 = lower_node(fx, width), y0 = lower_node(fy, height), z0 = lower_node(fz, depth);
-        const real ax = fx - (real)x0, ay = fy - (real)y0, az = fz - (real)z0;
-        for (int corner = 0; corner < 8; ++corner) {
-            const int dx = corner & 1, dy = (corner >> 1) & 1, dz = corner >> 2;
-            const real weight = (dx ? ax : R(1.0) - ax) * (dy ? ay : R(1.0) - ay) * (dz ? az : R(1.0) - az);
-            const size_t cell = (size_t)(x0 + dx) + (size_t)width * ((size_t)(y0 + dy) + (size_t)height * (size_t)(z0 + dz));
-            for (int c = 0; c < channels; ++c)
-                ibar[c] += weight * table[cell * channels + c];
-        }
-    }
-    const real f_r = phase_rayleigh(atm, nu);
-    const real f_m = phase_mie(atm, nu);
-    const int factored = (channels == 7 || channels == 9) ? channels - 3 : channels;
-    const int mie = 3;                          /* first Mie channel */
-    const int mie_stride = factored == 6;       /* Mie per wavelength, or the notes' one Mie channel */
-    const int multiple = factored < channels;   /* the physical mode's phased higher orders follow */
-    radiance[3 * i] = atm->incident_light.x * (f_r * ibar[0] + f_m * ibar[mie] + (multiple ? ibar[factored] : R(0.0)));
-    radiance[3 * i + 1] = atm->incident_light.y * (f_r * ibar[1] + f_m * ibar[mie + mie_stride]
-                                                   + (multiple ? ibar[factored + 1] : R(0.0)));
-    radiance[3 * i + 2] = atm->incident_light.z * (f_r * ibar[2] + f_m * ibar[mie + 2 * mie_stride]
-                                                   + (multiple ? ibar[factored + 2] : R(0.0)));
+    const int inside = enter_atmosphere(atm->planet_radius, atm->top_radius, &h, &mu_v, &mu_s, nu);
+    const real3 value = inside ? table_radiance(atm, table, width, height, depth, channels, mapping, h, mu_v, mu_s, nu)
+                               : (real3)(R(0.0));
+    radiance[3 * i] = value.x;
+    radiance[3 * i + 1] = value.y;
+    radiance[3 * i + 2] = value.z;
 }
+#endif

@@ -61,5 +61,10 @@ typedef int8 maskv8;
 #else
 #define SELECT(a, b, m) select((a), (b), (m))
 #endif
-/* lane k of a realv */
+/* lane k of a realv, and of a maskv */
 #define LANE(v, k) (((real *)&(v))[k])
+#if VECTOR_WIDTH == 8 && defined(REAL_IS_DOUBLE)
+#define MASK_LANE(m, k) (((long *)&(m))[k])
+#else
+#define MASK_LANE(m, k) (((int *)&(m))[k])
+#endif

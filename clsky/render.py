@@ -1,0 +1,192 @@
+"""HDR sky radiance per pixel on OpenCL (``kernels/render.cl``): by table lookup and by ray marching.
+
+:class:`SkyRenderer` owns one :class:`RenderEngine` and a table uploaded once; each call renders
+one frame for one sun direction and observer altitude. Directions are unit vectors in the observer's
+local frame (x east, y north, z zenith). NumPy twins: :func:`clsky.reference.render_table` and
+:func:`clsky.reference.render_raymarch`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pyopencl.array as cla
+
+from . import _atmosphere_cl, _cl, reference
+from .settings import MAPPINGS, TableSettings
+from .table import ScatteringTable
+from .transmittance import COMMON_SOURCES, TransmittanceEngine
+
+__all__ = ["SkyRenderer", "RenderEngine", "SUN_ANGULAR_RADIUS_DEG", "RAYMARCH_DEFAULTS", "sun_disc_radiance",
+           "check_directions"]
+
+#: Angular radius of the sun disc [deg].
+SUN_ANGULAR_RADIUS_DEG = 0.2665
+#: Quadrature of the per-pixel ray march (its "samples per ray"): Keller & Bohn nodes, which the
+#: Monte Carlo comparison showed to converge fastest for observers near the ground, and the sun's
+#: transmittance from a 2D table built with many steps (cheap: it is built once per renderer).
+RAYMARCH_DEFAULTS = TableSettings(view_steps=64, sun_steps=256, sampling="keller_bohn", sun_transmittance="table",
+                                  transmittance_size=(128, 512), orders=1)
+VECTOR_WIDTH = 8
+
+
+def check_directions(directions, sun_direction, altitude):
+    """Validated (n, 3) directions, sun direction (3,) and altitude; ValueError names the bad one."""
+    directions = np.asarray(directions, dtype=np.float64)
+    if directions.ndim < 1 or directions.shape[-1] != 3:
+        raise ValueError(f"directions must have shape (..., 3), got {directions.shape}")
+    if not np.all(np.isfinite(directions)) or not np.allclose(np.linalg.norm(directions, axis=-1), 1.0, atol=1e-6):
+        raise ValueError("directions must be finite unit vectors")
+    sun = np.asarray(sun_direction, dtype=np.float64)
+    if sun.shape != (3,) or not np.all(np.isfinite(sun)) or abs(np.linalg.norm(sun) - 1.0) > 1e-6:
+        raise ValueError(f"sun_direction must be a finite unit vector of 3 values, got {sun_direction!r}")
+    if not (np.isscalar(altitude) and np.isfinite(altitude) and 0.0 <= altitude <= 1e9):
+        raise ValueError(f"altitude must be finite and in [0, 1e9] m, got {altitude!r}")
+    return directions, sun, float(altitude)
+
+
+def sun_disc_radiance(atmosphere, sun_direction, altitude, steps=512):
+    """Radiance of the sun disc seen from ``altitude``: I_I T_sun / Omega_sun (r, g, b).
+
+    T_sun is the transmittance along the sun ray (Keller & Bohn trapezoid with ``steps`` steps); 0
+    when the sun is below the horizon (its ray hits the planet). Omega_sun = 2 pi (1 - cos 0.2665 deg).
+    """
+    rp, ra = atmosphere.planet_radius, atmosphere.top_radius
+    mu = float(sun_direction[2])
+    h = float(altitude)
+    if mu < reference.horizon_cos(h, rp):
+        return np.zeros(3)
+    if h > atmosphere.atmosphere_height:     # from space: the sun ray may cross the atmosphere's limb
+        r = rp + h
+        impact = r * math.sqrt(max(1.0 - mu * mu, 0.0))
+        if mu >= 0.0 or impact >= ra:
+            transmittance = np.ones(3)
+        else:
+            chord = 2.0 * math.sqrt(ra * ra - impact * impact)
+            entry_mu = -math.sqrt(max(1.0 - (impact / ra) ** 2, 0.0))
+            transmittance = reference.transmittance(atmosphere, atmosphere.atmosphere_height, entry_mu, chord,
+                                                    steps, "uniform")
+    else:
+        length = reference.distance_to_top(h, mu, rp, ra)
+        transmittance = reference.transmittance(atmosphere, h, mu, length, steps, "keller_bohn")
+    solid_angle = 2.0 * math.pi * (1.0 - math.cos(math.radians(SUN_ANGULAR_RADIUS_DEG)))
+    return atmosphere.incident_light * transmittance / solid_angle
+
+
+class RenderEngine(_cl.Engine):
+    """The render program, built for the ray march's quadrature (``ray_settings``)."""
+
+    def __init__(self, ray_settings: TableSettings = RAYMARCH_DEFAULTS, ctx=None, profile=False, fast_math=False):
+        self.ray_settings = ray_settings
+        super().__init__(ctx, np.dtype(ray_settings.dtype), profile, fast_math)
+
+    def program_sources(self):
+        declaration = _atmosphere_cl.declaration(self.ctx.devices[0], self.dtype)
+        return (("real.cl", declaration) + COMMON_SOURCES[1:]
+                + ("mapping.cl", "phase.cl", "view_ray.cl", "lookup.cl", "render.cl"))
+
+    def build_options(self):
+        s = self.ray_settings
+        options = super().build_options() + [f"-DN_VIEW={s.view_steps}", f"-DN_SUN={s.sun_steps}",
+                                             f"-DVECTOR_WIDTH={VECTOR_WIDTH}"]
+        if s.sampling == "keller_bohn":
+            options.append("-DKELLER_BOHN_SAMPLING=1")
+        if s.sun_transmittance == "table":
+            options.append("-DSUN_TRANSMITTANCE_TABLE=1")
+        return options
+
+
+class SkyRenderer:
+    """Renders HDR frames from a :class:`~clsky.table.ScatteringTable`, by lookup and by ray march.
+
+    Parameters
+    ----------
+    table : ScatteringTable
+        Its atmosphere, data and (for the ray march's higher orders) gathered in-scatter sum.
+    ray_settings : TableSettings, optional
+        Quadrature of the ray march (view_steps = samples per ray, sun_steps, sampling,
+        sun_transmittance, transmittance_size, dtype); defaults to :data:`RAYMARCH_DEFAULTS`.
+    ctx, fast_math
+        See :class:`clsky._cl.Engine`.
+    """
+
+    def __init__(self, table: ScatteringTable, ray_settings: TableSettings | None = None, ctx=None,
+                 fast_math=False):
+        self.table = table
+        self.ray_settings = ray_settings or RAYMARCH_DEFAULTS.replace(dtype=table.settings.dtype)
+        self.engine = RenderEngine(self.ray_settings, ctx=ctx, fast_math=fast_math)
+        self.queue = self.engine.queue
+        dtype = self.engine.dtype
+        self._atmosphere_d = _atmosphere_cl.to_device(self.queue, table.atmosphere, dtype)
+        self._table_d = cla.to_device(self.queue, np.ascontiguousarray(table.data, dtype=dtype))
+        gathered = table.gathered
+        padded = np.zeros((2, 2, 2, 8) if gathered is None else gathered.shape[:3] + (8,), dtype=dtype)
+        if gathered is not None:
+            padded[..., :6] = gathered
+        self._gathered_d = cla.to_device(self.queue, padded)
+        if self.ray_settings.sun_transmittance == "table":
+            transmittance = TransmittanceEngine(self.engine.ctx, dtype, steps=self.ray_settings.sun_steps,
+                                                sampling=self.ray_settings.sampling)
+            self._sun_table_d = transmittance.column_density_table(table.atmosphere,
+                                                                   self.ray_settings.transmittance_size,
+                                                                   queue_only=True)
+            transmittance.queue.finish()
+        else:
+            self._sun_table_d = cla.zeros(self.queue, 8, dtype)
+        self._cos_sun_radius = math.cos(math.radians(SUN_ANGULAR_RADIUS_DEG))
+
+    def _launch(self, name, directions, sun_direction, altitude, valid, extra_args):
+        directions, sun, altitude = check_directions(directions, sun_direction, altitude)
+        shape = directions.shape[:-1]
+        flat = np.ascontiguousarray(directions.reshape(-1, 3), dtype=self.engine.dtype)
+        n = flat.shape[0]
+        real4 = _cl.real_vector_dtype(self.engine.dtype, 4)
+        sun4 = _real4(real4, sun)
+        disc = _real4(real4, sun_disc_radiance(self.table.atmosphere, sun, altitude))
+        out_d = cla.empty(self.queue, (max(n, 1), 3), self.engine.dtype)
+        directions_d = cla.to_device(self.queue, flat)
+        kernel = self.engine.kernels[name]
+        kernel(self.queue, (-(-n // VECTOR_WIDTH),), None, self._atmosphere_d, *extra_args, np.int32(n),
+               directions_d.data, sun4, self.engine.real(altitude), disc, self.engine.real(self._cos_sun_radius),
+               out_d.data)
+        radiance = out_d.get()[:n].reshape(shape + (3,)).astype(np.float64)
+        if valid is not None:
+            radiance *= np.asarray(valid, dtype=bool)[..., None]
+        return radiance
+
+    def render_table(self, directions, sun_direction, altitude=0.0, valid=None):
+        """HDR radiance (..., 3) by table lookup; ``directions`` (..., 3) unit vectors, ``valid`` an
+        optional mask (invalid pixels are 0)."""
+        t = self.table
+        width, height, depth = t.settings.size
+        args = (self._table_d.data, np.int32(width), np.int32(height), np.int32(depth), np.int32(t.data.shape[-1]),
+                np.int32(MAPPINGS[t.settings.mapping]))
+        return self._launch("render_table", directions, sun_direction, altitude, valid, args)
+
+    def render_raymarch(self, directions, sun_direction, altitude=0.0, valid=None):
+        """HDR radiance (..., 3) by per-pixel ray marching (single scattering along the true ray, higher
+        orders from the table's gathered in-scatter)."""
+        t = self.table
+        width, height, depth = t.settings.size if t.gathered is not None else (2, 2, 2)
+        tw, th = self.ray_settings.transmittance_size if self.ray_settings.sun_transmittance == "table" else (2, 2)
+        args = (self._gathered_d.data, np.int32(width), np.int32(height), np.int32(depth),
+                np.int32(MAPPINGS[t.settings.mapping]), np.int32(t.gathered is not None),
+                np.int32(t.settings.mode == "physical"), self._sun_table_d.data, np.int32(tw), np.int32(th))
+        return self._launch("render_raymarch", directions, sun_direction, altitude, valid, args)
+
+    def close(self):
+        self.engine.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def _real4(dtype, values):
+    record = np.zeros((), dtype=dtype)
+    for name, value in zip(("x", "y", "z"), values):
+        record[name] = value
+    return record

@@ -1,0 +1,112 @@
+/* render.cl -- kernels of clsky/render.py: HDR sky radiance per pixel, two ways.
+ *
+ * Per pixel a unit view direction V (observer's local frame, z = zenith), one sun direction S per
+ * frame, one observer altitude h [m] (above Ha: seen from space, rays enter the atmosphere first).
+ *   mu_v = V.z,  mu_s = S.z,  nu = dot(V, S) (cos theta, constant along the straight ray).
+ *
+ * render_table:    I = I_I (F_R(nu) Ibar_R + F_M(nu) Ibar_M [+ Lbar]) by trilinear lookup (lookup.cl).
+ * render_raymarch: single scattering integrated along the pixel's actual ray with the true nu
+ *                  (view_ray.cl: integrate_single), nothing tabulated but, optionally, the sun's
+ *                  transmittance; higher orders from the gathered in-scatter table G along the ray
+ *                  (integrate_gathered): physical mode I_I sum_s beta_s / (4 pi) Integral rho_s T G_s,
+ *                  atmosphere-plus mode the same with F_s(nu) on each species (the notes' scheme).
+ * Both add the sun disc: sun_radiance (I_I T_sun / Omega_sun, from the host) where nu >= cos of the
+ * sun's angular radius and the ray does not hit the planet. The ground is black.
+ * Each work-item renders VECTOR_WIDTH pixels; global size ceil(n / VECTOR_WIDTH).
+ * Requires real.cl, atmosphere_t, geometry.cl, column.cl, transmittance_table.cl, mapping.cl,
+ * phase.cl, view_ray.cl, lookup.cl.
+ */
+
+/* Loads the directions of pixels first .. first + VECTOR_WIDTH - 1 (clamped to n - 1). */
+inline void load_directions(__global const real *directions, const int first, const int n, const real4 sun,
+                            realv *mu_v, realv *nu)
+{
+    for (int k = 0; k < VECTOR_WIDTH; ++k) {
+        const size_t i = (size_t)min(first + k, n - 1);
+        const real3 v = (real3)(directions[3 * i], directions[3 * i + 1], directions[3 * i + 2]);
+        LANE(*mu_v, k) = clamp(v.z, R(-1.0), R(1.0));
+        LANE(*nu, k) = clamp(dot(v, sun.xyz), R(-1.0), R(1.0));
+    }
+}
+
+/* The sun disc's radiance in direction (nu, mu_v) seen from an observer whose horizon is at `horizon`. */
+inline real3 sun_disc(const real nu, const real mu_v, const real horizon, const real4 sun_radiance,
+                      const real cos_sun_radius)
+{
+    return (nu >= cos_sun_radius && mu_v >= horizon) ? sun_radiance.xyz : (real3)(R(0.0));
+}
+
+inline void store_radiance(__global real *out, const int i, const real3 value)
+{
+    out[3 * i] = value.x;
+    out[3 * i + 1] = value.y;
+    out[3 * i + 2] = value.z;
+}
+
+__kernel void render_table(__constant const atmosphere_t *atm, __global const real *table, const int width,
+                           const int height, const int depth, const int channels, const int mapping,
+                           const int n, __global const real *directions, const real4 sun, const real altitude,
+                           const real4 sun_radiance, const real cos_sun_radius, __global real *out)
+{
+    const int first = get_global_id(0) * VECTOR_WIDTH;
+    if (first >= n)
+        return;
+    realv mu_v, nu;
+    load_directions(directions, first, n, sun, &mu_v, &nu);
+    const realv mu_v_observer = mu_v;
+    realv h = (realv)(altitude), mu_s = (realv)(sun.z);
+    const realv horizon = horizon_cos(h, atm->planet_radius);
+    const maskv inside = enter_atmosphere(atm->planet_radius, atm->top_radius, &h, &mu_v, &mu_s, nu);
+    for (int k = 0; k < VECTOR_WIDTH && first + k < n; ++k) {
+        real3 value = sun_disc(LANE(nu, k), LANE(mu_v_observer, k), LANE(horizon, 0), sun_radiance, cos_sun_radius);
+        if (MASK_LANE(inside, k))
+            value += table_radiance(atm, table, width, height, depth, channels, mapping, LANE(h, k), LANE(mu_v, k),
+                                    LANE(mu_s, k), LANE(nu, k));
+        store_radiance(out, first + k, value);
+    }
+}
+
+/* has_multiple: add the higher orders from `gathered` (padded (D, H, W, 8) on the table's grid);
+ * physical: 1 for the physical mode (phase inside G), 0 for atmosphere-plus (F_s(nu) applied here). */
+__kernel void render_raymarch(__constant const atmosphere_t *atm, __global const real *gathered, const int width,
+                              const int height, const int depth, const int mapping, const int has_multiple,
+                              const int physical, __global const real *sun_table, const int tw, const int th,
+                              const int n, __global const real *directions, const real4 sun, const real altitude,
+                              const real4 sun_radiance, const real cos_sun_radius, __global real *out)
+{
+    const int first = get_global_id(0) * VECTOR_WIDTH;
+    if (first >= n)
+        return;
+    realv mu_v, nu;
+    load_directions(directions, first, n, sun, &mu_v, &nu);
+    const realv mu_v_observer = mu_v;
+    realv h = (realv)(altitude), mu_s = (realv)(sun.z);
+    const realv horizon = horizon_cos(h, atm->planet_radius);
+    const maskv inside = enter_atmosphere(atm->planet_radius, atm->top_radius, &h, &mu_v, &mu_s, nu);
+
+    realv single[6];
+    integrate_single(atm, h, mu_v, mu_s, nu, sun_table, tw, th, single);
+    real8 multiple[VECTOR_WIDTH];
+    if (has_multiple)
+        integrate_gathered(atm, h, mu_v, mu_s, nu, gathered, width, height, depth, mapping, multiple);
+
+    const real scale = R(1.0) / (R(4.0) * PI_REAL);
+    const real3 beta_r = atm->beta_rayleigh.xyz * scale;
+    const real beta_m = atm->beta_mie * scale;
+    const real3 light = atm->incident_light.xyz;
+    for (int k = 0; k < VECTOR_WIDTH && first + k < n; ++k) {
+        real3 value = sun_disc(LANE(nu, k), LANE(mu_v_observer, k), LANE(horizon, 0), sun_radiance, cos_sun_radius);
+        if (MASK_LANE(inside, k)) {
+            const real f_r = phase_rayleigh(atm, LANE(nu, k)), f_m = phase_mie(atm, LANE(nu, k));
+            const real3 ibar_r = beta_r * (real3)(LANE(single[0], k), LANE(single[1], k), LANE(single[2], k));
+            const real3 ibar_m = beta_m * (real3)(LANE(single[3], k), LANE(single[4], k), LANE(single[5], k));
+            real3 sky = f_r * ibar_r + f_m * ibar_m;
+            if (has_multiple) {
+                const real3 g_r = beta_r * multiple[k].s012, g_m = beta_m * multiple[k].s345;
+                sky += physical ? g_r + g_m : f_r * g_r + f_m * g_m;
+            }
+            value += light * sky;
+        }
+        store_radiance(out, first + k, value);
+    }
+}
