@@ -90,7 +90,7 @@ def _add_table_arguments(parser):
     numerics.add_argument("--dtype", default="float64", choices=["float64", "float32"])
     numerics.add_argument("--view-steps", type=int, default=30, help="trapezoid steps per view ray")
     numerics.add_argument("--sun-steps", type=int, default=30, help="trapezoid steps per sun ray")
-    numerics.add_argument("--sampling", default="uniform", choices=list(SAMPLINGS))
+    numerics.add_argument("--sampling", default="keller_bohn", choices=list(SAMPLINGS))
     numerics.add_argument("--sun-transmittance", default="march", choices=list(SUN_TRANSMITTANCE_METHODS))
     numerics.add_argument("--transmittance-size", nargs=2, type=int, metavar=("TW", "TH"), default=[64, 256])
     numerics.add_argument("--backend", default="opencl", choices=["opencl", "numpy"])

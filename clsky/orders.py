@@ -23,8 +23,10 @@ Two schemes (``TableSettings.mode``):
 Stopping rule of ``orders="auto"``: after each order k >= 2, for every channel c, the *bright part* is
 the set of cells whose running sum S_c is at least :data:`BRIGHT_FRACTION` (1 %) of its maximum over
 the table; the order's relative addition is max over channels and bright cells of A_c / S_c, where A
-is what order k added. The iteration stops when that falls below ``order_tolerance`` (converged) or
-when ``max_orders`` orders have been computed (not converged: reported so). In the physical mode the
+is what order k added. The iteration stops when that falls below ``order_tolerance`` (converged), when
+``max_orders`` orders have been computed (not converged: reported so), or when two successive orders
+(from the fourth on) each carry more light than the one before (diverging: a numerical artefact of a
+view-ray quadrature too coarse for the atmosphere's optical depth; reported so). In the physical mode the
 running sum per wavelength is Ibar_R^(1) + Ibar_M^(1) + sum_{k>=2} L^(k) (single scattering counted with
 phase 1, its mean over the sphere).
 """
@@ -174,6 +176,11 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
             orders.append(new)
             running = running + new
             additions.append(relative_addition(new, running))
+            if _diverging(orders):
+                reason = (f"diverging: orders {k - 1} and {k} each carry more light than the one before, "
+                          f"which a dissipative atmosphere cannot do; the view-ray quadrature is too coarse "
+                          f"for this atmosphere's optical depth (use sampling='keller_bohn' or more view_steps)")
+                break
             if progress is not None:
                 progress("orders", k, wanted)
             if settings.orders == "auto" and additions[-1] < settings.order_tolerance:
@@ -198,15 +205,28 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
     return result
 
 
+def _total(order):
+    """Light an order carries per wavelength (r, g, b), summed over all cells (factored: R + M)."""
+    per_wavelength = order[..., :3] + order[..., 3:6] if order.shape[-1] == 6 else order
+    return per_wavelength.reshape(-1, 3).sum(axis=0)
+
+
+def _diverging(orders):
+    """True when the last two orders (from the third on) each carry more light than the one before in
+    some wavelength: in an atmosphere that absorbs (black ground, Mie absorption, escape to space) the
+    orders must decrease, so this only happens when the quadrature amplifies (optically thick steps)."""
+    if len(orders) < 5:
+        return False
+    totals = [_total(o) for o in orders[-3:]]
+    return bool(np.any((totals[1] > totals[0]) & (totals[2] > totals[1])))
+
+
 def order_shares(orders, mode):
     """Share of each order in the total, per wavelength (r, g, b), summed over all cells.
 
     Factored channels count Rayleigh + Mie (phase taken as 1, its mean over the sphere). Returns a list
     of [r, g, b] fractions, one per order, summing to 1 per wavelength.
     """
-    def per_wavelength(order):
-        return (order[..., :3] + order[..., 3:6] if order.shape[-1] == 6 else order).reshape(-1, 3).sum(axis=0)
-
-    totals = np.array([per_wavelength(o) for o in orders])
+    totals = np.array([_total(o) for o in orders])
     grand = totals.sum(axis=0)
     return (totals / np.where(grand > 0, grand, 1.0)).tolist()

@@ -49,8 +49,10 @@ class TableSettings:
         Texture mapping of the axes (mapping.cl).
     view_steps, sun_steps : int
         Trapezoid steps along the view ray and along each sun ray, in [1, 4096] (default 30 each).
-    sampling : {'uniform', 'keller_bohn'}
-        Node placement along rays.
+    sampling : {'keller_bohn', 'uniform'}
+        Node placement along rays. Keller & Bohn's (default) agrees with the Monte Carlo path tracer
+        within 1.3 % at 30 + 30 steps where uniform nodes overestimate by up to 39 % (near the ground,
+        toward a low sun), and keeps optically thick atmospheres from diverging (README).
     sun_transmittance : {'march', 'table'}
         Re-march every sun ray, or read a 2D column-density table of ``transmittance_size`` nodes.
     transmittance_size : (TW, TH)
@@ -78,7 +80,7 @@ class TableSettings:
     mapping: str = "nonlinear"
     view_steps: int = 30
     sun_steps: int = 30
-    sampling: str = "uniform"
+    sampling: str = "keller_bohn"
     sun_transmittance: str = "march"
     transmittance_size: tuple = (64, 256)
     mie_layout: str = "per-wavelength"

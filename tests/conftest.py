@@ -47,6 +47,22 @@ TOLERANCES = {
         "column_density_table": Tolerance(rtol=1e-12, atol_scale=1e-14),
         "single_scattering": Tolerance(rtol=1e-12, atol_scale=1e-14),
         "single_scattering_table": Tolerance(rtol=1e-12, atol_scale=1e-14),
+        # Gather: a sum of H positive products, same order in both: error <= (H + 2) u = 35 x 1.1e-16
+        # = 4e-15 for H = 33. Measured 4.9e-16 relative, everywhere (tests/test_multiple.py, per channel).
+        "gather": Tolerance(rtol=1e-12, atol_scale=1e-14),
+        # Scatter: the single-scattering formulas plus a trilinear lookup per node; the kernel sums its
+        # trapezoid as sum f_i (h_i + h_(i+1)) / 2, the twin as sum (f_(i-1) + f_i) h_i / 2 (a few ulps).
+        # Cells far below the channel maximum (sun below the horizon, Mie at 100 km: 1e-40 of it) get
+        # interpolation weights that cancel, hence the atol. Measured (atol per channel): 1.2e-13
+        # relative above 1e-6 of the channel max, 8e-13 above 1e-8; every cell within the atol alone.
+        "scatter": Tolerance(rtol=1e-12, atol_scale=1e-14),
+        # compute_orders, OpenCL against backend='numpy', every order: each order inherits the previous
+        # order's difference (the orders operator is a contraction, ratio <= 0.3 per order measured) and
+        # adds its own 1e-12, so K orders stay below K x 1e-12 on cells above the atol; 1e-10 leaves
+        # room for cells between 1e-12 and 1e-8 of the channel max, whose cbrt-mapped trilinear weights
+        # amplify rounding (measured 1.6e-10 there, covered by the atol). Measured worst relative error
+        # above the atol: 0 (every cell within 1e-14 of the channel max).
+        "orders": Tolerance(rtol=1e-10, atol_scale=1e-14),
     },
     "float32": {
         # measured 2.2e-6 relative on random segments with tau up to 12: rtol 1e-5 (style.md start).
@@ -65,6 +81,16 @@ TOLERANCES = {
         # (times tau ~ 0.5-7): measured 1.9e-4 relative beside the atol (sun on the horizon, observer
         # on the ground, view just above the horizon; Keller & Bohn sampling, 5/4 steps). rtol 1e-3.
         "single_scattering_table": Tolerance(rtol=1e-3, atol_scale=1e-6),
+        # Gather in float32 against the float64 twin: H = 33 positive products, each input rounded once:
+        # error <= (H + 2) u = 35 x 6e-8 = 2.1e-6. Measured 4.6e-7. The atol only covers values that fall
+        # below float32's normal range (1.2e-38, i.e. ~1e-36 of the channel max ~1e-2: deep Mie shadow).
+        "gather": Tolerance(rtol=2e-6, atol_scale=1e-30),
+        # Scatter in float32 against the float64 twin: the single-scattering errors (radii rounded to
+        # 0.5 m, exp(-tau) amplification; see single_scattering) plus float32 texture coordinates.
+        # Measured (atol per channel): 4.2e-6 relative above 1e-2 of the channel max, 2.7e-5 above 1e-4,
+        # 2.7e-4 above 1e-6 (tau ~ 15 rays); with atol 1e-7 x channel max the rtol needed is 2.0e-6.
+        # rtol 2e-5 (10x margin), atol 1e-7 x channel max.
+        "scatter": Tolerance(rtol=2e-5, atol_scale=1e-7),
     },
 }
 
