@@ -1,0 +1,214 @@
+"""anim.writers: atomic, never-overwriting PNG frames, HDR frames, MP4, PNG, JSON and CSV."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+
+import numpy as np
+import pytest
+from numpy.testing import assert_array_equal
+from PIL import Image
+
+from anim.writers import FrameWriter, write_csv, write_json, write_png
+
+try:
+    import imageio.v3 as imageio_v3
+    import imageio_ffmpeg  # noqa: F401
+except ImportError:                                    # the optional 'anim' extra is missing
+    imageio_v3 = None
+needs_ffmpeg = pytest.mark.skipif(imageio_v3 is None, reason="MP4 needs imageio and imageio-ffmpeg")
+
+
+def _frame(index, height=48, width=64):
+    """A frame with a flat colour per index plus a small gradient (distinct frames)."""
+    image = np.empty((height, width, 3), dtype=np.uint8)
+    image[...] = ((40 + 15 * index) % 256, (200 - 10 * index) % 256, (90 + 7 * index) % 256)
+    image[:, :8, 0] = np.arange(8, dtype=np.uint8) * 20
+    return image
+
+
+def _listing(directory):
+    return sorted(os.listdir(directory))
+
+
+# PNG frames -------------------------------------------------------------------------------------------
+
+def test_frames_are_named_zero_padded_and_lossless(tmp_path):
+    with FrameWriter(directory=tmp_path / "frames", total_frames=3) as writer:
+        for index in range(3):
+            writer.write(index, _frame(index))
+    assert _listing(tmp_path / "frames") == ["frame_00000.png", "frame_00001.png", "frame_00002.png"]
+    for index in range(3):
+        assert_array_equal(np.asarray(Image.open(tmp_path / "frames" / f"frame_{index:05d}.png")),
+                           _frame(index))
+    assert writer.paths == [tmp_path / "frames" / f"frame_{index:05d}.png" for index in range(3)]
+    wide = FrameWriter(directory=tmp_path / "wide", total_frames=1234567, prefix="sky")
+    assert wide.frame_path(42).name == "sky_0000042.png"            # 7 digits for 1234567 frames
+
+
+def test_hdr_frames_as_float32_npy(tmp_path):
+    hdr = np.random.default_rng(0).uniform(0, 3, size=(48, 64, 3))
+    with FrameWriter(directory=tmp_path, hdr="npy", total_frames=2) as writer:
+        writer.write(1, _frame(1), hdr=hdr)
+    assert _listing(tmp_path) == ["frame_00001.npy", "frame_00001.png"]     # no temporary files left
+    stored = np.load(tmp_path / "frame_00001.npy")
+    assert stored.dtype == np.float32
+    assert_array_equal(stored, hdr.astype(np.float32))
+    with FrameWriter(directory=tmp_path / "x", hdr="npy") as writer:
+        with pytest.raises(ValueError, match="hdr"):
+            writer.write(0, _frame(0))
+
+
+def test_frames_refuse_to_overwrite_and_touch_nothing(tmp_path):
+    existing = tmp_path / "frame_00001.png"
+    existing.write_bytes(b"precious")
+    with pytest.raises(FileExistsError, match="frame_00001.png.*--force"):
+        with FrameWriter(directory=tmp_path, total_frames=3) as writer:
+            writer.write(0, _frame(0))
+    assert existing.read_bytes() == b"precious"
+    assert _listing(tmp_path) == ["frame_00001.png"]
+
+
+def test_frames_overwrite_with_force_and_report_stale(tmp_path):
+    for index in range(3):
+        write_png(tmp_path / f"frame_{index:05d}.png", _frame(9))
+    with FrameWriter(directory=tmp_path, total_frames=2, force=True) as writer:
+        for index in range(2):
+            writer.write(index, _frame(index))
+    for index in range(2):
+        assert_array_equal(np.asarray(Image.open(tmp_path / f"frame_{index:05d}.png")), _frame(index))
+    assert writer.stale_paths == [tmp_path / "frame_00002.png"]       # reported, not deleted
+    assert _listing(tmp_path) == ["frame_00000.png", "frame_00001.png", "frame_00002.png"]
+
+
+def test_frame_index_checks(tmp_path):
+    with FrameWriter(directory=tmp_path, total_frames=2) as writer:
+        writer.write(0, _frame(0))
+        with pytest.raises(ValueError, match="already written"):
+            writer.write(0, _frame(0))
+        with pytest.raises(ValueError, match="out of range"):
+            writer.write(2, _frame(0))
+        with pytest.raises(ValueError, match="shape"):
+            writer.write(1, _frame(0, height=50))
+        with pytest.raises(TypeError, match="uint8"):
+            writer.write(1, _frame(0).astype(float))
+    with pytest.raises(RuntimeError, match="with"):
+        writer.write(1, _frame(1))
+
+
+# MP4 --------------------------------------------------------------------------------------------------
+
+@needs_ffmpeg
+def test_mp4_decodes_with_the_right_frames(tmp_path):
+    target = tmp_path / "sky.mp4"
+    with FrameWriter(directory=tmp_path / "frames", mp4_path=target, fps=24, total_frames=12) as writer:
+        for index in range(12):
+            writer.write(index, _frame(index))
+    assert _listing(tmp_path) == ["frames", "sky.mp4"]               # the .part file is gone
+    assert writer.paths[-1] == target
+    video = imageio_v3.imread(target, index=None)
+    assert video.shape == (12, 48, 64, 3) and video.dtype == np.uint8
+    for index in range(12):
+        difference = video[index, :, 8:].astype(float).mean(axis=(0, 1)) - _frame(index)[0, 8]
+        # Flat colours through 8-bit limited-range YUV 4:2:0 and CRF 18: measured <= 2.2 LSB (the
+        # Y step of limited range is 255/219 = 1.16 LSB, chroma adds about as much).
+        assert np.abs(difference).max() < 4.0, (index, difference)
+
+
+@needs_ffmpeg
+def test_mp4_refuses_to_overwrite(tmp_path):
+    target = tmp_path / "sky.mp4"
+    target.write_bytes(b"old movie")
+    with pytest.raises(FileExistsError, match="sky.mp4.*--force"):
+        with FrameWriter(mp4_path=target) as writer:
+            writer.write(0, _frame(0))
+    assert target.read_bytes() == b"old movie"
+    assert _listing(tmp_path) == ["sky.mp4"]
+    with FrameWriter(mp4_path=target, force=True) as writer:
+        for index in range(3):
+            writer.write(index, _frame(index))
+    assert imageio_v3.imread(target, index=None).shape == (3, 48, 64, 3)
+    assert _listing(tmp_path) == ["sky.mp4"]
+
+
+@needs_ffmpeg
+def test_exception_in_block_leaves_no_mp4(tmp_path):
+    target = tmp_path / "sky.mp4"
+    with pytest.raises(RuntimeError, match="renderer failed"):
+        with FrameWriter(directory=tmp_path / "frames", mp4_path=target, total_frames=12) as writer:
+            for index in range(3):
+                writer.write(index, _frame(index))
+            raise RuntimeError("renderer failed")
+    assert _listing(tmp_path) == ["frames"]                          # no MP4 and no .part file
+    # Frames already written stay, each complete (documented).
+    assert _listing(tmp_path / "frames") == [f"frame_{index:05d}.png" for index in range(3)]
+
+
+@needs_ffmpeg
+def test_exception_keeps_an_existing_mp4_with_force(tmp_path):
+    target = tmp_path / "sky.mp4"
+    target.write_bytes(b"old movie")
+    with pytest.raises(KeyboardInterrupt):
+        with FrameWriter(mp4_path=target, force=True) as writer:
+            writer.write(0, _frame(0))
+            raise KeyboardInterrupt
+    assert target.read_bytes() == b"old movie"
+    assert _listing(tmp_path) == ["sky.mp4"]
+
+
+@needs_ffmpeg
+def test_odd_size_is_refused_before_writing(tmp_path):
+    with pytest.raises(ValueError, match="63x48"):
+        with FrameWriter(directory=tmp_path / "frames", mp4_path=tmp_path / "sky.mp4") as writer:
+            writer.write(0, _frame(0, width=63))
+    assert _listing(tmp_path) == ["frames"]
+    assert _listing(tmp_path / "frames") == []
+
+
+# Single files -------------------------------------------------------------------------------------------
+
+def test_write_png_atomic_and_no_overwrite(tmp_path):
+    target = tmp_path / "sky.png"
+    assert write_png(target, _frame(1)) == target
+    assert_array_equal(np.asarray(Image.open(target)), _frame(1))
+    with pytest.raises(FileExistsError, match="--force"):
+        write_png(target, _frame(2))
+    assert_array_equal(np.asarray(Image.open(target)), _frame(1))
+    write_png(target, _frame(2), force=True)
+    assert_array_equal(np.asarray(Image.open(target)), _frame(2))
+    assert _listing(tmp_path) == ["sky.png"]
+    with pytest.raises(TypeError, match="uint8"):
+        write_png(tmp_path / "bad.png", _frame(0).astype(np.float32))
+
+
+def test_write_json_atomic_strict(tmp_path):
+    target = tmp_path / "metrics.json"
+    data = {"rmse": np.float64(0.25), "frames": np.arange(3), "pixels": np.int64(7), "name": "table"}
+    write_json(target, data)
+    assert json.loads(target.read_text()) == {"rmse": 0.25, "frames": [0, 1, 2], "pixels": 7, "name": "table"}
+    with pytest.raises(FileExistsError, match="metrics.json"):
+        write_json(target, {})
+    with pytest.raises(ValueError):                   # NaN is not JSON: refused before any file
+        write_json(tmp_path / "nan.json", {"x": float("nan")})
+    write_json(target, {"a": 1}, force=True)
+    assert json.loads(target.read_text()) == {"a": 1}
+    assert _listing(tmp_path) == ["metrics.json"]
+
+
+def test_write_csv_atomic(tmp_path):
+    target = tmp_path / "jumps.csv"
+    rows = [{"frame": 0, "excess": np.float64(0.0)}, {"frame": 1, "excess": 0.125, "note": "step"}]
+    write_csv(target, rows)
+    with open(target, newline="") as handle:
+        read = list(csv.DictReader(handle))
+    assert read == [{"frame": "0", "excess": "0.0", "note": ""},
+                    {"frame": "1", "excess": "0.125", "note": "step"}]
+    with pytest.raises(FileExistsError, match="jumps.csv"):
+        write_csv(target, rows)
+    write_csv(target, rows[:1], force=True)
+    assert target.read_text().splitlines() == ["frame,excess", "0,0.0"]
+    with pytest.raises(ValueError, match="empty"):
+        write_csv(tmp_path / "empty.csv", [])
+    assert _listing(tmp_path) == ["jumps.csv"]
