@@ -8,6 +8,7 @@ local frame (x east, y north, z zenith). NumPy twins: :func:`clsky.reference.ren
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -74,6 +75,15 @@ def sun_disc_radiance(atmosphere, sun_direction, altitude, steps=512):
     return atmosphere.incident_light * transmittance / solid_angle
 
 
+@dataclasses.dataclass(frozen=True)
+class PreparedDirections:
+    """A camera's directions on the device (:meth:`SkyRenderer.prepare`), with their shape and mask."""
+
+    array: cla.Array
+    shape: tuple
+    valid: np.ndarray | None = None
+
+
 class RenderEngine(_cl.Engine):
     """The render program, built for the ray march's quadrature (``ray_settings``)."""
 
@@ -136,16 +146,24 @@ class SkyRenderer:
             self._sun_table_d = cla.zeros(self.queue, 8, dtype)
         self._cos_sun_radius = math.cos(math.radians(SUN_ANGULAR_RADIUS_DEG))
 
-    def _launch(self, name, directions, sun_direction, altitude, valid, extra_args):
-        directions, sun, altitude = check_directions(directions, sun_direction, altitude)
-        shape = directions.shape[:-1]
+    def prepare(self, directions, valid=None):
+        """Upload a camera's directions (..., 3) once, for many frames: pass the result as ``directions``."""
+        directions, _, _ = check_directions(directions, (0.0, 0.0, 1.0), 0.0)
         flat = np.ascontiguousarray(directions.reshape(-1, 3), dtype=self.engine.dtype)
-        n = flat.shape[0]
+        return PreparedDirections(cla.to_device(self.queue, flat), directions.shape[:-1],
+                                  None if valid is None else np.asarray(valid, dtype=bool))
+
+    def _launch(self, name, directions, sun_direction, altitude, valid, extra_args):
+        if not isinstance(directions, PreparedDirections):
+            directions = self.prepare(directions, valid)
+        _, sun, altitude = check_directions(np.zeros((0, 3)), sun_direction, altitude)
+        valid = directions.valid if valid is None else valid
+        shape, directions_d = directions.shape, directions.array
+        n = directions_d.shape[0]
         real4 = _cl.real_vector_dtype(self.engine.dtype, 4)
         sun4 = _real4(real4, sun)
         disc = _real4(real4, sun_disc_radiance(self.table.atmosphere, sun, altitude))
         out_d = cla.empty(self.queue, (max(n, 1), 3), self.engine.dtype)
-        directions_d = cla.to_device(self.queue, flat)
         kernel = self.engine.kernels[name]
         kernel(self.queue, (-(-n // VECTOR_WIDTH),), None, self._atmosphere_d, *extra_args, np.int32(n),
                directions_d.data, sun4, self.engine.real(altitude), disc, self.engine.real(self._cos_sun_radius),
@@ -156,8 +174,8 @@ class SkyRenderer:
         return radiance
 
     def render_table(self, directions, sun_direction, altitude=0.0, valid=None):
-        """HDR radiance (..., 3) by table lookup; ``directions`` (..., 3) unit vectors, ``valid`` an
-        optional mask (invalid pixels are 0)."""
+        """HDR radiance (..., 3) by table lookup; ``directions`` (..., 3) unit vectors (or
+        :meth:`prepare`'s result), ``valid`` an optional mask (invalid pixels are 0)."""
         t = self.table
         width, height, depth = t.settings.size
         args = (self._table_d.data, np.int32(width), np.int32(height), np.int32(depth), np.int32(t.data.shape[-1]),

@@ -84,7 +84,7 @@ __kernel void scatter(__constant const atmosphere_t *atm, const int width, const
     const real nu = mu_v * mu_s + sqrt(fmax(R(1.0) - mu_v * mu_v, R(0.0)) * fmax(R(1.0) - mu_s * mu_s, R(0.0)));
     real8 sum[VECTOR_WIDTH];
     integrate_gathered(atm, h0, (realv)(mu_v), (realv)(mu_s), (realv)(nu), gathered, width, height, depth,
-                       mapping, sum);
+                       mapping, sum, 0, 0, 0, 0);
 
     const real4 beta = atm->beta_rayleigh;
     const real scale = R(1.0) / (R(4.0) * PI_REAL);

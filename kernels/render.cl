@@ -85,10 +85,12 @@ __kernel void render_raymarch(__constant const atmosphere_t *atm, __global const
     const maskv inside = enter_atmosphere(atm->planet_radius, atm->top_radius, &h, &mu_v, &mu_s, nu);
 
     realv single[6];
-    integrate_single(atm, h, mu_v, mu_s, nu, sun_table, tw, th, single);
     real8 multiple[VECTOR_WIDTH];
-    if (has_multiple)
-        integrate_gathered(atm, h, mu_v, mu_s, nu, gathered, width, height, depth, mapping, multiple);
+    if (has_multiple)   /* one pass along the ray for both */
+        integrate_gathered(atm, h, mu_v, mu_s, nu, gathered, width, height, depth, mapping, multiple, sun_table,
+                           tw, th, single);
+    else
+        integrate_single(atm, h, mu_v, mu_s, nu, sun_table, tw, th, single);
 
     const real scale = R(1.0) / (R(4.0) * PI_REAL);
     const real3 beta_r = atm->beta_rayleigh.xyz * scale;

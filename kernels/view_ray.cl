@@ -119,11 +119,15 @@ inline real8 lookup8(__global const real *table, const int width, const int heig
  *   sum[k].s012 = Integral rho_R T(P, Pa) Gbar_R dt (r, g, b), sum[k].s345 the same with rho_M, Gbar_M
  * with Gbar (padded (D, H, W, 8), the table's grid and mapping) looked up trilinearly at each node's
  * altitude, view and sun cosines. The trapezoid sum_i (f_(i-1) + f_i) h_i / 2 is accumulated as
- * sum_i f_i (h_i + h_(i+1)) / 2, so that each lane's 6 channels are one real8 FMA per node. */
+ * sum_i f_i (h_i + h_(i+1)) / 2, so that each lane's 6 channels are one real8 FMA per node.
+ * With single != 0 (the per-pixel ray march), the same pass also accumulates single scattering into
+ * single[0..5] as integrate_single does (sun columns from sun_table or re-marched), sharing the
+ * geometry, densities and view transmittance of each node. */
 inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h0, const realv mu_v,
                                const realv mu_s, const realv nu, __global const real *gathered,
                                const int width, const int height, const int depth, const int mapping,
-                               real8 *sum)
+                               real8 *sum, __global const real *sun_table, const int tw, const int th,
+                               realv *single)
 {
     const real rp = atm->planet_radius;
     const real ha = atm->top_radius - rp;
@@ -138,6 +142,9 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
     realv last_density_r = V(0.0), last_density_m = V(0.0);
     for (int k = 0; k < VECTOR_WIDTH; ++k)
         sum[k] = (real8)(R(0.0));
+    if (single)
+        for (int c = 0; c < 6; ++c)
+            single[c] = V(0.0);
     real node_previous = R(0.0);
 
     for (int i = 0; i <= N_VIEW; ++i) {
@@ -162,6 +169,22 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
         const realv t2 = exp(-(beta.z * view_r + beta_me * view_m));
         const realv wr = weight * density_r, wm = weight * density_m;
         const realv fr0 = wr * t0, fr1 = wr * t1, fr2 = wr * t2, fm0 = wm * t0, fm1 = wm * t1, fm2 = wm * t2;
+        if (single) {
+            const realv h_here = h;
+            const maskv lit = isgreaterequal(mu_sun_here, horizon_cos(h_here, rp));
+            realv sun_r, sun_m;
+#ifdef SUN_TRANSMITTANCE_TABLE
+            column_density_from_table(atm, sun_table, tw, th, h_here, mu_sun_here, &sun_r, &sun_m);
+#else
+            const realv sun_length = SELECT(V(0.0), distance_to_top(h_here, mu_sun_here, rp, atm->top_radius), lit);
+            column_density(atm, h_here, mu_sun_here, sun_length, &sun_r, &sun_m);
+#endif
+            const realv s0 = SELECT(V(0.0), exp(-(beta.x * sun_r + beta_me * sun_m)), lit);
+            const realv s1 = SELECT(V(0.0), exp(-(beta.y * sun_r + beta_me * sun_m)), lit);
+            const realv s2 = SELECT(V(0.0), exp(-(beta.z * sun_r + beta_me * sun_m)), lit);
+            single[0] += fr0 * s0; single[1] += fr1 * s1; single[2] += fr2 * s2;
+            single[3] += fm0 * s0; single[4] += fm1 * s1; single[5] += fm2 * s2;
+        }
         const realv fx = MAPPING_U(h, mapping, ha) * (real)(width - 1);
         const realv fy = MAPPING_V(mu_view_here, mapping) * (real)(height - 1);
         const realv fz = MAPPING_V(mu_sun_here, mapping) * (real)(depth - 1);
