@@ -25,10 +25,11 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(message)
 
 
-STAGE_LABELS = {"single": ("single scattering", "slab"), "orders": ("scattering orders", "order")}
+STAGE_LABELS = {"single": ("single scattering", "slab"), "orders": ("scattering orders", "order"),
+                "frames": ("frames", "frame")}
 
 
-def _progress_bar(mode):
+def progress_bar(mode):
     """A tqdm-driven ``progress(stage, done, total)`` callable (or None) and its closer; one bar per
     stage, on stderr. The orders' total is unknown when they iterate to convergence: the bar counts."""
     if mode == "none":
@@ -102,7 +103,10 @@ def _add_table_arguments(parser):
     output.add_argument("--progress", default="leave", choices=["display", "leave", "none"])
 
 
-def build_parser():
+def build_parser(extensions=()):
+    """The parser and the command handlers; each extension ``register(subparsers) -> {name: handler}``
+    adds commands (the animation package adds ``animate`` and ``render`` this way, so that clsky never
+    imports it)."""
     parser = _Parser(prog="clsky", description="Daylight and twilight skies: precomputed scattering on OpenCL.")
     parser.add_argument("--version", action="version", version=f"clsky {__version__}")
     parser.add_argument("--verbose", action="store_true", help="show tracebacks of unexpected errors")
@@ -110,7 +114,10 @@ def build_parser():
     commands.add_parser("devices", help="list OpenCL platforms and devices, and the one clsky uses")
     table = commands.add_parser("table", help="compute a scattering table and save it")
     _add_table_arguments(table)
-    return parser
+    handlers = dict(COMMANDS)
+    for register in extensions:
+        handlers.update(register(commands))
+    return parser, handlers
 
 
 def run_devices(args):
@@ -152,7 +159,7 @@ def run_table(args):
             raise UsageError(f"{target} exists; use --force to overwrite it")
         if not target.parent.is_dir():
             raise UsageError(f"output directory {target.parent} does not exist")
-    progress, close = _progress_bar(args.progress)
+    progress, close = progress_bar(args.progress)
     start = time.perf_counter()
     try:
         table = ScatteringTable.build(preset(args.preset), settings, backend=args.backend,
@@ -176,13 +183,15 @@ def run_table(args):
 COMMANDS = {"devices": run_devices, "table": run_table}
 
 
-def main(argv=None):
+def main(argv=None, extensions=()):
+    """Run the command line; returns the exit status (2 for bad arguments, one line on stderr)."""
     from ._cl import KernelBuildError, NoDeviceError
 
     verbose = "--verbose" in (sys.argv[1:] if argv is None else argv)
     try:
-        args = build_parser().parse_args(argv)
-        return COMMANDS[args.command](args)
+        parser, handlers = build_parser(extensions)
+        args = parser.parse_args(argv)
+        return handlers[args.command](args)
     except UsageError as error:
         print(f"clsky: error: {error}", file=sys.stderr)
         return EXIT_USAGE

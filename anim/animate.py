@@ -1,0 +1,295 @@
+"""Sunrise-to-sunset animations: render every frame by table lookup and by ray march, compare, write.
+
+The pipeline, one frame at a time: sun position (:mod:`anim.sunpath`) -> HDR frames
+(:class:`clsky.render.SkyRenderer`, for the camera of :mod:`anim.cameras`) -> display values
+(:mod:`anim.tonemap`) -> metrics, error image and composite (:mod:`anim.metrics`) -> files
+(:mod:`anim.writers`). The renderers never see files; the writers never see physics.
+
+Example
+-------
+>>> from anim.animate import AnimationConfig, render_animation
+>>> result = render_animation(AnimationConfig(frames=4, size=32, output="sky.mp4"))   # doctest: +SKIP
+>>> result.summary                                                                     # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import pathlib
+import time
+from typing import Callable
+
+import numpy as np
+
+import clsky
+from clsky.render import SkyRenderer
+
+from . import metrics, sunpath, tonemap, writers
+from .cameras import camera_from_name
+
+__all__ = ["AnimationConfig", "AnimationResult", "METHODS", "build_table", "sun_positions", "render_animation",
+           "render_frame"]
+
+#: What is rendered: table lookup only, ray march only, or both with the comparison.
+METHODS = ("compare", "lut", "raymarch")
+
+
+@dataclasses.dataclass(frozen=True)
+class AnimationConfig:
+    """Everything an animation needs; every field is validated on creation.
+
+    Parameters
+    ----------
+    frames : int
+        Number of frames, in [2, 100000] (sweep) (ignored with ``location``: the time range decides).
+    size : int
+        Image height [pixels] in [16, 8192]; the width follows from the camera (square fisheye,
+        2:1 panorama, 16:9 perspective).
+    camera : {'fisheye', 'perspective', 'equirectangular'}
+    fov_deg, heading_deg, pitch_deg : float
+        Perspective camera: horizontal field of view, azimuth of the optical axis (clockwise from
+        north), elevation.
+    altitude : float
+        Observer altitude [m], >= 0 (above 100 km: seen from space).
+    method : {'compare', 'lut', 'raymarch'}
+    preset : str
+        Atmosphere preset (:data:`clsky.PRESETS`).
+    mode : {'atmosphere-plus', 'physical'}
+        Scheme of the table's higher orders.
+    table_size : (W, H, D)
+        Scattering table grid.
+    samples : int
+        Ray-march samples per ray (view steps), in [2, 4096].
+    start_elevation_deg, max_elevation_deg : float
+        Sweep: sun elevation before sunrise / after sunset, and at its highest.
+    location : (latitude_deg, longitude_deg) or None
+        Real sun positions (pvlib NREL SPA) instead of the sweep.
+    date : datetime.date or None
+        Day of the real positions (default today), from ``start_hour`` to ``end_hour`` UTC.
+    start_hour, end_hour, step_minutes : float
+        Time range [h, UTC] and step of the real positions.
+    fps : float
+        Frames per second of the MP4, in (0, 240].
+    exposure : float
+        Exposure of the tone map, > 0.
+    dither : bool
+        Dither the 8-bit frames against banding.
+    output : str or path
+        MP4 file; PNG frames go to ``<stem>_frames/``, metrics to ``<stem>_metrics.csv`` / ``.json``.
+    hdr : bool
+        Also write float32 HDR frames (.npy) beside the PNGs.
+    force : bool
+        Overwrite existing outputs.
+    """
+
+    frames: int = 120
+    size: int = 512
+    camera: str = "fisheye"
+    fov_deg: float = 90.0
+    heading_deg: float = 180.0
+    pitch_deg: float = 10.0
+    altitude: float = 0.0
+    method: str = "compare"
+    preset: str = "physical"
+    mode: str = "physical"
+    table_size: tuple = (32, 256, 32)
+    samples: int = 64
+    start_elevation_deg: float = -6.0
+    max_elevation_deg: float = 60.0
+    location: tuple | None = None
+    date: datetime.date | None = None
+    start_hour: float = 0.0
+    end_hour: float = 24.0
+    step_minutes: float = 10.0
+    fps: float = 30.0
+    exposure: float = 1.0
+    dither: bool = True
+    output: str = "sky.mp4"
+    hdr: bool = False
+    force: bool = False
+
+    def __post_init__(self):
+        def check(name, ok, valid):
+            value = getattr(self, name)
+            try:
+                good = bool(ok(value))
+            except (TypeError, ValueError):
+                good = False
+            if not good:
+                raise ValueError(f"{name} must be {valid}, got {value!r}")
+
+        def integer(low, high):
+            return lambda v: isinstance(v, (int, np.integer)) and not isinstance(v, bool) and low <= v <= high
+
+        def real(low, high, low_open=False):
+            return lambda v: (isinstance(v, (int, float, np.floating)) and not isinstance(v, bool) and np.isfinite(v)
+                              and (low < v if low_open else low <= v) and v <= high)
+
+        check("frames", integer(2, 100_000), "an integer in [2, 100000]")
+        check("size", integer(16, 8192), "an integer in [16, 8192]")
+        check("camera", lambda v: v in ("fisheye", "perspective", "equirectangular"),
+              "one of 'fisheye', 'perspective', 'equirectangular'")
+        check("fov_deg", real(0.0, 179.0, low_open=True), "in (0, 179] degrees")
+        check("heading_deg", real(-360.0, 720.0), "in [-360, 720] degrees")
+        check("pitch_deg", real(-90.0, 90.0), "in [-90, 90] degrees")
+        check("altitude", real(0.0, 1e8), "in [0, 1e8] m")
+        check("method", lambda v: v in METHODS, f"one of {METHODS}")
+        check("preset", lambda v: v in clsky.PRESETS, f"one of {sorted(clsky.PRESETS)}")
+        check("mode", lambda v: v in ("atmosphere-plus", "physical"), "'atmosphere-plus' or 'physical'")
+        check("samples", integer(2, 4096), "an integer in [2, 4096]")
+        check("start_elevation_deg", real(-90.0, 90.0), "in [-90, 90] degrees")
+        check("max_elevation_deg", real(-90.0, 90.0), "in [-90, 90] degrees")
+        check("max_elevation_deg", lambda v: v >= self.start_elevation_deg, "at least start_elevation_deg")
+        check("location", lambda v: v is None or (len(v) == 2 and -90 <= v[0] <= 90 and -180 <= v[1] <= 180),
+              "None or (latitude in [-90, 90], longitude in [-180, 180]) degrees")
+        check("start_hour", real(0.0, 48.0), "in [0, 48] h")
+        check("end_hour", real(0.0, 48.0), "in [0, 48] h")
+        check("end_hour", lambda v: v > self.start_hour, "after start_hour")
+        check("step_minutes", real(0.0, 1440.0, low_open=True), "in (0, 1440] minutes")
+        check("fps", real(0.0, 240.0, low_open=True), "in (0, 240]")
+        check("exposure", real(0.0, 1e6, low_open=True), "in (0, 1e6]")
+        check("output", lambda v: str(v).endswith(".mp4"), "a path ending in .mp4")
+        clsky.TableSettings(size=tuple(self.table_size))          # validates the grid (names 'size')
+
+    @property
+    def output_path(self) -> pathlib.Path:
+        return pathlib.Path(self.output)
+
+    @property
+    def frames_directory(self) -> pathlib.Path:
+        return self.output_path.with_name(self.output_path.stem + "_frames")
+
+    def metrics_path(self, suffix) -> pathlib.Path:
+        return self.output_path.with_name(self.output_path.stem + "_metrics" + suffix)
+
+    def image_shape(self):
+        """(width, height) of a rendered frame."""
+        if self.camera == "fisheye":
+            return self.size, self.size
+        if self.camera == "equirectangular":
+            return 2 * self.size, self.size
+        return (16 * self.size) // 9 // 2 * 2, self.size
+
+
+@dataclasses.dataclass
+class AnimationResult:
+    """Per-frame metric rows, the temporal jumps, the written files and a one-line summary."""
+
+    rows: list
+    temporal: dict
+    paths: list
+    seconds: float
+    summary: str
+
+
+def build_table(config: AnimationConfig, ctx=None, progress=None) -> clsky.ScatteringTable:
+    """The scattering table of the animation's atmosphere (orders until converged)."""
+    settings = clsky.TableSettings(size=tuple(config.table_size), mode=config.mode)
+    return clsky.ScatteringTable.build(config.preset, settings, ctx=ctx, progress=progress)
+
+
+def sun_positions(config: AnimationConfig):
+    """The sun positions of the frames: the sweep, or real positions for a location and date."""
+    if config.location is None:
+        return sunpath.sweep(config.frames, config.start_elevation_deg, config.max_elevation_deg)
+    date = config.date or datetime.date.today()
+    midnight = datetime.datetime(date.year, date.month, date.day, tzinfo=datetime.timezone.utc)
+    return sunpath.real_positions(config.location[0], config.location[1],
+                                  midnight + datetime.timedelta(hours=config.start_hour),
+                                  midnight + datetime.timedelta(hours=config.end_hour), config.step_minutes,
+                                  altitude_m=min(config.altitude, 8000.0))
+
+
+def _camera(config):
+    width, height = config.image_shape()
+    options = {}
+    if config.camera == "perspective":
+        options = dict(fov_deg=config.fov_deg, heading_deg=config.heading_deg, pitch_deg=config.pitch_deg)
+    elif config.camera == "fisheye":
+        options = dict(heading_deg=config.heading_deg % 360.0)
+    return camera_from_name(config.camera, width, height, **options)
+
+
+def render_frame(renderer: SkyRenderer, prepared, sun_direction, config: AnimationConfig):
+    """HDR frames {'lut': ..., 'raymarch': ...} of one sun position, as ``config.method`` asks."""
+    frames = {}
+    if config.method in ("compare", "lut"):
+        frames["lut"] = renderer.render_table(prepared, sun_direction, config.altitude)
+    if config.method in ("compare", "raymarch"):
+        frames["raymarch"] = renderer.render_raymarch(prepared, sun_direction, config.altitude)
+    return frames
+
+
+def _even(image):
+    """Crop one column/row if needed: H.264 in yuv420p needs even sizes."""
+    height, width = image.shape[:2]
+    return image[: height - height % 2, : width - width % 2]
+
+
+def render_animation(config: AnimationConfig, ctx=None,
+                     progress: Callable[[str, int, int], None] | None = None) -> AnimationResult:
+    """Render, compare and write a whole animation (see the module docstring).
+
+    ``progress(stage, done, total)`` is called for the table build ('single', 'orders') and for each
+    frame ('frames').
+    """
+    start = time.perf_counter()
+    positions = sun_positions(config)
+    camera = _camera(config)
+    directions, valid = camera.directions()
+    table = build_table(config, ctx=ctx, progress=progress)
+    renderer = SkyRenderer(table, clsky.render.RAYMARCH_DEFAULTS.replace(view_steps=config.samples), ctx=ctx)
+    prepared = renderer.prepare(directions, valid)
+    rows, means = [], {"lut": [], "raymarch": []}
+    directory = config.frames_directory
+    with writers.FrameWriter(directory=directory, mp4_path=config.output_path, fps=config.fps,
+                             total_frames=len(positions), hdr="npy" if config.hdr else None, force=config.force,
+                             prefix="frame") as writer:
+        for index, sun in enumerate(positions):
+            hdr = render_frame(renderer, prepared, sun.direction, config)
+            display = {name: tonemap.to_uint8(tonemap.tone_map(frame, config.exposure), dither=config.dither,
+                                              seed=index) for name, frame in hdr.items()}
+            row = {"frame": index, "sun_zenith_deg": sun.zenith_deg, "sun_azimuth_deg": sun.azimuth_deg,
+                   "time": sun.time.isoformat() if sun.time is not None else ""}
+            for name, frame in hdr.items():
+                means[name].append(metrics.mean_luminance(frame[None], valid)[0])
+            if config.method == "compare":
+                row.update(metrics.compare_frames(hdr["raymarch"], hdr["lut"], valid, config.exposure))
+                error = metrics.error_image(metrics.relative_error_map(hdr["raymarch"], hdr["lut"], valid), valid)
+                image = metrics.composite([display["lut"], display["raymarch"], error],
+                                          ["table lookup", "ray march", "relative error"])
+                frame_hdr = hdr["raymarch"]
+            else:
+                image = display[config.method]
+                frame_hdr = hdr[config.method]
+            writer.write(index, _even(image), hdr=frame_hdr if config.hdr else None)
+            rows.append(row)
+            if progress is not None:
+                progress("frames", index + 1, len(positions))
+        paths = list(writer.paths)
+    temporal = {}
+    if config.method == "compare":
+        jumps = metrics.temporal_jumps(np.array(means["lut"]), np.array(means["raymarch"]), exposure=config.exposure)
+        temporal = {"table_jumps": np.asarray(jumps["table_jumps"]).tolist(),
+                    "raymarch_jumps": np.asarray(jumps["raymarch_jumps"]).tolist(),
+                    "excess": np.asarray(jumps["excess"]).tolist(),
+                    "worst_frames": [int(i) for i in jumps["worst_frames"]]}
+        for row, excess in zip(rows, temporal["excess"]):
+            row["temporal_excess_jump"] = float(excess)
+    paths.append(writers.write_csv(config.metrics_path(".csv"), rows, force=config.force))
+    paths.append(writers.write_json(config.metrics_path(".json"), {
+        "config": {k: (str(v) if isinstance(v, (datetime.date, pathlib.Path)) else v)
+                   for k, v in dataclasses.asdict(config).items()},
+        "table": {"settings": table.settings.to_dict(), "orders": table.orders_record,
+                  "metadata": table.metadata},
+        "frames": rows, "temporal": temporal}, force=config.force))
+    seconds = time.perf_counter() - start
+    summary = f"{len(positions)} frames {camera.width}x{camera.height} ({config.method}) in {seconds:.1f} s"
+    if config.method == "compare":
+        worst = max(rows, key=lambda r: r["p95_rel"])
+        summary += (f"; worst frame {worst['frame']} (sun zenith {worst['sun_zenith_deg']:.1f} deg): "
+                    f"95th-percentile error {100 * worst['p95_rel']:.1f} %, mean Delta E {worst['mean_delta_e']:.2f}; "
+                    f"worst temporal jumps at frames {temporal['worst_frames'][:3]}")
+    summary += f" -> {config.output_path}"
+    return AnimationResult(rows, temporal, paths, seconds, summary)

@@ -1,0 +1,180 @@
+"""``clsky animate`` and ``clsky render``: the animation commands, added to clsky's command line.
+
+Thin by design: parse -> :class:`anim.animate.AnimationConfig` -> library call -> one summary line.
+The ``clsky`` console script runs :func:`main`, which is clsky's own command line extended with
+these two commands (clsky never imports anim).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import re
+import sys
+
+from clsky import cli as clsky_cli
+
+#: AnimationConfig field -> command-line option, for error messages that name what the user typed.
+FIELD_OPTIONS = {
+    "frames": "--frames", "size": "--size", "camera": "--camera", "fov_deg": "--fov", "heading_deg": "--heading",
+    "pitch_deg": "--pitch", "altitude": "--altitude", "method": "--method", "preset": "--preset", "mode": "--mode",
+    "table_size": "--table-size", "samples": "--samples", "start_elevation_deg": "--start-elevation",
+    "max_elevation_deg": "--max-elevation", "location": "--location", "start_hour": "--hours",
+    "end_hour": "--hours", "step_minutes": "--step-minutes", "fps": "--fps", "exposure": "--exposure",
+    "output": "--output",
+}
+
+
+def _date(text):
+    try:
+        return datetime.date.fromisoformat(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid date {text!r}: use YYYY-MM-DD") from None
+
+
+def _add_scene_arguments(parser, frames=True):
+    from .animate import METHODS
+
+    scene = parser.add_argument_group("scene")
+    scene.add_argument("--camera", default="fisheye", choices=["fisheye", "perspective", "equirectangular"])
+    scene.add_argument("--size", type=int, default=512, help="image height in pixels (default: 512)")
+    scene.add_argument("--fov", type=float, default=90.0, help="perspective: horizontal field of view [deg]")
+    scene.add_argument("--heading", type=float, default=180.0,
+                       help="perspective: azimuth of the view [deg from north]; fisheye: azimuth at the top")
+    scene.add_argument("--pitch", type=float, default=10.0, help="perspective: elevation of the view [deg]")
+    scene.add_argument("--altitude", type=float, default=0.0, help="observer altitude [m] (default: 0)")
+    scene.add_argument("--method", default="compare", choices=list(METHODS),
+                       help="table lookup, ray march, or both compared (default)")
+    sky = parser.add_argument_group("sky")
+    sky.add_argument("--preset", default="physical", help="atmosphere preset (default: physical)")
+    sky.add_argument("--mode", default="physical", choices=["atmosphere-plus", "physical"],
+                     help="scheme of the higher orders (default: physical)")
+    sky.add_argument("--table-size", nargs=3, type=int, metavar=("W", "H", "D"), default=[32, 256, 32])
+    sky.add_argument("--samples", type=int, default=64, help="ray-march samples per ray (default: 64)")
+    sky.add_argument("--exposure", type=float, default=1.0)
+    if frames:
+        sun = parser.add_argument_group("sun path")
+        sun.add_argument("--frames", type=int, default=120, help="frames of the sweep (default: 120)")
+        sun.add_argument("--start-elevation", type=float, default=-6.0,
+                         help="sun elevation before sunrise and after sunset [deg] (default: -6)")
+        sun.add_argument("--max-elevation", type=float, default=60.0, help="highest sun elevation [deg]")
+        sun.add_argument("--location", nargs=2, type=float, metavar=("LAT", "LON"),
+                         help="real sun positions (NREL SPA) at this latitude and longitude [deg]")
+        sun.add_argument("--date", type=_date, help="day of the real positions, YYYY-MM-DD (default: today)")
+        sun.add_argument("--hours", nargs=2, type=float, metavar=("START", "END"), default=[0.0, 24.0],
+                         help="time range of the real positions [h, UTC]")
+        sun.add_argument("--step-minutes", type=float, default=10.0)
+
+
+def register(commands):
+    """Adds ``animate`` and ``render`` to clsky's sub-command parsers; returns their handlers."""
+    animate = commands.add_parser("animate", help="render a sunrise-to-sunset animation (MP4 + PNG frames)")
+    _add_scene_arguments(animate)
+    output = animate.add_argument_group("output")
+    output.add_argument("-o", "--output", default="sky.mp4",
+                        help="MP4 file; frames go to <stem>_frames/, metrics to <stem>_metrics.csv/.json")
+    output.add_argument("--fps", type=float, default=30.0)
+    output.add_argument("--no-dither", action="store_true", help="do not dither the 8-bit frames")
+    output.add_argument("--hdr", action="store_true", help="also write float32 HDR frames (.npy)")
+    output.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    output.add_argument("--progress", default="leave", choices=["display", "leave", "none"])
+
+    render = commands.add_parser("render", help="render one frame (PNG)")
+    _add_scene_arguments(render, frames=False)
+    sun = render.add_argument_group("sun")
+    sun.add_argument("--sun-elevation", type=float, default=10.0, help="[deg] (default: 10)")
+    sun.add_argument("--sun-azimuth", type=float, default=180.0, help="[deg from north] (default: 180, south)")
+    out = render.add_argument_group("output")
+    out.add_argument("-o", "--output", default="sky.png", help="PNG file (default: sky.png)")
+    out.add_argument("--force", action="store_true", help="overwrite an existing file")
+    out.add_argument("--no-dither", action="store_true")
+    return {"animate": run_animate, "render": run_render}
+
+
+def _config(args, **extra):
+    from .animate import AnimationConfig
+
+    fields = dict(size=args.size, camera=args.camera, fov_deg=args.fov, heading_deg=args.heading,
+                  pitch_deg=args.pitch, altitude=args.altitude, method=args.method, preset=args.preset,
+                  mode=args.mode, table_size=tuple(args.table_size), samples=args.samples, exposure=args.exposure,
+                  dither=not args.no_dither, force=args.force, **extra)
+    try:
+        return AnimationConfig(**fields)
+    except ValueError as error:
+        message = str(error)
+        field = message.split(" ", 1)[0]
+        if field in FIELD_OPTIONS:
+            message = FIELD_OPTIONS[field] + message[len(field):]
+        elif field.startswith("size["):           # from the table grid's validation
+            message = re.sub(r"^size\[(\d)\]", lambda m: f"--table-size {'WHD'[int(m.group(1))]}", message)
+        raise clsky_cli.UsageError(message) from None
+
+
+def run_animate(args):
+    from .animate import render_animation
+
+    config = _config(args, frames=args.frames, start_elevation_deg=args.start_elevation,
+                     max_elevation_deg=args.max_elevation,
+                     location=None if args.location is None else tuple(args.location), date=args.date,
+                     start_hour=args.hours[0], end_hour=args.hours[1], step_minutes=args.step_minutes,
+                     fps=args.fps, output=args.output, hdr=args.hdr)
+    for target in (config.output_path, config.metrics_path(".csv"), config.metrics_path(".json")):
+        if target.exists() and not config.force:
+            raise clsky_cli.UsageError(f"{target} exists; use --force to overwrite it")
+    if not config.output_path.parent.is_dir():
+        raise clsky_cli.UsageError(f"output directory {config.output_path.parent} does not exist")
+    progress, close = clsky_cli.progress_bar(args.progress)
+    try:
+        result = render_animation(config, progress=progress)
+    finally:
+        close()
+    print(result.summary)
+    return 0
+
+
+def run_render(args):
+    import pathlib
+
+    from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
+
+    from . import metrics, tonemap, writers
+    from .animate import _camera, build_table, render_frame
+    from .cameras import sun_direction
+
+    if not -90.0 <= args.sun_elevation <= 90.0:
+        raise clsky_cli.UsageError(f"--sun-elevation must be in [-90, 90] degrees, got {args.sun_elevation}")
+    output = pathlib.Path(args.output)
+    if output.suffix != ".png":
+        raise clsky_cli.UsageError(f"--output must end in .png, got {args.output!r}")
+    if output.exists() and not args.force:
+        raise clsky_cli.UsageError(f"{output} exists; use --force to overwrite it")
+    config = _config(args)
+    table = build_table(config)
+    camera = _camera(config)
+    directions, valid = camera.directions()
+    renderer = SkyRenderer(table, RAYMARCH_DEFAULTS.replace(view_steps=config.samples))
+    sun = sun_direction(90.0 - args.sun_elevation, args.sun_azimuth)
+    hdr = render_frame(renderer, renderer.prepare(directions, valid), sun, config)
+    display = {name: tonemap.to_uint8(tonemap.tone_map(frame, config.exposure), dither=config.dither)
+               for name, frame in hdr.items()}
+    if config.method == "compare":
+        error = metrics.error_image(metrics.relative_error_map(hdr["raymarch"], hdr["lut"], valid), valid)
+        image = metrics.composite([display["lut"], display["raymarch"], error],
+                                  ["table lookup", "ray march", "relative error"])
+        numbers = metrics.compare_frames(hdr["raymarch"], hdr["lut"], valid, config.exposure)
+        detail = f"; table vs ray march: 95th-percentile error {100 * numbers['p95_rel']:.1f} %"
+    else:
+        image, detail = display[config.method], ""
+    writers.write_png(output, image, force=args.force)
+    print(f"frame {camera.width}x{camera.height} ({config.method}, sun elevation {args.sun_elevation:g} deg, "
+          f"azimuth {args.sun_azimuth:g} deg){detail} -> {output}")
+    return 0
+
+
+def main(argv=None):
+    """The ``clsky`` command: clsky's command line plus ``animate`` and ``render``."""
+    return clsky_cli.main(argv, extensions=(register,))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
