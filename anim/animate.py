@@ -49,7 +49,8 @@ class AnimationConfig:
     camera : {'fisheye', 'perspective', 'equirectangular'}
     fov_deg, heading_deg, pitch_deg : float
         Perspective camera: horizontal field of view, azimuth of the optical axis (clockwise from
-        north), elevation.
+        north; default 180, south), elevation. Fisheye: heading_deg is the azimuth at the top of the
+        image (default 0, north up, east on the left as in all-sky photographs).
     altitude : float
         Observer altitude [m], >= 0 (above 100 km: seen from space).
     method : {'compare', 'lut', 'raymarch'}
@@ -87,14 +88,14 @@ class AnimationConfig:
     size: int = 512
     camera: str = "fisheye"
     fov_deg: float = 90.0
-    heading_deg: float = 180.0
+    heading_deg: float | None = None
     pitch_deg: float = 10.0
     altitude: float = 0.0
     method: str = "compare"
     preset: str = "physical"
     mode: str = "physical"
     table_size: tuple = (32, 256, 32)
-    samples: int = 64
+    samples: int = 48
     start_elevation_deg: float = -6.0
     max_elevation_deg: float = 60.0
     location: tuple | None = None
@@ -131,7 +132,7 @@ class AnimationConfig:
         check("camera", lambda v: v in ("fisheye", "perspective", "equirectangular"),
               "one of 'fisheye', 'perspective', 'equirectangular'")
         check("fov_deg", real(0.0, 179.0, low_open=True), "in (0, 179] degrees")
-        check("heading_deg", real(-360.0, 720.0), "in [-360, 720] degrees")
+        check("heading_deg", lambda v: v is None or real(-360.0, 720.0)(v), "None or in [-360, 720] degrees")
         check("pitch_deg", real(-90.0, 90.0), "in [-90, 90] degrees")
         check("altitude", real(0.0, 1e8), "in [0, 1e8] m")
         check("method", lambda v: v in METHODS, f"one of {METHODS}")
@@ -205,9 +206,10 @@ def _camera(config):
     width, height = config.image_shape()
     options = {}
     if config.camera == "perspective":
-        options = dict(fov_deg=config.fov_deg, heading_deg=config.heading_deg, pitch_deg=config.pitch_deg)
+        heading = 180.0 if config.heading_deg is None else config.heading_deg
+        options = dict(fov_deg=config.fov_deg, heading_deg=heading, pitch_deg=config.pitch_deg)
     elif config.camera == "fisheye":
-        options = dict(heading_deg=config.heading_deg % 360.0)
+        options = dict(heading_deg=(config.heading_deg or 0.0) % 360.0)
     return camera_from_name(config.camera, width, height, **options)
 
 

@@ -39,8 +39,9 @@ def _add_scene_arguments(parser, frames=True):
     scene.add_argument("--camera", default="fisheye", choices=["fisheye", "perspective", "equirectangular"])
     scene.add_argument("--size", type=int, default=512, help="image height in pixels (default: 512)")
     scene.add_argument("--fov", type=float, default=90.0, help="perspective: horizontal field of view [deg]")
-    scene.add_argument("--heading", type=float, default=180.0,
-                       help="perspective: azimuth of the view [deg from north]; fisheye: azimuth at the top")
+    scene.add_argument("--heading", type=float, default=None,
+                       help="perspective: azimuth of the view [deg from north] (default: 180, south); "
+                            "fisheye: azimuth at the top (default: 0, north)")
     scene.add_argument("--pitch", type=float, default=10.0, help="perspective: elevation of the view [deg]")
     scene.add_argument("--altitude", type=float, default=0.0, help="observer altitude [m] (default: 0)")
     scene.add_argument("--method", default="compare", choices=list(METHODS),
@@ -50,7 +51,7 @@ def _add_scene_arguments(parser, frames=True):
     sky.add_argument("--mode", default="physical", choices=["atmosphere-plus", "physical"],
                      help="scheme of the higher orders (default: physical)")
     sky.add_argument("--table-size", nargs=3, type=int, metavar=("W", "H", "D"), default=[32, 256, 32])
-    sky.add_argument("--samples", type=int, default=64, help="ray-march samples per ray (default: 64)")
+    sky.add_argument("--samples", type=int, default=48, help="ray-march samples per ray (default: 48)")
     sky.add_argument("--exposure", type=float, default=1.0)
     if frames:
         sun = parser.add_argument_group("sun path")

@@ -61,6 +61,10 @@ def _exists_error(path):
     return FileExistsError(f"{path} exists (use force=True, or --force on the command line)")
 
 
+#: zlib level of the PNG frames (see write_png).
+PNG_COMPRESS_LEVEL = 1
+
+
 def write_png(path, image_u8, force=False):
     """Write a uint8 image to a PNG file atomically.
 
@@ -92,7 +96,8 @@ def write_png(path, image_u8, force=False):
         raise ValueError(f"image_u8 must have shape (H, W), (H, W, 3) or (H, W, 4), got {image.shape}")
     path = pathlib.Path(path)
     with atomic_write(path, overwrite=force, suffix=".png") as temporary:
-        Image.fromarray(np.ascontiguousarray(image)).save(temporary, format="PNG")
+        # zlib level 1: 4.6x faster than PIL's default 6 on a 1614 x 512 composite frame, 27 % larger
+        Image.fromarray(np.ascontiguousarray(image)).save(temporary, format="PNG", compress_level=PNG_COMPRESS_LEVEL)
     return path
 
 

@@ -27,7 +27,9 @@ SUN_ANGULAR_RADIUS_DEG = 0.2665
 #: Quadrature of the per-pixel ray march (its "samples per ray"): Keller & Bohn nodes, which the
 #: Monte Carlo comparison showed to converge fastest for observers near the ground, and the sun's
 #: transmittance from a 2D table built with many steps (cheap: it is built once per renderer).
-RAYMARCH_DEFAULTS = TableSettings(view_steps=64, sun_steps=256, sampling="keller_bohn", sun_transmittance="table",
+#: 48 samples: fisheye frames from the ground within 0.25 % (95th percentile of the relative luminance
+#: error) of a 256-sample march by day, 2.3 % at most at sun elevation -2 deg (measured).
+RAYMARCH_DEFAULTS = TableSettings(view_steps=48, sun_steps=256, sampling="keller_bohn", sun_transmittance="table",
                                   transmittance_size=(128, 512), orders=1)
 VECTOR_WIDTH = 8
 
@@ -178,9 +180,29 @@ class SkyRenderer:
         :meth:`prepare`'s result), ``valid`` an optional mask (invalid pixels are 0)."""
         t = self.table
         width, height, depth = t.settings.size
+        inside = 0.0 <= altitude <= t.atmosphere.atmosphere_height
+        view_slice = self._view_slice(altitude, float(sun_direction[2])) if inside else np.zeros((2, 1))
+        slice_d = cla.to_device(self.queue, np.ascontiguousarray(view_slice, dtype=self.engine.dtype))
         args = (self._table_d.data, np.int32(width), np.int32(height), np.int32(depth), np.int32(t.data.shape[-1]),
-                np.int32(MAPPINGS[t.settings.mapping]))
+                np.int32(MAPPINGS[t.settings.mapping]), slice_d.data, np.int32(inside))
         return self._launch("render_table", directions, sun_direction, altitude, valid, args)
+
+    def _view_slice(self, altitude, cos_sun):
+        """The table interpolated (bilinearly, in texture space) at one altitude and sun cosine: (H, C)."""
+        from .mapping import altitude_to_u, cos_to_v
+
+        t = self.table
+        width, height, depth = t.settings.size
+        position = []
+        for coordinate, n in ((altitude_to_u(altitude, t.atmosphere.atmosphere_height, t.settings.mapping), width),
+                              (cos_to_v(cos_sun, t.settings.mapping), depth)):
+            f = float(coordinate) * (n - 1)
+            lower = min(max(int(f), 0), n - 2)
+            position.append((lower, f - lower))
+        (x0, ax), (z0, az) = position
+        data = t.data
+        return ((1 - az) * ((1 - ax) * data[z0, :, x0] + ax * data[z0, :, x0 + 1])
+                + az * ((1 - ax) * data[z0 + 1, :, x0] + ax * data[z0 + 1, :, x0 + 1]))
 
     def render_raymarch(self, directions, sun_direction, altitude=0.0, valid=None):
         """HDR radiance (..., 3) by per-pixel ray marching (single scattering along the true ray, higher
