@@ -83,7 +83,7 @@ class PreparedDirections:
 
     array: cla.Array
     shape: tuple
-    valid: np.ndarray | None = None
+    valid: cla.Array        # uint8 per pixel: 0 renders black
 
 
 class RenderEngine(_cl.Engine):
@@ -151,15 +151,20 @@ class SkyRenderer:
     def prepare(self, directions, valid=None):
         """Upload a camera's directions (..., 3) once, for many frames: pass the result as ``directions``."""
         directions, _, _ = check_directions(directions, (0.0, 0.0, 1.0), 0.0)
+        shape = directions.shape[:-1]
         flat = np.ascontiguousarray(directions.reshape(-1, 3), dtype=self.engine.dtype)
-        return PreparedDirections(cla.to_device(self.queue, flat), directions.shape[:-1],
-                                  None if valid is None else np.asarray(valid, dtype=bool))
+        mask = np.ones(shape, dtype=bool) if valid is None else np.asarray(valid, dtype=bool)
+        if mask.shape != shape:
+            raise ValueError(f"valid must have the directions' shape {shape}, got {mask.shape}")
+        return PreparedDirections(cla.to_device(self.queue, flat), shape,
+                                  cla.to_device(self.queue, np.ascontiguousarray(mask.ravel(), dtype=np.uint8)))
 
     def _launch(self, name, directions, sun_direction, altitude, valid, extra_args):
         if not isinstance(directions, PreparedDirections):
             directions = self.prepare(directions, valid)
+        elif valid is not None:
+            raise ValueError("valid must be given to prepare(), not with prepared directions")
         _, sun, altitude = check_directions(np.zeros((0, 3)), sun_direction, altitude)
-        valid = directions.valid if valid is None else valid
         shape, directions_d = directions.shape, directions.array
         n = directions_d.shape[0]
         real4 = _cl.real_vector_dtype(self.engine.dtype, 4)
@@ -168,12 +173,9 @@ class SkyRenderer:
         out_d = cla.empty(self.queue, (max(n, 1), 3), self.engine.dtype)
         kernel = self.engine.kernels[name]
         kernel(self.queue, (-(-n // VECTOR_WIDTH),), None, self._atmosphere_d, *extra_args, np.int32(n),
-               directions_d.data, sun4, self.engine.real(altitude), disc, self.engine.real(self._cos_sun_radius),
-               out_d.data)
-        radiance = out_d.get()[:n].reshape(shape + (3,)).astype(np.float64)
-        if valid is not None:
-            radiance *= np.asarray(valid, dtype=bool)[..., None]
-        return radiance
+               directions_d.data, directions.valid.data, sun4, self.engine.real(altitude), disc,
+               self.engine.real(self._cos_sun_radius), out_d.data)
+        return out_d.get()[:n].reshape(shape + (3,)).astype(np.float64, copy=False)
 
     def render_table(self, directions, sun_direction, altitude=0.0, valid=None):
         """HDR radiance (..., 3) by table lookup; ``directions`` (..., 3) unit vectors (or

@@ -12,7 +12,8 @@
  *                  atmosphere-plus mode the same with F_s(nu) on each species (the notes' scheme).
  * Both add the sun disc: sun_radiance (I_I T_sun / Omega_sun, from the host) where nu >= cos of the
  * sun's angular radius and the ray does not hit the planet. The ground is black.
- * Each work-item renders VECTOR_WIDTH pixels; global size ceil(n / VECTOR_WIDTH).
+ * Each work-item renders VECTOR_WIDTH pixels; global size ceil(n / VECTOR_WIDTH). Pixels whose
+ * valid[i] is 0 (outside a fisheye's circle) are written as 0.
  * Requires real.cl, atmosphere_t, geometry.cl, column.cl, transmittance_table.cl, mapping.cl,
  * phase.cl, view_ray.cl, lookup.cl.
  */
@@ -36,6 +37,18 @@ inline real3 sun_disc(const real nu, const real mu_v, const real horizon, const 
     return (nu >= cos_sun_radius && mu_v >= horizon) ? sun_radiance.xyz : (real3)(R(0.0));
 }
 
+/* 1 when none of pixels first .. first + VECTOR_WIDTH - 1 is valid: the work-item writes zeros and stops. */
+inline int all_invalid(__global const uchar *valid, const int first, const int n, __global real *out)
+{
+    for (int k = 0; k < VECTOR_WIDTH && first + k < n; ++k)
+        if (valid[first + k])
+            return 0;
+    for (int k = 0; k < VECTOR_WIDTH && first + k < n; ++k)
+        for (int c = 0; c < 3; ++c)
+            out[3 * (first + k) + c] = R(0.0);
+    return 1;
+}
+
 inline void store_radiance(__global real *out, const int i, const real3 value)
 {
     out[3 * i] = value.x;
@@ -43,13 +56,20 @@ inline void store_radiance(__global real *out, const int i, const real3 value)
     out[3 * i + 2] = value.z;
 }
 
+/* For an observer inside the atmosphere, altitude and sun cosine are the same for every pixel of a
+ * frame, so the host interpolates the table once at (h, mu_s) into a slice (H x channels) and each
+ * pixel only interpolates linearly along the view axis (same result as the trilinear lookup, which
+ * is linear in v). use_slice = 0 (observer above the atmosphere: h and mu_s change at each ray's entry
+ * point) looks up the full table. */
 __kernel void render_table(__constant const atmosphere_t *atm, __global const real *table, const int width,
                            const int height, const int depth, const int channels, const int mapping,
-                           const int n, __global const real *directions, const real4 sun, const real altitude,
+                           __global const real *slice, const int use_slice,
+                           const int n, __global const real *directions, __global const uchar *valid,
+                           const real4 sun, const real altitude,
                            const real4 sun_radiance, const real cos_sun_radius, __global real *out)
 {
     const int first = get_global_id(0) * VECTOR_WIDTH;
-    if (first >= n)
+    if (first >= n || all_invalid(valid, first, n, out))
         return;
     realv mu_v, nu;
     load_directions(directions, first, n, sun, &mu_v, &nu);
@@ -59,10 +79,20 @@ __kernel void render_table(__constant const atmosphere_t *atm, __global const re
     const maskv inside = enter_atmosphere(atm->planet_radius, atm->top_radius, &h, &mu_v, &mu_s, nu);
     for (int k = 0; k < VECTOR_WIDTH && first + k < n; ++k) {
         real3 value = sun_disc(LANE(nu, k), LANE(mu_v_observer, k), LANE(horizon, 0), sun_radiance, cos_sun_radius);
-        if (MASK_LANE(inside, k))
+        if (!valid[first + k]) {
+        } else if (use_slice) {
+            const real fy = MAPPING_V(LANE(mu_v, k), mapping) * (real)(height - 1);
+            const int y0 = lower_node(fy, height);
+            const real ay = fy - (real)y0;
+            real ibar[9];
+            for (int c = 0; c < channels; ++c)
+                ibar[c] = (R(1.0) - ay) * slice[y0 * channels + c] + ay * slice[(y0 + 1) * channels + c];
+            value += radiance_of_channels(atm, ibar, channels, LANE(nu, k));
+        } else if (MASK_LANE(inside, k)) {
             value += table_radiance(atm, table, width, height, depth, channels, mapping, LANE(h, k), LANE(mu_v, k),
                                     LANE(mu_s, k), LANE(nu, k));
-        store_radiance(out, first + k, value);
+        }
+        store_radiance(out, first + k, valid[first + k] ? value : (real3)(R(0.0)));
     }
 }
 
@@ -71,11 +101,12 @@ __kernel void render_table(__constant const atmosphere_t *atm, __global const re
 __kernel void render_raymarch(__constant const atmosphere_t *atm, __global const real *gathered, const int width,
                               const int height, const int depth, const int mapping, const int has_multiple,
                               const int physical, __global const real *sun_table, const int tw, const int th,
-                              const int n, __global const real *directions, const real4 sun, const real altitude,
+                              const int n, __global const real *directions, __global const uchar *valid,
+                           const real4 sun, const real altitude,
                               const real4 sun_radiance, const real cos_sun_radius, __global real *out)
 {
     const int first = get_global_id(0) * VECTOR_WIDTH;
-    if (first >= n)
+    if (first >= n || all_invalid(valid, first, n, out))
         return;
     realv mu_v, nu;
     load_directions(directions, first, n, sun, &mu_v, &nu);
@@ -109,6 +140,6 @@ __kernel void render_raymarch(__constant const atmosphere_t *atm, __global const
             }
             value += light * sky;
         }
-        store_radiance(out, first + k, value);
+        store_radiance(out, first + k, valid[first + k] ? value : (real3)(R(0.0)));
     }
 }

@@ -29,3 +29,4 @@ if ! .venv/bin/python -c "import pyopencl as cl, sys; sys.exit(0 if any(p.get_de
 fi
 log "OpenCL devices (* = the one clsky uses):"
 .venv/bin/clsky devices >&2
+log "clsky will use: $(.venv/bin/python -c 'import clsky._cl as c; print(c.describe_device(c.default_device()))')"
