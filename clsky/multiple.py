@@ -33,7 +33,7 @@ from .atmosphere import AtmosphereParameters
 from .mapping import cos_to_v, grid_coordinates
 from .phase import MIE_PHASES, RAYLEIGH_PHASES
 from .settings import MAPPINGS, TableSettings
-from .transmittance import COMMON_SOURCES
+from .transmittance import COMMON_SOURCES, quadrature_defines
 
 __all__ = ["gather_quadrature", "phase_azimuth_integrals", "gather_matrix", "gather_matrices",
            "first_gather_matrices", "MultipleScatteringEngine", "SPECIES"]
@@ -139,12 +139,7 @@ class MultipleScatteringEngine(_cl.Engine):
         return ("real.cl", declaration) + COMMON_SOURCES[1:] + ("mapping.cl", "view_ray.cl", "multiple.cl")
 
     def build_options(self):
-        s = self.settings
-        options = super().build_options() + [f"-DN_VIEW={s.view_steps}", f"-DN_SUN={s.sun_steps}",
-                                             f"-DVECTOR_WIDTH={VECTOR_WIDTH}"]
-        if s.sampling == "keller_bohn":
-            options.append("-DKELLER_BOHN_SAMPLING=1")
-        return options
+        return super().build_options() + quadrature_defines(self.settings, VECTOR_WIDTH)
 
     def to_device(self, table):
         """A host table (D, H, W, 6) as a padded device table (D, H, W, 8) (channels 6, 7 zero)."""

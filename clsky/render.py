@@ -17,7 +17,7 @@ import pyopencl.array as cla
 from . import _atmosphere_cl, _cl, reference
 from .settings import MAPPINGS, TableSettings
 from .table import ScatteringTable
-from .transmittance import COMMON_SOURCES, TransmittanceEngine
+from .transmittance import COMMON_SOURCES, quadrature_defines, TransmittanceEngine
 
 __all__ = ["SkyRenderer", "RenderEngine", "SUN_ANGULAR_RADIUS_DEG", "RAYMARCH_DEFAULTS", "sun_disc_radiance",
            "check_directions"]
@@ -99,14 +99,7 @@ class RenderEngine(_cl.Engine):
                 + ("mapping.cl", "phase.cl", "view_ray.cl", "lookup.cl", "render.cl"))
 
     def build_options(self):
-        s = self.ray_settings
-        options = super().build_options() + [f"-DN_VIEW={s.view_steps}", f"-DN_SUN={s.sun_steps}",
-                                             f"-DVECTOR_WIDTH={VECTOR_WIDTH}"]
-        if s.sampling == "keller_bohn":
-            options.append("-DKELLER_BOHN_SAMPLING=1")
-        if s.sun_transmittance == "table":
-            options.append("-DSUN_TRANSMITTANCE_TABLE=1")
-        return options
+        return super().build_options() + quadrature_defines(self.ray_settings, VECTOR_WIDTH)
 
 
 class SkyRenderer:

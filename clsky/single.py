@@ -11,7 +11,7 @@ import pyopencl.array as cla
 from . import _atmosphere_cl, _cl
 from .atmosphere import AtmosphereParameters
 from .settings import MAPPINGS, TableSettings
-from .transmittance import COMMON_SOURCES, TransmittanceEngine
+from .transmittance import COMMON_SOURCES, quadrature_defines, TransmittanceEngine
 
 __all__ = ["SingleScatteringEngine"]
 
@@ -47,14 +47,7 @@ class SingleScatteringEngine(_cl.Engine):
         return ("real.cl", declaration) + COMMON_SOURCES[1:] + ("mapping.cl", "view_ray.cl", "single.cl")
 
     def build_options(self):
-        s = self.settings
-        options = super().build_options() + [f"-DN_VIEW={s.view_steps}", f"-DN_SUN={s.sun_steps}",
-                                             f"-DVECTOR_WIDTH={VECTOR_WIDTH}"]
-        if s.sampling == "keller_bohn":
-            options.append("-DKELLER_BOHN_SAMPLING=1")
-        if s.sun_transmittance == "table":
-            options.append("-DSUN_TRANSMITTANCE_TABLE=1")
-        return options
+        return super().build_options() + quadrature_defines(self.settings, VECTOR_WIDTH)
 
     def compute(self, atmosphere: AtmosphereParameters, size=None, mapping=None, progress=None):
         """The single-scattering table.

@@ -19,6 +19,17 @@ __all__ = ["TransmittanceEngine", "check_segments"]
 COMMON_SOURCES = ("real.cl", "geometry.cl", "column.cl", "transmittance_table.cl")
 
 
+def quadrature_defines(settings, vector_width):
+    """The -D options of a program integrating along rays with ``settings``' quadrature (view and sun
+    steps, node placement, sun transmittance method) in ``vector_width`` lanes."""
+    options = [f"-DN_VIEW={settings.view_steps}", f"-DN_SUN={settings.sun_steps}", f"-DVECTOR_WIDTH={vector_width}"]
+    if settings.sampling == "keller_bohn":
+        options.append("-DKELLER_BOHN_SAMPLING=1")
+    if settings.sun_transmittance == "table":
+        options.append("-DSUN_TRANSMITTANCE_TABLE=1")
+    return options
+
+
 def check_segments(atmosphere, altitude, cos_zenith, length):
     """Broadcast and check segment arrays; ValueError names the bad parameter and its range."""
     altitude, cos_zenith, length = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64)

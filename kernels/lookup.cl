@@ -19,6 +19,22 @@ inline int lower_node(const real f, const int n)
     return clamp((int)f, 0, n - 2);
 }
 
+/* I = I_I (F_R(nu) Ibar_R + F_M(nu) Ibar_M [+ Lbar]) from interpolated channels ibar (see the header). */
+inline real3 radiance_of_channels(__constant const atmosphere_t *atm, const real *ibar, const int channels,
+                                  const real nu)
+{
+    const real f_r = phase_rayleigh(atm, nu);
+    const real f_m = phase_mie(atm, nu);
+    const int factored = (channels == 7 || channels == 9) ? channels - 3 : channels;
+    const int mie = 3;                          /* first Mie channel */
+    const int mie_stride = factored == 6;       /* Mie per wavelength, or the notes' one Mie channel */
+    const int multiple = factored < channels;   /* the physical mode's phased higher orders follow */
+    return atm->incident_light.xyz * (real3)(
+        f_r * ibar[0] + f_m * ibar[mie] + (multiple ? ibar[factored] : R(0.0)),
+        f_r * ibar[1] + f_m * ibar[mie + mie_stride] + (multiple ? ibar[factored + 1] : R(0.0)),
+        f_r * ibar[2] + f_m * ibar[mie + 2 * mie_stride] + (multiple ? ibar[factored + 2] : R(0.0)));
+}
+
 /* Radiance r, g, b at (h, mu_v, mu_s, nu) for an observer inside the atmosphere (see the header). */
 inline real3 table_radiance(__constant const atmosphere_t *atm, __global const real *table, const int width,
                             const int height, const int depth, const int channels, const int mapping,
@@ -38,16 +54,7 @@ inline real3 table_radiance(__constant const atmosphere_t *atm, __global const r
         for (int c = 0; c < channels; ++c)
             ibar[c] += weight * table[cell * channels + c];
     }
-    const real f_r = phase_rayleigh(atm, nu);
-    const real f_m = phase_mie(atm, nu);
-    const int factored = (channels == 7 || channels == 9) ? channels - 3 : channels;
-    const int mie = 3;                          /* first Mie channel */
-    const int mie_stride = factored == 6;       /* Mie per wavelength, or the notes' one Mie channel */
-    const int multiple = factored < channels;   /* the physical mode's phased higher orders follow */
-    return atm->incident_light.xyz * (real3)(
-        f_r * ibar[0] + f_m * ibar[mie] + (multiple ? ibar[factored] : R(0.0)),
-        f_r * ibar[1] + f_m * ibar[mie + mie_stride] + (multiple ? ibar[factored + 1] : R(0.0)),
-        f_r * ibar[2] + f_m * ibar[mie + 2 * mie_stride] + (multiple ? ibar[factored + 2] : R(0.0)));
+    return radiance_of_channels(atm, ibar, channels, nu);
 }
 
 #if VECTOR_WIDTH == 1   /* render.cl includes this file for table_radiance, with VECTOR_WIDTH 8 */

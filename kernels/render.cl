@@ -18,6 +18,13 @@
  * phase.cl, view_ray.cl, lookup.cl.
  */
 
+/* The pixels first .. first + VECTOR_WIDTH - 1: their view cosine at the observer (*mu_v_observer),
+ * the observer's horizon cosine, and (h, mu_v, mu_s) moved to where each ray enters the atmosphere
+ * (for observers above it); returns the mask of rays that see the atmosphere. */
+inline maskv pixel_rays(__constant const atmosphere_t *atm, __global const real *directions, const int first,
+                        const int n, const real4 sun, const real altitude, realv *mu_v_observer, realv *horizon,
+                        realv *h, realv *mu_v, realv *mu_s, realv *nu);
+
 /* Loads the directions of pixels first .. first + VECTOR_WIDTH - 1 (clamped to n - 1). */
 inline void load_directions(__global const real *directions, const int first, const int n, const real4 sun,
                             realv *mu_v, realv *nu)
@@ -35,6 +42,18 @@ inline real3 sun_disc(const real nu, const real mu_v, const real horizon, const 
                       const real cos_sun_radius)
 {
     return (nu >= cos_sun_radius && mu_v >= horizon) ? sun_radiance.xyz : (real3)(R(0.0));
+}
+
+inline maskv pixel_rays(__constant const atmosphere_t *atm, __global const real *directions, const int first,
+                        const int n, const real4 sun, const real altitude, realv *mu_v_observer, realv *horizon,
+                        realv *h, realv *mu_v, realv *mu_s, realv *nu)
+{
+    load_directions(directions, first, n, sun, mu_v, nu);
+    *mu_v_observer = *mu_v;
+    *h = (realv)(altitude);
+    *mu_s = (realv)(sun.z);
+    *horizon = horizon_cos(*h, atm->planet_radius);
+    return enter_atmosphere(atm->planet_radius, atm->top_radius, h, mu_v, mu_s, *nu);
 }
 
 /* 1 when none of pixels first .. first + VECTOR_WIDTH - 1 is valid: the work-item writes zeros and stops. */
@@ -71,12 +90,9 @@ __kernel void render_table(__constant const atmosphere_t *atm, __global const re
     const int first = get_global_id(0) * VECTOR_WIDTH;
     if (first >= n || all_invalid(valid, first, n, out))
         return;
-    realv mu_v, nu;
-    load_directions(directions, first, n, sun, &mu_v, &nu);
-    const realv mu_v_observer = mu_v;
-    realv h = (realv)(altitude), mu_s = (realv)(sun.z);
-    const realv horizon = horizon_cos(h, atm->planet_radius);
-    const maskv inside = enter_atmosphere(atm->planet_radius, atm->top_radius, &h, &mu_v, &mu_s, nu);
+    realv mu_v_observer, horizon, h, mu_v, mu_s, nu;
+    const maskv inside = pixel_rays(atm, directions, first, n, sun, altitude, &mu_v_observer, &horizon, &h, &mu_v,
+                                    &mu_s, &nu);
     for (int k = 0; k < VECTOR_WIDTH && first + k < n; ++k) {
         real3 value = sun_disc(LANE(nu, k), LANE(mu_v_observer, k), LANE(horizon, 0), sun_radiance, cos_sun_radius);
         if (!valid[first + k]) {
@@ -102,18 +118,15 @@ __kernel void render_raymarch(__constant const atmosphere_t *atm, __global const
                               const int height, const int depth, const int mapping, const int has_multiple,
                               const int physical, __global const real *sun_table, const int tw, const int th,
                               const int n, __global const real *directions, __global const uchar *valid,
-                           const real4 sun, const real altitude,
+                              const real4 sun, const real altitude,
                               const real4 sun_radiance, const real cos_sun_radius, __global real *out)
 {
     const int first = get_global_id(0) * VECTOR_WIDTH;
     if (first >= n || all_invalid(valid, first, n, out))
         return;
-    realv mu_v, nu;
-    load_directions(directions, first, n, sun, &mu_v, &nu);
-    const realv mu_v_observer = mu_v;
-    realv h = (realv)(altitude), mu_s = (realv)(sun.z);
-    const realv horizon = horizon_cos(h, atm->planet_radius);
-    const maskv inside = enter_atmosphere(atm->planet_radius, atm->top_radius, &h, &mu_v, &mu_s, nu);
+    realv mu_v_observer, horizon, h, mu_v, mu_s, nu;
+    const maskv inside = pixel_rays(atm, directions, first, n, sun, altitude, &mu_v_observer, &horizon, &h, &mu_v,
+                                    &mu_s, &nu);
 
     realv single[6];
     real8 multiple[VECTOR_WIDTH];

@@ -33,16 +33,9 @@ __kernel void single_scattering(__constant const atmosphere_t *atm, const int wi
     if (gx * VECTOR_WIDTH >= width || y >= height || z >= depth)
         return;
 
-    const real rp = atm->planet_radius;
-    const real ha = atm->top_radius - rp;
-    const realv u = fmin((real)(gx * VECTOR_WIDTH) + LANE_INDEX, (real)(width - 1)) / (real)(width - 1);
-    const real v = (real)y / (real)(height - 1);
-    const real w = (real)z / (real)(depth - 1);
-    const realv h0 = MAPPING_ALTITUDE(u, mapping, ha);
-    const real mu_v = MAPPING_COS(v, mapping);
-    const real mu_s = MAPPING_COS(w, mapping);
-    /* cos(phi - delta), the scattering-angle cosine of the canonical frame */
-    const real nu = mu_v * mu_s + sqrt(fmax(R(1.0) - mu_v * mu_v, R(0.0)) * fmax(R(1.0) - mu_s * mu_s, R(0.0)));
+    realv h0;
+    real mu_v, mu_s, nu;
+    table_cell(atm, gx, y, z, width, height, depth, mapping, &h0, &mu_v, &mu_s, &nu);
     realv sum[6];
     integrate_single(atm, h0, (realv)(mu_v), (realv)(mu_s), (realv)(nu), sun_table, tw, th, sum);
 

@@ -27,6 +27,22 @@ inline real view_node(const int i)
 #endif
 }
 
+/* The cells x = VECTOR_WIDTH gx + lane of row (y, z) of a table (W, H, D, mapping): altitudes h0,
+ * view and sun cosines, and the canonical frame's scattering cosine nu = cos(phi - delta). */
+inline void table_cell(__constant const atmosphere_t *atm, const int gx, const int y, const int z, const int width,
+                       const int height, const int depth, const int mapping, realv *h0, real *mu_v, real *mu_s,
+                       real *nu)
+{
+    const real ha = atm->top_radius - atm->planet_radius;
+    const realv u = fmin((real)(gx * VECTOR_WIDTH) + LANE_INDEX, (real)(width - 1)) / (real)(width - 1);
+    const real v = (real)y / (real)(height - 1);
+    const real w = (real)z / (real)(depth - 1);
+    *h0 = MAPPING_ALTITUDE(u, mapping, ha);
+    *mu_v = MAPPING_COS(v, mapping);
+    *mu_s = MAPPING_COS(w, mapping);
+    *nu = *mu_v * *mu_s + sqrt(fmax(R(1.0) - *mu_v * *mu_v, R(0.0)) * fmax(R(1.0) - *mu_s * *mu_s, R(0.0)));
+}
+
 /* Length [m] of the view ray to the top of the atmosphere or to the ground (*hits_ground). */
 inline realv view_ray_length(__constant const atmosphere_t *atm, const realv h0, const realv mu_v, maskv *hits_ground)
 {
