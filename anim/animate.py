@@ -269,7 +269,7 @@ def render_animation(config: AnimationConfig, ctx=None,
             rows.append(row)
             if progress is not None:
                 progress("frames", index + 1, len(positions))
-        paths = list(writer.paths)
+    paths = list(writer.paths)          # after the block: the MP4 is renamed into place on exit
     temporal = {}
     if config.method == "compare":
         jumps = metrics.temporal_jumps(np.array(means["lut"]), np.array(means["raymarch"]), exposure=config.exposure)

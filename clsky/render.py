@@ -175,6 +175,7 @@ class SkyRenderer:
         :meth:`prepare`'s result), ``valid`` an optional mask (invalid pixels are 0)."""
         t = self.table
         width, height, depth = t.settings.size
+        _, sun_direction, altitude = check_directions(np.zeros((0, 3)), sun_direction, altitude)
         inside = 0.0 <= altitude <= t.atmosphere.atmosphere_height
         view_slice = self._view_slice(altitude, float(sun_direction[2])) if inside else np.zeros((2, 1))
         slice_d = cla.to_device(self.queue, np.ascontiguousarray(view_slice, dtype=self.engine.dtype))

@@ -1,0 +1,207 @@
+"""Animations (anim/animate.py) and the ``clsky animate`` / ``clsky render`` commands.
+
+1. render_animation with tiny configurations: the MP4 (decoded with imageio), the PNG frames, the
+   metrics CSV and JSON; single-panel methods; refusing to overwrite without force, overwriting with it.
+2. The command line run as a user would (a subprocess): a small animation, one frame, bad values.
+3. Real sun positions (pvlib), and the default configuration's sizes.
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from anim import metrics
+from anim.animate import AnimationConfig, render_animation
+
+imageio_v3 = pytest.importorskip("imageio.v3")
+
+TINY = dict(size=32, table_size=(9, 33, 7))
+#: metric columns of a 'compare' run (anim.metrics.compare_frames plus the temporal excess)
+METRIC_COLUMNS = ("rmse", "median_rel", "p95_rel", "max_rel", "mean_delta_e", "temporal_excess_jump")
+
+
+def composite_shape(size):
+    """(H, W) of a 'compare' frame of a size x size camera: table | ray march | error image with its
+    legend, 4-pixel gutters, cropped to even sizes for H.264 (yuv420p)."""
+    panel = np.zeros((size, size, 3), np.uint8)
+    error = metrics.error_image(np.zeros((size, size)))
+    height, width = metrics.composite([panel, panel, error]).shape[:2]
+    return height - height % 2, width - width % 2
+
+
+def read_csv(path):
+    with open(path, newline="", encoding="utf-8") as handle:
+        return list(csv.DictReader(handle))
+
+
+def snapshot(directory):
+    """{relative path: (bytes, inode, mtime_ns)} of every file under ``directory``."""
+    return {str(path.relative_to(directory)): (path.read_bytes(), path.stat().st_ino, path.stat().st_mtime_ns)
+            for path in sorted(directory.rglob("*")) if path.is_file()}
+
+
+# 1. render_animation ------------------------------------------------------------------------------
+
+def test_compare_animation_writes_video_frames_and_metrics(tmp_path, cl_context):
+    config = AnimationConfig(frames=5, output=str(tmp_path / "sky.mp4"), **TINY)
+    result = render_animation(config, ctx=cl_context)
+
+    height, width = composite_shape(32)
+    video = imageio_v3.imread(tmp_path / "sky.mp4")
+    assert video.shape == (5, height, width, 3)
+
+    names = sorted(path.name for path in (tmp_path / "sky_frames").iterdir())
+    assert names == [f"frame_{index:05d}.png" for index in range(5)]
+    for name in names:
+        assert imageio_v3.imread(tmp_path / "sky_frames" / name).shape == (height, width, 3)
+
+    rows = read_csv(tmp_path / "sky_metrics.csv")
+    assert [int(row["frame"]) for row in rows] == list(range(5))
+    for column in METRIC_COLUMNS:
+        assert column in rows[0], f"column {column} missing from {list(rows[0])}"
+        assert all(np.isfinite(float(row[column])) for row in rows)
+    assert all(row["time"] == "" for row in rows)              # a sweep has no clock times
+
+    record = json.loads((tmp_path / "sky_metrics.json").read_text(encoding="utf-8"))
+    assert record["config"]["frames"] == 5 and record["config"]["size"] == 32
+    assert record["config"]["table_size"] == [9, 33, 7]
+    assert record["table"]["orders"]["converged"] is True
+    assert record["table"]["orders"]["orders"] >= 2
+    temporal = record["temporal"]
+    for key in ("table_jumps", "raymarch_jumps", "excess"):
+        assert len(temporal[key]) == 5
+    assert temporal["worst_frames"] and all(0 <= index < 5 for index in temporal["worst_frames"])
+
+    assert len(result.rows) == 5
+    assert {path.name for path in result.paths} >= {"sky_metrics.csv", "sky_metrics.json", *names}
+    assert "5 frames" in result.summary and "worst frame" in result.summary
+
+
+def test_result_paths_include_the_mp4(tmp_path, cl_context):
+    config = AnimationConfig(frames=2, method="lut", output=str(tmp_path / "sky.mp4"), **TINY)
+    result = render_animation(config, ctx=cl_context)
+    assert (tmp_path / "sky.mp4").is_file()
+    assert tmp_path / "sky.mp4" in result.paths
+
+
+@pytest.mark.parametrize("method", ["lut", "raymarch"])
+def test_single_method_writes_single_panel_frames(tmp_path, cl_context, method):
+    config = AnimationConfig(frames=5, method=method, output=str(tmp_path / "sky.mp4"), **TINY)
+    render_animation(config, ctx=cl_context)
+    assert imageio_v3.imread(tmp_path / "sky.mp4").shape == (5, 32, 32, 3)
+    frames = sorted((tmp_path / "sky_frames").iterdir())
+    assert len(frames) == 5
+    assert all(imageio_v3.imread(frame).shape == (32, 32, 3) for frame in frames)
+    assert len(read_csv(tmp_path / "sky_metrics.csv")) == 5
+
+
+def test_rerun_without_force_refuses_and_touches_nothing(tmp_path, cl_context):
+    config = AnimationConfig(frames=5, method="lut", output=str(tmp_path / "sky.mp4"), **TINY)
+    render_animation(config, ctx=cl_context)
+    before = snapshot(tmp_path)
+    assert len(before) == 5 + 3                                # frames, MP4, CSV, JSON
+
+    with pytest.raises(FileExistsError):
+        render_animation(config, ctx=cl_context)
+    assert snapshot(tmp_path) == before                        # same bytes, same inodes, same times
+
+    forced = AnimationConfig(frames=5, method="lut", output=str(tmp_path / "sky.mp4"), force=True, **TINY)
+    render_animation(forced, ctx=cl_context)
+    after = snapshot(tmp_path)
+    assert sorted(after) == sorted(before)
+    for name, (_, inode, _) in before.items():                 # atomic writes: new files renamed in
+        assert after[name][1] != inode, f"{name} was not rewritten"
+
+
+# 2. The command line ------------------------------------------------------------------------------
+
+def clsky(*args, cwd):
+    return subprocess.run([sys.executable, "-m", "anim", *args], cwd=cwd, capture_output=True, text=True)
+
+
+SMALL_ARGS = ("--size", "32", "--table-size", "9", "33", "7")
+
+
+def test_cli_animate_small_run(tmp_path):
+    result = clsky("animate", "--frames", "4", *SMALL_ARGS, "--progress", "none", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert len(lines) == 1, result.stdout
+    assert "4 frames" in lines[0] and "worst frame" in lines[0] and "sky.mp4" in lines[0]
+    assert (tmp_path / "sky.mp4").stat().st_size > 0
+    assert sorted(path.name for path in (tmp_path / "sky_frames").iterdir()) == \
+        [f"frame_{index:05d}.png" for index in range(4)]
+    assert len(read_csv(tmp_path / "sky_metrics.csv")) == 4
+    assert (tmp_path / "sky_metrics.json").is_file()
+
+
+def test_cli_render_writes_one_png(tmp_path):
+    result = clsky("render", *SMALL_ARGS, "--method", "lut", "-o", "one.png", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert len(result.stdout.splitlines()) == 1
+    assert [path.name for path in tmp_path.iterdir()] == ["one.png"]
+    assert imageio_v3.imread(tmp_path / "one.png").shape == (32, 32, 3)
+
+
+@pytest.mark.parametrize("command,args,named", [
+    ("animate", ["--frames", "1"], "--frames"),
+    ("animate", ["--size", "8"], "--size"),
+    ("animate", ["--camera", "perspective", "--fov", "0"], "--fov"),
+    ("animate", ["--table-size", "1", "33", "7"], "--table-size"),
+    ("animate", ["--method", "foo"], "--method"),
+    ("animate", ["--output", "x.avi"], "--output"),
+    ("animate", ["--location", "100", "0"], "--location"),
+    ("render", ["--sun-elevation", "95"], "--sun-elevation"),
+], ids=lambda value: " ".join(value) if isinstance(value, list) else value)
+def test_cli_bad_values_one_line_exit_2(tmp_path, command, args, named):
+    extra = ["--progress", "none"] if command == "animate" else []
+    result = clsky(command, *extra, *args, cwd=tmp_path)
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("clsky: error:") and named in lines[0], lines[0]
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_cli_refuses_existing_output_without_force(tmp_path):
+    (tmp_path / "sky.mp4").write_bytes(b"precious")
+    result = clsky("animate", "--frames", "2", *SMALL_ARGS, "--progress", "none", cwd=tmp_path)
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("clsky: error:") and "--force" in lines[0] and "sky.mp4" in lines[0]
+    assert (tmp_path / "sky.mp4").read_bytes() == b"precious"
+    assert [path.name for path in tmp_path.iterdir()] == ["sky.mp4"]
+
+
+# 3. Real sun positions and the defaults -----------------------------------------------------------
+
+def test_real_sun_positions_one_frame_each(tmp_path, cl_context):
+    pytest.importorskip("pvlib")
+    config = AnimationConfig(location=(48.0, 11.0), date=datetime.date(2024, 6, 21), start_hour=2.0,
+                             end_hour=20.0, step_minutes=240, output=str(tmp_path / "sky.mp4"), **TINY)
+    result = render_animation(config, ctx=cl_context)
+    hours = [2, 6, 10, 14, 18]                                 # start + k x 4 h <= 20 h
+    rows = read_csv(tmp_path / "sky_metrics.csv")
+    assert len(rows) == len(result.rows) == len(hours)
+    times = [datetime.datetime.fromisoformat(row["time"]) for row in rows]
+    assert [t.hour for t in times] == hours and all(t.date() == datetime.date(2024, 6, 21) for t in times)
+    assert len(list((tmp_path / "sky_frames").iterdir())) == len(hours)
+    assert imageio_v3.imread(tmp_path / "sky.mp4").shape[0] == len(hours)
+    # Munich at the June solstice: night at 02:00 UTC, the sun high at 10:00 UTC (local noon ~11:15)
+    zeniths = [float(row["sun_zenith_deg"]) for row in rows]
+    assert zeniths[0] > 90.0 and zeniths[2] < 30.0
+
+
+def test_default_configuration_sizes():
+    config = AnimationConfig()
+    assert config.frames == 120
+    assert config.camera == "fisheye"
+    assert config.image_shape() == (512, 512)
