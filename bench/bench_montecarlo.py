@@ -26,7 +26,8 @@ CASES = [(0.0, 1.0, 30.0), (0.0, 0.5, 60.0), (0.0, 0.1, 80.0), (0.0, 0.7, 0.0), 
          (0.0, 0.2, 70.0)]
 #: Quadrature at which the table no longer depends on it: halving every count (100 view steps, 300 sun
 #: steps, 64 x 256 transmittance table) changes these cases' radiance by at most 0.11 % (measured).
-CONVERGED = dict(view_steps=200, sun_steps=600, sun_transmittance="table", transmittance_size=(128, 512),
+CONVERGED = dict(view_steps=200, multiple_view_steps=None, sun_steps=600, sun_transmittance="table",
+                 transmittance_size=(128, 512),
                  sampling="keller_bohn")
 
 

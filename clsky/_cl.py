@@ -97,16 +97,25 @@ def default_device():
     return max(devices, key=_device_rank)
 
 
+_shared_contexts: dict = {}
+
+
 def make_context(dtype=np.float64):
-    """A context on the chosen device; NoDeviceError if that device lacks fp64 when float64 is asked."""
-    if os.environ.get("PYOPENCL_CTX"):
-        try:
-            context = cl.create_some_context(interactive=False)
-        except (cl.Error, RuntimeError, ValueError) as error:
-            raise NoDeviceError(f"PYOPENCL_CTX={os.environ['PYOPENCL_CTX']!r} selects no device: {error}; "
-                                f"run `clsky devices` to list them") from error
-    else:
-        context = cl.Context([default_device()])
+    """The context of the chosen device, shared by every engine of the process (so that programs
+    built once are found in the in-process cache); NoDeviceError if that device lacks fp64 when
+    float64 is asked."""
+    selector = os.environ.get("PYOPENCL_CTX")
+    if selector not in _shared_contexts:
+        if selector:
+            try:
+                context = cl.create_some_context(interactive=False)
+            except (cl.Error, RuntimeError, ValueError) as error:
+                raise NoDeviceError(f"PYOPENCL_CTX={selector!r} selects no device: {error}; "
+                                    f"run `clsky devices` to list them") from error
+        else:
+            context = cl.Context([default_device()])
+        _shared_contexts[selector] = context
+    context = _shared_contexts[selector]
     check_dtype(context.devices[0], dtype)
     return context
 

@@ -92,7 +92,9 @@ def _add_table_arguments(parser):
     numerics.add_argument("--view-steps", type=int, default=30, help="trapezoid steps per view ray")
     numerics.add_argument("--sun-steps", type=int, default=30, help="trapezoid steps per sun ray")
     numerics.add_argument("--sampling", default="keller_bohn", choices=list(SAMPLINGS))
-    numerics.add_argument("--sun-transmittance", default="march", choices=list(SUN_TRANSMITTANCE_METHODS))
+    numerics.add_argument("--sun-transmittance", default="table", choices=list(SUN_TRANSMITTANCE_METHODS))
+    numerics.add_argument("--multiple-view-steps", type=int, default=20,
+                          help="trapezoid steps per view ray for the orders k >= 2 (default: 20)")
     numerics.add_argument("--transmittance-size", nargs=2, type=int, metavar=("TW", "TH"), default=[64, 256])
     numerics.add_argument("--backend", default="opencl", choices=["opencl", "numpy"])
     numerics.add_argument("--fast-math", action="store_true", help="build kernels with -cl-fast-relaxed-math")
@@ -149,7 +151,8 @@ def run_table(args):
                              transmittance_size=tuple(args.transmittance_size), mie_layout=args.mie_layout,
                              dtype=args.dtype, mode=args.mode, orders=args.orders,
                              order_tolerance=args.order_tolerance, max_orders=args.max_orders,
-                             gather_theta_steps=args.gather_steps[0], gather_phi_steps=args.gather_steps[1])
+                             gather_theta_steps=args.gather_steps[0], gather_phi_steps=args.gather_steps[1],
+                             multiple_view_steps=args.multiple_view_steps)
     output = pathlib.Path(args.output)
     if output.suffix != ".npz":
         raise UsageError(f"--output must end in .npz, got {args.output!r}")

@@ -89,7 +89,7 @@ def interpolation_matrix(cosines, height, mapping):
     return p
 
 
-@functools.lru_cache(maxsize=16)
+@functools.lru_cache(maxsize=4)
 def _gather_parts(atmosphere: AtmosphereParameters, settings: TableSettings):
     theta, theta_weights, phi, phi_weights = gather_quadrature(settings.gather_theta_steps,
                                                                settings.gather_phi_steps)
@@ -101,21 +101,43 @@ def _gather_parts(atmosphere: AtmosphereParameters, settings: TableSettings):
     return p, weights, view, sun
 
 
+def _read_only(array):
+    array.flags.writeable = False
+    return array
+
+
 def gather_matrix(atmosphere: AtmosphereParameters, settings: TableSettings, species):
     """M (H, H) of one species' phase function: Gbar[:, j-axis] = M @ Ibar (see module docstring)."""
     p, weights, view, _ = _gather_parts(atmosphere, settings)
     return (view[species] * weights) @ p
 
 
+def _quadrature_key(settings: TableSettings) -> TableSettings:
+    """The settings the gather matrices depend on (grid, mapping, quadrature), others at defaults."""
+    return TableSettings(size=settings.size, mapping=settings.mapping, gather_theta_steps=settings.gather_theta_steps,
+                         gather_phi_steps=settings.gather_phi_steps)
+
+
 def gather_matrices(atmosphere, settings):
-    """{species: M} for the Rayleigh and Mie phase functions."""
-    return {s: gather_matrix(atmosphere, settings, s) for s in SPECIES}
+    """{species: M} for the Rayleigh and Mie phase functions (read-only, cached per grid and phase)."""
+    return _gather_matrices(atmosphere, _quadrature_key(settings))
+
+
+@functools.lru_cache(maxsize=8)
+def _gather_matrices(atmosphere, settings):
+    return {s: _read_only(gather_matrix(atmosphere, settings, s)) for s in SPECIES}
 
 
 def first_gather_matrices(atmosphere, settings):
-    """{(s, s'): M_{s,s'} of shape (D, H, H)}: the physical mode's first gather (module docstring)."""
+    """{(s, s'): M_{s,s'} of shape (D, H, H)}: the physical mode's first gather (module docstring);
+    read-only, cached per grid and phase."""
+    return _first_gather_matrices(atmosphere, _quadrature_key(settings))
+
+
+@functools.lru_cache(maxsize=4)
+def _first_gather_matrices(atmosphere, settings):
     p, weights, view, sun = _gather_parts(atmosphere, settings)
-    return {(s, s2): np.matmul(view[s][None] * (weights * sun[s2] / (2.0 * math.pi))[:, None, :], p)
+    return {(s, s2): _read_only(np.matmul(view[s][None] * (weights * sun[s2] / (2.0 * math.pi))[:, None, :], p))
             for s in SPECIES for s2 in SPECIES}
 
 
@@ -131,7 +153,7 @@ class MultipleScatteringEngine(_cl.Engine):
     """
 
     def __init__(self, settings: TableSettings = TableSettings(), ctx=None, profile=False, fast_math=False):
-        self.settings = settings
+        self.settings = settings.scatter_settings           # its view steps are those of the scatter
         super().__init__(ctx, np.dtype(settings.dtype), profile, fast_math)
 
     def program_sources(self):
@@ -150,12 +172,16 @@ class MultipleScatteringEngine(_cl.Engine):
         padded[..., :6] = table
         return cla.to_device(self.queue, padded)
 
+    def upload_matrices(self, matrices):
+        """Gather matrices on the device, to reuse across orders."""
+        return cla.to_device(self.queue, np.ascontiguousarray(matrices, dtype=self.dtype))
+
     def gather(self, matrices, table, out=None, accumulate=False):
         """out[z, i, x, c] (+)= sum_j M[c // 3][(z,) i, j] table[z, j, x, c].
 
         Parameters
         ----------
-        matrices : array (2, H, H) or (2, D, H, H)
+        matrices : array (2, H, H) or (2, D, H, H), host or device (:meth:`upload_matrices`)
             Rayleigh and Mie gather matrices (optionally one per sun node).
         table : host array (D, H, W, 6) or padded device array (D, H, W, 8)
         out : padded device array (D, H, W, 8), optional
@@ -166,11 +192,12 @@ class MultipleScatteringEngine(_cl.Engine):
         """
         table_d = table if isinstance(table, cla.Array) else self.to_device(table)
         depth, height, width, _ = table_d.shape
-        matrices = np.asarray(matrices)
+        if not isinstance(matrices, cla.Array):
+            matrices = np.asarray(matrices)
         if matrices.shape not in ((2, height, height), (2, depth, height, height)):
             raise ValueError(f"matrices must have shape (2, H, H) or (2, D, H, H) with D, H = {depth}, "
                              f"{height}, got {matrices.shape}")
-        matrices_d = cla.to_device(self.queue, np.ascontiguousarray(matrices, dtype=self.dtype))
+        matrices_d = matrices if isinstance(matrices, cla.Array) else self.upload_matrices(matrices)
         if out is None:
             out = cla.empty(self.queue, table_d.shape, self.dtype)
             accumulate = False

@@ -125,6 +125,8 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         def to_host(gathered):
             return gathered.get()[..., :6].astype(np.float64)
 
+        upload = engine.upload_matrices
+
         def scatter(gathered):
             new_d = engine.scatter(atmosphere, gathered, combine_species=settings.mode == "physical")
             return new_d, new_d.get()[..., :6].astype(np.float64)
@@ -142,6 +144,9 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         def to_host(gathered):
             return gathered
 
+        def upload(matrices):
+            return matrices
+
         def scatter(gathered):
             new = reference.scatter(atmosphere, settings, gathered)
             if settings.mode == "physical":
@@ -149,16 +154,17 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
             return new, new
 
     orders = [single]
+    totals = [_total(single)]
     gathered_sum = None
     additions, converged, reason = [], False, "orders=1: single scattering only"
     wanted = settings.max_orders if settings.orders == "auto" else settings.orders
     if wanted > 1:
         per_species = gather_matrices(atmosphere, settings)
-        same_species = np.stack([per_species[s] for s in SPECIES])          # (2, H, H): channel c -> c // 3
+        same_species = upload(np.stack([per_species[s] for s in SPECIES]))  # (2, H, H): channel c -> c // 3
         if settings.mode == "physical":
             first = first_gather_matrices(atmosphere, settings)
-            direct = np.stack([first[("rayleigh", "rayleigh")], first[("mie", "mie")]])
-            crossed = np.stack([first[("rayleigh", "mie")], first[("mie", "rayleigh")]])
+            direct = upload(np.stack([first[("rayleigh", "rayleigh")], first[("mie", "mie")]]))
+            crossed = upload(np.stack([first[("rayleigh", "mie")], first[("mie", "rayleigh")]]))
             swapped = np.concatenate([single[..., 3:], single[..., :3]], axis=-1)
             terms = [(direct, single), (crossed, swapped)]
             running = single[..., :3] + single[..., 3:]
@@ -168,15 +174,19 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         for k in range(2, wanted + 1):
             # the next gather reads the new order where it is (on the device for OpenCL)
             gathered = gather(terms)
-            gathered_sum = gathered.copy() if gathered_sum is None else gathered_sum + gathered
+            if gathered_sum is None:
+                gathered_sum = gathered.copy()
+            else:
+                gathered_sum += gathered
             next_input, new = scatter(gathered)
             terms = [(same_species, next_input)]
             if settings.mode == "physical":
                 new = new[..., :3]
             orders.append(new)
-            running = running + new
+            running += new
             additions.append(relative_addition(new, running))
-            if _diverging(orders):
+            totals.append(_total(new))
+            if _diverging(totals):
                 reason = (f"diverging: orders {k - 1} and {k} each carry more light than the one before, "
                           f"which a dissipative atmosphere cannot do; the view-ray quadrature is too coarse "
                           f"for this atmosphere's optical depth (use sampling='keller_bohn' or more view_steps)")
@@ -199,7 +209,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         "mode": settings.mode, "orders": len(orders), "requested": settings.orders,
         "tolerance": settings.order_tolerance, "max_orders": settings.max_orders,
         "converged": converged, "reason": reason, "relative_additions": additions,
-        "shares": order_shares(orders, settings.mode), "seconds": time.perf_counter() - start,
+        "shares": order_shares(totals), "seconds": time.perf_counter() - start,
         "device": device,
     }
     return result
@@ -207,26 +217,26 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
 
 def _total(order):
     """Light an order carries per wavelength (r, g, b), summed over all cells (factored: R + M)."""
-    per_wavelength = order[..., :3] + order[..., 3:6] if order.shape[-1] == 6 else order
-    return per_wavelength.reshape(-1, 3).sum(axis=0)
+    per_channel = order.reshape(-1, order.shape[-1]).sum(axis=0)
+    return per_channel[:3] + per_channel[3:6] if per_channel.size == 6 else per_channel
 
 
-def _diverging(orders):
-    """True when the last two orders (from the third on) each carry more light than the one before in
-    some wavelength: in an atmosphere that absorbs (black ground, Mie absorption, escape to space) the
-    orders must decrease, so this only happens when the quadrature amplifies (optically thick steps)."""
-    if len(orders) < 5:
+def _diverging(totals):
+    """True when the last two orders (from the third on) each carry more light (per-order totals,
+    :func:`_total`) than the one before in some wavelength: in an atmosphere that absorbs (black
+    ground, Mie absorption, escape to space) the orders must decrease, so this only happens when the
+    quadrature amplifies (optically thick steps)."""
+    if len(totals) < 5:
         return False
-    totals = [_total(o) for o in orders[-3:]]
-    return bool(np.any((totals[1] > totals[0]) & (totals[2] > totals[1])))
+    return bool(np.any((totals[-2] > totals[-3]) & (totals[-1] > totals[-2])))
 
 
-def order_shares(orders, mode):
-    """Share of each order in the total, per wavelength (r, g, b), summed over all cells.
+def order_shares(totals):
+    """Share of each order in the total, per wavelength (r, g, b), from the orders' :func:`_total`.
 
     Factored channels count Rayleigh + Mie (phase taken as 1, its mean over the sphere). Returns a list
     of [r, g, b] fractions, one per order, summing to 1 per wavelength.
     """
-    totals = np.array([_total(o) for o in orders])
+    totals = np.array(totals)
     grand = totals.sum(axis=0)
     return (totals / np.where(grand > 0, grand, 1.0)).tolist()

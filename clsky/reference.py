@@ -369,7 +369,8 @@ def scatter(atmosphere: AtmosphereParameters, settings: TableSettings, gathered)
                                                     settings.mapping)
 
     def cells(x, y, z):
-        return _gathered_along(atmosphere, settings, gathered, settings, altitudes[x], cos_view[y], cos_sun[z])
+        return _gathered_along(atmosphere, settings.scatter_settings, gathered, settings, altitudes[x], cos_view[y],
+                               cos_sun[z])
 
     return _cells_in_chunks(settings, (settings.view_steps + 1) * 8 * 6, cells)
 

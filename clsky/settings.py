@@ -53,8 +53,11 @@ class TableSettings:
         Node placement along rays. Keller & Bohn's (default) agrees with the Monte Carlo path tracer
         within 1.3 % at 30 + 30 steps where uniform nodes overestimate by up to 39 % (near the ground,
         toward a low sun), and keeps optically thick atmospheres from diverging (README).
-    sun_transmittance : {'march', 'table'}
-        Re-march every sun ray, or read a 2D column-density table of ``transmittance_size`` nodes.
+    sun_transmittance : {'table', 'march'}
+        Read the sun's column densities from a 2D table of ``transmittance_size`` nodes (default), or
+        re-march every sun ray. The table is 5x faster for single scattering and, at the default
+        sizes, as accurate: against a converged table, rendered radiance differs by 0.39 % (median)
+        either way (README, "Defaults").
     transmittance_size : (TW, TH)
         Nodes of that 2D table along altitude and zenith cosine, each in [2, 4096].
     mie_layout : {'per-wavelength', 'notes'}
@@ -74,6 +77,10 @@ class TableSettings:
     gather_theta_steps, gather_phi_steps : int
         Trapezoid steps of the sphere integral of the gather over Theta in [0, pi] and Phi in
         [0, 2 pi], each in [2, 8192] (defaults 256 and 128).
+    multiple_view_steps : int or None
+        Trapezoid steps along the view ray when scattering the orders k >= 2, in [1, 4096]; None
+        uses ``view_steps``. The higher orders are smooth and dim: 20 (default) instead of 30 makes
+        each order a third cheaper for a median error of 0.48 % instead of 0.39 % (README, "Defaults").
     """
 
     size: tuple = (32, 256, 32)
@@ -81,7 +88,7 @@ class TableSettings:
     view_steps: int = 30
     sun_steps: int = 30
     sampling: str = "keller_bohn"
-    sun_transmittance: str = "march"
+    sun_transmittance: str = "table"
     transmittance_size: tuple = (64, 256)
     mie_layout: str = "per-wavelength"
     dtype: str = "float64"
@@ -91,6 +98,7 @@ class TableSettings:
     max_orders: int = 100
     gather_theta_steps: int = 256
     gather_phi_steps: int = 128
+    multiple_view_steps: object = 20
 
     def __post_init__(self):
         object.__setattr__(self, "size", self._check_size("size", self.size, 3))
@@ -110,6 +118,9 @@ class TableSettings:
         object.__setattr__(self, "max_orders", _check_int("max_orders", self.max_orders, 2, 1000))
         object.__setattr__(self, "gather_theta_steps", _check_int("gather_theta_steps", self.gather_theta_steps, 2, 8192))
         object.__setattr__(self, "gather_phi_steps", _check_int("gather_phi_steps", self.gather_phi_steps, 2, 8192))
+        if self.multiple_view_steps is not None:
+            object.__setattr__(self, "multiple_view_steps",
+                               _check_int("multiple_view_steps", self.multiple_view_steps, 1, 4096))
         tolerance = self.order_tolerance
         if isinstance(tolerance, (bool, np.bool_)) or not isinstance(tolerance, (int, float, np.floating)) \
                 or not 0.0 < tolerance < 1.0:
@@ -132,6 +143,13 @@ class TableSettings:
         if len(items) != count:
             raise ValueError(f"{name} must be {count} integers, got {value!r}")
         return tuple(_check_int(f"{name}[{i}]", v, 2, 4096) for i, v in enumerate(items))
+
+    @property
+    def scatter_settings(self) -> "TableSettings":
+        """These settings as the scatter of the higher orders uses them (its view steps)."""
+        if self.multiple_view_steps is None:
+            return self
+        return self.replace(view_steps=self.multiple_view_steps, multiple_view_steps=None)
 
     @property
     def factored_channels(self) -> int:

@@ -33,8 +33,8 @@ SETTINGS_VARIANTS = {
     "default": SMALL,
     "linear": SMALL.replace(mapping="linear"),
     "keller_bohn": SMALL.replace(sampling="keller_bohn"),
-    "few_steps": SMALL.replace(view_steps=3),
-    "single_step": SMALL.replace(view_steps=1, size=(8, 17, 5)),
+    "few_steps": SMALL.replace(view_steps=3, multiple_view_steps=None),
+    "single_step": SMALL.replace(view_steps=1, multiple_view_steps=None, size=(8, 17, 5)),
 }
 PRESETS = ("atmosphere-plus", "physical")
 MODES = ("atmosphere-plus", "physical")
@@ -109,12 +109,14 @@ def channel_totals(order):
 @pytest.fixture(scope="module")
 def multiple_engine(cl_context):
     """``multiple_engine(settings)``: a cached MultipleScatteringEngine (keyed by what it compiles in
-    or reads from its settings: view_steps, sampling, dtype and mapping)."""
+    or reads from its settings: the scatter's view steps, sun steps, sampling, sun transmittance,
+    dtype and mapping)."""
     cache = {}
 
     def get(settings: TableSettings) -> MultipleScatteringEngine:
         require_dtype(cl_context, settings.dtype)
-        key = (settings.view_steps, settings.sampling, settings.dtype, settings.mapping)
+        s = settings.scatter_settings
+        key = (s.view_steps, s.sun_steps, s.sampling, s.sun_transmittance, s.dtype, s.mapping)
         if key not in cache:
             cache[key] = MultipleScatteringEngine(settings, ctx=cl_context)
         return cache[key]
@@ -468,23 +470,30 @@ def test_scatter_of_uniform_radiance_matches_extinction(multiple_engine):
     shared: own geometry and optical depth). With 300 uniform view steps the trapezoid error is
     O(dtau^2), dtau <= 0.09 per step on the ground's horizontal ray: measured 7.9e-4; bound 2e-3."""
     atmosphere = preset("physical")
-    total, exact = scatter_of_unit_radiance(multiple_engine(SMALL.replace(view_steps=300)), atmosphere, (9, 33, 7))
+    total, exact = scatter_of_unit_radiance(multiple_engine(SMALL.replace(view_steps=300, multiple_view_steps=None)), atmosphere, (9, 33, 7))
     print(max_error_report(total, exact, "unit radiance, 300 steps"))
     assert np.abs(total - exact).max() <= 2e-3
 
 
-@pytest.mark.parametrize("atmosphere_name", ["default", "thick"])
-def test_scatter_does_not_amplify_uniform_radiance(multiple_engine, atmosphere_name):
-    """Default settings (30 Keller & Bohn steps): the scattered fraction of a uniform radiance 1 stays
-    <= 1 up to the coarse quadrature's error (10 %). With 30 *uniform* steps the x20 atmosphere's
+@pytest.mark.parametrize("atmosphere_name, scatter_steps, bound", [
+    ("default", 20, 1.1),
+    ("thick", 30, 1.1),
+    # the default 20 scatter steps in the x20 atmosphere: measured 1.154; the orders still converge
+    # (test_thick_atmosphere_converges_with_default_sampling)
+    ("thick", 20, 1.2),
+])
+def test_scatter_does_not_amplify_uniform_radiance(multiple_engine, atmosphere_name, scatter_steps, bound):
+    """Keller & Bohn steps (the default): the scattered fraction of a uniform radiance 1 stays <= 1 up to
+    the coarse quadrature's error (10 % at 30 steps). With 30 *uniform* steps the x20 atmosphere's
     horizontal rays have steps of optical depth ~17 whose first node the trapezoid weights dtau/2:
     radiance 1 scattered into 9.5 (see test_uniform_sampling_on_thick_atmosphere_is_reported_diverging)."""
     atmosphere = preset("physical")
     if atmosphere_name == "thick":
         atmosphere = thick(atmosphere)
-    total, exact = scatter_of_unit_radiance(multiple_engine(SMALL), atmosphere, (9, 33, 7))
+    settings = SMALL.replace(multiple_view_steps=scatter_steps)
+    total, exact = scatter_of_unit_radiance(multiple_engine(settings), atmosphere, (9, 33, 7))
     print(f"{atmosphere_name}: max scattered fraction {total.max():.4g} (exact max {exact.max():.4g})")
-    assert total.max() <= 1.1
+    assert total.max() <= bound
 
 
 # 4. Sanity of the orders --------------------------------------------------------------------------

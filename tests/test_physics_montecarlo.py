@@ -11,7 +11,8 @@ import pytest
 import clsky
 from clsky import montecarlo
 
-CONVERGED = dict(view_steps=200, sun_steps=600, sun_transmittance="table", transmittance_size=(128, 512),
+CONVERGED = dict(view_steps=200, multiple_view_steps=None, sun_steps=600, sun_transmittance="table",
+                 transmittance_size=(128, 512),
                  sampling="keller_bohn")
 #: (altitude [m], cos view zenith, sun zenith [deg]), sun and view in one vertical plane (azimuth 0)
 CASES = [(0.0, 1.0, 30.0), (0.0, 0.5, 60.0), (0.0, 0.1, 80.0), (0.0, 0.7, 0.0), (5000.0, -0.3, 45.0),
