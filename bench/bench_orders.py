@@ -50,7 +50,7 @@ def main():
     parser.add_argument("--no-readme", action="store_true")
     args = parser.parse_args()
 
-    timing = [f"Full default table (32 x 256 x 32, float64, 30 + 30 steps, orders until 1e-4), measured "
+    timing = [f"Full default table (32 x 256 x 32, float64, default settings: orders until 1e-4), measured "
               f"{datetime.date.today()} on {machine()}. OpenCL: best of {args.repeat} after a warm-up "
               f"(kernel compilation excluded); NumPy twins: one run, same process.", "",
               "| mode | orders | OpenCL [s] | NumPy twins [s] | NumPy / OpenCL |", "|---|---:|---:|---:|---:|"]

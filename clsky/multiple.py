@@ -40,8 +40,9 @@ __all__ = ["gather_quadrature", "phase_azimuth_integrals", "gather_matrix", "gat
 
 SPECIES = ("rayleigh", "mie")
 VECTOR_WIDTH = 8
-#: Rows of the gather computed per work-item (kernels/multiple.cl, GATHER_ROWS).
+#: Rows and cells of the gather computed per work-item (kernels/multiple.cl, GATHER_ROWS, GATHER_CELLS).
 GATHER_ROWS = 4
+GATHER_CELLS = 4
 
 
 def gather_quadrature(theta_steps, phi_steps):
@@ -203,7 +204,7 @@ class MultipleScatteringEngine(_cl.Engine):
             accumulate = False
         per_node = matrices.ndim == 4
         event = self.kernels["gather"](
-            self.queue, (width, -(-height // GATHER_ROWS), depth), None, matrices_d.data,
+            self.queue, (-(-width // GATHER_CELLS), -(-height // GATHER_ROWS), depth), None, matrices_d.data,
             np.int32(matrices.size // 2), np.int32(height * height if per_node else 0), table_d.data,
             out.data, np.int32(accumulate), np.int32(width), np.int32(height), np.int32(depth))
         self._record("gather", event)

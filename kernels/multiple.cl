@@ -17,46 +17,52 @@
  * view_ray.cl.
  */
 
-/* out[z, i, p] (+)= sum_j M[c / 3][(z)][i][j] in[z, j, p] over the rows p = 8 x + c of a padded table
- * (D, H, W, 8): channel c (Rayleigh r, g, b, Mie r, g, b, then 2 unused) uses its species' matrix. matrices holds two
- * sets (Rayleigh, Mie) of H x H entries, per sun node when matrix_z_stride = H * H (else 0), the two
- * sets species_stride apart.
- * Blocking: a work-item computes GATHER_ROWS rows i and 8 consecutive p (one real8), so that each
- * loaded input vector serves GATHER_ROWS products. Global size (W, ceil(H / GATHER_ROWS), D). */
+/* out[z, i, x] (+)= sum_j M[c / 3][(z)][i][j] in[z, j, x] for every channel c of the padded tables
+ * (D, H, W, 8): one real8 per cell, channels Rayleigh r, g, b, Mie r, g, b (matrix M[0]), then 2 unused
+ * (M[1] for channels 3..7). matrices holds the two sets (Rayleigh, Mie) of H x H entries, per sun node
+ * when matrix_z_stride = H * H (else 0), the sets species_stride apart.
+ * Register blocking: a work-item computes GATHER_ROWS rows i for GATHER_CELLS cells x; per j it forms
+ * each row's per-channel coefficient vector once (select of the two species' entries) and applies it
+ * to every cell's real8. Global size (ceil(W / GATHER_CELLS), ceil(H / GATHER_ROWS), D). */
 #define GATHER_ROWS 4
+#define GATHER_CELLS 4
 __kernel void gather(__global const real *matrices, const int species_stride, const int matrix_z_stride,
                      __global const real *table_in, __global real *table_out, const int accumulate,
                      const int width, const int height, const int depth)
 {
-    const int p0 = 8 * get_global_id(0);
+    const int x0 = GATHER_CELLS * get_global_id(0);
     const int i0 = GATHER_ROWS * get_global_id(1);
     const int z = get_global_id(2);
-    const int row_length = 8 * width;
-    if (p0 >= row_length || i0 >= height || z >= depth)
+    if (x0 >= width || i0 >= height || z >= depth)
         return;
     __global const real *rayleigh = matrices + (size_t)z * (size_t)matrix_z_stride;
     __global const real *mie = rayleigh + (size_t)species_stride;
-    __global const real *slab = table_in + (size_t)z * (size_t)height * (size_t)row_length;
-    /* lanes of the Mie channels 3, 4, 5 (lanes 6, 7 are padding) */
+    const size_t slab = (size_t)z * (size_t)height * (size_t)width;       /* first cell of layer z */
     const maskv8 is_mie = (maskv8)(0, 0, 0, -1, -1, -1, -1, -1);
-    real8 sum[GATHER_ROWS];
+    const int cells = min(GATHER_CELLS, width - x0);
     int rows[GATHER_ROWS];
+    real8 sum[GATHER_ROWS][GATHER_CELLS];
     for (int r = 0; r < GATHER_ROWS; ++r) {
-        sum[r] = (real8)(R(0.0));
         rows[r] = min(i0 + r, height - 1);
+        for (int c = 0; c < GATHER_CELLS; ++c)
+            sum[r][c] = (real8)(R(0.0));
     }
     for (int j = 0; j < height; ++j) {
-        const real8 column = vload8(0, slab + (size_t)j * (size_t)row_length + (size_t)p0);
+        real8 column[GATHER_CELLS];
+        for (int c = 0; c < GATHER_CELLS; ++c)
+            column[c] = vload8(slab + (size_t)j * (size_t)width + (size_t)(x0 + min(c, cells - 1)), table_in);
         for (int r = 0; r < GATHER_ROWS; ++r) {
             const size_t entry = (size_t)rows[r] * (size_t)height + (size_t)j;
-            sum[r] += select((real8)(rayleigh[entry]), (real8)(mie[entry]), is_mie) * column;
+            const real8 coefficient = select((real8)(rayleigh[entry]), (real8)(mie[entry]), is_mie);
+            for (int c = 0; c < GATHER_CELLS; ++c)
+                sum[r][c] += coefficient * column[c];
         }
     }
-    for (int r = 0; r < GATHER_ROWS; ++r) {
-        if (i0 + r >= height)
-            break;
-        __global real *target = table_out + ((size_t)z * (size_t)height + (size_t)(i0 + r)) * (size_t)row_length + (size_t)p0;
-        vstore8((accumulate ? vload8(0, target) : (real8)(R(0.0))) + sum[r], 0, target);
+    for (int r = 0; r < GATHER_ROWS && i0 + r < height; ++r) {
+        for (int c = 0; c < cells; ++c) {
+            const size_t cell = slab + (size_t)(i0 + r) * (size_t)width + (size_t)(x0 + c);
+            vstore8((accumulate ? vload8(cell, table_out) : (real8)(R(0.0))) + sum[r][c], cell, table_out);
+        }
     }
 }
 
