@@ -89,7 +89,17 @@ def register(commands):
     out.add_argument("-o", "--output", default="sky.png", help="PNG file (default: sky.png)")
     out.add_argument("--force", action="store_true", help="overwrite an existing file")
     out.add_argument("--no-dither", action="store_true")
-    return {"animate": run_animate, "render": run_render}
+    bench = commands.add_parser("bench", help="measurements: `clsky bench accuracy`")
+    kinds = bench.add_subparsers(dest="bench", required=True, parser_class=clsky_cli._Parser)
+    accuracy = kinds.add_parser("accuracy", help="what each numerical knob costs and buys (CSV + Pareto plot)")
+    accuracy.add_argument("--size", type=int, default=128, help="fisheye frames of SIZE x SIZE (default: 128)")
+    accuracy.add_argument("-o", "--output", default="accuracy.csv", help="CSV of the candidates (default: %(default)s)")
+    accuracy.add_argument("--plot", default="accuracy.png", help="Pareto plot, PNG (default: %(default)s)")
+    accuracy.add_argument("--quick", action="store_true",
+                          help="default settings and two ray marches only (a smoke run)")
+    accuracy.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    accuracy.add_argument("--progress", default="leave", choices=["display", "leave", "none"])
+    return {"animate": run_animate, "render": run_render, "bench": run_bench}
 
 
 def _config(args, **extra):
@@ -169,6 +179,37 @@ def run_render(args):
     writers.write_png(output, image, force=args.force)
     print(f"frame {camera.width}x{camera.height} ({config.method}, sun elevation {args.sun_elevation:g} deg, "
           f"azimuth {args.sun_azimuth:g} deg){detail} -> {output}")
+    return 0
+
+
+def run_bench(args):
+    import pathlib
+
+    from . import accuracy, writers
+
+    if not 16 <= args.size <= 2048:
+        raise clsky_cli.UsageError(f"--size must be in [16, 2048], got {args.size}")
+    targets = {"--output": pathlib.Path(args.output), "--plot": pathlib.Path(args.plot)}
+    for option, suffix in (("--output", ".csv"), ("--plot", ".png")):
+        if targets[option].suffix != suffix:
+            raise clsky_cli.UsageError(f"{option} must end in {suffix}, got {str(targets[option])!r}")
+        if targets[option].exists() and not args.force:
+            raise clsky_cli.UsageError(f"{targets[option]} exists; use --force to overwrite it")
+    candidates = accuracy.default_candidates()
+    if args.quick:
+        candidates = [c for c in candidates if c.label in ("default", "ray march 16 samples", "ray march 48 samples")]
+    progress, close = clsky_cli.progress_bar(args.progress)
+    try:
+        reference, valid = accuracy.render_reference(args.size)
+        rows = accuracy.measure(candidates, reference, valid, progress=progress)
+    finally:
+        close()
+    writers.write_csv(targets["--output"], rows, force=args.force)
+    accuracy.pareto_plot(rows, targets["--plot"], force=args.force)
+    for row in rows:
+        print(f"{row['candidate']:>24}: build {row['build_s']:6.2f} s, frame {1e3 * row['render_s']:7.1f} ms, "
+              f"worst p95 error {100 * row['p95_rel']:8.2f} %, worst mean Delta E {row['mean_delta_e']:6.2f}")
+    print(f"{len(rows)} candidates -> {targets['--output']}, {targets['--plot']}")
     return 0
 
 

@@ -21,11 +21,11 @@ fi
 
 python3 -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip
-.venv/bin/python -m pip install -q -e ".[anim,test]"
+.venv/bin/python -m pip install -q -e ".[anim,test,bench]"
 
 if ! .venv/bin/python -c "import pyopencl as cl, sys; sys.exit(0 if any(p.get_devices() for p in cl.get_platforms()) else 1)" 2>/dev/null; then
     log "no OpenCL device found: installing the PoCL pip build (pyopencl[pocl])"
-    .venv/bin/python -m pip install -q -e ".[anim,test,pocl]"
+    .venv/bin/python -m pip install -q -e ".[anim,test,bench,pocl]"
 fi
 log "OpenCL devices (* = the one clsky uses):"
 .venv/bin/clsky devices >&2
