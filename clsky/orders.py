@@ -188,8 +188,10 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
             totals.append(_total(new))
             if _diverging(totals):
                 reason = (f"diverging: orders {k - 1} and {k} each carry more light than the one before, "
-                          f"which a dissipative atmosphere cannot do; the view-ray quadrature is too coarse "
-                          f"for this atmosphere's optical depth (use sampling='keller_bohn' or more view_steps)")
+                          f"which a dissipative atmosphere cannot do with phase functions of mean 1: either "
+                          f"a phase function adds light (the modified Rayleigh phase's mean is 1.2533, so an "
+                          f"optically thick atmosphere-plus sky grows) or the view-ray quadrature is too "
+                          f"coarse for this optical depth (more view_steps / multiple_view_steps)")
                 break
             if progress is not None:
                 progress("orders", k, wanted)

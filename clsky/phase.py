@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["rayleigh", "rayleigh_modified_atmosphereplus", "mie_cornette_shanks",
-           "RAYLEIGH_PHASES", "MIE_PHASES", "rayleigh_phase", "mie_phase"]
+           "RAYLEIGH_PHASES", "MIE_PHASES", "PHASE_MEANS", "rayleigh_phase", "mie_phase"]
 
 
 def rayleigh(c):
@@ -39,6 +39,10 @@ def mie_cornette_shanks(c, g):
     g2 = g * g
     return 1.5 * (1.0 - g2) / (2.0 + g2) * (1.0 + c * c) / (1.0 + g2 + 2.0 * g * c) ** 1.5
 
+
+#: Mean of each phase function over the sphere, (1 / 4 pi) Integral F d omega, exact: Cornette-Shanks is
+#: normalised for every g by its prefactor; the modified Rayleigh is 0.8 (7/5 + 1/6).
+PHASE_MEANS = {"rayleigh": 1.0, "modified_atmosphereplus": 0.8 * (1.4 + 1.0 / 6.0), "cornette_shanks": 1.0}
 
 #: Registries, keyed by AtmosphereParameters.rayleigh_phase / .mie_phase.
 RAYLEIGH_PHASES = {"rayleigh": rayleigh, "modified_atmosphereplus": rayleigh_modified_atmosphereplus}
