@@ -245,4 +245,5 @@ class MultipleScatteringEngine(_cl.Engine):
             np.int32(height), np.int32(depth), np.int32(MAPPINGS[self.settings.mapping]),
             np.int32(bool(combine_species)), gathered_d.data, out.data)
         self._record("scatter", event)
+        out.add_event(event)
         return out

@@ -38,6 +38,7 @@ import time
 from typing import Callable
 
 import numpy as np
+import pyopencl as cl
 
 from . import _cl
 from .atmosphere import AtmosphereParameters
@@ -126,10 +127,19 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
             return gathered.get()[..., :6].astype(np.float64)
 
         upload = engine.upload_matrices
+        copy_queue = cl.CommandQueue(engine.ctx)     # copies to the host overlap the next gather
 
         def scatter(gathered):
+            """The new order on the device, and a callable returning it on the host once copied."""
             new_d = engine.scatter(atmosphere, gathered, combine_species=settings.mode == "physical")
-            return new_d, new_d.get()[..., :6].astype(np.float64)
+            host = np.empty(new_d.shape, dtype=new_d.dtype)
+            copied = cl.enqueue_copy(copy_queue, host, new_d.data, wait_for=new_d.events, is_blocking=False)
+
+            def on_host():
+                copied.wait()
+                return host[..., :6].astype(np.float64)
+
+            return new_d, on_host
     else:
         from . import reference
 
@@ -151,7 +161,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
             new = reference.scatter(atmosphere, settings, gathered)
             if settings.mode == "physical":
                 new = np.concatenate([new[..., :3] + new[..., 3:]] * 2, axis=-1)
-            return new, new
+            return new, lambda: new
 
     orders = [single]
     totals = [_total(single)]
@@ -171,15 +181,19 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         else:
             terms = [(same_species, single)]
             running = single.copy()
+        gathered = gather(terms)
         for k in range(2, wanted + 1):
-            # the next gather reads the new order where it is (on the device for OpenCL)
-            gathered = gather(terms)
             if gathered_sum is None:
                 gathered_sum = gathered.copy()
             else:
                 gathered_sum += gathered
-            next_input, new = scatter(gathered)
-            terms = [(same_species, next_input)]
+            next_input, on_host = scatter(gathered)
+            # gather the next order from the new one where it is (on the device for OpenCL) before
+            # looking at it on the host, so that the copy and the stopping test overlap that work
+            # (wasted once, when this order turns out to be the last)
+            if k < wanted:
+                gathered = gather([(same_species, next_input)])
+            new = on_host()
             if settings.mode == "physical":
                 new = new[..., :3]
             orders.append(new)
