@@ -30,10 +30,11 @@ from __future__ import annotations
 import abc
 import dataclasses
 import math
-import numbers
 from typing import ClassVar
 
 import numpy as np
+
+from ._validate import check_integer, check_real
 
 __all__ = ["Camera", "FisheyeCamera", "PerspectiveCamera", "EquirectangularCamera", "CAMERAS",
            "camera_from_name", "sun_direction", "MIN_SIZE", "MAX_SIZE"]
@@ -45,28 +46,7 @@ MIN_SIZE, MAX_SIZE = 2, 16384
 # Validation ---------------------------------------------------------------------------------------
 
 def _check_size(name, value):
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-        raise ValueError(f"{name} must be an integer in [{MIN_SIZE}, {MAX_SIZE}], got {value!r}")
-    if not MIN_SIZE <= value <= MAX_SIZE:
-        raise ValueError(f"{name} must be in [{MIN_SIZE}, {MAX_SIZE}], got {value}")
-    return int(value)
-
-
-def _check_real(name, value, valid):
-    """A finite real number, as a float; ``valid`` describes the range in the error message."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real) \
-            or not math.isfinite(value):
-        raise ValueError(f"{name} must be a finite number {valid}, got {value!r}")
-    return float(value)
-
-
-def _check_range(name, value, low, high, low_open=False):
-    bracket = "(" if low_open else "["
-    valid = f"in {bracket}{low}, {high}]"
-    value = _check_real(name, value, valid)
-    if not ((low < value) if low_open else (low <= value)) or not value <= high:
-        raise ValueError(f"{name} must be {valid}, got {value}")
-    return value
+    return check_integer(name, value, MIN_SIZE, MAX_SIZE)
 
 
 # Directions ---------------------------------------------------------------------------------------
@@ -204,7 +184,7 @@ class FisheyeCamera(Camera):
     def __post_init__(self):
         object.__setattr__(self, "size", _check_size("size", self.size))
         object.__setattr__(self, "heading_deg",
-                           _check_real("heading_deg", self.heading_deg, "(any finite azimuth)"))
+                           check_real("heading_deg", self.heading_deg))
 
     @property
     def width(self) -> int:
@@ -286,11 +266,11 @@ class PerspectiveCamera(Camera):
     def __post_init__(self):
         object.__setattr__(self, "width", _check_size("width", self.width))
         object.__setattr__(self, "height", _check_size("height", self.height))
-        object.__setattr__(self, "fov_deg", _check_range("fov_deg", self.fov_deg, 0.0, 179.0,
+        object.__setattr__(self, "fov_deg", check_real("fov_deg", self.fov_deg, 0.0, 179.0,
                                                          low_open=True))
         object.__setattr__(self, "heading_deg",
-                           _check_real("heading_deg", self.heading_deg, "(any finite azimuth)"))
-        object.__setattr__(self, "pitch_deg", _check_range("pitch_deg", self.pitch_deg, -90.0, 90.0))
+                           check_real("heading_deg", self.heading_deg))
+        object.__setattr__(self, "pitch_deg", check_real("pitch_deg", self.pitch_deg, -90.0, 90.0))
 
     @property
     def focal_length(self) -> float:

@@ -19,24 +19,16 @@ from __future__ import annotations
 import dataclasses
 import datetime
 import math
-import numbers
 
 import numpy as np
 
+from ._validate import check_real
 from .cameras import sun_direction
 
 __all__ = ["SunPosition", "sweep", "real_positions", "MAX_POSITIONS"]
 
 #: Largest number of positions :func:`real_positions` computes in one call.
 MAX_POSITIONS = 100_000
-
-
-def _check_real(name, value, low=-math.inf, high=math.inf):
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real) \
-            or not math.isfinite(value) or not low <= value <= high:
-        valid = "a finite number" if (low, high) == (-math.inf, math.inf) else f"in [{low}, {high}]"
-        raise ValueError(f"{name} must be {valid}, got {value!r}")
-    return float(value)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,8 +63,8 @@ class SunPosition:
     time: datetime.datetime | None = None
 
     def __post_init__(self):
-        object.__setattr__(self, "zenith_deg", _check_real("zenith_deg", self.zenith_deg, 0.0, 180.0))
-        object.__setattr__(self, "azimuth_deg", _check_real("azimuth_deg", self.azimuth_deg))
+        object.__setattr__(self, "zenith_deg", check_real("zenith_deg", self.zenith_deg, 0.0, 180.0))
+        object.__setattr__(self, "azimuth_deg", check_real("azimuth_deg", self.azimuth_deg))
         if self.time is not None and not isinstance(self.time, datetime.datetime):
             raise ValueError(f"time must be a datetime.datetime or None, got {self.time!r}")
 
@@ -146,15 +138,15 @@ def sweep(frames=120, start_elevation_deg=-6.0, max_elevation_deg=60.0, end_elev
     if isinstance(frames, (bool, np.bool_)) or not isinstance(frames, (int, np.integer)) \
             or frames < 2:
         raise ValueError(f"frames must be an integer >= 2, got {frames!r}")
-    start = _check_real("start_elevation_deg", start_elevation_deg, -90.0, 90.0)
-    peak = _check_real("max_elevation_deg", max_elevation_deg, -90.0, 90.0)
-    end = start if end_elevation_deg is None else _check_real("end_elevation_deg",
+    start = check_real("start_elevation_deg", start_elevation_deg, -90.0, 90.0)
+    peak = check_real("max_elevation_deg", max_elevation_deg, -90.0, 90.0)
+    end = start if end_elevation_deg is None else check_real("end_elevation_deg",
                                                               end_elevation_deg, -90.0, 90.0)
     if peak < start or peak < end:
         raise ValueError(f"max_elevation_deg must be >= start_elevation_deg ({start}) and "
                          f"end_elevation_deg ({end}), got {peak}")
-    rise = _check_real("rise_azimuth_deg", rise_azimuth_deg)
-    set_ = _check_real("set_azimuth_deg", set_azimuth_deg)
+    rise = check_real("rise_azimuth_deg", rise_azimuth_deg)
+    set_ = check_real("set_azimuth_deg", set_azimuth_deg)
 
     s = np.arange(int(frames), dtype=np.float64) / (int(frames) - 1)
     elevation = _elevation_arc(s, start, peak, end)
@@ -230,12 +222,12 @@ def real_positions(latitude_deg, longitude_deg, start, end, step_minutes=5.0, al
     >>> len(path), bool(path[1].elevation_deg > 88.0)   # equinox noon on the equator: overhead
     (3, True)
     """
-    latitude = _check_real("latitude_deg", latitude_deg, -90.0, 90.0)
-    longitude = _check_real("longitude_deg", longitude_deg, -180.0, 180.0)
-    altitude = _check_real("altitude_m", altitude_m)
+    latitude = check_real("latitude_deg", latitude_deg, -90.0, 90.0)
+    longitude = check_real("longitude_deg", longitude_deg, -180.0, 180.0)
+    altitude = check_real("altitude_m", altitude_m)
     start = _check_aware("start", start)
     end = _check_aware("end", end)
-    step = _check_real("step_minutes", step_minutes)
+    step = check_real("step_minutes", step_minutes)
     if step <= 0.0:
         raise ValueError(f"step_minutes must be > 0, got {step_minutes!r}")
     # Convert to UTC before subtracting: two datetimes sharing one tzinfo object subtract as wall

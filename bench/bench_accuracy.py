@@ -41,11 +41,11 @@ def main():
              f"{args.size} x {args.size} fisheye frames from the ground, sun at elevations "
              + ", ".join(f"{e:g} deg ({n})" for n, e in accuracy.SUN_ELEVATIONS.items())
              + ". Error: 95th percentile of the relative HDR luminance error against the reference "
-             f"(a 256-sample ray march over a fine table, `anim/accuracy.py`). The first row is how much the "
-             f"reference itself changes when every count is doubled: errors below it are not resolved (the "
-             f"twilight reference follows the table's sun axis, which feeds the higher orders). Build: table "
-             f"(single + orders); render: one frame. * = on the Pareto front (render time vs worst error). "
-             f"Raw numbers: `docs/accuracy.csv`.", "",
+             "(a 256-sample ray march over a fine table, `anim/accuracy.py`). The first row is how much the "
+             "reference itself changes when every count is doubled: errors below it are not resolved (the "
+             "twilight reference follows the table's sun axis, which feeds the higher orders). Build: table "
+             "(single + orders); render: one frame. * = on the Pareto front (render time vs worst error). "
+             "Raw numbers: `docs/accuracy.csv`.", "",
              "| candidate | knob | build [s] | render [ms] | " + " | ".join(f"p95 {n} [%]" for n in names)
              + " | worst mean Delta E |",
              "|---|---|---:|---:|" + "---:|" * len(names) + "---:|",

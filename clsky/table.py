@@ -27,10 +27,10 @@ from typing import Callable
 
 import numpy as np
 
-from . import __version__, _cl
+from . import __version__
 from .atmosphere import AtmosphereParameters, preset
 from .lookup import check_queries
-from .settings import MIE_LAYOUTS, TableSettings
+from .settings import TableSettings
 
 __all__ = ["ScatteringTable", "TableFormatError", "FORMAT_VERSION", "BACKENDS", "atomic_write",
            "CHANNEL_NAMES"]

@@ -7,7 +7,6 @@ Kernels: ``kernels/transmittance.cl``. NumPy twins: :func:`clsky.reference.optic
 from __future__ import annotations
 
 import numpy as np
-import pyopencl as cl
 import pyopencl.array as cla
 
 from . import _atmosphere_cl, _cl

@@ -8,7 +8,6 @@ import sys
 import textwrap
 import zipfile
 
-import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 
