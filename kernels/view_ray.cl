@@ -51,6 +51,24 @@ inline realv view_ray_length(__constant const atmosphere_t *atm, const realv h0,
     return SELECT(distance_to_top(h0, mu_v, rp, atm->top_radius), distance_to_ground(h0, mu_v, rp), *hits_ground);
 }
 
+/* Column densities (*sun_r, *sun_m) [m] from a node at altitude h toward the sun (zenith cosine
+ * mu_sun), read from the 2D table (-DSUN_TRANSMITTANCE_TABLE) or re-marched; returns the mask of
+ * nodes the sun lights (not in the planet's shadow, decided from h and mu_sun against the local
+ * horizon). In the shadow the march would cross the planet: it is given zero length, and the
+ * caller discards the result. */
+inline maskv sun_column(__constant const atmosphere_t *atm, const realv h, const realv mu_sun,
+                        __global const real *sun_table, const int tw, const int th, realv *sun_r, realv *sun_m)
+{
+    const maskv lit = isgreaterequal(mu_sun, horizon_cos(h, atm->planet_radius));
+#ifdef SUN_TRANSMITTANCE_TABLE
+    column_density_from_table(atm, sun_table, tw, th, h, mu_sun, sun_r, sun_m);
+#else
+    const realv sun_length = SELECT(V(0.0), distance_to_top(h, mu_sun, atm->planet_radius, atm->top_radius), lit);
+    column_density(atm, h, mu_sun, sun_length, sun_r, sun_m);
+#endif
+    return lit;
+}
+
 /* Single scattering along the ray: sum[0..2] = Integral rho_R T dt (r, g, b), sum[3..5] the same with
  * rho_M, T = T(Pc, P) T(P, Pa), zero where P is in the planet's shadow (decided from P's altitude and
  * sun cosine against the local horizon, never from rounding). Multiply by beta_s / (4 pi) for Ibar. */
@@ -83,7 +101,6 @@ inline void integrate_single(__constant const atmosphere_t *atm, const realv h0,
             h = SELECT(h, V(0.0), hits_ground);
         const realv r = rp + h;
         const realv mu_sun_here = (r0 * mu_s + s * nu) / r;     /* dot(P, Sun) / |P| */
-        const maskv lit = isgreaterequal(mu_sun_here, horizon_cos(h, rp));
         const realv density_r = exp(-h * inv_hr), density_m = exp(-h * inv_hm);
         const realv half_step = R(0.5) * length * (node - node_previous);
         if (i > 0) {
@@ -91,13 +108,7 @@ inline void integrate_single(__constant const atmosphere_t *atm, const realv h0,
             view_m += (last_density_m + density_m) * half_step;
         }
         realv sun_r, sun_m;
-#ifdef SUN_TRANSMITTANCE_TABLE
-        column_density_from_table(atm, sun_table, tw, th, h, mu_sun_here, &sun_r, &sun_m);
-#else
-        /* in the shadow the march would cross the planet: give it zero length, then discard */
-        const realv sun_length = SELECT(V(0.0), distance_to_top(h, mu_sun_here, rp, atm->top_radius), lit);
-        column_density(atm, h, mu_sun_here, sun_length, &sun_r, &sun_m);
-#endif
+        const maskv lit = sun_column(atm, h, mu_sun_here, sun_table, tw, th, &sun_r, &sun_m);
         const realv column_r = view_r + sun_r, column_m = view_m + sun_m;
         const realv t0 = SELECT(V(0.0), exp(-(beta.x * column_r + beta_me * column_m)), lit);
         const realv t1 = SELECT(V(0.0), exp(-(beta.y * column_r + beta_me * column_m)), lit);
@@ -186,15 +197,8 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
         const realv wr = weight * density_r, wm = weight * density_m;
         const realv fr0 = wr * t0, fr1 = wr * t1, fr2 = wr * t2, fm0 = wm * t0, fm1 = wm * t1, fm2 = wm * t2;
         if (single) {
-            const realv h_here = h;
-            const maskv lit = isgreaterequal(mu_sun_here, horizon_cos(h_here, rp));
             realv sun_r, sun_m;
-#ifdef SUN_TRANSMITTANCE_TABLE
-            column_density_from_table(atm, sun_table, tw, th, h_here, mu_sun_here, &sun_r, &sun_m);
-#else
-            const realv sun_length = SELECT(V(0.0), distance_to_top(h_here, mu_sun_here, rp, atm->top_radius), lit);
-            column_density(atm, h_here, mu_sun_here, sun_length, &sun_r, &sun_m);
-#endif
+            const maskv lit = sun_column(atm, h, mu_sun_here, sun_table, tw, th, &sun_r, &sun_m);
             const realv s0 = SELECT(V(0.0), exp(-(beta.x * sun_r + beta_me * sun_m)), lit);
             const realv s1 = SELECT(V(0.0), exp(-(beta.y * sun_r + beta_me * sun_m)), lit);
             const realv s2 = SELECT(V(0.0), exp(-(beta.z * sun_r + beta_me * sun_m)), lit);
