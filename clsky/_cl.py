@@ -266,6 +266,12 @@ class Engine:
     def real(self, value):
         return self.dtype.type(value)
 
+    def real2(self, pair):
+        """``pair`` as the kernels' ``real2`` (e.g. the sun axis' w range, mapping.cl)."""
+        record = np.zeros((), dtype=real_vector_dtype(self.dtype, 2))
+        record["x"], record["y"] = pair
+        return record
+
     def _record(self, label, event):
         if self.profile:
             self.events.append((label, event))

@@ -10,6 +10,7 @@ import pyopencl.array as cla
 
 from . import _atmosphere_cl, _cl
 from .atmosphere import AtmosphereParameters
+from .mapping import FULL_SUN_RANGE, sun_w_range
 from .settings import MAPPINGS, _check_choice
 
 __all__ = ["TableLookupEngine", "check_queries"]
@@ -49,7 +50,7 @@ class TableLookupEngine(_cl.Engine):
         return ("real.cl", _atmosphere_cl.declaration(self.ctx.devices[0], self.dtype)) + self.sources
 
     def radiance(self, atmosphere: AtmosphereParameters, data, altitude, cos_view, cos_sun, cos_scatter,
-                 mapping="nonlinear"):
+                 mapping="nonlinear", sun_cos_range=FULL_SUN_RANGE):
         """Radiance I = I_I (F_R Ibar_R + F_M Ibar_M) for each query.
 
         Parameters
@@ -65,6 +66,8 @@ class TableLookupEngine(_cl.Engine):
             Cosines of the view zenith, the sun zenith and the scattering angle dot(Sun, V).
         mapping : {'nonlinear', 'linear'}
             The table's texture mapping.
+        sun_cos_range : (low, high)
+            The sun cosines the table's sun axis covers (``TableSettings.sun_cos_range``).
 
         Returns
         -------
@@ -83,7 +86,8 @@ class TableLookupEngine(_cl.Engine):
         if n:
             event = self.kernels["lookup"](
                 self.queue, (n,), None, atmosphere_d, table_d.data, np.int32(width), np.int32(height),
-                np.int32(depth), np.int32(channels), np.int32(MAPPINGS[mapping]), np.int32(n),
+                np.int32(depth), np.int32(channels), np.int32(MAPPINGS[mapping]),
+                self.real2(sun_w_range(mapping, sun_cos_range)), np.int32(n),
                 *(q.data for q in queries_d), radiance_d.data)
             self._record("lookup", event)
         return radiance_d.get()[:n].reshape(shape + (3,)).astype(np.float64)

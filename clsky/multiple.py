@@ -96,7 +96,8 @@ def interpolation_matrix(cosines, height, mapping):
 def _gather_parts(atmosphere: AtmosphereParameters, settings: TableSettings):
     theta, theta_weights, phi, phi_weights = gather_quadrature(settings.gather_theta_steps,
                                                                settings.gather_phi_steps)
-    _, cos_view, cos_sun = grid_coordinates(settings.size, atmosphere.atmosphere_height, settings.mapping)
+    _, cos_view, cos_sun = grid_coordinates(settings.size, atmosphere.atmosphere_height, settings.mapping,
+                                            settings.sun_cos_range)
     p = interpolation_matrix(np.cos(theta), settings.size[1], settings.mapping)
     weights = theta_weights * np.sin(theta)
     view, sun = {}, {}
@@ -243,7 +244,7 @@ class MultipleScatteringEngine(_cl.Engine):
         event = self.kernels["scatter"](
             self.queue, (-(-width // VECTOR_WIDTH), height, depth), None, atmosphere_d, np.int32(width),
             np.int32(height), np.int32(depth), np.int32(MAPPINGS[self.settings.mapping]),
-            np.int32(bool(combine_species)), gathered_d.data, out.data)
+            self.real2(self.settings.sun_w_range), np.int32(bool(combine_species)), gathered_d.data, out.data)
         self._record("scatter", event)
         out.add_event(event)
         return out

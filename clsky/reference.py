@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from .atmosphere import AtmosphereParameters
-from .mapping import grid_coordinates
+from .mapping import FULL_SUN_RANGE, grid_coordinates
 from .settings import TableSettings
 
 __all__ = [
@@ -251,7 +251,7 @@ def single_scattering(atmosphere: AtmosphereParameters, settings: TableSettings 
         Ibar^(1) [1/sr]: Rayleigh r, g, b, Mie r, g, b, per cell (see ``kernels/single.cl``).
     """
     altitudes, cos_view, cos_sun = grid_coordinates(settings.size, atmosphere.atmosphere_height,
-                                                    settings.mapping)
+                                                    settings.mapping, settings.sun_cos_range)
     sun_table = None
     if settings.sun_transmittance == "table":
         sun_table = transmittance_table(atmosphere, settings.transmittance_size, settings.sun_steps,
@@ -284,9 +284,9 @@ def enter_atmosphere(atmosphere, altitude, cos_view, cos_sun, cos_scatter):
 
 
 def lookup(atmosphere: AtmosphereParameters, data, altitude, cos_view, cos_sun, cos_scatter,
-           mapping="nonlinear"):
+           mapping="nonlinear", sun_cos_range=FULL_SUN_RANGE):
     """Radiance from a table; twin of ``TableLookupEngine.radiance`` (same parameters and result)."""
-    from .mapping import altitude_to_u, cos_to_v
+    from .mapping import altitude_to_u, cos_to_sun_t, cos_to_v
     from .phase import mie_phase, rayleigh_phase
 
     depth, height, width, channels = data.shape
@@ -296,7 +296,8 @@ def lookup(atmosphere: AtmosphereParameters, data, altitude, cos_view, cos_sun, 
     h, mu_v, mu_s, inside = enter_atmosphere(atmosphere, altitude, cos_view, cos_sun, nu)
     position = []
     for coordinate, n in ((altitude_to_u(h, atmosphere.atmosphere_height, mapping), width),
-                          (cos_to_v(mu_v, mapping), height), (cos_to_v(mu_s, mapping), depth)):
+                          (cos_to_v(mu_v, mapping), height),
+                          (cos_to_sun_t(mu_s, mapping, sun_cos_range), depth)):
         f = coordinate * (n - 1)
         lower = np.clip(f.astype(np.int64), 0, n - 2)
         position.append((lower, f - lower))
@@ -347,14 +348,14 @@ def trilinear(table, fx, fy, fz):
 
 def _gathered_along(atmosphere, ray_settings, gathered, grid_settings, h0, mu_v, mu_s, nu=None):
     """beta_s / (4 pi) Integral rho_s T(P, Pa) Gbar_s(P) ds along rays (n, 6); Gbar on grid_settings' grid."""
-    from .mapping import altitude_to_u, cos_to_v
+    from .mapping import altitude_to_u, cos_to_sun_t, cos_to_v
 
     width, height, depth = grid_settings.size
     rays = _ViewRays(atmosphere, ray_settings, h0, mu_v, mu_s, nu)
     g = trilinear(gathered,
                   altitude_to_u(rays.h, atmosphere.atmosphere_height, grid_settings.mapping) * (width - 1),
                   cos_to_v(rays.mu_view, grid_settings.mapping) * (height - 1),
-                  cos_to_v(rays.mu_sun, grid_settings.mapping) * (depth - 1))
+                  cos_to_sun_t(rays.mu_sun, grid_settings.mapping, grid_settings.sun_cos_range) * (depth - 1))
     transmittance = np.exp(-_optical_depth_of(atmosphere, rays.view_r, rays.view_m))
     return rays.integrate(atmosphere, transmittance, g[..., 0:3], g[..., 3:6])
 
@@ -366,7 +367,7 @@ def scatter(atmosphere: AtmosphereParameters, settings: TableSettings, gathered)
     r, g, b and Mie r, g, b in and out; shape (D, H, W, 6).
     """
     altitudes, cos_view, cos_sun = grid_coordinates(settings.size, atmosphere.atmosphere_height,
-                                                    settings.mapping)
+                                                    settings.mapping, settings.sun_cos_range)
 
     def cells(x, y, z):
         return _gathered_along(atmosphere, settings.scatter_settings, gathered, settings, altitudes[x], cos_view[y],
@@ -393,11 +394,12 @@ def _sun_disc(atmosphere, mu_v, nu, altitude, sun_radiance, cos_sun_radius):
     return visible[:, None] * np.asarray(sun_radiance, dtype=np.float64)
 
 
-def render_table(atmosphere, data, mapping, directions, sun_direction, altitude, sun_radiance, cos_sun_radius):
+def render_table(atmosphere, data, mapping, directions, sun_direction, altitude, sun_radiance, cos_sun_radius,
+                 sun_cos_range=FULL_SUN_RANGE):
     """Twin of ``SkyRenderer.render_table``: lookup radiance per direction plus the sun disc; (..., 3)."""
     shape = np.shape(directions)[:-1]
     mu_v, nu, h, mu_v_in, mu_s_in, inside = _pixel_geometry(atmosphere, directions, sun_direction, altitude)
-    sky = lookup(atmosphere, data, h, mu_v_in, mu_s_in, nu, mapping) * inside[:, None]
+    sky = lookup(atmosphere, data, h, mu_v_in, mu_s_in, nu, mapping, sun_cos_range) * inside[:, None]
     return (sky + _sun_disc(atmosphere, mu_v, nu, altitude, sun_radiance, cos_sun_radius)).reshape(shape + (3,))
 
 

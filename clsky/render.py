@@ -158,6 +158,8 @@ class SkyRenderer:
         elif valid is not None:
             raise ValueError("valid must be given to prepare(), not with prepared directions")
         _, sun, altitude = check_directions(np.zeros((0, 3)), sun_direction, altitude)
+        if name == "render_table" or self.table.gathered is not None:
+            self._check_sun_covered(sun)
         shape, directions_d = directions.shape, directions.array
         n = directions_d.shape[0]
         real4 = _cl.real_vector_dtype(self.engine.dtype, 4)
@@ -170,6 +172,14 @@ class SkyRenderer:
                self.engine.real(self._cos_sun_radius), out_d.data)
         return out_d.get()[:n].reshape(shape + (3,)).astype(np.float64, copy=False)
 
+    def _check_sun_covered(self, sun):
+        """A table planned for a scene covers its sun path only (``sun_cos_range``): refuse a sun outside
+        it rather than return the light of the range's end."""
+        low, high = self.table.settings.sun_cos_range
+        if not low - 1e-12 <= sun[2] <= high + 1e-12:
+            raise ValueError(f"sun_direction: its zenith cosine {sun[2]:.6g} is outside the table's "
+                             f"sun_cos_range [{low:.6g}, {high:.6g}] (plan the table for this sun path)")
+
     def render_table(self, directions, sun_direction, altitude=0.0, valid=None):
         """HDR radiance (..., 3) by table lookup; ``directions`` (..., 3) unit vectors (or
         :meth:`prepare`'s result), ``valid`` an optional mask (invalid pixels are 0)."""
@@ -180,18 +190,19 @@ class SkyRenderer:
         view_slice = self._view_slice(altitude, float(sun_direction[2])) if inside else np.zeros((2, 1))
         slice_d = cla.to_device(self.queue, np.ascontiguousarray(view_slice, dtype=self.engine.dtype))
         args = (self._table_d.data, np.int32(width), np.int32(height), np.int32(depth), np.int32(t.data.shape[-1]),
-                np.int32(MAPPINGS[t.settings.mapping]), slice_d.data, np.int32(inside))
+                np.int32(MAPPINGS[t.settings.mapping]), self.engine.real2(t.settings.sun_w_range), slice_d.data,
+                np.int32(inside))
         return self._launch("render_table", directions, sun_direction, altitude, valid, args)
 
     def _view_slice(self, altitude, cos_sun):
         """The table interpolated (bilinearly, in texture space) at one altitude and sun cosine: (H, C)."""
-        from .mapping import altitude_to_u, cos_to_v
+        from .mapping import altitude_to_u, cos_to_sun_t
 
         t = self.table
         width, height, depth = t.settings.size
         position = []
         for coordinate, n in ((altitude_to_u(altitude, t.atmosphere.atmosphere_height, t.settings.mapping), width),
-                              (cos_to_v(cos_sun, t.settings.mapping), depth)):
+                              (cos_to_sun_t(cos_sun, t.settings.mapping, t.settings.sun_cos_range), depth)):
             f = float(coordinate) * (n - 1)
             lower = min(max(int(f), 0), n - 2)
             position.append((lower, f - lower))
@@ -207,7 +218,8 @@ class SkyRenderer:
         width, height, depth = t.settings.size if t.gathered is not None else (2, 2, 2)
         tw, th = self.ray_settings.transmittance_size if self.ray_settings.sun_transmittance == "table" else (2, 2)
         args = (self._gathered_d.data, np.int32(width), np.int32(height), np.int32(depth),
-                np.int32(MAPPINGS[t.settings.mapping]), np.int32(t.gathered is not None),
+                np.int32(MAPPINGS[t.settings.mapping]), self.engine.real2(t.settings.sun_w_range),
+                np.int32(t.gathered is not None),
                 np.int32(t.settings.mode == "physical"), self._sun_table_d.data, np.int32(tw), np.int32(th))
         return self._launch("render_raymarch", directions, sun_direction, altitude, valid, args)
 

@@ -77,6 +77,11 @@ class TableSettings:
     gather_theta_steps, gather_phi_steps : int
         Trapezoid steps of the sphere integral of the gather over Theta in [0, pi] and Phi in
         [0, 2 pi], each in [2, 8192] (defaults 256 and 128).
+    sun_cos_range : (low, high)
+        Sun-zenith cosines the sun axis covers, -1 <= low < high <= 1, high - low >= 1e-3 (default
+        (-1, 1), the whole axis). The D nodes are spread evenly in the mapping's w between them
+        (clsky/mapping.py); a scene planner (clsky/planner.py) narrows it to a sun path plus the margin
+        that higher orders need. Lookups outside the range read its nearest end.
     multiple_view_steps : int or None
         Trapezoid steps along the view ray when scattering the orders k >= 2, in [1, 4096]; None
         uses ``view_steps``. The higher orders are smooth and dim: 20 (default) instead of 30 makes
@@ -99,6 +104,7 @@ class TableSettings:
     gather_theta_steps: int = 256
     gather_phi_steps: int = 128
     multiple_view_steps: object = 20
+    sun_cos_range: tuple = (-1.0, 1.0)
 
     def __post_init__(self):
         object.__setattr__(self, "size", self._check_size("size", self.size, 3))
@@ -121,6 +127,7 @@ class TableSettings:
         if self.multiple_view_steps is not None:
             object.__setattr__(self, "multiple_view_steps",
                                _check_int("multiple_view_steps", self.multiple_view_steps, 1, 4096))
+        object.__setattr__(self, "sun_cos_range", self._check_sun_cos_range(self.sun_cos_range))
         tolerance = self.order_tolerance
         if isinstance(tolerance, (bool, np.bool_)) or not isinstance(tolerance, (int, float, np.floating)) \
                 or not 0.0 < tolerance < 1.0:
@@ -143,6 +150,23 @@ class TableSettings:
         if len(items) != count:
             raise ValueError(f"{name} must be {count} integers, got {value!r}")
         return tuple(_check_int(f"{name}[{i}]", v, 2, 4096) for i, v in enumerate(items))
+
+    @staticmethod
+    def _check_sun_cos_range(value):
+        message = f"sun_cos_range must be two cosines -1 <= low < high <= 1, high - low >= 1e-3, got {value!r}"
+        try:
+            low, high = (float(v) for v in value)
+        except (TypeError, ValueError):
+            raise ValueError(message) from None
+        if not -1.0 <= low < high <= 1.0 or high - low < 1e-3:
+            raise ValueError(message)
+        return low, high
+
+    @property
+    def sun_w_range(self) -> tuple:
+        """(w_low, w_high): the texture coordinates the sun axis spans (the kernels' ``sun_range``)."""
+        from .mapping import sun_w_range
+        return sun_w_range(self.mapping, self.sun_cos_range)
 
     @property
     def scatter_settings(self) -> "TableSettings":

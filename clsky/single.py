@@ -84,7 +84,8 @@ class SingleScatteringEngine(_cl.Engine):
             slab = min(SLAB_LAYERS, depth - z_offset)
             event = kernel(self.queue, (-(-width // VECTOR_WIDTH), height, slab), None, atmosphere_d,
                            np.int32(width), np.int32(height), np.int32(depth), np.int32(z_offset),
-                           np.int32(MAPPINGS[settings.mapping]), sun_table_d.data, np.int32(tw),
+                           np.int32(MAPPINGS[settings.mapping]), self.real2(settings.sun_w_range),
+                           sun_table_d.data, np.int32(tw),
                            np.int32(th), table_d.data)
             self._record("single_scattering", event)
             if progress is not None:

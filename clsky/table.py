@@ -35,7 +35,7 @@ from .settings import TableSettings
 __all__ = ["ScatteringTable", "TableFormatError", "FORMAT_VERSION", "BACKENDS", "atomic_write",
            "CHANNEL_NAMES"]
 
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3   # 3: settings carry sun_cos_range (the sun axis' sub-range)
 BACKENDS = ("opencl", "numpy")
 _MULTIPLE_NAMES = ("multiple_r", "multiple_g", "multiple_b")
 CHANNEL_NAMES = {6: ("rayleigh_r", "rayleigh_g", "rayleigh_b", "mie_r", "mie_g", "mie_b"),
@@ -200,14 +200,14 @@ class ScatteringTable:
             from . import reference
 
             return reference.lookup(self.atmosphere, self.data, altitude, cos_view, cos_sun, cos_scatter,
-                                    self.settings.mapping)
+                                    self.settings.mapping, self.settings.sun_cos_range)
         if backend != "opencl":
             raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
         from .lookup import TableLookupEngine
 
         engine = engine or TableLookupEngine(dtype=self.settings.dtype)
         return engine.radiance(self.atmosphere, self.data, altitude, cos_view, cos_sun, cos_scatter,
-                               self.settings.mapping)
+                               self.settings.mapping, self.settings.sun_cos_range)
 
     # Files ----------------------------------------------------------------------------------------
     def save(self, path, overwrite=False):
@@ -286,8 +286,10 @@ class ScatteringTable:
                 "nonlinear": {"u": "sqrt(h/Ha)", "v": "0.5*(1+sign(cos_view)*|cos_view|^(1/3))",
                               "w": "0.5*(1+sign(cos_sun)*|cos_sun|^(1/3))"},
                 "linear": {"u": "h/Ha", "v": "0.5*(cos_view+1)", "w": "0.5*(cos_sun+1)"},
-                "nodes": "u = x/(W-1), v = y/(H-1), w = z/(D-1)",
+                "nodes": "u = x/(W-1), v = y/(H-1), w = w_low + (w_high - w_low) * z/(D-1)",
             },
+            "sun_cos_range": list(self.settings.sun_cos_range),
+            "sun_w_range": {"w_low": self.settings.sun_w_range[0], "w_high": self.settings.sun_w_range[1]},
             "radiance": ("I = I_I * (F_R(cos theta) * Ibar_R + F_M(cos theta) * Ibar_M [+ multiple]), "
                          "all channels interpolated trilinearly in (u, v, w); the multiple_* channels "
                          "(physical mode) already include their phase"),

@@ -38,13 +38,13 @@ inline real3 radiance_of_channels(__constant const atmosphere_t *atm, const real
 /* Radiance r, g, b at (h, mu_v, mu_s, nu) for an observer inside the atmosphere (see the header). */
 inline real3 table_radiance(__constant const atmosphere_t *atm, __global const real *table, const int width,
                             const int height, const int depth, const int channels, const int mapping,
-                            const real h, const real mu_v, const real mu_s, const real nu)
+                            const real2 sun_range, const real h, const real mu_v, const real mu_s, const real nu)
 {
     real ibar[9] = {R(0.0), R(0.0), R(0.0), R(0.0), R(0.0), R(0.0), R(0.0), R(0.0), R(0.0)};
     const real ha = atm->top_radius - atm->planet_radius;
     const real fx = MAPPING_U(h, mapping, ha) * (real)(width - 1);
     const real fy = MAPPING_V(mu_v, mapping) * (real)(height - 1);
-    const real fz = MAPPING_V(mu_s, mapping) * (real)(depth - 1);
+    const real fz = MAPPING_SUN_T(mu_s, mapping, sun_range) * (real)(depth - 1);
     const int x0 = lower_node(fx, width), y0 = lower_node(fy, height), z0 = lower_node(fz, depth);
     const real ax = fx - (real)x0, ay = fy - (real)y0, az = fz - (real)z0;
     for (int corner = 0; corner < 8; ++corner) {
@@ -60,7 +60,7 @@ inline real3 table_radiance(__constant const atmosphere_t *atm, __global const r
 #if VECTOR_WIDTH == 1   /* render.cl includes this file for table_radiance, with VECTOR_WIDTH 8 */
 __kernel void lookup(__constant const atmosphere_t *atm, __global const real *table,
                      const int width, const int height, const int depth, const int channels,
-                     const int mapping, const int n,
+                     const int mapping, const real2 sun_range, const int n,
                      __global const real *altitude, __global const real *cos_view,
                      __global const real *cos_sun, __global const real *cos_scatter,
                      __global real *radiance)
@@ -71,7 +71,8 @@ __kernel void lookup(__constant const atmosphere_t *atm, __global const real *ta
     real h = altitude[i], mu_v = cos_view[i], mu_s = cos_sun[i];
     const real nu = clamp(cos_scatter[i], R(-1.0), R(1.0));
     const int inside = enter_atmosphere(atm->planet_radius, atm->top_radius, &h, &mu_v, &mu_s, nu);
-    const real3 value = inside ? table_radiance(atm, table, width, height, depth, channels, mapping, h, mu_v, mu_s, nu)
+    const real3 value = inside ? table_radiance(atm, table, width, height, depth, channels, mapping, sun_range, h, mu_v,
+                                                 mu_s, nu)
                                : (real3)(R(0.0));
     radiance[3 * i] = value.x;
     radiance[3 * i + 1] = value.y;

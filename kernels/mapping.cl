@@ -16,6 +16,11 @@
 /* texture coordinate u of altitude h [m], clamped to [0, 1] */
 #define MAPPING_U(h, mapping, ha) \
     ((mapping) ? sqrt(clamp((h) / (ha), R(0.0), R(1.0))) : clamp((h) / (ha), R(0.0), R(1.0)))
+/* The sun axis may cover a sub-range of w only (a scene's sun path, clsky/planner.py): its D nodes
+ * span w in [range.x, range.y] (real2; (0, 1) for the whole axis). */
+/* position in [0, 1] along that sub-range of the sun cosine c, clamped */
+#define MAPPING_SUN_T(c, mapping, range) \
+    clamp((MAPPING_V(c, mapping) - (range).x) / ((range).y - (range).x), R(0.0), R(1.0))
 /* texture coordinate v (or w) of cosine c, clamped to [0, 1] */
 #define MAPPING_V(c, mapping) \
     (R(0.5) * (R(1.0) + ((mapping) ? cbrt(clamp((c), R(-1.0), R(1.0))) : clamp((c), R(-1.0), R(1.0)))))

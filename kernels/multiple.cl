@@ -71,7 +71,7 @@ __kernel void gather(__global const real *matrices, const int species_stride, co
  * Rayleigh + Mie per wavelength into channels 0-2 and again 3-5 (the next gather's input).
  * Requires view_ray.cl (and so N_VIEW). */
 __kernel void scatter(__constant const atmosphere_t *atm, const int width, const int height,
-                      const int depth, const int mapping, const int combine_species,
+                      const int depth, const int mapping, const real2 sun_range, const int combine_species,
                       __global const real *gathered, __global real *table)
 {
     const int gx = get_global_id(0);
@@ -82,10 +82,10 @@ __kernel void scatter(__constant const atmosphere_t *atm, const int width, const
 
     realv h0;
     real mu_v, mu_s, nu;
-    table_cell(atm, gx, y, z, width, height, depth, mapping, &h0, &mu_v, &mu_s, &nu);
+    table_cell(atm, gx, y, z, width, height, depth, mapping, sun_range, &h0, &mu_v, &mu_s, &nu);
     real8 sum[VECTOR_WIDTH];
     integrate_gathered(atm, h0, (realv)(mu_v), (realv)(mu_s), (realv)(nu), gathered, width, height, depth,
-                       mapping, sum, 0, 0, 0, 0);
+                       mapping, sun_range, sum, 0, 0, 0, 0);
 
     const real4 beta = atm->beta_rayleigh;
     const real scale = R(1.0) / (R(4.0) * PI_REAL);

@@ -82,7 +82,7 @@ inline void store_radiance(__global real *out, const int i, const real3 value)
  * point) looks up the full table. */
 __kernel void render_table(__constant const atmosphere_t *atm, __global const real *table, const int width,
                            const int height, const int depth, const int channels, const int mapping,
-                           __global const real *slice, const int use_slice,
+                           const real2 sun_range, __global const real *slice, const int use_slice,
                            const int n, __global const real *directions, __global const uchar *valid,
                            const real4 sun, const real altitude,
                            const real4 sun_radiance, const real cos_sun_radius, __global real *out)
@@ -105,8 +105,8 @@ __kernel void render_table(__constant const atmosphere_t *atm, __global const re
                 ibar[c] = (R(1.0) - ay) * slice[y0 * channels + c] + ay * slice[(y0 + 1) * channels + c];
             value += radiance_of_channels(atm, ibar, channels, LANE(nu, k));
         } else if (MASK_LANE(inside, k)) {
-            value += table_radiance(atm, table, width, height, depth, channels, mapping, LANE(h, k), LANE(mu_v, k),
-                                    LANE(mu_s, k), LANE(nu, k));
+            value += table_radiance(atm, table, width, height, depth, channels, mapping, sun_range, LANE(h, k),
+                                    LANE(mu_v, k), LANE(mu_s, k), LANE(nu, k));
         }
         store_radiance(out, first + k, valid[first + k] ? value : (real3)(R(0.0)));
     }
@@ -115,7 +115,8 @@ __kernel void render_table(__constant const atmosphere_t *atm, __global const re
 /* has_multiple: add the higher orders from `gathered` (padded (D, H, W, 8) on the table's grid);
  * physical: 1 for the physical mode (phase inside G), 0 for atmosphere-plus (F_s(nu) applied here). */
 __kernel void render_raymarch(__constant const atmosphere_t *atm, __global const real *gathered, const int width,
-                              const int height, const int depth, const int mapping, const int has_multiple,
+                              const int height, const int depth, const int mapping, const real2 sun_range,
+                              const int has_multiple,
                               const int physical, __global const real *sun_table, const int tw, const int th,
                               const int n, __global const real *directions, __global const uchar *valid,
                               const real4 sun, const real altitude,
@@ -131,8 +132,8 @@ __kernel void render_raymarch(__constant const atmosphere_t *atm, __global const
     realv single[6];
     real8 multiple[VECTOR_WIDTH];
     if (has_multiple)   /* one pass along the ray for both */
-        integrate_gathered(atm, h, mu_v, mu_s, nu, gathered, width, height, depth, mapping, multiple, sun_table,
-                           tw, th, single);
+        integrate_gathered(atm, h, mu_v, mu_s, nu, gathered, width, height, depth, mapping, sun_range, multiple,
+                           sun_table, tw, th, single);
     else
         integrate_single(atm, h, mu_v, mu_s, nu, sun_table, tw, th, single);
 

@@ -23,7 +23,7 @@
  * view_ray.cl.
  */
 __kernel void single_scattering(__constant const atmosphere_t *atm, const int width, const int height,
-                                const int depth, const int z_offset, const int mapping,
+                                const int depth, const int z_offset, const int mapping, const real2 sun_range,
                                 __global const real *sun_table, const int tw, const int th,
                                 __global real *table)
 {
@@ -35,7 +35,7 @@ __kernel void single_scattering(__constant const atmosphere_t *atm, const int wi
 
     realv h0;
     real mu_v, mu_s, nu;
-    table_cell(atm, gx, y, z, width, height, depth, mapping, &h0, &mu_v, &mu_s, &nu);
+    table_cell(atm, gx, y, z, width, height, depth, mapping, sun_range, &h0, &mu_v, &mu_s, &nu);
     realv sum[6];
     integrate_single(atm, h0, (realv)(mu_v), (realv)(mu_s), (realv)(nu), sun_table, tw, th, sum);
 

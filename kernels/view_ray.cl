@@ -27,16 +27,17 @@ inline real view_node(const int i)
 #endif
 }
 
-/* The cells x = VECTOR_WIDTH gx + lane of row (y, z) of a table (W, H, D, mapping): altitudes h0,
- * view and sun cosines, and the canonical frame's scattering cosine nu = cos(phi - delta). */
+/* The cells x = VECTOR_WIDTH gx + lane of row (y, z) of a table (W, H, D, mapping, sun nodes over
+ * w in sun_range): altitudes h0, view and sun cosines, and the canonical frame's scattering cosine
+ * nu = cos(phi - delta). */
 inline void table_cell(__constant const atmosphere_t *atm, const int gx, const int y, const int z, const int width,
-                       const int height, const int depth, const int mapping, realv *h0, real *mu_v, real *mu_s,
-                       real *nu)
+                       const int height, const int depth, const int mapping, const real2 sun_range, realv *h0,
+                       real *mu_v, real *mu_s, real *nu)
 {
     const real ha = atm->top_radius - atm->planet_radius;
     const realv u = fmin((real)(gx * VECTOR_WIDTH) + LANE_INDEX, (real)(width - 1)) / (real)(width - 1);
     const real v = (real)y / (real)(height - 1);
-    const real w = (real)z / (real)(depth - 1);
+    const real w = sun_range.x + (sun_range.y - sun_range.x) * ((real)z / (real)(depth - 1));
     *h0 = MAPPING_ALTITUDE(u, mapping, ha);
     *mu_v = MAPPING_COS(v, mapping);
     *mu_s = MAPPING_COS(w, mapping);
@@ -144,7 +145,7 @@ inline real8 lookup8(__global const real *table, const int width, const int heig
 
 /* In-scattering of a gathered table along the ray, per lane k:
  *   sum[k].s012 = Integral rho_R T(P, Pa) Gbar_R dt (r, g, b), sum[k].s345 the same with rho_M, Gbar_M
- * with Gbar (padded (D, H, W, 8), the table's grid and mapping) looked up trilinearly at each node's
+ * with Gbar (padded (D, H, W, 8), the table's grid, mapping and sun_range) looked up trilinearly at each node's
  * altitude, view and sun cosines. The trapezoid sum_i (f_(i-1) + f_i) h_i / 2 is accumulated as
  * sum_i f_i (h_i + h_(i+1)) / 2, so that each lane's 6 channels are one real8 FMA per node.
  * With single != 0 (the per-pixel ray march), the same pass also accumulates single scattering into
@@ -153,7 +154,7 @@ inline real8 lookup8(__global const real *table, const int width, const int heig
 inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h0, const realv mu_v,
                                const realv mu_s, const realv nu, __global const real *gathered,
                                const int width, const int height, const int depth, const int mapping,
-                               real8 *sum, __global const real *sun_table, const int tw, const int th,
+                               const real2 sun_range, real8 *sum, __global const real *sun_table, const int tw, const int th,
                                realv *single)
 {
     const real rp = atm->planet_radius;
@@ -207,7 +208,7 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
         }
         const realv fx = MAPPING_U(h, mapping, ha) * (real)(width - 1);
         const realv fy = MAPPING_V(mu_view_here, mapping) * (real)(height - 1);
-        const realv fz = MAPPING_V(mu_sun_here, mapping) * (real)(depth - 1);
+        const realv fz = MAPPING_SUN_T(mu_sun_here, mapping, sun_range) * (real)(depth - 1);
         for (int k = 0; k < VECTOR_WIDTH; ++k) {
             const real8 factor = (real8)(LANE(fr0, k), LANE(fr1, k), LANE(fr2, k), LANE(fm0, k), LANE(fm1, k),
                                          LANE(fm2, k), R(0.0), R(0.0));

@@ -368,6 +368,14 @@ def test_table_settings_defaults():
     ("dtype", "int32", "dtype"),
     ("dtype", "double-ish", "dtype"),
     ("dtype", np.complex128, "dtype"),
+    ("sun_cos_range", (0.5, 0.5), "sun_cos_range"),          # empty
+    ("sun_cos_range", (0.5, -0.5), "sun_cos_range"),         # reversed
+    ("sun_cos_range", (-1.5, 0.5), "sun_cos_range"),         # beyond a cosine's range
+    ("sun_cos_range", (0.0, 0.0005), "sun_cos_range"),       # narrower than 1e-3
+    ("sun_cos_range", (float("nan"), 0.5), "sun_cos_range"),
+    ("sun_cos_range", (0.1,), "sun_cos_range"),
+    ("sun_cos_range", "ab", "sun_cos_range"),
+    ("sun_cos_range", None, "sun_cos_range"),
 ])
 def test_invalid_table_settings_raise_naming_the_field(field, value, named):
     with raises_naming(named):
@@ -390,10 +398,12 @@ def test_table_settings_edge_sizes_are_accepted():
     assert TableSettings(size=np.array([4, 5, 6])).size == (4, 5, 6)
     assert type(TableSettings(size=np.array([4, 5, 6])).size[0]) is int
     assert TableSettings(view_steps=1, sun_steps=4096).sun_steps == 4096
+    assert TableSettings(sun_cos_range=np.array([-1, 1])).sun_cos_range == (-1.0, 1.0)
+    assert TableSettings(sun_cos_range=(0.2, 0.201)).sun_w_range[1] > TableSettings(sun_cos_range=(0.2, 0.201)).sun_w_range[0]
 
 
 def test_table_settings_round_trip_and_immutability():
-    settings = TableSettings(size=(9, 33, 7), sampling="keller_bohn", dtype="float32")
+    settings = TableSettings(size=(9, 33, 7), sampling="keller_bohn", dtype="float32", sun_cos_range=(-0.3, 0.5))
     data = settings.to_dict()
     assert json.loads(json.dumps(data)) == data
     assert TableSettings.from_dict(data) == settings

@@ -35,7 +35,11 @@ VARIANTS = {
     "physical": ("physical", "physical", "auto"),
     "atmosphere-plus": ("atmosphere-plus", "atmosphere-plus", "auto"),
     "single-only": ("physical", "physical", 1),         # orders=1: no gathered table
+    "sun-range": ("physical", "physical", "auto"),      # the sun axis on SUN_COS_RANGE only
 }
+#: The sun-axis sub-range of the "sun-range" variant: it holds every sun of SUN_ZENITHS (cos 0.87, 0.017,
+#: -0.087); the ray march's local sun angles and the entry points seen from space leave it (clamped).
+SUN_COS_RANGE = (-0.35, 0.9)
 METHODS = ("render_table", "render_raymarch")
 ALTITUDES = (0.0, 3000.0, 150e3)                        # ground, mountain, space (above Ha = 100 km)
 SUN_ZENITHS = (30.0, 89.0, 95.0)                        # high, near the horizon, twilight
@@ -54,7 +58,8 @@ def renderer(cl_context):
         key = (variant, dtype, tuple(size), atmosphere)
         if key not in cache:
             name, mode, orders = VARIANTS[variant]
-            settings = SMALL.replace(size=size, mode=mode, orders=orders, dtype=dtype)
+            settings = SMALL.replace(size=size, mode=mode, orders=orders, dtype=dtype,
+                                     sun_cos_range=SUN_COS_RANGE if variant == "sun-range" else (-1.0, 1.0))
             table = ScatteringTable.build(atmosphere or name, settings, ctx=cl_context)
             cache[key] = SkyRenderer(table, RAY.replace(dtype=dtype), ctx=cl_context)
         return cache[key]
@@ -93,7 +98,7 @@ def twin(method, table, directions, sun, altitude):
     disc = sun_disc_radiance(table.atmosphere, sun, altitude)
     if method == "render_table":
         return reference.render_table(table.atmosphere, table.data, table.settings.mapping, directions, sun,
-                                      altitude, disc, COS_SUN_RADIUS)
+                                      altitude, disc, COS_SUN_RADIUS, table.settings.sun_cos_range)
     return reference.render_raymarch(table.atmosphere, RAY, directions, sun, altitude, disc, COS_SUN_RADIUS,
                                      table.gathered, table.settings, physical=(table.settings.mode == "physical"))
 
@@ -351,6 +356,16 @@ def test_invalid_inputs_raise_value_error_naming_the_parameter(renderer, case, m
     arguments.update(changes)
     with pytest.raises(ValueError, match=parameter):
         getattr(renderer("single-only"), method)(**arguments)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_sun_outside_the_tables_sun_range_is_refused(renderer, method):
+    """A table planned for a sun path (SUN_COS_RANGE = [-0.35, 0.9]) refuses a higher sun (cos 0.95)
+    rather than render it with the light of the range's end."""
+    sky_renderer = renderer("sun-range")
+    sky_renderer.render_table(GOOD_DIRECTIONS, sun_direction(30.0, SUN_AZIMUTH))      # inside: fine
+    with pytest.raises(ValueError, match="sun_direction.*sun_cos_range"):
+        getattr(sky_renderer, method)(GOOD_DIRECTIONS, sun_direction(18.0, SUN_AZIMUTH))
 
 
 def test_prepare_rejects_non_unit_directions(renderer):

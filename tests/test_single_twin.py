@@ -28,6 +28,8 @@ SETTINGS_VARIANTS = {
     "keller_bohn_table_few_steps": SMALL.replace(sampling="keller_bohn", sun_transmittance="table",
                                                  view_steps=5, sun_steps=4, transmittance_size=(16, 33)),
     "single_step": SMALL.replace(view_steps=1, sun_steps=1, size=(8, 17, 5)),
+    # a scene's sub-range of the sun axis (clsky/planner.py): nodes from 69.5 deg to 110.5 deg zenith
+    "sun_range": SMALL.replace(sun_cos_range=(-0.35, 0.35)),
 }
 
 
