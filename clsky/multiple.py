@@ -136,9 +136,10 @@ def gather_matrix(atmosphere: AtmosphereParameters, settings: TableSettings, spe
 
 
 def _quadrature_key(settings: TableSettings) -> TableSettings:
-    """The settings the gather matrices depend on (grid, mapping, quadrature), others at defaults."""
+    """The settings the gather matrices depend on (grid, mapping, sun range, quadrature), others at
+    defaults."""
     return TableSettings(size=settings.size, mapping=settings.mapping, gather_theta_steps=settings.gather_theta_steps,
-                         gather_phi_steps=settings.gather_phi_steps)
+                         gather_phi_steps=settings.gather_phi_steps, sun_cos_range=settings.sun_cos_range)
 
 
 def gather_matrices(atmosphere, settings):

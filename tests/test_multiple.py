@@ -394,16 +394,25 @@ def literal_first_gather(phase_view, phase_sun, mu_view, mu_sun, column, mapping
     return total / phi_steps
 
 
+def sun_cosines(depth, sun_cos_range):
+    """Zenith cosines of the sun nodes of a non-linear table whose sun axis spans sun_cos_range: evenly
+    spaced in w = (1 + cbrt(c)) / 2 between the ends (physics.md mapping; clsky/mapping.py)."""
+    w_low, w_high = (0.5 * (1.0 + np.cbrt(c)) for c in sun_cos_range)
+    t = 2.0 * (w_low + (w_high - w_low) * np.arange(depth) / (depth - 1)) - 1.0
+    return t**3
+
+
+@pytest.mark.parametrize("sun_cos_range", [(-1.0, 1.0), (-0.3, 0.6)])
 @pytest.mark.parametrize("preset_name", PRESETS)
-def test_first_gather_matrices_equal_literal_azimuth_average(preset_name):
+def test_first_gather_matrices_equal_literal_azimuth_average(preset_name, sun_cos_range):
     """M_{s,s'}(z) @ Ibar equals the literal 2D trapezoid with both phases at their true angles,
     averaged over the azimuth of V, each phase's discrete integral rescaled to 4 pi x its mean (as the
     gather does). With psi on the Phi grid the discrete average separates exactly into K_s K_s' / (2 pi)
     (a periodic convolution), so only the summation order differs: rtol 1e-12."""
     atmosphere = preset(preset_name)
-    settings = TableSettings(size=(2, 17, 9), gather_theta_steps=48, gather_phi_steps=20)
+    settings = TableSettings(size=(2, 17, 9), gather_theta_steps=48, gather_phi_steps=20, sun_cos_range=sun_cos_range)
     first = first_gather_matrices(atmosphere, settings)
-    mu_view, mu_sun = view_cosines(17, "nonlinear"), view_cosines(9, "nonlinear")
+    mu_view, mu_sun = view_cosines(17, "nonlinear"), sun_cosines(9, sun_cos_range)
     column = np.random.default_rng(3).uniform(0.1, 2.0, 17)
     ones = np.ones(17)
     for (s, s2), matrices in first.items():
@@ -414,6 +423,28 @@ def test_first_gather_matrices_equal_literal_azimuth_average(preset_name):
             scale = (4.0 * math.pi * mean_view / literal_gather(phase_view, mu_view[i], ones, "nonlinear", 48, 20)
                      * 4.0 * math.pi * mean_sun / literal_gather(phase_sun, mu_sun[z], ones, "nonlinear", 48, 20))
             assert matrices[z, i] @ column == pytest.approx(literal * scale, rel=1e-12, abs=0), (s, s2, z, i)
+
+
+def test_sun_sub_range_table_matches_the_whole_axis():
+    """A table whose sun axis covers 34.9 to 90 deg only (24 nodes) against one over the whole axis with
+    the same node spacing there (256 nodes): looked up at a 45 deg sun, single scattering and every
+    order agree to the interpolation error between their different nodes (measured: 1.2e-6 and 1.2e-5,
+    95th percentile). This is the test that caught the first gather's sun nodes taken from the
+    whole axis (2 % too bright)."""
+    base = TableSettings(mode="physical", size=(16, 64, 256))
+    sub_range = dict(size=(16, 64, 24), sun_cos_range=(math.sin(math.radians(34.9)), 1.0))
+    rng = np.random.default_rng(0)
+    n = 2000
+    altitude, cos_view = rng.uniform(0.0, 2e4, n), rng.uniform(-0.2, 1.0, n)
+    cos_sun = np.full(n, math.sin(math.radians(45.0)))
+    cos_scatter = np.clip(cos_view * cos_sun + np.sqrt((1 - cos_view**2) * (1 - cos_sun**2))
+                          * np.cos(rng.uniform(0.0, np.pi, n)), -1.0, 1.0)
+    for orders in (1, "auto"):
+        whole = ScatteringTable.build("physical", base.replace(orders=orders))
+        part = ScatteringTable.build("physical", base.replace(orders=orders, **sub_range))
+        ratio = part.radiance(altitude, cos_view, cos_sun, cos_scatter) / whole.radiance(altitude, cos_view, cos_sun,
+                                                                                        cos_scatter)
+        assert np.percentile(np.abs(ratio - 1.0), 95) < 1e-4, orders
 
 
 def test_first_gather_reciprocity():
