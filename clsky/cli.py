@@ -66,36 +66,47 @@ def _orders(text):
 
 
 def _add_table_arguments(parser):
+    """The table's options. Those that set a TableSettings field default to None: unset, they take the
+    value of the --quality level (or of TableSettings)."""
     from .atmosphere import PRESETS
+    from .quality import QUALITY_LEVELS
     from .settings import MAPPINGS, MIE_LAYOUTS, SAMPLINGS, SCATTERING_MODES, SUN_TRANSMITTANCE_METHODS
 
     physics = parser.add_argument_group("atmosphere")
     physics.add_argument("--preset", default="atmosphere-plus", choices=sorted(PRESETS),
                          help="atmosphere preset (default: %(default)s)")
     grid = parser.add_argument_group("table")
-    grid.add_argument("--size", nargs=3, type=int, metavar=("W", "H", "D"), default=[32, 256, 32],
+    grid.add_argument("--quality", choices=list(QUALITY_LEVELS),
+                      help="start from a named quality level's settings (clsky/quality.py); the options "
+                           "below override them")
+    grid.add_argument("--size", nargs=3, type=int, metavar=("W", "H", "D"),
                       help="nodes along altitude, view zenith, sun zenith (default: 32 256 32)")
-    grid.add_argument("--mapping", default="nonlinear", choices=sorted(MAPPINGS))
-    grid.add_argument("--mie-layout", default="per-wavelength", choices=sorted(MIE_LAYOUTS))
+    grid.add_argument("--sun-elevations", nargs=2, type=float, metavar=("LOW", "HIGH"),
+                      help="plan the sun axis for sun elevations LOW to HIGH [deg] only, with the margins "
+                           "that curvature and higher orders need (clsky/planner.py); D keeps the quality "
+                           "level's node spacing unless --size sets it")
+    grid.add_argument("--mapping", choices=sorted(MAPPINGS))
+    grid.add_argument("--mie-layout", choices=sorted(MIE_LAYOUTS))
     orders = parser.add_argument_group("scattering orders")
-    orders.add_argument("--orders", type=_orders, default="auto",
-                        help="K: compute orders 1..K (1 = single scattering); auto: until converged (default)")
+    orders.add_argument("--orders", type=_orders, help="K: compute orders 1..K (1 = single scattering); "
+                                                       "auto: until converged (default)")
     orders.add_argument("--mode", default="atmosphere-plus", choices=list(SCATTERING_MODES),
                         help="scheme of the higher orders (default: %(default)s)")
-    orders.add_argument("--order-tolerance", type=float, default=1e-4,
-                        help="auto stops when an order adds less than this (default: %(default)g)")
-    orders.add_argument("--max-orders", type=int, default=100, help="most orders auto computes (default: 100)")
-    orders.add_argument("--gather-steps", nargs=2, type=int, metavar=("THETA", "PHI"), default=[256, 128],
+    orders.add_argument("--order-tolerance", type=float, help="auto stops when an order adds less than this "
+                                                              "(default: 1e-4)")
+    orders.add_argument("--max-orders", type=int, help="most orders auto computes (default: 100)")
+    orders.add_argument("--gather-steps", nargs=2, type=int, metavar=("THETA", "PHI"),
                         help="trapezoid steps of the gather's sphere integral (default: 256 128)")
     numerics = parser.add_argument_group("numerics")
-    numerics.add_argument("--dtype", default="float64", choices=["float64", "float32"])
-    numerics.add_argument("--view-steps", type=int, default=30, help="trapezoid steps per view ray")
-    numerics.add_argument("--sun-steps", type=int, default=30, help="trapezoid steps per sun ray")
-    numerics.add_argument("--sampling", default="keller_bohn", choices=list(SAMPLINGS))
-    numerics.add_argument("--sun-transmittance", default="table", choices=list(SUN_TRANSMITTANCE_METHODS))
-    numerics.add_argument("--multiple-view-steps", type=int, default=20,
+    numerics.add_argument("--dtype", choices=["float64", "float32"])
+    numerics.add_argument("--view-steps", type=int, help="trapezoid steps per view ray (default: 30)")
+    numerics.add_argument("--sun-steps", type=int, help="trapezoid steps per sun ray (default: 30)")
+    numerics.add_argument("--sampling", choices=list(SAMPLINGS))
+    numerics.add_argument("--sun-transmittance", choices=list(SUN_TRANSMITTANCE_METHODS))
+    numerics.add_argument("--multiple-view-steps", type=int,
                           help="trapezoid steps per view ray for the orders k >= 2 (default: 20)")
-    numerics.add_argument("--transmittance-size", nargs=2, type=int, metavar=("TW", "TH"), default=[64, 256])
+    numerics.add_argument("--transmittance-size", nargs=2, type=int, metavar=("TW", "TH"),
+                          help="2D transmittance table (default: 64 256)")
     numerics.add_argument("--backend", default="opencl", choices=["opencl", "numpy"])
     numerics.add_argument("--fast-math", action="store_true", help="build kernels with -cl-fast-relaxed-math")
     output = parser.add_argument_group("output")
@@ -103,6 +114,42 @@ def _add_table_arguments(parser):
     output.add_argument("--raw", metavar="NAME", help="also export NAME.bin (float32) + NAME.json for GPU engines")
     output.add_argument("--force", action="store_true", help="overwrite existing output files")
     output.add_argument("--progress", default="leave", choices=["display", "leave", "none"])
+
+
+#: TableSettings field -> the table option that sets it.
+SETTING_OPTIONS = {"size": "size", "mapping": "mapping", "view_steps": "view_steps", "sun_steps": "sun_steps",
+                   "sampling": "sampling", "sun_transmittance": "sun_transmittance",
+                   "transmittance_size": "transmittance_size", "mie_layout": "mie_layout", "dtype": "dtype",
+                   "orders": "orders", "order_tolerance": "order_tolerance", "max_orders": "max_orders",
+                   "multiple_view_steps": "multiple_view_steps"}
+
+
+def table_settings(args, atmosphere):
+    """TableSettings from the table options: the --quality level's (or the defaults), overridden by the
+    options given, with the sun axis planned for --sun-elevations."""
+    from .planner import Scene, sun_axis
+    from .quality import QUALITY_LEVELS, quality_level
+    from .settings import TableSettings
+
+    level = quality_level(args.quality) if args.quality else None
+    base = level.table if level else TableSettings()
+    changes = {field: getattr(args, option) for field, option in SETTING_OPTIONS.items()
+               if getattr(args, option) is not None}
+    changes = {k: tuple(v) if isinstance(v, list) else v for k, v in changes.items()}
+    if args.gather_steps is not None:
+        changes.update(gather_theta_steps=args.gather_steps[0], gather_phi_steps=args.gather_steps[1])
+    settings = base.replace(mode=args.mode, **changes)
+    if args.sun_elevations is not None:
+        try:
+            scene = Scene(sun_elevations_deg=tuple(args.sun_elevations))
+        except ValueError:
+            raise UsageError(f"--sun-elevations must be LOW <= HIGH in [-90, 90] degrees, "
+                             f"got {args.sun_elevations}") from None
+        cos_range, nodes, _, _ = sun_axis(atmosphere, scene, level or QUALITY_LEVELS["default"],
+                                          settings.mapping, orders=settings.orders != 1)
+        depth = settings.size[2] if args.size is not None else nodes
+        settings = settings.replace(size=settings.size[:2] + (depth,), sun_cos_range=cos_range)
+    return settings
 
 
 def build_parser(extensions=()):
@@ -142,17 +189,9 @@ def run_table(args):
     import pathlib
 
     from .atmosphere import preset
-    from .settings import TableSettings
     from .table import ScatteringTable
 
-    settings = TableSettings(size=tuple(args.size), mapping=args.mapping, view_steps=args.view_steps,
-                             sun_steps=args.sun_steps, sampling=args.sampling,
-                             sun_transmittance=args.sun_transmittance,
-                             transmittance_size=tuple(args.transmittance_size), mie_layout=args.mie_layout,
-                             dtype=args.dtype, mode=args.mode, orders=args.orders,
-                             order_tolerance=args.order_tolerance, max_orders=args.max_orders,
-                             gather_theta_steps=args.gather_steps[0], gather_phi_steps=args.gather_steps[1],
-                             multiple_view_steps=args.multiple_view_steps)
+    settings = table_settings(args, preset(args.preset))
     output = pathlib.Path(args.output)
     if output.suffix != ".npz":
         raise UsageError(f"--output must end in .npz, got {args.output!r}")

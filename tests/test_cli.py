@@ -33,6 +33,23 @@ def test_table_writes_a_loadable_file_and_raw_export(tmp_path):
     assert np.isfinite(table.data).all() and (table.data >= 0).all()
 
 
+def test_table_with_quality_and_sun_elevations(tmp_path):
+    """--quality starts from a level's settings (draft: 16 x 128, 15 view steps), --sun-elevations plans
+    the sun axis for that path (10 to 30 deg, plus the margins of a ray march from the ground: gamma =
+    acos(Rp / Ra) = 10.09 deg below, 3 gamma above) at the level's node spacing; an explicit option
+    still wins."""
+    result = clsky("table", "--preset", "physical", "--mode", "physical", "--quality", "draft", "--sun-elevations",
+                   "10", "30", "--sun-steps", "12", "-o", "day.npz", "--progress", "none", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    settings = ScatteringTable.load(tmp_path / "day.npz").settings
+    assert settings.size[:2] == (16, 128) and settings.view_steps == 15 and settings.sun_steps == 12
+    low, high = settings.sun_cos_range
+    gamma = np.degrees(np.arccos(6371.0 / 6471.0))
+    assert low == pytest.approx(np.sin(np.radians(10.0 - gamma)), abs=1e-12)
+    assert high == pytest.approx(np.sin(np.radians(30.0 + 3 * gamma)), abs=1e-12)
+    assert settings.size[2] == 37          # w from 0.443 to 0.977 at 0.015 spacing; the whole axis takes 68
+
+
 def test_table_refuses_to_overwrite_without_force(tmp_path):
     (tmp_path / "sky.npz").write_bytes(b"precious")
     result = clsky("table", "--size", "8", "8", "4", "-o", "sky.npz", "--progress", "none", cwd=tmp_path)
@@ -52,6 +69,9 @@ def test_table_refuses_to_overwrite_without_force(tmp_path):
     (["-o", "sky.txt"], "--output"),
     (["-o", "missing/sky.npz"], "directory"),
     (["--transmittance-size", "1", "8"], "transmittance_size"),
+    (["--quality", "best"], "--quality"),
+    (["--sun-elevations", "30", "10"], "--sun-elevations"),
+    (["--sun-elevations", "-100", "10"], "--sun-elevations"),
 ])
 def test_bad_arguments_one_line_exit_2(tmp_path, args, named):
     result = clsky("table", "--progress", "none", *args, cwd=tmp_path)

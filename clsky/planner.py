@@ -1,0 +1,339 @@
+"""Compute only what a scene requires: from a scene description to the least table that serves it.
+
+A :class:`Scene` says what will be rendered: the sun elevations of its path, the observer's altitudes,
+the view elevations its cameras see, the light components wanted and an error budget. :func:`plan_scene`
+turns it into a :class:`Plan`: table settings, the ray march's quadrature, and each decision with its
+reason, printed by :meth:`Plan.describe` with the work saved against the full table of the same quality.
+
+What the plan decides, and why:
+
+* **Sun axis**: only the sun cosines the scene can reach, plus the margins that the curvature of the
+  Earth and the higher orders need (:func:`sun_margins`). Along a view ray the local zenith turns by
+  the central angle gamma between the ray's points; the sun's zenith angle there changes by up to gamma.
+  The ray march reads the higher orders at every point of its pixel rays (both ways: +- gamma_view, the
+  longest pixel ray's angle); the table's scatter reads them along its canonical rays, which run toward
+  the sun's azimuth, so toward a *higher* sun (up to + gamma_table, the longest ray through the
+  atmosphere: 2 acos(Rp / Ra), 20.1 deg for Ra - Rp = 100 km), except that a ray passing under the sun
+  sees it sink again, to no lower than 90 deg - gamma_table. The nodes keep the quality level's
+  spacing (:mod:`clsky.quality`), so a narrower range costs proportionally fewer nodes.
+* **Altitude and view axes** stay whole whatever the scene: the gather integrates the in-scatter over
+  every view direction, and every view ray crosses all altitudes up to the top. The plan reports the
+  part the scene itself reaches.
+* **Resolution and orders** come from the quality level the budget asks for
+  (:func:`clsky.quality.level_for_budget`).
+* **Higher orders** are dropped when a pilot (a small table on the planned sun range, ray-marched on a
+  coarse fisheye at the path's lowest, highest and horizon suns) shows that they add less than half the
+  budget, or when the scene does not want them.
+* **Mie** is dropped (its scattering set to 0, and the table's Mie channels with it) only when the
+  scene does not want it; an atmosphere without Mie has nothing to drop.
+* **Ray march**: the table lookup alone serves the scene only where its measured error
+  (:data:`LOOKUP_ERROR`) fits the budget at the path's lowest sun; otherwise frames need the ray march.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from .atmosphere import AtmosphereParameters, preset
+from .mapping import cos_to_v
+from .quality import QualityLevel, level_for_budget, quality_level
+from .settings import TableSettings
+
+__all__ = ["Scene", "Plan", "plan_scene", "sun_margins", "sun_axis", "LOOKUP_ERROR", "COMPONENTS"]
+
+#: Light components a scene may want.
+COMPONENTS = ("rayleigh", "mie", "multiple")
+
+#: Measured error of the table lookup (95th percentile, relative, default table, all-sky fisheye from
+#: the ground; README "Speed versus accuracy") by sun elevation [deg]: it grows toward the horizon,
+#: where the missing azimuth of the 3D table dominates, whatever the table's size.
+LOOKUP_ERROR = ((-4.0, 4.7), (1.0, 0.31), (8.0, 0.03), (45.0, 0.011))
+
+
+def _lookup_error(elevation_deg):
+    """LOOKUP_ERROR interpolated in log error; below its first elevation, its first value."""
+    elevations, errors = zip(*LOOKUP_ERROR)
+    return float(np.exp(np.interp(elevation_deg, elevations, np.log(errors))))
+
+
+def _check_range(name, value, low, high):
+    try:
+        a, b = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be two numbers (low, high) in [{low:g}, {high:g}], got {value!r}") from None
+    if not low <= a <= b <= high:
+        raise ValueError(f"{name} must be two numbers low <= high in [{low:g}, {high:g}], got {value!r}")
+    return a, b
+
+
+@dataclasses.dataclass(frozen=True)
+class Scene:
+    """What a scene will render.
+
+    Parameters
+    ----------
+    sun_elevations_deg : (low, high)
+        Lowest and highest sun elevation of the sun path [deg], in [-90, 90].
+    altitudes_m : (low, high)
+        Lowest and highest observer altitude [m], in [0, 1e8] (default the ground).
+    view_elevations_deg : (low, high)
+        Lowest and highest view elevation the cameras see [deg], in [-90, 90] (default an all-sky
+        fisheye: 0 to 90).
+    components : tuple of str
+        Wanted light: any of 'rayleigh', 'mie', 'multiple' (higher orders); 'rayleigh' is required.
+    error_budget : float
+        Relative error allowed in rendered frames, in (0, 1] (default 0.01: 1 %).
+    quality : str, optional
+        A named level (:data:`clsky.quality.QUALITY_LEVELS`) instead of the one the budget picks.
+    """
+
+    sun_elevations_deg: tuple
+    altitudes_m: tuple = (0.0, 0.0)
+    view_elevations_deg: tuple = (0.0, 90.0)
+    components: tuple = COMPONENTS
+    error_budget: float = 0.01
+    quality: str | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "sun_elevations_deg", _check_range("sun_elevations_deg", self.sun_elevations_deg,
+                                                                    -90.0, 90.0))
+        object.__setattr__(self, "altitudes_m", _check_range("altitudes_m", self.altitudes_m, 0.0, 1e8))
+        object.__setattr__(self, "view_elevations_deg",
+                           _check_range("view_elevations_deg", self.view_elevations_deg, -90.0, 90.0))
+        components = tuple(self.components) if not isinstance(self.components, str) else (self.components,)
+        if not components or any(c not in COMPONENTS for c in components) or "rayleigh" not in components:
+            raise ValueError(f"components must be a subset of {list(COMPONENTS)} that holds 'rayleigh', "
+                             f"got {self.components!r}")
+        object.__setattr__(self, "components", components)
+        level_for_budget(self.error_budget)                       # validates error_budget
+        if self.quality is not None:
+            quality_level(self.quality)                           # validates quality
+
+
+@dataclasses.dataclass(frozen=True)
+class Plan:
+    """The least work that serves a :class:`Scene` (see the module docstring).
+
+    Attributes
+    ----------
+    scene : Scene
+    level : QualityLevel
+        The quality the plan meets.
+    atmosphere : AtmosphereParameters
+        The atmosphere to build (Mie removed if the scene does not want it).
+    table : TableSettings
+        The table to build: the level's, on the planned sun range.
+    ray : TableSettings or None
+        The ray march's quadrature, or None when the table lookup alone meets the budget.
+    decisions : tuple of (topic, decision, reason)
+    """
+
+    scene: Scene
+    level: QualityLevel
+    atmosphere: AtmosphereParameters
+    table: TableSettings
+    ray: TableSettings | None
+    decisions: tuple
+
+    @property
+    def budget(self) -> float:
+        """The error budget the plan meets: the scene's, or its named quality level's."""
+        return self.level.budget if self.scene.quality else self.scene.error_budget
+
+    @property
+    def full_table(self) -> TableSettings:
+        """The table of the same quality over the whole sun axis (what the plan is measured against)."""
+        return self.level.table.replace(mode=self.table.mode)
+
+    @property
+    def work_fraction(self) -> float:
+        """Planned table cells over the full table's (the cost of every order scales with the cells)."""
+        return float(np.prod(self.table.size)) / float(np.prod(self.full_table.size))
+
+    def describe(self) -> str:
+        """The plan as text: one line per decision, then the work against the full table."""
+        lines = [f"scene plan ({self.level.name} quality, error budget {100 * self.budget:g} %):"]
+        width = max(len(topic) for topic, _, _ in self.decisions)
+        for topic, decision, reason in self.decisions:
+            lines.append(f"  {topic:<{width}}  {decision}  ({reason})")
+        w, h, d = self.table.size
+        fw, fh, fd = self.full_table.size
+        lines.append(f"  {'work':<{width}}  table {w} x {h} x {d} = {w * h * d} cells, "
+                     f"{100 * self.work_fraction:.0f} % of the full table's {fw} x {fh} x {fd} = {fw * fh * fd}")
+        return "\n".join(lines)
+
+
+def _ray_angle(planet_radius, top_radius, radius, mu):
+    """Central angle [rad] between a ray's start (radius, view cosine mu) and where it leaves the
+    atmosphere or meets the ground (arrays)."""
+    discriminant_ground = radius * radius * (mu * mu - 1.0) + planet_radius ** 2
+    hits_ground = (mu < 0.0) & (discriminant_ground >= 0.0)
+    to_ground = -radius * mu - np.sqrt(np.maximum(discriminant_ground, 0.0))
+    to_top = -radius * mu + np.sqrt(np.maximum(radius * radius * (mu * mu - 1.0) + top_radius ** 2, 0.0))
+    length = np.where(hits_ground, to_ground, to_top)
+    end = np.sqrt(radius * radius + 2.0 * radius * mu * length + length * length)
+    return np.arccos(np.clip((radius + length * mu) / end, -1.0, 1.0))
+
+
+def sun_margins(atmosphere: AtmosphereParameters, scene: Scene, orders=True, ray_march=True):
+    """(below, above) [deg]: how far beyond the scene's sun elevations the table's sun axis must reach.
+
+    With higher orders, the table's scatter reads them along its rays at a sun up to gamma_table =
+    2 acos(Rp / Ra) (its longest ray's central angle) higher, or, for a sun within gamma_table of the
+    zenith, down to 90 deg - gamma_table (the ray passes under it). A ray march also reads them along
+    its pixel rays, at sun angles up to gamma_view either way (the longest pixel ray's angle; observers
+    above the atmosphere see rays that cross it: gamma_table). So below = max(gamma_view, low + gamma_table
+    - 90) and above = gamma_view + gamma_table, for the path's lowest elevation ``low``. Without higher
+    orders nothing is read along rays: (0, 0).
+    """
+    if not orders:
+        return 0.0, 0.0
+    rp, ra = atmosphere.planet_radius, atmosphere.top_radius
+    gamma_table = math.degrees(2.0 * math.acos(rp / ra))
+    if not ray_march:
+        gamma_view = 0.0
+    elif scene.altitudes_m[1] >= atmosphere.atmosphere_height:
+        gamma_view = gamma_table
+    else:
+        low, high = np.radians(scene.view_elevations_deg)
+        mu = np.sin(np.linspace(low, high, 2001))
+        radii = rp + np.asarray(scene.altitudes_m)
+        gamma_view = max(math.degrees(float(np.max(_ray_angle(rp, ra, r, mu)))) for r in radii)
+    return max(gamma_view, scene.sun_elevations_deg[0] + gamma_table - 90.0), gamma_view + gamma_table
+
+
+def sun_axis(atmosphere: AtmosphereParameters, scene: Scene, level: QualityLevel, mapping="nonlinear",
+             orders=True, ray_march=True):
+    """The sun axis a scene needs: (sun_cos_range, nodes, (low, high) elevations [deg], margins [deg]).
+
+    The path's elevations widened by :func:`sun_margins` (and to the 2e-3 in cosine that a table's
+    range needs at least, for a fixed sun without margins), with as many nodes as keep the level's
+    spacing in w.
+    """
+    margins = sun_margins(atmosphere, scene, orders, ray_march)
+    low = max(-90.0, scene.sun_elevations_deg[0] - margins[0])
+    high = min(90.0, scene.sun_elevations_deg[1] + margins[1])
+    cos_low, cos_high = math.sin(math.radians(low)), math.sin(math.radians(high))
+    if cos_high - cos_low < 2e-3:
+        middle = min(max(0.5 * (cos_low + cos_high), -1.0 + 1e-3), 1.0 - 1e-3)
+        cos_low, cos_high = middle - 1e-3, middle + 1e-3
+        low, high = math.degrees(math.asin(cos_low)), math.degrees(math.asin(cos_high))
+    w_low, w_high = (float(w) for w in cos_to_v(np.array([cos_low, cos_high]), mapping))
+    return (cos_low, cos_high), level.sun_nodes(w_low, w_high), (low, high), margins
+
+
+def _higher_orders_share(atmosphere, table, scene, ctx=None):
+    """Largest share of the higher orders in ray-marched pixels (95th percentile over a 24 x 24 fisheye
+    from the lowest observer) at the path's lowest, highest and horizon suns, from a pilot table (the
+    planned sun range, 16 x 64 nodes and enough sun nodes, 'draft' quadrature)."""
+    from .render import RAYMARCH_DEFAULTS, SkyRenderer
+    from .table import ScatteringTable
+
+    pilot = quality_level("draft").table.replace(size=(16, 64, max(8, min(64, table.size[2]))),
+                                                 sun_cos_range=table.sun_cos_range, mode=table.mode)
+    renderer = SkyRenderer(ScatteringTable.build(atmosphere, pilot, ctx=ctx),
+                           RAYMARCH_DEFAULTS.replace(view_steps=16, transmittance_size=(32, 128)), ctx=ctx)
+    single = SkyRenderer(ScatteringTable.build(atmosphere, pilot.replace(orders=1), ctx=ctx),
+                         RAYMARCH_DEFAULTS.replace(view_steps=16, transmittance_size=(32, 128)), ctx=ctx)
+    n = 24
+    y, x = (np.mgrid[0:n, 0:n] + 0.5) / n * 2.0 - 1.0
+    radius = np.hypot(x, y)
+    inside = radius < 1.0
+    elevation = (1.0 - radius[inside]) * math.pi / 2.0
+    azimuth = np.arctan2(x[inside], y[inside])
+    directions = np.stack([np.cos(elevation) * np.sin(azimuth), np.cos(elevation) * np.cos(azimuth),
+                           np.sin(elevation)], axis=-1)
+    low, high = scene.sun_elevations_deg
+    share = 0.0
+    for elevation_deg in sorted({low, high, min(max(0.0, low), high)}):
+        e = math.radians(elevation_deg)
+        sun = np.array([0.0, math.cos(e), math.sin(e)])
+        altitude = scene.altitudes_m[0]
+        total = renderer.render_raymarch(directions, sun, altitude) @ [0.2126, 0.7152, 0.0722]
+        first = single.render_raymarch(directions, sun, altitude) @ [0.2126, 0.7152, 0.0722]
+        lit = total > 0.0
+        if lit.any():
+            share = max(share, float(np.percentile((total[lit] - first[lit]) / total[lit], 95)))
+    renderer.close()
+    single.close()
+    return share
+
+
+def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None) -> Plan:
+    """The least table (and ray march) that renders ``scene`` within its error budget.
+
+    Parameters
+    ----------
+    scene : Scene
+    atmosphere : AtmosphereParameters or str
+        The atmosphere, or a preset name.
+    mode : {'physical', 'atmosphere-plus'}
+        Scheme of the higher orders.
+    ctx : pyopencl.Context, optional
+        For the pilot that decides whether the higher orders are needed.
+    """
+    atmosphere = preset(atmosphere) if isinstance(atmosphere, str) else atmosphere
+    if not isinstance(atmosphere, AtmosphereParameters):
+        raise ValueError(f"atmosphere must be AtmosphereParameters or a preset name, got {atmosphere!r}")
+    level = quality_level(scene.quality) if scene.quality else level_for_budget(scene.error_budget)
+    budget = level.budget if scene.quality else scene.error_budget
+    decisions = [("quality", level.name, f"promises {100 * level.budget:g} % or better"
+                  + ("" if scene.quality else f"; the fastest level within {100 * budget:g} %"))]
+
+    if "mie" in scene.components or atmosphere.mie_scattering == 0.0:
+        decisions.append(("Mie", "kept" if atmosphere.mie_scattering > 0 else "none",
+                          "wanted by the scene" if atmosphere.mie_scattering > 0 else "the atmosphere has none"))
+    else:
+        atmosphere = atmosphere.replace(mie_scattering=0.0)
+        decisions.append(("Mie", "dropped", "not wanted by the scene"))
+
+    table = level.table.replace(mode=mode)
+    lookup_error = _lookup_error(scene.sun_elevations_deg[0])
+    if lookup_error <= budget:
+        ray = None
+        decisions.append(("renderer", "table lookup", f"its error at the lowest sun, "
+                          f"{scene.sun_elevations_deg[0]:g} deg, is {100 * lookup_error:.3g} % (measured)"))
+    else:
+        ray = level.ray
+        decisions.append(("renderer", f"ray march, {ray.view_steps} samples per ray",
+                          f"the table lookup's {100 * lookup_error:.3g} % at the lowest sun, "
+                          f"{scene.sun_elevations_deg[0]:g} deg, exceeds the budget"))
+
+    def on_sun_axis(settings, orders):
+        cos_range, nodes, elevations, margins = sun_axis(atmosphere, scene, level, settings.mapping, orders,
+                                                         ray is not None)
+        return settings.replace(size=settings.size[:2] + (nodes,), sun_cos_range=cos_range), elevations, margins
+
+    table, elevations, margins = on_sun_axis(table, orders=True)
+    if "multiple" not in scene.components:
+        table, elevations, margins = on_sun_axis(table.replace(orders=1), orders=False)
+        decisions.append(("higher orders", "dropped", "not wanted by the scene"))
+    else:
+        share = _higher_orders_share(atmosphere, table, scene, ctx=ctx)
+        if share < 0.5 * budget:
+            table, elevations, margins = on_sun_axis(table.replace(orders=1), orders=False)
+            decisions.append(("higher orders", "dropped", f"they add at most {100 * share:.3g} % (pilot), "
+                              f"under half the budget"))
+        else:
+            decisions.append(("higher orders", f"until an order adds < {table.order_tolerance:g}",
+                              f"they add up to {100 * share:.3g} % of the light (pilot)"))
+
+    w_low, w_high = table.sun_w_range
+    decisions.append(("sun axis", f"elevations {elevations[0]:.1f} to {elevations[1]:.1f} deg, "
+                      f"{table.size[2]} nodes ({100 * (w_high - w_low):.2g} % of the axis)",
+                      f"the path's {scene.sun_elevations_deg[0]:g} to {scene.sun_elevations_deg[1]:g} deg "
+                      f"+ {margins[1]:.1f} deg above and {margins[0]:.1f} deg below for curvature and orders"))
+    whole_because = {"altitude": "view rays cross every altitude", "view": "the gather integrates every direction"}
+    if table.orders == 1:
+        whole_because = dict.fromkeys(whole_because, "without higher orders that part would do, but only the "
+                                                     "sun axis takes sub-ranges")
+    decisions.append(("altitude axis", f"whole, {table.size[0]} nodes",
+                      f"the scene reaches {scene.altitudes_m[0]:g} to {scene.altitudes_m[1]:g} m; "
+                      + whole_because["altitude"]))
+    decisions.append(("view axis", f"whole, {table.size[1]} nodes",
+                      f"the cameras see {scene.view_elevations_deg[0]:.3g} to {scene.view_elevations_deg[1]:.3g} "
+                      "deg; " + whole_because["view"]))
+    return Plan(scene, level, atmosphere, table, ray, tuple(decisions))

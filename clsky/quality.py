@@ -1,0 +1,98 @@
+"""Named quality levels: table and ray-march settings for an error budget (``--quality``).
+
+Each level is a promise about rendered frames: the 95th percentile of the relative HDR luminance error
+of ray-marched frames, against the reference of :mod:`anim.accuracy`, on an all-sky fisheye from the
+ground at four sun elevations (day, golden hour, sunset, civil twilight). The numbers come from the
+accuracy benchmark (``bench/bench_accuracy.py``, README "Quality levels"); ``tests/test_quality.py``
+checks each level at a reduced size.
+
+What sets a level apart (measured, README):
+
+* The ray march's samples per ray set the error of single scattering: 16 samples 2.5 %, 32 samples
+  0.7 %, 48 samples 0.35 %, 96 samples 0.17 %.
+* The higher orders come from the table, and in twilight they are most of the light. Their error is
+  set by the spacing of the sun axis' nodes: in texture coordinate w (mapping.cl), 0.03 between nodes
+  costs 12.6 % of a civil-twilight frame (sun 4 deg down), 0.01 1.3 %, 0.004 0.17 % (measured at
+  32 x 32; the error falls as the spacing to the power 2.2). A whole-axis table of 32 nodes (0.032) is
+  8 % off there. So a level fixes that spacing (:attr:`QualityLevel.sun_node_spacing`) rather than the
+  node count: the planner (:mod:`clsky.planner`) spreads as many nodes as it needs over the sun angles a
+  scene reaches.
+* A table lookup cannot meet these budgets below golden hour whatever its size (the 3D table has no
+  azimuth: 31 % at sunset, hundreds of % in twilight): the levels are for the ray march, and the
+  planner allows the lookup alone only where its measured error fits the budget.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+from .render import RAYMARCH_DEFAULTS
+from .settings import TableSettings
+
+__all__ = ["QualityLevel", "QUALITY_LEVELS", "quality_level", "level_for_budget"]
+
+
+@dataclasses.dataclass(frozen=True)
+class QualityLevel:
+    """A named quality: its error budget and the settings that meet it.
+
+    Attributes
+    ----------
+    name : str
+    budget : float
+        The relative error (95th percentile of the HDR luminance error) the level promises.
+    table : TableSettings
+        The scattering table's settings; its sun axis' node count (``size[2]``) is the one of a whole
+        sun axis at :attr:`sun_node_spacing` (a planned table covers less and needs fewer).
+    sun_node_spacing : float
+        Largest spacing of the sun axis' nodes in texture coordinate w.
+    ray : TableSettings
+        The ray march's quadrature (samples per ray = ``ray.view_steps``).
+    """
+
+    name: str
+    budget: float
+    table: TableSettings
+    sun_node_spacing: float
+    ray: TableSettings
+
+    def sun_nodes(self, w_low=0.0, w_high=1.0) -> int:
+        """Sun-axis nodes that keep the spacing over [w_low, w_high] (at least 4)."""
+        return max(4, math.ceil((w_high - w_low) / self.sun_node_spacing - 1e-9) + 1)
+
+
+def _level(name, budget, size_wh, spacing, samples, **table):
+    base = TableSettings(mode="physical", **table)
+    sized = base.replace(size=size_wh + (max(4, math.ceil(1.0 / spacing - 1e-9) + 1),))
+    ray = RAYMARCH_DEFAULTS.replace(view_steps=samples)
+    return QualityLevel(name, budget, sized, spacing, ray)
+
+
+#: The levels, fastest first.
+QUALITY_LEVELS = {
+    level.name: level for level in (
+        _level("draft", 0.10, (16, 128), 0.015, 16, view_steps=15, multiple_view_steps=10, sun_steps=15,
+               gather_theta_steps=64, gather_phi_steps=32, order_tolerance=1e-2),
+        _level("default", 0.01, (32, 256), 0.006, 48),
+        _level("high", 1e-3, (32, 256), 0.0025, 96, view_steps=60, multiple_view_steps=40, sun_steps=60,
+               order_tolerance=1e-5),
+        _level("reference", 2e-4, (32, 256), 0.0015, 256, view_steps=120, multiple_view_steps=None,
+               sun_steps=240, transmittance_size=(128, 512), order_tolerance=1e-5),
+    )
+}
+
+
+def quality_level(name: str) -> QualityLevel:
+    """The level called ``name``; ValueError lists the valid names."""
+    if name not in QUALITY_LEVELS:
+        raise ValueError(f"quality must be one of {list(QUALITY_LEVELS)}, got {name!r}")
+    return QUALITY_LEVELS[name]
+
+
+def level_for_budget(budget: float) -> QualityLevel:
+    """The fastest level whose promised error fits ``budget`` (a relative error in (0, 1])."""
+    if not isinstance(budget, (int, float)) or isinstance(budget, bool) or not 0.0 < budget <= 1.0:
+        raise ValueError(f"error_budget must be a relative error in (0, 1], got {budget!r}")
+    fitting = [level for level in QUALITY_LEVELS.values() if level.budget <= budget]
+    return fitting[0] if fitting else QUALITY_LEVELS["reference"]
