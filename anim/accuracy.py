@@ -2,15 +2,17 @@
 
 A *candidate* is a way to make a frame: a table (its :class:`clsky.TableSettings`, looked up per
 pixel) or a per-pixel ray march (its samples per ray). Each candidate is timed (table build, frame
-render) and compared, frame by frame, with a *reference*: a ray march with many samples whose higher
-orders come from a fine table. Frames: an all-sky fisheye from the ground at four sun elevations (day,
-golden hour, sunset, civil twilight). Errors: the 95th percentile of the relative HDR luminance error
-and the mean CIELAB Delta E (:func:`anim.metrics.compare_frames`), worst over the four frames.
+render) and compared, frame by frame, with a *reference*: the 'reference' quality level
+(:mod:`clsky.quality`): a 256-sample ray march whose higher orders come from a fine table, one per frame,
+whose sun axis covers only the sun angles that frame needs (:func:`clsky.planner.sun_axis`) with nodes
+every 0.002 in w. Frames: an all-sky fisheye from the ground at four sun elevations (day, golden hour,
+sunset, civil twilight). Errors: the 95th percentile of the relative HDR luminance error and the mean
+CIELAB Delta E (:func:`anim.metrics.compare_frames`), worst over the four frames.
 
-How far the reference has converged is measured by computing it twice, the second time with every
-count doubled (:func:`reference_convergence`), frame by frame: errors below that change are not
-resolved. (Measured at 128 x 128: 0.04 % by day, 0.07 % at golden hour, 0.3 % at sunset, 2.6 % in
-civil twilight, where the higher orders dominate and follow the table's sun axis.)
+How far the reference has converged is measured by doubling each group of its counts in turn
+(:func:`reference_convergence`, :data:`REFERENCE_GROUPS`), frame by frame: errors below the sum of
+those changes are not resolved. The sun axis is what twilight needs most: its higher orders fall off
+steeply between sun angles, and a whole-axis table of 32 sun nodes is 8 % off there (README).
 """
 
 from __future__ import annotations
@@ -21,12 +23,16 @@ import time
 import numpy as np
 
 import clsky
+from clsky.planner import Scene, sun_axis
+from clsky.quality import QualityLevel, quality_level
 from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
 
 from . import metrics
 from .cameras import FisheyeCamera, sun_direction
 
-__all__ = ["SUN_ELEVATIONS", "Candidate", "default_candidates", "reference_settings", "render_reference",
+__all__ = ["SUN_ELEVATIONS", "REFERENCE_GROUPS", "Candidate", "default_candidates", "reference_level",
+           "reference_renderer",
+           "render_reference",
            "reference_convergence", "measure", "pareto_front"]
 
 #: Sun elevations [deg] of the frames: day, golden hour, sunset, civil twilight.
@@ -82,18 +88,50 @@ def default_candidates(base: clsky.TableSettings | None = None):
     return candidates
 
 
-def reference_settings(scale=1):
-    """Table and ray-march settings of the reference; ``scale`` = 2 doubles every count that matters:
-    the ray march's samples, sun steps and transmittance table, and the table's view and sun steps,
-    gather quadrature and view and sun axes (the table only feeds the higher orders, which vary slowly
-    with altitude: its altitude axis stays at 32)."""
-    table = clsky.TableSettings(mode="physical", size=(32, 256 * scale, 32 * scale),
-                                view_steps=120 * scale, multiple_view_steps=None, sun_steps=240 * scale,
-                                transmittance_size=(128 * scale, 512 * scale), order_tolerance=1e-5,
-                                gather_theta_steps=256 * scale, gather_phi_steps=128 * scale)
-    march = RAYMARCH_DEFAULTS.replace(view_steps=256 * scale, sun_steps=256 * scale,
-                                      transmittance_size=(128 * scale, 512 * scale))
-    return table, march
+#: The reference's counts, in groups that its convergence check doubles one at a time (doubling all
+#: at once would need 2.9 GB of gather matrices and hours): {group: what doubles}.
+REFERENCE_GROUPS = {
+    "sun nodes": "the table's sun-axis nodes (half their spacing)",
+    "view axis, gather": "the table's view axis and the gather's Theta and Phi steps",
+    "table quadrature": "the table's view and sun steps and its transmittance table",
+    "ray march": "the ray march's samples, sun steps and transmittance table",
+}
+
+
+def reference_level(doubled=(), level="reference") -> QualityLevel:
+    """The quality level ``level`` (:mod:`clsky.quality`; 'reference' unless a test wants a cheaper
+    stand-in), with the counts of the groups named in
+    ``doubled`` (keys of :data:`REFERENCE_GROUPS`) doubled. The table only feeds the higher orders, which
+    vary slowly with altitude: its altitude axis stays at 32 (doubling it changed twilight frames by
+    0.06 %, measured)."""
+    unknown = set(doubled) - set(REFERENCE_GROUPS)
+    if unknown:
+        raise ValueError(f"doubled must name groups of {list(REFERENCE_GROUPS)}, got {sorted(unknown)}")
+    level = quality_level(level)
+    t, ray, spacing = level.table, level.ray, level.sun_node_spacing
+    if "sun nodes" in doubled:
+        spacing /= 2
+    if "view axis, gather" in doubled:
+        t = t.replace(size=(t.size[0], 2 * t.size[1], t.size[2]), gather_theta_steps=2 * t.gather_theta_steps,
+                      gather_phi_steps=2 * t.gather_phi_steps)
+    if "table quadrature" in doubled:
+        t = t.replace(view_steps=2 * t.view_steps, sun_steps=2 * t.sun_steps,
+                      transmittance_size=tuple(2 * n for n in t.transmittance_size))
+    if "ray march" in doubled:
+        ray = ray.replace(view_steps=2 * ray.view_steps, sun_steps=2 * ray.sun_steps,
+                          transmittance_size=tuple(2 * n for n in ray.transmittance_size))
+    return dataclasses.replace(level, table=t, sun_node_spacing=spacing, ray=ray)
+
+
+def reference_renderer(elevation_deg, doubled=(), atmosphere="physical", level="reference"):
+    """A SkyRenderer of the reference for one sun elevation: the reference level's table on the sun
+    range that frame needs (its sun, plus the planner's margins for a fisheye from the ground, at the
+    level's node spacing), and its ray march."""
+    level = reference_level(doubled, level)
+    atmosphere = clsky.preset(atmosphere) if isinstance(atmosphere, str) else atmosphere
+    cos_range, nodes, _, _ = sun_axis(atmosphere, Scene((elevation_deg, elevation_deg)), level)
+    settings = level.table.replace(size=level.table.size[:2] + (nodes,), sun_cos_range=cos_range)
+    return SkyRenderer(clsky.ScatteringTable.build(atmosphere, settings), level.ray)
 
 
 def _frames(renderer, method, prepared):
@@ -105,13 +143,15 @@ def _frames(renderer, method, prepared):
     return frames
 
 
-def render_reference(size=128, scale=1, atmosphere="physical"):
+def render_reference(size=128, doubled=(), atmosphere="physical", level="reference"):
     """The reference frames {name: HDR (size, size, 3)} and the fisheye's valid mask."""
-    table_settings, march = reference_settings(scale)
-    table = clsky.ScatteringTable.build(atmosphere, table_settings)
-    renderer = SkyRenderer(table, march)
     directions, valid = FisheyeCamera(size).directions()
-    return _frames(renderer, "raymarch", renderer.prepare(directions, valid)), valid
+    frames = {}
+    for name, elevation in SUN_ELEVATIONS.items():
+        with reference_renderer(elevation, doubled, atmosphere, level) as renderer:
+            frames[name] = renderer.render_raymarch(renderer.prepare(directions, valid),
+                                                    sun_direction(90.0 - elevation, SUN_AZIMUTH), 0.0)
+    return frames, valid
 
 
 def _errors(reference, frames, valid):
@@ -121,12 +161,19 @@ def _errors(reference, frames, valid):
             per_frame)
 
 
-def reference_convergence(size=128, atmosphere="physical"):
-    """How much the reference frames change when every count is doubled, per frame:
-    {frame name: compare_frames metrics (p95_rel, mean_delta_e, ...)}."""
-    coarse, valid = render_reference(size, 1, atmosphere)
-    fine, _ = render_reference(size, 2, atmosphere)
-    return _errors(fine, coarse, valid)[2]
+def reference_convergence(reference, valid, atmosphere="physical", progress=None):
+    """How much the reference frames change when each group of its counts is doubled:
+    {group: {frame name: p95 relative change}}, plus "sum": the sum over groups per frame, which bounds
+    the change of doubling them all (the changes are small, so they add to first order)."""
+    size = valid.shape[0]
+    change = {}
+    for index, group in enumerate(REFERENCE_GROUPS):
+        finer, _ = render_reference(size, (group,), atmosphere)
+        change[group] = {name: m["p95_rel"] for name, m in _errors(finer, reference, valid)[2].items()}
+        if progress is not None:
+            progress("reference convergence", index + 1, len(REFERENCE_GROUPS))
+    change["sum"] = {name: sum(change[g][name] for g in REFERENCE_GROUPS) for name in reference}
+    return change
 
 
 def measure(candidates, reference, valid, atmosphere="physical", progress=None):

@@ -23,13 +23,15 @@ from typing import Callable
 import numpy as np
 
 import clsky
+from clsky.planner import Plan, Scene, plan_scene
+from clsky.quality import QUALITY_LEVELS, QualityLevel, level_for_budget, quality_level
 from clsky.render import SkyRenderer
 
 from . import metrics, sunpath, tonemap, writers
 from .cameras import camera_from_name
 
-__all__ = ["AnimationConfig", "AnimationResult", "METHODS", "build_table", "sun_positions", "render_animation",
-           "render_frame"]
+__all__ = ["AnimationConfig", "AnimationResult", "METHODS", "quality", "plan_animation", "build_table",
+           "ray_settings", "sun_positions", "render_animation", "render_frame"]
 
 #: What is rendered: table lookup only, ray march only, or both with the comparison.
 METHODS = ("compare", "lut", "raymarch")
@@ -58,10 +60,16 @@ class AnimationConfig:
         Atmosphere preset (:data:`clsky.PRESETS`).
     mode : {'atmosphere-plus', 'physical'}
         Scheme of the table's higher orders.
-    table_size : (W, H, D)
-        Scattering table grid.
-    samples : int
-        Ray-march samples per ray (view steps), in [2, 4096].
+    error_budget : float
+        Relative error allowed in the frames, in (0, 1] (default 0.01): the scene plan
+        (:mod:`clsky.planner`) picks the fastest quality level within it.
+    quality : str or None
+        A named quality level ('draft', 'default', 'high', 'reference') instead of the budget's.
+    table_size : (W, H, D) or None
+        None (default): the table the scene plan asks for (the level's resolution, the sun axis on the
+        sun path only). A size: a full table of that grid, unplanned (the level's other settings).
+    samples : int or None
+        Ray-march samples per ray (view steps), in [2, 4096]; None (default): the quality level's.
     start_elevation_deg, max_elevation_deg : float
         Sweep: sun elevation before sunrise / after sunset, and at its highest.
     location : (latitude_deg, longitude_deg) or None
@@ -94,8 +102,10 @@ class AnimationConfig:
     method: str = "compare"
     preset: str = "physical"
     mode: str = "physical"
-    table_size: tuple = (32, 256, 32)
-    samples: int = 48
+    error_budget: float = 0.01
+    quality: str | None = None
+    table_size: tuple | None = None
+    samples: int | None = None
     start_elevation_deg: float = -6.0
     max_elevation_deg: float = 60.0
     location: tuple | None = None
@@ -138,7 +148,9 @@ class AnimationConfig:
         check("method", lambda v: v in METHODS, f"one of {METHODS}")
         check("preset", lambda v: v in clsky.PRESETS, f"one of {sorted(clsky.PRESETS)}")
         check("mode", lambda v: v in ("atmosphere-plus", "physical"), "'atmosphere-plus' or 'physical'")
-        check("samples", integer(2, 4096), "an integer in [2, 4096]")
+        check("samples", lambda v: v is None or integer(2, 4096)(v), "None or an integer in [2, 4096]")
+        check("error_budget", real(0.0, 1.0, low_open=True), "a relative error in (0, 1]")
+        check("quality", lambda v: v is None or v in QUALITY_LEVELS, f"None or one of {list(QUALITY_LEVELS)}")
         check("start_elevation_deg", real(-90.0, 90.0), "in [-90, 90] degrees")
         check("max_elevation_deg", real(-90.0, 90.0), "in [-90, 90] degrees")
         check("max_elevation_deg", lambda v: v >= self.start_elevation_deg, "at least start_elevation_deg")
@@ -151,7 +163,8 @@ class AnimationConfig:
         check("fps", real(0.0, 240.0, low_open=True), "in (0, 240]")
         check("exposure", real(0.0, 1e6, low_open=True), "in (0, 1e6]")
         check("output", lambda v: str(v).endswith(".mp4"), "a path ending in .mp4")
-        clsky.TableSettings(size=tuple(self.table_size))          # validates the grid (names 'size')
+        if self.table_size is not None:
+            clsky.TableSettings(size=tuple(self.table_size))      # validates the grid (names 'size')
 
     @property
     def output_path(self) -> pathlib.Path:
@@ -184,10 +197,40 @@ class AnimationResult:
     summary: str
 
 
-def build_table(config: AnimationConfig, ctx=None, progress=None) -> clsky.ScatteringTable:
-    """The scattering table of the animation's atmosphere (orders until converged)."""
-    settings = clsky.TableSettings(size=tuple(config.table_size), mode=config.mode)
+def quality(config: AnimationConfig) -> QualityLevel:
+    """The quality level of the animation: the named one, or the fastest within its error budget."""
+    return quality_level(config.quality) if config.quality else level_for_budget(config.error_budget)
+
+
+def plan_animation(config: AnimationConfig, positions, directions, valid, ctx=None) -> Plan | None:
+    """The scene plan of the animation (None with an explicit ``table_size``): its sun path, its
+    observer altitude, the view elevations its camera sees (from the valid pixels' directions) and its
+    error budget or quality."""
+    if config.table_size is not None:
+        return None
+    elevations = [90.0 - p.zenith_deg for p in positions]
+    seen = np.degrees(np.arcsin(np.clip(directions[valid][:, 2], -1.0, 1.0)))
+    scene = Scene(sun_elevations_deg=(min(elevations), max(elevations)),
+                  altitudes_m=(config.altitude, config.altitude),
+                  view_elevations_deg=(float(seen.min()), float(seen.max())),
+                  error_budget=config.error_budget, quality=config.quality)
+    return plan_scene(scene, config.preset, config.mode, ctx=ctx)
+
+
+def build_table(config: AnimationConfig, plan: Plan | None = None, ctx=None, progress=None) -> clsky.ScatteringTable:
+    """The scattering table of the animation: the plan's, or a full table of ``config.table_size``
+    at the quality level's other settings (orders until converged)."""
+    if plan is not None:
+        return clsky.ScatteringTable.build(plan.atmosphere, plan.table, ctx=ctx, progress=progress)
+    size = tuple(config.table_size) if config.table_size is not None else quality(config).table.size
+    settings = quality(config).table.replace(size=size, mode=config.mode)
     return clsky.ScatteringTable.build(config.preset, settings, ctx=ctx, progress=progress)
+
+
+def ray_settings(config: AnimationConfig) -> clsky.TableSettings:
+    """The ray march's quadrature: the quality level's, with ``config.samples`` if given."""
+    ray = quality(config).ray
+    return ray if config.samples is None else ray.replace(view_steps=config.samples)
 
 
 def sun_positions(config: AnimationConfig):
@@ -229,19 +272,22 @@ def _even(image):
     return image[: height - height % 2, : width - width % 2]
 
 
-def render_animation(config: AnimationConfig, ctx=None,
-                     progress: Callable[[str, int, int], None] | None = None) -> AnimationResult:
+def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str, int, int], None] | None = None,
+                     report: Callable[[str], None] | None = None) -> AnimationResult:
     """Render, compare and write a whole animation (see the module docstring).
 
     ``progress(stage, done, total)`` is called for the table build ('single', 'orders') and for each
-    frame ('frames').
+    frame ('frames'); ``report(text)`` receives the scene plan before the table is built.
     """
     start = time.perf_counter()
     positions = sun_positions(config)
     camera = _camera(config)
     directions, valid = camera.directions()
-    table = build_table(config, ctx=ctx, progress=progress)
-    renderer = SkyRenderer(table, clsky.render.RAYMARCH_DEFAULTS.replace(view_steps=config.samples), ctx=ctx)
+    plan = plan_animation(config, positions, directions, valid, ctx=ctx)
+    if plan is not None and report is not None:
+        report(plan.describe())
+    table = build_table(config, plan, ctx=ctx, progress=progress)
+    renderer = SkyRenderer(table, ray_settings(config), ctx=ctx)
     prepared = renderer.prepare(directions, valid)
     rows, means = [], {"lut": [], "raymarch": []}
     directory = config.frames_directory
@@ -285,6 +331,8 @@ def render_animation(config: AnimationConfig, ctx=None,
                    for k, v in dataclasses.asdict(config).items()},
         "table": {"settings": table.settings.to_dict(), "orders": table.orders_record,
                   "metadata": table.metadata},
+        "plan": None if plan is None else {"quality": plan.level.name, "work_fraction": plan.work_fraction,
+                                           "decisions": [list(d) for d in plan.decisions]},
         "frames": rows, "temporal": temporal}, force=config.force))
     seconds = time.perf_counter() - start
     summary = f"{len(positions)} frames {camera.width}x{camera.height} ({config.method}) in {seconds:.1f} s"

@@ -18,7 +18,8 @@ from clsky import cli as clsky_cli
 FIELD_OPTIONS = {
     "frames": "--frames", "size": "--size", "camera": "--camera", "fov_deg": "--fov", "heading_deg": "--heading",
     "pitch_deg": "--pitch", "altitude": "--altitude", "method": "--method", "preset": "--preset", "mode": "--mode",
-    "table_size": "--table-size", "samples": "--samples", "start_elevation_deg": "--start-elevation",
+    "table_size": "--table-size", "samples": "--samples", "error_budget": "--error-budget", "quality": "--quality",
+    "start_elevation_deg": "--start-elevation",
     "max_elevation_deg": "--max-elevation", "location": "--location", "start_hour": "--hours",
     "end_hour": "--hours", "step_minutes": "--step-minutes", "fps": "--fps", "exposure": "--exposure",
     "output": "--output",
@@ -33,6 +34,8 @@ def _date(text):
 
 
 def _add_scene_arguments(parser, frames=True):
+    from clsky.quality import QUALITY_LEVELS
+
     from .animate import METHODS
 
     scene = parser.add_argument_group("scene")
@@ -50,8 +53,13 @@ def _add_scene_arguments(parser, frames=True):
     sky.add_argument("--preset", default="physical", help="atmosphere preset (default: physical)")
     sky.add_argument("--mode", default="physical", choices=["atmosphere-plus", "physical"],
                      help="scheme of the higher orders (default: physical)")
-    sky.add_argument("--table-size", nargs=3, type=int, metavar=("W", "H", "D"), default=[32, 256, 32])
-    sky.add_argument("--samples", type=int, default=48, help="ray-march samples per ray (default: 48)")
+    sky.add_argument("--error-budget", type=float, default=0.01,
+                     help="relative error allowed in the frames; picks the fastest quality level within it "
+                          "(default: 0.01)")
+    sky.add_argument("--quality", choices=list(QUALITY_LEVELS), help="a named quality level instead of the budget's")
+    sky.add_argument("--table-size", nargs=3, type=int, metavar=("W", "H", "D"),
+                     help="a full table of this grid instead of the scene plan's")
+    sky.add_argument("--samples", type=int, help="ray-march samples per ray (default: the quality level's)")
     sky.add_argument("--exposure", type=float, default=1.0)
     if frames:
         sun = parser.add_argument_group("sun path")
@@ -95,6 +103,9 @@ def register(commands):
     accuracy.add_argument("--size", type=int, default=128, help="fisheye frames of SIZE x SIZE (default: 128)")
     accuracy.add_argument("-o", "--output", default="accuracy.csv", help="CSV of the candidates (default: %(default)s)")
     accuracy.add_argument("--plot", default="accuracy.png", help="Pareto plot, PNG (default: %(default)s)")
+    accuracy.add_argument("--reference-quality", default="reference", choices=["reference", "high", "default"],
+                          help="quality level of the reference frames (default: reference, ~5 min to build; "
+                               "a cheaper one for smoke runs)")
     accuracy.add_argument("--quick", action="store_true",
                           help="default settings and two ray marches only (a smoke run)")
     accuracy.add_argument("--force", action="store_true", help="overwrite existing outputs")
@@ -107,7 +118,8 @@ def _config(args, **extra):
 
     fields = dict(size=args.size, camera=args.camera, fov_deg=args.fov, heading_deg=args.heading,
                   pitch_deg=args.pitch, altitude=args.altitude, method=args.method, preset=args.preset,
-                  mode=args.mode, table_size=tuple(args.table_size), samples=args.samples, exposure=args.exposure,
+                  mode=args.mode, table_size=None if args.table_size is None else tuple(args.table_size),
+                  samples=args.samples, error_budget=args.error_budget, quality=args.quality, exposure=args.exposure,
                   dither=not args.no_dither, force=args.force, **extra)
     try:
         return AnimationConfig(**fields)
@@ -136,7 +148,7 @@ def run_animate(args):
         raise clsky_cli.UsageError(f"output directory {config.output_path.parent} does not exist")
     progress, close = clsky_cli.progress_bar(args.progress)
     try:
-        result = render_animation(config, progress=progress)
+        result = render_animation(config, progress=progress, report=print)
     finally:
         close()
     print(result.summary)
@@ -146,11 +158,12 @@ def run_animate(args):
 def run_render(args):
     import pathlib
 
-    from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
+    from clsky.render import SkyRenderer
 
     from . import metrics, tonemap, writers
-    from .animate import _camera, build_table, render_frame
+    from .animate import _camera, build_table, plan_animation, ray_settings, render_frame
     from .cameras import sun_direction
+    from .sunpath import SunPosition
 
     if not -90.0 <= args.sun_elevation <= 90.0:
         raise clsky_cli.UsageError(f"--sun-elevation must be in [-90, 90] degrees, got {args.sun_elevation}")
@@ -160,10 +173,14 @@ def run_render(args):
     if output.exists() and not args.force:
         raise clsky_cli.UsageError(f"{output} exists; use --force to overwrite it")
     config = _config(args)
-    table = build_table(config)
     camera = _camera(config)
     directions, valid = camera.directions()
-    renderer = SkyRenderer(table, RAYMARCH_DEFAULTS.replace(view_steps=config.samples))
+    position = SunPosition(90.0 - args.sun_elevation, args.sun_azimuth)
+    plan = plan_animation(config, [position], directions, valid)
+    if plan is not None:
+        print(plan.describe())
+    table = build_table(config, plan)
+    renderer = SkyRenderer(table, ray_settings(config))
     sun = sun_direction(90.0 - args.sun_elevation, args.sun_azimuth)
     hdr = render_frame(renderer, renderer.prepare(directions, valid), sun, config)
     display = {name: tonemap.to_uint8(tonemap.tone_map(frame, config.exposure), dither=config.dither)
@@ -200,7 +217,7 @@ def run_bench(args):
         candidates = [c for c in candidates if c.label in ("default", "ray march 16 samples", "ray march 48 samples")]
     progress, close = clsky_cli.progress_bar(args.progress)
     try:
-        reference, valid = accuracy.render_reference(args.size)
+        reference, valid = accuracy.render_reference(args.size, level=args.reference_quality)
         rows = accuracy.measure(candidates, reference, valid, progress=progress)
     finally:
         close()

@@ -27,13 +27,8 @@ def test_candidates_move_one_knob_each():
         assert knob in knobs
 
 
-@pytest.fixture(scope="module")
-def reference():
-    return accuracy.render_reference(size=24)
-
-
-def test_measure_on_tiny_frames(reference):
-    reference, valid = reference
+def test_measure_on_tiny_frames(stand_in_reference):
+    reference, valid = stand_in_reference
     default = accuracy.default_candidates()[0].table
     small = accuracy.Candidate("small table", "table size", default.replace(size=(9, 33, 9)))
     march = accuracy.Candidate("ray march 48", "ray march samples", default, samples=48)
@@ -42,12 +37,13 @@ def test_measure_on_tiny_frames(reference):
     for row in rows:
         assert row["build_s"] > 0 and row["render_s"] > 0 and row["mean_delta_e"] >= 0
         assert row["p95_rel"] == max(row[f"p95_rel {name}"] for name in accuracy.SUN_ELEVATIONS)
-    # the ray march over the default table follows the reference closely at every sun elevation
-    # (measured 0.35 % with 48 samples: its differences to the reference are the quadrature and the
-    # default table feeding the higher orders), while a 9 x 33 x 9 table misses twilight by far
-    # (measured: hundreds of %)
-    assert rows[1]["p95_rel"] < 0.02
-    assert rows[0]["p95_rel civil twilight"] > 10 * rows[1]["p95_rel"]
+    # The ray march (48 samples) over the default TableSettings follows the stand-in reference within
+    # 0.5 % by day (measured 0.3 %); in twilight its 32 whole-axis sun nodes feed the higher orders
+    # coarsely (measured 4.2 %, README "Quality levels"), while a 9 x 33 x 9 table looked up misses
+    # twilight by far (measured: hundreds of %).
+    assert rows[1]["p95_rel day"] < 0.005
+    assert rows[1]["p95_rel"] < 0.1
+    assert rows[0]["p95_rel civil twilight"] > 10 * rows[1]["p95_rel civil twilight"]
 
 
 @pytest.mark.parametrize("args,named", [(["--size", "8"], "--size"), (["-o", "x.txt"], "--output"),
@@ -63,7 +59,8 @@ def test_bench_accuracy_bad_arguments(tmp_path, args, named):
 def test_bench_accuracy_quick_run_writes_csv_and_plot(tmp_path):
     pytest.importorskip("matplotlib")
     result = subprocess.run([sys.executable, "-m", "anim", "bench", "accuracy", "--quick", "--size", "16",
-                             "--progress", "none"], cwd=tmp_path, capture_output=True, text=True)
+                             "--reference-quality", "default", "--progress", "none"], cwd=tmp_path,
+                            capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
     with open(tmp_path / "accuracy.csv") as stream:
         rows = list(csv.DictReader(stream))

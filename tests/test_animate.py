@@ -142,12 +142,37 @@ def test_cli_animate_small_run(tmp_path):
     assert (tmp_path / "sky_metrics.json").is_file()
 
 
+def test_cli_animate_planned_run_prints_the_plan(tmp_path):
+    """Without --table-size the scene plan decides the table: printed first, then the summary; the
+    metrics JSON records it and the table covers the sun path's part of the sun axis only."""
+    result = clsky("animate", "--frames", "3", "--size", "24", "--quality", "draft", "--start-elevation", "10",
+                   "--max-elevation", "30", "--progress", "none", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert lines[0].startswith("scene plan (draft quality") and "3 frames" in lines[-1]
+    assert any(line.strip().startswith("sun axis") for line in lines)
+    record = json.loads((tmp_path / "sky_metrics.json").read_text())
+    assert record["plan"]["quality"] == "draft" and 0.0 < record["plan"]["work_fraction"] < 0.5
+    low, high = record["table"]["settings"]["sun_cos_range"]
+    assert low <= np.sin(np.radians(10.0)) and high >= np.sin(np.radians(30.0)) and high - low < 1.0
+
+
 def test_cli_render_writes_one_png(tmp_path):
     result = clsky("render", *SMALL_ARGS, "--method", "lut", "-o", "one.png", cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     assert len(result.stdout.splitlines()) == 1
     assert [path.name for path in tmp_path.iterdir()] == ["one.png"]
     assert imageio_v3.imread(tmp_path / "one.png").shape == (32, 32, 3)
+
+
+def test_cli_render_plans_for_its_one_sun(tmp_path):
+    """One frame, planned: the table covers the sun's elevation plus the margins that the 24 x 24
+    fisheye's pixel rays need (its lowest pixel centre is 1.1 deg up: 9.0 deg below, 29.2 above)."""
+    result = clsky("render", "--size", "24", "--quality", "draft", "--sun-elevation", "3", "-o", "one.png", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert lines[0].startswith("scene plan (draft quality, error budget 10 %)") and lines[-1].startswith("frame ")
+    assert any("elevations -6.0 to 32.2 deg" in line for line in lines), result.stdout
 
 
 @pytest.mark.parametrize("command,args,named", [
@@ -158,6 +183,9 @@ def test_cli_render_writes_one_png(tmp_path):
     ("animate", ["--method", "foo"], "--method"),
     ("animate", ["--output", "x.avi"], "--output"),
     ("animate", ["--location", "100", "0"], "--location"),
+    ("animate", ["--error-budget", "0"], "--error-budget"),
+    ("animate", ["--error-budget", "1.5"], "--error-budget"),
+    ("animate", ["--quality", "best"], "--quality"),
     ("render", ["--sun-elevation", "95"], "--sun-elevation"),
 ], ids=lambda value: " ".join(value) if isinstance(value, list) else value)
 def test_cli_bad_values_one_line_exit_2(tmp_path, command, args, named):

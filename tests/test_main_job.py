@@ -18,8 +18,9 @@ def test_default_animate_writes_a_decodable_mp4_and_png_frames(tmp_path):
     result = subprocess.run([sys.executable, "-m", "anim", "animate", "--progress", "none"], cwd=tmp_path,
                             capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
-    summary = result.stdout.strip().splitlines()
-    assert len(summary) == 1 and summary[0].startswith("120 frames 512x512 (compare)")
+    lines = result.stdout.strip().splitlines()
+    assert lines[0].startswith("scene plan (default quality, error budget 1 %)")     # printed first
+    assert lines[-1].startswith("120 frames 512x512 (compare)")                     # the summary
     video = imageio.imread(tmp_path / "sky.mp4")
     pngs = sorted((tmp_path / "sky_frames").glob("frame_*.png"))
     first = imageio.imread(pngs[0])

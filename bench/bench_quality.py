@@ -1,0 +1,153 @@
+"""Benchmark: the quality levels and the scene plan, measured against the converged reference, in one run.
+
+1. The reference (anim/accuracy.py: the 'reference' quality level, one table per frame on the sun
+   range that frame needs) and its convergence: each group of its counts doubled in turn.
+2. Each quality level, planned for the four frames' sun path (-4 to 45 deg): table build, frame render,
+   and the error of its ray-marched frames against the reference.
+3. The scene plan of the default animation (sun from -6 to 60 deg, all-sky fisheye from the ground,
+   1 % budget) against the full table of the same quality: cells, build time side by side, and the
+   error of both against the reference.
+
+Writes the README sections "quality" and "plan", and docs/quality.csv.
+
+Usage: python bench/bench_quality.py [--size 64] [--no-readme]
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import pathlib
+import time
+
+import numpy as np
+from _report import machine, write_readme_section
+
+import clsky
+from anim import accuracy, metrics, writers
+from anim.cameras import FisheyeCamera, sun_direction
+from clsky._cl import default_device, describe_device
+from clsky.planner import Scene, plan_scene
+from clsky.quality import QUALITY_LEVELS
+from clsky.render import SkyRenderer
+
+DOCS = pathlib.Path(__file__).resolve().parent.parent / "docs"
+NAMES = list(accuracy.SUN_ELEVATIONS)
+#: The four frames' sun path.
+FRAMES_PATH = (min(accuracy.SUN_ELEVATIONS.values()), max(accuracy.SUN_ELEVATIONS.values()))
+
+
+def frames_of(table, ray, size, method="raymarch"):
+    """{frame name: HDR} of the four frames, and the mean render time of one frame [s]."""
+    directions, valid = FisheyeCamera(size).directions()
+    with SkyRenderer(table, ray) as renderer:
+        prepared = renderer.prepare(directions, valid)
+        render = renderer.render_raymarch if method == "raymarch" else renderer.render_table
+        render(prepared, sun_direction(90.0 - FRAMES_PATH[1], accuracy.SUN_AZIMUTH), 0.0)     # warm-up
+        start = time.perf_counter()
+        frames = {name: render(prepared, sun_direction(90.0 - e, accuracy.SUN_AZIMUTH), 0.0)
+                  for name, e in accuracy.SUN_ELEVATIONS.items()}
+        return frames, (time.perf_counter() - start) / len(frames)
+
+
+def errors(reference, frames, valid):
+    return {name: metrics.compare_frames(reference[name], frames[name], valid)["p95_rel"] for name in NAMES}
+
+
+def built(atmosphere, settings):
+    start = time.perf_counter()
+    table = clsky.ScatteringTable.build(atmosphere, settings)
+    return table, time.perf_counter() - start
+
+
+def percent(values):
+    return " | ".join(f"{100 * values[n]:.2f}" for n in NAMES)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--size", type=int, default=64)
+    parser.add_argument("--no-readme", action="store_true")
+    args = parser.parse_args()
+    stamp = f"Measured {datetime.date.today()} on {machine()}, {describe_device(default_device())}"
+
+    start = time.perf_counter()
+    reference, valid = accuracy.render_reference(args.size)
+    reference_seconds = time.perf_counter() - start
+    print(f"reference: {reference_seconds:.0f} s", flush=True)
+    change = accuracy.reference_convergence(reference, valid)
+    for group, values in change.items():
+        print(f"reference, {group} doubled: {percent(values)} %", flush=True)
+
+    rows = []
+    for name, level in QUALITY_LEVELS.items():
+        if name == "reference":
+            continue
+        plan = plan_scene(Scene(FRAMES_PATH, quality=name))
+        table, build = built(plan.atmosphere, plan.table)
+        frames, render = frames_of(table, level.ray, args.size)
+        lut, lut_render = frames_of(table, level.ray, args.size, method="lut")
+        error = errors(reference, frames, valid)
+        rows.append({"level": name, "budget": level.budget, "table": "x".join(map(str, plan.table.size)),
+                     "samples": level.ray.view_steps, "build_s": build, "render_s": render,
+                     **{f"p95_rel {n}": error[n] for n in NAMES}, "worst": max(error.values()),
+                     "lut_worst": max(errors(reference, lut, valid).values())})
+        print(rows[-1], flush=True)
+    writers.write_csv(DOCS / "quality.csv", rows, force=True)
+
+    lines = [f"{stamp}: {args.size} x {args.size} fisheye frames from the ground (`bench/bench_quality.py`). "
+             "Each level is planned for the four frames' sun path (-4 to 45 deg); error: 95th percentile of "
+             "the relative HDR luminance error of its ray-marched frames against the reference. Build: the "
+             "table; render: one frame by ray march. The last column is the same table's lookup (worst frame).",
+             "", "| level | promise | table | samples | build [s] | render [ms] | "
+             + " | ".join(f"{n} [%]" for n in NAMES) + " | lookup, worst [%] |",
+             "|---|---:|---|---:|---:|---:|" + "---:|" * len(NAMES) + "---:|"]
+    for r in rows:
+        lines.append(f"| {r['level']} | {100 * r['budget']:g} % | {r['table']} | {r['samples']} | {r['build_s']:.2f} | "
+                     f"{1e3 * r['render_s']:.1f} | " + percent({n: r[f"p95_rel {n}"] for n in NAMES})
+                     + f" | {100 * r['lut_worst']:.0f} |")
+    lines += ["", f"The reference ('reference' level: {accuracy.reference_level().table.size[:2]} altitude x view "
+              f"nodes, sun nodes every {accuracy.reference_level().sun_node_spacing:g} in w on each frame's sun range, "
+              f"{accuracy.reference_level().ray.view_steps} samples; {reference_seconds:.0f} s for the four frames) "
+              "changes this much when each group of its counts is doubled; their sum bounds the change of "
+              "doubling them all:", "",
+              "| doubled | " + " | ".join(f"{n} [%]" for n in NAMES) + " |", "|---|" + "---:|" * len(NAMES)]
+    for group, values in change.items():
+        label = accuracy.REFERENCE_GROUPS.get(group, "**sum**")
+        lines.append(f"| {label} | " + " | ".join(f"{100 * values[n]:.3f}" for n in NAMES) + " |")
+    quality_markdown = "\n".join(lines)
+
+    # The default animation's plan against the full table of the same quality, side by side.
+    plan = plan_scene(Scene((-6.0, 60.0)))
+    planned, planned_build = built(plan.atmosphere, plan.table)
+    full, full_build = built(plan.atmosphere, plan.full_table)
+    planned_frames, _ = frames_of(planned, plan.level.ray, args.size)
+    full_frames, _ = frames_of(full, plan.level.ray, args.size)
+    planned_error, full_error = errors(reference, planned_frames, valid), errors(reference, full_frames, valid)
+    between = errors(full_frames, planned_frames, valid)
+    cells = [int(np.prod(t.settings.size)) for t in (planned, full)]
+    lines = [f"{stamp}. The plan of the README's main job (`clsky animate`: sun from -6 to 60 deg, all-sky "
+             "fisheye from the ground, 1 % budget), as `clsky animate` prints it:", "", "```",
+             plan.describe(), "```", "",
+             "| table | sun axis | cells | build [s] | " + " | ".join(f"{n} [%]" for n in NAMES) + " |",
+             "|---|---|---:|---:|" + "---:|" * len(NAMES),
+             f"| planned | {plan.table.size[2]} nodes, elevations {np.degrees(np.arcsin(plan.table.sun_cos_range[0])):.1f} "
+             f"to {np.degrees(np.arcsin(plan.table.sun_cos_range[1])):.1f} deg | {cells[0]} | {planned_build:.2f} | "
+             + percent(planned_error) + " |",
+             f"| full, same quality | {full.settings.size[2]} nodes, whole axis | {cells[1]} | {full_build:.2f} | "
+             + percent(full_error) + " |",
+             f"| planned vs full | | {cells[0] / cells[1]:.2f} x | {planned_build / full_build:.2f} x | "
+             + percent(between) + " |", "",
+             "Errors: 95th percentile against the reference (planned vs full: between the two), ray march "
+             f"{plan.level.ray.view_steps} samples, {args.size} x {args.size} frames. Build times are measured in the "
+             "same run, one after the other."]
+    plan_markdown = "\n".join(lines)
+    print(quality_markdown)
+    print(plan_markdown)
+    if not args.no_readme:
+        write_readme_section("quality", quality_markdown)
+        write_readme_section("plan", plan_markdown)
+
+
+if __name__ == "__main__":
+    main()
