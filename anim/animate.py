@@ -205,7 +205,7 @@ def quality(config: AnimationConfig) -> QualityLevel:
 def plan_animation(config: AnimationConfig, positions, directions, valid, ctx=None) -> Plan | None:
     """The scene plan of the animation (None with an explicit ``table_size``): its sun path, its
     observer altitude, the view elevations its camera sees (from the valid pixels' directions) and its
-    error budget or quality."""
+    error budget or quality; the ray march is planned for whenever the animation renders it."""
     if config.table_size is not None:
         return None
     elevations = [90.0 - p.zenith_deg for p in positions]
@@ -214,7 +214,7 @@ def plan_animation(config: AnimationConfig, positions, directions, valid, ctx=No
                   altitudes_m=(config.altitude, config.altitude),
                   view_elevations_deg=(float(seen.min()), float(seen.max())),
                   error_budget=config.error_budget, quality=config.quality)
-    return plan_scene(scene, config.preset, config.mode, ctx=ctx)
+    return plan_scene(scene, config.preset, config.mode, ctx=ctx, ray_march=config.method != "lut")
 
 
 def build_table(config: AnimationConfig, plan: Plan | None = None, ctx=None, progress=None) -> clsky.ScatteringTable:

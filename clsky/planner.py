@@ -262,7 +262,7 @@ def _higher_orders_share(atmosphere, table, scene, ctx=None):
     return share
 
 
-def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None) -> Plan:
+def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, ray_march=None) -> Plan:
     """The least table (and ray march) that renders ``scene`` within its error budget.
 
     Parameters
@@ -274,6 +274,9 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None) -
         Scheme of the higher orders.
     ctx : pyopencl.Context, optional
         For the pilot that decides whether the higher orders are needed.
+    ray_march : bool, optional
+        True when frames will be ray-marched whatever the budget says (an animation comparing the two
+        renderers): the sun axis then keeps the ray march's margins.
     """
     atmosphere = preset(atmosphere) if isinstance(atmosphere, str) else atmosphere
     if not isinstance(atmosphere, AtmosphereParameters):
@@ -292,7 +295,11 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None) -
 
     table = level.table.replace(mode=mode)
     lookup_error = _lookup_error(scene.sun_elevations_deg[0])
-    if lookup_error <= budget:
+    if lookup_error <= budget and ray_march:
+        ray = level.ray
+        decisions.append(("renderer", f"ray march, {ray.view_steps} samples per ray",
+                          f"asked for; the table lookup alone would do: {100 * lookup_error:.3g} % at the lowest sun"))
+    elif lookup_error <= budget:
         ray = None
         decisions.append(("renderer", "table lookup", f"its error at the lowest sun, "
                           f"{scene.sun_elevations_deg[0]:g} deg, is {100 * lookup_error:.3g} % (measured)"))

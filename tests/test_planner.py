@@ -143,6 +143,10 @@ def test_a_day_scene_with_a_loose_budget_needs_the_lookup_only(cl_context):
     # lookups only: the table's own upward margin, none below
     assert plan.table.sun_cos_range[0] == pytest.approx(math.sin(math.radians(20.0)))
     assert plan.work_fraction < 0.25
+    # frames that will be ray-marched anyway (an animation comparing both) keep the ray march's margin
+    asked = plan_scene(Scene((20.0, 60.0), error_budget=0.1), ctx=cl_context, ray_march=True)
+    assert asked.ray is not None
+    assert asked.table.sun_cos_range[0] == pytest.approx(math.sin(math.radians(20.0 - GAMMA_GROUND)))
 
 
 def test_unwanted_components_are_dropped(cl_context):
