@@ -161,18 +161,19 @@ def _errors(reference, frames, valid):
             per_frame)
 
 
-def reference_convergence(reference, valid, atmosphere="physical", progress=None):
-    """How much the reference frames change when each group of its counts is doubled:
-    {group: {frame name: p95 relative change}}, plus "sum": the sum over groups per frame, which bounds
-    the change of doubling them all (the changes are small, so they add to first order)."""
+def reference_convergence(reference, valid, atmosphere="physical", progress=None, groups=tuple(REFERENCE_GROUPS)):
+    """How much the reference frames change when each group of its counts (``groups``, default all of
+    :data:`REFERENCE_GROUPS`) is doubled: {group: {frame name: p95 relative change}}, plus "sum": the sum
+    over those groups per frame, which bounds the change of doubling them all (the changes are small,
+    so they add to first order)."""
     size = valid.shape[0]
     change = {}
-    for index, group in enumerate(REFERENCE_GROUPS):
+    for index, group in enumerate(groups):
         finer, _ = render_reference(size, (group,), atmosphere)
         change[group] = {name: m["p95_rel"] for name, m in _errors(finer, reference, valid)[2].items()}
         if progress is not None:
-            progress("reference convergence", index + 1, len(REFERENCE_GROUPS))
-    change["sum"] = {name: sum(change[g][name] for g in REFERENCE_GROUPS) for name in reference}
+            progress("reference convergence", index + 1, len(groups))
+    change["sum"] = {name: sum(change[g][name] for g in groups) for name in reference}
     return change
 
 
@@ -215,9 +216,10 @@ def pareto_front(rows, cost="render_s", error="p95_rel"):
     return front
 
 
-def pareto_plot(rows, path, title="clsky: speed versus accuracy", force=False):
+def pareto_plot(rows, path, title="clsky: speed versus accuracy", force=False, size=128):
     """Error versus render time of every candidate (log-log), Pareto fronts joined; a PNG with two
-    panels: the worst of the four frames, and the day frame alone (where table knobs differ).
+    panels: the worst of the four frames, and the day frame alone (where table knobs differ); ``size``
+    is the frames' side in pixels (for the axis label).
 
     matplotlib draws it (a well-kept plotting library does this better than hand-written code); it is
     the ``bench`` extra: ``pip install 'clsky[bench]'``.
@@ -246,7 +248,7 @@ def pareto_plot(rows, path, title="clsky: speed versus accuracy", force=False):
                   label="Pareto front (labelled)")
         axes.set_xscale("log")
         axes.set_yscale("log")
-        axes.set_xlabel("render time per 128 x 128 frame [ms]")
+        axes.set_xlabel(f"render time per {size} x {size} frame [ms]")
         axes.set_ylabel("95th-percentile relative error [%]")
         axes.set_title(subtitle, fontsize=9)
         axes.grid(True, which="both", lw=0.3)

@@ -222,7 +222,7 @@ def run_bench(args):
     finally:
         close()
     writers.write_csv(targets["--output"], rows, force=args.force)
-    accuracy.pareto_plot(rows, targets["--plot"], force=args.force)
+    accuracy.pareto_plot(rows, targets["--plot"], force=args.force, size=args.size)
     for row in rows:
         print(f"{row['candidate']:>24}: build {row['build_s']:6.2f} s, frame {1e3 * row['render_s']:7.1f} ms, "
               f"worst p95 error {100 * row['p95_rel']:8.2f} %, worst mean Delta E {row['mean_delta_e']:6.2f}")

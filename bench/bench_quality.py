@@ -10,13 +10,19 @@
 
 Writes the README sections "quality" and "plan", and docs/quality.csv.
 
-Usage: python bench/bench_quality.py [--size 64] [--no-readme]
+Usage: python bench/bench_quality.py [--size 64] [--groups GROUP ...] [--reference-cache FILE] [--no-readme]
+
+``--groups`` names the reference's count groups to double (anim.accuracy.REFERENCE_GROUPS; default all;
+each costs a rebuild of the four reference tables, 5 to 15 min); ``--reference-cache FILE`` keeps the
+reference frames and their convergence in an .npz, read back by later runs (and by
+bench/bench_accuracy.py) instead of being computed again.
 """
 
 from __future__ import annotations
 
 import argparse
 import datetime
+import json
 import pathlib
 import time
 
@@ -67,15 +73,29 @@ def percent(values):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--size", type=int, default=64)
+    parser.add_argument("--groups", nargs="*", default=list(accuracy.REFERENCE_GROUPS),
+                        choices=list(accuracy.REFERENCE_GROUPS))
+    parser.add_argument("--reference-cache", type=pathlib.Path)
     parser.add_argument("--no-readme", action="store_true")
     args = parser.parse_args()
     stamp = f"Measured {datetime.date.today()} on {machine()}, {describe_device(default_device())}"
 
-    start = time.perf_counter()
-    reference, valid = accuracy.render_reference(args.size)
-    reference_seconds = time.perf_counter() - start
+    if args.reference_cache and args.reference_cache.exists():
+        cached = np.load(args.reference_cache)
+        reference, valid = {name: cached[name] for name in NAMES}, cached["valid"]
+        reference_seconds, change = float(cached["seconds"]), json.loads(str(cached["convergence"]))
+        args.groups = [g for g in change if g != "sum"]
+        if valid.shape != (args.size, args.size):
+            raise SystemExit(f"{args.reference_cache} holds {valid.shape} frames, not {args.size} x {args.size}")
+    else:
+        start = time.perf_counter()
+        reference, valid = accuracy.render_reference(args.size)
+        reference_seconds = time.perf_counter() - start
+        change = accuracy.reference_convergence(reference, valid, groups=args.groups)
+        if args.reference_cache:
+            np.savez(args.reference_cache, valid=valid, seconds=reference_seconds, convergence=json.dumps(change),
+                     **reference)
     print(f"reference: {reference_seconds:.0f} s", flush=True)
-    change = accuracy.reference_convergence(reference, valid)
     for group, values in change.items():
         print(f"reference, {group} doubled: {percent(values)} %", flush=True)
 
@@ -110,7 +130,11 @@ def main():
               f"nodes, sun nodes every {accuracy.reference_level().sun_node_spacing:g} in w on each frame's sun range, "
               f"{accuracy.reference_level().ray.view_steps} samples; {reference_seconds:.0f} s for the four frames) "
               "changes this much when each group of its counts is doubled; their sum bounds the change of "
-              "doubling them all:", "",
+              "doubling them all"
+              + ("" if len(args.groups) == len(accuracy.REFERENCE_GROUPS) else
+                 " (groups not doubled in this run: " + "; ".join(accuracy.REFERENCE_GROUPS[g] for g in
+                                                                accuracy.REFERENCE_GROUPS if g not in args.groups)
+                 + ")") + ":", "",
               "| doubled | " + " | ".join(f"{n} [%]" for n in NAMES) + " |", "|---|" + "---:|" * len(NAMES)]
     for group, values in change.items():
         label = accuracy.REFERENCE_GROUPS.get(group, "**sum**")

@@ -158,7 +158,7 @@ def first_gather_matrices(atmosphere, settings):
     return _first_gather_matrices(atmosphere, _quadrature_key(settings))
 
 
-@functools.lru_cache(maxsize=4)
+@functools.lru_cache(maxsize=1)   # 4 x (D, H, H): 1.9 GB for a reference table (D = 922): keep one
 def _first_gather_matrices(atmosphere, settings):
     p, weights, view, sun = _gather_parts(atmosphere, settings)
     return {(s, s2): _read_only(np.matmul(view[s][None] * (weights * sun[s2] / (2.0 * math.pi))[:, None, :], p))

@@ -50,7 +50,7 @@ COMPONENTS = ("rayleigh", "mie", "multiple")
 #: Measured error of the table lookup (95th percentile, relative, default table, all-sky fisheye from
 #: the ground; README "Speed versus accuracy") by sun elevation [deg]: it grows toward the horizon,
 #: where the missing azimuth of the 3D table dominates, whatever the table's size.
-LOOKUP_ERROR = ((-4.0, 4.7), (1.0, 0.31), (8.0, 0.03), (45.0, 0.011))
+LOOKUP_ERROR = ((-4.0, 4.99), (1.0, 0.320), (8.0, 0.0314), (45.0, 0.0078))
 
 
 def _lookup_error(elevation_deg):

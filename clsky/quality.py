@@ -75,9 +75,9 @@ QUALITY_LEVELS = {
         _level("draft", 0.10, (16, 128), 0.015, 16, view_steps=15, multiple_view_steps=10, sun_steps=15,
                gather_theta_steps=64, gather_phi_steps=32, order_tolerance=1e-2),
         _level("default", 0.01, (32, 256), 0.006, 48),
-        _level("high", 1e-3, (32, 256), 0.0025, 96, view_steps=60, multiple_view_steps=40, sun_steps=60,
+        _level("high", 1e-3, (32, 256), 0.002, 128, view_steps=60, multiple_view_steps=40, sun_steps=60,
                order_tolerance=1e-5),
-        _level("reference", 2e-4, (32, 256), 0.0015, 256, view_steps=120, multiple_view_steps=None,
+        _level("reference", 5e-4, (32, 256), 0.0015, 256, view_steps=120, multiple_view_steps=None,
                sun_steps=240, transmittance_size=(128, 512), order_tolerance=1e-5),
     )
 }
