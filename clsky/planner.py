@@ -13,7 +13,7 @@ What the plan decides, and why:
   The ray march reads the higher orders at every point of its pixel rays (both ways: +- gamma_view, the
   longest pixel ray's angle); the table's scatter reads them along its canonical rays, which run toward
   the sun's azimuth, so toward a *higher* sun (up to + gamma_table, the longest ray through the
-  atmosphere: 2 acos(Rp / Ra), 20.1 deg for Ra - Rp = 100 km), except that a ray passing under the sun
+  atmosphere: 2 acos(Rp / Ra), 20.2 deg for Ra - Rp = 100 km), except that a ray passing under the sun
   sees it sink again, to no lower than 90 deg - gamma_table. The nodes keep the quality level's
   spacing (:mod:`clsky.quality`), so a narrower range costs proportionally fewer nodes.
 * **Altitude and view axes** stay whole whatever the scene: the gather integrates the in-scatter over
@@ -24,10 +24,11 @@ What the plan decides, and why:
 * **Higher orders** are dropped when a pilot (a small table on the planned sun range, ray-marched on a
   coarse fisheye at the path's lowest, highest and horizon suns) shows that they add less than half the
   budget, or when the scene does not want them.
-* **Mie** is dropped (its scattering set to 0, and the table's Mie channels with it) only when the
-  scene does not want it; an atmosphere without Mie has nothing to drop.
+* **Mie** is dropped (its scattering set to 0: the Mie channels hold zeros) only when the scene does
+  not want it; an atmosphere without Mie has nothing to drop.
 * **Ray march**: the table lookup alone serves the scene only where its measured error
-  (:data:`LOOKUP_ERROR`) fits the budget at the path's lowest sun; otherwise frames need the ray march.
+  (:data:`LOOKUP_ERROR`) fits the budget at the path's lowest sun; otherwise frames need the ray march
+  (and so does an animation that renders both: ``plan_scene(..., ray_march=True)``).
 """
 
 from __future__ import annotations
