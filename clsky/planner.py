@@ -332,7 +332,7 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     w_low, w_high = table.sun_w_range
     decisions.append(("sun axis", f"elevations {elevations[0]:.1f} to {elevations[1]:.1f} deg, "
                       f"{table.size[2]} nodes ({100 * (w_high - w_low):.2g} % of the axis)",
-                      f"the path's {scene.sun_elevations_deg[0]:g} to {scene.sun_elevations_deg[1]:g} deg "
+                      f"the path's {scene.sun_elevations_deg[0]:.1f} to {scene.sun_elevations_deg[1]:.1f} deg "
                       f"+ {margins[1]:.1f} deg above and {margins[0]:.1f} deg below for curvature and orders"))
     whole_because = {"altitude": "view rays cross every altitude", "view": "the gather integrates every direction"}
     if table.orders == 1:
@@ -342,6 +342,6 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
                       f"the scene reaches {scene.altitudes_m[0]:g} to {scene.altitudes_m[1]:g} m; "
                       + whole_because["altitude"]))
     decisions.append(("view axis", f"whole, {table.size[1]} nodes",
-                      f"the cameras see {scene.view_elevations_deg[0]:.3g} to {scene.view_elevations_deg[1]:.3g} "
+                      f"the cameras see {scene.view_elevations_deg[0]:.1f} to {scene.view_elevations_deg[1]:.1f} "
                       "deg; " + whole_because["view"]))
     return Plan(scene, level, atmosphere, table, ray, tuple(decisions))
