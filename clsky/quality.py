@@ -2,14 +2,14 @@
 
 Each level is a promise about rendered frames: the 95th percentile of the relative HDR luminance error
 of ray-marched frames, against the reference of :mod:`anim.accuracy`, on an all-sky fisheye from the
-ground at four sun elevations (day, golden hour, sunset, civil twilight). The numbers come from the
-accuracy benchmark (``bench/bench_accuracy.py``, README "Quality levels"); ``tests/test_quality.py``
-checks each level at a reduced size.
+ground at four sun elevations (day, golden hour, sunset, civil twilight). The numbers come from
+``bench/bench_quality.py`` and ``bench/bench_accuracy.py`` (README "Quality levels" and "Speed versus
+accuracy"); ``tests/test_quality.py`` checks each level at a reduced size.
 
 What sets a level apart (measured, README):
 
-* The ray march's samples per ray set the error of single scattering: 16 samples 2.5 %, 32 samples
-  0.7 %, 48 samples 0.35 %, 96 samples 0.17 %.
+* The ray march's samples per ray set the error by day: 16 samples 2.4 %, 32 samples 0.6 %,
+  48 samples 0.3 %, 96 samples 0.1 %.
 * The higher orders come from the table, and in twilight they are most of the light. Their error is
   set by the spacing of the sun axis' nodes: in texture coordinate w (mapping.cl), 0.03 between nodes
   costs 12.6 % of a civil-twilight frame (sun 4 deg down), 0.01 1.3 %, 0.004 0.17 % (measured at
@@ -18,7 +18,7 @@ What sets a level apart (measured, README):
   node count: the planner (:mod:`clsky.planner`) spreads as many nodes as it needs over the sun angles a
   scene reaches.
 * A table lookup cannot meet these budgets below golden hour whatever its size (the 3D table has no
-  azimuth: 31 % at sunset, hundreds of % in twilight): the levels are for the ray march, and the
+  azimuth: 32 % at sunset, hundreds of % in twilight): the levels are for the ray march, and the
   planner allows the lookup alone only where its measured error fits the budget.
 """
 
@@ -64,9 +64,8 @@ class QualityLevel:
 
 def _level(name, budget, size_wh, spacing, samples, **table):
     base = TableSettings(mode="physical", **table)
-    sized = base.replace(size=size_wh + (max(4, math.ceil(1.0 / spacing - 1e-9) + 1),))
-    ray = RAYMARCH_DEFAULTS.replace(view_steps=samples)
-    return QualityLevel(name, budget, sized, spacing, ray)
+    level = QualityLevel(name, budget, base, spacing, RAYMARCH_DEFAULTS.replace(view_steps=samples))
+    return dataclasses.replace(level, table=base.replace(size=size_wh + (level.sun_nodes(),)))
 
 
 #: The levels, fastest first.
