@@ -11,12 +11,13 @@ What sets a level apart (measured, README):
 * The ray march's samples per ray set the error by day: 16 samples 2.4 %, 32 samples 0.6 %,
   48 samples 0.3 %, 96 samples 0.1 %.
 * The higher orders come from the table, and in twilight they are most of the light. Their error is
-  set by the spacing of the sun axis' nodes: in texture coordinate w (mapping.cl), 0.03 between nodes
-  costs 12.6 % of a civil-twilight frame (sun 4 deg down), 0.01 1.3 %, 0.004 0.17 % (measured at
-  32 x 32; the error falls as the spacing to the power 2.2). A whole-axis table of 32 nodes (0.032) is
-  8 % off there. So a level fixes that spacing (:attr:`QualityLevel.sun_node_spacing`) rather than the
-  node count: the planner (:mod:`clsky.planner`) spreads as many nodes as it needs over the sun angles a
-  scene reaches.
+  set by the spacing of the sun axis' nodes in texture coordinate w (mapping.cl): over the default
+  TableSettings' whole axis of 32 nodes (0.032 apart) the ray march is 5 to 7 % off in civil twilight
+  (sun 4 deg down). Trial levels measured at 32 x 32 were 12.6 % off there at 0.03 (draft's other
+  settings), 1.3 % at 0.01 (default's) and 0.17 % at 0.004 (high's, with 96 samples): the error falls
+  about as the spacing to the power 2.2. So a level fixes that spacing (:attr:`QualityLevel.sun_node_spacing`)
+  rather than the node count: the planner (:mod:`clsky.planner`) spreads as many nodes as it needs
+  over the sun angles a scene reaches.
 * A table lookup cannot meet these budgets below golden hour whatever its size (the 3D table has no
   azimuth: 32 % at sunset, hundreds of % in twilight): the levels are for the ray march, and the
   planner allows the lookup alone only where its measured error fits the budget.
