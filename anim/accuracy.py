@@ -32,7 +32,7 @@ from . import metrics
 from .cameras import FisheyeCamera, sun_direction
 
 __all__ = ["SUN_ELEVATIONS", "REFERENCE_GROUPS", "Candidate", "default_candidates", "reference_level",
-           "reference_renderer",
+           "reference_renderer", "render_frames",
            "render_reference",
            "reference_convergence", "measure", "pareto_front"]
 
@@ -135,7 +135,9 @@ def reference_renderer(elevation_deg, doubled=(), atmosphere="physical", level="
     return SkyRenderer(clsky.ScatteringTable.build(atmosphere, settings), level.ray)
 
 
-def _frames(renderer, method, prepared):
+def render_frames(renderer, method, prepared):
+    """The four frames {name: HDR} of :data:`SUN_ELEVATIONS` by table lookup ('lut') or ray march, with
+    ``prepared`` directions (:meth:`clsky.render.SkyRenderer.prepare`)."""
     frames = {}
     for name, elevation in SUN_ELEVATIONS.items():
         sun = sun_direction(90.0 - elevation, SUN_AZIMUTH)
@@ -192,9 +194,9 @@ def measure(candidates, reference, valid, atmosphere="physical", progress=None):
         ray = None if candidate.samples is None else RAYMARCH_DEFAULTS.replace(view_steps=candidate.samples)
         renderer = SkyRenderer(table, ray, fast_math=candidate.fast_math)
         prepared = renderer.prepare(directions, valid)
-        _frames(renderer, candidate.method, prepared)                       # warm-up (compilation)
+        render_frames(renderer, candidate.method, prepared)                 # warm-up (compilation)
         start = time.perf_counter()
-        frames = _frames(renderer, candidate.method, prepared)
+        frames = render_frames(renderer, candidate.method, prepared)
         render = (time.perf_counter() - start) / len(frames)
         p95, delta_e, per_frame = _errors(reference, frames, valid)
         row = {"candidate": candidate.label, "knob": candidate.knob, "method": candidate.method,

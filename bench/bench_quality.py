@@ -31,7 +31,7 @@ from _report import machine, write_readme_section
 
 import clsky
 from anim import accuracy, animate, metrics, writers
-from anim.cameras import FisheyeCamera, sun_direction
+from anim.cameras import FisheyeCamera
 from clsky._cl import default_device, describe_device
 from clsky.planner import Scene, plan_scene
 from clsky.quality import QUALITY_LEVELS
@@ -48,11 +48,9 @@ def frames_of(table, ray, size, method="raymarch"):
     directions, valid = FisheyeCamera(size).directions()
     with SkyRenderer(table, ray) as renderer:
         prepared = renderer.prepare(directions, valid)
-        render = renderer.render_raymarch if method == "raymarch" else renderer.render_table
-        render(prepared, sun_direction(90.0 - FRAMES_PATH[1], accuracy.SUN_AZIMUTH), 0.0)     # warm-up
+        accuracy.render_frames(renderer, method, prepared)                  # warm-up
         start = time.perf_counter()
-        frames = {name: render(prepared, sun_direction(90.0 - e, accuracy.SUN_AZIMUTH), 0.0)
-                  for name, e in accuracy.SUN_ELEVATIONS.items()}
+        frames = accuracy.render_frames(renderer, method, prepared)
         return frames, (time.perf_counter() - start) / len(frames)
 
 

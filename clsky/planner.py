@@ -235,10 +235,12 @@ def _higher_orders_share(atmosphere, table, scene, ctx=None):
 
     pilot = quality_level("draft").table.replace(size=(16, 64, max(8, min(64, table.size[2]))),
                                                  sun_cos_range=table.sun_cos_range, mode=table.mode)
-    renderer = SkyRenderer(ScatteringTable.build(atmosphere, pilot, ctx=ctx),
-                           RAYMARCH_DEFAULTS.replace(view_steps=16, transmittance_size=(32, 128)), ctx=ctx)
-    single = SkyRenderer(ScatteringTable.build(atmosphere, pilot.replace(orders=1), ctx=ctx),
-                         RAYMARCH_DEFAULTS.replace(view_steps=16, transmittance_size=(32, 128)), ctx=ctx)
+    pilot_table = ScatteringTable.build(atmosphere, pilot, ctx=ctx)
+    ray = RAYMARCH_DEFAULTS.replace(view_steps=16, transmittance_size=(32, 128))
+    renderer = SkyRenderer(pilot_table, ray, ctx=ctx)
+    # the ray march's single scattering does not depend on the table: without the gathered sum, the
+    # same table gives the first order alone
+    single = SkyRenderer(dataclasses.replace(pilot_table, gathered=None), ray, ctx=ctx)
     n = 24
     y, x = (np.mgrid[0:n, 0:n] + 0.5) / n * 2.0 - 1.0
     radius = np.hypot(x, y)

@@ -62,9 +62,7 @@ def planned_frames(name, ctx=None):
     table = clsky.ScatteringTable.build(plan.atmosphere, plan.table, ctx=ctx)
     directions, valid = FisheyeCamera(SIZE).directions()
     with SkyRenderer(table, plan.level.ray, ctx=ctx) as renderer:
-        prepared = renderer.prepare(directions, valid)
-        return {name: renderer.render_raymarch(prepared, sun_direction(90.0 - e, accuracy.SUN_AZIMUTH), 0.0)
-                for name, e in accuracy.SUN_ELEVATIONS.items()}
+        return accuracy.render_frames(renderer, "raymarch", renderer.prepare(directions, valid))
 
 
 def worst_error(reference, frames, valid):
