@@ -87,7 +87,8 @@ class AnimationConfig:
     output : str or path
         MP4 file; PNG frames go to ``<stem>_frames/``, metrics to ``<stem>_metrics.csv`` / ``.json``.
     hdr : bool
-        Also write float32 HDR frames (.npy) beside the PNGs.
+        Also write each frame's HDR values as float32 .npy beside the PNGs: the ray march's frame
+        (with ``method='compare'``, the reference the lookup is compared with) or the lookup's.
     force : bool
         Overwrite existing outputs.
     """

@@ -84,7 +84,8 @@ def register(commands):
                         help="MP4 file; frames go to <stem>_frames/, metrics to <stem>_metrics.csv/.json")
     output.add_argument("--fps", type=float, default=30.0)
     output.add_argument("--no-dither", action="store_true", help="do not dither the 8-bit frames")
-    output.add_argument("--hdr", action="store_true", help="also write float32 HDR frames (.npy)")
+    output.add_argument("--hdr", action="store_true", help="also write float32 HDR frames (.npy): the ray march's "
+                             "(with --method compare) or the lookup's")
     output.add_argument("--force", action="store_true", help="overwrite existing outputs")
     output.add_argument("--progress", default="leave", choices=["display", "leave", "none"])
 

@@ -261,6 +261,7 @@ class FrameWriter:
         self._existing = []
         self._indices = set()
         self._size = None
+        self._hdr_shape = None
         self._video = None
         self._part = None
         self._state = "new"                             # then "open", then "closed"
@@ -357,9 +358,10 @@ class FrameWriter:
             the MP4 gets the frames in call order.
         display_u8 : numpy.ndarray of uint8, shape (H, W, 3)
             Tone-mapped pixels; every frame has the same size.
-        hdr : numpy.ndarray, shape (H, W, 3), optional
+        hdr : numpy.ndarray, shape (H', W', 3), optional
             HDR values, stored as float32 .npy when the writer was made with ``hdr='npy'`` (then
-            required); ignored otherwise.
+            required); ignored otherwise. Its shape need not be the display's (a display frame may be
+            a composite of several renders), but it is the same for every frame.
 
         Returns
         -------
@@ -382,11 +384,15 @@ class FrameWriter:
             if hdr is None:
                 raise ValueError("this FrameWriter stores HDR frames (hdr='npy'): pass hdr=")
             hdr = np.asarray(hdr, dtype=np.float32)
-            if hdr.shape != image.shape:
-                raise ValueError(f"hdr has shape {hdr.shape}, display_u8 has {image.shape}")
+            if hdr.ndim != 3 or hdr.shape[2] != 3:
+                raise ValueError(f"hdr must have shape (H, W, 3), got {hdr.shape}")
+            if self._hdr_shape is not None and hdr.shape != self._hdr_shape:
+                raise ValueError(f"frame {index}: hdr has shape {hdr.shape}, the first frame's had {self._hdr_shape}")
         if self._size is None and self.mp4_path is not None:
             self._open_video(*image.shape[:2])
         self._size = image.shape
+        if hdr is not None and self.hdr == "npy":
+            self._hdr_shape = hdr.shape
         written = []
         if self.directory is not None:
             written.append(write_png(self.frame_path(index), image, force=self.force))

@@ -1,0 +1,183 @@
+"""Every command line and code example the README shows, run as a user would run it (issue 9, class 1).
+
+The README is parsed, not copied: a new example in it is run here without anyone editing this file,
+and an example that stops working fails here. Examples run at a reduced size, by appending options
+(argparse keeps the last value of an option given twice) or, in the Python examples, by textual
+substitutions that must each match (so a changed example is noticed, not silently run at full size).
+
+What is reduced, and why it keeps the example's meaning:
+- ``clsky animate`` / ``clsky render``: 32-pixel frames, 3 frames, no progress bar; the draft quality
+  level where the line names neither a level, a budget nor a table size (the default level's own run
+  is the README's main job, ``tests/test_main_job.py``, slow). Real sun positions keep their location
+  and date, over two hours around a Munich sunrise.
+- ``clsky table``: an 8 x 32 x 8 grid (every other option as written).
+- ``clsky bench accuracy``: its ``--quick`` smoke run at 16 pixels against the default level.
+- ``python bench/X.py``: ``--smoke`` (the same code path at a tiny size; writes no README or docs).
+
+The README's first two commands are checked for what they promise: the test command is the one
+``.ci/run`` runs, and the main job is the command ``tests/test_main_job.py`` runs.
+"""
+
+from __future__ import annotations
+
+import pathlib
+import re
+import shlex
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+README = ROOT / "README.md"
+TEXT = README.read_text(encoding="utf-8")
+
+
+def fenced_blocks(language):
+    """The contents of the README's ```language blocks, in order."""
+    return [match.group(1) for match in re.finditer(rf"^```{language}\n(.*?)^```", TEXT, re.S | re.M)]
+
+
+def shell_lines(block):
+    """Command lines of a shell block: comments after ``#`` (preceded by a space) dropped, and the
+    optional parts written as ``[--raw sky]`` included."""
+    lines = []
+    for line in block.splitlines():
+        line = re.split(r"\s+#", line, maxsplit=1)[0].strip()
+        if line:
+            lines.append(re.sub(r"\[([^\]]*)\]", r"\1", line))
+    return lines
+
+
+def inline_commands():
+    """Command lines quoted inline in the prose: `clsky ...` and `python bench/...`."""
+    spans = re.findall(r"`((?:clsky|python) [^`]+)`", TEXT)
+    return [span for span in dict.fromkeys(spans) if not span.startswith("clsky --")]
+
+
+def readme_commands():
+    """Every command line of the README after its first block (the setup commands, tested below)."""
+    blocks = fenced_blocks("sh")
+    lines = [line for block in blocks[1:] for line in shell_lines(block)]
+    return list(dict.fromkeys(lines + inline_commands()))
+
+
+def reduced(argv):
+    """``argv`` (the README's words) with the options that make it small."""
+    if argv[0] == "python":
+        return [sys.executable, str(ROOT / argv[1]), *argv[2:], "--smoke"]
+    command = argv[1] if len(argv) > 1 else ""
+    extra = []
+    if command in ("animate", "render"):
+        extra = ["--size", "32", "--progress", "none"] if command == "animate" else ["--size", "32"]
+        if command == "animate":
+            extra += ["--frames", "3"]
+            if "--location" in argv:                # sunrise in Munich on 21 June: about 03:15 UTC
+                extra += ["--hours", "2.5", "4.5", "--step-minutes", "60"]
+        if not {"--quality", "--error-budget", "--table-size"} & set(argv):
+            extra += ["--quality", "draft"]
+    elif command == "table":
+        extra = ["--size", "8", "32", "8", "--progress", "none"]
+    elif argv[1:3] == ["bench", "accuracy"]:
+        extra = ["--quick", "--size", "16", "--reference-quality", "default", "--progress", "none"]
+    return [str(pathlib.Path(sys.executable).parent / "clsky"), *argv[1:], *extra]
+
+
+def option_value(argv, *names):
+    for index, word in enumerate(argv[:-1]):
+        if word in names:
+            return argv[index + 1]
+    return None
+
+
+def check_outputs(argv, directory):
+    """The files the command line names exist and hold what they should."""
+    command = argv[1] if len(argv) > 1 else ""
+    output = option_value(argv, "-o", "--output")
+    if command == "table":
+        from clsky import ScatteringTable
+
+        table = ScatteringTable.load(directory / (output or "table.npz"))
+        assert table.settings.size == (8, 32, 8)
+        assert np.isfinite(table.data).all() and (table.data >= 0).all()
+        raw = option_value(argv, "--raw")
+        if raw:
+            assert (directory / f"{raw}.bin").stat().st_size == table.data.size * 4
+            assert (directory / f"{raw}.json").is_file()
+    elif command == "animate":
+        imageio = pytest.importorskip("imageio.v3")
+        movie = directory / (output or "sky.mp4")
+        frames = imageio.imread(movie)
+        assert frames.ndim == 4 and frames.shape[0] == 3 and frames.shape[1] == 32
+        stem = movie.with_suffix("")
+        assert len(list(pathlib.Path(f"{stem}_frames").glob("frame_*.png"))) == 3
+        assert pathlib.Path(f"{stem}_metrics.csv").is_file() and pathlib.Path(f"{stem}_metrics.json").is_file()
+        if "--hdr" in argv:
+            hdr = [np.load(path) for path in sorted(pathlib.Path(f"{stem}_frames").glob("frame_*.npy"))]
+            assert len(hdr) == 3 and all(np.isfinite(h).all() and (h >= 0).all() for h in hdr)
+    elif command == "render":
+        imageio = pytest.importorskip("imageio.v3")
+        image = imageio.imread(directory / (output or "sky.png"))
+        assert image.ndim == 3 and image.shape[0] == 32
+
+
+COMMANDS = readme_commands()
+
+
+def test_the_readme_shows_command_lines():
+    """The parser finds the README's examples (guards this module against a README it cannot read)."""
+    assert len(COMMANDS) >= 10
+    assert any(line.startswith("clsky animate --camera equirectangular") for line in COMMANDS)
+    assert any(line.startswith("python bench/") for line in COMMANDS)
+
+
+@pytest.mark.parametrize("line", COMMANDS, ids=[line[:60] for line in COMMANDS])
+def test_readme_command_line_runs(line, tmp_path):
+    argv = shlex.split(line)
+    assert argv[0] in ("clsky", "python"), f"the README shows a command this test cannot run: {line}"
+    result = subprocess.run(reduced(argv), cwd=ROOT if argv[0] == "python" else tmp_path, capture_output=True,
+                            text=True, timeout=600)
+    assert result.returncode == 0, f"{line!r} exited {result.returncode}:\n{result.stderr[-2000:]}"
+    assert "Traceback" not in result.stderr
+    check_outputs(argv, tmp_path)
+
+
+def test_the_first_lines_are_the_two_commands():
+    """The README opens with exactly two commands: the main job and the tests; .ci/run runs the test
+    command itself, and tests/test_main_job.py runs the main job's ``clsky animate`` with no options."""
+    first = shell_lines(fenced_blocks("sh")[0])
+    assert TEXT.startswith("```sh\n")
+    assert first == ["./scripts/setup.sh && .venv/bin/clsky animate",
+                     "./scripts/setup.sh && .venv/bin/python -m pytest"]
+    ci = (ROOT / ".ci" / "run").read_text()
+    assert re.search(r"^" + re.escape(first[1]) + r"(\s|$)", ci, re.M), ".ci/run does not run the README's test command"
+    main_job = (ROOT / "tests" / "test_main_job.py").read_text()
+    assert '"animate", "--progress", "none"]' in main_job
+
+
+#: (README text, reduced text) for the Python examples; each left side must occur in the README.
+PYTHON_REDUCTIONS = [
+    ("TableSettings(size=(32, 256, 32), mode=\"physical\", orders=\"auto\")",
+     "TableSettings(size=(8, 32, 8), mode=\"physical\", orders=\"auto\")"),
+    ("FisheyeCamera(512)", "FisheyeCamera(32)"),
+    ("AnimationConfig(frames=120, size=512, output=\"sky.mp4\")",
+     "AnimationConfig(frames=3, size=32, quality=\"draft\", output=\"sky.mp4\")"),
+    ("error_budget=0.01))", "error_budget=0.1))"),
+]
+
+
+def test_readme_python_examples_run(tmp_path, monkeypatch):
+    """The README's Python blocks, in order, in one namespace (each builds on the one before)."""
+    code = "\n".join(fenced_blocks("python"))
+    for original, small in PYTHON_REDUCTIONS:
+        assert original in code, f"the README's Python examples no longer contain {original!r}"
+        code = code.replace(original, small)
+    monkeypatch.chdir(tmp_path)
+    namespace = {"__name__": "readme_example"}
+    exec(compile(code, str(README), "exec"), namespace)       # noqa: S102  (the README is ours)
+    assert namespace["same"].settings.size == (8, 32, 8)        # the first block's table, loaded back
+    assert namespace["table"].settings == namespace["plan"].table     # the last block's planned table
+    assert np.isfinite(namespace["lookup"]).all() and np.isfinite(namespace["reference"]).all()
+    assert namespace["result"].rows and len(namespace["result"].rows) == 3
+    assert (tmp_path / "sky.mp4").is_file() and (tmp_path / "sky.bin").is_file()
