@@ -4,7 +4,8 @@ Builds the reference (the 'reference' quality level, anim/accuracy.py); then tim
 measures its error on four fisheye frames (day, golden hour, sunset, civil twilight). Writes
 docs/accuracy.csv, the Pareto plot docs/accuracy.png, and the table into README.md.
 
-Usage: python bench/bench_accuracy.py [--size 128] [--reference-cache FILE] [--no-readme] [--docs DIR] [--smoke]
+Usage: python bench/bench_accuracy.py [--size 128] [--reference-cache FILE] [--no-readme] [--docs DIR]
+[--smoke]
 
 ``--reference-cache``: the reference frames saved by bench/bench_quality.py (same size), instead of
 rendering them again (minutes). How far the reference converged: bench/bench_quality.py.

@@ -55,8 +55,8 @@ def main():
     if args.smoke:
         args.repeat = SMOKE.repeat
 
-    timing = [f"Full default table ({' x '.join(map(str, size))}, float64, default settings: orders until 1e-4), measured "
-              f"{datetime.date.today()} on {machine()}. OpenCL: best of {args.repeat} after a warm-up "
+    timing = [f"Full default table ({' x '.join(map(str, size))}, float64, default settings: orders until 1e-4), "
+              f"measured {datetime.date.today()} on {machine()}. OpenCL: best of {args.repeat} after a warm-up "
               f"(kernel compilation excluded); NumPy twins: one run, same process.", "",
               "| mode | orders | OpenCL [s] | NumPy twins [s] | NumPy / OpenCL |", "|---|---:|---:|---:|---:|"]
     shares = ["Share of each order in the table (sum over altitudes and view directions at the sun node "
