@@ -32,8 +32,9 @@ HEADERS = {
     "bench_quality": ["| level | promise | table | samples | build [s] | render [ms] | day [%] |",
                       "| doubled | day [%] |", "| table | sun axis | cells | build [s] | day [%] |"],
 }
-#: Measured wall time of the smoke run: single 11 s, orders 10 s, montecarlo 17 s, render 10 s,
-#: accuracy 52 s (the four 'draft' reference tables: 21 s), quality 2 min (reference and one doubled group).
+#: Measured wall time of each case (pytest, 2 shared cores): single 3-5 s, orders 5-7 s, montecarlo 10-12 s,
+#: render 9-10 s; accuracy 41 s (the four 'draft' reference tables: 21 s), quality 109 s (the reference
+#: and one doubled group).
 SLOW = {"bench_accuracy", "bench_quality"}
 
 NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
