@@ -164,15 +164,17 @@ def _errors(reference, frames, valid):
             per_frame)
 
 
-def reference_convergence(reference, valid, atmosphere="physical", progress=None, groups=tuple(REFERENCE_GROUPS)):
+def reference_convergence(reference, valid, atmosphere="physical", progress=None, groups=tuple(REFERENCE_GROUPS),
+                          level="reference"):
     """How much the reference frames change when each group of its counts (``groups``, default all of
     :data:`REFERENCE_GROUPS`) is doubled: {group: {frame name: p95 relative change}}, plus "sum": the sum
     over those groups per frame, which bounds the change of doubling them all (the changes are small,
-    so they add to first order)."""
+    so they add to first order). ``level``: the quality level ``reference`` was rendered at
+    (:func:`render_reference`; 'reference' unless a smoke run wants a cheaper stand-in)."""
     size = valid.shape[0]
     change = {}
     for index, group in enumerate(groups):
-        finer, _ = render_reference(size, (group,), atmosphere)
+        finer, _ = render_reference(size, (group,), atmosphere, level)
         change[group] = {name: m["p95_rel"] for name, m in _errors(finer, reference, valid)[2].items()}
         if progress is not None:
             progress("reference convergence", index + 1, len(groups))

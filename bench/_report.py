@@ -2,10 +2,17 @@
 
 A benchmark writes its Markdown table between ``<!-- bench:NAME -->`` and ``<!-- /bench:NAME -->`` in
 the README, so the figures there are always those of the last run.
+
+Every benchmark also takes ``--smoke`` (:func:`add_output_arguments`, :data:`SMOKE`): the same code
+path at a tiny size, to prove that the script runs (tests/test_bench_smoke.py). A smoke run prints its
+table and writes nothing into README.md or docs/: it implies ``--no-readme``, and any file it would
+write goes to a temporary directory instead.
 """
 
 from __future__ import annotations
 
+import argparse
+import dataclasses
 import os
 import pathlib
 import platform
@@ -14,6 +21,47 @@ import statistics
 import time
 
 README = pathlib.Path(__file__).resolve().parent.parent / "README.md"
+
+
+@dataclasses.dataclass(frozen=True)
+class SmokeSizes:
+    """The sizes of a ``--smoke`` run: small enough that each benchmark runs in seconds to a minute on
+    two cores, large enough that every code path (tables, orders, renders, plots) still runs."""
+
+    #: table (W, H, D): altitude x view x sun nodes
+    table: tuple = (8, 32, 8)
+    #: Monte Carlo paths per channel and case
+    photons: int = 300
+    #: side of a rendered frame [px]
+    frame: int = 16
+    #: timing repetitions
+    repeat: int = 1
+    #: quality level standing in for the accuracy reference (anim/accuracy.py); 'draft' is the cheapest
+    reference_level: str = "draft"
+    #: frames of the animation run by bench_render.py
+    animation_frames: int = 2
+
+
+#: The one set of smoke sizes every benchmark uses.
+SMOKE = SmokeSizes()
+
+
+def add_output_arguments(parser: argparse.ArgumentParser):
+    """Add the options every benchmark shares: ``--no-readme`` and ``--smoke``."""
+    parser.add_argument("--no-readme", action="store_true", help="print only: leave README.md as it is")
+    parser.add_argument("--smoke", action="store_true",
+                        help="the same code path at a tiny size (bench/_report.py: SMOKE), to check that the "
+                             "script runs; prints its table, writes nothing into README.md or docs/ "
+                             "(implies --no-readme)")
+    return parser
+
+
+def parse_arguments(parser: argparse.ArgumentParser, argv=None):
+    """``parser.parse_args(argv)``, with ``--smoke`` implying ``--no-readme``."""
+    args = parser.parse_args(argv)
+    if args.smoke:
+        args.no_readme = True
+    return args
 
 
 def machine() -> str:

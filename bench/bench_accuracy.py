@@ -4,10 +4,19 @@ Builds the reference (the 'reference' quality level, anim/accuracy.py); then tim
 measures its error on four fisheye frames (day, golden hour, sunset, civil twilight). Writes
 docs/accuracy.csv, the Pareto plot docs/accuracy.png, and the table into README.md.
 
-Usage: python bench/bench_accuracy.py [--size 128] [--reference-cache FILE] [--no-readme]
+Usage: python bench/bench_accuracy.py [--size 128] [--reference-cache FILE] [--no-readme] [--docs DIR]
+[--smoke]
 
 ``--reference-cache``: the reference frames saved by bench/bench_quality.py (same size), instead of
 rendering them again (minutes). How far the reference converged: bench/bench_quality.py.
+
+``--docs DIR``: where accuracy.csv and accuracy.png go. Default: docs/ when the run writes the README
+(they belong together); with ``--no-readme``, nowhere (print only), so that a trial run never
+overwrites the published data unless asked.
+
+``--smoke``: 16 x 16 frames, the 'draft' quality level as the reference, three candidates (the default
+table, a halved view axis, a 16-sample ray march) over an 8 x 32 x 8 table; the CSV and the plot go to
+a temporary directory (or ``--docs DIR``); print only (bench/_report.py).
 """
 
 from __future__ import annotations
@@ -15,23 +24,44 @@ from __future__ import annotations
 import argparse
 import datetime
 import pathlib
+import tempfile
 
 import numpy as np
 
-from _report import machine, write_readme_section
+from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
 
+import clsky
 from anim import accuracy, writers
 from clsky._cl import default_device, describe_device
 
 DOCS = pathlib.Path(__file__).resolve().parent.parent / "docs"
+#: The candidates of a --smoke run (over an SMOKE.table base): one table, one table knob, one ray march.
+SMOKE_CANDIDATES = ("default", "H / 2", "ray march 16 samples")
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--size", type=int, default=128)
     parser.add_argument("--reference-cache", type=pathlib.Path)
-    parser.add_argument("--no-readme", action="store_true")
-    args = parser.parse_args()
+    parser.add_argument("--docs", type=pathlib.Path, metavar="DIR",
+                        help="write accuracy.csv and accuracy.png into DIR (default: docs/ when writing the "
+                             "README; none with --no-readme; a temporary directory with --smoke)")
+    add_output_arguments(parser)
+    args = parse_arguments(parser)
+    candidates, level = accuracy.default_candidates(), "reference"
+    if args.smoke:
+        args.size, level = SMOKE.frame, SMOKE.reference_level
+        base = clsky.TableSettings(mode="physical", size=SMOKE.table)
+        candidates = [c for c in accuracy.default_candidates(base) if c.label in SMOKE_CANDIDATES]
+    with tempfile.TemporaryDirectory() as temporary:
+        if args.docs is None and args.smoke:
+            args.docs = pathlib.Path(temporary)
+        elif args.docs is None and not args.no_readme:
+            args.docs = DOCS
+        run(args, candidates, level)
+
+
+def run(args, candidates, level):
 
     if args.reference_cache:
         cached = np.load(args.reference_cache)
@@ -39,17 +69,20 @@ def main():
         if valid.shape != (args.size, args.size):
             raise SystemExit(f"{args.reference_cache} holds {valid.shape} frames, not {args.size} x {args.size}")
     else:
-        reference, valid = accuracy.render_reference(args.size)
-    rows = accuracy.measure(accuracy.default_candidates(), reference, valid)
-    writers.write_csv(DOCS / "accuracy.csv", rows, force=True)
-    accuracy.pareto_plot(rows, DOCS / "accuracy.png", force=True, size=args.size)
+        reference, valid = accuracy.render_reference(args.size, level=level)
+    rows = accuracy.measure(candidates, reference, valid)
+    if args.docs is not None:
+        args.docs.mkdir(parents=True, exist_ok=True)
+        writers.write_csv(args.docs / "accuracy.csv", rows, force=True)
+        accuracy.pareto_plot(rows, args.docs / "accuracy.png", force=True, size=args.size)
+        print(f"wrote {args.docs / 'accuracy.csv'}, {args.docs / 'accuracy.png'}", flush=True)
     front = {r["candidate"] for r in accuracy.pareto_front(rows)}
     names = list(accuracy.SUN_ELEVATIONS)
     lines = [f"Measured {datetime.date.today()} on {machine()}, {describe_device(default_device())}: "
              f"{args.size} x {args.size} fisheye frames from the ground, sun at elevations "
              + ", ".join(f"{e:g} deg ({n})" for n, e in accuracy.SUN_ELEVATIONS.items())
              + ". Error: 95th percentile of the relative HDR luminance error against the reference "
-             "(the 'reference' quality level, `anim/accuracy.py`; how far it converged: \"Quality levels\" "
+             f"(the '{level}' quality level, `anim/accuracy.py`; how far it converged: \"Quality levels\" "
              "below). Build: table "
              "(single + orders); render: one frame. * = on the Pareto front (render time vs worst error). "
              "Raw numbers: `docs/accuracy.csv`.", "",

@@ -6,7 +6,9 @@ Carlo estimate and its standard error, for both scattering modes, at converged q
 (the physics) and at the default settings (what the defaults cost). Prints the table and writes it
 into README.md.
 
-Usage: python bench/bench_montecarlo.py [--photons N] [--no-readme]
+Usage: python bench/bench_montecarlo.py [--photons N] [--no-readme] [--smoke]
+
+``--smoke``: 8 x 32 x 8 tables, a few hundred paths per case, print only (bench/_report.py).
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import datetime
 
 import numpy as np
 
-from _report import machine, write_readme_section
+from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
 
 import clsky
 from clsky import montecarlo
@@ -45,19 +47,22 @@ def compare(table, atmosphere, photons):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--photons", type=int, default=200_000, help="paths per channel and case")
-    parser.add_argument("--no-readme", action="store_true")
-    args = parser.parse_args()
+    add_output_arguments(parser)
+    args = parse_arguments(parser)
+    size = SMOKE.table if args.smoke else clsky.TableSettings().size
+    if args.smoke:
+        args.photons = SMOKE.photons
 
     lines = [f"Monte Carlo: {args.photons} paths per channel and case; measured {datetime.date.today()} on "
              f"{machine()}. Deviation = table / MC - 1 per channel (r, g, b) [%], and in units of the MC "
              f"standard error. Converged quadrature: {CONVERGED}; default: 30 + 30 uniform trapezoid "
-             f"steps. Every table: 32 x 256 x 32, orders until 1e-4.", "",
+             f"steps. Every table: {' x '.join(map(str, size))}, orders until 1e-4.", "",
              "| mode (preset) | quadrature | altitude [m] | cos view | sun zenith [deg] | deviation [%] | "
              "deviation [SE] |", "|---|---|---:|---:|---:|---|---|"]
     for mode in ("physical", "atmosphere-plus"):
         atmosphere = clsky.preset(mode)
         for label, settings in (("converged", CONVERGED), ("default", {})):
-            table = clsky.ScatteringTable.build(atmosphere, clsky.TableSettings(mode=mode, **settings))
+            table = clsky.ScatteringTable.build(atmosphere, clsky.TableSettings(mode=mode, size=size, **settings))
             for (altitude, cos_view, sun_zenith), value, mc, error in compare(table, atmosphere, args.photons):
                 deviation = ", ".join(f"{d:+.1f}" for d in 100 * (value / mc - 1))
                 sigmas = ", ".join(f"{s:+.1f}" for s in (value - mc) / error)

@@ -2,7 +2,9 @@
 1e-4) through OpenCL and through the NumPy twins, side by side in one run, for both modes; and the
 share of each order at a few sun angles. Prints both tables and writes them into README.md.
 
-Usage: python bench/bench_orders.py [--repeat N] [--no-readme]
+Usage: python bench/bench_orders.py [--repeat N] [--no-readme] [--smoke]
+
+``--smoke``: 8 x 32 x 8 tables, one repetition, print only (bench/_report.py).
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ import time
 
 import numpy as np
 
-from _report import machine, write_readme_section
+from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
 
 import clsky
 from clsky.mapping import grid_coordinates
@@ -47,11 +49,14 @@ def shares_at_sun_nodes(result, settings, atmosphere):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=3, help="OpenCL repetitions (NumPy runs once)")
-    parser.add_argument("--no-readme", action="store_true")
-    args = parser.parse_args()
+    add_output_arguments(parser)
+    args = parse_arguments(parser)
+    size = SMOKE.table if args.smoke else clsky.TableSettings().size
+    if args.smoke:
+        args.repeat = SMOKE.repeat
 
-    timing = [f"Full default table (32 x 256 x 32, float64, default settings: orders until 1e-4), measured "
-              f"{datetime.date.today()} on {machine()}. OpenCL: best of {args.repeat} after a warm-up "
+    timing = [f"Full default table ({' x '.join(map(str, size))}, float64, default settings: orders until 1e-4), "
+              f"measured {datetime.date.today()} on {machine()}. OpenCL: best of {args.repeat} after a warm-up "
               f"(kernel compilation excluded); NumPy twins: one run, same process.", "",
               "| mode | orders | OpenCL [s] | NumPy twins [s] | NumPy / OpenCL |", "|---|---:|---:|---:|---:|"]
     shares = ["Share of each order in the table (sum over altitudes and view directions at the sun node "
@@ -61,7 +66,7 @@ def main():
               "|---|---:|---|---|---|---|---|"]
     for mode in ("atmosphere-plus", "physical"):
         atmosphere = clsky.preset(mode)
-        settings = clsky.TableSettings(mode=mode)
+        settings = clsky.TableSettings(mode=mode, size=size)
         compute_orders(atmosphere, settings)                                     # warm-up
         best = min(timed(lambda: compute_orders(atmosphere, settings))[1] for _ in range(args.repeat))
         result = compute_orders(atmosphere, settings)

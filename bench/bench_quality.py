@@ -11,11 +11,20 @@
 Writes the README sections "quality" and "plan", and docs/quality.csv.
 
 Usage: python bench/bench_quality.py [--size 64] [--groups GROUP ...] [--reference-cache FILE] [--no-readme]
+[--docs DIR] [--smoke]
 
 ``--groups`` names the reference's count groups to double (anim.accuracy.REFERENCE_GROUPS; default all;
 each costs a rebuild of the four reference tables, 5 to 15 min); ``--reference-cache FILE`` keeps the
 reference frames and their convergence in an .npz, read back by later runs (and by
 bench/bench_accuracy.py) instead of being computed again.
+
+``--docs DIR``: where quality.csv goes. Default: docs/ when the run writes the README; with
+``--no-readme``, nowhere (print only), so that a trial run never overwrites the published data unless
+asked.
+
+``--smoke``: 16 x 16 frames, the 'draft' quality level as the reference with one group doubled ("ray
+march", unless ``--groups`` names others), every table cut to at most 8 x 32 x 8 nodes, each build
+once; quality.csv goes to a temporary directory (or ``--docs DIR``); print only (bench/_report.py).
 """
 
 from __future__ import annotations
@@ -24,10 +33,11 @@ import argparse
 import datetime
 import json
 import pathlib
+import tempfile
 import time
 
 import numpy as np
-from _report import machine, write_readme_section
+from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
 
 import clsky
 from anim import accuracy, animate, metrics, writers
@@ -58,8 +68,12 @@ def errors(reference, frames, valid):
     return {name: metrics.compare_frames(reference[name], frames[name], valid)["p95_rel"] for name in NAMES}
 
 
-def built(atmosphere, settings, repeat=1):
-    """The table and its build time [s]: the fastest of ``repeat`` builds (the least noisy figure)."""
+def built(atmosphere, settings, repeat=1, smoke=False):
+    """The table and its build time [s]: the fastest of ``repeat`` builds (the least noisy figure).
+    ``smoke``: cut the table to at most SMOKE.table nodes per axis, and build it once."""
+    if smoke:
+        settings = settings.replace(size=tuple(min(n, m) for n, m in zip(settings.size, SMOKE.table)))
+        repeat = SMOKE.repeat
     seconds = []
     for _ in range(repeat):
         start = time.perf_counter()
@@ -75,11 +89,28 @@ def percent(values):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--size", type=int, default=64)
-    parser.add_argument("--groups", nargs="*", default=list(accuracy.REFERENCE_GROUPS),
-                        choices=list(accuracy.REFERENCE_GROUPS))
+    parser.add_argument("--groups", nargs="*", choices=list(accuracy.REFERENCE_GROUPS),
+                        help="default: all (with --smoke: ray march)")
     parser.add_argument("--reference-cache", type=pathlib.Path)
-    parser.add_argument("--no-readme", action="store_true")
-    args = parser.parse_args()
+    parser.add_argument("--docs", type=pathlib.Path, metavar="DIR",
+                        help="write quality.csv into DIR (default: docs/ when writing the README; none with "
+                             "--no-readme; a temporary directory with --smoke)")
+    add_output_arguments(parser)
+    args = parse_arguments(parser)
+    reference_name = "reference"
+    if args.smoke:
+        args.size, reference_name = SMOKE.frame, SMOKE.reference_level
+    if args.groups is None:
+        args.groups = ["ray march"] if args.smoke else list(accuracy.REFERENCE_GROUPS)
+    with tempfile.TemporaryDirectory() as temporary:
+        if args.docs is None and args.smoke:
+            args.docs = pathlib.Path(temporary)
+        elif args.docs is None and not args.no_readme:
+            args.docs = DOCS
+        run(args, reference_name)
+
+
+def run(args, reference_name):
     stamp = f"Measured {datetime.date.today()} on {machine()}, {describe_device(default_device())}"
 
     if args.reference_cache and args.reference_cache.exists():
@@ -91,9 +122,9 @@ def main():
             raise SystemExit(f"{args.reference_cache} holds {valid.shape} frames, not {args.size} x {args.size}")
     else:
         start = time.perf_counter()
-        reference, valid = accuracy.render_reference(args.size)
+        reference, valid = accuracy.render_reference(args.size, level=reference_name)
         reference_seconds = time.perf_counter() - start
-        change = accuracy.reference_convergence(reference, valid, groups=args.groups)
+        change = accuracy.reference_convergence(reference, valid, groups=args.groups, level=reference_name)
         if args.reference_cache:
             np.savez(args.reference_cache, valid=valid, seconds=reference_seconds, convergence=json.dumps(change),
                      **reference)
@@ -106,16 +137,19 @@ def main():
         if name == "reference":
             continue
         plan = plan_scene(Scene(FRAMES_PATH, quality=name))
-        table, build = built(plan.atmosphere, plan.table)
+        table, build = built(plan.atmosphere, plan.table, smoke=args.smoke)
         frames, render = frames_of(table, level.ray, args.size)
         lut, lut_render = frames_of(table, level.ray, args.size, method="lut")
         error = errors(reference, frames, valid)
-        rows.append({"level": name, "budget": level.budget, "table": "x".join(map(str, plan.table.size)),
+        rows.append({"level": name, "budget": level.budget, "table": "x".join(map(str, table.settings.size)),
                      "samples": level.ray.view_steps, "build_s": build, "render_s": render,
                      **{f"p95_rel {n}": error[n] for n in NAMES}, "worst": max(error.values()),
                      "lut_worst": max(errors(reference, lut, valid).values())})
         print(rows[-1], flush=True)
-    writers.write_csv(DOCS / "quality.csv", rows, force=True)
+    if args.docs is not None:
+        args.docs.mkdir(parents=True, exist_ok=True)
+        writers.write_csv(args.docs / "quality.csv", rows, force=True)
+        print(f"wrote {args.docs / 'quality.csv'}", flush=True)
 
     lines = [f"{stamp}: {args.size} x {args.size} fisheye frames from the ground (`bench/bench_quality.py`). "
              "Each level is planned for the four frames' sun path (-4 to 45 deg); error: 95th percentile of "
@@ -128,9 +162,10 @@ def main():
         lines.append(f"| {r['level']} | {100 * r['budget']:g} % | {r['table']} | {r['samples']} | {r['build_s']:.2f} | "
                      f"{1e3 * r['render_s']:.1f} | " + percent({n: r[f"p95_rel {n}"] for n in NAMES})
                      + f" | {100 * r['lut_worst']:.0f} |")
-    lines += ["", "The reference ('reference' level: {} x {} altitude x view ".format(*accuracy.reference_level().table.size[:2])
-              + f"nodes, sun nodes every {accuracy.reference_level().sun_node_spacing:g} in w on each frame's sun range, "
-              f"{accuracy.reference_level().ray.view_steps} samples; {reference_seconds:.0f} s for the four frames) "
+    reference_level = accuracy.reference_level(level=reference_name)
+    lines += ["", f"The reference ('{reference_name}' level: " + "{} x {} altitude x view ".format(*reference_level.table.size[:2])
+              + f"nodes, sun nodes every {reference_level.sun_node_spacing:g} in w on each frame's sun range, "
+              f"{reference_level.ray.view_steps} samples; {reference_seconds:.0f} s for the four frames) "
               "changes this much when each group of its counts is doubled; their sum bounds the change of "
               "doubling them all"
               + ("" if len(args.groups) == len(accuracy.REFERENCE_GROUPS) else
@@ -145,11 +180,11 @@ def main():
 
     # The default animation's plan (exactly as `clsky animate` makes it) against the full table of the
     # same quality, side by side.
-    config = animate.AnimationConfig()
+    config = animate.AnimationConfig(size=SMOKE.frame) if args.smoke else animate.AnimationConfig()
     directions, camera_valid = animate._camera(config).directions()
     plan = animate.plan_animation(config, animate.sun_positions(config), directions, camera_valid)
-    planned, planned_build = built(plan.atmosphere, plan.table, repeat=3)
-    full, full_build = built(plan.atmosphere, plan.full_table, repeat=3)
+    planned, planned_build = built(plan.atmosphere, plan.table, repeat=3, smoke=args.smoke)
+    full, full_build = built(plan.atmosphere, plan.full_table, repeat=3, smoke=args.smoke)
     planned_frames, _ = frames_of(planned, plan.level.ray, args.size)
     full_frames, _ = frames_of(full, plan.level.ray, args.size)
     planned_error, full_error = errors(reference, planned_frames, valid), errors(reference, full_frames, valid)
@@ -160,7 +195,7 @@ def main():
              plan.describe(), "```", "",
              "| table | sun axis | cells | build [s] | " + " | ".join(f"{n} [%]" for n in NAMES) + " |",
              "|---|---|---:|---:|" + "---:|" * len(NAMES),
-             f"| planned | {plan.table.size[2]} nodes, elevations {np.degrees(np.arcsin(plan.table.sun_cos_range[0])):.1f} "
+             f"| planned | {planned.settings.size[2]} nodes, elevations {np.degrees(np.arcsin(plan.table.sun_cos_range[0])):.1f} "
              f"to {np.degrees(np.arcsin(plan.table.sun_cos_range[1])):.1f} deg | {cells[0]} | {planned_build:.2f} | "
              + percent(planned_error) + " |",
              f"| full, same quality | {full.settings.size[2]} nodes, whole axis | {cells[1]} | {full_build:.2f} | "

@@ -5,7 +5,10 @@
 - the default `clsky animate` (120 frames, 512 x 512, both renderers, comparison, files), wall time.
 Prints the table and writes it into README.md.
 
-Usage: python bench/bench_render.py [--repeat N] [--no-readme] [--skip-animation]
+Usage: python bench/bench_render.py [--repeat N] [--no-readme] [--skip-animation] [--smoke]
+
+``--smoke``: an 8 x 32 x 8 table, 16 x 16 frames, one repetition, and a 2-frame 16 x 16 animation over
+the same table grid; print only (bench/_report.py).
 """
 
 from __future__ import annotations
@@ -17,7 +20,7 @@ import sys
 import tempfile
 import time
 
-from _report import best_of, machine, write_readme_section
+from _report import SMOKE, add_output_arguments, best_of, machine, parse_arguments, write_readme_section
 
 import clsky
 from anim.cameras import FisheyeCamera, sun_direction
@@ -28,17 +31,24 @@ from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=5)
-    parser.add_argument("--no-readme", action="store_true")
     parser.add_argument("--skip-animation", action="store_true")
-    args = parser.parse_args()
+    add_output_arguments(parser)
+    args = parse_arguments(parser)
+    sizes, animate = (1024, 512), [sys.executable, "-m", "anim", "animate", "--progress", "none"]
+    settings = clsky.TableSettings(mode="physical")
+    if args.smoke:
+        args.repeat, sizes = SMOKE.repeat, (SMOKE.frame, SMOKE.frame)
+        settings = settings.replace(size=SMOKE.table)
+        animate += ["--size", str(SMOKE.frame), "--frames", str(SMOKE.animation_frames),
+                    "--table-size", *map(str, SMOKE.table)]
 
-    table = clsky.ScatteringTable.build("physical", clsky.TableSettings(mode="physical"))
+    table = clsky.ScatteringTable.build("physical", settings)
     renderer = SkyRenderer(table)
     sun = sun_direction(50.0, 160.0)
     rows = []
-    for size, method, label in ((1024, renderer.render_table, "table lookup, fisheye 1024 x 1024"),
-                                (512, renderer.render_raymarch,
-                                 f"ray march ({RAYMARCH_DEFAULTS.view_steps} samples), fisheye 512 x 512")):
+    for size, method, label in ((sizes[0], renderer.render_table, f"table lookup, fisheye {sizes[0]} x {sizes[0]}"),
+                                (sizes[1], renderer.render_raymarch,
+                                 f"ray march ({RAYMARCH_DEFAULTS.view_steps} samples), fisheye {sizes[1]} x {sizes[1]}")):
         directions, valid = FisheyeCamera(size).directions()
         prepared = renderer.prepare(directions, valid)
         method(prepared, sun, 0.0)                                     # warm-up
@@ -49,15 +59,17 @@ def main():
     if not args.skip_animation:
         with tempfile.TemporaryDirectory() as directory:
             start = time.perf_counter()
-            subprocess.run([sys.executable, "-m", "anim", "animate", "--progress", "none"], cwd=directory, check=True)
+            subprocess.run(animate, cwd=directory, check=True)
             animation = f"{time.perf_counter() - start:.0f} s"
         print("default animate:", animation, flush=True)
     lines = [f"Rendering, measured {datetime.date.today()} on {machine()}, OpenCL device "
              f"{describe_device(renderer.engine.device)}; best and median of {args.repeat} frames after a warm-up "
              f"(HDR float64 frame copied to the host).", "",
              "| render | best | median | frames/s (best) |", "|---|---:|---:|---:|", *rows, "",
-             f"Default `clsky animate` (120 frames, 512 x 512 fisheye, table build, both renderers, comparison, "
-             f"PNG + MP4 + metrics), wall time of the whole command: **{animation}**."]
+             ("Smoke run: `" + " ".join(["clsky", *animate[3:]]) + "`" if args.smoke else
+              "Default `clsky animate` (120 frames, 512 x 512 fisheye, table build, both renderers, comparison, "
+             f"PNG + MP4 + metrics)")
+             + f", wall time of the whole command: **{animation}**."]
     markdown = "\n".join(lines)
     print(markdown)
     if not args.no_readme:

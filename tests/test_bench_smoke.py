@@ -1,0 +1,120 @@
+"""Every benchmark in bench/ runs: ``python bench/<name>.py --smoke`` (the README's command lines, at the
+tiny sizes of bench/_report.py's SMOKE) exits 0, prints its Markdown table with finite numbers, and
+leaves README.md and docs/ byte for byte as they were.
+
+The scripts import ``_report`` from their own directory, so they run by path from the repository root,
+exactly as the README shows them. Cases that take more than ~30 s on two shared cores are marked slow
+(measured wall times, on a loaded 2-core machine, in the comments).
+"""
+
+from __future__ import annotations
+
+import math
+import pathlib
+import re
+import subprocess
+import sys
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+BENCH = ROOT / "bench"
+
+#: script: the start of the header line of each Markdown table it prints
+HEADERS = {
+    "bench_single": ["| settings | OpenCL [s] | NumPy twin [s] | NumPy / OpenCL |"],
+    "bench_orders": ["| mode | orders | OpenCL [s] | NumPy twins [s] | NumPy / OpenCL |",
+                     "| mode | sun zenith [deg] | order 1 | order 2 | order 3 | order 4 | orders 5+ |"],
+    "bench_montecarlo": ["| mode (preset) | quadrature | altitude [m] | cos view | sun zenith [deg] | deviation [%] | "
+                         "deviation [SE] |"],
+    "bench_render": ["| render | best | median | frames/s (best) |"],
+    "bench_accuracy": ["| candidate | knob | build [s] | render [ms] | p95 day [%] |"],
+    "bench_quality": ["| level | promise | table | samples | build [s] | render [ms] | day [%] |",
+                      "| doubled | day [%] |", "| table | sun axis | cells | build [s] | day [%] |"],
+}
+#: Measured wall time of each case (pytest, 2 shared cores): single 3-5 s, orders 5-7 s, montecarlo 10-12 s,
+#: render 9-10 s; accuracy 41 s (the four 'draft' reference tables: 21 s), quality 109 s (the reference
+#: and one doubled group).
+SLOW = {"bench_accuracy", "bench_quality"}
+
+NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+
+
+def snapshot():
+    """README.md and every file under docs/: {relative path: bytes}."""
+    files = [ROOT / "README.md", *sorted(p for p in (ROOT / "docs").rglob("*") if p.is_file())]
+    return {str(p.relative_to(ROOT)): p.read_bytes() for p in files}
+
+
+def table_rows(output, header):
+    """The data rows (lists of cells) of the Markdown table whose header line starts with ``header``."""
+    lines = output.splitlines()
+    starts = [i for i, line in enumerate(lines) if line.startswith(header)]
+    assert starts, f"no table with header {header!r} in the output:\n{output}"
+    start = starts[0]
+    assert set(lines[start + 1]) <= set("|-:"), lines[start + 1]
+    rows = []
+    for line in lines[start + 2:]:
+        if not line.startswith("|"):
+            break
+        rows.append([cell.strip() for cell in line.strip().strip("|").split("|")])
+    return rows
+
+
+def assert_finite_row(rows):
+    """At least one row holds numbers, and every number in every row is finite."""
+    numbers_seen = False
+    for row in rows:
+        values = " | ".join(row[1:])
+        assert not re.search(r"\b(nan|inf)\b", values, re.I), row
+        numbers = [float(n) for n in NUMBER.findall(values)]
+        assert all(math.isfinite(n) for n in numbers), row
+        numbers_seen = numbers_seen or bool(numbers)
+    assert rows and numbers_seen, rows
+
+
+def run_smoke(name, *extra, timeout=900):
+    before = snapshot()
+    result = subprocess.run([sys.executable, f"bench/{name}.py", "--smoke", *extra], cwd=ROOT, capture_output=True,
+                            text=True, timeout=timeout)
+    assert result.returncode == 0, result.stdout + result.stderr
+    after = snapshot()
+    assert after.keys() == before.keys(), sorted(set(after) ^ set(before))
+    changed = [path for path in before if before[path] != after[path]]
+    assert not changed, f"{name} --smoke changed {changed}"
+    return result.stdout
+
+
+@pytest.mark.parametrize("name", [pytest.param(name, marks=pytest.mark.slow) if name in SLOW else name
+                                  for name in HEADERS])
+def test_smoke_run_prints_its_table_and_writes_nothing(name):
+    output = run_smoke(name)
+    for header in HEADERS[name]:
+        assert_finite_row(table_rows(output, header))
+
+
+def test_every_bench_script_is_covered():
+    """A new bench script (bench_memory.py, ...) must get --smoke and a case here."""
+    assert {p.stem for p in BENCH.glob("bench_*.py")} <= set(HEADERS)
+
+
+def test_smoke_implies_no_readme():
+    sys.path.insert(0, str(BENCH))
+    try:
+        import _report
+    finally:
+        sys.path.remove(str(BENCH))
+    import argparse
+
+    parser = _report.add_output_arguments(argparse.ArgumentParser())
+    assert _report.parse_arguments(parser, ["--smoke"]).no_readme
+    assert not _report.parse_arguments(parser, []).no_readme
+    assert not _report.parse_arguments(parser, []).smoke
+
+
+@pytest.mark.slow
+def test_accuracy_smoke_writes_its_files_where_asked(tmp_path):
+    pytest.importorskip("matplotlib")
+    run_smoke("bench_accuracy", "--docs", str(tmp_path))
+    assert (tmp_path / "accuracy.csv").read_text().startswith("candidate,")
+    assert (tmp_path / "accuracy.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
