@@ -12,7 +12,9 @@ What is reduced, and why it keeps the example's meaning:
   and date, over two hours around a Munich sunrise.
 - ``clsky table``: an 8 x 32 x 8 grid (every other option as written).
 - ``clsky bench accuracy``: its ``--quick`` smoke run at 16 pixels against the default level.
-- ``python bench/X.py``: ``--smoke`` (the same code path at a tiny size; writes no README or docs).
+- ``python bench/X.py``: run with ``--smoke`` (the same code path at a tiny size; writes no README or
+  docs) by ``tests/test_bench_smoke.py``, which checks their tables too; here the README's bench lines
+  are checked to be among the scripts that module runs, so they are not run twice.
 
 The README's first two commands are checked for what they promise: the test command is the one
 ``.ci/run`` runs, and the main job is the command ``tests/test_main_job.py`` runs.
@@ -65,8 +67,6 @@ def readme_commands():
 
 def reduced(argv):
     """``argv`` (the README's words) with the options that make it small."""
-    if argv[0] == "python":
-        return [sys.executable, str(ROOT / argv[1]), *argv[2:], "--smoke"]
     command = argv[1] if len(argv) > 1 else ""
     extra = []
     if command in ("animate", "render"):
@@ -132,15 +132,28 @@ def test_the_readme_shows_command_lines():
     assert any(line.startswith("python bench/") for line in COMMANDS)
 
 
-@pytest.mark.parametrize("line", COMMANDS, ids=[line[:60] for line in COMMANDS])
+CLSKY_COMMANDS = [line for line in COMMANDS if not line.startswith("python bench/")]
+BENCH_COMMANDS = [line for line in COMMANDS if line.startswith("python bench/")]
+
+
+@pytest.mark.parametrize("line", CLSKY_COMMANDS, ids=[line[:60] for line in CLSKY_COMMANDS])
 def test_readme_command_line_runs(line, tmp_path):
     argv = shlex.split(line)
-    assert argv[0] in ("clsky", "python"), f"the README shows a command this test cannot run: {line}"
-    result = subprocess.run(reduced(argv), cwd=ROOT if argv[0] == "python" else tmp_path, capture_output=True,
-                            text=True, timeout=600)
+    assert argv[0] == "clsky", f"the README shows a command this test cannot run: {line}"
+    result = subprocess.run(reduced(argv), cwd=tmp_path, capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, f"{line!r} exited {result.returncode}:\n{result.stderr[-2000:]}"
     assert "Traceback" not in result.stderr
     check_outputs(argv, tmp_path)
+
+
+@pytest.mark.parametrize("line", BENCH_COMMANDS)
+def test_readme_bench_lines_are_run_by_the_smoke_tests(line):
+    """``python bench/X.py`` as the README shows it: X exists and tests/test_bench_smoke.py runs it."""
+    from test_bench_smoke import HEADERS
+
+    argv = shlex.split(line)
+    assert len(argv) == 2 and (ROOT / argv[1]).is_file(), line
+    assert pathlib.Path(argv[1]).stem in HEADERS
 
 
 def test_the_first_lines_are_the_two_commands():
