@@ -128,10 +128,9 @@ def check_finite_nonnegative(name, array):
     low, high = array.min(), array.max()          # min and max propagate NaN
     if low >= 0 and high < np.inf:
         return
-    nan, infinite = int(np.isnan(array).sum()), int(np.isinf(array).sum())
-    negative = int((array < 0).sum())
-    raise TableFormatError(f"{name} holds {nan} NaN, {infinite} infinite and {negative} negative values "
-                           f"(a table's values are finite and >= 0)")
+    counts = {"NaN": np.isnan(array).sum(), "infinite": np.isinf(array).sum(), "negative": (array < 0).sum()}
+    found = " and ".join(f"{int(count)} {kind}" for kind, count in counts.items() if count)
+    raise TableFormatError(f"{name} holds {found} values (a table's values are finite and >= 0)")
 
 
 def check_table_array(name, array, shape, dtypes, check_values=True):
@@ -243,12 +242,12 @@ class ScatteringTable:
         limit = max_orders_kept(self.settings)
         if len(self.orders) > limit:
             raise TableFormatError(f"{len(self.orders)} orders kept, the settings compute at most {limit}")
-        recorded = self.orders_record.get("orders")
-        if self.orders and recorded is not None and recorded != len(self.orders):
-            raise TableFormatError(f"orders_record counts {recorded!r} orders, the table keeps {len(self.orders)}")
         for k, order in enumerate(self.orders, start=1):
             check_table_array(f"order_{k}", order, grid + (order_channels(self.settings, k),),
                               ("float32", "float64"), check_values)
+        recorded = self.orders_record.get("orders")
+        if self.orders and recorded is not None and recorded != len(self.orders):
+            raise TableFormatError(f"orders_record counts {recorded!r} orders, the table keeps {len(self.orders)}")
 
     # Building -------------------------------------------------------------------------------------
     @classmethod
@@ -539,7 +538,8 @@ def _check_membership(contents) -> int:
     if unexpected:
         raise TableFormatError(f"unexpected members {unexpected}")
     if orders != list(range(1, len(orders) + 1)):
-        raise TableFormatError(f"orders must be order_1 to order_{len(orders)}, got order_{orders}")
+        raise TableFormatError(f"orders must be order_1 to order_{len(orders)}, got "
+                               f"{', '.join(f'order_{k}' for k in orders)}")
     return len(orders)
 
 
