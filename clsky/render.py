@@ -145,6 +145,7 @@ class SkyRenderer:
         dtype = self.engine.dtype
         # the kernels get the sizes of what was uploaded here, never re-read from the table
         self._table_shape = table.data.shape
+        self._gathered_shape = None if table.gathered is None else table.gathered.shape
         self._has_gathered = table.gathered is not None
         self._atmosphere_d = _atmosphere_cl.to_device(self.queue, table.atmosphere, dtype)
         self._table_d = cla.to_device(self.queue, np.ascontiguousarray(table.data, dtype=dtype))
@@ -228,15 +229,17 @@ class SkyRenderer:
         return self._launch("render_table", directions, sun_direction, altitude, valid, args, buffers)
 
     def _check_table_unchanged(self):
-        """The table, once its data, gathered and size are checked to be what was uploaded (a frozen
-        dataclass can still be changed with object.__setattr__): ValueError otherwise."""
+        """The table, once the shapes of its data and gathered and its settings' size and channels are
+        checked to be those of the upload (a frozen dataclass can still be changed with
+        object.__setattr__): ValueError otherwise."""
         t = self.table
         width, height, depth = t.settings.size
-        now = (np.shape(t.data), (depth, height, width), t.gathered is not None)
-        uploaded = (self._table_shape, self._table_shape[:3], self._has_gathered)
-        if now != uploaded or t.data.shape[-1] != t.settings.channels:
-            raise ValueError(f"the table changed since the renderer uploaded it (data {uploaded[0]}, gathered "
-                             f"{uploaded[2]}; now {now[0]}, {now[2]}, size {t.settings.size}): make a new SkyRenderer")
+        uploaded = (self._table_shape, self._table_shape, self._gathered_shape)
+        now = (np.shape(t.data), (depth, height, width, t.settings.channels),
+               None if t.gathered is None else np.shape(t.gathered))
+        if now != uploaded:
+            raise ValueError(f"the table changed since the renderer uploaded it (data, settings and gathered "
+                             f"shapes {uploaded} then, {now} now): make a new SkyRenderer")
         return t
 
     def _view_slice(self, altitude, cos_sun):

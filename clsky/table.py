@@ -201,7 +201,10 @@ class ScatteringTable:
     gathered: np.ndarray | None = None
 
     def __post_init__(self):
-        object.__setattr__(self, "orders", tuple(self.orders))
+        try:
+            object.__setattr__(self, "orders", tuple(self.orders))
+        except TypeError:
+            raise TableFormatError(f"orders must be a sequence of arrays, got {type(self.orders).__name__}") from None
         self.validate()
 
     def validate(self, check_values=True):
@@ -418,6 +421,7 @@ class ScatteringTable:
         Returns the two paths. Both are written atomically; existing files are kept unless
         ``overwrite``.
         """
+        self.validate()
         path = pathlib.Path(path)
         binary, header = path.with_suffix(".bin"), path.with_suffix(".json")
         for target in (binary, header):

@@ -356,6 +356,7 @@ def test_edited_parameters_fail_the_hash(saved, table):
     ("gathered", np.zeros((4, 8, 3, 6)), "gathered has shape"),
     ("gathered", np.full(GRID + (6,), np.inf), "infinite"),
     ("orders", (np.zeros(GRID + (3,)),), "order_1 has shape"),
+    ("orders", None, "orders must be a sequence"),
     ("metadata", "provenance", "metadata must be a dict"),
     ("settings", {"size": (4, 8, 4)}, "settings must be TableSettings"),
 ])
@@ -369,6 +370,8 @@ def test_save_refuses_a_table_edited_in_place(tmp_path):
     table.data[0, 0, 0, 0] = np.nan
     with pytest.raises(TableFormatError, match="NaN"):
         table.save(tmp_path / "sky.npz")
+    with pytest.raises(TableFormatError, match="NaN"):
+        table.export_raw(tmp_path / "sky")
     assert list(tmp_path.iterdir()) == []
 
 
@@ -425,7 +428,8 @@ def test_renderer_refuses_a_bypassed_table(cl_context, table, changes, fragment)
 
 @pytest.mark.parametrize("method", ["render_table", "render_raymarch"])
 @pytest.mark.parametrize("changes", [{"settings": TINY.replace(size=(8, 8, 4), mode="physical")},
-                                     {"data": np.ones((4, 8, 3, 9))}])
+                                     {"settings": TINY.replace(mode="atmosphere-plus")},
+                                     {"data": np.ones((4, 8, 3, 9))}, {"gathered": np.ones((4, 8, 3, 6))}])
 def test_renderer_refuses_a_table_changed_after_upload(cl_context, table, monkeypatch, method, changes):
     copy = bypassed(table)
     with SkyRenderer(copy, RAY, ctx=cl_context) as renderer:
