@@ -44,6 +44,7 @@ import pathlib
 import re
 import tempfile
 import time
+import tokenize
 import zipfile
 import zlib
 from typing import Callable
@@ -469,9 +470,11 @@ class ScatteringTable:
 #: Members every table file holds (besides order_1 ... order_K and the optional gathered).
 REQUIRED_MEMBERS = ("format_version", "data", "atmosphere", "settings", "metadata", "orders_record",
                     "parameters_hash", "checksums")
-#: What reading a damaged archive raises, in numpy and zipfile (a member's header, payload or CRC).
+#: What reading a damaged archive raises, in numpy and zipfile (a member's header, payload or CRC;
+#: numpy tokenizes an npy header, so a flipped bracket there raises TokenError).
 _READ_ERRORS = (OSError, EOFError, ValueError, KeyError, TypeError, UnicodeError, OverflowError, MemoryError,
-                NotImplementedError, zipfile.BadZipFile, zlib.error)
+                NotImplementedError, SyntaxError, RecursionError, tokenize.TokenError, zipfile.BadZipFile,
+                zlib.error)
 
 
 def _json_text(value) -> np.ndarray:

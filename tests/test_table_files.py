@@ -171,10 +171,13 @@ def test_flipped_byte_in_data_payload(saved):
     refused(saved)
 
 
-@pytest.mark.parametrize("where", ["zip header", "npy header"])
+@pytest.mark.parametrize("where", ["zip header", "npy header", "npy header bracket"])
 def test_flipped_byte_in_data_header(saved, where):
-    member_start, payload = data_payload_offset(saved)
-    flip(saved, 30 if where == "zip header" else member_start + 40)   # the member's name / its npy header
+    member_start, _ = data_payload_offset(saved)
+    offsets = {"zip header": 30,                    # the member's name in its local header
+               "npy header": member_start + 40,     # inside the npy header's dict
+               "npy header bracket": saved.read_bytes().index(b"'shape': (") + 9}   # numpy: TokenError
+    flip(saved, offsets[where])
     refused(saved)
 
 
