@@ -293,8 +293,13 @@ class ScatteringTable:
         seconds = time.perf_counter() - start
         metadata = {"clsky_version": __version__, "backend": backend, "device": result.record.pop("device"),
                     "build_seconds": seconds, "fast_math": bool(fast_math)}
-        return cls(atmosphere, settings, to_layout(result.combined(settings.mode), settings.mie_layout),
-                   metadata, tuple(result.orders), result.record, result.gathered)
+        try:
+            return cls(atmosphere, settings, to_layout(result.combined(settings.mode), settings.mie_layout),
+                       metadata, tuple(result.orders), result.record, result.gathered)
+        except TableFormatError as error:
+            cause = " (or fast_math removed a guard)" if fast_math else ""
+            raise TableFormatError(f"the computed table is unusable: {error}; the atmosphere or settings are "
+                                   f"beyond what the numerics support{cause}") from error
 
     # Using ----------------------------------------------------------------------------------------
     @property

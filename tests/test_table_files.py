@@ -378,6 +378,22 @@ def test_save_refuses_a_table_edited_in_place(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_build_refuses_a_table_with_nan(monkeypatch):
+    """A build whose numbers went wrong (e.g. an absurd planet) raises instead of returning NaN."""
+    import clsky.orders
+
+    compute_orders = clsky.orders.compute_orders
+
+    def with_nan(*args, **kwargs):
+        result = compute_orders(*args, **kwargs)
+        result.orders[0][0, 0, 0, 0] = np.nan
+        return result
+
+    monkeypatch.setattr(clsky.orders, "compute_orders", with_nan)
+    with pytest.raises(TableFormatError, match="computed table is unusable: data holds 1 NaN"):
+        ScatteringTable.build("physical", TINY, backend="numpy")
+
+
 def test_orders_are_kept_as_a_tuple(table):
     assert isinstance(dataclasses.replace(table, orders=list(table.orders)).orders, tuple)
 
