@@ -413,7 +413,7 @@ class ScatteringTable:
         except (ValueError, TypeError, KeyError, AttributeError) as error:
             if isinstance(error, TableFormatError):
                 raise
-            raise TableFormatError(f"invalid parameters: {error}") from error
+            raise TableFormatError(f"invalid parameters: {_shorten(str(error))}") from error
         stored_hash = contents["parameters_hash"]
         if not _is_text(stored_hash) or parameters_hash(atmosphere, settings) != stored_hash.item():
             raise TableFormatError("parameters hash does not match its parameters (corrupted or edited file)")
@@ -491,17 +491,19 @@ def _is_text(member) -> bool:
     return isinstance(member, np.ndarray) and member.shape == () and member.dtype.kind == "U"
 
 
+def _shorten(text, limit=200) -> str:
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
 def _describe_error(error) -> str:
-    text = f"{type(error).__name__}: {error}"
-    return text if len(text) <= 200 else text[:197] + "..."
+    return _shorten(f"{type(error).__name__}: {error}")
 
 
 def _describe_member(member) -> str:
     """A short description of a member's value for a message: the scalar itself, else its kind."""
     if isinstance(member, np.ndarray) and member.shape == ():
         value = member.item()
-        text = f"{value:g}" if isinstance(value, float) else repr(value)
-        return text if len(text) <= 40 else text[:37] + "..."
+        return _shorten(f"{value:g}" if isinstance(value, float) else repr(value), 40)
     if isinstance(member, np.ndarray):
         return f"a {member.dtype} array of shape {member.shape}"
     return f"a {type(member).__name__}"
