@@ -13,7 +13,7 @@ from .atmosphere import AtmosphereParameters
 from .mapping import FULL_SUN_RANGE, sun_w_range
 from .settings import MAPPINGS, _check_choice
 
-__all__ = ["TableLookupEngine", "check_queries"]
+__all__ = ["TableLookupEngine", "check_queries", "check_table_data", "check_kernel_buffer"]
 
 
 def check_queries(altitude, cos_view, cos_sun, cos_scatter):
@@ -32,13 +32,47 @@ def check_queries(altitude, cos_view, cos_sun, cos_scatter):
 TABLE_CHANNELS = (6, 4, 9, 7)
 
 
+#: Values a kernel may index with its 32-bit int flat indices.
+MAX_KERNEL_VALUES = 2**31 - 1
+
+
 def check_table_data(data):
-    """The (D, H, W, C) array of a table, C in :data:`TABLE_CHANNELS`, each axis >= 2."""
+    """The (D, H, W, C) array of a table, C in :data:`TABLE_CHANNELS`, each axis >= 2, real numbers,
+    fewer than 2**31 values (the kernels' int indices); ValueError otherwise."""
     data = np.asarray(data)
     if data.ndim != 4 or data.shape[3] not in TABLE_CHANNELS or min(data.shape[:3]) < 2:
         raise ValueError(f"table data must have shape (D, H, W, C) with C in {TABLE_CHANNELS} and "
                          f"D, H, W >= 2, got {data.shape}")
+    if data.dtype.kind not in "fiu":
+        raise ValueError(f"table data must hold real numbers, got dtype {data.dtype}")
+    if data.size > MAX_KERNEL_VALUES:
+        raise ValueError(f"table data must have at most {MAX_KERNEL_VALUES} values, got {data.size}")
     return data
+
+
+def check_kernel_buffer(kernel, name, array_d, count, dtype):
+    """Check, right before a launch, that a buffer holds exactly what the kernel indexes.
+
+    Parameters
+    ----------
+    kernel, name : str
+        The kernel and its argument, for the message.
+    array_d : pyopencl.array.Array
+        The buffer passed to the kernel.
+    count : int
+        Values the kernel indexes, from the sizes passed with the buffer (e.g. D H W C).
+    dtype : numpy.dtype
+        The values' type in the kernel (``real`` is the engine's dtype).
+
+    Raises
+    ------
+    ValueError
+        The buffer's dtype or number of values differ: the kernel would read past it (or misread it).
+    """
+    dtype = np.dtype(dtype)
+    if array_d.dtype != dtype or array_d.size != count:
+        raise ValueError(f"{kernel}: buffer {name} holds {array_d.size} {array_d.dtype} values, the kernel "
+                         f"indexes {count} {dtype} values (refused before the launch)")
 
 
 class TableLookupEngine(_cl.Engine):
@@ -83,6 +117,10 @@ class TableLookupEngine(_cl.Engine):
         queries_d = [cla.to_device(self.queue, np.ascontiguousarray(q.ravel(), dtype=self.dtype)) for q in queries]
         radiance_d = cla.empty(self.queue, (max(n, 1), 3), self.dtype)
         atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
+        check_kernel_buffer("lookup", "table", table_d, depth * height * width * channels, self.dtype)
+        for name, query_d in zip(("altitude", "cos_view", "cos_sun", "cos_scatter"), queries_d):
+            check_kernel_buffer("lookup", name, query_d, n, self.dtype)
+        check_kernel_buffer("lookup", "radiance", radiance_d, 3 * max(n, 1), self.dtype)
         if n:
             event = self.kernels["lookup"](
                 self.queue, (n,), None, atmosphere_d, table_d.data, np.int32(width), np.int32(height),

@@ -15,12 +15,13 @@ import numpy as np
 import pyopencl.array as cla
 
 from . import _atmosphere_cl, _cl, reference
+from .lookup import check_kernel_buffer, check_table_data
 from .settings import MAPPINGS, TableSettings
-from .table import ScatteringTable
+from .table import ScatteringTable, check_table_array
 from .transmittance import COMMON_SOURCES, quadrature_defines, TransmittanceEngine
 
 __all__ = ["SkyRenderer", "RenderEngine", "SUN_ANGULAR_RADIUS_DEG", "RAYMARCH_DEFAULTS", "sun_disc_radiance",
-           "check_directions"]
+           "check_directions", "check_render_table"]
 
 #: Angular radius of the sun disc [deg].
 SUN_ANGULAR_RADIUS_DEG = 0.2665
@@ -47,6 +48,24 @@ def check_directions(directions, sun_direction, altitude):
     if not (np.isscalar(altitude) and np.isfinite(altitude) and 0.0 <= altitude <= 1e9):
         raise ValueError(f"altitude must be finite and in [0, 1e9] m, got {altitude!r}")
     return directions, sun, float(altitude)
+
+
+def check_render_table(table):
+    """Check what the renderer uploads from ``table`` against its settings, even for a table whose
+    validation was bypassed: data (D, H, W, C) with C = ``settings.channels``, gathered (D, H, W, 6) or
+    None, both float, finite and >= 0.
+
+    Raises
+    ------
+    ValueError
+        (:class:`~clsky.table.TableFormatError`) naming the array and what is wrong.
+    """
+    width, height, depth = table.settings.size
+    grid = (depth, height, width)
+    check_table_array("table data", table.data, grid + (table.settings.channels,), ("float64", "float32"))
+    check_table_data(table.data)
+    if table.gathered is not None:
+        check_table_array("table gathered", table.gathered, grid + (6,), ("float64", "float32"))
 
 
 def sun_disc_radiance(atmosphere, sun_direction, altitude, steps=512):
@@ -118,18 +137,24 @@ class SkyRenderer:
 
     def __init__(self, table: ScatteringTable, ray_settings: TableSettings | None = None, ctx=None,
                  fast_math=False):
+        check_render_table(table)
         self.table = table
         self.ray_settings = ray_settings or RAYMARCH_DEFAULTS.replace(dtype=table.settings.dtype)
         self.engine = RenderEngine(self.ray_settings, ctx=ctx, fast_math=fast_math)
         self.queue = self.engine.queue
         dtype = self.engine.dtype
+        # the kernels get the sizes of what was uploaded here, never re-read from the table
+        self._table_shape = table.data.shape
+        self._gathered_shape = None if table.gathered is None else table.gathered.shape
+        self._has_gathered = table.gathered is not None
         self._atmosphere_d = _atmosphere_cl.to_device(self.queue, table.atmosphere, dtype)
         self._table_d = cla.to_device(self.queue, np.ascontiguousarray(table.data, dtype=dtype))
-        gathered = table.gathered
-        padded = np.zeros((2, 2, 2, 8) if gathered is None else gathered.shape[:3] + (8,), dtype=dtype)
-        if gathered is not None:
-            padded[..., :6] = gathered
+        padded = np.zeros(self._table_shape[:3] + (8,) if self._has_gathered else (2, 2, 2, 8), dtype=dtype)
+        if self._has_gathered:
+            padded[..., :6] = table.gathered
         self._gathered_d = cla.to_device(self.queue, padded)
+        self._sun_table_size = (self.ray_settings.transmittance_size
+                                if self.ray_settings.sun_transmittance == "table" else (2, 2))
         if self.ray_settings.sun_transmittance == "table":
             transmittance = TransmittanceEngine(self.engine.ctx, dtype, steps=self.ray_settings.sun_steps,
                                                 sampling=self.ray_settings.sampling)
@@ -152,20 +177,27 @@ class SkyRenderer:
         return PreparedDirections(cla.to_device(self.queue, flat), shape,
                                   cla.to_device(self.queue, np.ascontiguousarray(mask.ravel(), dtype=np.uint8)))
 
-    def _launch(self, name, directions, sun_direction, altitude, valid, extra_args):
+    def _launch(self, name, directions, sun_direction, altitude, valid, extra_args, buffers):
+        """Launch kernel ``name`` once ``buffers`` ((argument, array_d, values indexed) for ``extra_args``)
+        and the directions, mask and output have passed :func:`~clsky.lookup.check_kernel_buffer`."""
         if not isinstance(directions, PreparedDirections):
             directions = self.prepare(directions, valid)
         elif valid is not None:
             raise ValueError("valid must be given to prepare(), not with prepared directions")
         _, sun, altitude = check_directions(np.zeros((0, 3)), sun_direction, altitude)
-        if name == "render_table" or self.table.gathered is not None:
+        if name == "render_table" or self._has_gathered:
             self._check_sun_covered(sun)
         shape, directions_d = directions.shape, directions.array
         n = directions_d.shape[0]
+        if math.prod(shape) != n:
+            raise ValueError(f"{name}: prepared directions of shape {shape} hold {n} directions")
         real4 = _cl.real_vector_dtype(self.engine.dtype, 4)
         sun4 = _real4(real4, sun)
         disc = _real4(real4, sun_disc_radiance(self.table.atmosphere, sun, altitude))
         out_d = cla.empty(self.queue, (max(n, 1), 3), self.engine.dtype)
+        for argument, array_d, count in buffers + [("directions", directions_d, 3 * n), ("out", out_d, 3 * max(n, 1))]:
+            check_kernel_buffer(name, argument, array_d, count, self.engine.dtype)
+        check_kernel_buffer(name, "valid", directions.valid, n, np.uint8)
         kernel = self.engine.kernels[name]
         kernel(self.queue, (-(-n // VECTOR_WIDTH),), None, self._atmosphere_d, *extra_args, np.int32(n),
                directions_d.data, directions.valid.data, sun4, self.engine.real(altitude), disc,
@@ -183,16 +215,32 @@ class SkyRenderer:
     def render_table(self, directions, sun_direction, altitude=0.0, valid=None):
         """HDR radiance (..., 3) by table lookup; ``directions`` (..., 3) unit vectors (or
         :meth:`prepare`'s result), ``valid`` an optional mask (invalid pixels are 0)."""
-        t = self.table
-        width, height, depth = t.settings.size
+        t = self._check_table_unchanged()
+        depth, height, width, channels = self._table_shape
         _, sun_direction, altitude = check_directions(np.zeros((0, 3)), sun_direction, altitude)
         inside = 0.0 <= altitude <= t.atmosphere.atmosphere_height
         view_slice = self._view_slice(altitude, float(sun_direction[2])) if inside else np.zeros((2, 1))
         slice_d = cla.to_device(self.queue, np.ascontiguousarray(view_slice, dtype=self.engine.dtype))
-        args = (self._table_d.data, np.int32(width), np.int32(height), np.int32(depth), np.int32(t.data.shape[-1]),
+        args = (self._table_d.data, np.int32(width), np.int32(height), np.int32(depth), np.int32(channels),
                 np.int32(MAPPINGS[t.settings.mapping]), self.engine.real2(t.settings.sun_w_range), slice_d.data,
                 np.int32(inside))
-        return self._launch("render_table", directions, sun_direction, altitude, valid, args)
+        buffers = [("table", self._table_d, depth * height * width * channels),
+                   ("slice", slice_d, height * channels if inside else slice_d.size)]
+        return self._launch("render_table", directions, sun_direction, altitude, valid, args, buffers)
+
+    def _check_table_unchanged(self):
+        """The table, once the shapes of its data and gathered and its settings' size and channels are
+        checked to be those of the upload (a frozen dataclass can still be changed with
+        object.__setattr__): ValueError otherwise."""
+        t = self.table
+        width, height, depth = t.settings.size
+        uploaded = (self._table_shape, self._table_shape, self._gathered_shape)
+        now = (np.shape(t.data), (depth, height, width, t.settings.channels),
+               None if t.gathered is None else np.shape(t.gathered))
+        if now != uploaded:
+            raise ValueError(f"the table changed since the renderer uploaded it (data, settings and gathered "
+                             f"shapes {uploaded} then, {now} now): make a new SkyRenderer")
+        return t
 
     def _view_slice(self, altitude, cos_sun):
         """The table interpolated (bilinearly, in texture space) at one altitude and sun cosine: (H, C)."""
@@ -214,14 +262,16 @@ class SkyRenderer:
     def render_raymarch(self, directions, sun_direction, altitude=0.0, valid=None):
         """HDR radiance (..., 3) by per-pixel ray marching (single scattering along the true ray, higher
         orders from the table's gathered in-scatter)."""
-        t = self.table
-        width, height, depth = t.settings.size if t.gathered is not None else (2, 2, 2)
-        tw, th = self.ray_settings.transmittance_size if self.ray_settings.sun_transmittance == "table" else (2, 2)
+        t = self._check_table_unchanged()
+        depth, height, width = self._table_shape[:3] if self._has_gathered else (2, 2, 2)
+        tw, th = self._sun_table_size
         args = (self._gathered_d.data, np.int32(width), np.int32(height), np.int32(depth),
                 np.int32(MAPPINGS[t.settings.mapping]), self.engine.real2(t.settings.sun_w_range),
-                np.int32(t.gathered is not None),
+                np.int32(self._has_gathered),
                 np.int32(t.settings.mode == "physical"), self._sun_table_d.data, np.int32(tw), np.int32(th))
-        return self._launch("render_raymarch", directions, sun_direction, altitude, valid, args)
+        buffers = [("gathered", self._gathered_d, depth * height * width * 8),
+                   ("sun_table", self._sun_table_d, th * tw * 2)]
+        return self._launch("render_raymarch", directions, sun_direction, altitude, valid, args, buffers)
 
     def close(self):
         self.engine.close()

@@ -1,12 +1,32 @@
 """The scattering table as a product: build, look up, save, load, export for GPU engines.
 
 File format (``.npz``, uncompressed: compression saves little on these values and costs seconds;
-:data:`FORMAT_VERSION`): arrays ``data`` (D, H, W, C) at full precision, ``order_1``, ``order_2``, ...
-(every scattering order, stored as float32 for inspection), ``gathered`` (the sum of the gathered
-in-scatter tables, for the ray march; absent for single scattering), ``format_version``, and JSON strings
-``atmosphere``, ``settings``, ``metadata``, ``orders_record`` (how the iteration stopped) and
-``parameters_hash`` (SHA-256 of the atmosphere and settings). :meth:`ScatteringTable.load` refuses a file whose version,
-hash or shape does not match, with a clear error.
+:data:`FORMAT_VERSION` 4). Members:
+
+``format_version``
+    int64 scalar, 4.
+``data``
+    (D, H, W, C) table values at full precision (float64 as built, or the settings' dtype), finite, >= 0.
+``order_1``, ``order_2``, ..., ``order_K``
+    Every scattering order, stored as float32 for inspection: order 1 (D, H, W, 6) factored, higher
+    orders (D, H, W, 6) factored (atmosphere-plus) or (D, H, W, 3) phased (physical); finite, >= 0.
+``gathered``
+    (D, H, W, 6), the sum of the gathered in-scatter tables for the ray march, finite, >= 0; absent
+    for single scattering.
+``atmosphere``, ``settings``, ``metadata``, ``orders_record``
+    JSON objects (0-d unicode strings): the parameters, the provenance, how the iteration stopped.
+``parameters_hash``
+    SHA-256 of the atmosphere and settings (:func:`parameters_hash`): identifies the parameters.
+``checksums``
+    JSON object, member name -> SHA-256 of that member (:func:`array_checksum`: its dtype, shape and
+    bytes), for every other member. It detects corruption and careless edits, not a deliberate
+    forgery (it has no key): the checks on shapes, dtypes and values are what keeps a forged file
+    from reaching a kernel.
+
+:meth:`ScatteringTable.load` refuses with :class:`TableFormatError`, naming the file and what is wrong,
+any file that is not such an archive, has another version (older files: rebuild the table), misses
+or adds a member, fails a checksum or the parameters hash, or holds arrays whose shape, dtype or
+values (:meth:`ScatteringTable.validate`) do not fit its settings.
 
 Raw export (:meth:`ScatteringTable.export_raw`): ``<name>.bin`` holds little-endian float32 values,
 cell after cell in the order i = x + y W + z W H (x: altitude, y: view zenith, z: sun zenith), C
@@ -21,8 +41,12 @@ import hashlib
 import json
 import os
 import pathlib
+import re
 import tempfile
 import time
+import tokenize
+import zipfile
+import zlib
 from typing import Callable
 
 import numpy as np
@@ -33,9 +57,10 @@ from .lookup import check_queries
 from .settings import TableSettings
 
 __all__ = ["ScatteringTable", "TableFormatError", "FORMAT_VERSION", "BACKENDS", "atomic_write",
-           "CHANNEL_NAMES"]
+           "CHANNEL_NAMES", "array_checksum", "check_table_array"]
 
-FORMAT_VERSION = 3   # 3: settings carry sun_cos_range (the sun axis' sub-range)
+# 3: settings carry sun_cos_range (the sun axis' sub-range); 4: a checksum of every member
+FORMAT_VERSION = 4
 BACKENDS = ("opencl", "numpy")
 _MULTIPLE_NAMES = ("multiple_r", "multiple_g", "multiple_b")
 CHANNEL_NAMES = {6: ("rayleigh_r", "rayleigh_g", "rayleigh_b", "mie_r", "mie_g", "mie_b"),
@@ -45,7 +70,8 @@ CHANNEL_NAMES[7] = CHANNEL_NAMES[4] + _MULTIPLE_NAMES
 
 
 class TableFormatError(ValueError):
-    """A table file that clsky cannot (or must not) load: wrong version, shape or hash."""
+    """A table (or table file) that clsky must not use: unreadable file, wrong version, checksum or
+    hash, or arrays whose shape, dtype or values do not fit the settings."""
 
 
 @contextlib.contextmanager
@@ -78,6 +104,58 @@ def parameters_hash(atmosphere: AtmosphereParameters, settings: TableSettings) -
     text = json.dumps({"atmosphere": atmosphere.to_dict(), "settings": settings.to_dict()},
                       sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()
+
+
+def array_checksum(array) -> str:
+    """SHA-256 of an array's dtype (``dtype.str``), shape and bytes in C order, as a hex string.
+
+    Examples
+    --------
+    >>> array_checksum(np.zeros(2)) == array_checksum(np.zeros(2))
+    True
+    >>> array_checksum(np.zeros(2)) == array_checksum(np.zeros(2, dtype=np.float32))
+    False
+    """
+    array = np.asarray(array)
+    digest = hashlib.sha256(json.dumps({"dtype": array.dtype.str, "shape": list(array.shape)}).encode())
+    digest.update(np.ascontiguousarray(array).reshape(-1).view(np.uint8))
+    return digest.hexdigest()
+
+
+def check_finite_nonnegative(name, array):
+    """TableFormatError unless every value of ``array`` is finite and >= 0 (radiances [1/sr])."""
+    if array.size == 0:
+        return
+    low, high = array.min(), array.max()          # min and max propagate NaN
+    if low >= 0 and high < np.inf:
+        return
+    counts = {"NaN": np.isnan(array).sum(), "infinite": np.isinf(array).sum(), "negative": (array < 0).sum()}
+    found = " and ".join(f"{int(count)} {kind}" for kind, count in counts.items() if count)
+    raise TableFormatError(f"{name} holds {found} values (a table's values are finite and >= 0)")
+
+
+def check_table_array(name, array, shape, dtypes, check_values=True):
+    """Check one of a table's arrays: a NumPy array of ``shape``, a dtype in ``dtypes``, and (when
+    ``check_values``) finite non-negative values; TableFormatError names ``name`` and what is wrong."""
+    if not isinstance(array, np.ndarray):
+        raise TableFormatError(f"{name} must be a NumPy array, got {type(array).__name__}")
+    if array.shape != tuple(shape):
+        raise TableFormatError(f"{name} has shape {array.shape}, the settings need {tuple(shape)} (D, H, W, C)")
+    if array.dtype not in [np.dtype(d) for d in dtypes]:
+        raise TableFormatError(f"{name} has dtype {array.dtype}, expected {' or '.join(map(str, dtypes))}")
+    if check_values:
+        check_finite_nonnegative(name, array)
+
+
+def order_channels(settings: TableSettings, k: int) -> int:
+    """Channels of order ``k`` (1-based): 6 factored for single scattering and the atmosphere-plus
+    mode's higher orders, 3 phased for the physical mode's (clsky/orders.py)."""
+    return 6 if k == 1 or settings.mode == "atmosphere-plus" else 3
+
+
+def max_orders_kept(settings: TableSettings) -> int:
+    """The most orders a build with ``settings`` computes."""
+    return settings.max_orders if settings.orders == "auto" else settings.orders
 
 
 def to_layout(data6, mie_layout):
@@ -124,11 +202,56 @@ class ScatteringTable:
     gathered: np.ndarray | None = None
 
     def __post_init__(self):
+        try:
+            object.__setattr__(self, "orders", tuple(self.orders))
+        except TypeError:
+            raise TableFormatError(f"orders must be a sequence of arrays, got {type(self.orders).__name__}") from None
+        self.validate()
+
+    def validate(self, check_values=True):
+        """Check every array against the settings, as :meth:`load` and construction do.
+
+        ``data`` (D, H, W, C) with C = ``settings.channels``, float64 (as built) or ``settings.dtype``;
+        ``orders[k - 1]`` (D, H, W, :func:`order_channels`), float32 (as stored) or float64, at most
+        :func:`max_orders_kept` of them, as many as ``orders_record["orders"]`` says; ``gathered``
+        None or (D, H, W, 6), dtype as ``data``; with ``check_values``, every value finite and >= 0.
+
+        Parameters
+        ----------
+        check_values : bool
+            Also scan the values (one pass over every array); shapes and dtypes are always checked.
+
+        Raises
+        ------
+        TableFormatError
+            Naming the array and what is wrong.
+        """
+        if not isinstance(self.atmosphere, AtmosphereParameters):
+            raise TableFormatError(f"atmosphere must be AtmosphereParameters, got {type(self.atmosphere).__name__}")
+        if not isinstance(self.settings, TableSettings):
+            raise TableFormatError(f"settings must be TableSettings, got {type(self.settings).__name__}")
+        for name in ("metadata", "orders_record"):
+            if not isinstance(getattr(self, name), dict):
+                raise TableFormatError(f"{name} must be a dict, got {type(getattr(self, name)).__name__}")
         width, height, depth = self.settings.size
-        expected = (depth, height, width, self.settings.channels)
-        if self.data.shape != expected:
-            raise TableFormatError(f"table data has shape {self.data.shape}, settings say {expected} "
-                                   f"(D, H, W, channels)")
+        grid = (depth, height, width)
+        full_precision = sorted({"float64", self.settings.dtype}, reverse=True)
+        check_table_array("data", self.data, grid + (self.settings.channels,), full_precision, check_values)
+        if self.gathered is not None:
+            check_table_array("gathered", self.gathered, grid + (6,), full_precision, check_values)
+        self._validate_orders(grid, check_values)
+
+    def _validate_orders(self, grid, check_values):
+        """The orders' count (against the settings and the record), shapes, dtypes and values."""
+        limit = max_orders_kept(self.settings)
+        if len(self.orders) > limit:
+            raise TableFormatError(f"{len(self.orders)} orders kept, the settings compute at most {limit}")
+        for k, order in enumerate(self.orders, start=1):
+            check_table_array(f"order_{k}", order, grid + (order_channels(self.settings, k),),
+                              ("float32", "float64"), check_values)
+        recorded = self.orders_record.get("orders")
+        if self.orders and recorded is not None and recorded != len(self.orders):
+            raise TableFormatError(f"orders_record counts {recorded!r} orders, the table keeps {len(self.orders)}")
 
     # Building -------------------------------------------------------------------------------------
     @classmethod
@@ -170,8 +293,13 @@ class ScatteringTable:
         seconds = time.perf_counter() - start
         metadata = {"clsky_version": __version__, "backend": backend, "device": result.record.pop("device"),
                     "build_seconds": seconds, "fast_math": bool(fast_math)}
-        return cls(atmosphere, settings, to_layout(result.combined(settings.mode), settings.mie_layout),
-                   metadata, tuple(result.orders), result.record, result.gathered)
+        try:
+            return cls(atmosphere, settings, to_layout(result.combined(settings.mode), settings.mie_layout),
+                       metadata, tuple(result.orders), result.record, result.gathered)
+        except TableFormatError as error:
+            cause = " (or fast_math removed a guard)" if fast_math else ""
+            raise TableFormatError(f"the computed table is unusable: {error}; the atmosphere or settings are "
+                                   f"beyond what the numerics support{cause}") from error
 
     # Using ----------------------------------------------------------------------------------------
     @property
@@ -195,6 +323,7 @@ class ScatteringTable:
         engine : TableLookupEngine, optional
             Reused across calls to avoid rebuilding (OpenCL backend).
         """
+        self.validate(check_values=False)    # the kernel indexes data by the settings' size
         check_queries(altitude, cos_view, cos_sun, cos_scatter)
         if backend == "numpy":
             from . import reference
@@ -211,52 +340,86 @@ class ScatteringTable:
 
     # Files ----------------------------------------------------------------------------------------
     def save(self, path, overwrite=False):
-        """Write the table to ``path`` (.npz) atomically; never overwrites unless ``overwrite``."""
+        """Write the table to ``path`` (.npz, format in the module docstring) atomically; never
+        overwrites unless ``overwrite``.
+
+        Raises
+        ------
+        ValueError
+            ``path`` does not end in .npz.
+        TableFormatError
+            The table's arrays no longer pass :meth:`validate` (edited in place since construction),
+            or an order exceeds the float32 range it is stored in: no file is written.
+        FileExistsError
+            ``path`` exists and not ``overwrite``.
+        """
         path = pathlib.Path(path)
         if path.suffix != ".npz":
             raise ValueError(f"path must end in .npz, got {str(path)!r}")
+        members = self._file_members()
         with atomic_write(path, overwrite) as temporary:
             with open(temporary, "wb") as stream:
-                orders = {f"order_{k}": np.asarray(order, dtype=np.float32)
-                          for k, order in enumerate(self.orders, start=1)}
-                np.savez(
-                    stream, data=self.data, format_version=np.int64(FORMAT_VERSION),
-                    atmosphere=json.dumps(self.atmosphere.to_dict()),
-                    settings=json.dumps(self.settings.to_dict()),
-                    metadata=json.dumps(self.metadata), orders_record=json.dumps(self.orders_record),
-                    parameters_hash=self.parameters_hash, **orders,
-                    **({} if self.gathered is None else {"gathered": self.gathered}))
+                np.savez(stream, **members)
         return path
+
+    def _file_members(self) -> dict:
+        """The archive's members (module docstring), ``checksums`` last."""
+        self.validate()
+        orders = {f"order_{k}": np.asarray(order, dtype=np.float32) for k, order in enumerate(self.orders, start=1)}
+        for name, order in orders.items():
+            check_finite_nonnegative(f"{name} (as float32)", order)
+        members = {"data": self.data, "format_version": np.array(FORMAT_VERSION, dtype=np.int64),
+                   "atmosphere": _json_text(self.atmosphere.to_dict()),
+                   "settings": _json_text(self.settings.to_dict()), "metadata": _json_text(self.metadata),
+                   "orders_record": _json_text(self.orders_record),
+                   "parameters_hash": np.array(self.parameters_hash), **orders}
+        if self.gathered is not None:
+            members["gathered"] = self.gathered
+        members["checksums"] = _json_text({name: array_checksum(value) for name, value in members.items()})
+        return members
 
     @classmethod
     def load(cls, path) -> "ScatteringTable":
-        """Read a table written by :meth:`save`; TableFormatError if it is not one clsky can trust."""
+        """Read a table written by :meth:`save` and check everything the module docstring lists.
+
+        Raises
+        ------
+        FileNotFoundError
+            ``path`` does not exist.
+        TableFormatError
+            The file is not a clsky table of this version that passes every check (unreadable or
+            truncated archive, wrong version, missing or extra member, checksum, hash, shape, dtype,
+            NaN, infinite or negative values); the message names the file and what is wrong.
+        """
         path = pathlib.Path(path)
+        contents = _read_members(path)
         try:
-            with np.load(path, allow_pickle=False) as archive:
-                contents = {key: archive[key] for key in archive.files}
-        except (OSError, ValueError) as error:
-            raise TableFormatError(f"{path} is not a clsky table file: {error}") from error
-        required = {"data", "format_version", "atmosphere", "settings", "metadata", "parameters_hash",
-                    "orders_record"}
-        missing = required - set(contents)
-        if missing:
-            raise TableFormatError(f"{path} is not a clsky table file (missing {sorted(missing)})")
-        version = int(contents["format_version"])
+            return cls._from_members(contents)
+        except TableFormatError as error:
+            raise TableFormatError(f"{path}: {error}") from error
+
+    @classmethod
+    def _from_members(cls, contents) -> "ScatteringTable":
+        """The table an archive's members describe (:meth:`load`, messages without the file name)."""
+        version = _format_version(contents)
         if version != FORMAT_VERSION:
-            raise TableFormatError(f"{path} has table format version {version}; this clsky reads "
-                                   f"version {FORMAT_VERSION} (rebuild the table with `clsky table`)")
+            raise TableFormatError(f"table format version {version}; this clsky reads version {FORMAT_VERSION} "
+                                   f"(rebuild the table with `clsky table`)")
+        order_count = _check_membership(contents)
+        _verify_checksums(contents)
         try:
-            atmosphere = AtmosphereParameters.from_dict(json.loads(str(contents["atmosphere"])))
-            settings = TableSettings.from_dict(json.loads(str(contents["settings"])))
-        except (ValueError, TypeError) as error:
-            raise TableFormatError(f"{path} holds invalid parameters: {error}") from error
-        if parameters_hash(atmosphere, settings) != str(contents["parameters_hash"]):
-            raise TableFormatError(f"{path}: parameters hash does not match its parameters (corrupted "
-                                   f"or edited file)")
-        orders = tuple(contents[f"order_{k}"] for k in range(1, len(contents) + 1) if f"order_{k}" in contents)
-        return cls(atmosphere, settings, contents["data"], json.loads(str(contents["metadata"])), orders,
-                   json.loads(str(contents["orders_record"])), contents.get("gathered"))
+            atmosphere = AtmosphereParameters.from_dict(_json_member(contents, "atmosphere"))
+            settings = TableSettings.from_dict(_json_member(contents, "settings"))
+        except (ValueError, TypeError, KeyError, AttributeError) as error:
+            if isinstance(error, TableFormatError):
+                raise
+            raise TableFormatError(f"invalid parameters: {_shorten(str(error))}") from error
+        stored_hash = contents["parameters_hash"]
+        if not _is_text(stored_hash) or parameters_hash(atmosphere, settings) != stored_hash.item():
+            raise TableFormatError("parameters hash does not match its parameters (corrupted or edited file)")
+        orders = tuple(contents[f"order_{k}"] for k in range(1, order_count + 1))
+        return cls(atmosphere, settings, contents["data"], _json_member(contents, "metadata"), orders,
+                   _json_member(contents, "orders_record"), contents.get("gathered"))
 
     def export_raw(self, path, overwrite=False):
         """Write ``<path>.bin`` (float32 values) and ``<path>.json`` (layout header) for GPU engines.
@@ -264,6 +427,7 @@ class ScatteringTable:
         Returns the two paths. Both are written atomically; existing files are kept unless
         ``overwrite``.
         """
+        self.validate()
         path = pathlib.Path(path)
         binary, header = path.with_suffix(".bin"), path.with_suffix(".json")
         for target in (binary, header):
@@ -305,3 +469,115 @@ class ScatteringTable:
         with atomic_write(header, overwrite) as temporary:
             temporary.write_text(json.dumps(description, indent=2) + "\n")
         return binary, header
+
+
+# File members -------------------------------------------------------------------------------------
+#: Members every table file holds (besides order_1 ... order_K and the optional gathered).
+REQUIRED_MEMBERS = ("format_version", "data", "atmosphere", "settings", "metadata", "orders_record",
+                    "parameters_hash", "checksums")
+#: What reading a damaged archive raises, in numpy and zipfile (a member's header, payload or CRC;
+#: numpy tokenizes an npy header, so a flipped bracket there raises TokenError).
+_READ_ERRORS = (OSError, EOFError, ValueError, KeyError, TypeError, UnicodeError, OverflowError, MemoryError,
+                NotImplementedError, SyntaxError, RecursionError, tokenize.TokenError, zipfile.BadZipFile,
+                zlib.error)
+
+
+def _json_text(value) -> np.ndarray:
+    """``value`` as a JSON string member (0-d unicode array)."""
+    return np.array(json.dumps(value))
+
+
+def _is_text(member) -> bool:
+    return isinstance(member, np.ndarray) and member.shape == () and member.dtype.kind == "U"
+
+
+def _shorten(text, limit=200) -> str:
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+def _describe_error(error) -> str:
+    return _shorten(f"{type(error).__name__}: {error}")
+
+
+def _describe_member(member) -> str:
+    """A short description of a member's value for a message: the scalar itself, else its kind."""
+    if isinstance(member, np.ndarray) and member.shape == ():
+        value = member.item()
+        return _shorten(f"{value:g}" if isinstance(value, float) else repr(value), 40)
+    if isinstance(member, np.ndarray):
+        return f"a {member.dtype} array of shape {member.shape}"
+    return f"a {type(member).__name__}"
+
+
+def _read_members(path) -> dict:
+    """Every member of the .npz archive at ``path``, read whole; TableFormatError (naming ``path``)
+    if it is not a readable one, FileNotFoundError if it does not exist."""
+    if not path.exists():
+        raise FileNotFoundError(f"{path} does not exist")
+    if not path.is_file():
+        raise TableFormatError(f"{path} is not a clsky table file (not a regular file)")
+    try:
+        archive = np.load(path, allow_pickle=False)
+    except _READ_ERRORS as error:
+        raise TableFormatError(f"{path} is not a clsky table file (not a readable .npz archive: "
+                               f"{_describe_error(error)})") from error
+    if not isinstance(archive, np.lib.npyio.NpzFile):
+        raise TableFormatError(f"{path} is not a clsky table file (a single .npy array, not an .npz archive)")
+    try:
+        with archive:
+            return {name: archive[name] for name in archive.files}
+    except _READ_ERRORS as error:
+        raise TableFormatError(f"{path} is damaged (reading its members: {_describe_error(error)})") from error
+
+
+def _format_version(contents) -> int:
+    """The archive's format version: an integer scalar."""
+    if "format_version" not in contents:
+        raise TableFormatError("not a clsky table file (no format_version member)")
+    member = contents["format_version"]
+    if not (isinstance(member, np.ndarray) and member.shape == () and member.dtype.kind in "iu"):
+        raise TableFormatError(f"format_version must be an integer, got {_describe_member(member)}")
+    return int(member)
+
+
+def _check_membership(contents) -> int:
+    """Check that the archive holds the required members, order_1 ... order_K, optionally gathered
+    and nothing else; returns K."""
+    missing = [name for name in REQUIRED_MEMBERS if name not in contents]
+    if missing:
+        raise TableFormatError(f"not a clsky table file (missing {missing})")
+    orders = sorted(int(match.group(1)) for match in map(re.compile(r"order_([1-9][0-9]{0,3})").fullmatch, contents)
+                    if match)
+    unexpected = sorted(set(contents) - set(REQUIRED_MEMBERS) - {"gathered"} - {f"order_{k}" for k in orders})
+    if unexpected:
+        raise TableFormatError(f"unexpected members {unexpected}")
+    if orders != list(range(1, len(orders) + 1)):
+        raise TableFormatError(f"orders must be order_1 to order_{len(orders)}, got "
+                               f"{', '.join(f'order_{k}' for k in orders)}")
+    return len(orders)
+
+
+def _verify_checksums(contents):
+    """Check every member against the ``checksums`` member (module docstring)."""
+    checksums = _json_member(contents, "checksums")
+    listed, present = set(checksums), set(contents) - {"checksums"}
+    if listed != present:
+        raise TableFormatError(f"checksums list {sorted(listed)}, the file holds {sorted(present)}")
+    failed = [name for name in sorted(present) if checksums[name] != array_checksum(contents[name])]
+    if failed:
+        raise TableFormatError(f"{', '.join(failed)} do{'es' if len(failed) == 1 else ''} not match "
+                               f"the stored checksum (corrupted or edited file)")
+
+
+def _json_member(contents, name) -> dict:
+    """The JSON object a string member holds."""
+    member = contents[name]
+    if not _is_text(member):
+        raise TableFormatError(f"{name} must be a JSON string, got {_describe_member(member)}")
+    try:
+        value = json.loads(member.item())
+    except (ValueError, RecursionError) as error:
+        raise TableFormatError(f"{name} is not valid JSON ({error})") from error
+    if not isinstance(value, dict):
+        raise TableFormatError(f"{name} must be a JSON object, got {type(value).__name__}")
+    return value

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from clsky import ScatteringTable, TableFormatError, TableSettings, preset
-from clsky.table import FORMAT_VERSION
+from clsky.table import FORMAT_VERSION, array_checksum
 
 SETTINGS = TableSettings(size=(8, 16, 6))
 
@@ -61,9 +61,13 @@ def test_interrupted_save_leaves_no_file(table, tmp_path, monkeypatch):
 
 
 def rewrite(path, **changes):
+    """Edit members of a saved table and recompute its checksums (as a deliberate edit would), so that
+    the check under test, not the checksum, is what refuses it."""
     with np.load(path) as archive:
         contents = {key: archive[key] for key in archive.files}
     contents.update(changes)
+    contents["checksums"] = json.dumps({name: array_checksum(np.asarray(value))
+                                        for name, value in contents.items() if name != "checksums"})
     np.savez(path, **contents)
 
 
