@@ -19,15 +19,14 @@ import contextlib
 import dataclasses
 import hashlib
 import json
-import os
 import pathlib
-import tempfile
 import time
 from typing import Callable
 
 import numpy as np
 
 from . import __version__
+from ._files import StagedWrites, atomic_write, check_output
 from .atmosphere import AtmosphereParameters, preset
 from .lookup import check_queries
 from .settings import TableSettings
@@ -46,31 +45,6 @@ CHANNEL_NAMES[7] = CHANNEL_NAMES[4] + _MULTIPLE_NAMES
 
 class TableFormatError(ValueError):
     """A table file that clsky cannot (or must not) load: wrong version, shape or hash."""
-
-
-@contextlib.contextmanager
-def atomic_write(path, overwrite=False, suffix=None):
-    """Yield a temporary path beside ``path``; on success it replaces ``path`` atomically.
-
-    An interrupted write leaves no partial file. An existing ``path`` raises FileExistsError unless
-    ``overwrite``.
-    """
-    path = pathlib.Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists (use overwrite=True, or --force on the command line)")
-    if not path.parent.is_dir():
-        raise FileNotFoundError(f"directory {path.parent} does not exist")
-    fd, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix or path.suffix, dir=path.parent)
-    os.close(fd)
-    temporary = pathlib.Path(temporary)
-    umask = os.umask(0)
-    os.umask(umask)
-    temporary.chmod(0o666 & ~umask)        # mkstemp's 0600 would leak into the final file
-    try:
-        yield temporary
-        os.replace(temporary, path)
-    finally:
-        temporary.unlink(missing_ok=True)
 
 
 def parameters_hash(atmosphere: AtmosphereParameters, settings: TableSettings) -> str:
@@ -210,12 +184,18 @@ class ScatteringTable:
                                self.settings.mapping, self.settings.sun_cos_range)
 
     # Files ----------------------------------------------------------------------------------------
-    def save(self, path, overwrite=False):
-        """Write the table to ``path`` (.npz) atomically; never overwrites unless ``overwrite``."""
+    def save(self, path, overwrite=False, staging=None):
+        """Write the table to ``path`` (.npz) atomically; never overwrites unless ``overwrite``.
+
+        The path is checked (:func:`clsky._files.check_output`: FileExistsError, IsADirectoryError,
+        FileNotFoundError, NotADirectoryError, PermissionError, ValueError) before anything is
+        written. With ``staging`` (a :class:`clsky._files.StagedWrites`) the file lands when that
+        set commits.
+        """
         path = pathlib.Path(path)
         if path.suffix != ".npz":
             raise ValueError(f"path must end in .npz, got {str(path)!r}")
-        with atomic_write(path, overwrite) as temporary:
+        with atomic_write(path, overwrite, staging=staging) as temporary:
             with open(temporary, "wb") as stream:
                 orders = {f"order_{k}": np.asarray(order, dtype=np.float32)
                           for k, order in enumerate(self.orders, start=1)}
@@ -258,17 +238,17 @@ class ScatteringTable:
         return cls(atmosphere, settings, contents["data"], json.loads(str(contents["metadata"])), orders,
                    json.loads(str(contents["orders_record"])), contents.get("gathered"))
 
-    def export_raw(self, path, overwrite=False):
+    def export_raw(self, path, overwrite=False, staging=None):
         """Write ``<path>.bin`` (float32 values) and ``<path>.json`` (layout header) for GPU engines.
 
-        Returns the two paths. Both are written atomically; existing files are kept unless
-        ``overwrite``.
+        Returns the two paths. Both paths are checked before either is written (as in :meth:`save`),
+        and they land together (renamed one after the other once both are written; with
+        ``staging``, when that set commits); existing files are kept unless ``overwrite``.
         """
         path = pathlib.Path(path)
         binary, header = path.with_suffix(".bin"), path.with_suffix(".json")
         for target in (binary, header):
-            if target.exists() and not overwrite:
-                raise FileExistsError(f"{target} exists (use overwrite=True, or --force on the command line)")
+            check_output(target, force=overwrite)
         width, height, depth = self.settings.size
         channels = self.settings.channels
         description = {
@@ -300,8 +280,11 @@ class ScatteringTable:
             "parameters_hash": self.parameters_hash,
             "metadata": self.metadata,
         }
-        with atomic_write(binary, overwrite) as temporary:
-            self.data.astype("<f4").tofile(temporary)
-        with atomic_write(header, overwrite) as temporary:
-            temporary.write_text(json.dumps(description, indent=2) + "\n")
+        with contextlib.ExitStack() as stack:
+            if staging is None:
+                staging = stack.enter_context(StagedWrites())
+            with atomic_write(binary, overwrite, staging=staging) as temporary:
+                self.data.astype("<f4").tofile(temporary)
+            with atomic_write(header, overwrite, staging=staging) as temporary:
+                temporary.write_text(json.dumps(description, indent=2) + "\n")
         return binary, header
