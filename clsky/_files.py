@@ -106,7 +106,7 @@ def _probe_directory(directory, option):
     os.unlink(probe)
 
 
-def _check_parent(directory, option, create=False):
+def _check_parent(directory, option, create=False, probe=True):
     """The directory that will hold an output: it exists (or, with ``create``, its nearest existing
     ancestor does), is a directory, and a file can be created in it."""
     directory = pathlib.Path(directory)
@@ -116,10 +116,11 @@ def _check_parent(directory, option, create=False):
         raise FileNotFoundError(f"{_label(option)}directory {directory} does not exist")
     if not directory.is_dir():
         raise NotADirectoryError(f"{_label(option)}{directory} is not a directory")
-    _probe_directory(directory, option)
+    if probe:
+        _probe_directory(directory, option)
 
 
-def check_output(path, force=False, option=None, suffix=None):
+def check_output(path, force=False, option=None, suffix=None, probe=True):
     """Check, before any work, that ``path`` can be written as a new file.
 
     Parameters
@@ -133,6 +134,9 @@ def check_output(path, force=False, option=None, suffix=None):
         and an existing file asks for ``--force``.
     suffix : str, optional
         Suffix of the temporary file (default: the path's): its length counts for the name check.
+    probe : bool
+        Create and delete a file in the parent to prove it writable (False when the caller creates
+        its temporary there next, which proves it as well).
 
     Returns
     -------
@@ -160,13 +164,21 @@ def check_output(path, force=False, option=None, suffix=None):
         raise IsADirectoryError(f"{_label(option)}{path} is a directory")
     if os.path.lexists(path) and not force:
         raise FileExistsError(f"{_label(option)}{path} exists; {_force_hint(option)}")
-    _check_parent(path.parent, option)
+    _check_parent(path.parent, option, probe=probe)
     return path
 
 
-def check_output_directory(path, option=None):
+def check_output_directory(path, option=None, names=()):
     """Check, before any work, that ``path`` can hold output files: an existing directory where
     files can be created, or a path whose missing parts can be created (``mkdir(parents=True)``).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    option : str, optional
+        As in :func:`check_output`.
+    names : sequence of str
+        The longest file names to be created in it: each, with its temporary name, must fit.
 
     Raises
     ------
@@ -178,7 +190,8 @@ def check_output_directory(path, option=None):
         A name component too long.
     """
     path = pathlib.Path(path)
-    _check_names(path / "x", option, "")
+    for name in (*names, "x"):
+        _check_names(path / name, option, pathlib.Path(name).suffix)
     if os.path.lexists(path) and not path.is_dir():
         raise NotADirectoryError(f"{_label(option)}{path} exists and is not a directory")
     _check_parent(path, option, create=True)
@@ -268,7 +281,7 @@ class StagedWrites:
         """
         path = pathlib.Path(path)
         suffix = path.suffix if suffix is None else suffix
-        check_output(path, force=overwrite, suffix=suffix)
+        check_output(path, force=overwrite, suffix=suffix, probe=False)
         try:
             fd, temporary = tempfile.mkstemp(prefix=temporary_prefix(path, suffix), suffix=suffix,
                                              dir=path.parent)
