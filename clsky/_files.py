@@ -198,17 +198,36 @@ def check_output_directory(path, option=None, names=()):
     return path
 
 
-def _block_signals():
-    """Block SIGINT and SIGTERM in this thread (the main thread, which runs the handlers) while a set
-    is renamed into place: a signal then arrives after the set landed, never halfway."""
-    if not hasattr(signal, "pthread_sigmask") or threading.current_thread() is not threading.main_thread():
-        return None
-    return signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+#: Signals held back while a set is renamed into place.
+_DEFERRED_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
-def _restore_signals(previous):
-    if previous is not None:
-        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+@contextlib.contextmanager
+def _signals_deferred():
+    """Hold SIGINT, SIGTERM and SIGHUP back during the block and deliver them after it, to the
+    handlers that were in place: an interruption then arrives after a set landed, never halfway.
+
+    Python runs signal handlers in the main thread whichever thread the signal reached (PoCL's
+    worker threads included, so blocking with pthread_sigmask would not do), so swapping the
+    handlers for a recorder is enough; elsewhere than the main thread the block runs unchanged.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending = []
+    previous = {}
+    for number in _DEFERRED_SIGNALS:
+        handler = signal.getsignal(number)
+        if handler is None or handler == signal.SIG_IGN:     # not Python's to change, or ignored
+            continue
+        previous[number] = signal.signal(number, lambda signum, frame: pending.append(signum))
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+        for number in dict.fromkeys(pending):
+            signal.raise_signal(number)
 
 
 def _place(temporary, target, overwrite):
@@ -245,8 +264,9 @@ class StagedWrites:
     - Order: the files are renamed in the order they were staged, those staged with ``last=True``
       after the others (an animation's MP4: when it is there, its frames and metrics are too); then
       the files given to :meth:`remove_on_commit` are deleted.
-    - SIGINT and SIGTERM are blocked while the set is renamed (main thread, POSIX), so an
-      interruption arrives after the set landed, not halfway.
+    - SIGINT, SIGTERM and SIGHUP are held back while the set is renamed (when committing in the
+      main thread) and delivered after it, so an interruption arrives after the set landed, not
+      halfway.
     - A rename that fails midway (rare after :func:`check_output`: a disk removed, a permission
       changed during the run) stops the commit: the targets renamed so far hold the new files, the
       others keep their old contents (or stay absent); the remaining temporaries are deleted and the
@@ -320,15 +340,16 @@ class StagedWrites:
         """Rename every staged temporary onto its target (see the class notes), then delete the
         files to remove. Returns the targets written."""
         entries = [e for e in self._staged if not e[3]] + [e for e in self._staged if e[3]]
-        previous = _block_signals()
-        try:
+        with _signals_deferred():
             for position, (temporary, target, overwrite, _) in enumerate(entries):
                 try:
                     _place(temporary, target, overwrite)
-                except OSError as error:
+                except BaseException as error:
                     for rest in entries[position:]:
                         rest[0].unlink(missing_ok=True)
                     self._staged = []
+                    if not isinstance(error, OSError):
+                        raise
                     done = ", ".join(str(path) for path in self.committed) or "none"
                     raise type(error)(f"could not put {target} in place ({error}); "
                                       f"new files already in place: {done}") from error
@@ -337,8 +358,6 @@ class StagedWrites:
             for path in self._removals:
                 path.unlink(missing_ok=True)
             self._removals = []
-        finally:
-            _restore_signals(previous)
         return list(self.committed)
 
 

@@ -98,6 +98,7 @@ def test_a_signal_during_the_renames_arrives_after_them(tmp_path, monkeypatch):
         place(temporary, target, overwrite)
 
     monkeypatch.setattr(_files, "_place", place_and_signal)
+    handler = signal.getsignal(signal.SIGTERM)
     with pytest.raises(Interrupted) as error:
         with signals_interrupt():
             with StagedWrites() as staging:
@@ -105,7 +106,7 @@ def test_a_signal_during_the_renames_arrives_after_them(tmp_path, monkeypatch):
                     staging.stage(tmp_path / name).write_text(name)
     assert error.value.signum == signal.SIGTERM
     assert snapshot(tmp_path) == {name: name.encode() for name in ("a.txt", "b.txt", "c.txt")}
-    assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL          # restored
+    assert signal.getsignal(signal.SIGTERM) == handler                  # restored
 
 
 def _frame(value, size=16):
