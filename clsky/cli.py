@@ -49,11 +49,13 @@ def _interrupt(signum, frame):
 @contextlib.contextmanager
 def signals_interrupt():
     """Within the block, SIGINT, SIGTERM and SIGHUP raise :class:`Interrupted` (main thread only;
-    elsewhere the block runs unchanged); the previous handlers come back after it."""
+    elsewhere the block runs unchanged); the previous handlers come back after it. A signal ignored
+    when clsky started stays ignored (``nohup`` ignores SIGHUP, a shell's ``&`` SIGINT)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = {number: signal.signal(number, _interrupt) for number in INTERRUPT_SIGNALS}
+    previous = {number: signal.signal(number, _interrupt) for number in INTERRUPT_SIGNALS
+                if signal.getsignal(number) not in (signal.SIG_IGN, None)}
     try:
         yield
     finally:

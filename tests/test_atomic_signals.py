@@ -137,10 +137,17 @@ def test_two_frame_writers_of_one_mp4_at_once(tmp_path):
 TINY = ("--size", "32", "--frames", "4", "--method", "lut", "--table-size", "4", "8", "4", "--progress", "none")
 
 
+def default_signals():
+    """In the child: the signal dispositions of a command started from a terminal (a test runner
+    started in the background may have passed SIGINT on ignored)."""
+    for number in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(number, signal.SIG_DFL)
+
+
 def clsky_process(*args, cwd, script=None, **kwargs):
     command = [sys.executable, "-m", "anim"] if script is None else [sys.executable, str(script)]
     return subprocess.Popen([*command, *args], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, **kwargs)
+                            text=True, preexec_fn=default_signals, **kwargs)
 
 
 @pytest.mark.parametrize("rounds", [pytest.param(3, id="3 rounds"),
@@ -206,7 +213,7 @@ def test_signal_during_the_table_build(tmp_path, signum):
     with open(errors, "w") as stream:
         run = subprocess.Popen([sys.executable, "-m", "clsky", "table", "--size", "32", "256", "32", "-o", "t.npz",
                                 "--raw", "t", "--force", "--progress", "leave"], cwd=tmp_path,
-                               stdout=subprocess.DEVNULL, stderr=stream, text=True)
+                               stdout=subprocess.DEVNULL, stderr=stream, text=True, preexec_fn=default_signals)
         wait_for(lambda: "single scattering" in errors.read_text(), run)     # the build has begun
         run.send_signal(signum)
         run.wait(timeout=60)
@@ -271,3 +278,21 @@ def test_signal_in_the_middle_of_an_animation(tmp_path, signum):
     run.send_signal(signum)
     assert_interrupted(run, signum)
     assert snapshot(tmp_path) == before and hidden(tmp_path) == []
+
+
+def test_a_signal_ignored_at_start_stays_ignored(tmp_path):
+    """nohup: SIGHUP ignored when clsky starts is not turned into an interruption."""
+    script = tmp_path.parent / f"{tmp_path.name}_slow_frames.py"
+    script.write_text(textwrap.dedent(SLOW_FRAMES))
+
+    def ignore_hangup():
+        default_signals()
+        signal.signal(signal.SIGHUP, signal.SIG_IGN)
+
+    run = subprocess.Popen([sys.executable, str(script), "animate", *TINY], cwd=tmp_path, stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE, text=True, preexec_fn=ignore_hangup)
+    wait_for(lambda: list(tmp_path.glob(".sky.mp4.*.mp4")), run)
+    run.send_signal(signal.SIGHUP)
+    out, err = run.communicate(timeout=120)
+    assert run.returncode == 0, err
+    assert decoded_frames(tmp_path / "sky.mp4") == 4 and hidden(tmp_path) == []
