@@ -348,8 +348,8 @@ class StagedWrites:
                     for rest in entries[position:]:
                         rest[0].unlink(missing_ok=True)
                     self._staged = []
-                    if not isinstance(error, OSError):
-                        raise
+                    if not isinstance(error, OSError) or not self.committed:
+                        raise                    # nothing is in place yet: the error says it all
                     done = ", ".join(str(path) for path in self.committed) or "none"
                     raise type(error)(f"could not put {target} in place ({error}); "
                                       f"new files already in place: {done}") from error
@@ -387,13 +387,17 @@ def atomic_write(path, overwrite=False, suffix=None, staging=None):
     one, and the last rename wins. An exception in the block (KeyboardInterrupt included) deletes
     the temporary and leaves ``path`` as it was.
     """
-    if staging is not None:
-        temporary = staging.stage(path, overwrite, suffix)
-        try:
-            yield temporary
-        except BaseException:
-            staging.discard(temporary)
+    own = StagedWrites() if staging is None else None
+    temporary = (staging or own).stage(path, overwrite, suffix)
+    try:
+        yield temporary
+    except OSError as error:                     # e.g. a full disk: name the target, not the temporary
+        (staging or own).discard(temporary)
+        if error.errno is None or error.filename not in (str(temporary), temporary):
             raise
-        return
-    with StagedWrites() as own:
-        yield own.stage(path, overwrite, suffix)
+        raise type(error)(f"cannot write {path}: {error.strerror.lower()}") from error
+    except BaseException:
+        (staging or own).discard(temporary)
+        raise
+    if own is not None:
+        own.commit()

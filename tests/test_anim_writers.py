@@ -128,7 +128,7 @@ def test_mp4_decodes_with_the_right_frames(tmp_path):
     with FrameWriter(directory=tmp_path / "frames", mp4_path=target, fps=24, total_frames=12) as writer:
         for index in range(12):
             writer.write(index, _frame(index))
-    assert _listing(tmp_path) == ["frames", "sky.mp4"]               # the .part file is gone
+    assert _listing(tmp_path) == ["frames", "sky.mp4"]               # no temporary is left
     assert writer.paths[-1] == target
     video = imageio_v3.imread(target, index=None)
     assert video.shape == (12, 48, 64, 3) and video.dtype == np.uint8

@@ -313,3 +313,37 @@ def test_atomic_write_error_names_the_target_not_a_temporary(tmp_path):
         with atomic_write(tmp_path / "gone" / "t.npz"):
             pass
     assert "gone" in str(error.value) and ".t.npz." not in str(error.value)
+
+
+# 3. After the checks: what a failure midway leaves ------------------------------------------------
+
+def test_a_write_error_names_the_target(tmp_path):
+    def full_disk(temporary):
+        raise OSError(28, "No space left on device", str(temporary))
+
+    with pytest.raises(OSError, match=r"^cannot write .*t\.npz: no space left on device$"):
+        with atomic_write(tmp_path / "t.npz") as temporary:
+            full_disk(temporary)
+    assert listing(tmp_path) == []
+
+
+def test_a_rename_failing_midway_is_reported_and_leaves_no_temporary(tmp_path, monkeypatch):
+    """Documented in StagedWrites: the files renamed so far are new, the others keep their old
+    contents, no temporary is left, and the error says which is which."""
+    from clsky import _files
+
+    place = _files._place
+
+    def fail_on_b(temporary, target, overwrite):
+        if target.name == "b.txt":
+            raise PermissionError(13, "Permission denied", str(target))
+        place(temporary, target, overwrite)
+
+    monkeypatch.setattr(_files, "_place", fail_on_b)
+    (tmp_path / "b.txt").write_text("old b")
+    with pytest.raises(PermissionError, match=r"could not put .*b\.txt in place.*already in place: .*a\.txt"):
+        with StagedWrites() as staging:
+            for name in ("a.txt", "b.txt", "c.txt"):
+                staging.stage(tmp_path / name, overwrite=True).write_text("new " + name)
+    assert {name: (tmp_path / name).read_text() for name in listing(tmp_path)} == \
+        {"a.txt": "new a.txt", "b.txt": "old b"}
