@@ -150,22 +150,27 @@ def clsky_process(*args, cwd, script=None, **kwargs):
                             text=True, preexec_fn=default_signals, **kwargs)
 
 
+#: Long enough for the two runs' MP4 phases to overlap: with the old fixed temporary, 2 rounds of 4
+#: gave an MP4 that did not decode and every round one run failed ('No such file ... .same.part.mp4').
+RACE = ("--size", "64", "--frames", "24", "--method", "lut", "--table-size", "4", "8", "4", "--progress", "none")
+
+
 @pytest.mark.parametrize("rounds", [pytest.param(3, id="3 rounds"),
                                     pytest.param(10, id="10 rounds", marks=pytest.mark.slow)])
 def test_two_forced_animations_to_one_file(tmp_path, rounds):
     """The issue's race (both used the fixed temporary .same.part.mp4: 4 of 5 MP4s did not decode):
-    each round the MP4 decodes fully, the frame folder holds the 4 frames, no temporary is left.
-    Ten rounds (the issue's criterion) take about 100 s on two busy cores: marked slow; three by
-    default."""
+    each round both runs succeed, the MP4 decodes fully, the frame folder holds the 24 frames, no
+    temporary is left. Ten rounds (the issue's criterion) take about 80 s on two busy cores: marked
+    slow; three by default."""
     for round_ in range(rounds):
-        runs = [clsky_process("animate", *TINY, "--exposure", exposure, "--force", "-o", "same.mp4", cwd=tmp_path)
+        runs = [clsky_process("animate", *RACE, "--exposure", exposure, "--force", "-o", "same.mp4", cwd=tmp_path)
                 for exposure in ("1", "4")]
         for run in runs:
             out, err = run.communicate(timeout=120)
             assert run.returncode == 0, (round_, err)
-        assert decoded_frames(tmp_path / "same.mp4") == 4, round_
-        assert sorted(os.listdir(tmp_path / "same_frames")) == [f"frame_{index:05d}.png" for index in range(4)]
-        assert len((tmp_path / "same_metrics.csv").read_text().splitlines()) == 1 + 4
+        assert decoded_frames(tmp_path / "same.mp4") == 24, round_
+        assert sorted(os.listdir(tmp_path / "same_frames")) == [f"frame_{index:05d}.png" for index in range(24)]
+        assert len((tmp_path / "same_metrics.csv").read_text().splitlines()) == 1 + 24
         assert hidden(tmp_path) == [], round_
 
 
