@@ -249,7 +249,11 @@ class FrameWriter:
       video differ from the PNGs). A block that writes no frame creates no MP4 (with a warning).
     - Two writers of the same outputs at once (``force``) each rename their own complete files: the
       MP4 is always one writer's whole video, and the last rename wins per file (the frames may
-      then mix both runs).
+      then mix both runs). A writer that fails removes the frame directory it created only if it
+      is empty; a concurrent writer that has not yet staged a frame there then fails to create its
+      temporary (one-line error, nothing half written).
+    - The frames become visible only at the end of the block (they wait as hidden temporaries, the
+      same disk space as the frames themselves).
 
     Examples
     --------
