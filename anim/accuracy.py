@@ -221,13 +221,14 @@ def pareto_front(rows, cost="render_s", error="p95_rel"):
     return front
 
 
-def pareto_plot(rows, path, title="clsky: speed versus accuracy", force=False, size=128):
+def pareto_plot(rows, path, title="clsky: speed versus accuracy", force=False, size=128, staging=None):
     """Error versus render time of every candidate (log-log), Pareto fronts joined; a PNG with two
     panels: the worst of the four frames, and the day frame alone (where table knobs differ); ``size``
     is the frames' side in pixels (for the axis label).
 
     matplotlib draws it (a well-kept plotting library does this better than hand-written code); it is
-    the ``bench`` extra: ``pip install 'clsky[bench]'``.
+    the ``bench`` extra: ``pip install 'clsky[bench]'``. ``staging`` (a
+    :class:`clsky._files.StagedWrites`): the file lands when that set commits.
     """
     try:
         import matplotlib
@@ -260,7 +261,7 @@ def pareto_plot(rows, path, title="clsky: speed versus accuracy", force=False, s
         axes.legend(fontsize=7)
     figure.suptitle(title, fontsize=10)
     figure.tight_layout()
-    with atomic_write(path, overwrite=force) as temporary:
+    with atomic_write(path, overwrite=force, staging=staging) as temporary:
         figure.savefig(temporary, format="png")
     plt.close(figure)
     return path

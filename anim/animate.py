@@ -14,6 +14,7 @@ Example
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import datetime
 import pathlib
@@ -23,6 +24,7 @@ from typing import Callable
 import numpy as np
 
 import clsky
+from clsky._files import StagedWrites, check_output
 from clsky.planner import Plan, Scene, plan_scene
 from clsky.quality import QUALITY_LEVELS, QualityLevel, level_for_budget, quality_level
 from clsky.render import SkyRenderer
@@ -31,7 +33,7 @@ from . import metrics, sunpath, tonemap, writers
 from .cameras import camera_from_name
 
 __all__ = ["AnimationConfig", "AnimationResult", "METHODS", "quality", "plan_animation", "build_table",
-           "ray_settings", "sun_positions", "render_animation", "render_frame"]
+           "ray_settings", "sun_positions", "check_outputs", "render_animation", "render_frame"]
 
 #: What is rendered: table lookup only, ray march only, or both with the comparison.
 METHODS = ("compare", "lut", "raymarch")
@@ -189,13 +191,15 @@ class AnimationConfig:
 
 @dataclasses.dataclass
 class AnimationResult:
-    """Per-frame metric rows, the temporal jumps, the written files and a one-line summary."""
+    """Per-frame metric rows, the temporal jumps, the written files, a one-line summary, and the
+    stale frames of an earlier run that a forced run deleted."""
 
     rows: list
     temporal: dict
     paths: list
     seconds: float
     summary: str
+    removed: list = dataclasses.field(default_factory=list)
 
 
 def quality(config: AnimationConfig) -> QualityLevel:
@@ -267,6 +271,34 @@ def render_frame(renderer: SkyRenderer, prepared, sun_direction, config: Animati
     return frames
 
 
+def _frame_writer(config: AnimationConfig, total_frames: int, staging=None) -> writers.FrameWriter:
+    return writers.FrameWriter(directory=config.frames_directory, mp4_path=config.output_path, fps=config.fps,
+                               total_frames=total_frames, hdr="npy" if config.hdr else None, force=config.force,
+                               prefix="frame", staging=staging)
+
+
+def check_outputs(config: AnimationConfig, total_frames: int | None = None, option: str | None = None):
+    """Check every output of the animation before any work: the MP4, the frame directory (and the
+    frames of an earlier run, refused without ``force``), the metrics CSV and JSON.
+
+    Parameters
+    ----------
+    config : AnimationConfig
+    total_frames : int, optional
+        Number of frames (default ``config.frames``): the longest frame name.
+    option : str, optional
+        The command-line option naming the outputs ('--output'): it starts the messages.
+
+    Raises
+    ------
+    FileExistsError, IsADirectoryError, FileNotFoundError, NotADirectoryError, PermissionError, ValueError
+        See :func:`clsky._files.check_output`; nothing is written.
+    """
+    _frame_writer(config, total_frames or config.frames).check(option)
+    for suffix in (".csv", ".json"):
+        check_output(config.metrics_path(suffix), config.force, option)
+
+
 def _even(image):
     """Crop one column/row if needed: H.264 in yuv420p needs even sizes."""
     height, width = image.shape[:2]
@@ -279,9 +311,16 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
 
     ``progress(stage, done, total)`` is called for the table build ('single', 'orders') and for each
     frame ('frames'); ``report(text)`` receives the scene plan before the table is built.
+
+    Every output is checked first (:func:`check_outputs`), before the table is built. The MP4, the
+    frames and the metrics are written to temporary files and land together at the end (frames,
+    metrics, then the MP4; a forced run deletes the stale frames of an earlier, longer run): an
+    exception or an interruption leaves the earlier outputs as they were and no temporary file.
+    See :class:`clsky._files.StagedWrites` for a failure while the files are renamed.
     """
     start = time.perf_counter()
     positions = sun_positions(config)
+    check_outputs(config, len(positions))
     camera = _camera(config)
     directions, valid = camera.directions()
     plan = plan_animation(config, positions, directions, valid, ctx=ctx)
@@ -290,11 +329,34 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
     table = build_table(config, plan, ctx=ctx, progress=progress)
     renderer = SkyRenderer(table, ray_settings(config), ctx=ctx)
     prepared = renderer.prepare(directions, valid)
+    had_frames_directory = config.frames_directory.is_dir()
+    try:
+        with StagedWrites() as staging:
+            rows, temporal, paths, removed = _write_animation(config, positions, renderer, prepared, valid, table,
+                                                              plan, staging, progress)
+    except BaseException:
+        if not had_frames_directory:             # created for the temporaries of the frames
+            with contextlib.suppress(OSError):
+                config.frames_directory.rmdir()  # only if empty
+        raise
+    seconds = time.perf_counter() - start
+    summary = f"{len(positions)} frames {camera.width}x{camera.height} ({config.method}) in {seconds:.1f} s"
+    if config.method == "compare":
+        worst = max(rows, key=lambda r: r["p95_rel"])
+        summary += (f"; worst frame {worst['frame']} (sun zenith {worst['sun_zenith_deg']:.1f} deg): "
+                    f"95th-percentile error {100 * worst['p95_rel']:.1f} %, mean Delta E {worst['mean_delta_e']:.2f}; "
+                    f"worst temporal jumps at frames {temporal['worst_frames'][:3]}")
+    if removed:
+        summary += f"; deleted {len(removed)} stale frame files of an earlier run"
+    summary += f" -> {config.output_path}"
+    return AnimationResult(rows, temporal, paths, seconds, summary, removed)
+
+
+def _write_animation(config, positions, renderer, prepared, valid, table, plan, staging, progress):
+    """Render every frame and stage the frames, the MP4 and the metrics in ``staging``; returns the
+    metric rows, the temporal jumps, the target paths and the stale frames to be deleted."""
     rows, means = [], {"lut": [], "raymarch": []}
-    directory = config.frames_directory
-    with writers.FrameWriter(directory=directory, mp4_path=config.output_path, fps=config.fps,
-                             total_frames=len(positions), hdr="npy" if config.hdr else None, force=config.force,
-                             prefix="frame") as writer:
+    with _frame_writer(config, len(positions), staging) as writer:
         for index, sun in enumerate(positions):
             hdr = render_frame(renderer, prepared, sun.direction, config)
             display = {name: tonemap.to_uint8(tonemap.tone_map(frame, config.exposure), dither=config.dither,
@@ -316,7 +378,7 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
             rows.append(row)
             if progress is not None:
                 progress("frames", index + 1, len(positions))
-    paths = list(writer.paths)          # after the block: the MP4 is renamed into place on exit
+    paths = list(writer.paths)          # the frames and the MP4: they land when ``staging`` commits
     temporal = {}
     if config.method == "compare":
         jumps = metrics.temporal_jumps(np.array(means["lut"]), np.array(means["raymarch"]), exposure=config.exposure)
@@ -326,7 +388,7 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
                     "worst_frames": [int(i) for i in jumps["worst_frames"]]}
         for row, excess in zip(rows, temporal["excess"]):
             row["temporal_excess_jump"] = float(excess)
-    paths.append(writers.write_csv(config.metrics_path(".csv"), rows, force=config.force))
+    paths.append(writers.write_csv(config.metrics_path(".csv"), rows, force=config.force, staging=staging))
     paths.append(writers.write_json(config.metrics_path(".json"), {
         "config": {k: (str(v) if isinstance(v, (datetime.date, pathlib.Path)) else v)
                    for k, v in dataclasses.asdict(config).items()},
@@ -334,13 +396,5 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
                   "metadata": table.metadata},
         "plan": None if plan is None else {"quality": plan.level.name, "work_fraction": plan.work_fraction,
                                            "decisions": [list(d) for d in plan.decisions]},
-        "frames": rows, "temporal": temporal}, force=config.force))
-    seconds = time.perf_counter() - start
-    summary = f"{len(positions)} frames {camera.width}x{camera.height} ({config.method}) in {seconds:.1f} s"
-    if config.method == "compare":
-        worst = max(rows, key=lambda r: r["p95_rel"])
-        summary += (f"; worst frame {worst['frame']} (sun zenith {worst['sun_zenith_deg']:.1f} deg): "
-                    f"95th-percentile error {100 * worst['p95_rel']:.1f} %, mean Delta E {worst['mean_delta_e']:.2f}; "
-                    f"worst temporal jumps at frames {temporal['worst_frames'][:3]}")
-    summary += f" -> {config.output_path}"
-    return AnimationResult(rows, temporal, paths, seconds, summary)
+        "frames": rows, "temporal": temporal}, force=config.force, staging=staging))
+    return rows, temporal, paths, list(writer.stale_paths)

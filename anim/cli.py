@@ -135,18 +135,17 @@ def _config(args, **extra):
 
 
 def run_animate(args):
-    from .animate import render_animation
+    from .animate import check_outputs, render_animation
 
     config = _config(args, frames=args.frames, start_elevation_deg=args.start_elevation,
                      max_elevation_deg=args.max_elevation,
                      location=None if args.location is None else tuple(args.location), date=args.date,
                      start_hour=args.hours[0], end_hour=args.hours[1], step_minutes=args.step_minutes,
                      fps=args.fps, output=args.output, hdr=args.hdr)
-    for target in (config.output_path, config.metrics_path(".csv"), config.metrics_path(".json")):
-        if target.exists() and not config.force:
-            raise clsky_cli.UsageError(f"{target} exists; use --force to overwrite it")
-    if not config.output_path.parent.is_dir():
-        raise clsky_cli.UsageError(f"output directory {config.output_path.parent} does not exist")
+    try:                                         # the MP4, <stem>_frames/, <stem>_metrics.csv/.json
+        check_outputs(config, option="--output")
+    except (OSError, ValueError) as error:
+        raise clsky_cli.UsageError(str(error)) from None
     progress, close = clsky_cli.progress_bar(args.progress)
     try:
         result = render_animation(config, progress=progress, report=print)
@@ -171,8 +170,7 @@ def run_render(args):
     output = pathlib.Path(args.output)
     if output.suffix != ".png":
         raise clsky_cli.UsageError(f"--output must end in .png, got {args.output!r}")
-    if output.exists() and not args.force:
-        raise clsky_cli.UsageError(f"{output} exists; use --force to overwrite it")
+    clsky_cli.check_outputs([("--output", output)], args.force)
     config = _config(args)
     camera = _camera(config)
     directions, valid = camera.directions()
@@ -203,6 +201,8 @@ def run_render(args):
 def run_bench(args):
     import pathlib
 
+    from clsky._files import StagedWrites
+
     from . import accuracy, writers
 
     if not 16 <= args.size <= 2048:
@@ -211,8 +211,7 @@ def run_bench(args):
     for option, suffix in (("--output", ".csv"), ("--plot", ".png")):
         if targets[option].suffix != suffix:
             raise clsky_cli.UsageError(f"{option} must end in {suffix}, got {str(targets[option])!r}")
-        if targets[option].exists() and not args.force:
-            raise clsky_cli.UsageError(f"{targets[option]} exists; use --force to overwrite it")
+    clsky_cli.check_outputs(targets.items(), args.force)
     candidates = accuracy.default_candidates()
     if args.quick:
         candidates = [c for c in candidates if c.label in ("default", "ray march 16 samples", "ray march 48 samples")]
@@ -222,8 +221,9 @@ def run_bench(args):
         rows = accuracy.measure(candidates, reference, valid, progress=progress)
     finally:
         close()
-    writers.write_csv(targets["--output"], rows, force=args.force)
-    accuracy.pareto_plot(rows, targets["--plot"], force=args.force, size=args.size)
+    with StagedWrites() as staging:                # the CSV and its plot land together
+        writers.write_csv(targets["--output"], rows, force=args.force, staging=staging)
+        accuracy.pareto_plot(rows, targets["--plot"], force=args.force, size=args.size, staging=staging)
     for row in rows:
         print(f"{row['candidate']:>24}: build {row['build_s']:6.2f} s, frame {1e3 * row['render_s']:7.1f} ms, "
               f"worst p95 error {100 * row['p95_rel']:8.2f} %, worst mean Delta E {row['mean_delta_e']:6.2f}")

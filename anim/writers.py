@@ -1,10 +1,13 @@
 """Writers: PNG frames, an MP4, single images, JSON and CSV, all atomic and never overwriting.
 
 Writers are separate from renderers (manim's ``SceneFileWriter``): a renderer yields frames, a
-:class:`FrameWriter` stores them. Every file is first written to a temporary file in its target's
-directory and then renamed onto the target (``os.replace``, atomic on POSIX), so an interrupted run
-leaves complete files or none, never a truncated one. Existing outputs are refused with
-FileExistsError unless ``force`` (``--force`` on the command line).
+:class:`FrameWriter` stores them. Every file is first written to a hidden temporary file with a
+unique name in its target's directory and then renamed onto the target (``os.replace``, atomic on
+POSIX; see :mod:`clsky._files`), so an interrupted run leaves complete files or none, never a
+truncated one, and concurrent writers of one file never share a temporary. Every target is checked
+before anything is written (:func:`clsky._files.check_output`); existing outputs are refused with
+FileExistsError unless ``force`` (``--force`` on the command line). Each writer takes ``staging=``
+(a :class:`clsky._files.StagedWrites`) to make several files land together.
 
 PNG needs Pillow; the MP4 needs imageio and imageio-ffmpeg (the ``anim`` extra of clsky), imported
 only when an MP4 is requested.
@@ -24,19 +27,19 @@ Examples
 from __future__ import annotations
 
 import csv
-import glob
 import io
 import json
 import os
 import pathlib
+import re
 import warnings
 
 import numpy as np
 from PIL import Image
 
-from clsky.table import atomic_write
+from clsky._files import StagedWrites, atomic_write, check_output, check_output_directory
 
-__all__ = ["FrameWriter", "write_png", "write_json", "write_csv", "MP4_OUTPUT_PARAMS"]
+__all__ = ["FrameWriter", "frame_files", "write_png", "write_json", "write_csv", "MP4_OUTPUT_PARAMS"]
 
 #: ffmpeg output options of the MP4: constant-quality H.264 at CRF 18 (visually lossless for x264),
 #: the RGB -> YUV conversion and the stream tagged as BT.709 (so players decode the colours as they
@@ -57,7 +60,9 @@ def _check_image(name, image):
     return np.ascontiguousarray(image)
 
 
-def _exists_error(path):
+def _exists_error(path, option=None):
+    if option:
+        return FileExistsError(f"{option}: {path} exists; use --force to overwrite it")
     return FileExistsError(f"{path} exists (use force=True, or --force on the command line)")
 
 
@@ -65,7 +70,7 @@ def _exists_error(path):
 PNG_COMPRESS_LEVEL = 1
 
 
-def write_png(path, image_u8, force=False):
+def write_png(path, image_u8, force=False, staging=None):
     """Write a uint8 image to a PNG file atomically.
 
     Parameters
@@ -76,6 +81,8 @@ def write_png(path, image_u8, force=False):
         RGB, RGBA or grey pixels.
     force : bool
         Replace an existing file.
+    staging : clsky._files.StagedWrites, optional
+        Stage the file in this set: it lands when the set commits.
 
     Returns
     -------
@@ -86,8 +93,10 @@ def write_png(path, image_u8, force=False):
     ------
     FileExistsError
         ``path`` exists and not ``force``.
+    IsADirectoryError, FileNotFoundError, NotADirectoryError, PermissionError
+        ``path`` is a directory; its directory is missing, not one, or not writable (before writing).
     TypeError, ValueError
-        Not uint8, or an unsupported shape.
+        Not uint8, or an unsupported shape; a name too long for the file system.
     """
     image = np.asarray(image_u8)
     if image.dtype != np.uint8:
@@ -95,7 +104,7 @@ def write_png(path, image_u8, force=False):
     if not (image.ndim == 2 or (image.ndim == 3 and image.shape[2] in (3, 4))):
         raise ValueError(f"image_u8 must have shape (H, W), (H, W, 3) or (H, W, 4), got {image.shape}")
     path = pathlib.Path(path)
-    with atomic_write(path, overwrite=force, suffix=".png") as temporary:
+    with atomic_write(path, overwrite=force, suffix=".png", staging=staging) as temporary:
         # zlib level 1: 4.6x faster than PIL's default 6 on a 1614 x 512 composite frame, 27 % larger
         Image.fromarray(np.ascontiguousarray(image)).save(temporary, format="PNG", compress_level=PNG_COMPRESS_LEVEL)
     return path
@@ -111,11 +120,12 @@ def _json_default(value):
     raise TypeError(f"object of type {type(value).__name__} is not JSON serialisable")
 
 
-def write_json(path, obj, force=False):
+def write_json(path, obj, force=False, staging=None):
     """Write ``obj`` as strict JSON (indented, keys in the given order) atomically.
 
     NumPy scalars and arrays are converted to numbers and lists; NaN and infinity raise ValueError
-    (strict JSON has no such numbers), before any file is created.
+    (strict JSON has no such numbers), before any file is created. The path is checked as in
+    :func:`write_png` (same exceptions); ``staging`` as there.
 
     Returns
     -------
@@ -123,12 +133,12 @@ def write_json(path, obj, force=False):
     """
     text = json.dumps(obj, indent=2, allow_nan=False, default=_json_default) + "\n"
     path = pathlib.Path(path)
-    with atomic_write(path, overwrite=force, suffix=".json") as temporary:
+    with atomic_write(path, overwrite=force, suffix=".json", staging=staging) as temporary:
         temporary.write_text(text, encoding="utf-8")
     return path
 
 
-def write_csv(path, rows, force=False, fieldnames=None):
+def write_csv(path, rows, force=False, fieldnames=None, staging=None):
     """Write a list of dicts as CSV (header + one line per dict) atomically.
 
     Parameters
@@ -139,6 +149,8 @@ def write_csv(path, rows, force=False, fieldnames=None):
     force : bool
     fieldnames : sequence of str, optional
         Column order; default: the keys in the order they first appear in ``rows``.
+    staging : clsky._files.StagedWrites, optional
+        As in :func:`write_png`.
 
     Returns
     -------
@@ -148,6 +160,8 @@ def write_csv(path, rows, force=False, fieldnames=None):
     ------
     ValueError
         No rows and no ``fieldnames``, or a row with a key not in ``fieldnames``.
+    OSError, ValueError
+        The path, checked as in :func:`write_png`.
     """
     rows = list(rows)
     if fieldnames is None:
@@ -161,9 +175,19 @@ def write_csv(path, rows, force=False, fieldnames=None):
         writer.writerow({key: (value.item() if isinstance(value, np.generic) else value)
                          for key, value in row.items()})
     path = pathlib.Path(path)
-    with atomic_write(path, overwrite=force, suffix=".csv") as temporary:
+    with atomic_write(path, overwrite=force, suffix=".csv", staging=staging) as temporary:
         temporary.write_text(buffer.getvalue(), encoding="utf-8", newline="")
     return path
+
+
+def frame_files(directory, prefix="frame"):
+    """The files of ``directory`` named as a :class:`FrameWriter` names its frames:
+    ``<prefix>_<digits>.png`` or ``.npy`` (sorted); nothing else is ever counted as a frame."""
+    directory = pathlib.Path(directory)
+    if not directory.is_dir():
+        return []
+    pattern = re.compile(re.escape(prefix) + r"_\d+\.(png|npy)")
+    return sorted(directory / name for name in os.listdir(directory) if pattern.fullmatch(name))
 
 
 class FrameWriter:
@@ -183,39 +207,53 @@ class FrameWriter:
     hdr : {None, 'npy'}
         Also store each frame's HDR values as float32 ``<prefix>_<index>.npy`` in ``directory``.
     force : bool
-        Overwrite existing outputs.
+        Overwrite existing outputs, and delete the stale frames of an earlier run (see Notes).
     prefix : str
         File name prefix of the frames: ``<prefix>_00001.png``.
+    staging : clsky._files.StagedWrites, optional
+        Stage every file in this set, to land with the caller's other files when the set commits
+        (an animation's metrics); default: the writer's own set, committed when the block ends.
 
     Attributes
     ----------
     paths : list of pathlib.Path
-        Files written so far (the MP4 is added once it is in place, at the end of the block).
+        The targets written so far: frames, then the MP4 (added at the end of the block). They are
+        in place once the staging set has committed (at the end of the block by default).
     stale_paths : list of pathlib.Path
-        After a forced run: frames matching the prefix that existed before and were not rewritten
-        (from an earlier, longer run). They are reported, never deleted.
+        After a forced run: the frame files of an earlier run (``<prefix>_<digits>.png`` / ``.npy``)
+        that this run did not rewrite. They are deleted when the set commits, so the directory holds
+        this run's frames only.
 
     Raises
     ------
     FileExistsError
-        On entering: the MP4, or any ``<prefix>_*.png`` (``*.npy`` with hdr) in ``directory``
-        exists and not ``force`` (this covers every frame name that could be written). Nothing is
-        touched then.
+        On entering (or :meth:`check`): the MP4, or any frame file (``<prefix>_<digits>.png`` or
+        ``.npy``) in ``directory`` exists and not ``force``. Nothing is touched then.
+    IsADirectoryError, FileNotFoundError, NotADirectoryError, PermissionError
+        On entering (or :meth:`check`): an output that cannot be written (see
+        :func:`clsky._files.check_output`). Nothing is touched then.
     ValueError
-        Bad arguments.
+        Bad arguments; a name too long for the file system.
 
     Notes
     -----
-    - Frames: each PNG (and .npy) is written to a temporary file in ``directory`` and renamed, so
-      every frame file is complete. An exception inside the ``with`` block keeps the frames already
-      written (they are valid, and useful to see what went wrong); re-running needs ``force``.
-    - MP4: frames are appended, in call order, to ``.<stem>.part.mp4`` next to the target (H.264,
-      yuv420p, :data:`MP4_OUTPUT_PARAMS`), renamed onto the target when the block exits normally.
-      On an exception the partial file is deleted and the target is not touched. yuv420p halves
-      the chroma resolution, so width and height must be even: an odd size raises ValueError at the
-      first frame, before anything of that frame is written (crop or pad the frames yourself;
-      padding silently here would make the video differ from the PNGs). A block that writes no
-      frame creates no MP4 (with a warning). Two writers must not target the same MP4 at once.
+    - Everything lands together: each frame (PNG, .npy) and the MP4 are written to hidden temporary
+      files with unique names (``.<name>.XXXXXXXX<suffix>``) beside their targets, and renamed when
+      the block exits normally: the frames first, then the stale frames are deleted, the MP4 last
+      (when it is there, its frames are too). An exception inside the block (KeyboardInterrupt
+      included) deletes every temporary, and the frame directory if this writer created it and it
+      is empty: the outputs of an earlier run stay as they were, never mixed with new ones.
+    - MP4: H.264, yuv420p, :data:`MP4_OUTPUT_PARAMS`. yuv420p halves the chroma resolution, so width
+      and height must be even: an odd size raises ValueError at the first frame, before anything of
+      that frame is written (crop or pad the frames yourself; padding silently here would make the
+      video differ from the PNGs). A block that writes no frame creates no MP4 (with a warning).
+    - Two writers of the same outputs at once (``force``) each rename their own complete files: the
+      MP4 is always one writer's whole video, and the last rename wins per file (the frames may
+      then mix both runs). A writer that fails removes the frame directory it created only if it
+      is empty; a concurrent writer that has not yet staged a frame there then fails to create its
+      temporary (one-line error, nothing half written).
+    - The frames become visible only at the end of the block (they wait as hidden temporaries, the
+      same disk space as the frames themselves).
 
     Examples
     --------
@@ -232,7 +270,7 @@ class FrameWriter:
     HDR_FORMATS = (None, "npy")
 
     def __init__(self, directory=None, mp4_path=None, fps=30, total_frames=None, hdr=None, force=False,
-                 prefix="frame"):
+                 prefix="frame", staging=None):
         if directory is None and mp4_path is None:
             raise ValueError("give a frame directory, an mp4_path, or both")
         if hdr not in self.HDR_FORMATS:
@@ -264,6 +302,10 @@ class FrameWriter:
         self._hdr_shape = None
         self._video = None
         self._part = None
+        self._own_staging = staging is None
+        self._staging = staging
+        self._temporaries = []
+        self._created_directory = False
         self._state = "new"                             # then "open", then "closed"
 
     # Names ----------------------------------------------------------------------------------------
@@ -273,38 +315,53 @@ class FrameWriter:
             raise ValueError("this FrameWriter writes no frame files (directory=None)")
         return self.directory / f"{self.prefix}_{index:0{self.width}d}{suffix}"
 
-    def _existing_frames(self):
-        if self.directory is None or not self.directory.is_dir():
-            return []
-        suffixes = [".png"] + ([".npy"] if self.hdr == "npy" else [])
-        pattern = glob.escape(str(self.directory / self.prefix)) + "_*"
-        return sorted(pathlib.Path(name) for suffix in suffixes for name in glob.glob(pattern + suffix))
+    @property
+    def _mp4_suffix(self):
+        return self.mp4_path.suffix or ".mp4"           # ffmpeg picks the container from it
 
-    # Context --------------------------------------------------------------------------------------
-    def __enter__(self):
-        if self._state != "new":
-            raise RuntimeError("a FrameWriter can be entered only once")
+    # Checks ---------------------------------------------------------------------------------------
+    def check(self, option=None):
+        """Check every output before any work (the animation calls it before building its table).
+
+        Parameters
+        ----------
+        option : str, optional
+            The command-line option that named the outputs: it starts the messages.
+
+        Raises
+        ------
+        FileExistsError, IsADirectoryError, FileNotFoundError, NotADirectoryError, PermissionError,
+        ValueError
+            As for the class; ImportError when an MP4 is asked for without imageio-ffmpeg.
+        """
         if self.mp4_path is not None:
-            if self.mp4_path.exists() and not self.force:
-                raise _exists_error(self.mp4_path)
-            if not self.mp4_path.parent.is_dir():
-                raise FileNotFoundError(f"directory {self.mp4_path.parent} does not exist")
-        if self.directory is not None and self.directory.exists() and not self.directory.is_dir():
-            raise NotADirectoryError(f"{self.directory} exists and is not a directory")
-        self._existing = self._existing_frames()
-        if self._existing and not self.force:
-            raise _exists_error(self._existing[0])
-        if self.mp4_path is not None:
+            check_output(self.mp4_path, self.force, option, suffix=self._mp4_suffix)
             try:
                 import imageio.v2 as imageio  # noqa: F401  (fail before writing anything)
                 import imageio_ffmpeg  # noqa: F401
             except ImportError as error:
                 raise ImportError("writing an MP4 needs imageio and imageio-ffmpeg: "
                                   "pip install 'clsky[anim]'") from error
-            suffix = self.mp4_path.suffix or ".mp4"        # ffmpeg picks the container from it
-            self._part = self.mp4_path.with_name(f".{self.mp4_path.stem}.part{suffix}")
         if self.directory is not None:
-            self.directory.mkdir(parents=True, exist_ok=True)
+            last = (self.total_frames or 1) - 1
+            check_output_directory(self.directory, option, names=[self.frame_path(last, ".png").name,
+                                                                  self.frame_path(last, ".npy").name])
+            existing = frame_files(self.directory, self.prefix)
+            if existing and not self.force:
+                raise _exists_error(existing[0], option)
+
+    # Context --------------------------------------------------------------------------------------
+    def __enter__(self):
+        if self._state != "new":
+            raise RuntimeError("a FrameWriter can be entered only once")
+        self.check()
+        if self.directory is not None:
+            self._existing = frame_files(self.directory, self.prefix)
+            if not self.directory.is_dir():
+                self.directory.mkdir(parents=True)
+                self._created_directory = True
+        if self._own_staging:
+            self._staging = StagedWrites()
         self._state = "open"
         return self
 
@@ -317,25 +374,36 @@ class FrameWriter:
                     video.close()
                 except Exception:  # noqa: BLE001  (the block's exception is the one to report)
                     pass
-            if self._part is not None:
-                self._part.unlink(missing_ok=True)
+            self._discard()
             return False
         try:
             if video is not None:
                 video.close()
-                if self.mp4_path.exists() and not self.force:
-                    raise _exists_error(self.mp4_path)
-                os.replace(self._part, self.mp4_path)
                 self.paths.append(self.mp4_path)
             elif self.mp4_path is not None:
                 warnings.warn(f"no frame was written: {self.mp4_path} not created", RuntimeWarning,
                               stacklevel=2)
-        finally:
-            if self._part is not None:
-                self._part.unlink(missing_ok=True)
-        written = set(self.paths)
-        self.stale_paths = [path for path in self._existing if path not in written]
+            written = set(self.paths)
+            self.stale_paths = [path for path in self._existing if path not in written]
+            for path in self.stale_paths:
+                self._staging.remove_on_commit(path)
+            if self._own_staging:
+                self._staging.commit()
+        except BaseException:
+            self._discard()
+            raise
         return False
+
+    def _discard(self):
+        """Delete this writer's temporaries (and the frame directory if it created it and it is empty)."""
+        for temporary in self._temporaries:
+            self._staging.discard(temporary)
+        self._temporaries = []
+        if self._created_directory:
+            try:
+                self.directory.rmdir()
+            except OSError:                              # not empty: someone else's files are there
+                pass
 
     # Writing --------------------------------------------------------------------------------------
     def _open_video(self, height, width):
@@ -343,13 +411,29 @@ class FrameWriter:
             raise ValueError(f"MP4 (yuv420p) needs an even width and height, got {width}x{height} "
                              f"(width x height): crop or pad the frames")
         import imageio.v2 as imageio
-        self._part.unlink(missing_ok=True)               # a leftover of a crashed run
+        self._part = self._staging.stage(self.mp4_path, self.force, suffix=self._mp4_suffix, last=True)
+        self._temporaries.append(self._part)
         self._video = imageio.get_writer(self._part, format="FFMPEG", mode="I", fps=self.fps,
                                          codec="libx264", pixelformat="yuv420p", quality=None,
                                          macro_block_size=1, output_params=list(MP4_OUTPUT_PARAMS))
 
+    def _write_files(self, index, image, hdr):
+        """Stage frame ``index``'s PNG (and .npy); returns their targets."""
+        written = []
+        with atomic_write(self.frame_path(index), self.force, suffix=".png", staging=self._staging) as temporary:
+            self._temporaries.append(temporary)
+            Image.fromarray(image).save(temporary, format="PNG", compress_level=PNG_COMPRESS_LEVEL)
+        written.append(self.frame_path(index))
+        if self.hdr == "npy":
+            target = self.frame_path(index, ".npy")
+            with atomic_write(target, self.force, suffix=".npy", staging=self._staging) as temporary:
+                self._temporaries.append(temporary)
+                np.save(temporary, hdr)
+            written.append(target)
+        return written
+
     def write(self, index, display_u8, hdr=None):
-        """Store frame ``index``.
+        """Store frame ``index`` (in a temporary file, renamed at the end of the block).
 
         Parameters
         ----------
@@ -366,7 +450,7 @@ class FrameWriter:
         Returns
         -------
         list of pathlib.Path
-            The frame files written for this frame (empty for an MP4-only writer).
+            The frame files this frame will have (empty for an MP4-only writer).
         """
         if self._state != "open":
             raise RuntimeError("use FrameWriter.write inside its with statement")
@@ -393,14 +477,7 @@ class FrameWriter:
         self._size = image.shape
         if hdr is not None and self.hdr == "npy":
             self._hdr_shape = hdr.shape
-        written = []
-        if self.directory is not None:
-            written.append(write_png(self.frame_path(index), image, force=self.force))
-            if self.hdr == "npy":
-                target = self.frame_path(index, ".npy")
-                with atomic_write(target, overwrite=self.force, suffix=".npy") as temporary:
-                    np.save(temporary, hdr)
-                written.append(target)
+        written = self._write_files(index, image, hdr) if self.directory is not None else []
         if self._video is not None:
             self._video.append_data(image)
         self._indices.add(index)

@@ -1,13 +1,19 @@
 """Command line: ``clsky devices`` and ``clsky table``.
 
 Thin by design: parse, build the configuration objects, call the library, write. Bad arguments give
-one line on stderr and exit status 2; ``--verbose`` shows tracebacks of unexpected errors.
+one line on stderr and exit status 2; ``--verbose`` shows tracebacks of unexpected errors. Every output
+path is checked before any work (:func:`check_outputs`). SIGINT, SIGTERM and SIGHUP take the same
+path: the temporary files are deleted, one line on stderr, exit status 128 + the signal's number
+(130, 143, 129).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
 import sys
+import threading
 import time
 
 from . import __version__
@@ -18,6 +24,69 @@ EXIT_FAILURE = 1
 
 class UsageError(Exception):
     """A bad command-line value: reported in one line, exit status 2."""
+
+
+class Interrupted(KeyboardInterrupt):
+    """A signal (SIGINT, SIGTERM, SIGHUP) turned into a KeyboardInterrupt, so that every ``with`` and
+    ``finally`` cleans up as for Ctrl-C; ``signum`` is the signal's number."""
+
+    def __init__(self, signum):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+#: Signals that interrupt a command cleanly (SIGHUP: the terminal was closed).
+INTERRUPT_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
+
+
+def _interrupt(signum, frame):
+    # Later signals are ignored while the interrupted command deletes its temporary files.
+    for other in INTERRUPT_SIGNALS:
+        signal.signal(other, signal.SIG_IGN)
+    raise Interrupted(signum)
+
+
+@contextlib.contextmanager
+def signals_interrupt():
+    """Within the block, SIGINT, SIGTERM and SIGHUP raise :class:`Interrupted` (main thread only;
+    elsewhere the block runs unchanged); the previous handlers come back after it. A signal ignored
+    when clsky started stays ignored (``nohup`` ignores SIGHUP, a shell's ``&`` SIGINT)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {number: signal.signal(number, _interrupt) for number in INTERRUPT_SIGNALS
+                if signal.getsignal(number) not in (signal.SIG_IGN, None)}
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+
+
+def check_outputs(targets, force):
+    """Check output paths before any work; the first that cannot be written is a UsageError.
+
+    Parameters
+    ----------
+    targets : iterable of (str, path)
+        The option that names each output ('--output', '--raw') and the file.
+    force : bool
+        Existing files may be replaced (--force).
+
+    Raises
+    ------
+    UsageError
+        One line naming the option and the path: it exists (without --force), is a directory,
+        its directory is missing or not one, nothing can be created there, or a name is too long
+        (:func:`clsky._files.check_output`).
+    """
+    from ._files import check_output
+
+    for option, path in targets:
+        try:
+            check_output(path, force, option)
+        except (OSError, ValueError) as error:
+            raise UsageError(str(error)) from None
 
 
 class _Parser(argparse.ArgumentParser):
@@ -188,6 +257,7 @@ def run_devices(args):
 def run_table(args):
     import pathlib
 
+    from ._files import StagedWrites
     from .atmosphere import preset
     from .table import ScatteringTable
 
@@ -195,12 +265,8 @@ def run_table(args):
     output = pathlib.Path(args.output)
     if output.suffix != ".npz":
         raise UsageError(f"--output must end in .npz, got {args.output!r}")
-    targets = [output] + ([pathlib.Path(args.raw).with_suffix(s) for s in (".bin", ".json")] if args.raw else [])
-    for target in targets:
-        if target.exists() and not args.force:
-            raise UsageError(f"{target} exists; use --force to overwrite it")
-        if not target.parent.is_dir():
-            raise UsageError(f"output directory {target.parent} does not exist")
+    raw = [("--raw", pathlib.Path(args.raw).with_suffix(s)) for s in (".bin", ".json")] if args.raw else []
+    check_outputs([("--output", output)] + raw, args.force)
     progress, close = progress_bar(args.progress)
     start = time.perf_counter()
     try:
@@ -208,9 +274,10 @@ def run_table(args):
                                       fast_math=args.fast_math, progress=progress)
     finally:
         close()
-    table.save(output, overwrite=args.force)
-    if args.raw:
-        table.export_raw(args.raw, overwrite=args.force)
+    with StagedWrites() as staging:                # the table and its raw export land together
+        table.save(output, overwrite=args.force, staging=staging)
+        if args.raw:
+            table.export_raw(args.raw, overwrite=args.force, staging=staging)
     width, height, depth = settings.size
     record = table.orders_record
     print(f"table {width}x{height}x{depth} {settings.dtype} ({args.preset}, mode {settings.mode}, "
@@ -226,7 +293,18 @@ COMMANDS = {"devices": run_devices, "table": run_table}
 
 
 def main(argv=None, extensions=()):
-    """Run the command line; returns the exit status (2 for bad arguments, one line on stderr)."""
+    """Run the command line; returns the exit status (2 for bad arguments, one line on stderr;
+    128 + the signal's number when SIGINT, SIGTERM or SIGHUP interrupts it)."""
+    with signals_interrupt():
+        try:
+            return _main(argv, extensions)
+        except KeyboardInterrupt as error:
+            signum = getattr(error, "signum", signal.SIGINT)
+            print(f"clsky: interrupted by {signal.Signals(signum).name}", file=sys.stderr)
+            return 128 + signum
+
+
+def _main(argv, extensions):
     from ._cl import KernelBuildError, NoDeviceError
 
     verbose = "--verbose" in (sys.argv[1:] if argv is None else argv)
@@ -247,6 +325,3 @@ def main(argv=None, extensions=()):
             raise
         print(f"clsky: error: {str(error).splitlines()[0]}", file=sys.stderr)
         return EXIT_FAILURE
-    except KeyboardInterrupt:
-        print("clsky: interrupted", file=sys.stderr)
-        return 130

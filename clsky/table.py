@@ -39,10 +39,8 @@ import contextlib
 import dataclasses
 import hashlib
 import json
-import os
 import pathlib
 import re
-import tempfile
 import time
 import tokenize
 import zipfile
@@ -52,6 +50,7 @@ from typing import Callable
 import numpy as np
 
 from . import __version__
+from ._files import StagedWrites, atomic_write, check_output
 from .atmosphere import AtmosphereParameters, preset
 from .lookup import check_queries
 from .settings import TableSettings
@@ -72,31 +71,6 @@ CHANNEL_NAMES[7] = CHANNEL_NAMES[4] + _MULTIPLE_NAMES
 class TableFormatError(ValueError):
     """A table (or table file) that clsky must not use: unreadable file, wrong version, checksum or
     hash, or arrays whose shape, dtype or values do not fit the settings."""
-
-
-@contextlib.contextmanager
-def atomic_write(path, overwrite=False, suffix=None):
-    """Yield a temporary path beside ``path``; on success it replaces ``path`` atomically.
-
-    An interrupted write leaves no partial file. An existing ``path`` raises FileExistsError unless
-    ``overwrite``.
-    """
-    path = pathlib.Path(path)
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists (use overwrite=True, or --force on the command line)")
-    if not path.parent.is_dir():
-        raise FileNotFoundError(f"directory {path.parent} does not exist")
-    fd, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix or path.suffix, dir=path.parent)
-    os.close(fd)
-    temporary = pathlib.Path(temporary)
-    umask = os.umask(0)
-    os.umask(umask)
-    temporary.chmod(0o666 & ~umask)        # mkstemp's 0600 would leak into the final file
-    try:
-        yield temporary
-        os.replace(temporary, path)
-    finally:
-        temporary.unlink(missing_ok=True)
 
 
 def parameters_hash(atmosphere: AtmosphereParameters, settings: TableSettings) -> str:
@@ -339,25 +313,30 @@ class ScatteringTable:
                                self.settings.mapping, self.settings.sun_cos_range)
 
     # Files ----------------------------------------------------------------------------------------
-    def save(self, path, overwrite=False):
+    def save(self, path, overwrite=False, staging=None):
         """Write the table to ``path`` (.npz, format in the module docstring) atomically; never
         overwrites unless ``overwrite``.
+
+        The path is checked (:func:`clsky._files.check_output`) before anything is written. With
+        ``staging`` (a :class:`clsky._files.StagedWrites`) the file lands when that set commits.
 
         Raises
         ------
         ValueError
-            ``path`` does not end in .npz.
+            ``path`` does not end in .npz, or a name too long for the file system.
         TableFormatError
             The table's arrays no longer pass :meth:`validate` (edited in place since construction),
             or an order exceeds the float32 range it is stored in: no file is written.
         FileExistsError
             ``path`` exists and not ``overwrite``.
+        IsADirectoryError, FileNotFoundError, NotADirectoryError, PermissionError
+            ``path`` is a directory, or its directory is missing or not writable.
         """
         path = pathlib.Path(path)
         if path.suffix != ".npz":
             raise ValueError(f"path must end in .npz, got {str(path)!r}")
         members = self._file_members()
-        with atomic_write(path, overwrite) as temporary:
+        with atomic_write(path, overwrite, staging=staging) as temporary:
             with open(temporary, "wb") as stream:
                 np.savez(stream, **members)
         return path
@@ -421,18 +400,18 @@ class ScatteringTable:
         return cls(atmosphere, settings, contents["data"], _json_member(contents, "metadata"), orders,
                    _json_member(contents, "orders_record"), contents.get("gathered"))
 
-    def export_raw(self, path, overwrite=False):
+    def export_raw(self, path, overwrite=False, staging=None):
         """Write ``<path>.bin`` (float32 values) and ``<path>.json`` (layout header) for GPU engines.
 
-        Returns the two paths. Both are written atomically; existing files are kept unless
-        ``overwrite``.
+        Returns the two paths. Both paths are checked before either is written (as in :meth:`save`),
+        and they land together (renamed one after the other once both are written; with
+        ``staging``, when that set commits); existing files are kept unless ``overwrite``.
         """
         self.validate()
         path = pathlib.Path(path)
         binary, header = path.with_suffix(".bin"), path.with_suffix(".json")
         for target in (binary, header):
-            if target.exists() and not overwrite:
-                raise FileExistsError(f"{target} exists (use overwrite=True, or --force on the command line)")
+            check_output(target, force=overwrite)
         width, height, depth = self.settings.size
         channels = self.settings.channels
         description = {
@@ -464,10 +443,13 @@ class ScatteringTable:
             "parameters_hash": self.parameters_hash,
             "metadata": self.metadata,
         }
-        with atomic_write(binary, overwrite) as temporary:
-            self.data.astype("<f4").tofile(temporary)
-        with atomic_write(header, overwrite) as temporary:
-            temporary.write_text(json.dumps(description, indent=2) + "\n")
+        with contextlib.ExitStack() as stack:
+            if staging is None:
+                staging = stack.enter_context(StagedWrites())
+            with atomic_write(binary, overwrite, staging=staging) as temporary:
+                self.data.astype("<f4").tofile(temporary)
+            with atomic_write(header, overwrite, staging=staging) as temporary:
+                temporary.write_text(json.dumps(description, indent=2) + "\n")
         return binary, header
 
 

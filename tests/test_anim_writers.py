@@ -71,16 +71,38 @@ def test_frames_refuse_to_overwrite_and_touch_nothing(tmp_path):
     assert _listing(tmp_path) == ["frame_00001.png"]
 
 
-def test_frames_overwrite_with_force_and_report_stale(tmp_path):
+def test_frames_overwrite_with_force_and_delete_stale(tmp_path):
+    """A forced, shorter run leaves its own frames only: the earlier run's frames it did not rewrite
+    (PNG and .npy, any zero padding) are deleted and reported; other files are never touched."""
     for index in range(3):
         write_png(tmp_path / f"frame_{index:05d}.png", _frame(9))
+    np.save(tmp_path / "frame_00000.npy", np.zeros((2, 2, 3), np.float32))    # an earlier --hdr run
+    write_png(tmp_path / "frame_0000012.png", _frame(9))                       # 7-digit padding
+    for name in ("notes.txt", "frame_final.png", "frame_00003.png.bak", "myframe_00004.png"):
+        (tmp_path / name).write_text("mine")
     with FrameWriter(directory=tmp_path, total_frames=2, force=True) as writer:
         for index in range(2):
             writer.write(index, _frame(index))
     for index in range(2):
         assert_array_equal(np.asarray(Image.open(tmp_path / f"frame_{index:05d}.png")), _frame(index))
-    assert writer.stale_paths == [tmp_path / "frame_00002.png"]       # reported, not deleted
-    assert _listing(tmp_path) == ["frame_00000.png", "frame_00001.png", "frame_00002.png"]
+    assert writer.stale_paths == sorted(tmp_path / name for name in
+                                        ("frame_00000.npy", "frame_00002.png", "frame_0000012.png"))
+    assert _listing(tmp_path) == ["frame_00000.png", "frame_00001.png", "frame_00003.png.bak", "frame_final.png",
+                                  "myframe_00004.png", "notes.txt"]
+
+
+def test_interrupted_forced_run_keeps_the_earlier_frames(tmp_path):
+    """Frames land together at the end of the block: an interruption leaves the earlier run's frames
+    exactly as they were (not a mix of old and new) and no temporary file."""
+    for index in range(3):
+        write_png(tmp_path / f"frame_{index:05d}.png", _frame(9))
+    before = {name: (tmp_path / name).read_bytes() for name in _listing(tmp_path)}
+    with pytest.raises(KeyboardInterrupt):
+        with FrameWriter(directory=tmp_path, total_frames=2, force=True) as writer:
+            writer.write(0, _frame(0))
+            assert any(name.startswith(".frame_00000.png.") for name in os.listdir(tmp_path))
+            raise KeyboardInterrupt
+    assert {name: (tmp_path / name).read_bytes() for name in _listing(tmp_path)} == before
 
 
 def test_frame_index_checks(tmp_path):
@@ -106,7 +128,7 @@ def test_mp4_decodes_with_the_right_frames(tmp_path):
     with FrameWriter(directory=tmp_path / "frames", mp4_path=target, fps=24, total_frames=12) as writer:
         for index in range(12):
             writer.write(index, _frame(index))
-    assert _listing(tmp_path) == ["frames", "sky.mp4"]               # the .part file is gone
+    assert _listing(tmp_path) == ["frames", "sky.mp4"]               # no temporary is left
     assert writer.paths[-1] == target
     video = imageio_v3.imread(target, index=None)
     assert video.shape == (12, 48, 64, 3) and video.dtype == np.uint8
@@ -141,9 +163,9 @@ def test_exception_in_block_leaves_no_mp4(tmp_path):
             for index in range(3):
                 writer.write(index, _frame(index))
             raise RuntimeError("renderer failed")
-    assert _listing(tmp_path) == ["frames"]                          # no MP4 and no .part file
-    # Frames already written stay, each complete (documented).
-    assert _listing(tmp_path / "frames") == [f"frame_{index:05d}.png" for index in range(3)]
+    # No MP4, no temporary, no frame: the set lands whole or not at all, and the frame directory
+    # that the writer created (empty again) is removed.
+    assert _listing(tmp_path) == []
 
 
 @needs_ffmpeg
@@ -163,8 +185,7 @@ def test_odd_size_is_refused_before_writing(tmp_path):
     with pytest.raises(ValueError, match="63x48"):
         with FrameWriter(directory=tmp_path / "frames", mp4_path=tmp_path / "sky.mp4") as writer:
             writer.write(0, _frame(0, width=63))
-    assert _listing(tmp_path) == ["frames"]
-    assert _listing(tmp_path / "frames") == []
+    assert _listing(tmp_path) == []
 
 
 # Single files -------------------------------------------------------------------------------------------

@@ -1,0 +1,403 @@
+"""Output files: checks before the work, unique temporaries, and sets of files that land together.
+
+Every file clsky writes goes through :func:`atomic_write` or a :class:`StagedWrites` set: it is written
+to a hidden temporary file with a unique name (``tempfile.mkstemp``) beside its target, then renamed
+onto the target (``os.replace``, atomic on POSIX). Two writers of one target never share a temporary,
+so the last rename wins and the target is always one writer's complete file. :func:`check_output`
+finds, before any work, what would make a write fail: a target that exists (without ``force``) or is
+a directory, a missing or non-directory parent, a parent where no file can be created, a name too
+long for the file system.
+
+Examples
+--------
+>>> import pathlib, tempfile
+>>> directory = pathlib.Path(tempfile.mkdtemp())
+>>> with StagedWrites() as staged:
+...     staged.stage(directory / "a.txt").write_text("a")
+...     staged.stage(directory / "b.txt").write_text("b")
+1
+1
+>>> sorted(path.name for path in directory.iterdir())
+['a.txt', 'b.txt']
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+import pathlib
+import signal
+import tempfile
+import threading
+
+__all__ = ["check_output", "check_output_directory", "atomic_write", "StagedWrites", "temporary_prefix"]
+
+#: Characters that tempfile.mkstemp adds between its prefix and suffix.
+_RANDOM_CHARACTERS = 8
+_DEFAULT_NAME_MAX = 255
+_DEFAULT_PATH_MAX = 4096
+
+
+def _limit(directory, name, default):
+    try:
+        return os.pathconf(directory, name)
+    except (OSError, ValueError):
+        return default
+
+
+def _nearest_existing(path):
+    """The path itself or its nearest ancestor that exists (the current directory for a relative path)."""
+    path = pathlib.Path(path)
+    for candidate in (path, *path.parents):
+        if os.path.lexists(candidate):
+            return candidate
+    return pathlib.Path(".")
+
+
+def _label(option):
+    return f"{option}: " if option else ""
+
+
+def _force_hint(option):
+    return "use --force to overwrite it" if option else "use force=True, or --force on the command line"
+
+
+def temporary_prefix(path, suffix):
+    """The mkstemp prefix of a temporary for ``path``: ``.<name>.``, the name shortened (never the
+    suffix) so that prefix + 8 random characters + ``suffix`` fit in the directory's NAME_MAX."""
+    path = pathlib.Path(path)
+    name_max = _limit(_nearest_existing(path.parent), "PC_NAME_MAX", _DEFAULT_NAME_MAX)
+    room = name_max - 2 - _RANDOM_CHARACTERS - len(os.fsencode(suffix))
+    return "." + os.fsdecode(os.fsencode(path.name)[:max(room, 0)]) + "."
+
+
+def _check_names(path, option, suffix):
+    """Name components too long for the file system (the target's, and those of the directories
+    still to be created), or a temporary name that cannot fit: ValueError."""
+    path = pathlib.Path(path)
+    existing = _nearest_existing(path.parent)
+    name_max = _limit(existing, "PC_NAME_MAX", _DEFAULT_NAME_MAX)
+    path_max = _limit(existing, "PC_PATH_MAX", _DEFAULT_PATH_MAX)
+    for part in path.parts:
+        if len(os.fsencode(part)) > name_max:
+            shown = part[:24] + "..."
+            raise ValueError(f"{_label(option)}name {shown} is {len(os.fsencode(part))} bytes long; "
+                             f"this file system allows {name_max}")
+    if len(os.fsencode(suffix)) + 2 + _RANDOM_CHARACTERS > name_max:
+        raise ValueError(f"{_label(option)}the suffix of {path.name[:24]}... is too long for a temporary name")
+    longest = len(os.fsencode(str(path))) + 2 + _RANDOM_CHARACTERS + len(os.fsencode(suffix))
+    if longest >= path_max:
+        raise ValueError(f"{_label(option)}path {str(path)[:24]}... is too long ({longest} bytes with its "
+                         f"temporary name; at most {path_max - 1})")
+
+
+def _probe_directory(directory, option):
+    """PermissionError unless a file can be created in ``directory`` (os.access, then a real file:
+    os.access says yes to root where creating still fails, e.g. in /sys)."""
+    if not os.access(directory, os.W_OK | os.X_OK):
+        raise PermissionError(f"{_label(option)}cannot write in directory {directory}")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".clsky-probe.", dir=directory)
+    except OSError as error:
+        raise PermissionError(f"{_label(option)}cannot create a file in directory {directory} "
+                              f"({error.strerror.lower()})") from None
+    os.close(fd)
+    os.unlink(probe)
+
+
+def _check_parent(directory, option, create=False, probe=True):
+    """The directory that will hold an output: it exists (or, with ``create``, its nearest existing
+    ancestor does), is a directory, and a file can be created in it."""
+    directory = pathlib.Path(directory)
+    if create:
+        directory = _nearest_existing(directory)
+    if not directory.exists():
+        raise FileNotFoundError(f"{_label(option)}directory {directory} does not exist")
+    if not directory.is_dir():
+        raise NotADirectoryError(f"{_label(option)}{directory} is not a directory")
+    if probe:
+        _probe_directory(directory, option)
+
+
+def check_output(path, force=False, option=None, suffix=None, probe=True):
+    """Check, before any work, that ``path`` can be written as a new file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The output file.
+    force : bool
+        An existing file may be replaced.
+    option : str, optional
+        The command-line option that named ``path`` (e.g. ``"--output"``): it starts the message,
+        and an existing file asks for ``--force``.
+    suffix : str, optional
+        Suffix of the temporary file (default: the path's): its length counts for the name check.
+    probe : bool
+        Create and delete a file in the parent to prove it writable (False when the caller creates
+        its temporary there next, which proves it as well).
+
+    Returns
+    -------
+    pathlib.Path
+
+    Raises
+    ------
+    FileExistsError
+        ``path`` exists and not ``force``.
+    IsADirectoryError
+        ``path`` is a directory.
+    FileNotFoundError, NotADirectoryError
+        Its parent does not exist, or is not a directory.
+    PermissionError
+        No file can be created in its parent (read-only file system, permissions, immutable
+        directory, a pseudo file system such as /proc or /sys).
+    ValueError
+        A name longer than the file system's NAME_MAX, or a path (with its temporary name) longer
+        than PATH_MAX.
+    """
+    path = pathlib.Path(path)
+    suffix = path.suffix if suffix is None else suffix
+    _check_names(path, option, suffix)
+    if path.is_dir():
+        raise IsADirectoryError(f"{_label(option)}{path} is a directory")
+    if os.path.lexists(path) and not force:
+        raise FileExistsError(f"{_label(option)}{path} exists; {_force_hint(option)}")
+    _check_parent(path.parent, option, probe=probe)
+    return path
+
+
+def check_output_directory(path, option=None, names=()):
+    """Check, before any work, that ``path`` can hold output files: an existing directory where
+    files can be created, or a path whose missing parts can be created (``mkdir(parents=True)``).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    option : str, optional
+        As in :func:`check_output`.
+    names : sequence of str
+        The longest file names to be created in it: each, with its temporary name, must fit.
+
+    Raises
+    ------
+    NotADirectoryError
+        ``path`` (or an ancestor) exists and is not a directory.
+    PermissionError
+        Nothing can be created there.
+    ValueError
+        A name component too long.
+    """
+    path = pathlib.Path(path)
+    for name in (*names, "x"):
+        _check_names(path / name, option, pathlib.Path(name).suffix)
+    if os.path.lexists(path) and not path.is_dir():
+        raise NotADirectoryError(f"{_label(option)}{path} exists and is not a directory")
+    _check_parent(path, option, create=True)
+    return path
+
+
+#: Signals held back while a set is renamed into place.
+_DEFERRED_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
+
+
+@contextlib.contextmanager
+def _signals_deferred():
+    """Hold SIGINT, SIGTERM and SIGHUP back during the block and deliver them after it, to the
+    handlers that were in place: an interruption then arrives after a set landed, never halfway.
+
+    Python runs signal handlers in the main thread whichever thread the signal reached (PoCL's
+    worker threads included, so blocking with pthread_sigmask would not do), so swapping the
+    handlers for a recorder is enough; elsewhere than the main thread the block runs unchanged.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending = []
+    previous = {}
+    for number in _DEFERRED_SIGNALS:
+        handler = signal.getsignal(number)
+        if handler is None or handler == signal.SIG_IGN:     # not Python's to change, or ignored
+            continue
+        previous[number] = signal.signal(number, lambda signum, frame: pending.append(signum))
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+        for number in dict.fromkeys(pending):
+            signal.raise_signal(number)
+
+
+def _place(temporary, target, overwrite):
+    """Rename ``temporary`` onto ``target``; without ``overwrite`` a target that appeared meanwhile
+    is kept (hard link: atomic create-if-absent; plain check where links are not supported)."""
+    if overwrite:
+        os.replace(temporary, target)
+        return
+    try:
+        os.link(temporary, target)
+    except FileExistsError:
+        raise FileExistsError(f"{target} exists (it appeared during the run); "
+                              f"use force=True, or --force on the command line") from None
+    except OSError as error:
+        if error.errno not in (errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.EXDEV, errno.EMLINK):
+            raise
+        if os.path.lexists(target):
+            raise FileExistsError(f"{target} exists (it appeared during the run); "
+                                  f"use force=True, or --force on the command line") from None
+        os.replace(temporary, target)
+        return
+    os.unlink(temporary)
+
+
+class StagedWrites:
+    """A set of output files that land together: each is written to a unique hidden temporary beside
+    its target, and all are renamed onto their targets at :meth:`commit`.
+
+    Used as a context manager: commits when the block ends normally, deletes every temporary when it
+    raises (KeyboardInterrupt included), and the targets are left as they were.
+
+    Notes
+    -----
+    - Order: the files are renamed in the order they were staged, those staged with ``last=True``
+      after the others (an animation's MP4: when it is there, its frames and metrics are too); then
+      the files given to :meth:`remove_on_commit` are deleted.
+    - SIGINT, SIGTERM and SIGHUP are held back while the set is renamed (when committing in the
+      main thread) and delivered after it, so an interruption arrives after the set landed, not
+      halfway.
+    - A rename that fails midway (rare after :func:`check_output`: a disk removed, a permission
+      changed during the run) stops the commit: the targets renamed so far hold the new files, the
+      others keep their old contents (or stay absent); the remaining temporaries are deleted and the
+      error names the file that failed and the new files already in place.
+    - A killed process (SIGKILL, power loss) can leave hidden temporaries ``.<name>.XXXXXXXX<suffix>``
+      beside the targets; they are never mistaken for outputs, and can be deleted.
+    - Concurrent writers of the same targets each rename their own complete files: every target is
+      complete, and the last rename wins per file (a set written by two runs at once may mix them).
+    """
+
+    def __init__(self):
+        self._staged = []           # (temporary, target, overwrite, last)
+        self._removals = []
+        self.committed = []
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, traceback):
+        if exc_type is None:
+            self.commit()
+        else:
+            self.discard()
+        return False
+
+    def stage(self, path, overwrite=False, suffix=None, last=False):
+        """Check ``path`` (:func:`check_output`) and create its empty temporary; returns the
+        temporary's path, to be written by the caller (the file may be replaced, not only filled).
+
+        ``suffix`` is the temporary's suffix (default: the target's; writers that pick a format
+        from the file name need it).
+        """
+        path = pathlib.Path(path)
+        suffix = path.suffix if suffix is None else suffix
+        check_output(path, force=overwrite, suffix=suffix, probe=False)
+        try:
+            fd, temporary = tempfile.mkstemp(prefix=temporary_prefix(path, suffix), suffix=suffix,
+                                             dir=path.parent)
+        except OSError as error:
+            raise PermissionError(f"cannot create a file beside {path} ({error.strerror.lower()})") from None
+        os.close(fd)
+        temporary = pathlib.Path(temporary)
+        umask = os.umask(0)
+        os.umask(umask)
+        temporary.chmod(0o666 & ~umask)        # mkstemp's 0600 would leak into the final file
+        self._staged.append((temporary, path, bool(overwrite), bool(last)))
+        return temporary
+
+    def remove_on_commit(self, path):
+        """Delete ``path`` (if it still exists) once the staged files are in place."""
+        self._removals.append(pathlib.Path(path))
+
+    @property
+    def temporaries(self):
+        """The temporaries not yet renamed."""
+        return [entry[0] for entry in self._staged]
+
+    def discard(self, temporary=None):
+        """Delete one staged temporary (``temporary``), or all of them and forget the removals."""
+        keep = []
+        for entry in self._staged:
+            if temporary is None or entry[0] == pathlib.Path(temporary):
+                entry[0].unlink(missing_ok=True)
+            else:
+                keep.append(entry)
+        self._staged = keep
+        if temporary is None:
+            self._removals = []
+
+    def commit(self):
+        """Rename every staged temporary onto its target (see the class notes), then delete the
+        files to remove. Returns the targets written."""
+        entries = [e for e in self._staged if not e[3]] + [e for e in self._staged if e[3]]
+        with _signals_deferred():
+            for position, (temporary, target, overwrite, _) in enumerate(entries):
+                try:
+                    _place(temporary, target, overwrite)
+                except BaseException as error:
+                    for rest in entries[position:]:
+                        rest[0].unlink(missing_ok=True)
+                    self._staged = []
+                    if not isinstance(error, OSError) or not self.committed:
+                        raise                    # nothing is in place yet: the error says it all
+                    done = ", ".join(str(path) for path in self.committed) or "none"
+                    raise type(error)(f"could not put {target} in place ({error}); "
+                                      f"new files already in place: {done}") from error
+                self.committed.append(target)
+            self._staged = []
+            for path in self._removals:
+                path.unlink(missing_ok=True)
+            self._removals = []
+        return list(self.committed)
+
+
+@contextlib.contextmanager
+def atomic_write(path, overwrite=False, suffix=None, staging=None):
+    """Yield a temporary path beside ``path``; on success it replaces ``path`` atomically.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The target file; its directory must exist.
+    overwrite : bool
+        Replace an existing ``path``.
+    suffix : str, optional
+        Suffix of the temporary (default: the target's).
+    staging : StagedWrites, optional
+        Stage the file in this set instead: it is renamed when the set commits.
+
+    Raises
+    ------
+    FileExistsError, IsADirectoryError, FileNotFoundError, NotADirectoryError, PermissionError, ValueError
+        From :func:`check_output`, before anything is written.
+
+    Notes
+    -----
+    The temporary has a unique name (``.<name>.XXXXXXXX<suffix>``): concurrent writers never share
+    one, and the last rename wins. An exception in the block (KeyboardInterrupt included) deletes
+    the temporary and leaves ``path`` as it was.
+    """
+    own = StagedWrites() if staging is None else None
+    temporary = (staging or own).stage(path, overwrite, suffix)
+    try:
+        yield temporary
+    except OSError as error:                     # e.g. a full disk: name the target, not the temporary
+        (staging or own).discard(temporary)
+        if error.errno is None or error.filename not in (str(temporary), temporary):
+            raise
+        raise type(error)(f"cannot write {path}: {error.strerror.lower()}") from error
+    except BaseException:
+        (staging or own).discard(temporary)
+        raise
+    if own is not None:
+        own.commit()
