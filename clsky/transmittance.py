@@ -31,8 +31,10 @@ def quadrature_defines(settings, vector_width):
 
 def check_segments(atmosphere, altitude, cos_zenith, length):
     """Broadcast and check segment arrays; ValueError names the bad parameter and its range."""
-    altitude, cos_zenith, length = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64)
-                                                         for a in (altitude, cos_zenith, length)))
+    from .errors import as_real_array
+
+    altitude, cos_zenith, length = np.broadcast_arrays(*(as_real_array(name, a) for name, a in (
+        ("altitude", altitude), ("cos_zenith", cos_zenith), ("length", length))))
     checks = (("altitude", altitude, 0.0, atmosphere.atmosphere_height, "m"),
               ("cos_zenith", cos_zenith, -1.0, 1.0, ""),
               ("length", length, 0.0, 2 * atmosphere.top_radius, "m"))
