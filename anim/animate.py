@@ -136,10 +136,10 @@ class AnimationConfig:
         for name, check in _FIELD_CHECKS.items():
             object.__setattr__(self, name, check(name, getattr(self, name)))
         if self.max_elevation_deg < self.start_elevation_deg:
-            raise ParameterError("max_elevation_deg", f"at least start_elevation_deg ({self.start_elevation_deg:g})",
+            raise ParameterError("max_elevation_deg", f"at least the start elevation ({self.start_elevation_deg:g})",
                                  self.max_elevation_deg)
         if self.end_hour <= self.start_hour:
-            raise ParameterError("end_hour", f"after start_hour ({self.start_hour:g})", self.end_hour)
+            raise ParameterError("end_hour", f"after the start hour ({self.start_hour:g})", self.end_hour)
         object.__setattr__(self, "table_size", _check_table_size(self.table_size))
 
     @property
