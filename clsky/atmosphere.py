@@ -85,8 +85,11 @@ ATMOSPHERE_HEIGHT_RANGE = (1.0, 1e10)
 MIN_SCALE_HEIGHT_FRACTION = 1e-4
 #: Largest vertical optical depth (Rayleigh + Mie extinction, per wavelength).
 MAX_VERTICAL_OPTICAL_DEPTH = 1e3
-#: Least atmosphere height, as a fraction of the planet radius, in float32 kernels.
-FLOAT32_MIN_HEIGHT_FRACTION = 1e-3
+#: Float32 kernels: the largest planet radius [m], and the least atmosphere height as a fraction of
+#: the planet radius (measured against float64, tests/test_scales.py: within 2e-6 inside; 5e-4 at a
+#: radius of 1e9 m, 1 % at 1e10 m, all zero at 1e15 m; all zero for a shell 1e-10 of the radius).
+FLOAT32_MAX_PLANET_RADIUS = 1e8
+FLOAT32_MIN_HEIGHT_FRACTION = 1e-6
 
 
 def _as_rgb(name: str, value) -> tuple[float, float, float]:
@@ -146,8 +149,9 @@ class AtmosphereParameters:
     above, ray lengths times coefficients overflow (a planet of 1e300 m gave 98 % NaN). A scale height
     below 1e-4 of the atmosphere's height falls between the quadrature's first nodes (the table comes
     out zero), and beyond a vertical optical depth of 1000 the 30-step quadratures overflow. The
-    float32 kernels also need Ra - Rp >= 1e-3 Rp (:meth:`check_dtype`, checked when a table is built):
-    radii carry 7 digits, and thinner shells give all-zero tables (1e15 m planets did).
+    float32 kernels also need Rp <= 1e8 m and Ra - Rp >= 1e-6 Rp (:meth:`check_dtype`, checked when a
+    table is built): radii carry 7 digits; beyond, tables drift from float64's (5e-4 at 1e9 m, 1 % at
+    1e10 m) and end all zero (1e15 m planets did).
     """
 
     planet_radius: float = 6_371_000.0
@@ -218,15 +222,20 @@ class AtmosphereParameters:
                                  getattr(self, name))
 
     def check_dtype(self, dtype):
-        """ParameterError if the kernels of ``dtype`` cannot resolve this atmosphere: float32 needs an
-        atmosphere at least :data:`FLOAT32_MIN_HEIGHT_FRACTION` of the planet radius high (radii carry
-        7 digits; thinner shells come out all zero)."""
-        if np.dtype(dtype) == np.float32:
-            least = FLOAT32_MIN_HEIGHT_FRACTION * self.planet_radius
-            if self.atmosphere_height < least:
-                raise ParameterError("top_radius", f"at least planet_radius + {least:g} m in float32 "
-                                                   f"(an atmosphere {FLOAT32_MIN_HEIGHT_FRACTION:g} of the "
-                                                   f"planet radius high; use dtype float64)", self.top_radius)
+        """ParameterError if the kernels of ``dtype`` cannot resolve this atmosphere: float32 needs a
+        planet radius <= :data:`FLOAT32_MAX_PLANET_RADIUS` and an atmosphere at least
+        :data:`FLOAT32_MIN_HEIGHT_FRACTION` of it high (radii carry 7 digits; beyond, tables drift
+        from float64's and end all zero)."""
+        if np.dtype(dtype) != np.float32:
+            return
+        if self.planet_radius > FLOAT32_MAX_PLANET_RADIUS:
+            raise ParameterError("planet_radius", f"<= {FLOAT32_MAX_PLANET_RADIUS:g} m in float32 (use dtype "
+                                                  f"float64)", self.planet_radius)
+        least = FLOAT32_MIN_HEIGHT_FRACTION * self.planet_radius
+        if self.atmosphere_height < least:
+            raise ParameterError("top_radius", f"at least planet_radius + {least:g} m in float32 (an atmosphere "
+                                               f"{FLOAT32_MIN_HEIGHT_FRACTION:g} of the planet radius high; use "
+                                               f"dtype float64)", self.top_radius)
 
     # Derived quantities -----------------------------------------------------------------------------
     @property
