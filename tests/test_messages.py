@@ -115,3 +115,22 @@ def test_unwritable_pocl_cache_dir_is_named(tmp_path):
     result = clsky("table", "--size", "4", "8", "4", "--progress", "none", cwd=tmp_path, env=env)
     assert result.returncode == 1
     assert "POCL_CACHE_DIR" in result.stderr and "install" not in result.stderr, result.stderr
+
+
+def test_pocl_cache_problem_in_process(monkeypatch, tmp_path):
+    """The check itself (not cached: ``__wrapped__``): a default cache that cannot be written falls back
+    to a private one under the temporary directory; a POCL_CACHE_DIR that cannot is named, not replaced."""
+    import tempfile
+
+    from clsky import _cl
+
+    monkeypatch.delenv("POCL_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", UNWRITABLE)
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    assert _cl.pocl_cache_problem.__wrapped__() is None
+    assert _cl.os.environ["POCL_CACHE_DIR"].startswith(str(tmp_path))
+    monkeypatch.setenv("POCL_CACHE_DIR", UNWRITABLE)
+    problem = _cl.pocl_cache_problem.__wrapped__()
+    assert "POCL_CACHE_DIR" in problem and UNWRITABLE in problem
+    monkeypatch.setenv("POCL_CACHE_DIR", str(tmp_path))
+    assert _cl.pocl_cache_problem.__wrapped__() is None

@@ -110,3 +110,11 @@ def test_twin_and_kernel_agree_up_to_the_highest_altitude(cl_context):
         assert np.isfinite(twin).all() and (twin >= 0).all()
         np.testing.assert_allclose(kernel, twin, rtol=1e-9, atol=1e-12)
     reference.enter_atmosphere(PHYSICAL, MAX_QUERY_ALTITUDE, -1.0, 0.5, -0.5)
+
+
+def test_a_build_whose_order_turns_nan_raises_instead_of_converging(monkeypatch):
+    """Whatever makes an order non-finite, the build stops: no table, no 'converged' record."""
+    scatter = reference.scatter
+    monkeypatch.setattr(reference, "scatter", lambda *args: scatter(*args) * np.nan)
+    with pytest.raises(NumericalError, match="order 2 of the table has 100 % non-finite values"):
+        ScatteringTable.build(PHYSICAL, TINY.replace(orders="auto"), backend="numpy")
