@@ -140,6 +140,12 @@ class AnimationConfig:
                                  self.max_elevation_deg)
         if self.end_hour <= self.start_hour:
             raise ParameterError("end_hour", f"after the start hour ({self.start_hour:g})", self.end_hour)
+        if self.location is not None:
+            least = (self.end_hour - self.start_hour) * 60.0 / (sunpath.MAX_POSITIONS - 1)
+            if self.step_minutes < least:
+                raise ParameterError("step_minutes", f"at least {least:.6g} minutes from {self.start_hour:g} h to "
+                                                     f"{self.end_hour:g} h (at most {sunpath.MAX_POSITIONS} positions)",
+                                     self.step_minutes)
         object.__setattr__(self, "table_size", _check_table_size(self.table_size))
 
     @property

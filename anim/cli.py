@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import math
 import sys
 
 from clsky import cli as clsky_cli
@@ -171,6 +172,8 @@ def run_render(args):
 
     if not -90.0 <= args.sun_elevation <= 90.0:
         raise clsky_cli.UsageError(f"--sun-elevation must be in [-90, 90] degrees, got {short(args.sun_elevation)}")
+    if not math.isfinite(args.sun_azimuth):
+        raise clsky_cli.UsageError(f"--sun-azimuth must be a finite number of degrees, got {short(args.sun_azimuth)}")
     output = pathlib.Path(args.output)
     if output.suffix != ".png":
         raise clsky_cli.UsageError(f"--output must end in .png, got {args.output!r}")

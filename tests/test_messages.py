@@ -57,6 +57,8 @@ def test_table_errors_name_the_option(tmp_path, args, named):
     (["--hours", "10", "5"], "--hours END must be"),
     (["--error-budget", "nan"], "--error-budget must be"),
     (["--preset", "venus"], "--preset must be"),
+    (["--location", "45", "5", "--step-minutes", "0.001"], "--step-minutes must be"),
+    (["--max-elevation", "-10"], "--max-elevation must be at least the start elevation"),
 ])
 def test_animate_errors_name_the_option(tmp_path, args, named):
     line = one_line_error(clsky("animate", "--progress", "none", *args, cwd=tmp_path))
@@ -79,6 +81,11 @@ def test_animate_errors_name_the_option(tmp_path, args, named):
 def test_numbers_in_messages_are_short(tmp_path, command, args):
     line = one_line_error(clsky(command, *args, cwd=tmp_path))
     assert len(line) < 200 and "1e+300" in line, line
+
+
+def test_render_sun_azimuth_names_the_option(tmp_path):
+    line = one_line_error(clsky("render", "--sun-azimuth", "nan", cwd=tmp_path))
+    assert "--sun-azimuth must be" in line, line
 
 
 def test_short_numbers():
