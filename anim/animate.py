@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import datetime
+import math
 import pathlib
 import time
 from typing import Callable
@@ -25,6 +26,7 @@ import numpy as np
 
 import clsky
 from clsky._files import StagedWrites, check_output
+from clsky.errors import ParameterError, is_integer, is_real_number
 from clsky.planner import Plan, Scene, plan_scene
 from clsky.quality import QUALITY_LEVELS, QualityLevel, level_for_budget, quality_level
 from clsky.render import SkyRenderer
@@ -76,8 +78,9 @@ class AnimationConfig:
         Sweep: sun elevation before sunrise / after sunset, and at its highest.
     location : (latitude_deg, longitude_deg) or None
         Real sun positions (pvlib NREL SPA) instead of the sweep.
-    date : datetime.date or None
-        Day of the real positions (default today), from ``start_hour`` to ``end_hour`` UTC.
+    date : datetime.date, str or None
+        Day of the real positions (default today), from ``start_hour`` to ``end_hour`` UTC; an ISO
+        string 'YYYY-MM-DD' is converted on creation (a datetime gives its date).
     start_hour, end_hour, step_minutes : float
         Time range [h, UTC] and step of the real positions.
     fps : float
@@ -93,6 +96,15 @@ class AnimationConfig:
         (with ``method='compare'``, the reference the lookup is compared with) or the lookup's.
     force : bool
         Overwrite existing outputs.
+
+    Every number field takes NumPy scalars too (stored as Python ints and floats), and the tuple
+    fields take lists and arrays of the right length.
+
+    Raises
+    ------
+    ValueError
+        (:class:`clsky.errors.ParameterError`, with ``field`` and, for ``table_size``, ``index``) for
+        a field of the wrong type or outside its range.
     """
 
     frames: int = 120
@@ -124,50 +136,20 @@ class AnimationConfig:
     force: bool = False
 
     def __post_init__(self):
-        def check(name, ok, valid):
-            value = getattr(self, name)
-            try:
-                good = bool(ok(value))
-            except (TypeError, ValueError):
-                good = False
-            if not good:
-                raise ValueError(f"{name} must be {valid}, got {value!r}")
-
-        def integer(low, high):
-            return lambda v: isinstance(v, (int, np.integer)) and not isinstance(v, bool) and low <= v <= high
-
-        def real(low, high, low_open=False):
-            return lambda v: (isinstance(v, (int, float, np.floating)) and not isinstance(v, bool) and np.isfinite(v)
-                              and (low < v if low_open else low <= v) and v <= high)
-
-        check("frames", integer(2, 100_000), "an integer in [2, 100000]")
-        check("size", integer(16, 8192), "an integer in [16, 8192]")
-        check("camera", lambda v: v in ("fisheye", "perspective", "equirectangular"),
-              "one of 'fisheye', 'perspective', 'equirectangular'")
-        check("fov_deg", real(0.0, 179.0, low_open=True), "in (0, 179] degrees")
-        check("heading_deg", lambda v: v is None or real(-360.0, 720.0)(v), "None or in [-360, 720] degrees")
-        check("pitch_deg", real(-90.0, 90.0), "in [-90, 90] degrees")
-        check("altitude", real(0.0, 1e8), "in [0, 1e8] m")
-        check("method", lambda v: v in METHODS, f"one of {METHODS}")
-        check("preset", lambda v: v in clsky.PRESETS, f"one of {sorted(clsky.PRESETS)}")
-        check("mode", lambda v: v in ("atmosphere-plus", "physical"), "'atmosphere-plus' or 'physical'")
-        check("samples", lambda v: v is None or integer(2, 4096)(v), "None or an integer in [2, 4096]")
-        check("error_budget", real(0.0, 1.0, low_open=True), "a relative error in (0, 1]")
-        check("quality", lambda v: v is None or v in QUALITY_LEVELS, f"None or one of {list(QUALITY_LEVELS)}")
-        check("start_elevation_deg", real(-90.0, 90.0), "in [-90, 90] degrees")
-        check("max_elevation_deg", real(-90.0, 90.0), "in [-90, 90] degrees")
-        check("max_elevation_deg", lambda v: v >= self.start_elevation_deg, "at least start_elevation_deg")
-        check("location", lambda v: v is None or (len(v) == 2 and -90 <= v[0] <= 90 and -180 <= v[1] <= 180),
-              "None or (latitude in [-90, 90], longitude in [-180, 180]) degrees")
-        check("start_hour", real(0.0, 48.0), "in [0, 48] h")
-        check("end_hour", real(0.0, 48.0), "in [0, 48] h")
-        check("end_hour", lambda v: v > self.start_hour, "after start_hour")
-        check("step_minutes", real(0.0, 1440.0, low_open=True), "in (0, 1440] minutes")
-        check("fps", real(0.0, 240.0, low_open=True), "in (0, 240]")
-        check("exposure", real(0.0, 1e6, low_open=True), "in (0, 1e6]")
-        check("output", lambda v: str(v).endswith(".mp4"), "a path ending in .mp4")
-        if self.table_size is not None:
-            clsky.TableSettings(size=tuple(self.table_size))      # validates the grid (names 'size')
+        for name, check in _FIELD_CHECKS.items():
+            object.__setattr__(self, name, check(name, getattr(self, name)))
+        if self.max_elevation_deg < self.start_elevation_deg:
+            raise ParameterError("max_elevation_deg", f"at least the start elevation ({self.start_elevation_deg:g})",
+                                 self.max_elevation_deg)
+        if self.end_hour <= self.start_hour:
+            raise ParameterError("end_hour", f"after the start hour ({self.start_hour:g})", self.end_hour)
+        if self.location is not None:
+            least = (self.end_hour - self.start_hour) * 60.0 / (sunpath.MAX_POSITIONS - 1)
+            if self.step_minutes < least:
+                raise ParameterError("step_minutes", f"at least {least:.6g} minutes from {self.start_hour:g} h to "
+                                                     f"{self.end_hour:g} h (at most {sunpath.MAX_POSITIONS} positions)",
+                                     self.step_minutes)
+        object.__setattr__(self, "table_size", _check_table_size(self.table_size))
 
     @property
     def output_path(self) -> pathlib.Path:
@@ -187,6 +169,103 @@ class AnimationConfig:
         if self.camera == "equirectangular":
             return 2 * self.size, self.size
         return (16 * self.size) // 9 // 2 * 2, self.size
+
+
+def _integer(low, high, optional=False):
+    """A check of an integer field in [low, high] (NumPy integers too; None if optional)."""
+    def check(name, value):
+        if optional and value is None:
+            return None
+        if not is_integer(value) or not low <= value <= high:
+            raise ParameterError(name, ("None or " if optional else "") + f"an integer in [{low}, {high}]", value)
+        return int(value)
+    return check
+
+
+def _real(low, high, unit="", low_open=False, optional=False):
+    """A check of a finite real field in [low, high] (or (low, high]; NumPy scalars too)."""
+    def check(name, value):
+        if optional and value is None:
+            return None
+        if (not is_real_number(value) or not math.isfinite(value) or not (low < value if low_open else low <= value)
+                or not value <= high):
+            valid = f"{'(' if low_open else '['}{low:g}, {high:g}]{unit}"
+            raise ParameterError(name, ("None or " if optional else "") + f"a number in {valid}", value)
+        return float(value)
+    return check
+
+
+def _choice(choices, optional=False):
+    def check(name, value):
+        if optional and value is None:
+            return None
+        if not isinstance(value, str) or value not in choices:
+            raise ParameterError(name, ("None or " if optional else "") + f"one of {list(choices)}", value)
+        return value
+    return check
+
+
+def _flag(name, value):
+    if not isinstance(value, (bool, np.bool_)):
+        raise ParameterError(name, "True or False", value)
+    return bool(value)
+
+
+def _location(name, value):
+    """None or (latitude in [-90, 90], longitude in [-180, 180]) degrees, from any pair of numbers."""
+    if value is None:
+        return None
+    valid = "None or (latitude in [-90, 90], longitude in [-180, 180]) degrees"
+    items = tuple(value) if isinstance(value, (tuple, list, np.ndarray)) else ()
+    if (len(items) != 2 or not all(is_real_number(v) and math.isfinite(v) for v in items)
+            or not (-90 <= items[0] <= 90 and -180 <= items[1] <= 180)):
+        raise ParameterError(name, valid, value)
+    return float(items[0]), float(items[1])
+
+
+def _date(name, value):
+    """None, a datetime.date (a datetime gives its date), or an ISO date string 'YYYY-MM-DD'."""
+    if value is None or (isinstance(value, datetime.date) and not isinstance(value, datetime.datetime)):
+        return value
+    if isinstance(value, datetime.datetime):
+        return value.date()
+    if isinstance(value, str):
+        try:
+            return datetime.date.fromisoformat(value)
+        except ValueError:
+            pass
+    raise ParameterError(name, "None, a datetime.date or an ISO date 'YYYY-MM-DD'", value)
+
+
+def _output(name, value):
+    if not isinstance(value, (str, pathlib.PurePath)) or not str(value).endswith(".mp4"):
+        raise ParameterError(name, "a path ending in .mp4", value)
+    return value
+
+
+def _check_table_size(value):
+    """None, or three node counts (W, H, D) as TableSettings checks them, errors naming table_size."""
+    if value is None:
+        return None
+    try:
+        return clsky.TableSettings(size=value).size
+    except ParameterError as error:
+        raise ParameterError("table_size", error.valid, error.value, error.index) from None
+
+
+_FIELD_CHECKS = {
+    "frames": _integer(2, 100_000), "size": _integer(16, 8192),
+    "camera": _choice(("fisheye", "perspective", "equirectangular")),
+    "fov_deg": _real(0.0, 179.0, " degrees", low_open=True), "heading_deg": _real(-360.0, 720.0, " degrees", optional=True),
+    "pitch_deg": _real(-90.0, 90.0, " degrees"), "altitude": _real(0.0, 1e8, " m"), "method": _choice(METHODS),
+    "preset": _choice(tuple(sorted(clsky.PRESETS))), "mode": _choice(("atmosphere-plus", "physical")),
+    "samples": _integer(2, 4096, optional=True), "error_budget": _real(0.0, 1.0, low_open=True),
+    "quality": _choice(tuple(QUALITY_LEVELS), optional=True),
+    "start_elevation_deg": _real(-90.0, 90.0, " degrees"), "max_elevation_deg": _real(-90.0, 90.0, " degrees"),
+    "location": _location, "date": _date, "start_hour": _real(0.0, 48.0, " h"), "end_hour": _real(0.0, 48.0, " h"),
+    "step_minutes": _real(0.0, 1440.0, " minutes", low_open=True), "fps": _real(0.0, 240.0, low_open=True),
+    "exposure": _real(0.0, 1e6, low_open=True), "dither": _flag, "output": _output, "hdr": _flag, "force": _flag,
+}
 
 
 @dataclasses.dataclass

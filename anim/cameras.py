@@ -34,6 +34,8 @@ from typing import ClassVar
 
 import numpy as np
 
+from clsky.errors import short
+
 from ._validate import check_integer, check_real
 
 __all__ = ["Camera", "FisheyeCamera", "PerspectiveCamera", "EquirectangularCamera", "CAMERAS",
@@ -94,9 +96,9 @@ def sun_direction(zenith_deg, azimuth_deg):
     zenith = np.asarray(zenith_deg, dtype=np.float64)
     azimuth = np.asarray(azimuth_deg, dtype=np.float64)
     if not np.all(np.isfinite(zenith)):
-        raise ValueError(f"zenith_deg must be finite, got {zenith_deg!r}")
+        raise ValueError(f"zenith_deg must be finite, got {short(zenith_deg)}")
     if not np.all(np.isfinite(azimuth)):
-        raise ValueError(f"azimuth_deg must be finite, got {azimuth_deg!r}")
+        raise ValueError(f"azimuth_deg must be finite, got {short(azimuth_deg)}")
     return _direction(np.radians(zenith), np.radians(azimuth))
 
 
@@ -382,7 +384,7 @@ class EquirectangularCamera(Camera):
 def _fisheye_from_size(width, height, **options):
     if width != height:
         raise ValueError(f"the fisheye camera is square: width and height must be equal, "
-                         f"got {width!r} x {height!r}")
+                         f"got {short(width)} x {short(height)}")
     return FisheyeCamera(width, **options)
 
 

@@ -9,21 +9,27 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import re
+import math
 import sys
 
 from clsky import cli as clsky_cli
+from clsky.errors import short
 
-#: AnimationConfig field -> command-line option, for error messages that name what the user typed.
+#: AnimationConfig field -> command-line option (one per item for a tuple field), for error messages
+#: that name what the user typed.
 FIELD_OPTIONS = {
     "frames": "--frames", "size": "--size", "camera": "--camera", "fov_deg": "--fov", "heading_deg": "--heading",
     "pitch_deg": "--pitch", "altitude": "--altitude", "method": "--method", "preset": "--preset", "mode": "--mode",
-    "table_size": "--table-size", "samples": "--samples", "error_budget": "--error-budget", "quality": "--quality",
-    "start_elevation_deg": "--start-elevation",
-    "max_elevation_deg": "--max-elevation", "location": "--location", "start_hour": "--hours",
-    "end_hour": "--hours", "step_minutes": "--step-minutes", "fps": "--fps", "exposure": "--exposure",
-    "output": "--output",
+    "table_size": ("--table-size W", "--table-size H", "--table-size D"), "samples": "--samples",
+    "error_budget": "--error-budget", "quality": "--quality", "start_elevation_deg": "--start-elevation",
+    "max_elevation_deg": "--max-elevation", "location": "--location", "date": "--date",
+    "start_hour": "--hours START", "end_hour": "--hours END", "step_minutes": "--step-minutes", "fps": "--fps",
+    "exposure": "--exposure", "output": "--output",
 }
+
+#: Options whose default is None so that, not given, the AnimationConfig's own default (or the
+#: quality level's / scene plan's choice) applies.
+UNSET_DEFAULTS = ("preset", "mode", "error_budget")
 
 
 def _date(text):
@@ -50,10 +56,10 @@ def _add_scene_arguments(parser, frames=True):
     scene.add_argument("--method", default="compare", choices=list(METHODS),
                        help="table lookup, ray march, or both compared (default)")
     sky = parser.add_argument_group("sky")
-    sky.add_argument("--preset", default="physical", help="atmosphere preset (default: physical)")
-    sky.add_argument("--mode", default="physical", choices=["atmosphere-plus", "physical"],
+    sky.add_argument("--preset", help="atmosphere preset (default: physical)")
+    sky.add_argument("--mode", choices=["atmosphere-plus", "physical"],
                      help="scheme of the higher orders (default: physical)")
-    sky.add_argument("--error-budget", type=float, default=0.01,
+    sky.add_argument("--error-budget", type=float,
                      help="relative error allowed in the frames; picks the fastest quality level within it "
                           "(default: 0.01)")
     sky.add_argument("--quality", choices=list(QUALITY_LEVELS), help="a named quality level instead of the budget's")
@@ -115,23 +121,22 @@ def register(commands):
 
 
 def _config(args, **extra):
+    """The AnimationConfig of the options; options not given (None) keep the config's defaults.
+    UsageError names the option of a bad value."""
+    from clsky.errors import ParameterError
+
     from .animate import AnimationConfig
 
     fields = dict(size=args.size, camera=args.camera, fov_deg=args.fov, heading_deg=args.heading,
-                  pitch_deg=args.pitch, altitude=args.altitude, method=args.method, preset=args.preset,
-                  mode=args.mode, table_size=None if args.table_size is None else tuple(args.table_size),
-                  samples=args.samples, error_budget=args.error_budget, quality=args.quality, exposure=args.exposure,
+                  pitch_deg=args.pitch, altitude=args.altitude, method=args.method,
+                  table_size=None if args.table_size is None else tuple(args.table_size),
+                  samples=args.samples, quality=args.quality, exposure=args.exposure,
                   dither=not args.no_dither, force=args.force, **extra)
+    fields.update({name: getattr(args, name) for name in UNSET_DEFAULTS if getattr(args, name) is not None})
     try:
         return AnimationConfig(**fields)
-    except ValueError as error:
-        message = str(error)
-        field = message.split(" ", 1)[0]
-        if field in FIELD_OPTIONS:
-            message = FIELD_OPTIONS[field] + message[len(field):]
-        elif field.startswith("size["):           # from the table grid's validation
-            message = re.sub(r"^size\[(\d)\]", lambda m: f"--table-size {'WHD'[int(m.group(1))]}", message)
-        raise clsky_cli.UsageError(message) from None
+    except ParameterError as error:
+        raise clsky_cli.UsageError(clsky_cli.option_message(error, FIELD_OPTIONS)) from None
 
 
 def run_animate(args):
@@ -166,7 +171,9 @@ def run_render(args):
     from .sunpath import SunPosition
 
     if not -90.0 <= args.sun_elevation <= 90.0:
-        raise clsky_cli.UsageError(f"--sun-elevation must be in [-90, 90] degrees, got {args.sun_elevation}")
+        raise clsky_cli.UsageError(f"--sun-elevation must be in [-90, 90] degrees, got {short(args.sun_elevation)}")
+    if not math.isfinite(args.sun_azimuth):
+        raise clsky_cli.UsageError(f"--sun-azimuth must be a finite number of degrees, got {short(args.sun_azimuth)}")
     output = pathlib.Path(args.output)
     if output.suffix != ".png":
         raise clsky_cli.UsageError(f"--output must end in .png, got {args.output!r}")
@@ -206,7 +213,7 @@ def run_bench(args):
     from . import accuracy, writers
 
     if not 16 <= args.size <= 2048:
-        raise clsky_cli.UsageError(f"--size must be in [16, 2048], got {args.size}")
+        raise clsky_cli.UsageError(f"--size must be an integer in [16, 2048], got {short(args.size)}")
     targets = {"--output": pathlib.Path(args.output), "--plot": pathlib.Path(args.plot)}
     for option, suffix in (("--output", ".csv"), ("--plot", ".png")):
         if targets[option].suffix != suffix:

@@ -25,6 +25,8 @@ from __future__ import annotations
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from clsky.errors import short
+
 from .tonemap import GAMMA, luminance, tone_map
 
 __all__ = ["compare_frames", "relative_error_map", "relative_error_floor", "display_to_lab",
@@ -340,7 +342,7 @@ def display_floor(exposure=1.0):
     """
     exposure = float(exposure)
     if not (np.isfinite(exposure) and exposure > 0):
-        raise ValueError(f"exposure must be finite and > 0, got {exposure}")
+        raise ValueError(f"exposure must be finite and > 0, got {short(exposure)}")
     return float(-np.log1p(-(0.5 / 255.0) ** GAMMA) / exposure)
 
 
@@ -392,7 +394,7 @@ def relative_jumps(means, floor):
     if not np.isfinite(means).all() or (means < 0).any():
         raise ValueError("means contains NaN, infinite or negative values")
     if not floor > 0:
-        raise ValueError(f"floor must be > 0, got {floor}")
+        raise ValueError(f"floor must be > 0, got {short(floor)}")
     jumps = np.zeros_like(means)
     jumps[1:] = np.abs(np.diff(means)) / np.maximum(np.maximum(means[1:], means[:-1]), floor)
     return jumps
@@ -422,7 +424,7 @@ def frame_changes(frames, valid=None, floor=None, exposure=1.0):
     frames, valid = _as_frames("frames", frames, valid)
     floor = display_floor(exposure) if floor is None else float(floor)
     if not floor > 0:
-        raise ValueError(f"floor must be > 0, got {floor}")
+        raise ValueError(f"floor must be > 0, got {short(floor)}")
     y = luminance(frames)[:, valid]
     changes = np.zeros(len(frames))
     if len(frames) > 1:
@@ -635,7 +637,7 @@ def error_image(error_map, valid=None, vmax=0.1, legend=True):
                              f"{valid.shape}")
     vmax = float(vmax)
     if not (np.isfinite(vmax) and vmax > 0):
-        raise ValueError(f"vmax must be finite and > 0, got {vmax}")
+        raise ValueError(f"vmax must be finite and > 0, got {short(vmax)}")
     shown = error_map[valid]
     if np.isnan(shown).any() or (shown < 0).any():
         raise ValueError("error_map has NaN or negative values on valid pixels")

@@ -22,6 +22,8 @@ import math
 
 import numpy as np
 
+from clsky.errors import short
+
 from ._validate import check_real
 from .cameras import sun_direction
 
@@ -137,14 +139,14 @@ def sweep(frames=120, start_elevation_deg=-6.0, max_elevation_deg=60.0, end_elev
     """
     if isinstance(frames, (bool, np.bool_)) or not isinstance(frames, (int, np.integer)) \
             or frames < 2:
-        raise ValueError(f"frames must be an integer >= 2, got {frames!r}")
+        raise ValueError(f"frames must be an integer >= 2, got {short(frames)}")
     start = check_real("start_elevation_deg", start_elevation_deg, -90.0, 90.0)
     peak = check_real("max_elevation_deg", max_elevation_deg, -90.0, 90.0)
     end = start if end_elevation_deg is None else check_real("end_elevation_deg",
                                                               end_elevation_deg, -90.0, 90.0)
     if peak < start or peak < end:
-        raise ValueError(f"max_elevation_deg must be >= start_elevation_deg ({start}) and "
-                         f"end_elevation_deg ({end}), got {peak}")
+        raise ValueError(f"max_elevation_deg must be >= start_elevation_deg ({short(start)}) and "
+                         f"end_elevation_deg ({short(end)}), got {short(peak)}")
     rise = check_real("rise_azimuth_deg", rise_azimuth_deg)
     set_ = check_real("set_azimuth_deg", set_azimuth_deg)
 
@@ -229,7 +231,7 @@ def real_positions(latitude_deg, longitude_deg, start, end, step_minutes=5.0, al
     end = _check_aware("end", end)
     step = check_real("step_minutes", step_minutes)
     if step <= 0.0:
-        raise ValueError(f"step_minutes must be > 0, got {step_minutes!r}")
+        raise ValueError(f"step_minutes must be > 0, got {short(step_minutes)}")
     # Convert to UTC before subtracting: two datetimes sharing one tzinfo object subtract as wall
     # clocks in Python, which is wrong across a daylight-saving change.
     utc = datetime.timezone.utc

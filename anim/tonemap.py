@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from clsky.errors import short
+
 __all__ = ["GAMMA", "REC709_LUMINANCE_WEIGHTS", "tone_map", "to_uint8", "luminance"]
 
 #: Display gamma of the tone map (physics.md): a pure power law, not the piecewise sRGB curve.
@@ -82,7 +84,7 @@ def tone_map(hdr, exposure=1.0):
         raise ValueError(f"hdr contains negative values (minimum {hdr.min():.6g}); radiance must be >= 0")
     exposure = float(exposure)
     if not (np.isfinite(exposure) and exposure > 0):
-        raise ValueError(f"exposure must be finite and > 0, got {exposure}")
+        raise ValueError(f"exposure must be finite and > 0, got {short(exposure)}")
     return (-np.expm1(-exposure * hdr)) ** (1.0 / GAMMA)
 
 

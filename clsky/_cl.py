@@ -15,9 +15,11 @@ from __future__ import annotations
 import dataclasses
 import functools
 import importlib.resources
+import logging
 import os
 import pathlib
 import re
+import tempfile
 import threading
 
 import numpy as np
@@ -31,7 +33,8 @@ except ImportError as error:  # pragma: no cover - exercised only on broken inst
     raise ImportError("clsky needs pyopencl: pip install pyopencl (and an OpenCL driver, see README)") from error
 
 __all__ = ["KernelBuildError", "NoDeviceError", "Source", "Engine", "list_devices", "default_device",
-           "make_context", "real_vector_dtype", "check_dtype", "INSTALL_HINT"]
+           "make_context", "real_vector_dtype", "check_dtype", "INSTALL_HINT", "pocl_cache_problem",
+           "no_device_hint"]
 
 INSTALL_HINT = ("install a CPU OpenCL driver: as root `apt-get install pocl-opencl-icd` (fast PoCL 3.1), "
                 "or `pip install 'pyopencl[pocl]'` (PoCL pip build)")
@@ -53,6 +56,64 @@ class Source:
     text: str
 
 
+# PoCL's kernel cache -----------------------------------------------------------------------------------
+#
+# PoCL keeps compiled kernels in $POCL_CACHE_DIR, else $XDG_CACHE_HOME/pocl, else ~/.cache/pocl. When
+# that directory cannot be created or written (a read-only HOME, as in some containers and CI sandboxes),
+# PoCL lists its platform with no device at all, which looked like a missing driver. Before the first
+# device query, clsky checks the directory; if it is the default one (POCL_CACHE_DIR unset), clsky sets
+# POCL_CACHE_DIR to a private directory under the system's temporary directory and says so once on
+# stderr: the run works, only the compiled kernels are kept there instead. A POCL_CACHE_DIR the user set
+# is never overridden: the no-device error then names it.
+
+_logger = logging.getLogger("clsky")
+
+
+def _pocl_cache_directory():
+    """(directory, the variable it comes from) of PoCL's kernel cache."""
+    if os.environ.get("POCL_CACHE_DIR"):
+        return pathlib.Path(os.environ["POCL_CACHE_DIR"]), "POCL_CACHE_DIR"
+    if os.environ.get("XDG_CACHE_HOME"):
+        return pathlib.Path(os.environ["XDG_CACHE_HOME"]) / "pocl", "XDG_CACHE_HOME"
+    return pathlib.Path(os.path.expanduser("~")) / ".cache" / "pocl", "HOME"
+
+
+def _writable(directory: pathlib.Path) -> bool:
+    """True if ``directory`` exists or can be made, and a file can be written in it."""
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=directory):
+            pass
+        return True
+    except OSError:
+        return False
+
+
+@functools.lru_cache(maxsize=1)
+def pocl_cache_problem():
+    """None when PoCL's kernel cache is usable (after falling back to a temporary one if needed, see
+    above); otherwise one sentence saying which directory is not writable and what to set."""
+    directory, source = _pocl_cache_directory()
+    if _writable(directory):
+        return None
+    if source == "POCL_CACHE_DIR":
+        return (f"PoCL's kernel cache POCL_CACHE_DIR={directory} is not writable (PoCL then finds no device); "
+                f"set POCL_CACHE_DIR to a writable directory")
+    fallback = pathlib.Path(tempfile.gettempdir()) / f"clsky-pocl-cache-{getattr(os, 'getuid', lambda: 'user')()}"
+    if _writable(fallback):
+        os.environ["POCL_CACHE_DIR"] = str(fallback)
+        _logger.warning(f"clsky: note: PoCL's kernel cache {directory} is not writable (from {source}); "
+                        f"using {fallback} (set POCL_CACHE_DIR or XDG_CACHE_HOME to choose)")
+        return None
+    return (f"PoCL's kernel cache {directory} (from {source}) is not writable, nor is {fallback} (PoCL then "
+            f"finds no device); set POCL_CACHE_DIR or XDG_CACHE_HOME to a writable directory")
+
+
+def no_device_hint() -> str:
+    """What to do when no device is found: fix PoCL's cache if that is the cause, else install a driver."""
+    return pocl_cache_problem() or INSTALL_HINT
+
+
 # Devices ----------------------------------------------------------------------------------------------
 
 def _pocl_version(platform) -> tuple[int, ...]:
@@ -72,6 +133,7 @@ def _device_rank(device) -> tuple:
 
 
 def _all_devices():
+    pocl_cache_problem()                 # before PoCL starts: it reads POCL_CACHE_DIR once
     try:
         platforms = cl.get_platforms()
     except cl.Error:
@@ -93,7 +155,7 @@ def default_device():
     """The device clsky uses when ``PYOPENCL_CTX`` is not set (see module docstring)."""
     devices = _all_devices()
     if not devices:
-        raise NoDeviceError(f"no OpenCL device found; {INSTALL_HINT}")
+        raise NoDeviceError(f"no OpenCL device found; {no_device_hint()}")
     return max(devices, key=_device_rank)
 
 
@@ -105,6 +167,7 @@ def make_context(dtype=np.float64):
     built once are found in the in-process cache); NoDeviceError if that device lacks fp64 when
     float64 is asked."""
     selector = os.environ.get("PYOPENCL_CTX")
+    pocl_cache_problem()
     if selector not in _shared_contexts:
         if selector:
             try:

@@ -28,6 +28,8 @@ from typing import Any
 
 import numpy as np
 
+from .errors import ParameterError, is_real_number
+
 __all__ = [
     "AtmosphereParameters",
     "PRESETS",
@@ -74,16 +76,32 @@ def rayleigh_scattering_coefficient(refractive_index, number_density, wavelength
     return 8.0 * math.pi**3 * n2m1**2 / (3.0 * number_density * wavelength_m**4)
 
 
-def _is_real_number(value) -> bool:
-    """A real number: int or float (NumPy's too), but not a bool, a string or a complex."""
-    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+_is_real_number = is_real_number
+
+#: Supported ranges (float64; see :class:`AtmosphereParameters`, Notes).
+PLANET_RADIUS_RANGE = (1e3, 1e10)
+ATMOSPHERE_HEIGHT_RANGE = (1.0, 1e10)
+#: Least scale height, as a fraction of the atmosphere's height.
+MIN_SCALE_HEIGHT_FRACTION = 1e-4
+#: Largest vertical optical depth (Rayleigh + Mie extinction, per wavelength).
+MAX_VERTICAL_OPTICAL_DEPTH = 1e3
+#: Float32 kernels: the largest planet radius [m], and the least atmosphere height as a fraction of
+#: the planet radius (measured against float64, tests/test_scales.py: within 2e-6 inside; 5e-4 at a
+#: radius of 1e9 m, 1 % at 1e10 m, all zero at 1e15 m; all zero for a shell 1e-10 of the radius).
+FLOAT32_MAX_PLANET_RADIUS = 1e8
+FLOAT32_MIN_HEIGHT_FRACTION = 1e-6
 
 
 def _as_rgb(name: str, value) -> tuple[float, float, float]:
     items = tuple(value) if isinstance(value, (tuple, list, np.ndarray)) else None
     if items is None or len(items) != 3 or not all(_is_real_number(v) for v in items):
-        raise ValueError(f"{name} must be 3 real numbers (r, g, b), got {value!r}")
+        raise ParameterError(name, "3 real numbers (r, g, b)", value)
     return tuple(float(v) for v in items)
+
+
+def _column(scale_height, atmosphere_height):
+    """Vertical column of rho = exp(-h / H) from the ground to the top [m]: H (1 - exp(-Ha / H))."""
+    return -scale_height * math.expm1(-atmosphere_height / scale_height)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -93,15 +111,16 @@ class AtmosphereParameters:
     Parameters
     ----------
     planet_radius : float
-        Rp [m], > 0.
+        Rp [m], in [1e3, 1e10].
     top_radius : float
-        Ra [m], radius of the top of the atmosphere, > Rp.
+        Ra [m], radius of the top of the atmosphere: Ra - Rp in [1, 1e10] m.
     rayleigh_scale_height, mie_scale_height : float
-        H_R, H_M [m], > 0: densities are rho(h) = exp(-h / H).
+        H_R, H_M [m], >= 1e-4 (Ra - Rp): densities are rho(h) = exp(-h / H).
     rayleigh_scattering : tuple of 3 floats
         beta_R at the three wavelengths [1/m], >= 0 (Rayleigh extinction equals scattering).
     mie_scattering : float
-        beta_M [1/m], >= 0, wavelength independent.
+        beta_M [1/m], >= 0, wavelength independent. With beta_R, at most a vertical optical depth of
+        1000 per wavelength.
     mie_extinction_ratio : float
         beta_M / beta_M^e in (0, 1]: the notes' 0.9 gives beta_M^e = beta_M / 0.9.
     mie_g : float
@@ -116,6 +135,23 @@ class AtmosphereParameters:
         Factors of the incident light, >= 0.
     exposure : float
         Exposure factor of the incident light, > 0.
+
+    Raises
+    ------
+    ValueError
+        (:class:`clsky.errors.ParameterError`, with the field's name as ``field``) for a value
+        outside its range.
+
+    Notes
+    -----
+    The ranges are those the numerics are tested for (tests/test_scales.py), with margin: in float64
+    the geometry is exact to 1e-6 relative up to radii of 1e15 m, but beyond the radii and heights
+    above, ray lengths times coefficients overflow (a planet of 1e300 m gave 98 % NaN). A scale height
+    below 1e-4 of the atmosphere's height falls between the quadrature's first nodes (the table comes
+    out zero), and beyond a vertical optical depth of 1000 the 30-step quadratures overflow. The
+    float32 kernels also need Rp <= 1e8 m and Ra - Rp >= 1e-6 Rp (:meth:`check_dtype`, checked when a
+    table is built): radii carry 7 digits; beyond, tables drift from float64's (5e-4 at 1e9 m, 1 % at
+    1e10 m) and end all zero (1e15 m planets did).
     """
 
     planet_radius: float = 6_371_000.0
@@ -140,19 +176,25 @@ class AtmosphereParameters:
                      "mie_scattering", "mie_extinction_ratio", "mie_g", "exposure"):
             value = getattr(self, name)
             if not _is_real_number(value):
-                raise ValueError(f"{name} must be a real number, got {value!r}")
+                raise ParameterError(name, "a real number", value)
             object.__setattr__(self, name, float(value))
 
         def check(name, ok, valid_range):
             values = np.atleast_1d(getattr(self, name))
             if not (np.all(np.isfinite(values)) and ok(values)):
-                raise ValueError(f"{name} must be {valid_range}, got {getattr(self, name)!r}")
+                raise ParameterError(name, valid_range, getattr(self, name))
 
-        check("planet_radius", lambda v: v > 0, "a finite radius > 0 m")
-        check("top_radius", lambda v: v > self.planet_radius,
-              f"finite and > planet_radius ({self.planet_radius:g} m)")
-        check("rayleigh_scale_height", lambda v: v > 0, "finite and > 0 m")
-        check("mie_scale_height", lambda v: v > 0, "finite and > 0 m")
+        low, high = PLANET_RADIUS_RANGE
+        check("planet_radius", lambda v: (low <= v) & (v <= high),
+              f"in [{low:g}, {high:g}] m (the range the geometry is tested for)")
+        rp = self.planet_radius
+        low, high = ATMOSPHERE_HEIGHT_RANGE
+        check("top_radius", lambda v: (v - rp >= low) & (v - rp <= high),
+              f"{low:g} to {high:g} m above planet_radius")
+        least = MIN_SCALE_HEIGHT_FRACTION * self.atmosphere_height
+        for name in ("rayleigh_scale_height", "mie_scale_height"):
+            check(name, lambda v: v >= least, f">= {least:g} m ({MIN_SCALE_HEIGHT_FRACTION:g} of the "
+                                              f"atmosphere's height: thinner layers fall between the quadrature's nodes)")
         check("rayleigh_scattering", lambda v: np.all(v >= 0), "finite and >= 0 1/m")
         check("mie_scattering", lambda v: v >= 0, "finite and >= 0 1/m")
         check("mie_extinction_ratio", lambda v: (v > 0) & (v <= 1), "in (0, 1]")
@@ -161,11 +203,39 @@ class AtmosphereParameters:
         check("solar_irradiance", lambda v: np.all(v >= 0), "finite and >= 0")
         check("spectral_to_rgb", lambda v: np.all(v >= 0), "finite and >= 0")
         check("exposure", lambda v: v > 0, "finite and > 0")
+        self._check_optical_depth()
         if not isinstance(self.rayleigh_phase, str) or self.rayleigh_phase not in RAYLEIGH_PHASE_METHODS:
-            raise ValueError(f"rayleigh_phase must be one of {sorted(RAYLEIGH_PHASE_METHODS)}, "
-                             f"got {self.rayleigh_phase!r}")
+            raise ParameterError("rayleigh_phase", f"one of {sorted(RAYLEIGH_PHASE_METHODS)}", self.rayleigh_phase)
         if not isinstance(self.mie_phase, str) or self.mie_phase not in MIE_PHASE_METHODS:
-            raise ValueError(f"mie_phase must be one of {sorted(MIE_PHASE_METHODS)}, got {self.mie_phase!r}")
+            raise ParameterError("mie_phase", f"one of {sorted(MIE_PHASE_METHODS)}", self.mie_phase)
+
+    def _check_optical_depth(self):
+        """ParameterError naming the coefficient that makes a vertical optical depth exceed
+        :data:`MAX_VERTICAL_OPTICAL_DEPTH` (beyond it, quadratures of 30 steps amplify and overflow)."""
+        rayleigh = np.array(self.rayleigh_scattering) * _column(self.rayleigh_scale_height, self.atmosphere_height)
+        mie = self.mie_extinction * _column(self.mie_scale_height, self.atmosphere_height)
+        depth = float(np.max(rayleigh + mie))
+        if depth > MAX_VERTICAL_OPTICAL_DEPTH:
+            name = "mie_scattering" if mie > np.max(rayleigh) else "rayleigh_scattering"
+            raise ParameterError(name, f"small enough for a vertical optical depth <= {MAX_VERTICAL_OPTICAL_DEPTH:g} "
+                                       f"(the range the quadratures are tested for; here {depth:.3g})",
+                                 getattr(self, name))
+
+    def check_dtype(self, dtype):
+        """ParameterError if the kernels of ``dtype`` cannot resolve this atmosphere: float32 needs a
+        planet radius <= :data:`FLOAT32_MAX_PLANET_RADIUS` and an atmosphere at least
+        :data:`FLOAT32_MIN_HEIGHT_FRACTION` of it high (radii carry 7 digits; beyond, tables drift
+        from float64's and end all zero)."""
+        if np.dtype(dtype) != np.float32:
+            return
+        if self.planet_radius > FLOAT32_MAX_PLANET_RADIUS:
+            raise ParameterError("planet_radius", f"<= {FLOAT32_MAX_PLANET_RADIUS:g} m in float32 (use dtype "
+                                                  f"float64)", self.planet_radius)
+        least = FLOAT32_MIN_HEIGHT_FRACTION * self.planet_radius
+        if self.atmosphere_height < least:
+            raise ParameterError("top_radius", f"at least planet_radius + {least:g} m in float32 (an atmosphere "
+                                               f"{FLOAT32_MIN_HEIGHT_FRACTION:g} of the planet radius high; use "
+                                               f"dtype float64)", self.top_radius)
 
     # Derived quantities -----------------------------------------------------------------------------
     @property
@@ -188,7 +258,24 @@ class AtmosphereParameters:
     def from_refractive_index(cls, refractive_index=1.0003, number_density=2.545e25,
                               wavelengths=(650.0, 510.0, 475.0), **fields):
         """Parameters whose beta_R is derived from n, N and the wavelengths
-        (:func:`rayleigh_scattering_coefficient`)."""
+        (:func:`rayleigh_scattering_coefficient`).
+
+        Raises
+        ------
+        ValueError
+            (:class:`clsky.errors.ParameterError`) naming ``refractive_index`` (a real number >= 1),
+            ``number_density`` (> 0 1/m^3) or ``wavelengths`` (3 numbers > 0 nm), or any field.
+        """
+        for name, value in (("refractive_index", refractive_index), ("number_density", number_density)):
+            if not _is_real_number(value) or not math.isfinite(value):
+                raise ParameterError(name, "a finite real number", value)
+        if refractive_index < 1.0:
+            raise ParameterError("refractive_index", "a real number >= 1", refractive_index)
+        if number_density <= 0.0:
+            raise ParameterError("number_density", "a finite number > 0 1/m^3", number_density)
+        wavelengths = _as_rgb("wavelengths", wavelengths)
+        if not all(math.isfinite(w) and w > 0 for w in wavelengths):
+            raise ParameterError("wavelengths", "3 finite numbers > 0 nm", wavelengths)
         beta = rayleigh_scattering_coefficient(refractive_index, number_density, wavelengths)
         return cls(rayleigh_scattering=tuple(beta), wavelengths=tuple(wavelengths), **fields)
 

@@ -17,6 +17,7 @@ import threading
 import time
 
 from . import __version__
+from .errors import short
 
 EXIT_USAGE = 2
 EXIT_FAILURE = 1
@@ -159,8 +160,8 @@ def _add_table_arguments(parser):
     orders = parser.add_argument_group("scattering orders")
     orders.add_argument("--orders", type=_orders, help="K: compute orders 1..K (1 = single scattering); "
                                                        "auto: until converged (default)")
-    orders.add_argument("--mode", default="atmosphere-plus", choices=list(SCATTERING_MODES),
-                        help="scheme of the higher orders (default: %(default)s)")
+    orders.add_argument("--mode", choices=list(SCATTERING_MODES),
+                        help="scheme of the higher orders (default: the --quality level's, else atmosphere-plus)")
     orders.add_argument("--order-tolerance", type=float, help="auto stops when an order adds less than this "
                                                               "(default: 1e-4)")
     orders.add_argument("--max-orders", type=int, help="most orders auto computes (default: 100)")
@@ -185,17 +186,49 @@ def _add_table_arguments(parser):
     output.add_argument("--progress", default="leave", choices=["display", "leave", "none"])
 
 
-#: TableSettings field -> the table option that sets it.
+#: TableSettings field -> the attribute of the parsed arguments that sets it (None: not given).
 SETTING_OPTIONS = {"size": "size", "mapping": "mapping", "view_steps": "view_steps", "sun_steps": "sun_steps",
                    "sampling": "sampling", "sun_transmittance": "sun_transmittance",
                    "transmittance_size": "transmittance_size", "mie_layout": "mie_layout", "dtype": "dtype",
-                   "orders": "orders", "order_tolerance": "order_tolerance", "max_orders": "max_orders",
-                   "multiple_view_steps": "multiple_view_steps"}
+                   "mode": "mode", "orders": "orders", "order_tolerance": "order_tolerance",
+                   "max_orders": "max_orders", "multiple_view_steps": "multiple_view_steps"}
+
+#: TableSettings field -> the option a user types, or one per item of a tuple field; for messages.
+TABLE_OPTION_NAMES = {
+    "size": ("--size W", "--size H", "--size D"), "mapping": "--mapping", "view_steps": "--view-steps",
+    "sun_steps": "--sun-steps", "sampling": "--sampling", "sun_transmittance": "--sun-transmittance",
+    "transmittance_size": ("--transmittance-size TW", "--transmittance-size TH"), "mie_layout": "--mie-layout",
+    "dtype": "--dtype", "mode": "--mode", "orders": "--orders", "order_tolerance": "--order-tolerance",
+    "max_orders": "--max-orders", "multiple_view_steps": "--multiple-view-steps",
+    "gather_theta_steps": "--gather-steps THETA", "gather_phi_steps": "--gather-steps PHI",
+    "sun_cos_range": "--sun-elevations", "quality": "--quality", "preset": "--preset",
+}
+
+
+def option_message(error, options):
+    """The message of a :class:`clsky.errors.ParameterError` naming the option the user typed:
+    ``options`` maps a field to its option, or to one option per item of a tuple field. Fields
+    without an option keep their name."""
+    option = options.get(error.field)
+    if isinstance(option, tuple):
+        option = option[error.index] if error.index is not None else option[0].split(" ")[0]
+    if option is None:
+        return str(error)
+    return error.reworded(option)
 
 
 def table_settings(args, atmosphere):
     """TableSettings from the table options: the --quality level's (or the defaults), overridden by the
-    options given, with the sun axis planned for --sun-elevations."""
+    options given, with the sun axis planned for --sun-elevations. UsageError names the option."""
+    from .errors import ParameterError
+
+    try:
+        return _table_settings(args, atmosphere)
+    except ParameterError as error:
+        raise UsageError(option_message(error, TABLE_OPTION_NAMES)) from None
+
+
+def _table_settings(args, atmosphere):
     from .planner import Scene, sun_axis
     from .quality import QUALITY_LEVELS, quality_level
     from .settings import TableSettings
@@ -207,13 +240,13 @@ def table_settings(args, atmosphere):
     changes = {k: tuple(v) if isinstance(v, list) else v for k, v in changes.items()}
     if args.gather_steps is not None:
         changes.update(gather_theta_steps=args.gather_steps[0], gather_phi_steps=args.gather_steps[1])
-    settings = base.replace(mode=args.mode, **changes)
+    settings = base.replace(**changes)
     if args.sun_elevations is not None:
         try:
             scene = Scene(sun_elevations_deg=tuple(args.sun_elevations))
         except ValueError:
             raise UsageError(f"--sun-elevations must be LOW <= HIGH in [-90, 90] degrees, "
-                             f"got {args.sun_elevations}") from None
+                             f"got {' '.join(short(v) for v in args.sun_elevations)}") from None
         cos_range, nodes, _, _ = sun_axis(atmosphere, scene, level or QUALITY_LEVELS["default"],
                                           settings.mapping, orders=settings.orders != 1)
         depth = settings.size[2] if args.size is not None else nodes
@@ -239,11 +272,11 @@ def build_parser(extensions=()):
 
 
 def run_devices(args):
-    from ._cl import INSTALL_HINT, list_devices
+    from ._cl import list_devices, no_device_hint
 
     devices = list_devices()
     if not devices:
-        print(f"no OpenCL device found; {INSTALL_HINT}")
+        print(f"no OpenCL device found; {no_device_hint()}")
         return EXIT_FAILURE
     for d in devices:
         mark = "*" if d["chosen"] else " "
@@ -306,6 +339,7 @@ def main(argv=None, extensions=()):
 
 def _main(argv, extensions):
     from ._cl import KernelBuildError, NoDeviceError
+    from .errors import NumericalError
 
     verbose = "--verbose" in (sys.argv[1:] if argv is None else argv)
     try:
@@ -320,7 +354,7 @@ def _main(argv, extensions):
             raise
         print(f"clsky: error: {error}", file=sys.stderr)
         return EXIT_USAGE
-    except (NoDeviceError, KernelBuildError, OSError) as error:
+    except (NoDeviceError, KernelBuildError, NumericalError, OSError) as error:
         if verbose:
             raise
         print(f"clsky: error: {str(error).splitlines()[0]}", file=sys.stderr)

@@ -10,22 +10,42 @@ import pyopencl.array as cla
 
 from . import _atmosphere_cl, _cl
 from .atmosphere import AtmosphereParameters
+from .errors import ParameterError, as_real_array
 from .mapping import FULL_SUN_RANGE, sun_w_range
 from .settings import MAPPINGS, _check_choice
 
 __all__ = ["TableLookupEngine", "check_queries", "check_table_data", "check_kernel_buffer"]
 
 
+#: Highest observer altitude a lookup takes [m] (as the renderer, clsky/render.py): far beyond it the
+#: squared radii of the entry-point geometry overflow (the NumPy twin gave NaN from 1e155 m).
+MAX_QUERY_ALTITUDE = 1e9
+
+
 def check_queries(altitude, cos_view, cos_sun, cos_scatter):
-    """Broadcast and check lookup queries; ValueError names the bad parameter and its range."""
-    arrays = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64)
-                                   for a in (altitude, cos_view, cos_sun, cos_scatter)))
+    """Broadcast and check lookup queries; ValueError names the bad parameter and its range.
+
+    Raises
+    ------
+    ValueError
+        (:class:`clsky.errors.ParameterError`) for a query that is not numeric, does not broadcast,
+        or lies outside its range: altitude in [0, 1e9] m, cosines in [-1, 1].
+    """
     names = ("altitude", "cos_view", "cos_sun", "cos_scatter")
-    ranges = ((0.0, np.inf), (-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0))
-    for name, values, (low, high) in zip(names, arrays, ranges):
-        if not np.all(np.isfinite(values) & (values >= low) & (values <= high)):
-            raise ValueError(f"{name} must be finite and in [{low:g}, {high:g}]")
-    return arrays
+    ranges = ((0.0, MAX_QUERY_ALTITUDE), (-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0))
+    arrays = []
+    for name, value, (low, high) in zip(names, (altitude, cos_view, cos_sun, cos_scatter), ranges):
+        valid = f"finite and in [{low:g}, {high:g}]" + (" m" if name == "altitude" else "")
+        array = as_real_array(name, value, f"real numbers {valid}")
+        if not np.all(np.isfinite(array) & (array >= low) & (array <= high)):
+            bad = array[~(np.isfinite(array) & (array >= low) & (array <= high))].flat[0]
+            raise ParameterError(name, valid, bad)
+        arrays.append(array)
+    try:
+        return np.broadcast_arrays(*arrays)
+    except ValueError:
+        raise ValueError(f"altitude, cos_view, cos_sun and cos_scatter must broadcast together, got shapes "
+                         f"{[a.shape for a in arrays]}") from None
 
 
 #: Channels per cell a table may have: factored (6, or the notes' 4), plus 3 phased higher orders.

@@ -42,10 +42,11 @@ import pyopencl as cl
 
 from . import _cl
 from .atmosphere import AtmosphereParameters
+from .errors import NumericalError
 from .multiple import SPECIES, first_gather_matrices, gather_matrices
 from .settings import TableSettings
 
-__all__ = ["OrdersResult", "compute_orders", "BRIGHT_FRACTION", "relative_addition"]
+__all__ = ["OrdersResult", "compute_orders", "BRIGHT_FRACTION", "relative_addition", "check_finite"]
 
 #: Cells whose running sum reaches this fraction of the channel's maximum form the "bright part".
 BRIGHT_FRACTION = 1e-2
@@ -91,6 +92,17 @@ def relative_addition(added, running_sum):
     return float(np.max(added[bright] / running_sum[bright]))
 
 
+def check_finite(order, k, atmosphere, settings):
+    """``order`` (the table of order k) if all its values are finite; NumericalError otherwise (a
+    table with NaN is never returned, saved, or called converged)."""
+    finite = np.isfinite(order)
+    if not finite.all():
+        raise NumericalError(f"order {k} of the table has {100 * (1 - finite.mean()):.3g} % non-finite values "
+                             f"({settings.dtype}, planet radius {atmosphere.planet_radius:g} m, atmosphere "
+                             f"{atmosphere.atmosphere_height:g} m): the numerics do not hold for these parameters")
+    return order
+
+
 def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, backend="opencl", ctx=None,
                    fast_math=False, progress: Callable[[str, int, int], None] | None = None) -> OrdersResult:
     """Single scattering and the higher orders (see module docstring).
@@ -103,8 +115,17 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
     backend : {'opencl', 'numpy'}
     progress : callable, optional
         ``progress(stage, done, total)``: stage 'single' with slabs, then 'orders' with orders done.
+
+    Raises
+    ------
+    ValueError
+        (:class:`clsky.errors.ParameterError`) for an atmosphere the kernels of ``settings.dtype``
+        cannot resolve (:meth:`AtmosphereParameters.check_dtype`).
+    clsky.errors.NumericalError
+        If an order comes out with non-finite values.
     """
     start = time.perf_counter()
+    atmosphere.check_dtype(settings.dtype)
     if backend not in ("opencl", "numpy"):
         raise ValueError(f"backend must be one of ['opencl', 'numpy'], got {backend!r}")
     if backend == "opencl":
@@ -163,7 +184,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
                 new = np.concatenate([new[..., :3] + new[..., 3:]] * 2, axis=-1)
             return new, lambda: new
 
-    orders = [single]
+    orders = [check_finite(single, 1, atmosphere, settings)]
     totals = [_total(single)]
     gathered_sum = None
     additions, converged, reason = [], False, "orders=1: single scattering only"
@@ -196,7 +217,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
             new = on_host()
             if settings.mode == "physical":
                 new = new[..., :3]
-            orders.append(new)
+            orders.append(check_finite(new, k, atmosphere, settings))
             running += new
             additions.append(relative_addition(new, running))
             totals.append(_total(new))

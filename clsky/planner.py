@@ -39,6 +39,7 @@ import math
 import numpy as np
 
 from .atmosphere import AtmosphereParameters, preset
+from .errors import ParameterError, is_real_number
 from .mapping import cos_to_v
 from .quality import QualityLevel, level_for_budget, quality_level
 from .settings import TableSettings
@@ -61,12 +62,14 @@ def _lookup_error(elevation_deg):
 
 
 def _check_range(name, value, low, high):
-    try:
-        a, b = (float(v) for v in value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be two numbers (low, high) in [{low:g}, {high:g}], got {value!r}") from None
+    """(low, high) floats from two real numbers (NumPy's too; a list or array) in order in [low, high]."""
+    valid = f"two numbers low <= high in [{low:g}, {high:g}]"
+    items = tuple(value) if isinstance(value, (tuple, list, np.ndarray)) else ()
+    if len(items) != 2 or not all(is_real_number(v) for v in items):
+        raise ParameterError(name, valid, value)
+    a, b = (float(v) for v in items)
     if not low <= a <= b <= high:
-        raise ValueError(f"{name} must be two numbers low <= high in [{low:g}, {high:g}], got {value!r}")
+        raise ParameterError(name, valid, value)
     return a, b
 
 

@@ -28,6 +28,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
+from .errors import ParameterError, is_real_number
 from .render import RAYMARCH_DEFAULTS
 from .settings import TableSettings
 
@@ -85,14 +86,14 @@ QUALITY_LEVELS = {
 
 def quality_level(name: str) -> QualityLevel:
     """The level called ``name``; ValueError lists the valid names."""
-    if name not in QUALITY_LEVELS:
-        raise ValueError(f"quality must be one of {list(QUALITY_LEVELS)}, got {name!r}")
+    if not isinstance(name, str) or name not in QUALITY_LEVELS:
+        raise ParameterError("quality", f"one of {list(QUALITY_LEVELS)}", name)
     return QUALITY_LEVELS[name]
 
 
 def level_for_budget(budget: float) -> QualityLevel:
     """The fastest level whose promised error fits ``budget`` (a relative error in (0, 1])."""
-    if not isinstance(budget, (int, float)) or isinstance(budget, bool) or not 0.0 < budget <= 1.0:
-        raise ValueError(f"error_budget must be a relative error in (0, 1], got {budget!r}")
+    if not is_real_number(budget) or not 0.0 < budget <= 1.0:
+        raise ParameterError("error_budget", "a relative error in (0, 1]", budget)
     fitting = [level for level in QUALITY_LEVELS.values() if level.budget <= budget]
     return fitting[0] if fitting else QUALITY_LEVELS["reference"]

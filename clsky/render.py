@@ -16,6 +16,7 @@ import pyopencl.array as cla
 
 from . import _atmosphere_cl, _cl, reference
 from .lookup import check_kernel_buffer, check_table_data
+from .errors import as_real_array, is_real_number, short
 from .settings import MAPPINGS, TableSettings
 from .table import ScatteringTable, check_table_array
 from .transmittance import COMMON_SOURCES, quadrature_defines, TransmittanceEngine
@@ -37,16 +38,16 @@ VECTOR_WIDTH = 8
 
 def check_directions(directions, sun_direction, altitude):
     """Validated (n, 3) directions, sun direction (3,) and altitude; ValueError names the bad one."""
-    directions = np.asarray(directions, dtype=np.float64)
+    directions = as_real_array("directions", directions, "unit vectors of shape (..., 3)")
     if directions.ndim < 1 or directions.shape[-1] != 3:
         raise ValueError(f"directions must have shape (..., 3), got {directions.shape}")
     if not np.all(np.isfinite(directions)) or not np.allclose(np.linalg.norm(directions, axis=-1), 1.0, atol=1e-6):
         raise ValueError("directions must be finite unit vectors")
-    sun = np.asarray(sun_direction, dtype=np.float64)
+    sun = as_real_array("sun_direction", sun_direction, "a finite unit vector of 3 values")
     if sun.shape != (3,) or not np.all(np.isfinite(sun)) or abs(np.linalg.norm(sun) - 1.0) > 1e-6:
-        raise ValueError(f"sun_direction must be a finite unit vector of 3 values, got {sun_direction!r}")
-    if not (np.isscalar(altitude) and np.isfinite(altitude) and 0.0 <= altitude <= 1e9):
-        raise ValueError(f"altitude must be finite and in [0, 1e9] m, got {altitude!r}")
+        raise ValueError(f"sun_direction must be a finite unit vector of 3 values, got {short(sun_direction)}")
+    if not (is_real_number(altitude) and np.isfinite(altitude) and 0.0 <= altitude <= 1e9):
+        raise ValueError(f"altitude must be finite and in [0, 1e9] m, got {short(altitude)}")
     return directions, sun, float(altitude)
 
 

@@ -6,6 +6,8 @@ import dataclasses
 
 import numpy as np
 
+from .errors import ParameterError, is_integer, is_real_number
+
 __all__ = ["TableSettings", "MAPPINGS", "SAMPLINGS", "SUN_TRANSMITTANCE_METHODS", "MIE_LAYOUTS",
            "SCATTERING_MODES"]
 
@@ -23,17 +25,16 @@ MIE_LAYOUTS = {"per-wavelength": 6, "notes": 4}
 _MAX_CELLS = 2**31 // 8   # keeps every flat index (times channels) inside a signed 32-bit int
 
 
-def _check_int(name, value, low, high):
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-        raise ValueError(f"{name} must be an integer in [{low}, {high}], got {value!r}")
-    if not low <= value <= high:
-        raise ValueError(f"{name} must be in [{low}, {high}], got {value}")
+def _check_int(name, value, low, high, index=None):
+    """``value`` as an int if it is an integer (Python's or NumPy's, not a bool) in [low, high]."""
+    if not is_integer(value) or not low <= value <= high:
+        raise ParameterError(name, f"an integer in [{low}, {high}]", value, index)
     return int(value)
 
 
 def _check_choice(name, value, choices):
     if not isinstance(value, str) or value not in choices:
-        raise ValueError(f"{name} must be one of {sorted(choices)}, got {value!r}")
+        raise ParameterError(name, f"one of {sorted(choices)}", value)
     return value
 
 
@@ -111,7 +112,7 @@ class TableSettings:
         object.__setattr__(self, "transmittance_size",
                            self._check_size("transmittance_size", self.transmittance_size, 2))
         if int(np.prod(self.size)) > _MAX_CELLS:
-            raise ValueError(f"size must have at most {_MAX_CELLS} cells, got {self.size}")
+            raise ParameterError("size", f"at most {_MAX_CELLS} cells (W x H x D)", self.size)
         object.__setattr__(self, "view_steps", _check_int("view_steps", self.view_steps, 1, 4096))
         object.__setattr__(self, "sun_steps", _check_int("sun_steps", self.sun_steps, 1, 4096))
         _check_choice("mapping", self.mapping, MAPPINGS)
@@ -119,7 +120,7 @@ class TableSettings:
         _check_choice("sun_transmittance", self.sun_transmittance, SUN_TRANSMITTANCE_METHODS)
         _check_choice("mie_layout", self.mie_layout, MIE_LAYOUTS)
         _check_choice("mode", self.mode, SCATTERING_MODES)
-        if self.orders != "auto":
+        if not (isinstance(self.orders, str) and self.orders == "auto"):
             object.__setattr__(self, "orders", _check_int("orders", self.orders, 1, 1000))
         object.__setattr__(self, "max_orders", _check_int("max_orders", self.max_orders, 2, 1000))
         object.__setattr__(self, "gather_theta_steps", _check_int("gather_theta_steps", self.gather_theta_steps, 2, 8192))
@@ -129,16 +130,15 @@ class TableSettings:
                                _check_int("multiple_view_steps", self.multiple_view_steps, 1, 4096))
         object.__setattr__(self, "sun_cos_range", self._check_sun_cos_range(self.sun_cos_range))
         tolerance = self.order_tolerance
-        if isinstance(tolerance, (bool, np.bool_)) or not isinstance(tolerance, (int, float, np.floating)) \
-                or not 0.0 < tolerance < 1.0:
-            raise ValueError(f"order_tolerance must be a number in (0, 1), got {tolerance!r}")
+        if not is_real_number(tolerance) or not 0.0 < tolerance < 1.0:
+            raise ParameterError("order_tolerance", "a number in (0, 1)", tolerance)
         object.__setattr__(self, "order_tolerance", float(tolerance))
         try:
             dtype = None if self.dtype is None else np.dtype(self.dtype)   # np.dtype(None) is float64
         except TypeError:
             dtype = None
         if dtype not in (np.float32, np.float64):
-            raise ValueError(f"dtype must be 'float64' or 'float32', got {self.dtype!r}")
+            raise ParameterError("dtype", "'float64' or 'float32'", self.dtype)
         object.__setattr__(self, "dtype", dtype.name)
 
     @staticmethod
@@ -146,20 +146,23 @@ class TableSettings:
         try:
             items = tuple(value)
         except TypeError:
-            raise ValueError(f"{name} must be {count} integers, got {value!r}") from None
+            raise ParameterError(name, f"{count} integers", value) from None
         if len(items) != count:
-            raise ValueError(f"{name} must be {count} integers, got {value!r}")
-        return tuple(_check_int(f"{name}[{i}]", v, 2, 4096) for i, v in enumerate(items))
+            raise ParameterError(name, f"{count} integers", value)
+        return tuple(_check_int(name, v, 2, 4096, index=i) for i, v in enumerate(items))
 
     @staticmethod
     def _check_sun_cos_range(value):
-        message = f"sun_cos_range must be two cosines -1 <= low < high <= 1, high - low >= 1e-3, got {value!r}"
+        error = ParameterError("sun_cos_range", "two cosines -1 <= low < high <= 1, high - low >= 1e-3", value)
         try:
-            low, high = (float(v) for v in value)
-        except (TypeError, ValueError):
-            raise ValueError(message) from None
+            items = tuple(value)
+        except TypeError:
+            raise error from None
+        if len(items) != 2 or not all(is_real_number(v) for v in items):
+            raise error
+        low, high = (float(v) for v in items)
         if not -1.0 <= low < high <= 1.0 or high - low < 1e-3:
-            raise ValueError(message)
+            raise error
         return low, high
 
     @property

@@ -11,6 +11,7 @@ import pyopencl.array as cla
 
 from . import _atmosphere_cl, _cl
 from .atmosphere import AtmosphereParameters
+from .errors import as_real_array
 from .settings import SAMPLINGS, _check_choice, _check_int
 
 __all__ = ["TransmittanceEngine", "check_segments"]
@@ -31,8 +32,8 @@ def quadrature_defines(settings, vector_width):
 
 def check_segments(atmosphere, altitude, cos_zenith, length):
     """Broadcast and check segment arrays; ValueError names the bad parameter and its range."""
-    altitude, cos_zenith, length = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64)
-                                                         for a in (altitude, cos_zenith, length)))
+    altitude, cos_zenith, length = np.broadcast_arrays(*(as_real_array(name, a) for name, a in (
+        ("altitude", altitude), ("cos_zenith", cos_zenith), ("length", length))))
     checks = (("altitude", altitude, 0.0, atmosphere.atmosphere_height, "m"),
               ("cos_zenith", cos_zenith, -1.0, 1.0, ""),
               ("length", length, 0.0, 2 * atmosphere.top_radius, "m"))

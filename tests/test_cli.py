@@ -61,14 +61,14 @@ def test_table_refuses_to_overwrite_without_force(tmp_path):
 
 
 @pytest.mark.parametrize("args,named", [
-    (["--size", "1", "16", "6"], "size[0]"),
+    (["--size", "1", "16", "6"], "--size W"),
     (["--size", "8", "16"], "--size"),
-    (["--view-steps", "0"], "view_steps"),
+    (["--view-steps", "0"], "--view-steps"),
     (["--preset", "venus"], "--preset"),
     (["--dtype", "float16"], "--dtype"),
     (["-o", "sky.txt"], "--output"),
     (["-o", "missing/sky.npz"], "directory"),
-    (["--transmittance-size", "1", "8"], "transmittance_size"),
+    (["--transmittance-size", "1", "8"], "--transmittance-size TW"),
     (["--quality", "best"], "--quality"),
     (["--sun-elevations", "30", "10"], "--sun-elevations"),
     (["--sun-elevations", "-100", "10"], "--sun-elevations"),

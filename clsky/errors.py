@@ -1,0 +1,98 @@
+"""Validation errors that know which parameter they are about, and short numbers for messages.
+
+A :class:`ParameterError` is a ``ValueError`` that carries the parameter's name (``field``), the item
+of a tuple parameter (``index``), what is valid and what was given. The library's message names the
+Python parameter (``size[0] must be ...``); a command line rewords it with :meth:`ParameterError.reworded`
+to name the option the user typed (``--size W must be ...``).
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+
+import numpy as np
+
+__all__ = ["ParameterError", "NumericalError", "short", "is_real_number", "is_integer", "as_real_array"]
+
+#: Longest text of a value echoed in a message.
+_MAX_ECHO = 60
+
+
+def short(value) -> str:
+    """``value`` as a short text for a message: numbers with at most 6 significant digits (a
+    300-digit integer prints as ``1e+300``), other values by ``repr``, cut to 60 characters.
+
+    Examples
+    --------
+    >>> short(10**300), short(4096), short(0.1 + 0.2), short("a")
+    ('1e+300', '4096', '0.3', "'a'")
+    """
+    if isinstance(value, (bool, np.bool_)):
+        return repr(bool(value))
+    if isinstance(value, numbers.Integral):
+        value = int(value)
+        if abs(value) < 10**7:
+            return str(value)
+        try:
+            return f"{float(value):g}"
+        except OverflowError:                   # beyond float: its order of magnitude
+            return f"{'-' if value < 0 else ''}1e+{int(abs(value).bit_length() * math.log10(2))}"
+    if isinstance(value, numbers.Real):
+        return f"{float(value):g}"
+    if isinstance(value, (tuple, list)) and len(value) <= 8:
+        items = ", ".join(short(v) for v in value)
+        return f"({items})" if isinstance(value, tuple) else f"[{items}]"
+    text = repr(value)
+    return text if len(text) <= _MAX_ECHO else text[:_MAX_ECHO - 3] + "..."
+
+
+def is_real_number(value) -> bool:
+    """A real number: Python's or NumPy's int or float, not a bool, a string or a complex."""
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
+def is_integer(value) -> bool:
+    """An integer: Python's or NumPy's, not a bool."""
+    return isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))
+
+
+def as_real_array(name, value, valid="real numbers"):
+    """``value`` as a float64 array if it holds real numbers (ints or floats, Python's or NumPy's);
+    ParameterError naming ``name`` otherwise (strings, objects, complex values, bools)."""
+    try:
+        array = np.asarray(value)
+        if array.dtype.kind not in "iuf":
+            raise TypeError(array.dtype)
+        return array.astype(np.float64)
+    except (TypeError, ValueError):
+        raise ParameterError(name, valid, value) from None
+
+
+class ParameterError(ValueError):
+    """A parameter outside what is valid: ``'{field}[{index}] must be {valid}, got {value}'``.
+
+    Parameters
+    ----------
+    field : str
+        The parameter's (or dataclass field's) name.
+    valid : str
+        What is valid, e.g. ``'an integer in [2, 4096]'``.
+    value : object
+        What was given (printed short, :func:`short`).
+    index : int, optional
+        The item of a tuple parameter.
+    """
+
+    def __init__(self, field, valid, value, index=None):
+        self.field, self.valid, self.value, self.index = field, valid, value, index
+        super().__init__(self.reworded(field if index is None else f"{field}[{index}]"))
+
+    def reworded(self, name: str) -> str:
+        """The message with ``name`` (e.g. a command-line option) in place of the parameter's name."""
+        return f"{name} must be {self.valid}, got {short(self.value)}"
+
+
+class NumericalError(ArithmeticError):
+    """A computation gave non-finite values (NaN or infinity) where the inputs were valid: the result
+    is refused rather than returned or saved."""

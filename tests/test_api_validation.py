@@ -1,0 +1,124 @@
+"""Issue 9, class 7: the API raises the documented ValueError, at construction, and takes NumPy scalars
+wherever it takes numbers."""
+
+import datetime
+
+import numpy as np
+import pytest
+
+from anim.animate import AnimationConfig, quality
+from clsky import AtmosphereParameters, ScatteringTable, TableSettings
+from clsky.errors import ParameterError
+from clsky.planner import Scene
+from clsky.quality import level_for_budget
+
+
+@pytest.fixture(scope="module")
+def table():
+    return ScatteringTable.build("physical", TableSettings(size=(4, 8, 4), mode="physical", orders=2),
+                                 backend="numpy")
+
+
+@pytest.mark.parametrize("position,name", [(0, "altitude"), (1, "cos_view"), (2, "cos_sun"), (3, "cos_scatter")])
+@pytest.mark.parametrize("bad", ["a", [0.5, "x"], None, 1j, True])
+def test_radiance_refuses_non_numbers_naming_the_query(table, position, name, bad):
+    queries = [10.0, 0.5, 0.5, 0.5]
+    queries[position] = bad
+    with pytest.raises(ValueError, match=f"^{name} must be"):
+        table.radiance(*queries, backend="numpy")
+
+
+def test_radiance_takes_numpy_scalars(table):
+    expected = table.radiance(10.0, 0.5, 0.5, 0.5, backend="numpy")
+    got = table.radiance(np.float32(10.0), np.float64(0.5), np.float32(0.5), np.float64(0.5), backend="numpy")
+    np.testing.assert_allclose(got, expected, rtol=1e-7)
+
+
+@pytest.mark.parametrize("bad,name", [("1.0003", "refractive_index"), (None, "refractive_index"),
+                                      (0.5, "refractive_index"), (float("nan"), "refractive_index")])
+def test_from_refractive_index_refuses_bad_index(bad, name):
+    with pytest.raises(ValueError, match=f"^{name} must be"):
+        AtmosphereParameters.from_refractive_index(bad)
+
+
+def test_from_refractive_index_checks_density_and_wavelengths():
+    with pytest.raises(ValueError, match="^number_density must be"):
+        AtmosphereParameters.from_refractive_index(1.0003, "2.5e25")
+    with pytest.raises(ValueError, match="^wavelengths must be"):
+        AtmosphereParameters.from_refractive_index(1.0003, 2.545e25, (650.0, 510.0))
+    beta = AtmosphereParameters.from_refractive_index(np.float32(1.0003), np.float64(2.545e25)).rayleigh_scattering
+    assert all(isinstance(b, float) for b in beta)
+
+
+NUMERIC_FIELDS = {   # AnimationConfig field -> a valid value
+    "frames": 4, "size": 32, "fov_deg": 60.0, "heading_deg": 90.0, "pitch_deg": 5.0, "altitude": 10.0,
+    "error_budget": 0.5, "samples": 16, "start_elevation_deg": -5.0, "max_elevation_deg": 50.0,
+    "start_hour": 1.0, "end_hour": 20.0, "step_minutes": 5.0, "fps": 24.0, "exposure": 2.0,
+}
+INTEGER_FIELDS = {"frames", "size", "samples"}
+
+
+@pytest.mark.parametrize("field", sorted(NUMERIC_FIELDS))
+def test_animation_config_takes_numpy_scalars(field):
+    value = NUMERIC_FIELDS[field]
+    kinds = (np.int64, np.int32) if field in INTEGER_FIELDS else (np.float32, np.float64)
+    if field not in INTEGER_FIELDS and float(value).is_integer():
+        kinds += (np.int64,)
+    for kind in kinds:
+        config = AnimationConfig(**{field: kind(value)})
+        stored = getattr(config, field)
+        assert type(stored) is (int if field in INTEGER_FIELDS else float) and stored == pytest.approx(value)
+
+
+@pytest.mark.parametrize("field", sorted(NUMERIC_FIELDS))
+@pytest.mark.parametrize("bad", ["1", True, [1.0], float("nan")])
+def test_animation_config_refuses_wrong_types_at_construction(field, bad):
+    with pytest.raises(ParameterError) as caught:
+        AnimationConfig(**{field: bad})
+    assert caught.value.field == field
+
+
+def test_animation_config_float_budget_is_used_later():
+    """The issue's example: np.float32(0.5) was accepted, then refused by the planner."""
+    config = AnimationConfig(error_budget=np.float32(0.5))
+    assert quality(config).name == "draft"
+    assert level_for_budget(np.float32(0.5)).name == "draft"
+    Scene(sun_elevations_deg=(np.float32(-5.0), np.int64(30)), error_budget=np.float32(0.5))
+
+
+def test_animation_config_date():
+    assert AnimationConfig(date="2026-01-01").date == datetime.date(2026, 1, 1)
+    assert AnimationConfig(date=datetime.datetime(2026, 1, 1, 12)).date == datetime.date(2026, 1, 1)
+    for bad in ("01/01/2026", 20260101, "2026-13-01"):
+        with pytest.raises(ValueError, match="^date must be"):
+            AnimationConfig(date=bad)
+
+
+def test_animation_config_tuple_fields():
+    config = AnimationConfig(table_size=np.array([4, 8, 4]), location=[45.0, np.float32(5.0)])
+    assert config.table_size == (4, 8, 4) and config.location == (45.0, 5.0)
+    with pytest.raises(ParameterError) as caught:
+        AnimationConfig(table_size=(4, 8, 1))
+    assert (caught.value.field, caught.value.index) == ("table_size", 2)
+    for bad in ((45.0,), ("45", "5"), 45.0, (100.0, 0.0)):
+        with pytest.raises(ValueError, match="^location must be"):
+            AnimationConfig(location=bad)
+
+
+@pytest.mark.parametrize("field,bad", [("camera", 1), ("method", None), ("preset", "venus"), ("mode", 3),
+                                       ("quality", ["draft"]), ("dither", 1), ("hdr", "yes"), ("output", 3)])
+def test_animation_config_other_fields(field, bad):
+    with pytest.raises(ParameterError, match=f"^{field} must be"):
+        AnimationConfig(**{field: bad})
+
+
+def test_table_settings_and_scene_take_numpy_and_refuse_strings():
+    settings = TableSettings(size=np.array([4, 8, 4]), view_steps=np.int64(10), order_tolerance=np.float32(1e-3),
+                             sun_cos_range=np.array([-0.5, 0.5]))
+    assert settings.size == (4, 8, 4) and type(settings.view_steps) is int
+    with pytest.raises(ValueError, match="^sun_cos_range must be"):
+        TableSettings(sun_cos_range=("-0.5", "0.5"))
+    with pytest.raises(ValueError, match="^sun_elevations_deg must be"):
+        Scene(sun_elevations_deg=("1", "2"))
+    with pytest.raises(ValueError, match="^order_tolerance must be"):
+        TableSettings(order_tolerance="0.1")

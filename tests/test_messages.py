@@ -1,0 +1,143 @@
+"""Issue 9, class 6: messages name what the user typed, print numbers short, and say when PoCL's
+kernel cache is what is missing (the command line through a subprocess)."""
+
+import subprocess
+import sys
+
+import pytest
+
+from clsky.errors import ParameterError, short
+from clsky.settings import TableSettings
+
+
+ANIMATION_COMMANDS = ("animate", "render", "bench")
+
+
+def clsky(*args, cwd, env=None):
+    """The ``clsky`` console script: clsky's commands, extended by anim's (``python -m anim``)."""
+    package = "anim" if args[0] in ANIMATION_COMMANDS else "clsky"
+    return subprocess.run([sys.executable, "-m", package, *args], cwd=cwd, capture_output=True, text=True, env=env)
+
+
+def one_line_error(result):
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("clsky: error:")
+    return lines[0]
+
+
+@pytest.mark.parametrize("args,named", [
+    (["--size", "0", "0", "0"], "--size W must be"),
+    (["--size", "8", "1", "4"], "--size H must be"),
+    (["--size", "8", "8", "5000"], "--size D must be"),
+    (["--order-tolerance", "nan"], "--order-tolerance must be"),
+    (["--view-steps", "0"], "--view-steps must be"),
+    (["--sun-steps", "99999"], "--sun-steps must be"),
+    (["--multiple-view-steps", "0"], "--multiple-view-steps must be"),
+    (["--max-orders", "1"], "--max-orders must be"),
+    (["--orders", "0"], "--orders must be"),
+    (["--gather-steps", "1", "8"], "--gather-steps THETA must be"),
+    (["--gather-steps", "8", "1"], "--gather-steps PHI must be"),
+    (["--transmittance-size", "1", "8"], "--transmittance-size TW must be"),
+    (["--transmittance-size", "8", "1"], "--transmittance-size TH must be"),
+])
+def test_table_errors_name_the_option(tmp_path, args, named):
+    line = one_line_error(clsky("table", "--progress", "none", *args, cwd=tmp_path))
+    assert named in line, line
+    assert "size[" not in line and "_" not in line.split(" must ")[0], line
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("args,named", [
+    (["--table-size", "4096", "4096", "4096"], "--table-size must be"),
+    (["--table-size", "1", "33", "7"], "--table-size W must be"),
+    (["--table-size", "9", "33", "5000"], "--table-size D must be"),
+    (["--size", "8"], "--size must be"),
+    (["--hours", "10", "5"], "--hours END must be"),
+    (["--error-budget", "nan"], "--error-budget must be"),
+    (["--preset", "venus"], "--preset must be"),
+    (["--location", "45", "5", "--step-minutes", "0.001"], "--step-minutes must be"),
+    (["--max-elevation", "-10"], "--max-elevation must be at least the start elevation"),
+])
+def test_animate_errors_name_the_option(tmp_path, args, named):
+    line = one_line_error(clsky("animate", "--progress", "none", *args, cwd=tmp_path))
+    assert named in line, line
+
+
+@pytest.mark.parametrize("command,args", [
+    ("animate", ["--frames", str(10**300)]),
+    ("animate", ["--size", str(10**300)]),
+    ("animate", ["--samples", str(10**300)]),
+    ("animate", ["--table-size", "8", "8", str(10**300)]),
+    ("render", ["--size", str(-10**300)]),
+    ("table", ["--size", "8", "8", str(10**300)]),
+    ("table", ["--orders", str(10**300)]),
+    ("table", ["--max-orders", str(10**300)]),
+    ("table", ["--view-steps", str(10**300)]),
+    ("table", ["--gather-steps", str(10**300), "8"]),
+    ("bench", ["accuracy", "--size", str(10**300)]),
+])
+def test_numbers_in_messages_are_short(tmp_path, command, args):
+    line = one_line_error(clsky(command, *args, cwd=tmp_path))
+    assert len(line) < 200 and "1e+300" in line, line
+
+
+def test_render_sun_azimuth_names_the_option(tmp_path):
+    line = one_line_error(clsky("render", "--sun-azimuth", "nan", cwd=tmp_path))
+    assert "--sun-azimuth must be" in line, line
+
+
+def test_short_numbers():
+    assert short(10**300) == "1e+300" and short(-(10**5000)) == "-1e+5000"
+    assert short(0.1 + 0.2) == "0.3" and short(4096) == "4096" and short(float("nan")) == "nan"
+    assert len(short("x" * 1000)) <= 60
+
+
+def test_parameter_error_carries_field_and_index():
+    with pytest.raises(ParameterError) as caught:
+        TableSettings(size=(8, 1, 8))
+    assert (caught.value.field, caught.value.index) == ("size", 1)
+    assert str(caught.value) == "size[1] must be an integer in [2, 4096], got 1"
+    assert caught.value.reworded("--size H") == "--size H must be an integer in [2, 4096], got 1"
+
+
+UNWRITABLE = "/proc/clsky-unwritable"       # not even root can create a directory there
+
+
+def test_unwritable_default_pocl_cache_falls_back_with_a_note(tmp_path):
+    env = {"PATH": "/usr/bin:/bin", "HOME": UNWRITABLE, "XDG_CACHE_HOME": UNWRITABLE, "TMPDIR": str(tmp_path)}
+    result = clsky("devices", cwd=tmp_path, env=env)
+    assert result.returncode == 0, result.stdout + result.stderr
+    notes = result.stderr.strip().splitlines()
+    assert len(notes) == 1 and notes[0].startswith("clsky: note:") and "POCL_CACHE_DIR" in notes[0], notes
+    assert any(line.startswith("* ") for line in result.stdout.splitlines())
+
+
+def test_unwritable_pocl_cache_dir_is_named(tmp_path):
+    env = {"PATH": "/usr/bin:/bin", "HOME": str(tmp_path), "POCL_CACHE_DIR": UNWRITABLE}
+    result = clsky("devices", cwd=tmp_path, env=env)
+    assert result.returncode == 1
+    assert "POCL_CACHE_DIR" in result.stdout and "not writable" in result.stdout, result.stdout
+    result = clsky("table", "--size", "4", "8", "4", "--progress", "none", cwd=tmp_path, env=env)
+    assert result.returncode == 1
+    assert "POCL_CACHE_DIR" in result.stderr and "install" not in result.stderr, result.stderr
+
+
+def test_pocl_cache_problem_in_process(monkeypatch, tmp_path):
+    """The check itself (not cached: ``__wrapped__``): a default cache that cannot be written falls back
+    to a private one under the temporary directory; a POCL_CACHE_DIR that cannot is named, not replaced."""
+    import tempfile
+
+    from clsky import _cl
+
+    monkeypatch.delenv("POCL_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", UNWRITABLE)
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    assert _cl.pocl_cache_problem.__wrapped__() is None
+    assert _cl.os.environ["POCL_CACHE_DIR"].startswith(str(tmp_path))
+    monkeypatch.setenv("POCL_CACHE_DIR", UNWRITABLE)
+    problem = _cl.pocl_cache_problem.__wrapped__()
+    assert "POCL_CACHE_DIR" in problem and UNWRITABLE in problem
+    monkeypatch.setenv("POCL_CACHE_DIR", str(tmp_path))
+    assert _cl.pocl_cache_problem.__wrapped__() is None
