@@ -38,6 +38,7 @@ import numpy as np
 from PIL import Image
 
 from clsky._files import StagedWrites, atomic_write, check_output, check_output_directory
+from clsky.errors import short
 
 __all__ = ["FrameWriter", "frame_files", "write_png", "write_json", "write_csv", "MP4_OUTPUT_PARAMS"]
 
@@ -279,10 +280,10 @@ class FrameWriter:
             raise ValueError("hdr='npy' needs a frame directory")
         fps = float(fps)
         if not (np.isfinite(fps) and fps > 0):
-            raise ValueError(f"fps must be finite and > 0, got {fps}")
+            raise ValueError(f"fps must be finite and > 0, got {short(fps)}")
         if total_frames is not None:
             if int(total_frames) != total_frames or total_frames < 1:
-                raise ValueError(f"total_frames must be a positive integer, got {total_frames!r}")
+                raise ValueError(f"total_frames must be a positive integer, got {short(total_frames)}")
             total_frames = int(total_frames)
         if not prefix or os.sep in prefix or (os.altsep and os.altsep in prefix):
             raise ValueError(f"prefix must be a non-empty file name part, got {prefix!r}")
@@ -455,10 +456,10 @@ class FrameWriter:
         if self._state != "open":
             raise RuntimeError("use FrameWriter.write inside its with statement")
         if isinstance(index, bool) or int(index) != index or index < 0:
-            raise ValueError(f"index must be an integer >= 0, got {index!r}")
+            raise ValueError(f"index must be an integer >= 0, got {short(index)}")
         index = int(index)
         if self.total_frames is not None and index >= self.total_frames:
-            raise ValueError(f"index {index} out of range for total_frames={self.total_frames}")
+            raise ValueError(f"index {short(index)} out of range for total_frames={short(self.total_frames)}")
         if index in self._indices:
             raise ValueError(f"frame {index} was already written")
         image = _check_image("display_u8", display_u8)
