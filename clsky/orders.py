@@ -42,7 +42,7 @@ import pyopencl as cl
 
 from . import _cl
 from .atmosphere import AtmosphereParameters
-from .multiple import SPECIES, first_gather_matrices, gather_matrices
+from .multiple import CROSSED_PAIRS, DIRECT_PAIRS, SPECIES, first_gather_stack, gather_matrices
 from .settings import TableSettings
 
 __all__ = ["OrdersResult", "compute_orders", "BRIGHT_FRACTION", "relative_addition"]
@@ -76,10 +76,22 @@ class OrdersResult:
     def combined(self, mode):
         """The table's channels: factored sum (atmosphere-plus), or single + sum of higher orders."""
         if mode == "atmosphere-plus":
-            return np.sum(self.orders, axis=0)
+            return _sum_in_order(self.orders)
         if len(self.orders) == 1:
             return self.orders[0]
-        return np.concatenate([self.orders[0], np.sum(self.orders[1:], axis=0)], axis=-1)
+        return np.concatenate([self.orders[0], _sum_in_order(self.orders[1:])], axis=-1)
+
+
+def _sum_in_order(tables):
+    """tables[0] + tables[1] + ... added one after the other, into one new array.
+
+    The same sums, in the same order, as ``np.sum(tables, axis=0)`` (a reduction over the outer axis
+    adds slice by slice), without that call's stacked copy of every table (K x the table's bytes).
+    """
+    total = np.array(tables[0], dtype=np.float64)
+    for table in tables[1:]:
+        total += table
+    return total
 
 
 def relative_addition(added, running_sum):
@@ -117,14 +129,15 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
                                        (lambda done, total: progress("single", done, total)))
         device = _cl.describe_device(single_engine.device)
 
-        def gather(terms):
-            out = None
+        def gather(terms, out=None):
             for matrices, table in terms:
                 out = engine.gather(matrices, table, out=out, accumulate=out is not None)
             return out
 
         def to_host(gathered):
             return gathered.get()[..., :6].astype(np.float64)
+
+        kept = 3 if settings.mode == "physical" else 6    # channels of an order kept on the host
 
         upload = engine.upload_matrices
         copy_queue = cl.CommandQueue(engine.ctx)     # copies to the host overlap the next gather
@@ -137,7 +150,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
 
             def on_host():
                 copied.wait()
-                return host[..., :6].astype(np.float64)
+                return host[..., :kept].astype(np.float64)     # a copy: the padded buffer is dropped
 
             return new_d, on_host
     else:
@@ -148,8 +161,11 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         if progress is not None:
             progress("single", 1, 1)
 
-        def gather(terms):
-            return sum(reference.gather(matrices, table) for matrices, table in terms)
+        def gather(terms, out=None):
+            for matrices, table in terms:
+                term = reference.gather(matrices, table)
+                out = term if out is None else out + term
+            return out
 
         def to_host(gathered):
             return gathered
@@ -160,7 +176,8 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         def scatter(gathered):
             new = reference.scatter(atmosphere, settings, gathered)
             if settings.mode == "physical":
-                new = np.concatenate([new[..., :3] + new[..., 3:]] * 2, axis=-1)
+                phased = new[..., :3] + new[..., 3:]
+                return np.concatenate([phased] * 2, axis=-1), lambda: phased
             return new, lambda: new
 
     orders = [single]
@@ -172,16 +189,15 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         per_species = gather_matrices(atmosphere, settings)
         same_species = upload(np.stack([per_species[s] for s in SPECIES]))  # (2, H, H): channel c -> c // 3
         if settings.mode == "physical":
-            first = first_gather_matrices(atmosphere, settings)
-            direct = upload(np.stack([first[("rayleigh", "rayleigh")], first[("mie", "mie")]]))
-            crossed = upload(np.stack([first[("rayleigh", "mie")], first[("mie", "rayleigh")]]))
-            swapped = np.concatenate([single[..., 3:], single[..., :3]], axis=-1)
-            terms = [(direct, single), (crossed, swapped)]
+            # one (2, D, H, H) stack of per-sun-node matrices at a time on the host, dropped once on the
+            # device; the swapped single scattering lives only for its term
+            gathered = gather([(upload(first_gather_stack(atmosphere, settings, DIRECT_PAIRS)), single)])
+            gathered = gather([(upload(first_gather_stack(atmosphere, settings, CROSSED_PAIRS)),
+                                np.concatenate([single[..., 3:], single[..., :3]], axis=-1))], out=gathered)
             running = single[..., :3] + single[..., 3:]
         else:
-            terms = [(same_species, single)]
+            gathered = gather([(same_species, single)])
             running = single.copy()
-        gathered = gather(terms)
         for k in range(2, wanted + 1):
             if gathered_sum is None:
                 gathered_sum = gathered.copy()
@@ -194,8 +210,6 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
             if k < wanted:
                 gathered = gather([(same_species, next_input)])
             new = on_host()
-            if settings.mode == "physical":
-                new = new[..., :3]
             orders.append(new)
             running += new
             additions.append(relative_addition(new, running))
