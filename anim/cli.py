@@ -133,8 +133,28 @@ def _config(args, **extra):
         raise clsky_cli.UsageError(message) from None
 
 
+def _memory_options(args, config):
+    """The options each part of an animation's memory comes from, for InsufficientMemoryError."""
+    if args.table_size is not None:
+        table = "--table-size " + " ".join(str(n) for n in args.table_size)
+    elif args.quality is not None:
+        table = f"--quality {args.quality}"
+    else:
+        table = f"--error-budget {args.error_budget:g}"
+    return {"table": table, "frames": f"--size {config.size}"}
+
+
+def _check_memory(args, config, positions):
+    """Refuse, before any work, an animation or frame that does not fit the machine (exit 2, one line)."""
+    from clsky.resources import check_memory, device_of
+
+    from .animate import memory_estimate
+
+    check_memory(memory_estimate(config, positions), device=device_of(), options=_memory_options(args, config))
+
+
 def run_animate(args):
-    from .animate import render_animation
+    from .animate import render_animation, sun_positions
 
     config = _config(args, frames=args.frames, start_elevation_deg=args.start_elevation,
                      max_elevation_deg=args.max_elevation,
@@ -146,6 +166,7 @@ def run_animate(args):
             raise clsky_cli.UsageError(f"{target} exists; use --force to overwrite it")
     if not config.output_path.parent.is_dir():
         raise clsky_cli.UsageError(f"output directory {config.output_path.parent} does not exist")
+    _check_memory(args, config, sun_positions(config))
     progress, close = clsky_cli.progress_bar(args.progress)
     try:
         result = render_animation(config, progress=progress, report=print)
@@ -173,9 +194,10 @@ def run_render(args):
     if output.exists() and not args.force:
         raise clsky_cli.UsageError(f"{output} exists; use --force to overwrite it")
     config = _config(args)
+    position = SunPosition(90.0 - args.sun_elevation, args.sun_azimuth)
+    _check_memory(args, config, [position])
     camera = _camera(config)
     directions, valid = camera.directions()
-    position = SunPosition(90.0 - args.sun_elevation, args.sun_azimuth)
     plan = plan_animation(config, [position], directions, valid)
     if plan is not None:
         print(plan.describe())
