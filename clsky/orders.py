@@ -100,7 +100,10 @@ def relative_addition(added, running_sum):
     bright = (running_sum >= BRIGHT_FRACTION * peak) & (running_sum > 0)
     if not bright.any():
         return 0.0
-    return float(np.max(added[bright] / running_sum[bright]))
+    # the ratios of the bright cells in one array of the table's shape (0 elsewhere: every ratio is >= 0),
+    # instead of three copies of the bright cells
+    ratio = np.divide(added, running_sum, out=np.zeros(running_sum.shape), where=bright)
+    return float(np.max(ratio))
 
 
 def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, backend="opencl", ctx=None,
@@ -204,12 +207,15 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
             else:
                 gathered_sum += gathered
             next_input, on_host = scatter(gathered)
+            del gathered                  # summed and scattered: its (D, H, W, 8) buffer may go
             # gather the next order from the new one where it is (on the device for OpenCL) before
             # looking at it on the host, so that the copy and the stopping test overlap that work
             # (wasted once, when this order turns out to be the last)
             if k < wanted:
                 gathered = gather([(same_species, next_input)])
+            del next_input                # gathered: only its host copy is read from here on
             new = on_host()
+            del on_host                   # and the padded download buffer behind that copy
             orders.append(new)
             running += new
             additions.append(relative_addition(new, running))

@@ -217,12 +217,13 @@ def estimate_table_memory(settings: TableSettings, backend="opencl", saving=Fals
     -------
     MemoryEstimate
         With N = W H D cells, s the kernels' bytes per value, K the orders (:func:`expected_orders`),
-        c = 3 channels kept per higher order (physical; 6 atmosphere-plus): the single-scattering
-        download (N 6 s + N 6 x 8 if s != 8), the physical mode's first gather (two (2, D, H, H)
-        matrix stacks on the device, one float64 stack on the host, single scattering and its swap,
-        three padded device tables N 8 s), the orders (K - 1 kept tables N c 8, running sum, the
-        stopping test's temporaries, four padded device tables), and the combination into the table
-        (N C 8) beside the gathered sum (N 6 8); with ``saving``, float32 copies of the K orders.
+        c = 3 channels kept per higher order (physical; 6 atmosphere-plus), phase by phase: the
+        single-scattering download (N 6 s, + N 6 8 if s != 8); the physical mode's first gather
+        (a (2, D, H, H) matrix stack on the host, 16 x 8 D H^2, and on the device, 16 s D H^2,
+        single scattering and its swap, 2 x N 6 8, three padded device tables, 3 x N 8 s); the
+        orders (K - 1 kept tables N c 8, the running sum N c 8, three padded device tables 3 x N 8 s,
+        the download N 8 s or else the stopping test's temporaries, 11 N c); the combination into the
+        table (N C 8) beside the gathered sum (N 6 8); with ``saving``, float32 copies of the orders.
     """
     cells, height, depth, s = _table_sizes(settings)
     device = backend == "opencl"
@@ -244,23 +245,28 @@ def estimate_table_memory(settings: TableSettings, backend="opencl", saving=Fals
         if physical:
             stack = 2 * depth * height * height
             theta = settings.gather_theta_steps + 1
+            # the same-species stack, then the crossed one: the first is released once its gather ran
+            # (the kernel is done long before the host has computed the second stack)
             phases.append(Phase("first gather", (
                 single, Allocation("swapped single scattering (D, H, W, 6)", cells * 6 * f64),
                 Allocation("first-gather matrix stack (2, D, H, H) float64", stack * f64),
                 Allocation("first-gather product temporary", 16 * height * theta * f64),
                 Allocation("upload staging (D, H, W, 8)", padded),
-                Allocation("first-gather matrix stacks (2, D, H, H)", stack * s, count=2, on_device=device),
+                Allocation("first-gather matrix stack (2, D, H, H)", stack * s, on_device=device),
                 Allocation("padded tables (D, H, W, 8)", padded, count=3, on_device=device))))
         kept_orders = Allocation(f"higher orders kept (D, H, W, {kept}) float64", cells * kept * f64,
                                  count=orders - 1)
         running = Allocation(f"running sum (D, H, W, {kept}) float64", cells * kept * f64)
-        loop_buffers = Allocation("padded tables (D, H, W, 8)", padded, count=4, on_device=device)
+        # on the device: the gathered sum, the order just scattered and the next gather's input or output
+        loop_buffers = Allocation("padded tables (D, H, W, 8)", padded, count=3, on_device=device)
         phases.append(Phase("orders", (
             single, same_species, kept_orders, running, loop_buffers,
-            Allocation("stopping test temporaries", cells * kept * (3 * f64 + 1)),
-            Allocation("order downloads (D, H, W, 8)", padded, count=2))))
+            # the padded download of the order (dropped once copied), then the stopping test's copies
+            Allocation("order download or stopping test temporaries",
+                       max(padded, cells * kept * (f64 + 3))))))
         phases.append(Phase("gathered download", (
-            single, same_species, kept_orders, running, loop_buffers,
+            single, same_species, kept_orders, running,
+            Allocation("padded tables (D, H, W, 8)", padded, count=2, on_device=device),
             Allocation("gathered sum download (D, H, W, 8)", padded),
             Allocation("gathered sum (D, H, W, 6) float64", cells * 6 * f64))))
     table = _table_held(settings, cells, orders, keep_orders=True)
