@@ -177,6 +177,7 @@ def run_animate(args):
 
 
 def run_render(args):
+    import dataclasses
     import pathlib
 
     from clsky.render import SkyRenderer
@@ -201,7 +202,7 @@ def run_render(args):
     plan = plan_animation(config, [position], directions, valid)
     if plan is not None:
         print(plan.describe())
-    table = build_table(config, plan)
+    table = dataclasses.replace(build_table(config, plan), orders=())   # the frame reads data and gathered only
     renderer = SkyRenderer(table, ray_settings(config))
     sun = sun_direction(90.0 - args.sun_elevation, args.sun_azimuth)
     hdr = render_frame(renderer, renderer.prepare(directions, valid), sun, config)

@@ -49,10 +49,11 @@ BASE_PROCESS_BYTES = 130 * 2**20
 #: Ratio of an order's relative addition to the previous one's, for :func:`expected_orders`: the
 #: default table (tolerance 1e-4) converges at order 10, the high level (1e-5) at 12, draft (1e-2) at 5.
 ORDER_RATIO = 0.4
-#: Host bytes per pixel of one frame's processing beyond the HDR frames themselves, per method:
-#: tone map, 8-bit frames, metrics, error image, composite, PNG and MP4 encoding (measured as the
-#: slope of peak RSS over pixels between 256^2 and 1024^2 fisheye animations, see tests/test_memory.py).
-FRAME_BYTES_PER_PIXEL = {"compare": 200, "lut": 80, "raymarch": 80}
+#: Host bytes per pixel of one frame's processing beyond the directions, buffers and HDR frames, per
+#: method: tone map, 8-bit frames, metrics, error image, composite, PNG and MP4 encoding. Measured as
+#: the growth of peak RSS between 2-frame 256^2 and 1024^2 fisheye animations: 390 bytes per pixel in
+#: all (compare), 195 (lut), 203 (raymarch), of which the listed arrays are 147 and 123.
+FRAME_BYTES_PER_PIXEL = {"compare": 240, "lut": 80, "raymarch": 80}
 
 _GIB = 2**30
 
@@ -219,72 +220,26 @@ def estimate_table_memory(settings: TableSettings, backend="opencl", saving=Fals
         With N = W H D cells, s the kernels' bytes per value, K the orders (:func:`expected_orders`),
         c = 3 channels kept per higher order (physical; 6 atmosphere-plus), phase by phase: the
         single-scattering download (N 6 s, + N 6 8 if s != 8); the physical mode's first gather
-        (a (2, D, H, H) matrix stack on the host, 16 x 8 D H^2, and on the device, 16 s D H^2,
-        single scattering and its swap, 2 x N 6 8, three padded device tables, 3 x N 8 s); the
+        (a (2, D, H, H) matrix stack on the host, 16 x 8 D H^2, one on the device, 16 s D H^2, single
+        scattering and its swap, 2 x N 6 8, a staging copy and three padded device tables,
+        4 x N 8 s); the
         orders (K - 1 kept tables N c 8, the running sum N c 8, three padded device tables 3 x N 8 s,
         the download N 8 s or else the stopping test's temporaries, 11 N c); the combination into the
         table (N C 8) beside the gathered sum (N 6 8); with ``saving``, float32 copies of the orders.
     """
-    cells, height, depth, s = _table_sizes(settings)
-    device = backend == "opencl"
+    cells, _, _, s = _table_sizes(settings)
     orders = expected_orders(settings)
-    physical = settings.mode == "physical"
-    kept = 3 if physical else 6
-    f64 = 8
-    single = Allocation("single scattering (D, H, W, 6) float64", cells * 6 * f64)
-    padded = cells * 8 * s
-    transmittance = Allocation("transmittance table", int(np.prod(settings.transmittance_size)) * 2 * s,
-                               on_device=device)
-    download = [Allocation("single scattering download (D, H, W, 6)", cells * 6 * s)]
-    if s != f64:
-        download.append(single)
-    phases = [Phase("single scattering", (Allocation("single scattering (D, H, W, 6)", cells * 6 * s,
-                                                     on_device=device), transmittance, *download))]
+    phases = [_single_phase(settings)]
     if orders > 1:
-        same_species = Allocation("gather matrices (2, H, H)", 2 * height * height * s, on_device=device)
-        if physical:
-            stack = 2 * depth * height * height
-            theta = settings.gather_theta_steps + 1
-            # the same-species stack, then the crossed one: the first is released once its gather ran
-            # (the kernel is done long before the host has computed the second stack)
-            phases.append(Phase("first gather", (
-                single, Allocation("swapped single scattering (D, H, W, 6)", cells * 6 * f64),
-                Allocation("first-gather matrix stack (2, D, H, H) float64", stack * f64),
-                Allocation("first-gather product temporary", 16 * height * theta * f64),
-                Allocation("upload staging (D, H, W, 8)", padded),
-                Allocation("first-gather matrix stack (2, D, H, H)", stack * s, on_device=device),
-                Allocation("padded tables (D, H, W, 8)", padded, count=3, on_device=device))))
-        kept_orders = Allocation(f"higher orders kept (D, H, W, {kept}) float64", cells * kept * f64,
-                                 count=orders - 1)
-        running = Allocation(f"running sum (D, H, W, {kept}) float64", cells * kept * f64)
-        # on the device: the gathered sum, the order just scattered and the next gather's input or output
-        loop_buffers = Allocation("padded tables (D, H, W, 8)", padded, count=3, on_device=device)
-        phases.append(Phase("orders", (
-            single, same_species, kept_orders, running, loop_buffers,
-            # the padded download of the order (dropped once copied), then the stopping test's copies
-            Allocation("order download or stopping test temporaries",
-                       max(padded, cells * kept * (f64 + 3))))))
-        phases.append(Phase("gathered download", (
-            single, same_species, kept_orders, running,
-            Allocation("padded tables (D, H, W, 8)", padded, count=2, on_device=device),
-            Allocation("gathered sum download (D, H, W, 8)", padded),
-            Allocation("gathered sum (D, H, W, 6) float64", cells * 6 * f64))))
+        if settings.mode == "physical":
+            phases.append(_first_gather_phase(settings))
+        phases.extend(_orders_phases(settings, orders))
     table = _table_held(settings, cells, orders, keep_orders=True)
-    combined_channels = 9 if physical and orders > 1 else 6
-    last = [Allocation(f"combined table (D, H, W, {combined_channels}) float64", cells * combined_channels * f64)]
-    if orders > 1 and physical:
-        last.append(Allocation(f"sum of the higher orders (D, H, W, {kept})", cells * kept * f64))
-    if settings.mie_layout == "notes":
-        last.append(Allocation("table in the notes' layout", cells * settings.channels * f64))
-    phases.append(Phase("combine", tuple(a for a in table if not a.label.startswith("table data")) + tuple(last)))
+    phases.append(_combine_phase(settings, table, orders))
     phases.append(Phase("table", table))
     if saving:
-        copies = [Allocation("order 1 as float32 (D, H, W, 6)", cells * 6 * 4)]
-        if orders > 1:
-            copies.append(Allocation(f"higher orders as float32 (D, H, W, {kept})", cells * kept * 4,
-                                     count=orders - 1))
-        phases.append(Phase("save", table + tuple(copies)))
-    if not device:
+        phases.append(_save_phase(settings, table, orders))
+    if backend != "opencl":
         phases = [Phase(p.name, tuple(dataclasses.replace(a, on_device=False) for a in p.allocations))
                   for p in phases]
     width, height, depth = settings.size
@@ -292,10 +247,97 @@ def estimate_table_memory(settings: TableSettings, backend="opencl", saving=Fals
                           tuple(phases))
 
 
+_F64 = 8   # bytes of a float64: the host keeps every table in float64
+
+
+def _single(cells):
+    return Allocation("single scattering (D, H, W, 6) float64", cells * 6 * _F64)
+
+
+def _kept_channels(settings):
+    """Channels of a higher order kept on the host: 3 phased (physical), 6 factored (atmosphere-plus)."""
+    return 3 if settings.mode == "physical" else 6
+
+
+def _single_phase(settings):
+    """The single-scattering table on the device and its download."""
+    cells, _, _, s = _table_sizes(settings)
+    allocations = [Allocation("single scattering (D, H, W, 6)", cells * 6 * s, on_device=True),
+                   Allocation("transmittance table", int(np.prod(settings.transmittance_size)) * 2 * s, on_device=True),
+                   Allocation("single scattering download (D, H, W, 6)", cells * 6 * s)]
+    if s != _F64:
+        allocations.append(_single(cells))
+    return Phase("single scattering", tuple(allocations))
+
+
+def _first_gather_phase(settings):
+    """The physical mode's first gather, same species then crossed, counted as one moment (an upper
+    bound): a (2, D, H, H) float64 matrix stack on the host and one on the device (the same-species
+    stack goes once its gather ran), single scattering and its swap, a staging copy and three padded
+    device tables."""
+    from .multiple import FIRST_GATHER_CHUNK
+
+    cells, height, depth, s = _table_sizes(settings)
+    stack = 2 * depth * height * height
+    padded = cells * 8 * s
+    return Phase("first gather", (
+        _single(cells), Allocation("swapped single scattering (D, H, W, 6)", cells * 6 * _F64),
+        Allocation("first-gather matrix stack (2, D, H, H) float64", stack * _F64),
+        Allocation("first-gather product temporary",
+                   FIRST_GATHER_CHUNK * height * (settings.gather_theta_steps + 1) * _F64),
+        Allocation("upload staging (D, H, W, 8)", padded),
+        Allocation("first-gather matrix stack (2, D, H, H)", stack * s, on_device=True),
+        Allocation("padded tables (D, H, W, 8)", padded, count=3, on_device=True)))
+
+
+def _orders_phases(settings, orders):
+    """The orders loop (at its last order) and the download of the gathered sum after it."""
+    cells, height, _, s = _table_sizes(settings)
+    kept = _kept_channels(settings)
+    padded = cells * 8 * s
+    common = (_single(cells),
+              Allocation("gather matrices (2, H, H)", 2 * height * height * s, on_device=True),
+              Allocation(f"higher orders kept (D, H, W, {kept}) float64", cells * kept * _F64, count=orders - 1),
+              Allocation(f"running sum (D, H, W, {kept}) float64", cells * kept * _F64))
+    return [
+        Phase("orders", common + (
+            # on the device: the gathered sum, the order just scattered, the next gather's input or output
+            Allocation("padded tables (D, H, W, 8)", padded, count=3, on_device=True),
+            # the padded download of the order (dropped once copied), then the stopping test's arrays
+            Allocation("order download or stopping test temporaries", max(padded, cells * kept * (_F64 + 3))))),
+        Phase("gathered download", common + (
+            Allocation("padded tables (D, H, W, 8)", padded, count=2, on_device=True),
+            Allocation("gathered sum download (D, H, W, 8)", padded),
+            Allocation("gathered sum (D, H, W, 6) float64", cells * 6 * _F64)))]
+
+
+def _combine_phase(settings, table, orders):
+    """The orders summed into the table's data, beside everything the built table holds."""
+    cells = _table_sizes(settings)[0]
+    kept = _kept_channels(settings)
+    combined = 9 if settings.mode == "physical" and orders > 1 else 6
+    allocations = [a for a in table if not a.label.startswith("table data")]
+    allocations.append(Allocation(f"combined table (D, H, W, {combined}) float64", cells * combined * _F64))
+    if orders > 1 and settings.mode == "physical":
+        allocations.append(Allocation(f"sum of the higher orders (D, H, W, {kept})", cells * kept * _F64))
+    if settings.mie_layout == "notes":
+        allocations.append(Allocation("table in the notes' layout", cells * settings.channels * _F64))
+    return Phase("combine", tuple(allocations))
+
+
+def _save_phase(settings, table, orders):
+    """:meth:`~clsky.table.ScatteringTable.save`: float32 copies of every order beside the table."""
+    cells = _table_sizes(settings)[0]
+    kept = _kept_channels(settings)
+    copies = [Allocation("order 1 as float32 (D, H, W, 6)", cells * 6 * 4)]
+    if orders > 1:
+        copies.append(Allocation(f"higher orders as float32 (D, H, W, {kept})", cells * kept * 4, count=orders - 1))
+    return Phase("save", table + tuple(copies))
+
+
 def _table_held(settings, cells, orders, keep_orders=True):
     """The host arrays of a built table: data, single scattering, gathered sum, higher orders."""
-    physical = settings.mode == "physical"
-    kept = 3 if physical else 6
+    kept = _kept_channels(settings)
     held = [Allocation(f"table data (D, H, W, {settings.channels}) float64", cells * settings.channels * 8),
             Allocation("single scattering (D, H, W, 6) float64", cells * 6 * 8)]
     if orders > 1:
