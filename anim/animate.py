@@ -27,15 +27,17 @@ import numpy as np
 import clsky
 from clsky._files import StagedWrites, check_output
 from clsky.errors import ParameterError, is_integer, is_real_number
-from clsky.planner import Plan, Scene, plan_scene
+from clsky.planner import Plan, Scene, plan_scene, sun_axis
 from clsky.quality import QUALITY_LEVELS, QualityLevel, level_for_budget, quality_level
 from clsky.render import SkyRenderer
+from clsky.resources import MemoryEstimate, check_memory, device_of, estimate_animation_memory
 
 from . import metrics, sunpath, tonemap, writers
 from .cameras import camera_from_name
 
 __all__ = ["AnimationConfig", "AnimationResult", "METHODS", "quality", "plan_animation", "build_table",
-           "ray_settings", "sun_positions", "check_outputs", "render_animation", "render_frame"]
+           "ray_settings", "sun_positions", "check_outputs", "render_animation", "render_frame",
+           "memory_estimate"]
 
 #: What is rendered: table lookup only, ray march only, or both with the comparison.
 METHODS = ("compare", "lut", "raymarch")
@@ -292,13 +294,40 @@ def plan_animation(config: AnimationConfig, positions, directions, valid, ctx=No
     error budget or quality; the ray march is planned for whenever the animation renders it."""
     if config.table_size is not None:
         return None
+    return plan_scene(_scene(config, positions, directions, valid), config.preset, config.mode, ctx=ctx,
+                      ray_march=config.method != "lut")
+
+
+def _scene(config: AnimationConfig, positions, directions, valid) -> Scene:
+    """The scene of the animation: its sun path, observer altitude, the view elevations of the valid
+    pixels' ``directions``, and its error budget or quality."""
     elevations = [90.0 - p.zenith_deg for p in positions]
     seen = np.degrees(np.arcsin(np.clip(directions[valid][:, 2], -1.0, 1.0)))
-    scene = Scene(sun_elevations_deg=(min(elevations), max(elevations)),
-                  altitudes_m=(config.altitude, config.altitude),
-                  view_elevations_deg=(float(seen.min()), float(seen.max())),
-                  error_budget=config.error_budget, quality=config.quality)
-    return plan_scene(scene, config.preset, config.mode, ctx=ctx, ray_march=config.method != "lut")
+    return Scene(sun_elevations_deg=(min(elevations), max(elevations)),
+                 altitudes_m=(config.altitude, config.altitude),
+                 view_elevations_deg=(float(seen.min()), float(seen.max())),
+                 error_budget=config.error_budget, quality=config.quality)
+
+
+def memory_estimate(config: AnimationConfig, positions) -> MemoryEstimate:
+    """Peak memory of the animation (:func:`clsky.resources.estimate_animation_memory`), from its
+    settings alone: no pilot, no full-size camera.
+
+    The table is the plan's sun axis (view elevations from the camera at 64 pixels, ray-march margins)
+    with the higher orders kept, an upper bound of the plan (whose pilot may drop them); with
+    ``table_size``, that full table.
+    """
+    level = quality(config)
+    if config.table_size is not None:
+        settings = level.table.replace(size=tuple(config.table_size), mode=config.mode)
+    else:
+        directions, valid = _camera(dataclasses.replace(config, size=64)).directions()
+        scene = _scene(config, positions, directions, valid)
+        cos_range, nodes, _, _ = sun_axis(clsky.preset(config.preset), scene, level, level.table.mapping)
+        settings = level.table.replace(mode=config.mode, size=level.table.size[:2] + (nodes,),
+                                       sun_cos_range=cos_range)
+    return estimate_animation_memory(settings, config.image_shape(), config.method,
+                                     ray_settings(config), hdr_output=config.hdr)
 
 
 def build_table(config: AnimationConfig, plan: Plan | None = None, ctx=None, progress=None) -> clsky.ScatteringTable:
@@ -391,21 +420,25 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
     ``progress(stage, done, total)`` is called for the table build ('single', 'orders') and for each
     frame ('frames'); ``report(text)`` receives the scene plan before the table is built.
 
-    Every output is checked first (:func:`check_outputs`), before the table is built. The MP4, the
-    frames and the metrics are written to temporary files and land together at the end (frames,
-    metrics, then the MP4; a forced run deletes the stale frames of an earlier, longer run): an
-    exception or an interruption leaves the earlier outputs as they were and no temporary file.
-    See :class:`clsky._files.StagedWrites` for a failure while the files are renamed.
+    Every output is checked first (:func:`check_outputs`), and the memory the animation needs
+    (:func:`memory_estimate`; InsufficientMemoryError when it does not fit the machine), before the
+    table is built. The MP4, the frames and the metrics are written to temporary files and land
+    together at the end (frames, metrics, then the MP4; a forced run deletes the stale frames of an
+    earlier, longer run): an exception or an interruption leaves the earlier outputs as they were and
+    no temporary file. See :class:`clsky._files.StagedWrites` for a failure while the files are renamed.
     """
     start = time.perf_counter()
     positions = sun_positions(config)
     check_outputs(config, len(positions))
+    check_memory(memory_estimate(config, positions), device=device_of(ctx))
     camera = _camera(config)
     directions, valid = camera.directions()
     plan = plan_animation(config, positions, directions, valid, ctx=ctx)
     if plan is not None and report is not None:
         report(plan.describe())
     table = build_table(config, plan, ctx=ctx, progress=progress)
+    # the frames need the data and the gathered sum only: let the higher orders (K - 1 tables) go
+    table = dataclasses.replace(table, orders=())
     renderer = SkyRenderer(table, ray_settings(config), ctx=ctx)
     prepared = renderer.prepare(directions, valid)
     had_frames_directory = config.frames_directory.is_dir()

@@ -139,8 +139,28 @@ def _config(args, **extra):
         raise clsky_cli.UsageError(clsky_cli.option_message(error, FIELD_OPTIONS)) from None
 
 
+def _memory_options(args, config):
+    """The options each part of an animation's memory comes from, for InsufficientMemoryError."""
+    if args.table_size is not None:
+        table = "--table-size " + " ".join(str(n) for n in args.table_size)
+    elif args.quality is not None:
+        table = f"--quality {args.quality}"
+    else:
+        table = f"--error-budget {args.error_budget:g}"
+    return {"table": table, "frames": f"--size {config.size}"}
+
+
+def _check_memory(args, config, positions):
+    """Refuse, before any work, an animation or frame that does not fit the machine (exit 2, one line)."""
+    from clsky.resources import check_memory, device_of
+
+    from .animate import memory_estimate
+
+    check_memory(memory_estimate(config, positions), device=device_of(), options=_memory_options(args, config))
+
+
 def run_animate(args):
-    from .animate import check_outputs, render_animation
+    from .animate import check_outputs, render_animation, sun_positions
 
     config = _config(args, frames=args.frames, start_elevation_deg=args.start_elevation,
                      max_elevation_deg=args.max_elevation,
@@ -151,6 +171,7 @@ def run_animate(args):
         check_outputs(config, option="--output")
     except (OSError, ValueError) as error:
         raise clsky_cli.UsageError(str(error)) from None
+    _check_memory(args, config, sun_positions(config))
     progress, close = clsky_cli.progress_bar(args.progress)
     try:
         result = render_animation(config, progress=progress, report=print)
@@ -161,6 +182,7 @@ def run_animate(args):
 
 
 def run_render(args):
+    import dataclasses
     import pathlib
 
     from clsky.render import SkyRenderer
@@ -179,13 +201,14 @@ def run_render(args):
         raise clsky_cli.UsageError(f"--output must end in .png, got {args.output!r}")
     clsky_cli.check_outputs([("--output", output)], args.force)
     config = _config(args)
+    position = SunPosition(90.0 - args.sun_elevation, args.sun_azimuth)
+    _check_memory(args, config, [position])
     camera = _camera(config)
     directions, valid = camera.directions()
-    position = SunPosition(90.0 - args.sun_elevation, args.sun_azimuth)
     plan = plan_animation(config, [position], directions, valid)
     if plan is not None:
         print(plan.describe())
-    table = build_table(config, plan)
+    table = dataclasses.replace(build_table(config, plan), orders=())   # the frame reads data and gathered only
     renderer = SkyRenderer(table, ray_settings(config))
     sun = sun_direction(90.0 - args.sun_elevation, args.sun_azimuth)
     hdr = render_frame(renderer, renderer.prepare(directions, valid), sun, config)

@@ -10,8 +10,9 @@
 __version__ = "0.1.0"
 
 from .atmosphere import PRESETS, AtmosphereParameters, preset  # noqa: E402
+from .resources import InsufficientMemoryError  # noqa: E402
 from .settings import TableSettings  # noqa: E402
 from .table import ScatteringTable, TableFormatError  # noqa: E402
 
 __all__ = ["AtmosphereParameters", "PRESETS", "preset", "TableSettings", "ScatteringTable",
-           "TableFormatError", "__version__"]
+           "TableFormatError", "InsufficientMemoryError", "__version__"]

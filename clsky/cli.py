@@ -287,6 +287,19 @@ def run_devices(args):
     return 0
 
 
+def _check_table_memory(args, settings):
+    """Refuse, before any work, a table (with its save) that does not fit the machine (exit 2, one line)."""
+    from .resources import check_memory, device_of, estimate_table_memory
+
+    if args.size is not None:
+        option = "--size " + " ".join(str(n) for n in args.size)
+    else:
+        option = f"--quality {args.quality}" if args.quality else None
+    check_memory(estimate_table_memory(settings, args.backend, saving=True),
+                 device=device_of(None, settings.dtype) if args.backend == "opencl" else None,
+                 options={"table": option})
+
+
 def run_table(args):
     import pathlib
 
@@ -300,6 +313,7 @@ def run_table(args):
         raise UsageError(f"--output must end in .npz, got {args.output!r}")
     raw = [("--raw", pathlib.Path(args.raw).with_suffix(s)) for s in (".bin", ".json")] if args.raw else []
     check_outputs([("--output", output)] + raw, args.force)
+    _check_table_memory(args, settings)
     progress, close = progress_bar(args.progress)
     start = time.perf_counter()
     try:

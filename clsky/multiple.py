@@ -38,7 +38,8 @@ from .settings import MAPPINGS, TableSettings
 from .transmittance import COMMON_SOURCES, quadrature_defines
 
 __all__ = ["gather_quadrature", "phase_azimuth_integrals", "gather_matrix", "gather_matrices",
-           "first_gather_matrices", "MultipleScatteringEngine", "SPECIES"]
+           "first_gather_matrices", "first_gather_matrix", "first_gather_stack", "DIRECT_PAIRS",
+           "CROSSED_PAIRS", "MultipleScatteringEngine", "SPECIES"]
 
 SPECIES = ("rayleigh", "mie")
 VECTOR_WIDTH = 8
@@ -152,17 +153,52 @@ def _gather_matrices(atmosphere, settings):
     return {s: _read_only(gather_matrix(atmosphere, settings, s)) for s in SPECIES}
 
 
+#: Species pairs (s, s') of the physical mode's first gather, as the two (2, D, H, H) stacks the gather
+#: kernel takes: same species (Rayleigh, Mie), then crossed (Rayleigh seeing Mie, Mie seeing Rayleigh).
+DIRECT_PAIRS = (("rayleigh", "rayleigh"), ("mie", "mie"))
+CROSSED_PAIRS = (("rayleigh", "mie"), ("mie", "rayleigh"))
+#: Sun nodes per matrix product in :func:`first_gather_matrix`: bounds its (nodes, H, Theta) temporary.
+FIRST_GATHER_CHUNK = 16
+
+
+def first_gather_matrix(atmosphere, settings, pair, out=None):
+    """M_{s,s'} of shape (D, H, H) for one species pair (s, s') (module docstring).
+
+    Computed FIRST_GATHER_CHUNK sun nodes at a time, into ``out`` if given (float64, (D, H, H)): the
+    temporary of the product is (chunk, H, Theta + 1) instead of (D, H, Theta + 1). Each sun node's matrix
+    is its own matrix product, so chunking changes no value.
+    """
+    p, weights, view, sun = _gather_parts(atmosphere, _quadrature_key(settings))
+    species, other = pair
+    depth, height = sun[other].shape[0], view[species].shape[0]
+    out = np.empty((depth, height, p.shape[1])) if out is None else out
+    factor = weights * sun[other] / (2.0 * math.pi)           # (D, Theta + 1)
+    for start in range(0, depth, FIRST_GATHER_CHUNK):
+        stop = min(start + FIRST_GATHER_CHUNK, depth)
+        np.matmul(view[species][None] * factor[start:stop, None, :], p, out=out[start:stop])
+    return out
+
+
+def first_gather_stack(atmosphere, settings, pairs):
+    """The (2, D, H, H) float64 stack of the first-gather matrices of two species pairs
+    (:data:`DIRECT_PAIRS` or :data:`CROSSED_PAIRS`), as :meth:`MultipleScatteringEngine.gather` takes it.
+
+    Not cached: 2 D H^2 x 8 bytes (0.87 GB at the high quality level's 32 x 256 x 414) is worth freeing
+    once uploaded rather than keeping for a next build of the same grid.
+    """
+    depth, height = settings.size[2], settings.size[1]
+    stack = np.empty((2, depth, height, height))
+    for index, pair in enumerate(pairs):
+        first_gather_matrix(atmosphere, settings, pair, out=stack[index])
+    return stack
+
+
 def first_gather_matrices(atmosphere, settings):
-    """{(s, s'): M_{s,s'} of shape (D, H, H)}: the physical mode's first gather (module docstring);
-    read-only, cached per grid and phase."""
-    return _first_gather_matrices(atmosphere, _quadrature_key(settings))
+    """{(s, s'): M_{s,s'} of shape (D, H, H)}: the physical mode's first gather (module docstring).
 
-
-@functools.lru_cache(maxsize=1)   # 4 x (D, H, H): 1.9 GB for a reference table (D = 922): keep one
-def _first_gather_matrices(atmosphere, settings):
-    p, weights, view, sun = _gather_parts(atmosphere, settings)
-    return {(s, s2): _read_only(np.matmul(view[s][None] * (weights * sun[s2] / (2.0 * math.pi))[:, None, :], p))
-            for s in SPECIES for s2 in SPECIES}
+    Not cached (4 D H^2 x 8 bytes); a build uses :func:`first_gather_stack`, one stack at a time.
+    """
+    return {pair: first_gather_matrix(atmosphere, settings, pair) for pair in DIRECT_PAIRS + CROSSED_PAIRS}
 
 
 class MultipleScatteringEngine(_cl.Engine):

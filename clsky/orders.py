@@ -43,7 +43,7 @@ import pyopencl as cl
 from . import _cl
 from .atmosphere import AtmosphereParameters
 from .errors import NumericalError
-from .multiple import SPECIES, first_gather_matrices, gather_matrices
+from .multiple import CROSSED_PAIRS, DIRECT_PAIRS, SPECIES, first_gather_stack, gather_matrices
 from .settings import TableSettings
 
 __all__ = ["OrdersResult", "compute_orders", "BRIGHT_FRACTION", "relative_addition", "check_finite"]
@@ -77,10 +77,22 @@ class OrdersResult:
     def combined(self, mode):
         """The table's channels: factored sum (atmosphere-plus), or single + sum of higher orders."""
         if mode == "atmosphere-plus":
-            return np.sum(self.orders, axis=0)
+            return _sum_in_order(self.orders)
         if len(self.orders) == 1:
             return self.orders[0]
-        return np.concatenate([self.orders[0], np.sum(self.orders[1:], axis=0)], axis=-1)
+        return np.concatenate([self.orders[0], _sum_in_order(self.orders[1:])], axis=-1)
+
+
+def _sum_in_order(tables):
+    """tables[0] + tables[1] + ... added one after the other, into one new array.
+
+    The same sums, in the same order, as ``np.sum(tables, axis=0)`` (a reduction over the outer axis
+    adds slice by slice), without that call's stacked copy of every table (K x the table's bytes).
+    """
+    total = np.array(tables[0], dtype=np.float64)
+    for table in tables[1:]:
+        total += table
+    return total
 
 
 def relative_addition(added, running_sum):
@@ -89,7 +101,10 @@ def relative_addition(added, running_sum):
     bright = (running_sum >= BRIGHT_FRACTION * peak) & (running_sum > 0)
     if not bright.any():
         return 0.0
-    return float(np.max(added[bright] / running_sum[bright]))
+    # the ratios of the bright cells in one array of the table's shape (0 elsewhere: every ratio is >= 0),
+    # instead of three copies of the bright cells
+    ratio = np.divide(added, running_sum, out=np.zeros(running_sum.shape), where=bright)
+    return float(np.max(ratio))
 
 
 def check_finite(order, k, atmosphere, settings):
@@ -138,14 +153,15 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
                                        (lambda done, total: progress("single", done, total)))
         device = _cl.describe_device(single_engine.device)
 
-        def gather(terms):
-            out = None
+        def gather(terms, out=None):
             for matrices, table in terms:
                 out = engine.gather(matrices, table, out=out, accumulate=out is not None)
             return out
 
         def to_host(gathered):
             return gathered.get()[..., :6].astype(np.float64)
+
+        kept = 3 if settings.mode == "physical" else 6    # channels of an order kept on the host
 
         upload = engine.upload_matrices
         copy_queue = cl.CommandQueue(engine.ctx)     # copies to the host overlap the next gather
@@ -158,7 +174,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
 
             def on_host():
                 copied.wait()
-                return host[..., :6].astype(np.float64)
+                return host[..., :kept].astype(np.float64)     # a copy: the padded buffer is dropped
 
             return new_d, on_host
     else:
@@ -169,8 +185,11 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         if progress is not None:
             progress("single", 1, 1)
 
-        def gather(terms):
-            return sum(reference.gather(matrices, table) for matrices, table in terms)
+        def gather(terms, out=None):
+            for matrices, table in terms:
+                term = reference.gather(matrices, table)
+                out = term if out is None else out + term
+            return out
 
         def to_host(gathered):
             return gathered
@@ -181,7 +200,8 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         def scatter(gathered):
             new = reference.scatter(atmosphere, settings, gathered)
             if settings.mode == "physical":
-                new = np.concatenate([new[..., :3] + new[..., 3:]] * 2, axis=-1)
+                phased = new[..., :3] + new[..., 3:]
+                return np.concatenate([phased] * 2, axis=-1), lambda: phased
             return new, lambda: new
 
     orders = [check_finite(single, 1, atmosphere, settings)]
@@ -193,30 +213,30 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         per_species = gather_matrices(atmosphere, settings)
         same_species = upload(np.stack([per_species[s] for s in SPECIES]))  # (2, H, H): channel c -> c // 3
         if settings.mode == "physical":
-            first = first_gather_matrices(atmosphere, settings)
-            direct = upload(np.stack([first[("rayleigh", "rayleigh")], first[("mie", "mie")]]))
-            crossed = upload(np.stack([first[("rayleigh", "mie")], first[("mie", "rayleigh")]]))
-            swapped = np.concatenate([single[..., 3:], single[..., :3]], axis=-1)
-            terms = [(direct, single), (crossed, swapped)]
+            # one (2, D, H, H) stack of per-sun-node matrices at a time on the host, dropped once on the
+            # device; the swapped single scattering lives only for its term
+            gathered = gather([(upload(first_gather_stack(atmosphere, settings, DIRECT_PAIRS)), single)])
+            gathered = gather([(upload(first_gather_stack(atmosphere, settings, CROSSED_PAIRS)),
+                                np.concatenate([single[..., 3:], single[..., :3]], axis=-1))], out=gathered)
             running = single[..., :3] + single[..., 3:]
         else:
-            terms = [(same_species, single)]
+            gathered = gather([(same_species, single)])
             running = single.copy()
-        gathered = gather(terms)
         for k in range(2, wanted + 1):
             if gathered_sum is None:
                 gathered_sum = gathered.copy()
             else:
                 gathered_sum += gathered
             next_input, on_host = scatter(gathered)
+            del gathered                  # summed and scattered: its (D, H, W, 8) buffer may go
             # gather the next order from the new one where it is (on the device for OpenCL) before
             # looking at it on the host, so that the copy and the stopping test overlap that work
             # (wasted once, when this order turns out to be the last)
             if k < wanted:
                 gathered = gather([(same_species, next_input)])
+            del next_input                # gathered: only its host copy is read from here on
             new = on_host()
-            if settings.mode == "physical":
-                new = new[..., :3]
+            del on_host                   # and the padded download buffer behind that copy
             orders.append(check_finite(new, k, atmosphere, settings))
             running += new
             additions.append(relative_addition(new, running))

@@ -15,8 +15,9 @@ import numpy as np
 import pyopencl.array as cla
 
 from . import _atmosphere_cl, _cl, reference
-from .lookup import check_kernel_buffer, check_table_data
 from .errors import as_real_array, is_real_number, short
+from .lookup import check_kernel_buffer, check_table_data
+from .resources import check_memory, device_of, estimate_directions_memory, estimate_render_memory
 from .settings import MAPPINGS, TableSettings
 from .table import ScatteringTable, check_table_array
 from .transmittance import COMMON_SOURCES, quadrature_defines, TransmittanceEngine
@@ -134,6 +135,12 @@ class SkyRenderer:
         sun_transmittance, transmittance_size, dtype); defaults to :data:`RAYMARCH_DEFAULTS`.
     ctx, fast_math
         See :class:`clsky._cl.Engine`.
+
+    Raises
+    ------
+    InsufficientMemoryError
+        When the table's device copies do not fit the device or the host
+        (:func:`clsky.resources.check_memory`; :meth:`prepare` checks a camera's buffers).
     """
 
     def __init__(self, table: ScatteringTable, ray_settings: TableSettings | None = None, ctx=None,
@@ -141,6 +148,8 @@ class SkyRenderer:
         check_render_table(table)
         self.table = table
         self.ray_settings = ray_settings or RAYMARCH_DEFAULTS.replace(dtype=table.settings.dtype)
+        check_memory(estimate_render_memory(table.settings, (0, 0), ray_settings=self.ray_settings,
+                                            count_table=False), device=device_of(ctx, self.ray_settings.dtype))
         self.engine = RenderEngine(self.ray_settings, ctx=ctx, fast_math=fast_math)
         self.queue = self.engine.queue
         dtype = self.engine.dtype
@@ -171,6 +180,7 @@ class SkyRenderer:
         """Upload a camera's directions (..., 3) once, for many frames: pass the result as ``directions``."""
         directions, _, _ = check_directions(directions, (0.0, 0.0, 1.0), 0.0)
         shape = directions.shape[:-1]
+        check_memory(estimate_directions_memory(int(np.prod(shape)), self.engine.dtype), device=self.engine.device)
         flat = np.ascontiguousarray(directions.reshape(-1, 3), dtype=self.engine.dtype)
         mask = np.ones(shape, dtype=bool) if valid is None else np.asarray(valid, dtype=bool)
         if mask.shape != shape:

@@ -91,4 +91,4 @@ class SingleScatteringEngine(_cl.Engine):
             if progress is not None:
                 event.wait()
                 progress(done, len(slabs))
-        return table_d.get().astype(np.float64)
+        return table_d.get().astype(np.float64, copy=False)   # no second copy of a float64 table

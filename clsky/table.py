@@ -246,6 +246,12 @@ class ScatteringTable:
         progress : callable, optional
             ``progress(stage, done, total)`` as the work advances (see :func:`clsky.orders.compute_orders`).
 
+        Raises
+        ------
+        InsufficientMemoryError
+            Before any work, when the build needs more memory than the host or device has
+            (:func:`clsky.resources.check_memory`).
+
         Examples
         --------
         >>> table = ScatteringTable.build("physical", TableSettings(size=(8, 16, 8), mode="physical"))
@@ -260,7 +266,10 @@ class ScatteringTable:
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
         from .orders import compute_orders
+        from .resources import check_memory, device_of, estimate_table_memory
 
+        check_memory(estimate_table_memory(settings, backend),
+                     device=device_of(ctx, settings.dtype) if backend == "opencl" else None)
         start = time.perf_counter()
         result = compute_orders(atmosphere, settings, backend=backend, ctx=ctx, fast_math=fast_math,
                                 progress=progress)

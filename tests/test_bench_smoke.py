@@ -28,6 +28,7 @@ HEADERS = {
     "bench_montecarlo": ["| mode (preset) | quadrature | altitude [m] | cos view | sun zenith [deg] | deviation [%] | "
                          "deviation [SE] |"],
     "bench_render": ["| render | best | median | frames/s (best) |"],
+    "bench_memory": ["| run | table (W x H x D) | measured peak | estimate | estimate / measured |"],
     "bench_accuracy": ["| candidate | knob | build [s] | render [ms] | p95 day [%] |"],
     "bench_quality": ["| level | promise | table | samples | build [s] | render [ms] | day [%] |",
                       "| doubled | day [%] |", "| table | sun axis | cells | build [s] | day [%] |"],

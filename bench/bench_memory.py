@@ -1,0 +1,128 @@
+"""Benchmark: peak memory (maximum resident set size) of the default animation and of the table of each
+quality level, measured against :mod:`clsky.resources`' estimate. Prints the table and writes it into
+README.md (section ``memory``).
+
+Each case runs the command line in a fresh process, one at a time, after a warm-up run that fills
+PyOpenCL's program cache (a first compile adds up to ~150 MiB of LLVM memory); the peak is that
+process' ``ru_maxrss``, read by a wrapper process of its own.
+
+Usage: python bench/bench_memory.py [--reference] [--no-readme] [--only NAME ...] [--smoke]
+
+``--smoke``: one table and one animation at bench/_report.py's SMOKE sizes, outputs in a temporary
+directory, the table printed only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
+
+from clsky import preset
+from clsky.resources import BASE_PROCESS_BYTES, estimate_table_memory, format_bytes
+
+#: Runs the command in argv[1:] and prints its peak RSS [KiB] (ru_maxrss of the only child).
+_WRAPPER = ("import resource, subprocess, sys; code = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL, "
+            "stderr=subprocess.DEVNULL).returncode; "
+            "print(code, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)")
+
+TABLE_ARGS = ["table", "--preset", "physical", "--mode", "physical", "--sun-elevations", "-6", "60",
+              "--progress", "none", "--force"]
+
+
+def smoke_cases():
+    """The cases of a ``--smoke`` run: one small table, one small animation (bench/_report.py)."""
+    size = [str(n) for n in SMOKE.table]
+    return [("table smoke", f"`clsky table --quality draft --size {' '.join(size)}`",
+             TABLE_ARGS + ["--quality", "draft", "--size", *size]),
+            ("frames smoke", f"`clsky animate --frames 2 --size {SMOKE.frame}`",
+             ["animate", "--frames", "2", "--size", str(SMOKE.frame), "--quality", "draft", "--table-size", *size,
+              "--progress", "none", "--force"])]
+
+
+def cases(reference=False):
+    """(name, description, clsky arguments without the output) of each measurement."""
+    levels = ["draft", "default", "high"] + (["reference"] if reference else [])
+    rows = [("animation", "`clsky animate` (defaults: 120 frames 512 x 512, compare, default quality)",
+             ["animate", "--progress", "none", "--force"])]
+    rows += [(f"table {level}", f"`clsky table --quality {level}` (physical, sun -6 to 60 deg)",
+              TABLE_ARGS + ["--quality", level]) for level in levels]
+    rows += [(f"frames {size}", f"`clsky animate --frames 2 --size {size}` (draft, table 16 x 64 x 16)",
+              ["animate", "--frames", "2", "--size", str(size), "--quality", "draft", "--table-size", "16", "64",
+               "16", "--progress", "none", "--force"]) for size in (256, 1024)]
+    return rows
+
+
+def peak_rss(arguments, output):
+    """(exit status, peak RSS [bytes], seconds) of ``clsky ARGUMENTS -o OUTPUT`` in a fresh process."""
+    command = [sys.executable, "-c", _WRAPPER, sys.executable, "-m", "anim", *arguments, "-o", output]
+    start = time.perf_counter()
+    result = subprocess.run(command, capture_output=True, text=True, check=True)
+    seconds = time.perf_counter() - start
+    code, kib = result.stdout.split()
+    return int(code), int(kib) * 1024, seconds
+
+
+def estimate(arguments):
+    """The estimated peak [bytes] of a case (arrays + :data:`BASE_PROCESS_BYTES`), and its table size."""
+    from anim import cli as anim_cli
+    from anim.animate import memory_estimate, sun_positions
+    from clsky import cli
+
+    parser, _ = cli.build_parser(extensions=(anim_cli.register,))
+    args = parser.parse_args(arguments + ["-o", "x.mp4" if arguments[0] == "animate" else "x.npz"])
+    if arguments[0] == "table":
+        settings = cli.table_settings(args, preset(args.preset))
+        result = estimate_table_memory(settings, saving=True)
+        size = settings.size
+    else:
+        config = anim_cli._config(args, frames=args.frames, start_elevation_deg=args.start_elevation,
+                                  max_elevation_deg=args.max_elevation, output="x.mp4")
+        result = memory_estimate(config, sun_positions(config))
+        size = result.what.rsplit("table ", 1)[1].rstrip(")")
+    return result.peak_bytes() + BASE_PROCESS_BYTES, size
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--reference", action="store_true", help="also the reference level (~6 min)")
+    parser.add_argument("--only", nargs="+", help="run only these cases (names as printed)")
+    parser.add_argument("--directory", default="/tmp/clsky_bench_memory", help="where outputs go")
+    add_output_arguments(parser)
+    args = parse_arguments(parser)
+    if args.smoke:
+        args.directory = tempfile.mkdtemp(prefix="clsky_bench_memory_")
+    os.makedirs(args.directory, exist_ok=True)
+    selected = [c for c in (smoke_cases() if args.smoke else cases(args.reference)) if not args.only or c[0] in args.only]
+    peak_rss(["table", "--size", "8", "16", "8", "--progress", "none", "--force"],
+             os.path.join(args.directory, "warm.npz"))
+    lines = [f"Peak resident memory (`ru_maxrss` of the whole process) measured {datetime.date.today()} on "
+             f"{machine()}, load average {os.getloadavg()[0]:.1f} at the start (a machine shared with other "
+             f"work: the times are not benchmarks), PyOpenCL's program cache warm. Estimate: "
+             f"`clsky.resources` (the arrays' peak, host and OpenCL buffers, one memory on a CPU device) + "
+             f"{format_bytes(BASE_PROCESS_BYTES)} for the process itself.", "",
+             "| run | table (W x H x D) | measured peak | estimate | estimate / measured | wall time [s] |",
+             "|---|---|---:|---:|---:|---:|"]
+    for name, description, arguments in selected:
+        suffix = ".mp4" if arguments[0] == "animate" else ".npz"
+        code, measured, seconds = peak_rss(arguments, os.path.join(args.directory, name.replace(" ", "_") + suffix))
+        if code != 0:
+            raise SystemExit(f"{name}: exit status {code}")
+        estimated, size = estimate(arguments)
+        size_text = " x ".join(str(n) for n in size) if isinstance(size, tuple) else size
+        lines.append(f"| {description} | {size_text} | {format_bytes(measured)} | {format_bytes(estimated)} | "
+                     f"{estimated / measured:.2f} | {seconds:.0f} |")
+        print(lines[-1], flush=True)
+    print("\n".join(lines))
+    if not args.no_readme:
+        write_readme_section("memory", "\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,539 @@
+"""Memory a request needs, against what the machine has: say "too big" before any work.
+
+A table build, a renderer and an animation allocate a few large arrays whose sizes follow from their
+settings. :func:`estimate_table_memory`, :func:`estimate_render_memory` and
+:func:`estimate_animation_memory` list them phase by phase (:class:`Phase`, :class:`Allocation`);
+:func:`check_memory` compares the peak with what the machine has and raises
+:class:`InsufficientMemoryError`, in one line that says how much is needed and how much there is.
+
+Three limits are checked, in this order:
+
+1. every OpenCL buffer against the device's ``max_mem_alloc_size`` (PoCL refuses a larger one with
+   CL_INVALID_BUFFER_SIZE);
+2. the OpenCL buffers alive at once against the device's ``global_mem_size`` (PoCL refuses an
+   allocation past it, ``total_alloc_limit``);
+3. the host's peak against the memory available now (``MemAvailable`` of /proc/meminfo, lowered to
+   what a cgroup v2 limit leaves; else ``sysconf`` free pages; unknown: not checked).
+
+On a CPU device (PoCL) and on devices that report ``host_unified_memory``, a buffer *is* host memory,
+allocated by the driver beside NumPy's arrays: the host check then counts the host arrays plus the
+buffers, each once (a host array and its device copy are two allocations). On a discrete GPU the two
+memories are separate and the host check counts the host arrays only.
+
+The estimate is of the arrays, not of the process: Python, NumPy, PyOpenCL and PoCL with its
+compiled programs add :data:`BASE_PROCESS_BYTES` (measured; up to about 150 MiB more while LLVM
+compiles a program that is not in PyOpenCL's disk cache), which is already resident when the check
+runs. An ``orders="auto"`` build is estimated at :func:`expected_orders` orders; each further order
+keeps one more (D, H, W, 3) (physical) or (D, H, W, 6) (atmosphere-plus) float64 table.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import pathlib
+
+import numpy as np
+
+from .settings import TableSettings
+
+__all__ = ["InsufficientMemoryError", "Allocation", "Phase", "MemoryEstimate", "MemoryLimits",
+           "estimate_table_memory", "estimate_render_memory", "estimate_animation_memory", "expected_orders",
+           "estimate_directions_memory", "machine_limits", "device_of", "check_memory", "host_available_bytes",
+           "format_bytes", "BASE_PROCESS_BYTES", "FRAME_BYTES_PER_PIXEL"]
+
+#: Resident memory of a process that imported clsky and built a small table with cached programs [bytes]
+#: (127 MiB measured, PoCL 3.1 on the 2-core development machine).
+BASE_PROCESS_BYTES = 130 * 2**20
+#: Ratio of an order's relative addition to the previous one's, for :func:`expected_orders`: the
+#: default table (tolerance 1e-4) converges at order 10, the high level (1e-5) at 12, draft (1e-2) at 5.
+ORDER_RATIO = 0.4
+#: Host bytes per pixel of one frame's processing beyond the directions, buffers and HDR frames, per
+#: method: tone map, 8-bit frames, metrics, error image, composite, PNG and MP4 encoding. Measured as
+#: the growth of peak RSS between 2-frame 256^2 and 1024^2 fisheye animations: 390 bytes per pixel in
+#: all (compare), 195 (lut), 203 (raymarch), of which the listed arrays are 147 and 123.
+FRAME_BYTES_PER_PIXEL = {"compare": 240, "lut": 80, "raymarch": 80}
+
+_GIB = 2**30
+
+
+class InsufficientMemoryError(ValueError):
+    """A request needs more memory than the machine has; the one-line message says how much of each."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Allocation:
+    """Arrays of one kind alive in a phase.
+
+    Attributes
+    ----------
+    label : str
+        What they hold, e.g. 'padded tables (D, H, W, 8)'.
+    nbytes : int
+        Bytes of one array [bytes].
+    count : int
+        How many such arrays are alive at once.
+    on_device : bool
+        An OpenCL buffer (else a NumPy array).
+    source : {'table', 'frames'}
+        The part of the request it grows with (names the option in messages).
+    """
+
+    label: str
+    nbytes: int
+    count: int = 1
+    on_device: bool = False
+    source: str = "table"
+
+    @property
+    def total(self) -> int:
+        """nbytes x count [bytes]."""
+        return int(self.nbytes) * int(self.count)
+
+
+@dataclasses.dataclass(frozen=True)
+class Phase:
+    """The arrays alive at one moment of the work (its local peak)."""
+
+    name: str
+    allocations: tuple
+
+    def bytes(self, on_device=None) -> int:
+        """Bytes of the host arrays (False), of the buffers (True) or of both (None)."""
+        return sum(a.total for a in self.allocations if on_device is None or a.on_device == on_device)
+
+
+@dataclasses.dataclass(frozen=True)
+class MemoryEstimate:
+    """The memory of a request, phase by phase.
+
+    Attributes
+    ----------
+    what : str
+        The request, for messages (e.g. 'the table 32 x 256 x 139').
+    phases : tuple of Phase
+    """
+
+    what: str
+    phases: tuple
+
+    @property
+    def host_bytes(self) -> int:
+        """Peak of the host (NumPy) arrays over the phases [bytes]."""
+        return max(p.bytes(False) for p in self.phases)
+
+    @property
+    def device_bytes(self) -> int:
+        """Peak of the OpenCL buffers alive at once [bytes]."""
+        return max(p.bytes(True) for p in self.phases)
+
+    @property
+    def largest_device_buffer(self) -> Allocation | None:
+        """The allocation with the largest single OpenCL buffer, or None without buffers."""
+        buffers = [a for p in self.phases for a in p.allocations if a.on_device]
+        return max(buffers, key=lambda a: a.nbytes) if buffers else None
+
+    def peak_bytes(self, unified=True) -> int:
+        """Peak of host arrays + buffers when they share one memory (``unified``), else of the host
+        arrays [bytes]; add :data:`BASE_PROCESS_BYTES` for the process' peak resident memory."""
+        return max(p.bytes(None if unified else False) for p in self.phases)
+
+    def peak_phase(self, unified=True, on_device=None) -> Phase:
+        """The phase of the peak (of both memories if ``unified``, else of ``on_device``'s)."""
+        kind = None if unified else bool(on_device)
+        return max(self.phases, key=lambda p: p.bytes(kind))
+
+
+@dataclasses.dataclass(frozen=True)
+class MemoryLimits:
+    """What the machine has (None: unknown, not checked).
+
+    Attributes
+    ----------
+    host_available : int or None
+        Host memory available now [bytes].
+    device_global : int or None
+        The device's ``global_mem_size`` [bytes].
+    device_max_alloc : int or None
+        The device's ``max_mem_alloc_size`` [bytes].
+    unified : bool
+        The device's buffers are host memory (CPU device, or ``host_unified_memory``).
+    device_name : str
+    """
+
+    host_available: int | None
+    device_global: int | None = None
+    device_max_alloc: int | None = None
+    unified: bool = True
+    device_name: str = "no OpenCL device"
+
+
+def format_bytes(nbytes) -> str:
+    """``nbytes`` in KiB, MiB, GiB or TiB with 3 significant digits, e.g. '2.10 GiB'.
+
+    >>> format_bytes(2.1 * 2**30), format_bytes(512 * 2**20), format_bytes(25.31 * 2**30)
+    ('2.10 GiB', '512 MiB', '25.3 GiB')
+    """
+    value = float(nbytes)
+    if value < 1024.0:
+        return f"{int(value)} bytes"
+    for unit in ("KiB", "MiB", "GiB", "TiB"):
+        value /= 1024.0
+        rounded = float(f"{value:.3g}")                 # 3 significant digits, before choosing the unit
+        if rounded < 1000.0 or unit == "TiB":
+            break
+    digits = max(0, 2 - int(math.floor(math.log10(rounded))))
+    return f"{rounded:.{digits}f} {unit}"
+
+
+def expected_orders(settings: TableSettings) -> int:
+    """Orders a build computes: ``settings.orders``, or for 'auto' the order at which ORDER_RATIO^k falls
+    below the tolerance (at least 2, at most ``max_orders``)."""
+    if settings.orders != "auto":
+        return settings.orders
+    estimate = math.ceil(math.log(settings.order_tolerance) / math.log(ORDER_RATIO))
+    return min(settings.max_orders, max(2, estimate))
+
+
+def _table_sizes(settings: TableSettings):
+    width, height, depth = settings.size
+    cells = width * height * depth
+    itemsize = np.dtype(settings.dtype).itemsize
+    return cells, height, depth, itemsize
+
+
+def estimate_table_memory(settings: TableSettings, backend="opencl", saving=False) -> MemoryEstimate:
+    """Peak memory of :meth:`clsky.table.ScatteringTable.build` with ``settings``.
+
+    Parameters
+    ----------
+    settings : TableSettings
+    backend : {'opencl', 'numpy'}
+        The NumPy twins hold their arrays on the host (counted as host arrays; a rough estimate).
+    saving : bool
+        Then :meth:`~clsky.table.ScatteringTable.save`: float32 copies of every order beside the table.
+
+    Returns
+    -------
+    MemoryEstimate
+        With N = W H D cells, s the kernels' bytes per value, K the orders (:func:`expected_orders`),
+        c = 3 channels kept per higher order (physical; 6 atmosphere-plus), phase by phase: the
+        single-scattering download (N 6 s, + N 6 8 if s != 8); the physical mode's first gather
+        (a (2, D, H, H) matrix stack on the host, 16 x 8 D H^2, one on the device, 16 s D H^2, single
+        scattering and its swap, 2 x N 6 8, a staging copy and three padded device tables,
+        4 x N 8 s); the
+        orders (K - 1 kept tables N c 8, the running sum N c 8, three padded device tables 3 x N 8 s,
+        the download N 8 s or else the stopping test's temporaries, 11 N c); the combination into the
+        table (N C 8) beside the gathered sum (N 6 8); with ``saving``, float32 copies of the orders.
+    """
+    cells, _, _, s = _table_sizes(settings)
+    orders = expected_orders(settings)
+    phases = [_single_phase(settings)]
+    if orders > 1:
+        if settings.mode == "physical":
+            phases.append(_first_gather_phase(settings))
+        phases.extend(_orders_phases(settings, orders))
+    table = _table_held(settings, cells, orders, keep_orders=True)
+    phases.append(_combine_phase(settings, table, orders))
+    phases.append(Phase("table", table))
+    if saving:
+        phases.append(_save_phase(settings, table, orders))
+    if backend != "opencl":
+        phases = [Phase(p.name, tuple(dataclasses.replace(a, on_device=False) for a in p.allocations))
+                  for p in phases]
+    width, height, depth = settings.size
+    return MemoryEstimate(f"the table {width} x {height} x {depth} ({settings.mode}, {settings.dtype})",
+                          tuple(phases))
+
+
+_F64 = 8   # bytes of a float64: the host keeps every table in float64
+
+
+def _single(cells):
+    return Allocation("single scattering (D, H, W, 6) float64", cells * 6 * _F64)
+
+
+def _kept_channels(settings):
+    """Channels of a higher order kept on the host: 3 phased (physical), 6 factored (atmosphere-plus)."""
+    return 3 if settings.mode == "physical" else 6
+
+
+def _single_phase(settings):
+    """The single-scattering table on the device and its download."""
+    cells, _, _, s = _table_sizes(settings)
+    allocations = [Allocation("single scattering (D, H, W, 6)", cells * 6 * s, on_device=True),
+                   Allocation("transmittance table", int(np.prod(settings.transmittance_size)) * 2 * s, on_device=True),
+                   Allocation("single scattering download (D, H, W, 6)", cells * 6 * s)]
+    if s != _F64:
+        allocations.append(_single(cells))
+    return Phase("single scattering", tuple(allocations))
+
+
+def _first_gather_phase(settings):
+    """The physical mode's first gather, same species then crossed, counted as one moment (an upper
+    bound): a (2, D, H, H) float64 matrix stack on the host and one on the device (the same-species
+    stack goes once its gather ran), single scattering and its swap, a staging copy and three padded
+    device tables."""
+    from .multiple import FIRST_GATHER_CHUNK
+
+    cells, height, depth, s = _table_sizes(settings)
+    stack = 2 * depth * height * height
+    padded = cells * 8 * s
+    return Phase("first gather", (
+        _single(cells), Allocation("swapped single scattering (D, H, W, 6)", cells * 6 * _F64),
+        Allocation("first-gather matrix stack (2, D, H, H) float64", stack * _F64),
+        Allocation("first-gather product temporary",
+                   FIRST_GATHER_CHUNK * height * (settings.gather_theta_steps + 1) * _F64),
+        Allocation("upload staging (D, H, W, 8)", padded),
+        Allocation("first-gather matrix stack (2, D, H, H)", stack * s, on_device=True),
+        Allocation("padded tables (D, H, W, 8)", padded, count=3, on_device=True)))
+
+
+def _orders_phases(settings, orders):
+    """The orders loop (at its last order) and the download of the gathered sum after it."""
+    cells, height, _, s = _table_sizes(settings)
+    kept = _kept_channels(settings)
+    padded = cells * 8 * s
+    common = (_single(cells),
+              Allocation("gather matrices (2, H, H)", 2 * height * height * s, on_device=True),
+              Allocation(f"higher orders kept (D, H, W, {kept}) float64", cells * kept * _F64, count=orders - 1),
+              Allocation(f"running sum (D, H, W, {kept}) float64", cells * kept * _F64))
+    return [
+        Phase("orders", common + (
+            # on the device: the gathered sum, the order just scattered, the next gather's input or output
+            Allocation("padded tables (D, H, W, 8)", padded, count=3, on_device=True),
+            # the padded download of the order (dropped once copied), then the stopping test's arrays
+            Allocation("order download or stopping test temporaries", max(padded, cells * kept * (_F64 + 3))))),
+        Phase("gathered download", common + (
+            Allocation("padded tables (D, H, W, 8)", padded, count=2, on_device=True),
+            Allocation("gathered sum download (D, H, W, 8)", padded),
+            Allocation("gathered sum (D, H, W, 6) float64", cells * 6 * _F64)))]
+
+
+def _combine_phase(settings, table, orders):
+    """The orders summed into the table's data, beside everything the built table holds."""
+    cells = _table_sizes(settings)[0]
+    kept = _kept_channels(settings)
+    combined = 9 if settings.mode == "physical" and orders > 1 else 6
+    allocations = [a for a in table if not a.label.startswith("table data")]
+    allocations.append(Allocation(f"combined table (D, H, W, {combined}) float64", cells * combined * _F64))
+    if orders > 1 and settings.mode == "physical":
+        allocations.append(Allocation(f"sum of the higher orders (D, H, W, {kept})", cells * kept * _F64))
+    if settings.mie_layout == "notes":
+        allocations.append(Allocation("table in the notes' layout", cells * settings.channels * _F64))
+    return Phase("combine", tuple(allocations))
+
+
+def _save_phase(settings, table, orders):
+    """:meth:`~clsky.table.ScatteringTable.save`: float32 copies of every order beside the table."""
+    cells = _table_sizes(settings)[0]
+    kept = _kept_channels(settings)
+    copies = [Allocation("order 1 as float32 (D, H, W, 6)", cells * 6 * 4)]
+    if orders > 1:
+        copies.append(Allocation(f"higher orders as float32 (D, H, W, {kept})", cells * kept * 4, count=orders - 1))
+    return Phase("save", table + tuple(copies))
+
+
+def _table_held(settings, cells, orders, keep_orders=True):
+    """The host arrays of a built table: data, single scattering, gathered sum, higher orders."""
+    kept = _kept_channels(settings)
+    held = [Allocation(f"table data (D, H, W, {settings.channels}) float64", cells * settings.channels * 8),
+            Allocation("single scattering (D, H, W, 6) float64", cells * 6 * 8)]
+    if orders > 1:
+        held.append(Allocation("gathered sum (D, H, W, 6) float64", cells * 6 * 8))
+        if keep_orders:
+            held.append(Allocation(f"higher orders kept (D, H, W, {kept}) float64", cells * kept * 8,
+                                   count=orders - 1))
+    return tuple(held)
+
+
+def estimate_render_memory(settings: TableSettings, image_shape, method="compare",
+                           ray_settings: TableSettings | None = None, keep_orders=False,
+                           hdr_output=False, count_table=True) -> MemoryEstimate:
+    """Peak memory of rendering frames of ``image_shape`` from a table of ``settings``.
+
+    Parameters
+    ----------
+    settings : TableSettings
+        The table's (its host arrays are counted as held: :func:`estimate_table_memory`'s last phase).
+    image_shape : (width, height)
+        Pixels of a frame (0 x 0: the renderer's table upload only).
+    method : {'compare', 'lut', 'raymarch'}
+        What each frame renders (:mod:`anim.animate`).
+    ray_settings : TableSettings, optional
+        The ray march's quadrature (its transmittance table); default :data:`clsky.render.RAYMARCH_DEFAULTS`.
+    keep_orders : bool
+        Whether the table still holds its higher orders (``clsky render``; an animation drops them).
+    hdr_output : bool
+        Also a float32 HDR copy per frame for the .npy files.
+    count_table : bool
+        Count the table's host arrays (False where the table exists already, e.g. in
+        :class:`clsky.render.SkyRenderer`: the memory available then no longer includes them).
+
+    Returns
+    -------
+    MemoryEstimate
+        The table held on the host, its device copy (N C s) and padded gathered sum (N 8 s), and per
+        pixel: directions (24 bytes host, 3 s device), the mask, the output buffer (3 s device, 3 s
+        host), the HDR frames (24 bytes each) and :data:`FRAME_BYTES_PER_PIXEL` of frame processing.
+    """
+    from .render import RAYMARCH_DEFAULTS
+
+    ray_settings = ray_settings or RAYMARCH_DEFAULTS
+    cells, _, _, s = _table_sizes(settings)
+    orders = expected_orders(settings)
+    width, height = image_shape
+    pixels = int(width) * int(height)
+    held = _table_held(settings, cells, orders, keep_orders) if count_table else ()
+    gathered = cells * 8 * s if orders > 1 else 2 * 2 * 2 * 8 * s
+    upload = (Allocation(f"table data on the device (D, H, W, {settings.channels})", cells * settings.channels * s,
+                         on_device=True),
+              Allocation("padded gathered sum on the device (D, H, W, 8)", gathered, on_device=True),
+              Allocation("ray-march transmittance table", int(np.prod(ray_settings.transmittance_size)) * 2 * s,
+                         on_device=True))
+    phases = [Phase("renderer", held + upload + (Allocation("upload staging (D, H, W, 8)", gathered),))]
+    if pixels:
+        frames = 2 if method == "compare" else 1
+        per_pixel = (
+            Allocation("ray directions (pixels, 3) float64", pixels * 24, source="frames"),
+            Allocation("pixel mask", pixels * 2, source="frames"),
+            Allocation("ray directions on the device (pixels, 3)", pixels * 3 * s, on_device=True, source="frames"),
+            Allocation("pixel mask on the device", pixels, on_device=True, source="frames"),
+            Allocation("frame output on the device (pixels, 3)", pixels * 3 * s, on_device=True, source="frames"),
+            Allocation("frame download (pixels, 3)", pixels * 3 * s, source="frames"),
+            Allocation("HDR frames (pixels, 3) float64", pixels * 24, count=frames, source="frames"),
+            Allocation("frame processing (tone map, metrics, composite, encoding)",
+                       pixels * (FRAME_BYTES_PER_PIXEL[method] + (12 if hdr_output else 0)), source="frames"))
+        phases.append(Phase("frames", held + upload + per_pixel))
+    w, h, d = settings.size
+    return MemoryEstimate(f"rendering {width} x {height} frames from the table {w} x {h} x {d}", tuple(phases))
+
+
+def estimate_directions_memory(pixels, dtype="float64") -> MemoryEstimate:
+    """What :meth:`clsky.render.SkyRenderer.prepare` and a frame add for ``pixels`` directions: their
+    device copy (3 s each), the mask and one output buffer (3 s), and the download (3 s)."""
+    s = np.dtype(dtype).itemsize
+    pixels = int(pixels)
+    return MemoryEstimate(f"{pixels} ray directions", (Phase("frame", (
+        Allocation("ray directions on the device (pixels, 3)", pixels * 3 * s, on_device=True, source="frames"),
+        Allocation("pixel mask on the device", pixels, on_device=True, source="frames"),
+        Allocation("frame output on the device (pixels, 3)", pixels * 3 * s, on_device=True, source="frames"),
+        Allocation("frame download (pixels, 3)", pixels * 3 * s, source="frames"))),))
+
+
+def estimate_animation_memory(settings: TableSettings, image_shape, method="compare",
+                              ray_settings: TableSettings | None = None, hdr_output=False) -> MemoryEstimate:
+    """The table build, then the frames (:func:`estimate_table_memory`, :func:`estimate_render_memory`
+    without the higher orders, which an animation drops once the table is built)."""
+    build = estimate_table_memory(settings)
+    render = estimate_render_memory(settings, image_shape, method, ray_settings, keep_orders=False,
+                                    hdr_output=hdr_output)
+    width, height = image_shape
+    w, h, d = settings.size
+    return MemoryEstimate(f"the animation ({width} x {height} frames, table {w} x {h} x {d})",
+                          build.phases + render.phases)
+
+
+def host_available_bytes() -> int | None:
+    """Host memory available now [bytes]: MemAvailable (/proc/meminfo), lowered to what a cgroup v2
+    memory limit leaves; else free pages (sysconf); None if unknown."""
+    available = None
+    try:
+        for line in pathlib.Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                available = int(line.split()[1]) * 1024
+                break
+    except (OSError, ValueError, IndexError):
+        available = None
+    if available is None:
+        try:
+            available = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+        except (ValueError, OSError, AttributeError):
+            available = None
+    try:
+        limit = pathlib.Path("/sys/fs/cgroup/memory.max").read_text().strip()
+        if limit != "max":
+            used = int(pathlib.Path("/sys/fs/cgroup/memory.current").read_text().strip())
+            left = max(0, int(limit) - used)
+            available = left if available is None else min(available, left)
+    except (OSError, ValueError):
+        pass
+    return available
+
+
+def device_of(ctx=None, dtype="float64"):
+    """The device work on ``ctx`` (default: clsky's shared context, :func:`clsky._cl.make_context`) runs on."""
+    from . import _cl
+
+    return (ctx if ctx is not None else _cl.make_context(np.dtype(dtype))).devices[0]
+
+
+def machine_limits(device=None) -> MemoryLimits:
+    """The host's available memory and ``device``'s (a pyopencl.Device, or None: no device) limits."""
+    host = host_available_bytes()
+    if device is None:
+        return MemoryLimits(host)
+    import pyopencl as cl
+
+    unified = bool(device.type & cl.device_type.CPU)
+    try:
+        unified = unified or bool(device.host_unified_memory)
+    except (cl.Error, AttributeError):
+        pass
+    return MemoryLimits(host, int(device.global_mem_size), int(device.max_mem_alloc_size), unified,
+                        device.name.strip())
+
+
+def _largest(allocations):
+    return max(allocations, key=lambda a: a.total)
+
+
+def _prefix(allocation, options):
+    option = (options or {}).get(allocation.source)
+    return f"{option}: " if option else ""
+
+
+def check_memory(estimate: MemoryEstimate, limits: MemoryLimits | None = None, device=None, options=None):
+    """Raise InsufficientMemoryError if ``estimate`` does not fit ``limits``.
+
+    Parameters
+    ----------
+    estimate : MemoryEstimate
+    limits : MemoryLimits, optional
+        Default :func:`machine_limits` of ``device``.
+    device : pyopencl.Device, optional
+        The device the work will run on (None: host memory only).
+    options : dict, optional
+        {'table': ..., 'frames': ...}: the command-line option each part of the request comes from;
+        the message starts with the one of the largest allocation.
+
+    Raises
+    ------
+    InsufficientMemoryError
+        One line: what needs how much, and how much there is (3 significant digits).
+    """
+    limits = limits or machine_limits(device)
+    largest = estimate.largest_device_buffer
+    if largest is not None and limits.device_max_alloc is not None and largest.nbytes > limits.device_max_alloc:
+        raise InsufficientMemoryError(
+            f"{_prefix(largest, options)}{estimate.what} needs an OpenCL buffer of {format_bytes(largest.nbytes)} "
+            f"({largest.label}); the device {limits.device_name} allows {format_bytes(limits.device_max_alloc)} "
+            f"per buffer (max_mem_alloc_size)")
+    if limits.device_global is not None and estimate.device_bytes > limits.device_global:
+        phase = estimate.peak_phase(unified=False, on_device=True)
+        biggest = _largest([a for a in phase.allocations if a.on_device])
+        raise InsufficientMemoryError(
+            f"{_prefix(biggest, options)}{estimate.what} needs {format_bytes(estimate.device_bytes)} of OpenCL "
+            f"buffers at once ({biggest.label}: {format_bytes(biggest.total)}); the device {limits.device_name} "
+            f"has {format_bytes(limits.device_global)} (global_mem_size)")
+    need = estimate.peak_bytes(limits.unified)
+    if limits.host_available is not None and need > limits.host_available:
+        phase = estimate.peak_phase(limits.unified)
+        biggest = _largest([a for a in phase.allocations if limits.unified or not a.on_device])
+        where = ("host arrays and OpenCL buffers, one memory on this CPU device" if limits.unified
+                 else "host arrays")
+        raise InsufficientMemoryError(
+            f"{_prefix(biggest, options)}{estimate.what} needs {format_bytes(need)} of memory ({where}; "
+            f"most: {biggest.label}, {format_bytes(biggest.total)}); {format_bytes(limits.host_available)} "
+            f"is available")
