@@ -166,7 +166,7 @@ class SkyRenderer:
         sun4 = _real4(real4, sun)
         disc = _real4(real4, sun_disc_radiance(self.table.atmosphere, sun, altitude))
         out_d = cla.empty(self.queue, (max(n, 1), 3), self.engine.dtype)
-        kernel = self.engine.kernels[name]
+        kernel = self.engine.kernels_with(_atmosphere_cl.feature_defines(self.table.atmosphere))[name]
         kernel(self.queue, (-(-n // VECTOR_WIDTH),), None, self._atmosphere_d, *extra_args, np.int32(n),
                directions_d.data, directions.valid.data, sun4, self.engine.real(altitude), disc,
                self.engine.real(self._cos_sun_radius), out_d.data)
