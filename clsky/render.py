@@ -52,7 +52,8 @@ def check_directions(directions, sun_direction, altitude):
 def sun_disc_radiance(atmosphere, sun_direction, altitude, steps=512):
     """Radiance of the sun disc seen from ``altitude``: I_I T_sun / Omega_sun (r, g, b).
 
-    T_sun is the transmittance along the sun ray (Keller & Bohn trapezoid with ``steps`` steps); 0
+    T_sun is the transmittance along the sun ray (every species, ozone included:
+    :func:`clsky.reference.transmittance`; Keller & Bohn trapezoid with ``steps`` steps); 0
     when the sun is below the horizon (its ray hits the planet). Omega_sun = 2 pi (1 - cos 0.2665 deg).
     """
     rp, ra = atmosphere.planet_radius, atmosphere.top_radius
