@@ -86,8 +86,8 @@ def cross_section_serdyuchenko2014(wavelengths_nm):
 
     Examples
     --------
-    >>> cross_section_serdyuchenko2014([650, 510, 475])
-    array([2.45e-25, 1.541e-25, 4.924e-26])
+    >>> (cross_section_serdyuchenko2014([650, 510, 475]) * 1e25).round(4).tolist()    # [1e-25 m^2]
+    [2.45, 1.541, 0.4924]
     """
     low, high, sigma = cross_section_table()
     centres = 0.5 * (low + high)

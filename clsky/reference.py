@@ -23,7 +23,7 @@ from .settings import TableSettings
 
 __all__ = [
     "horizon_cos", "distance_to_top", "distance_to_ground", "altitude_along",
-    "quadrature_nodes", "column_density", "optical_depth", "transmittance",
+    "quadrature_nodes", "densities", "column_density", "optical_depth", "transmittance",
     "transmittance_table", "column_density_from_table", "single_scattering", "enter_atmosphere",
     "lookup", "gather", "trilinear", "scatter", "render_table", "render_raymarch",
 ]
