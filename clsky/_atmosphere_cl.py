@@ -1,7 +1,8 @@
 """The atmosphere as the kernels see it: one ``atmosphere_t`` struct in a ``__constant`` buffer.
 
 The C declaration is generated from the NumPy dtype (``pyopencl.tools.match_dtype_to_c_struct``), so
-the two can never drift apart.
+the two can never drift apart. The ozone fields come last, so that the fields before them keep their
+offsets; the kernels read them only when built with ``-DOZONE`` (:func:`feature_defines`).
 """
 
 from __future__ import annotations
@@ -30,7 +31,16 @@ def _fields(dtype):
         ("mie_g", real),                   # Cornette-Shanks g, notes' sign convention
         ("rayleigh_phase", np.int32),      # index into RAYLEIGH_PHASE_METHODS
         ("mie_phase", np.int32),           # index into MIE_PHASE_METHODS
+        ("ozone_extinction", real4),       # sigma_O3 n_max for r, g, b (.w = 0) [1/m], at the tent's peak
+        ("ozone_peak_altitude", real),     # tent peak [m]
+        ("ozone_half_width", real),        # tent half width [m]
     )
+
+
+def feature_defines(atmosphere: AtmosphereParameters) -> list[str]:
+    """The compile-time features of ``atmosphere``: ``-DOZONE=1`` when it has ozone, else none (the
+    program is then the ozone-free one)."""
+    return ["-DOZONE=1"] if atmosphere.has_ozone else []
 
 
 def declaration(device, dtype) -> _cl.Source:
@@ -54,5 +64,8 @@ def to_device(queue, atmosphere: AtmosphereParameters, dtype):
     record["mie_g"] = atmosphere.mie_g
     record["rayleigh_phase"] = RAYLEIGH_PHASE_METHODS[atmosphere.rayleigh_phase]
     record["mie_phase"] = MIE_PHASE_METHODS[atmosphere.mie_phase]
+    record["ozone_extinction"] = tuple(atmosphere.ozone_extinction) + (0.0,)
+    record["ozone_peak_altitude"] = atmosphere.ozone_peak_altitude
+    record["ozone_half_width"] = atmosphere.ozone_half_width
     mf = cl.mem_flags
     return cl.Buffer(queue.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=record)

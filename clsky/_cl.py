@@ -322,6 +322,20 @@ class Engine:
         self.events: list = []
         self.program = build_program(self.ctx, self.program_sources(), self.build_options())
         self.kernels = {k.function_name: k for k in self.program.all_kernels()}
+        self._feature_kernels: dict = {}
+
+    def kernels_with(self, defines=()):
+        """The kernels of this engine's program built with the extra ``-D`` options ``defines`` (an
+        atmosphere's compile-time features, e.g. ``-DOZONE=1``; see
+        ``clsky._atmosphere_cl.feature_defines``): :attr:`kernels` itself when there are none. Each
+        variant is built once (in-process program cache) and its kernels fetched once."""
+        if not defines:
+            return self.kernels
+        key = tuple(sorted(defines))
+        if key not in self._feature_kernels:
+            program = build_program(self.ctx, self.program_sources(), self.build_options() + list(key))
+            self._feature_kernels[key] = {k.function_name: k for k in program.all_kernels()}
+        return self._feature_kernels[key]
 
     def program_sources(self):
         return self.sources
@@ -349,6 +363,7 @@ class Engine:
     def close(self):
         self.queue.finish()
         self.kernels = {}
+        self._feature_kernels = {}
 
     def __enter__(self):
         return self

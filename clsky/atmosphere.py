@@ -1,12 +1,14 @@
 """Atmosphere parameters: a validated, immutable description of the planet, its air and its sun.
 
-Two presets share one atmosphere and differ only in the Rayleigh phase function:
+Two presets share one atmosphere of air and haze:
 
 ``atmosphere-plus``
     The constants of the Atmosphere Plus notes (after Elek 2009) with the notes' *modified* Rayleigh
-    phase 0.8 (7/5 + c^2/2), an artistic choice whose mean over the sphere is 1.2533, not 1.
+    phase 0.8 (7/5 + c^2/2), an artistic choice whose mean over the sphere is 1.2533, not 1. No ozone.
 ``physical``
-    The same atmosphere with the true Rayleigh phase 3/4 (1 + c^2).
+    The same air with the true Rayleigh phase 3/4 (1 + c^2) and ozone: Bruneton 2017's tent (10 to
+    40 km, peak at 25 km) holding 300 Dobson units, cross-sections of Serdyuchenko et al. 2014
+    (:mod:`clsky.ozone`).
 
 All lengths are in metres, scattering coefficients in 1/m, wavelengths in nanometres.
 
@@ -29,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from .errors import ParameterError, is_real_number
+from .ozone import DOBSON_UNIT, cross_section_serdyuchenko2014
 
 __all__ = [
     "AtmosphereParameters",
@@ -91,6 +94,14 @@ MAX_VERTICAL_OPTICAL_DEPTH = 1e3
 FLOAT32_MAX_PLANET_RADIUS = 1e8
 FLOAT32_MIN_HEIGHT_FRACTION = 1e-6
 
+#: Default r, g, b wavelengths [nm] and their O3 cross-sections [m^2] (:mod:`clsky.ozone`).
+DEFAULT_WAVELENGTHS = (650.0, 510.0, 475.0)
+DEFAULT_OZONE_CROSS_SECTION = tuple(float(v) for v in cross_section_serdyuchenko2014(DEFAULT_WAVELENGTHS))
+#: The ozone fields and their defaults (Bruneton 2017's tent, no column): see :meth:`AtmosphereParameters.to_dict`.
+OZONE_DEFAULTS = {"ozone_column_du": 0.0, "ozone_peak_altitude": 25_000.0, "ozone_half_width": 15_000.0,
+                  "ozone_cross_section": DEFAULT_OZONE_CROSS_SECTION}
+
+
 
 def _as_rgb(name: str, value) -> tuple[float, float, float]:
     items = tuple(value) if isinstance(value, (tuple, list, np.ndarray)) else None
@@ -135,6 +146,16 @@ class AtmosphereParameters:
         Factors of the incident light, >= 0.
     exposure : float
         Exposure factor of the incident light, > 0.
+    ozone_column_du : float
+        Ozone column [Dobson units, 1 DU = 2.687e20 molecules/m^2], >= 0; 0 (the default) is no ozone,
+        and the kernels are then built without it (bit-for-bit the ozone-free program).
+    ozone_peak_altitude, ozone_half_width : float
+        The tent profile n_O3(h) = n_max max(0, 1 - |h - peak| / half_width) [m]; half_width > 0 and
+        peak >= half_width (the tent lies above the ground, so its column is n_max half_width). Ozone
+        above the top of the atmosphere is ignored.
+    ozone_cross_section : tuple of 3 floats
+        O3 absorption cross-section sigma at the three wavelengths [m^2], >= 0; defaults to
+        Serdyuchenko et al. (2014) at 650, 510, 475 nm (:func:`clsky.ozone.cross_section_serdyuchenko2014`).
 
     Raises
     ------
@@ -168,12 +189,18 @@ class AtmosphereParameters:
     solar_irradiance: tuple = (0.1526, 0.191, 0.208)
     spectral_to_rgb: tuple = (133.3209, 88.51855, 112.7552)
     exposure: float = 1.0
+    ozone_column_du: float = 0.0
+    ozone_peak_altitude: float = 25_000.0
+    ozone_half_width: float = 15_000.0
+    ozone_cross_section: tuple = DEFAULT_OZONE_CROSS_SECTION
 
     def __post_init__(self):
-        for name in ("rayleigh_scattering", "wavelengths", "solar_irradiance", "spectral_to_rgb"):
+        for name in ("rayleigh_scattering", "wavelengths", "solar_irradiance", "spectral_to_rgb",
+                     "ozone_cross_section"):
             object.__setattr__(self, name, _as_rgb(name, getattr(self, name)))
         for name in ("planet_radius", "top_radius", "rayleigh_scale_height", "mie_scale_height",
-                     "mie_scattering", "mie_extinction_ratio", "mie_g", "exposure"):
+                     "mie_scattering", "mie_extinction_ratio", "mie_g", "exposure", "ozone_column_du",
+                     "ozone_peak_altitude", "ozone_half_width"):
             value = getattr(self, name)
             if not _is_real_number(value):
                 raise ParameterError(name, "a real number", value)
@@ -203,6 +230,11 @@ class AtmosphereParameters:
         check("solar_irradiance", lambda v: np.all(v >= 0), "finite and >= 0")
         check("spectral_to_rgb", lambda v: np.all(v >= 0), "finite and >= 0")
         check("exposure", lambda v: v > 0, "finite and > 0")
+        check("ozone_column_du", lambda v: v >= 0, "finite and >= 0 DU")
+        check("ozone_half_width", lambda v: v > 0, "finite and > 0 m")
+        check("ozone_peak_altitude", lambda v: v >= self.ozone_half_width,
+              f"finite and >= ozone_half_width ({self.ozone_half_width:g} m): the tent must lie above the ground")
+        check("ozone_cross_section", lambda v: np.all(v >= 0), "finite and >= 0 m^2")
         self._check_optical_depth()
         if not isinstance(self.rayleigh_phase, str) or self.rayleigh_phase not in RAYLEIGH_PHASE_METHODS:
             raise ParameterError("rayleigh_phase", f"one of {sorted(RAYLEIGH_PHASE_METHODS)}", self.rayleigh_phase)
@@ -214,9 +246,12 @@ class AtmosphereParameters:
         :data:`MAX_VERTICAL_OPTICAL_DEPTH` (beyond it, quadratures of 30 steps amplify and overflow)."""
         rayleigh = np.array(self.rayleigh_scattering) * _column(self.rayleigh_scale_height, self.atmosphere_height)
         mie = self.mie_extinction * _column(self.mie_scale_height, self.atmosphere_height)
-        depth = float(np.max(rayleigh + mie))
+        ozone = np.array(self.ozone_cross_section) * self.ozone_column_du * DOBSON_UNIT   # the whole tent's column
+        depth = float(np.max(rayleigh + mie + ozone))
         if depth > MAX_VERTICAL_OPTICAL_DEPTH:
-            name = "mie_scattering" if mie > np.max(rayleigh) else "rayleigh_scattering"
+            largest = max((np.max(ozone), "ozone_column_du"), (mie, "mie_scattering"),
+                          (np.max(rayleigh), "rayleigh_scattering"))
+            name = largest[1]
             raise ParameterError(name, f"small enough for a vertical optical depth <= {MAX_VERTICAL_OPTICAL_DEPTH:g} "
                                        f"(the range the quadratures are tested for; here {depth:.3g})",
                                  getattr(self, name))
@@ -249,6 +284,23 @@ class AtmosphereParameters:
         return self.mie_scattering / self.mie_extinction_ratio
 
     @property
+    def has_ozone(self) -> bool:
+        """True when the ozone column is > 0 (the kernels are then built with -DOZONE)."""
+        return self.ozone_column_du > 0.0
+
+    @property
+    def ozone_number_density_max(self) -> float:
+        """n_max = column / half_width [1/m^3], the tent's peak (0 without ozone)."""
+        from .ozone import tent_number_density_max
+
+        return tent_number_density_max(self.ozone_column_du, self.ozone_half_width)
+
+    @property
+    def ozone_extinction(self) -> np.ndarray:
+        """sigma n_max per channel [1/m]: ozone's extinction at the tent's peak (zeros without ozone)."""
+        return np.array(self.ozone_cross_section) * self.ozone_number_density_max
+
+    @property
     def incident_light(self) -> np.ndarray:
         """I_I = irradiance * exposure * spectral-to-RGB, one value per channel (r, g, b)."""
         return (np.array(self.solar_irradiance) * self.exposure * np.array(self.spectral_to_rgb))
@@ -258,7 +310,8 @@ class AtmosphereParameters:
     def from_refractive_index(cls, refractive_index=1.0003, number_density=2.545e25,
                               wavelengths=(650.0, 510.0, 475.0), **fields):
         """Parameters whose beta_R is derived from n, N and the wavelengths
-        (:func:`rayleigh_scattering_coefficient`).
+        (:func:`rayleigh_scattering_coefficient`), and, unless given, the ozone cross-sections too
+        (:func:`clsky.ozone.cross_section_serdyuchenko2014`).
 
         Raises
         ------
@@ -277,6 +330,7 @@ class AtmosphereParameters:
         if not all(math.isfinite(w) and w > 0 for w in wavelengths):
             raise ParameterError("wavelengths", "3 finite numbers > 0 nm", wavelengths)
         beta = rayleigh_scattering_coefficient(refractive_index, number_density, wavelengths)
+        fields.setdefault("ozone_cross_section", tuple(cross_section_serdyuchenko2014(wavelengths)))
         return cls(rayleigh_scattering=tuple(beta), wavelengths=tuple(wavelengths), **fields)
 
     def replace(self, **changes) -> "AtmosphereParameters":
@@ -284,8 +338,17 @@ class AtmosphereParameters:
         return dataclasses.replace(self, **changes)
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain JSON-serialisable dictionary of every field."""
-        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(self).items()}
+        """Plain JSON-serialisable dictionary of every field.
+
+        An atmosphere without ozone whose ozone fields all keep their defaults (:data:`OZONE_DEFAULTS`)
+        leaves them out, so that its dictionary and :meth:`digest` (and the hash of its saved tables)
+        are those of clsky before ozone; :meth:`from_dict` restores the defaults.
+        """
+        data = {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(self).items()}
+        if all(getattr(self, name) == value for name, value in OZONE_DEFAULTS.items()):
+            for name in OZONE_DEFAULTS:
+                del data[name]
+        return data
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "AtmosphereParameters":
@@ -305,7 +368,7 @@ class AtmosphereParameters:
 #: Named presets (see module docstring).
 PRESETS = {
     "atmosphere-plus": AtmosphereParameters(),
-    "physical": AtmosphereParameters(rayleigh_phase="rayleigh"),
+    "physical": AtmosphereParameters(rayleigh_phase="rayleigh", ozone_column_du=300.0),
 }
 
 

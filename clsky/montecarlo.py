@@ -2,7 +2,9 @@
 
 The atmosphere is a spherical shell (planet radius Rp, top radius Ra) of two exponential species,
 rho_s(h) = exp(-h / H_s): Rayleigh (extinction = scattering, beta_R per channel) and Mie (scattering
-beta_M, extinction beta_M / ratio, Cornette-Shanks phase). The ground is black, there is no refraction,
+beta_M, extinction beta_M / ratio, Cornette-Shanks phase), and, when ``atmosphere.ozone_column_du`` > 0,
+ozone, which only absorbs: extinction sigma_O3 n_O3(h) per channel with the tent
+n_O3 = n_max max(0, 1 - |h - h_peak| / w), n_max = column [DU] * 2.687e20 / w. The ground is black, there is no refraction,
 and the sun is a directional source of irradiance 1 per channel, so :func:`sky_radiance` returns radiance
 per unit incident light, comparable with ``table radiance / atmosphere.incident_light``
 (:func:`absolute_sky_radiance` multiplies by ``incident_light``).
@@ -28,14 +30,17 @@ Estimator
 Backward path tracing from the observer, one scalar-extinction simulation per channel (the three
 channels are independent photon populations, processed together in one vectorised batch):
 
-1. Free flight by delta (Woodcock) tracking with the constant majorant mu_bar = beta_R + beta_M^e, the
-   total extinction at the ground (densities are <= 1 in the shell). A tentative collision at x is real
-   with probability mu_t(x) / mu_bar, else null (the path continues unchanged). Leaving through the top
+1. Free flight by delta (Woodcock) tracking with the constant majorant mu_bar = beta_R + beta_M^e
+   (+ sigma_O3 n_max with ozone), the sum of each species' largest extinction (densities are <= 1
+   in the shell, the ozone tent <= n_max). A tentative collision at x is real
+   with probability mu_t(x) / mu_bar, else null (the path continues unchanged). Ozone is part of
+   mu_t: a real collision absorbs with probability mu_O3 / mu_t, which the weight below accounts for. Leaving through the top
    of the atmosphere or hitting the black ground ends the path. Real collisions are distributed with
    density mu_t(x) T(x0, x) along the path, so no transmittance weight is needed.
 2. Next-event estimation toward the sun at every real collision (order k = number of real collisions):
    contribution = w * sum_s mu_s(x) / mu_t(x) * F_s(dot(Sun, d)) / (4 pi) * T_sun(x), with d the current
-   (backward) direction and T_sun from :func:`optical_depth_to_top` (0 if the sun ray hits the planet).
+   (backward) direction and T_sun from :func:`optical_depth_to_top` and :func:`ozone_column_to_top`
+   (0 if the sun ray hits the planet).
 3. Continuation: species s chosen with probability mu_s / (mu_R + mu_M), new backward direction d'
    with dot(d, d') drawn from F_s / (4 pi mean F_s) (exact samplers), weight
    w *= (mu_R + mu_M) / mu_t * mean(F_s) (the single-scattering albedo; mean F_s = 1 except for the
@@ -70,6 +75,7 @@ __all__ = [
     "ray_sphere_exit",
     "ray_sphere_entry",
     "optical_depth_to_top",
+    "ozone_column_to_top",
     "transmittance_to_top",
     "simulate",
     "sky_radiance",
@@ -83,6 +89,9 @@ QUADRATURE_NODES = 20
 #: Integrate a species' density only up to K scale heights above the lowest point of a leg
 #: (the neglected tail is < exp(-K) = 2e-16 of the column).
 DENSITY_CUTOFF_SCALE_HEIGHTS = 36.0
+
+#: 1 Dobson unit [molecules / m^2] (written here again: this module imports nothing from clsky).
+_DOBSON_UNIT = 2.687e20
 
 _FOUR_PI = 4.0 * math.pi
 _MODIFIED_RAYLEIGH = (0.8 * 7.0 / 5.0, 0.8 * 0.5)  # F = a + b c^2 of the notes' modified phase
@@ -419,13 +428,95 @@ def optical_depth_to_top(r, mu, planet_radius, top_radius, scale_heights, nodes=
     return columns, blocked
 
 
+def _tent(h, peak, half_width):
+    """Ozone tent max(0, 1 - |h - peak| / half_width), 1 at the peak."""
+    return np.clip(1.0 - np.abs(h - peak) / half_width, 0.0, None)
+
+
+def _tent_leg(r_t, v_lo, v_hi, planet_radius, peak, half_width, nodes, weights):
+    """Integral of the tent ds over the ray part where sqrt(r - r_t) runs from v_lo to v_hi, split at the
+    tent's three kinks (r = Rp + peak -/+ half_width and Rp + peak) so that each piece is smooth."""
+    kinks = [np.clip(np.sqrt(np.maximum(planet_radius + a - r_t, 0.0)), v_lo, v_hi)
+             for a in (peak - half_width, peak, peak + half_width)]
+    edges = [v_lo] + kinks + [v_hi]
+    total = np.zeros_like(r_t)
+    for a, b in zip(edges[:-1], edges[1:]):
+        half = 0.5 * (b - a)
+        v = 0.5 * (b + a)[:, None] + half[:, None] * nodes
+        v2 = v * v
+        rt = r_t[:, None]
+        f = _tent((rt - planet_radius) + v2, peak, half_width) * (2.0 * (rt + v2) / np.sqrt(v2 + 2.0 * rt))
+        total += half * (f @ weights)
+    return total
+
+
+def ozone_column_to_top(r, mu, planet_radius, top_radius, peak, half_width, nodes=QUADRATURE_NODES):
+    """Column of the ozone tent, Integral max(0, 1 - |h - peak| / half_width) ds, from points to the top
+    of the atmosphere along a ray [m] (times n_max: molecules / m^2).
+
+    Same variable v = sqrt(r(s) - r_t) as :func:`optical_depth_to_top`; in it h = r_t - Rp + v^2, so the
+    tent is a piecewise quadratic in v, and each leg is split at the kinks and integrated piece by
+    piece by Gauss-Legendre (exact up to the smooth path element 2 r / sqrt(r + r_t)).
+
+    Parameters
+    ----------
+    r, mu : array_like
+        Radii [m] of the start points and cosines between the ray and the local vertical.
+    planet_radius, top_radius : float
+        Rp and Ra [m].
+    peak, half_width : float
+        The tent's peak altitude and half width [m].
+    nodes : int, optional
+        Gauss-Legendre nodes per piece.
+
+    Returns
+    -------
+    columns : numpy.ndarray
+        Shape (n,) [m] (meaningless where ``blocked``).
+    blocked : numpy.ndarray of bool
+        Shape (n,): the ray hits the planet.
+    """
+    r = np.atleast_1d(np.asarray(r, dtype=np.float64))
+    mu = np.clip(np.atleast_1d(np.asarray(mu, dtype=np.float64)), -1.0, 1.0)
+    r, mu = np.broadcast_arrays(r, mu)
+    r = r.ravel()
+    mu = mu.ravel()
+    x, w = np.polynomial.legendre.leggauss(int(nodes))
+    sin_zenith = np.sqrt(np.maximum(0.0, (1.0 - mu) * (1.0 + mu)))
+    r_t = r * sin_zenith
+    above_tangent = r * mu * mu / (1.0 + sin_zenith)  # r - r_t without cancellation
+    down = mu < 0.0
+    blocked = down & (r_t < planet_radius)
+    columns = np.zeros(r.size)
+    ok = np.flatnonzero(~blocked)
+    rt = r_t[ok]
+    v_start = np.sqrt(above_tangent[ok])
+    v_top = np.sqrt(np.maximum(top_radius - rt, 0.0))
+    is_down = down[ok]
+    # Ascending leg (from the start, or from the tangent point when going down), then the descending one.
+    columns[ok] = _tent_leg(rt, np.where(is_down, 0.0, v_start), np.maximum(v_top, v_start), planet_radius,
+                            peak, half_width, x, w)
+    columns[ok] += np.where(is_down, _tent_leg(rt, np.zeros_like(rt), v_start, planet_radius, peak, half_width,
+                                               x, w), 0.0)
+    return columns, blocked
+
+
+def _ozone(atmosphere):
+    """(beta_O3 at the tent's peak per channel [1/m], peak [m], half width [m]); beta = 0 without ozone."""
+    column = float(getattr(atmosphere, "ozone_column_du", 0.0))
+    peak = float(getattr(atmosphere, "ozone_peak_altitude", 25_000.0))
+    half_width = float(getattr(atmosphere, "ozone_half_width", 15_000.0))
+    sigma = np.asarray(getattr(atmosphere, "ozone_cross_section", (0.0, 0.0, 0.0)), dtype=np.float64)
+    return sigma * (column * _DOBSON_UNIT / half_width), peak, half_width
+
+
 def transmittance_to_top(atmosphere, r, mu, nodes=QUADRATURE_NODES):
     """Transmittance from points to the top of the atmosphere along a ray, per channel.
 
     Parameters
     ----------
     atmosphere : AtmosphereParameters
-        Planet and air (radii [m], scale heights [m], beta_R [1/m], beta_M^e [1/m]).
+        Planet and air (radii [m], scale heights [m], beta_R [1/m], beta_M^e [1/m], ozone).
     r : array_like
         Radii of the start points [m].
     mu : array_like
@@ -436,14 +527,19 @@ def transmittance_to_top(atmosphere, r, mu, nodes=QUADRATURE_NODES):
     Returns
     -------
     numpy.ndarray
-        Shape (n, 3): exp(-(beta_R col_R + beta_M^e col_M)) per channel (r, g, b); 0 where the ray hits
-        the planet.
+        Shape (n, 3): exp(-(beta_R col_R + beta_M^e col_M + beta_O3 col_O3)) per channel (r, g, b); 0
+        where the ray hits the planet.
     """
     columns, blocked = optical_depth_to_top(
         r, mu, atmosphere.planet_radius, atmosphere.top_radius,
         (atmosphere.rayleigh_scale_height, atmosphere.mie_scale_height), nodes)
     beta_r = np.asarray(atmosphere.rayleigh_scattering, dtype=np.float64)
     tau = columns[0][:, None] * beta_r[None, :] + columns[1][:, None] * _mie_extinction(atmosphere)
+    beta_o, peak, half_width = _ozone(atmosphere)
+    if np.any(beta_o > 0.0):
+        ozone, _ = ozone_column_to_top(r, mu, atmosphere.planet_radius, atmosphere.top_radius, peak, half_width,
+                                       nodes)
+        tau = tau + ozone[:, None] * beta_o[None, :]
     return np.where(blocked[:, None], 0.0, np.exp(-tau))
 
 
@@ -555,6 +651,8 @@ def simulate(atmosphere, altitude, cos_view, cos_sun, azimuth=0.0, *, photons=20
     h_r = float(atmosphere.rayleigh_scale_height)
     h_m = float(atmosphere.mie_scale_height)
     g = float(atmosphere.mie_g)
+    beta_o, ozone_peak, ozone_half_width = _ozone(atmosphere)
+    has_ozone = bool(np.any(beta_o > 0.0))
     rayleigh_kind = atmosphere.rayleigh_phase
     mean_r = phase_mean(rayleigh_kind)
     mean_m = phase_mean("cornette_shanks", g)
@@ -567,7 +665,7 @@ def simulate(atmosphere, altitude, cos_view, cos_sun, azimuth=0.0, *, photons=20
     dirn = np.tile(view, (n_total, 1))
     weight = np.ones(n_total)
     order = np.zeros(n_total, dtype=np.int64)
-    majorant = beta_r + beta_me  # per channel, extinction at the ground (rho <= 1)
+    majorant = beta_r + beta_me + beta_o  # per channel: each species' largest extinction (rho, tent <= 1)
 
     contrib = np.zeros(n_total)
     orders = np.zeros((max_orders, 3))
@@ -596,6 +694,8 @@ def simulate(atmosphere, altitude, cos_view, cos_sun, azimuth=0.0, *, photons=20
         mu_r = beta_r[channel] * rho_r
         mu_ms = beta_ms * rho_m
         mu_t = mu_r + beta_me * rho_m
+        if has_ozone:   # absorption only: in mu_t, not in the scattering coefficients
+            mu_t = mu_t + beta_o[channel] * _tent(h, ozone_peak, ozone_half_width)
         real = rng.random(ids.size) * majorant[channel] < mu_t
         null_count += int(ids.size - np.count_nonzero(real))
         if not np.any(real):
@@ -613,6 +713,9 @@ def simulate(atmosphere, altitude, cos_view, cos_sun, azimuth=0.0, *, photons=20
             block = slice(start, start + chunk)
             cols, blocked = optical_depth_to_top(rs[block], mus[block], rp, ra, (h_r, h_m))
             tau = cols[0] * beta_r[channel[sel][block]] + cols[1] * beta_me
+            if has_ozone:
+                ozone, _ = ozone_column_to_top(rs[block], mus[block], rp, ra, ozone_peak, ozone_half_width)
+                tau = tau + ozone * beta_o[channel[sel][block]]
             t_sun[block] = np.where(blocked, 0.0, np.exp(-tau))
         phase = (mu_r[sel] * rayleigh_phase(cos_theta, rayleigh_kind)
                  + mu_ms[sel] * cornette_shanks_phase(cos_theta, g))

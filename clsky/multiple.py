@@ -278,7 +278,7 @@ class MultipleScatteringEngine(_cl.Engine):
         depth, height, width, _ = gathered_d.shape
         out = cla.empty(self.queue, gathered_d.shape, self.dtype)
         atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
-        event = self.kernels["scatter"](
+        event = self.kernels_with(_atmosphere_cl.feature_defines(atmosphere))["scatter"](
             self.queue, (-(-width // VECTOR_WIDTH), height, depth), None, atmosphere_d, np.int32(width),
             np.int32(height), np.int32(depth), np.int32(MAPPINGS[self.settings.mapping]),
             self.real2(self.settings.sun_w_range), np.int32(bool(combine_species)), gathered_d.data, out.data)

@@ -17,12 +17,13 @@ import math
 import numpy as np
 
 from .atmosphere import AtmosphereParameters
+from .ozone import tent_profile
 from .mapping import FULL_SUN_RANGE, grid_coordinates
 from .settings import TableSettings
 
 __all__ = [
     "horizon_cos", "distance_to_top", "distance_to_ground", "altitude_along",
-    "quadrature_nodes", "column_density", "optical_depth", "transmittance",
+    "quadrature_nodes", "densities", "column_density", "optical_depth", "transmittance",
     "transmittance_table", "column_density_from_table", "single_scattering", "enter_atmosphere",
     "lookup", "gather", "trilinear", "scatter", "render_table", "render_raymarch",
 ]
@@ -76,9 +77,18 @@ def _trapezoid(values, half_steps):
     return np.sum((values[..., :-1] + values[..., 1:]) * half_steps, axis=-1)
 
 
+def densities(atmosphere: AtmosphereParameters, h):
+    """The species' densities at altitudes h [m] (``densities_at`` of ``kernels/column.cl``): a tuple
+    (rho_R, rho_M), plus the ozone tent f_O (:func:`clsky.ozone.tent_profile`) with ozone."""
+    species = (np.exp(-h / atmosphere.rayleigh_scale_height), np.exp(-h / atmosphere.mie_scale_height))
+    if atmosphere.has_ozone:
+        species += (tent_profile(h, atmosphere.ozone_peak_altitude, atmosphere.ozone_half_width),)
+    return species
+
+
 def column_density(atmosphere: AtmosphereParameters, altitude, cos_zenith, length, steps=30,
                    sampling="uniform"):
-    """Column densities (C_R, C_M) [m] of segments by the trapezoidal rule (``kernels/column.cl``).
+    """Column densities (C_R, C_M[, C_O]) [m] of segments by the trapezoidal rule (``kernels/column.cl``).
 
     Parameters
     ----------
@@ -89,21 +99,25 @@ def column_density(atmosphere: AtmosphereParameters, altitude, cos_zenith, lengt
 
     Returns
     -------
-    (C_R, C_M) : two arrays of the broadcast shape [m]
+    (C_R, C_M) or, with ozone, (C_R, C_M, C_O) : arrays of the broadcast shape [m]
+        C_O is the column of the ozone tent f_O (1 at its peak): the ozone column is n_max C_O.
     """
     rp = atmosphere.planet_radius
     h0, mu, d = (np.asarray(a, dtype=np.float64)[..., None] for a in (altitude, cos_zenith, length))
     nodes = quadrature_nodes(steps, sampling, power=2)
     h = altitude_along(h0, rp + h0, mu, d * nodes, rp)
     half_steps = 0.5 * d * np.diff(nodes)
-    return (_trapezoid(np.exp(-h / atmosphere.rayleigh_scale_height), half_steps),
-            _trapezoid(np.exp(-h / atmosphere.mie_scale_height), half_steps))
+    return tuple(_trapezoid(density, half_steps) for density in densities(atmosphere, h))
 
 
-def _optical_depth_of(atmosphere, column_r, column_m):
-    """tau per wavelength (last axis: r, g, b) of column densities."""
+def _optical_depth_of(atmosphere, column_r, column_m, column_o=None):
+    """tau per wavelength (last axis: r, g, b) of column densities (``optical_depth_of`` of
+    ``kernels/column.cl``): beta_R C_R + beta_M^e C_M, plus sigma_O3 n_max C_O with ozone."""
     beta = np.asarray(atmosphere.rayleigh_scattering)
-    return beta * column_r[..., None] + atmosphere.mie_extinction * column_m[..., None]
+    tau = beta * column_r[..., None] + atmosphere.mie_extinction * column_m[..., None]
+    if atmosphere.has_ozone:
+        tau = tau + atmosphere.ozone_extinction * column_o[..., None]
+    return tau
 
 
 def optical_depth(atmosphere: AtmosphereParameters, altitude, cos_zenith, length, steps=30,
@@ -134,7 +148,8 @@ def transmittance_table_nodes(atmosphere, size):
 
 
 def transmittance_table(atmosphere: AtmosphereParameters, size=(64, 256), steps=30, sampling="uniform"):
-    """Column densities (C_R, C_M) [m] from each node to the top; shape (TH, TW, 2).
+    """Column densities (C_R, C_M[, C_O]) [m] from each node to the top; shape (TH, TW, 2), or
+    (TH, TW, 3) with ozone.
 
     Twin of ``TransmittanceEngine.column_density_table``.
     """
@@ -144,7 +159,7 @@ def transmittance_table(atmosphere: AtmosphereParameters, size=(64, 256), steps=
 
 
 def column_density_from_table(atmosphere, table, altitude, cos_zenith):
-    """Bilinear lookup of (C_R, C_M) in a table from :func:`transmittance_table`."""
+    """Bilinear lookup of (C_R, C_M[, C_O]) in a table from :func:`transmittance_table`."""
     th, tw, _ = table.shape
     h = np.asarray(altitude, dtype=np.float64)
     mu_h = horizon_cos(h, atmosphere.planet_radius)
@@ -172,7 +187,8 @@ class _ViewRays:
 
     Arrays have shape (cells, N_VIEW + 1): distance s, altitude h, radius r, the sun and view cosines
     at each node, densities, the column densities from the observer, and the trapezoid half steps
-    (cells, N_VIEW).
+    (cells, N_VIEW). ``density`` and ``view`` are tuples over the species (R, M, and O with ozone;
+    :func:`densities`); ``density_r``, ``density_m`` name the scatterers'.
     """
 
     def __init__(self, atmosphere, settings, h0, mu_v, mu_s, nu=None):
@@ -192,13 +208,12 @@ class _ViewRays:
         self.r = rp + self.h
         self.mu_sun = (r0 * mu_s + self.s * nu) / self.r                   # dot(P, Sun) / |P|
         self.mu_view = (r0 * mu_v + self.s) / self.r                       # dot(P, V) / |P|
-        self.density_r = np.exp(-self.h / atmosphere.rayleigh_scale_height)
-        self.density_m = np.exp(-self.h / atmosphere.mie_scale_height)
+        self.density = densities(atmosphere, self.h)
+        self.density_r, self.density_m = self.density[:2]
         self.half_steps = 0.5 * length * np.diff(nodes)
-        self.view_r = np.zeros_like(self.h)
-        self.view_m = np.zeros_like(self.h)
-        np.cumsum((self.density_r[:, :-1] + self.density_r[:, 1:]) * self.half_steps, axis=1, out=self.view_r[:, 1:])
-        np.cumsum((self.density_m[:, :-1] + self.density_m[:, 1:]) * self.half_steps, axis=1, out=self.view_m[:, 1:])
+        self.view = tuple(np.zeros_like(self.h) for _ in self.density)
+        for density, view in zip(self.density, self.view):
+            np.cumsum((density[:, :-1] + density[:, 1:]) * self.half_steps, axis=1, out=view[:, 1:])
 
     def integrate(self, atmosphere, transmittance, weight_r, weight_m):
         """beta_s / (4 pi) * trapezoid of rho_s * transmittance * weight_s: (cells, 6).
@@ -219,11 +234,10 @@ def _single_scattering_cells(atmosphere, settings, h0, mu_v, mu_s, sun_table, nu
     lit = rays.mu_sun >= horizon_cos(rays.h, atmosphere.planet_radius)
     if sun_table is None:
         sun_length = np.where(lit, distance_to_top(rays.h, rays.mu_sun, atmosphere.planet_radius, atmosphere.top_radius), 0.0)
-        sun_r, sun_m = column_density(atmosphere, rays.h, rays.mu_sun, sun_length, settings.sun_steps,
-                                      settings.sampling)
+        sun = column_density(atmosphere, rays.h, rays.mu_sun, sun_length, settings.sun_steps, settings.sampling)
     else:
-        sun_r, sun_m = column_density_from_table(atmosphere, sun_table, rays.h, rays.mu_sun)
-    transmittance = np.exp(-_optical_depth_of(atmosphere, rays.view_r + sun_r, rays.view_m + sun_m))
+        sun = column_density_from_table(atmosphere, sun_table, rays.h, rays.mu_sun)
+    transmittance = np.exp(-_optical_depth_of(atmosphere, *(v + s for v, s in zip(rays.view, sun))))
     transmittance *= lit[..., None]                             # (n, N_VIEW + 1, 3)
     return rays.integrate(atmosphere, transmittance, 1.0, 1.0)
 
@@ -356,7 +370,7 @@ def _gathered_along(atmosphere, ray_settings, gathered, grid_settings, h0, mu_v,
                   altitude_to_u(rays.h, atmosphere.atmosphere_height, grid_settings.mapping) * (width - 1),
                   cos_to_v(rays.mu_view, grid_settings.mapping) * (height - 1),
                   cos_to_sun_t(rays.mu_sun, grid_settings.mapping, grid_settings.sun_cos_range) * (depth - 1))
-    transmittance = np.exp(-_optical_depth_of(atmosphere, rays.view_r, rays.view_m))
+    transmittance = np.exp(-_optical_depth_of(atmosphere, *rays.view))
     return rays.integrate(atmosphere, transmittance, g[..., 0:3], g[..., 3:6])
 
 

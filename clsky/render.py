@@ -73,7 +73,8 @@ def check_render_table(table):
 def sun_disc_radiance(atmosphere, sun_direction, altitude, steps=512):
     """Radiance of the sun disc seen from ``altitude``: I_I T_sun / Omega_sun (r, g, b).
 
-    T_sun is the transmittance along the sun ray (Keller & Bohn trapezoid with ``steps`` steps); 0
+    T_sun is the transmittance along the sun ray (every species, ozone included:
+    :func:`clsky.reference.transmittance`; Keller & Bohn trapezoid with ``steps`` steps); 0
     when the sun is below the horizon (its ray hits the planet). Omega_sun = 2 pi (1 - cos 0.2665 deg).
     """
     rp, ra = atmosphere.planet_radius, atmosphere.top_radius
@@ -209,7 +210,7 @@ class SkyRenderer:
         for argument, array_d, count in buffers + [("directions", directions_d, 3 * n), ("out", out_d, 3 * max(n, 1))]:
             check_kernel_buffer(name, argument, array_d, count, self.engine.dtype)
         check_kernel_buffer(name, "valid", directions.valid, n, np.uint8)
-        kernel = self.engine.kernels[name]
+        kernel = self.engine.kernels_with(_atmosphere_cl.feature_defines(self.table.atmosphere))[name]
         kernel(self.queue, (-(-n // VECTOR_WIDTH),), None, self._atmosphere_d, *extra_args, np.int32(n),
                directions_d.data, directions.valid.data, sun4, self.engine.real(altitude), disc,
                self.engine.real(self._cos_sun_radius), out_d.data)

@@ -78,7 +78,7 @@ class SingleScatteringEngine(_cl.Engine):
             tw = th = 2
             sun_table_d = cla.zeros(self.queue, 8, self.dtype)
         table_d = cla.empty(self.queue, (depth, height, width, 6), self.dtype)
-        kernel = self.kernels["single_scattering"]
+        kernel = self.kernels_with(_atmosphere_cl.feature_defines(atmosphere))["single_scattering"]
         slabs = range(0, depth, SLAB_LAYERS)
         for done, z_offset in enumerate(slabs, start=1):
             slab = min(SLAB_LAYERS, depth - z_offset)

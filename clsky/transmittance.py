@@ -14,7 +14,7 @@ from .atmosphere import AtmosphereParameters
 from .errors import as_real_array
 from .settings import SAMPLINGS, _check_choice, _check_int
 
-__all__ = ["TransmittanceEngine", "check_segments"]
+__all__ = ["TransmittanceEngine", "check_segments", "column_channels"]
 
 COMMON_SOURCES = ("real.cl", "geometry.cl", "column.cl", "transmittance_table.cl")
 
@@ -28,6 +28,12 @@ def quadrature_defines(settings, vector_width):
     if settings.sun_transmittance == "table":
         options.append("-DSUN_TRANSMITTANCE_TABLE=1")
     return options
+
+
+def column_channels(atmosphere) -> int:
+    """Columns per node of the 2D table (``COLUMN_CHANNELS`` of kernels/column.cl): C_R, C_M, and C_O
+    with ozone."""
+    return 3 if atmosphere.has_ozone else 2
 
 
 def check_segments(atmosphere, altitude, cos_zenith, length):
@@ -98,7 +104,7 @@ class TransmittanceEngine(_cl.Engine):
         tau_d = cla.empty(self.queue, (max(n, 1), 3), self.dtype)
         atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
         if n:
-            event = self.kernels["optical_depth"](self.queue, (n,), None, atmosphere_d, np.int32(n),
+            event = self.kernels_with(_atmosphere_cl.feature_defines(atmosphere))["optical_depth"](self.queue, (n,), None, atmosphere_d, np.int32(n),
                                                   *(a.data for a in inputs), tau_d.data)
             self._record("optical_depth", event)
         return tau_d.get()[:n].reshape(shape + (3,)).astype(np.float64)
@@ -108,15 +114,16 @@ class TransmittanceEngine(_cl.Engine):
         return np.exp(-self.optical_depth(atmosphere, altitude, cos_zenith, length))
 
     def column_density_table(self, atmosphere: AtmosphereParameters, size=(64, 256), queue_only=False):
-        """The 2D table of column densities (C_R, C_M) [m] from each node to the top of the atmosphere.
+        """The 2D table of column densities (C_R, C_M[, C_O]) [m] from each node to the top of the atmosphere.
 
-        Axes in ``kernels/transmittance_table.cl``. Returns an array of shape (TH, TW, 2) (or, with
-        ``queue_only``, the device array, for use by other kernels of the same context).
+        Axes in ``kernels/transmittance_table.cl``. Returns an array of shape (TH, TW, C) with C = 2, or
+        3 with ozone (C_O: column of the ozone tent, :mod:`clsky.ozone`) (or, with ``queue_only``, the
+        device array, for use by other kernels of the same context).
         """
         tw, th = (_check_int(f"size[{i}]", v, 2, 4096) for i, v in enumerate(size))
-        table_d = cla.empty(self.queue, (th, tw, 2), self.dtype)
+        table_d = cla.empty(self.queue, (th, tw, column_channels(atmosphere)), self.dtype)
         atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
-        event = self.kernels["transmittance_table"](self.queue, (tw, th), None, atmosphere_d,
+        event = self.kernels_with(_atmosphere_cl.feature_defines(atmosphere))["transmittance_table"](self.queue, (tw, th), None, atmosphere_d,
                                                     np.int32(tw), np.int32(th), table_d.data)
         self._record("transmittance_table", event)
         return table_d if queue_only else table_d.get()

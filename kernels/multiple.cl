@@ -10,6 +10,7 @@
  *
  * Scatter (physics.md, order k >= 2): for each cell, along its view ray (as in single.cl),
  *   Ibar_s^(k)(lambda) = beta_s(lambda) / (4 pi) Integral_{Pa}^{Pb} Gbar_s^(k-1)(P, V, L) rho_s(h(P)) T(P, Pa) ds
+ * (T of every species, column.cl: with -DOZONE it includes ozone's absorption)
  * with Gbar looked up trilinearly (texture space) at the altitude, view and sun cosines of each node
  * P. Channels of Gbar and of the result: Rayleigh r, g, b, Mie r, g, b, padded to 8 (one real8 per
  * cell: a trilinear lookup is 8 vector loads).

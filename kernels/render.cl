@@ -10,6 +10,7 @@
  *                  transmittance; higher orders from the gathered in-scatter table G along the ray
  *                  (integrate_gathered): physical mode I_I sum_s beta_s / (4 pi) Integral rho_s T G_s,
  *                  atmosphere-plus mode the same with F_s(nu) on each species (the notes' scheme).
+ * Transmittances are those of column.cl (with -DOZONE, including ozone's absorption).
  * Both add the sun disc: sun_radiance (I_I T_sun / Omega_sun, from the host) where nu >= cos of the
  * sun's angular radius and the ray does not hit the planet. The ground is black.
  * Each work-item renders VECTOR_WIDTH pixels; global size ceil(n / VECTOR_WIDTH). Pixels whose

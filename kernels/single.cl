@@ -10,6 +10,8 @@
  * over N_VIEW + 1 nodes s_i = L f(i / N_VIEW), f(x) = x, or x^3 with -DKELLER_BOHN_SAMPLING. T(P, Pa) is
  * accumulated by the same trapezoid along the view ray; T(Pc, P) is re-marched with N_SUN steps
  * (column.cl) or, with -DSUN_TRANSMITTANCE_TABLE, read from the 2D table (transmittance_table.cl).
+ * T = exp(-tau) of every species (column.cl): with -DOZONE, tau includes ozone's absorption
+ * sigma_O3 n_max C_O on both legs (the 2D table then has a third channel, C_O).
  * A node whose sun ray hits the planet (mu below the local horizon, decided from its altitude and
  * mu, never from |P| - Rp rounding) is in the shadow and contributes nothing. The last node of a
  * ground-hitting view ray lies on the ground at altitude exactly 0.

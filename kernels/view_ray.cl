@@ -10,6 +10,8 @@
  *
  * Trapezoidal rule over N_VIEW + 1 nodes s_i = L f(i / N_VIEW), f(x) = x, or x^3 with
  * -DKELLER_BOHN_SAMPLING; the last node of a ground-hitting ray lies at altitude exactly 0.
+ * Transmittances T = exp(-tau) take every species' column from column.cl (column_t, optical_depth_of):
+ * with -DOZONE they include ozone's absorption, tau += sigma_O3 n_max C_O.
  * Works on realv. Requires real.cl, atmosphere_t, geometry.cl, column.cl, transmittance_table.cl,
  * mapping.cl.
  */
@@ -52,20 +54,20 @@ inline realv view_ray_length(__constant const atmosphere_t *atm, const realv h0,
     return SELECT(distance_to_top(h0, mu_v, rp, atm->top_radius), distance_to_ground(h0, mu_v, rp), *hits_ground);
 }
 
-/* Column densities (*sun_r, *sun_m) [m] from a node at altitude h toward the sun (zenith cosine
+/* Column densities *sun [m] from a node at altitude h toward the sun (zenith cosine
  * mu_sun), read from the 2D table (-DSUN_TRANSMITTANCE_TABLE) or re-marched; returns the mask of
  * nodes the sun lights (not in the planet's shadow, decided from h and mu_sun against the local
  * horizon). In the shadow the march would cross the planet: it is given zero length, and the
  * caller discards the result. */
 inline maskv sun_column(__constant const atmosphere_t *atm, const realv h, const realv mu_sun,
-                        __global const real *sun_table, const int tw, const int th, realv *sun_r, realv *sun_m)
+                        __global const real *sun_table, const int tw, const int th, column_t *sun)
 {
     const maskv lit = isgreaterequal(mu_sun, horizon_cos(h, atm->planet_radius));
 #ifdef SUN_TRANSMITTANCE_TABLE
-    column_density_from_table(atm, sun_table, tw, th, h, mu_sun, sun_r, sun_m);
+    *sun = column_density_from_table(atm, sun_table, tw, th, h, mu_sun);
 #else
     const realv sun_length = SELECT(V(0.0), distance_to_top(h, mu_sun, atm->planet_radius, atm->top_radius), lit);
-    column_density(atm, h, mu_sun, sun_length, sun_r, sun_m);
+    *sun = column_density(atm, h, mu_sun, sun_length);
 #endif
     return lit;
 }
@@ -85,8 +87,9 @@ inline void integrate_single(__constant const atmosphere_t *atm, const realv h0,
     const real inv_hm = R(1.0) / atm->mie_scale_height;
     const real4 beta = atm->beta_rayleigh;
     const real beta_me = atm->beta_mie_extinction;
-    realv view_r = V(0.0), view_m = V(0.0);                 /* column densities from the observer */
-    realv last_density_r = V(0.0), last_density_m = V(0.0);
+    const real4 beta_o = atm->ozone_extinction;
+    column_t view = column_zero();                          /* column densities from the observer */
+    column_t last_density = column_zero();
     realv last[6];
     for (int c = 0; c < 6; ++c) {
         last[c] = V(0.0);
@@ -102,28 +105,25 @@ inline void integrate_single(__constant const atmosphere_t *atm, const realv h0,
             h = SELECT(h, V(0.0), hits_ground);
         const realv r = rp + h;
         const realv mu_sun_here = (r0 * mu_s + s * nu) / r;     /* dot(P, Sun) / |P| */
-        const realv density_r = exp(-h * inv_hr), density_m = exp(-h * inv_hm);
+        const column_t density = densities_at(atm, h, inv_hr, inv_hm);
         const realv half_step = R(0.5) * length * (node - node_previous);
-        if (i > 0) {
-            view_r += (last_density_r + density_r) * half_step;
-            view_m += (last_density_m + density_m) * half_step;
-        }
-        realv sun_r, sun_m;
-        const maskv lit = sun_column(atm, h, mu_sun_here, sun_table, tw, th, &sun_r, &sun_m);
-        const realv column_r = view_r + sun_r, column_m = view_m + sun_m;
-        const realv t0 = SELECT(V(0.0), exp(-(beta.x * column_r + beta_me * column_m)), lit);
-        const realv t1 = SELECT(V(0.0), exp(-(beta.y * column_r + beta_me * column_m)), lit);
-        const realv t2 = SELECT(V(0.0), exp(-(beta.z * column_r + beta_me * column_m)), lit);
+        if (i > 0)
+            view = column_step(view, last_density, density, half_step);
+        column_t sun;
+        const maskv lit = sun_column(atm, h, mu_sun_here, sun_table, tw, th, &sun);
+        const column_t column = column_sum(view, sun);
+        const realv t0 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.x, beta_me, beta_o.x)), lit);
+        const realv t1 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.y, beta_me, beta_o.y)), lit);
+        const realv t2 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.z, beta_me, beta_o.z)), lit);
         realv f[6];
-        f[0] = density_r * t0; f[1] = density_r * t1; f[2] = density_r * t2;
-        f[3] = density_m * t0; f[4] = density_m * t1; f[5] = density_m * t2;
+        f[0] = density.r * t0; f[1] = density.r * t1; f[2] = density.r * t2;
+        f[3] = density.m * t0; f[4] = density.m * t1; f[5] = density.m * t2;
         for (int c = 0; c < 6; ++c) {
             if (i > 0)
                 sum[c] += (last[c] + f[c]) * half_step;
             last[c] = f[c];
         }
-        last_density_r = density_r;
-        last_density_m = density_m;
+        last_density = density;
         node_previous = node;
     }
 }
@@ -166,8 +166,9 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
     const real inv_hm = R(1.0) / atm->mie_scale_height;
     const real4 beta = atm->beta_rayleigh;
     const real beta_me = atm->beta_mie_extinction;
-    realv view_r = V(0.0), view_m = V(0.0);
-    realv last_density_r = V(0.0), last_density_m = V(0.0);
+    const real4 beta_o = atm->ozone_extinction;
+    column_t view = column_zero();
+    column_t last_density = column_zero();
     for (int k = 0; k < VECTOR_WIDTH; ++k)
         sum[k] = (real8)(R(0.0));
     if (single)
@@ -185,24 +186,23 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
         const realv inv_r = R(1.0) / (rp + h);
         const realv mu_view_here = clamp((r0 * mu_v + s) * inv_r, R(-1.0), R(1.0));
         const realv mu_sun_here = clamp((r0 * mu_s + s * nu) * inv_r, R(-1.0), R(1.0));
-        const realv density_r = exp(-h * inv_hr), density_m = exp(-h * inv_hm);
+        const column_t density = densities_at(atm, h, inv_hr, inv_hm);
         if (i > 0) {
             const realv half_step = R(0.5) * length * (node - node_previous);
-            view_r += (last_density_r + density_r) * half_step;
-            view_m += (last_density_m + density_m) * half_step;
+            view = column_step(view, last_density, density, half_step);
         }
         const realv weight = R(0.5) * length * ((node - node_previous) + (node_next - node));
-        const realv t0 = exp(-(beta.x * view_r + beta_me * view_m));
-        const realv t1 = exp(-(beta.y * view_r + beta_me * view_m));
-        const realv t2 = exp(-(beta.z * view_r + beta_me * view_m));
-        const realv wr = weight * density_r, wm = weight * density_m;
+        const realv t0 = exp(-optical_depth_of(view, beta.x, beta_me, beta_o.x));
+        const realv t1 = exp(-optical_depth_of(view, beta.y, beta_me, beta_o.y));
+        const realv t2 = exp(-optical_depth_of(view, beta.z, beta_me, beta_o.z));
+        const realv wr = weight * density.r, wm = weight * density.m;
         const realv fr0 = wr * t0, fr1 = wr * t1, fr2 = wr * t2, fm0 = wm * t0, fm1 = wm * t1, fm2 = wm * t2;
         if (single) {
-            realv sun_r, sun_m;
-            const maskv lit = sun_column(atm, h, mu_sun_here, sun_table, tw, th, &sun_r, &sun_m);
-            const realv s0 = SELECT(V(0.0), exp(-(beta.x * sun_r + beta_me * sun_m)), lit);
-            const realv s1 = SELECT(V(0.0), exp(-(beta.y * sun_r + beta_me * sun_m)), lit);
-            const realv s2 = SELECT(V(0.0), exp(-(beta.z * sun_r + beta_me * sun_m)), lit);
+            column_t sun;
+            const maskv lit = sun_column(atm, h, mu_sun_here, sun_table, tw, th, &sun);
+            const realv s0 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.x, beta_me, beta_o.x)), lit);
+            const realv s1 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.y, beta_me, beta_o.y)), lit);
+            const realv s2 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.z, beta_me, beta_o.z)), lit);
             single[0] += fr0 * s0; single[1] += fr1 * s1; single[2] += fr2 * s2;
             single[3] += fm0 * s0; single[4] += fm1 * s1; single[5] += fm2 * s2;
         }
@@ -214,8 +214,7 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
                                          LANE(fm2, k), R(0.0), R(0.0));
             sum[k] += factor * lookup8(gathered, width, height, depth, LANE(fx, k), LANE(fy, k), LANE(fz, k));
         }
-        last_density_r = density_r;
-        last_density_m = density_m;
+        last_density = density;
         node_previous = node;
     }
 }

@@ -171,12 +171,13 @@ def test_replace_validates_again():
 
 # Presets and published constants -----------------------------------------------------------------
 
-def test_presets_differ_only_in_the_rayleigh_phase():
-    artistic = preset("atmosphere-plus").to_dict()
+def test_presets_differ_only_in_the_rayleigh_phase_and_ozone():
+    artistic = preset("atmosphere-plus").replace(ozone_column_du=300.0).to_dict()
     physical = preset("physical").to_dict()
     assert artistic.pop("rayleigh_phase") == "modified_atmosphereplus"
     assert physical.pop("rayleigh_phase") == "rayleigh"
     assert artistic == physical
+    assert preset("physical").ozone_column_du == 300.0 and preset("atmosphere-plus").ozone_column_du == 0.0
     assert set(PRESETS) == {"atmosphere-plus", "physical"}
     assert preset("atmosphere-plus") == AtmosphereParameters()
 
@@ -263,6 +264,8 @@ def _changed_value(field, value):
         return value + 1.0
     if field == "planet_radius":
         return value - 1.0
+    if field == "ozone_column_du":     # 0 by default
+        return value + 300.0
     return value * 1.25
 
 

@@ -259,15 +259,29 @@ def test_uniform_medium_single_scattering(case):
 
 # Single scattering in the real atmosphere against a deterministic quadrature ------------------------
 
+def _ozone_density(atmosphere, h):
+    """The ozone tent n_O3 / n_max = max(0, 1 - |h - peak| / half width) (0 without ozone)."""
+    if atmosphere.ozone_column_du == 0:
+        return np.zeros_like(h)
+    return np.maximum(1.0 - np.abs(h - atmosphere.ozone_peak_altitude) / atmosphere.ozone_half_width, 0.0)
+
+
+def _ozone_extinction(atmosphere):
+    """sigma_O3 n_max per channel [1/m], n_max = column * 2.687e20 / half width."""
+    return np.asarray(atmosphere.ozone_cross_section) * atmosphere.ozone_column_du * 2.687e20 / atmosphere.ozone_half_width
+
+
 def _simpson_column(points, direction, length, atmosphere, nodes=1601):
-    """Density columns (Rayleigh, Mie) [m] from points along a direction over a length (uniform Simpson)."""
+    """Density columns (Rayleigh, Mie, ozone tent) [m] from points along a direction over a length
+    (uniform Simpson)."""
     rp = atmosphere.planet_radius
     t = np.linspace(0.0, 1.0, nodes)
+    q = points[:, None, :] + (length[:, None] * t[None, :])[:, :, None] * direction
+    h = np.linalg.norm(q, axis=2) - rp
     cols = []
     for height in (atmosphere.rayleigh_scale_height, atmosphere.mie_scale_height):
-        q = points[:, None, :] + (length[:, None] * t[None, :])[:, :, None] * direction
-        h = np.linalg.norm(q, axis=2) - rp
         cols.append(integrate.simpson(np.exp(-h / height), x=t, axis=1) * length)
+    cols.append(integrate.simpson(_ozone_density(atmosphere, h), x=t, axis=1) * length)
     return cols
 
 
@@ -298,7 +312,7 @@ def _single_scattering_reference(atmosphere, altitude, cos_view, cos_sun, azimut
     View ray split at the exact shadow-cylinder boundary; Simpson on each lit piece; T_view by a
     cumulative Simpson/trapezoid of the columns from the observer; T_sun by a 1601-node Simpson along
     each sun chord. Independent of clsky.montecarlo (only the phase functions are shared, and they are
-    tested separately against the notes' formulas).
+    tested separately against the notes' formulas). Ozone (the physical preset's) absorbs along both.
     """
     rp, ra = atmosphere.planet_radius, atmosphere.top_radius
     sv, ss = math.sqrt(1 - cos_view**2), math.sqrt(1 - cos_sun**2)
@@ -319,6 +333,7 @@ def _single_scattering_reference(atmosphere, altitude, cos_view, cos_sun, azimut
             pieces = [(a, c) for a, c in ((0.0, lo), (hi, length)) if c - a > 0]
     beta_r = np.asarray(atmosphere.rayleigh_scattering)
     beta_me = atmosphere.mie_extinction
+    beta_o = _ozone_extinction(atmosphere)
     integral_r = np.zeros(3)
     integral_m = np.zeros(3)
     for a, c in pieces:
@@ -327,20 +342,24 @@ def _single_scattering_reference(atmosphere, altitude, cos_view, cos_sun, azimut
         h = np.linalg.norm(p0 + fine[:, None] * view, axis=1) - rp
         cum_r = integrate.cumulative_trapezoid(np.exp(-h / atmosphere.rayleigh_scale_height), fine, initial=0)
         cum_m = integrate.cumulative_trapezoid(np.exp(-h / atmosphere.mie_scale_height), fine, initial=0)
+        cum_o = integrate.cumulative_trapezoid(_ozone_density(atmosphere, h), fine, initial=0)
         s = np.linspace(a, c, nodes)
         col_r = np.interp(s, fine, cum_r)
         col_m = np.interp(s, fine, cum_m)
+        col_o = np.interp(s, fine, cum_o)
         p = p0 + s[:, None] * view
         h = np.linalg.norm(p, axis=1) - rp
         bs = p @ sun
         d_sun = -bs + np.sqrt(bs * bs + ra * ra - np.einsum("ij,ij->i", p, p))
-        sun_r, sun_m = [], []
+        sun_r, sun_m, sun_o = [], [], []
         for k in range(0, nodes, 500):
-            cr, cm = _simpson_column(p[k:k + 500], sun, d_sun[k:k + 500], atmosphere)
+            cr, cm, co = _simpson_column(p[k:k + 500], sun, d_sun[k:k + 500], atmosphere)
             sun_r.append(cr)
             sun_m.append(cm)
-        sun_r, sun_m = np.concatenate(sun_r), np.concatenate(sun_m)
-        transmit = np.exp(-beta_r[:, None] * (col_r + sun_r) - beta_me * (col_m + sun_m))
+            sun_o.append(co)
+        sun_r, sun_m, sun_o = np.concatenate(sun_r), np.concatenate(sun_m), np.concatenate(sun_o)
+        transmit = np.exp(-beta_r[:, None] * (col_r + sun_r) - beta_me * (col_m + sun_m)
+                          - beta_o[:, None] * (col_o + sun_o))
         integral_r += integrate.simpson(np.exp(-h / atmosphere.rayleigh_scale_height) * transmit, x=s, axis=1)
         integral_m += integrate.simpson(np.exp(-h / atmosphere.mie_scale_height) * transmit, x=s, axis=1)
     cos_theta = view @ sun
