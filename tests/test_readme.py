@@ -11,7 +11,8 @@ What is reduced, and why it keeps the example's meaning:
   is the README's main job, ``tests/test_main_job.py``, slow). Real sun positions keep their location
   and date, over two hours around a Munich sunrise.
 - ``clsky table``: an 8 x 32 x 8 grid (every other option as written).
-- ``clsky bench accuracy``: its ``--quick`` smoke run at 16 pixels against the default level.
+- ``clsky bench accuracy``: its ``--quick`` smoke run at 16 pixels against the default level (slow: the
+  four reference tables take minutes even so).
 - ``python bench/X.py``: run with ``--smoke`` (the same code path at a tiny size; writes no README or
   docs) by ``tests/test_bench_smoke.py``, which checks their tables too; here the README's bench lines
   are checked to be among the scripts that module runs, so they are not run twice.
@@ -136,7 +137,13 @@ CLSKY_COMMANDS = [line for line in COMMANDS if not line.startswith("python bench
 BENCH_COMMANDS = [line for line in COMMANDS if line.startswith("python bench/")]
 
 
-@pytest.mark.parametrize("line", CLSKY_COMMANDS, ids=[line[:60] for line in CLSKY_COMMANDS])
+#: Command lines whose reduced run still takes minutes on two cores (slow: run by .ci/run when time allows):
+#: `clsky bench accuracy` builds four reference tables at the default level even in its --quick run.
+SLOW_COMMANDS = {"clsky bench accuracy"}
+
+
+@pytest.mark.parametrize("line", [pytest.param(line, marks=pytest.mark.slow) if line in SLOW_COMMANDS else line
+                                  for line in CLSKY_COMMANDS], ids=[line[:60] for line in CLSKY_COMMANDS])
 def test_readme_command_line_runs(line, tmp_path):
     argv = shlex.split(line)
     assert argv[0] == "clsky", f"the README shows a command this test cannot run: {line}"
