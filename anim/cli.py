@@ -146,7 +146,8 @@ def _memory_options(args, config):
     elif args.quality is not None:
         table = f"--quality {args.quality}"
     else:
-        table = f"--error-budget {args.error_budget:g}"
+        typed = "" if args.error_budget is not None else " (the default)"
+        table = f"--error-budget {config.error_budget:g}{typed}"
     return {"table": table, "frames": f"--size {config.size}"}
 
 

@@ -20,7 +20,7 @@ from .lookup import check_kernel_buffer, check_table_data
 from .resources import check_memory, device_of, estimate_directions_memory, estimate_render_memory
 from .settings import MAPPINGS, TableSettings
 from .table import ScatteringTable, check_table_array
-from .transmittance import COMMON_SOURCES, quadrature_defines, TransmittanceEngine
+from .transmittance import COMMON_SOURCES, TransmittanceEngine, column_channels, quadrature_defines
 
 __all__ = ["SkyRenderer", "RenderEngine", "SUN_ANGULAR_RADIUS_DEG", "RAYMARCH_DEFAULTS", "sun_disc_radiance",
            "check_directions", "check_render_table"]
@@ -174,7 +174,7 @@ class SkyRenderer:
                                                                    queue_only=True)
             transmittance.queue.finish()
         else:
-            self._sun_table_d = cla.zeros(self.queue, 8, dtype)
+            self._sun_table_d = cla.zeros(self.queue, 2 * 2 * column_channels(table.atmosphere), dtype)
         self._cos_sun_radius = math.cos(math.radians(SUN_ANGULAR_RADIUS_DEG))
 
     def prepare(self, directions, valid=None):
@@ -282,7 +282,7 @@ class SkyRenderer:
                 np.int32(self._has_gathered),
                 np.int32(t.settings.mode == "physical"), self._sun_table_d.data, np.int32(tw), np.int32(th))
         buffers = [("gathered", self._gathered_d, depth * height * width * 8),
-                   ("sun_table", self._sun_table_d, th * tw * 2)]
+                   ("sun_table", self._sun_table_d, th * tw * column_channels(t.atmosphere))]
         return self._launch("render_raymarch", directions, sun_direction, altitude, valid, args, buffers)
 
     def close(self):
