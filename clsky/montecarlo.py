@@ -363,6 +363,20 @@ def _leg_columns(r_t, v_lo, v_hi, planet_radius, scale_height, nodes, weights):
     return half * (f @ weights)
 
 
+def _ray_legs(r, mu, planet_radius):
+    """The geometry both column integrals start from, for rays from radii ``r`` [m] at cosines ``mu``
+    to the local vertical: (r, r_t, r - r_t, going down, hitting the planet), flattened; r_t = r sin(zenith)
+    is the closest approach (impact parameter), r - r_t computed without cancellation."""
+    r = np.atleast_1d(np.asarray(r, dtype=np.float64))
+    mu = np.clip(np.atleast_1d(np.asarray(mu, dtype=np.float64)), -1.0, 1.0)
+    r, mu = (a.ravel() for a in np.broadcast_arrays(r, mu))
+    sin_zenith = np.sqrt(np.maximum(0.0, (1.0 - mu) * (1.0 + mu)))
+    r_t = r * sin_zenith
+    above_tangent = r * mu * mu / (1.0 + sin_zenith)
+    down = mu < 0.0
+    return r, r_t, above_tangent, down, down & (r_t < planet_radius)
+
+
 def optical_depth_to_top(r, mu, planet_radius, top_radius, scale_heights, nodes=QUADRATURE_NODES):
     """Density columns Integral rho_s ds from points to the top of the atmosphere along a ray [m].
 
@@ -394,17 +408,8 @@ def optical_depth_to_top(r, mu, planet_radius, top_radius, scale_heights, nodes=
     blocked : numpy.ndarray of bool
         Shape (n,): the ray hits the planet (mu < 0 and r_t < Rp).
     """
-    r = np.atleast_1d(np.asarray(r, dtype=np.float64))
-    mu = np.clip(np.atleast_1d(np.asarray(mu, dtype=np.float64)), -1.0, 1.0)
-    r, mu = np.broadcast_arrays(r, mu)
-    r = r.ravel()
-    mu = mu.ravel()
+    r, r_t, above_tangent, down, blocked = _ray_legs(r, mu, planet_radius)
     x, w = np.polynomial.legendre.leggauss(int(nodes))
-    sin_zenith = np.sqrt(np.maximum(0.0, (1.0 - mu) * (1.0 + mu)))
-    r_t = r * sin_zenith
-    above_tangent = r * mu * mu / (1.0 + sin_zenith)  # r - r_t without cancellation
-    down = mu < 0.0
-    blocked = down & (r_t < planet_radius)
     columns = np.zeros((len(scale_heights), r.size))
     ok = ~blocked
     idx_up = np.flatnonzero(ok)
@@ -476,17 +481,8 @@ def ozone_column_to_top(r, mu, planet_radius, top_radius, peak, half_width, node
     blocked : numpy.ndarray of bool
         Shape (n,): the ray hits the planet.
     """
-    r = np.atleast_1d(np.asarray(r, dtype=np.float64))
-    mu = np.clip(np.atleast_1d(np.asarray(mu, dtype=np.float64)), -1.0, 1.0)
-    r, mu = np.broadcast_arrays(r, mu)
-    r = r.ravel()
-    mu = mu.ravel()
+    r, r_t, above_tangent, down, blocked = _ray_legs(r, mu, planet_radius)
     x, w = np.polynomial.legendre.leggauss(int(nodes))
-    sin_zenith = np.sqrt(np.maximum(0.0, (1.0 - mu) * (1.0 + mu)))
-    r_t = r * sin_zenith
-    above_tangent = r * mu * mu / (1.0 + sin_zenith)  # r - r_t without cancellation
-    down = mu < 0.0
-    blocked = down & (r_t < planet_radius)
     columns = np.zeros(r.size)
     ok = np.flatnonzero(~blocked)
     rt = r_t[ok]
