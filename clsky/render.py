@@ -19,7 +19,7 @@ from .errors import as_real_array, is_real_number, short
 from .lookup import check_kernel_buffer, check_table_data
 from .resources import check_memory, device_of, estimate_directions_memory, estimate_render_memory
 from .settings import MAPPINGS, TableSettings
-from .table import ScatteringTable, check_table_array
+from .table import ScatteringTable
 from .transmittance import COMMON_SOURCES, TransmittanceEngine, column_channels, quadrature_defines
 
 __all__ = ["SkyRenderer", "RenderEngine", "SUN_ANGULAR_RADIUS_DEG", "RAYMARCH_DEFAULTS", "sun_disc_radiance",
@@ -54,20 +54,18 @@ def check_directions(directions, sun_direction, altitude):
 
 def check_render_table(table):
     """Check what the renderer uploads from ``table`` against its settings, even for a table whose
-    validation was bypassed: data (D, H, W, C) with C = ``settings.channels``, gathered (D, H, W, 6) or
-    None, both float, finite and >= 0.
+    attributes were replaced after construction: the shapes and dtypes of :meth:`ScatteringTable.validate`
+    (data (D, H, W, C) with C = ``settings.channels``, gathered (D, H, W, 6) or None) and the kernels'
+    32-bit index range. The values were checked (finite, >= 0) when the table was made; they cannot
+    make a kernel read out of bounds.
 
     Raises
     ------
     ValueError
         (:class:`~clsky.table.TableFormatError`) naming the array and what is wrong.
     """
-    width, height, depth = table.settings.size
-    grid = (depth, height, width)
-    check_table_array("table data", table.data, grid + (table.settings.channels,), ("float64", "float32"))
+    table.validate(check_values=False)
     check_table_data(table.data)
-    if table.gathered is not None:
-        check_table_array("table gathered", table.gathered, grid + (6,), ("float64", "float32"))
 
 
 def sun_disc_radiance(atmosphere, sun_direction, altitude, steps=512):
