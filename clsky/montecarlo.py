@@ -60,7 +60,6 @@ import math
 
 import numpy as np
 
-from .errors import short
 
 __all__ = [
     "DEFAULT_MAX_ORDERS",
@@ -627,14 +626,14 @@ def simulate(atmosphere, altitude, cos_view, cos_sun, azimuth=0.0, *, photons=20
     rp = float(atmosphere.planet_radius)
     ra = float(atmosphere.top_radius)
     if not (0.0 <= altitude <= ra - rp):
-        raise ValueError(f"altitude must be in [0, {ra - rp:g}] m, got {short(altitude)}")
+        raise ValueError(f"altitude must be in [0, {ra - rp:g}] m, got {float(altitude):g}")
     if single_only:
         max_orders = 1
     if max_orders is None:
         max_orders = DEFAULT_MAX_ORDERS
     max_orders = int(max_orders)
     if max_orders < 1:
-        raise ValueError(f"max_orders must be >= 1, got {short(max_orders)}")
+        raise ValueError(f"max_orders must be >= 1, got {max_orders!r:.40}")
     photons = int(photons)
     if photons < 2:
         raise ValueError("photons must be >= 2")
