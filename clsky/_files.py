@@ -198,8 +198,9 @@ def check_output_directory(path, option=None, names=()):
     return path
 
 
-#: Signals held back while a set is renamed into place.
-_DEFERRED_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
+#: The signals that interrupt a command cleanly (clsky/cli.py; SIGHUP: the terminal was closed) and
+#: that are held back while a set of files lands.
+INTERRUPT_SIGNALS = _DEFERRED_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
 @contextlib.contextmanager

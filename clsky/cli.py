@@ -17,6 +17,7 @@ import threading
 import time
 
 from . import __version__
+from ._files import INTERRUPT_SIGNALS
 from .errors import short
 
 EXIT_USAGE = 2
@@ -34,10 +35,6 @@ class Interrupted(KeyboardInterrupt):
     def __init__(self, signum):
         super().__init__(signal.Signals(signum).name)
         self.signum = signum
-
-
-#: Signals that interrupt a command cleanly (SIGHUP: the terminal was closed).
-INTERRUPT_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
 def _interrupt(signum, frame):
