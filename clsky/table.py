@@ -52,6 +52,7 @@ import numpy as np
 from . import __version__
 from ._files import StagedWrites, atomic_write, check_output
 from .atmosphere import AtmosphereParameters, preset
+from .errors import short
 from .lookup import check_queries
 from .settings import TableSettings
 
@@ -493,8 +494,7 @@ def _describe_error(error) -> str:
 def _describe_member(member) -> str:
     """A short description of a member's value for a message: the scalar itself, else its kind."""
     if isinstance(member, np.ndarray) and member.shape == ():
-        value = member.item()
-        return _shorten(f"{value:g}" if isinstance(value, float) else repr(value), 40)
+        return short(member.item())
     if isinstance(member, np.ndarray):
         return f"a {member.dtype} array of shape {member.shape}"
     return f"a {type(member).__name__}"
