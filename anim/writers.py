@@ -240,8 +240,8 @@ class FrameWriter:
     -----
     - Everything lands together: each frame (PNG, .npy) and the MP4 are written to hidden temporary
       files with unique names (``.<name>.XXXXXXXX<suffix>``) beside their targets, and renamed when
-      the block exits normally: the frames first, then the stale frames are deleted, the MP4 last
-      (when it is there, its frames are too). An exception inside the block (KeyboardInterrupt
+      the block exits normally (with ``staging``, when that set commits): the frames first, the MP4
+      last (when it is there, its frames are too), then the stale frames are deleted. An exception inside the block (KeyboardInterrupt
       included) deletes every temporary, and the frame directory if this writer created it and it
       is empty: the outputs of an earlier run stay as they were, never mixed with new ones.
     - MP4: H.264, yuv420p, :data:`MP4_OUTPUT_PARAMS`. yuv420p halves the chroma resolution, so width

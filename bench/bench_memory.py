@@ -96,12 +96,19 @@ def main():
     parser.add_argument("--directory", default="/tmp/clsky_bench_memory", help="where outputs go")
     add_output_arguments(parser)
     args = parse_arguments(parser)
-    if args.smoke:
-        args.directory = tempfile.mkdtemp(prefix="clsky_bench_memory_")
-    os.makedirs(args.directory, exist_ok=True)
+    if args.smoke:                               # a temporary directory, removed afterwards
+        with tempfile.TemporaryDirectory(prefix="clsky_bench_memory_") as directory:
+            measure(args, directory)
+    else:
+        os.makedirs(args.directory, exist_ok=True)
+        measure(args, args.directory)
+
+
+def measure(args, directory):
+    """Run the selected cases with their outputs in ``directory``; print (and write) the table."""
     selected = [c for c in (smoke_cases() if args.smoke else cases(args.reference)) if not args.only or c[0] in args.only]
     peak_rss(["table", "--size", "8", "16", "8", "--progress", "none", "--force"],
-             os.path.join(args.directory, "warm.npz"))
+             os.path.join(directory, "warm.npz"))
     lines = [f"Peak resident memory (`ru_maxrss` of the whole process) measured {datetime.date.today()} on "
              f"{machine()}, load average {os.getloadavg()[0]:.1f} at the start (a machine shared with other "
              f"work: the times are not benchmarks), PyOpenCL's program cache warm. Estimate: "
@@ -111,7 +118,7 @@ def main():
              "|---|---|---:|---:|---:|---:|"]
     for name, description, arguments in selected:
         suffix = ".mp4" if arguments[0] == "animate" else ".npz"
-        code, measured, seconds = peak_rss(arguments, os.path.join(args.directory, name.replace(" ", "_") + suffix))
+        code, measured, seconds = peak_rss(arguments, os.path.join(directory, name.replace(" ", "_") + suffix))
         if code != 0:
             raise SystemExit(f"{name}: exit status {code}")
         estimated, size = estimate(arguments)

@@ -390,7 +390,8 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
     upload = (Allocation(f"table data on the device (D, H, W, {settings.channels})", cells * settings.channels * s,
                          on_device=True),
               Allocation("padded gathered sum on the device (D, H, W, 8)", gathered, on_device=True),
-              Allocation("ray-march transmittance table", int(np.prod(ray_settings.transmittance_size)) * 2 * s,
+              # 2 columns per node, 3 with ozone (transmittance.column_channels): counted as 3
+              Allocation("ray-march transmittance table", int(np.prod(ray_settings.transmittance_size)) * 3 * s,
                          on_device=True))
     phases = [Phase("renderer", held + upload + (Allocation("upload staging (D, H, W, 8)", gathered),))]
     if pixels:
