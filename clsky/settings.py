@@ -22,7 +22,7 @@ SCATTERING_MODES = ("atmosphere-plus", "physical")
 #: Channels stored per cell: Rayleigh r, g, b + Mie r, g, b, or the notes' Rayleigh r, g, b + one Mie.
 MIE_LAYOUTS = {"per-wavelength": 6, "notes": 4}
 
-_MAX_CELLS = (2**31 - 1) // 9   # every flat index times the most channels (9) fits a signed 32-bit int
+_MAX_CELLS = 2**31 // 8   # keeps every flat index (times channels) inside a signed 32-bit int
 
 
 def _check_int(name, value, low, high, index=None):
