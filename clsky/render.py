@@ -54,17 +54,16 @@ def check_directions(directions, sun_direction, altitude):
 
 def check_render_table(table):
     """Check what the renderer uploads from ``table`` against its settings, even for a table whose
-    attributes were replaced after construction: the shapes and dtypes of :meth:`ScatteringTable.validate`
-    (data (D, H, W, C) with C = ``settings.channels``, gathered (D, H, W, 6) or None) and the kernels'
-    32-bit index range. The values were checked (finite, >= 0) when the table was made; they cannot
-    make a kernel read out of bounds.
+    attributes were replaced after construction: :meth:`ScatteringTable.validate` (data (D, H, W, C)
+    with C = ``settings.channels``, gathered (D, H, W, 6) or None, their dtypes, every value finite and
+    >= 0: one pass over the arrays, once per renderer) and the kernels' 32-bit index range.
 
     Raises
     ------
     ValueError
         (:class:`~clsky.table.TableFormatError`) naming the array and what is wrong.
     """
-    table.validate(check_values=False)
+    table.validate()
     check_table_data(table.data)
 
 
