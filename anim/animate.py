@@ -2,7 +2,7 @@
 
 The pipeline, one frame at a time: sun position (:mod:`anim.sunpath`) -> HDR frames
 (:class:`clsky.render.SkyRenderer`, for the camera of :mod:`anim.cameras`) -> display values
-(:mod:`anim.tonemap`) -> metrics, error image and composite (:mod:`anim.metrics`) -> files
+(:mod:`anim.display`: white balance, exposure, tone curve, sRGB) -> metrics, error image and composite (:mod:`anim.metrics`) -> files
 (:mod:`anim.writers`). The renderers never see files; the writers never see physics.
 
 Example
@@ -32,12 +32,13 @@ from clsky.quality import QUALITY_LEVELS, QualityLevel, level_for_budget, qualit
 from clsky.render import SkyRenderer
 from clsky.resources import MemoryEstimate, check_memory, device_of, estimate_animation_memory
 
-from . import metrics, sunpath, tonemap, writers
+from . import display as display_pipeline
+from . import metrics, sunpath, writers
 from .cameras import camera_from_name
 
 __all__ = ["AnimationConfig", "AnimationResult", "METHODS", "quality", "plan_animation", "build_table",
            "ray_settings", "sun_positions", "check_outputs", "render_animation", "render_frame",
-           "memory_estimate"]
+           "memory_estimate", "display", "display_frames"]
 
 #: What is rendered: table lookup only, ray march only, or both with the comparison.
 METHODS = ("compare", "lut", "raymarch")
@@ -88,7 +89,18 @@ class AnimationConfig:
     fps : float
         Frames per second of the MP4, in (0, 240].
     exposure : float
-        Exposure of the tone map, > 0.
+        Exposure [EV] in [-40, 40] (default 0): frames are scaled by 2^exposure before the tone curve
+        (EV 0 is the old multiplier 1; the old ``exposure=x`` is ``log2(x)``). With ``auto_exposure``,
+        a compensation added to the metered EV.
+    tone_map : str or None
+        Tone curve (:data:`anim.display.TONE_CURVES`); None (default): ``'atmosphere-plus'`` (the notes'
+        curve, frames bit for bit as before) for the atmosphere-plus preset, else
+        :data:`anim.display.DEFAULT_TONE_MAP`.
+    auto_exposure : bool
+        Meter each frame's luminance, smoothed over time (:class:`anim.display.AutoExposure`).
+    white_balance : {'d65', 'sun'}
+        'd65' (default): no balance, sRGB's own white; 'sun': the sun's colour (the incident light
+        I_I) adapted to D65 white (von Kries, CAT02).
     dither : bool
         Dither the 8-bit frames against banding.
     output : str or path
@@ -131,7 +143,10 @@ class AnimationConfig:
     end_hour: float = 24.0
     step_minutes: float = 10.0
     fps: float = 30.0
-    exposure: float = 1.0
+    exposure: float = 0.0
+    tone_map: str | None = None
+    auto_exposure: bool = False
+    white_balance: str = "d65"
     dither: bool = True
     output: str = "sky.mp4"
     hdr: bool = False
@@ -152,6 +167,9 @@ class AnimationConfig:
                                                      f"{self.end_hour:g} h (at most {sunpath.MAX_POSITIONS} positions)",
                                      self.step_minutes)
         object.__setattr__(self, "table_size", _check_table_size(self.table_size))
+        if self.tone_map is None:
+            object.__setattr__(self, "tone_map", "atmosphere-plus" if self.preset == "atmosphere-plus"
+                               else display_pipeline.DEFAULT_TONE_MAP)
 
     @property
     def output_path(self) -> pathlib.Path:
@@ -266,7 +284,8 @@ _FIELD_CHECKS = {
     "start_elevation_deg": _real(-90.0, 90.0, " degrees"), "max_elevation_deg": _real(-90.0, 90.0, " degrees"),
     "location": _location, "date": _date, "start_hour": _real(0.0, 48.0, " h"), "end_hour": _real(0.0, 48.0, " h"),
     "step_minutes": _real(0.0, 1440.0, " minutes", low_open=True), "fps": _real(0.0, 240.0, low_open=True),
-    "exposure": _real(0.0, 1e6, low_open=True), "dither": _flag, "output": _output, "hdr": _flag, "force": _flag,
+    "exposure": _real(-40.0, 40.0, " EV"), "tone_map": _choice(tuple(display_pipeline.TONE_CURVES), optional=True),
+    "auto_exposure": _flag, "white_balance": _choice(display_pipeline.WHITE_BALANCES), "dither": _flag, "output": _output, "hdr": _flag, "force": _flag,
 }
 
 
@@ -379,6 +398,22 @@ def render_frame(renderer: SkyRenderer, prepared, sun_direction, config: Animati
     return frames
 
 
+def display(config: AnimationConfig, atmosphere) -> display_pipeline.Display:
+    """The display pipeline of the animation's frames (:class:`anim.display.Display`)."""
+    auto = display_pipeline.AutoExposure() if config.auto_exposure else None
+    # The renderer's r, g, b are taken as linear Rec. 709, and the sun's colour as its incident light I_I.
+    return display_pipeline.Display(config.tone_map, config.exposure, auto, config.white_balance,
+                                    sun_white=atmosphere.incident_light, source="rec709")
+
+
+def display_frames(pipeline: display_pipeline.Display, hdr, valid, config: AnimationConfig, seed=0):
+    """(EV, {name: 8-bit frame}, Delta E display) of one sun position's HDR frames: the exposure is
+    metered on the reference (the ray march when there is one) and shows every frame at that EV."""
+    ev = pipeline.exposure(hdr.get("raymarch", hdr.get("lut")), valid)
+    images = {name: pipeline.to_uint8(frame, ev, dither=config.dither, seed=seed) for name, frame in hdr.items()}
+    return ev, images, (lambda pixels: pipeline.linear(pixels, ev))
+
+
 def _frame_writer(config: AnimationConfig, total_frames: int, staging=None) -> writers.FrameWriter:
     return writers.FrameWriter(directory=config.frames_directory, mp4_path=config.output_path, fps=config.fps,
                                total_frames=total_frames, hdr="npy" if config.hdr else None, force=config.force,
@@ -468,23 +503,23 @@ def _write_animation(config, positions, renderer, prepared, valid, table, plan, 
     """Render every frame and stage the frames, the MP4 and the metrics in ``staging``; returns the
     metric rows, the temporal jumps, the target paths and the stale frames to be deleted."""
     rows, means = [], {"lut": [], "raymarch": []}
+    pipeline = display(config, table.atmosphere)
     with _frame_writer(config, len(positions), staging) as writer:
         for index, sun in enumerate(positions):
             hdr = render_frame(renderer, prepared, sun.direction, config)
-            display = {name: tonemap.to_uint8(tonemap.tone_map(frame, config.exposure), dither=config.dither,
-                                              seed=index) for name, frame in hdr.items()}
+            ev, images, shown = display_frames(pipeline, hdr, valid, config, seed=index)
             row = {"frame": index, "sun_zenith_deg": sun.zenith_deg, "sun_azimuth_deg": sun.azimuth_deg,
-                   "time": sun.time.isoformat() if sun.time is not None else ""}
+                   "time": sun.time.isoformat() if sun.time is not None else "", "exposure_ev": ev}
             for name, frame in hdr.items():
                 means[name].append(metrics.mean_luminance(frame[None], valid)[0])
             if config.method == "compare":
-                row.update(metrics.compare_frames(hdr["raymarch"], hdr["lut"], valid, config.exposure))
+                row.update(metrics.compare_frames(hdr["raymarch"], hdr["lut"], valid, display=shown))
                 error = metrics.error_image(metrics.relative_error_map(hdr["raymarch"], hdr["lut"], valid), valid)
-                image = metrics.composite([display["lut"], display["raymarch"], error],
+                image = metrics.composite([images["lut"], images["raymarch"], error],
                                           ["table lookup", "ray march", "relative error"])
                 frame_hdr = hdr["raymarch"]
             else:
-                image = display[config.method]
+                image = images[config.method]
                 frame_hdr = hdr[config.method]
             writer.write(index, _even(image), hdr=frame_hdr if config.hdr else None)
             rows.append(row)
@@ -493,7 +528,8 @@ def _write_animation(config, positions, renderer, prepared, valid, table, plan, 
     paths = list(writer.paths)          # the frames and the MP4: they land when ``staging`` commits
     temporal = {}
     if config.method == "compare":
-        jumps = metrics.temporal_jumps(np.array(means["lut"]), np.array(means["raymarch"]), exposure=config.exposure)
+        jumps = metrics.temporal_jumps(np.array(means["lut"]), np.array(means["raymarch"]),
+                                       exposure=2.0 ** config.exposure)
         temporal = {"table_jumps": np.asarray(jumps["table_jumps"]).tolist(),
                     "raymarch_jumps": np.asarray(jumps["raymarch_jumps"]).tolist(),
                     "excess": np.asarray(jumps["excess"]).tolist(),
@@ -506,6 +542,7 @@ def _write_animation(config, positions, renderer, prepared, valid, table, plan, 
                    for k, v in dataclasses.asdict(config).items()},
         "table": {"settings": table.settings.to_dict(), "orders": table.orders_record,
                   "metadata": table.metadata},
+        "display": pipeline.describe(),
         "plan": None if plan is None else {"quality": plan.level.name, "work_fraction": plan.work_fraction,
                                            "decisions": [list(d) for d in plan.decisions]},
         "frames": rows, "temporal": temporal}, force=config.force, staging=staging))

@@ -24,7 +24,7 @@ FIELD_OPTIONS = {
     "error_budget": "--error-budget", "quality": "--quality", "start_elevation_deg": "--start-elevation",
     "max_elevation_deg": "--max-elevation", "location": "--location", "date": "--date",
     "start_hour": "--hours START", "end_hour": "--hours END", "step_minutes": "--step-minutes", "fps": "--fps",
-    "exposure": "--exposure", "output": "--output",
+    "exposure": "--exposure", "tone_map": "--tone-map", "white_balance": "--white-balance", "output": "--output",
 }
 
 #: Options whose default is None so that, not given, the AnimationConfig's own default (or the
@@ -66,7 +66,7 @@ def _add_scene_arguments(parser, frames=True):
     sky.add_argument("--table-size", nargs=3, type=int, metavar=("W", "H", "D"),
                      help="a full table of this grid instead of the scene plan's")
     sky.add_argument("--samples", type=int, help="ray-march samples per ray (default: the quality level's)")
-    sky.add_argument("--exposure", type=float, default=1.0)
+    _add_display_arguments(parser)
     if frames:
         sun = parser.add_argument_group("sun path")
         sun.add_argument("--frames", type=int, default=120, help="frames of the sweep (default: 120)")
@@ -79,6 +79,22 @@ def _add_scene_arguments(parser, frames=True):
         sun.add_argument("--hours", nargs=2, type=float, metavar=("START", "END"), default=[0.0, 24.0],
                          help="time range of the real positions [h, UTC]")
         sun.add_argument("--step-minutes", type=float, default=10.0)
+
+
+def _add_display_arguments(parser):
+    from .display import DEFAULT_TONE_MAP, TONE_CURVES, WHITE_BALANCES
+
+    display = parser.add_argument_group("display")
+    display.add_argument("--tone-map", choices=list(TONE_CURVES),
+                         help=f"tone curve (default: atmosphere-plus, the notes' curve, for --preset atmosphere-plus; "
+                              f"{DEFAULT_TONE_MAP} otherwise)")
+    display.add_argument("--exposure", type=float, default=0.0, metavar="EV",
+                         help="exposure in EV: frames are scaled by 2^EV (default: 0, the frames' own values; the old "
+                              "multiplier x is log2(x)); with --auto-exposure, a compensation")
+    display.add_argument("--auto-exposure", action="store_true",
+                         help="meter each frame's log-average luminance to mid-grey, smoothed over the frames")
+    display.add_argument("--white-balance", choices=list(WHITE_BALANCES), default="d65",
+                         help="white: d65 (none, default) or the sun's colour adapted to D65 (CAT02)")
 
 
 def register(commands):
@@ -130,7 +146,8 @@ def _config(args, **extra):
     fields = dict(size=args.size, camera=args.camera, fov_deg=args.fov, heading_deg=args.heading,
                   pitch_deg=args.pitch, altitude=args.altitude, method=args.method,
                   table_size=None if args.table_size is None else tuple(args.table_size),
-                  samples=args.samples, quality=args.quality, exposure=args.exposure,
+                  samples=args.samples, quality=args.quality, exposure=args.exposure, tone_map=args.tone_map,
+                  auto_exposure=args.auto_exposure, white_balance=args.white_balance,
                   dither=not args.no_dither, force=args.force, **extra)
     fields.update({name: getattr(args, name) for name in UNSET_DEFAULTS if getattr(args, name) is not None})
     try:
@@ -188,8 +205,8 @@ def run_render(args):
 
     from clsky.render import SkyRenderer
 
-    from . import metrics, tonemap, writers
-    from .animate import _camera, build_table, plan_animation, ray_settings, render_frame
+    from . import metrics, writers
+    from .animate import _camera, build_table, display, display_frames, plan_animation, ray_settings, render_frame
     from .cameras import sun_direction
     from .sunpath import SunPosition
 
@@ -213,19 +230,18 @@ def run_render(args):
     renderer = SkyRenderer(table, ray_settings(config))
     sun = sun_direction(90.0 - args.sun_elevation, args.sun_azimuth)
     hdr = render_frame(renderer, renderer.prepare(directions, valid), sun, config)
-    display = {name: tonemap.to_uint8(tonemap.tone_map(frame, config.exposure), dither=config.dither)
-               for name, frame in hdr.items()}
+    ev, images, shown = display_frames(display(config, table.atmosphere), hdr, valid, config)
     if config.method == "compare":
         error = metrics.error_image(metrics.relative_error_map(hdr["raymarch"], hdr["lut"], valid), valid)
-        image = metrics.composite([display["lut"], display["raymarch"], error],
+        image = metrics.composite([images["lut"], images["raymarch"], error],
                                   ["table lookup", "ray march", "relative error"])
-        numbers = metrics.compare_frames(hdr["raymarch"], hdr["lut"], valid, config.exposure)
+        numbers = metrics.compare_frames(hdr["raymarch"], hdr["lut"], valid, display=shown)
         detail = f"; table vs ray march: 95th-percentile error {100 * numbers['p95_rel']:.1f} %"
     else:
-        image, detail = display[config.method], ""
+        image, detail = images[config.method], ""
     writers.write_png(output, image, force=args.force)
     print(f"frame {camera.width}x{camera.height} ({config.method}, sun elevation {args.sun_elevation:g} deg, "
-          f"azimuth {args.sun_azimuth:g} deg){detail} -> {output}")
+          f"azimuth {args.sun_azimuth:g} deg, {config.tone_map} at {ev:+.2f} EV){detail} -> {output}")
     return 0
 
 
