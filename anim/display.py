@@ -72,17 +72,20 @@ GAMUT_STEPS = 16
 
 @functools.lru_cache(maxsize=None)
 def _matrices():
-    """(sRGB -> XYZ, XYZ -> sRGB, sRGB -> Oklab LMS, Oklab LMS' -> Lab, and inverses) from colour-science."""
+    """(sRGB -> XYZ, XYZ -> sRGB, sRGB -> Oklab LMS, Oklab LMS' -> Lab, and inverses) from colour-science's
+    sRGB colourspace (the IEC 61966-2-1 matrix) and Oklab's forward matrices."""
     import colour
     from colour.models import oklab
 
     srgb = colour.RGB_COLOURSPACES["sRGB"]
     to_xyz = np.asarray(srgb.matrix_RGB_to_XYZ, dtype=np.float64)
-    to_rgb = np.asarray(srgb.matrix_XYZ_to_RGB, dtype=np.float64)
+    to_rgb = np.linalg.inv(to_xyz)                # its printed inverse has 4 digits: white would be off 5e-5
     to_lms = np.asarray(oklab.MATRIX_1_XYZ_TO_LMS, dtype=np.float64) @ to_xyz
     to_lab = np.asarray(oklab.MATRIX_2_LMS_TO_LAB, dtype=np.float64)
-    from_lab = np.asarray(oklab.MATRIX_2_LAB_TO_LMS, dtype=np.float64)
-    from_lms = to_rgb @ np.asarray(oklab.MATRIX_1_LMS_TO_XYZ, dtype=np.float64)
+    # the inverses to double precision (colour-science prints them to fewer digits: a round trip
+    # through its printed inverses moves L by 1e-5 and the hue by 1e-3 deg)
+    from_lab = np.linalg.inv(to_lab)
+    from_lms = np.linalg.inv(to_lms)
     return {"rgb_to_xyz": to_xyz, "xyz_to_rgb": to_rgb, "rgb_to_lms": to_lms, "lms_to_lab": to_lab,
             "lab_to_lms": from_lab, "lms_to_rgb": from_lms}
 
@@ -235,9 +238,10 @@ def white_balance_matrix(source_white_xyz, transform="CAT02"):
     source = np.asarray(source_white_xyz, dtype=np.float64)
     if source.shape != (3,) or not np.isfinite(source).all() or not source[1] > 0 or (source < 0).any():
         raise ParameterError("source_white_xyz", "three finite XYZ values >= 0 with Y > 0", source.tolist())
-    d65 = colour.xy_to_XYZ(colour.RGB_COLOURSPACES["sRGB"].whitepoint) * source[1]
-    cat = colour.adaptation.matrix_chromatic_adaptation_VonKries(source, d65, transform=transform)
     m = _matrices()
+    white = m["rgb_to_xyz"].sum(axis=1)           # sRGB white (1, 1, 1): D65 as the matrix has it
+    cat = colour.adaptation.matrix_chromatic_adaptation_VonKries(source, white * source[1] / white[1],
+                                                                 transform=transform)
     return m["xyz_to_rgb"] @ np.asarray(cat, dtype=np.float64) @ m["rgb_to_xyz"]
 
 
@@ -263,7 +267,7 @@ class AutoExposure:
 
     key: float = 0.18
     smoothing: float = 0.5
-    max_step_ev: float = 0.5
+    max_step_ev: float = 2.0
     min_ev: float = -20.0
     max_ev: float = 20.0
 
@@ -310,7 +314,7 @@ def meter_ev(luminance, key=0.18, min_ev=-20.0, max_ev=20.0):
     return float(np.clip(math.log2(key / average), min_ev, max_ev))
 
 
-def smoothed_ev(previous, metered, smoothing=0.5, max_step_ev=0.5):
+def smoothed_ev(previous, metered, smoothing=0.5, max_step_ev=2.0):
     """The next frame's EV: previous + clip(smoothing (metered - previous), +-max_step_ev); the first
     frame (``previous`` None) takes the metered EV."""
     if previous is None:
@@ -413,7 +417,10 @@ class Display:
 
         For ``atmosphere-plus`` with D65 this is ``tonemap.tone_map(frame, 2**ev)`` itself."""
         if self.tone_map == "atmosphere-plus":
-            return tonemap.tone_map(self.linear_srgb(frame), 2.0 ** ev)
+            if self._to_srgb is None:             # the notes' pipeline exactly
+                return tonemap.tone_map(self._check(frame), 2.0 ** ev)
+            # a converted frame (XYZ, white balance) may leave the gamut: its negative channels show as 0
+            return tonemap.tone_map(np.maximum(self.linear_srgb(frame), 0.0), 2.0 ** ev)
         return srgb_encode(self.linear(frame, ev))
 
     def linear(self, frame, ev):
@@ -425,7 +432,9 @@ class Display:
             raise ValueError(f"frame contains {int((~np.isfinite(rgb)).sum())} NaN or infinite values")
         if (_luminance(rgb) < 0).any():
             raise ValueError("frame contains pixels of negative luminance; radiance must be >= 0")
-        return TONE_CURVES[self.tone_map].function(rgb * 2.0 ** ev)
+        with np.errstate(over="ignore"):          # beyond EXPOSED_MAX the curves are 1 anyway
+            exposed = rgb * 2.0 ** ev
+        return TONE_CURVES[self.tone_map].function(exposed)
 
     def to_uint8(self, frame, ev, dither=False, seed=0):
         """8-bit display values (:func:`anim.tonemap.to_uint8` of :meth:`encode`)."""
