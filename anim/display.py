@@ -15,7 +15,7 @@ function, as in the notes.
 
 Units. EV is relative to the frame's own units: EV 0 shows the frame's values as they are (I_I units for
 the 3-wavelength renderer: a day sky has Y of about 0.5), EV +1 doubles them. Auto-exposure meters the
-log-average luminance (Reinhard et al. 2002) and aims it at ``key`` (0.18, mid-grey), so it works in
+log-average luminance (Reinhard et al. 2002) and aims it at ``key`` (0.36: a sky is a high-key scene), so it works in
 any unit, absolute luminance [cd/m^2] included.
 
 Hue. The per-channel curves (``atmosphere-plus``, ``reinhard``, ``aces-fit``) compress each of r, g, b
@@ -254,8 +254,10 @@ class AutoExposure:
     Parameters
     ----------
     key : float
-        Display-linear luminance the log-average of the frame is mapped to [-], in (0, 1] (0.18,
-        Reinhard et al. 2002's middle grey).
+        Scene luminance, after exposure, that the log-average of the frame is mapped to [-], in (0, 1].
+        Reinhard et al. 2002 use 0.18 for average scenes and up to 0.72 for high-key ones; 0.36 (one
+        stop above mid-grey) keeps a day sky about as bright as the frames' own values (EV -0.2 for
+        the physical preset's day sky) and lifts twilight.
     smoothing : float
         Fraction of the difference between the metered and the current EV corrected per frame, in
         (0, 1] (1: no smoothing).
@@ -265,7 +267,7 @@ class AutoExposure:
         Range of the metered EV [EV] (a black frame meters at ``max_ev``).
     """
 
-    key: float = 0.18
+    key: float = 0.36
     smoothing: float = 0.5
     max_step_ev: float = 2.0
     min_ev: float = -20.0
@@ -279,7 +281,7 @@ class AutoExposure:
         check_real("max_ev", self.max_ev, self.min_ev, 60.0)
 
 
-def meter_ev(luminance, key=0.18, min_ev=-20.0, max_ev=20.0):
+def meter_ev(luminance, key=0.36, min_ev=-20.0, max_ev=20.0):
     """EV that maps the log-average of ``luminance`` to ``key``: log2(key / exp(mean log max(Y, floor))).
 
     Parameters
