@@ -149,6 +149,12 @@ def _exponential(x):
     return -np.expm1(-x)
 
 
+def _mix(matrix, x, y, z):
+    """``matrix`` applied to the components x, y, z (1-D arrays): faster than (N, 3) @ (3, 3), which
+    NumPy runs without BLAS for an inner size of 3."""
+    return [matrix[i, 0] * x + matrix[i, 1] * y + matrix[i, 2] * z for i in range(3)]
+
+
 def _into_gamut(rgb):
     """``rgb`` with the chroma of out-of-gamut pixels reduced in Oklab at constant L and hue until all
     channels lie in [0, 1] (bisection on the chroma factor t in [0, 1]; t = 0 is the grey of the same
@@ -157,16 +163,23 @@ def _into_gamut(rgb):
     outside = ((rgb < 0.0) | (rgb > 1.0)).any(axis=-1)
     if not outside.any():
         return rgb
-    lab = linear_srgb_to_oklab(rgb[outside])
-    lab[:, 0] = np.minimum(lab[:, 0], 1.0)
-    low, high = np.zeros(len(lab)), np.ones(len(lab))
+    m = _matrices()
+    lightness, a, b = linear_srgb_to_oklab(rgb[outside]).T
+    lightness = np.minimum(lightness, 1.0)
+
+    def shown(t):
+        lms = [c * c * c for c in _mix(m["lab_to_lms"], lightness, t * a, t * b)]
+        return _mix(m["lms_to_rgb"], *lms)
+
+    low, high = np.zeros(len(a)), np.ones(len(a))
     for _ in range(GAMUT_STEPS):
         middle = 0.5 * (low + high)
-        trial = oklab_to_linear_srgb(lab * np.stack([np.ones_like(middle), middle, middle], axis=-1))
-        inside = ((trial >= 0.0) & (trial <= 1.0)).all(axis=-1)
+        red, green, blue = shown(middle)
+        inside = ((red >= 0.0) & (red <= 1.0) & (green >= 0.0) & (green <= 1.0) & (blue >= 0.0)
+                  & (blue <= 1.0))
         low = np.where(inside, middle, low)
         high = np.where(inside, high, middle)
-    rgb[outside] = oklab_to_linear_srgb(lab * np.stack([np.ones_like(low), low, low], axis=-1))
+    rgb[outside] = np.stack(shown(low), axis=-1)
     return np.clip(rgb, 0.0, 1.0)
 
 
