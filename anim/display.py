@@ -431,6 +431,7 @@ class Display:
         """Encoded display values in [0, 1] of ``frame`` at exposure ``ev`` [EV].
 
         For ``atmosphere-plus`` with D65 this is ``tonemap.tone_map(frame, 2**ev)`` itself."""
+        ev = check_real("ev", ev, -100.0, 100.0)
         if self.tone_map == "atmosphere-plus":
             if self._to_srgb is None:             # the notes' pipeline exactly
                 return tonemap.tone_map(self._check(frame), 2.0 ** ev)
@@ -442,6 +443,7 @@ class Display:
         """Display-linear sRGB in [0, 1]: what the screen emits, relative to its white (for Delta E)."""
         if self.tone_map == "atmosphere-plus":
             return np.clip(self.encode(frame, ev), 0.0, 1.0) ** tonemap.GAMMA
+        ev = check_real("ev", ev, -100.0, 100.0)
         rgb = self.linear_srgb(frame)
         if not np.isfinite(rgb).all():
             raise ValueError(f"frame contains {int((~np.isfinite(rgb)).sum())} NaN or infinite values")

@@ -311,9 +311,13 @@ def test_auto_exposure_refuses_bad_parameters(kwargs, field):
     assert caught.value.field == field
 
 
-def test_display_refuses_nan_frames():
+def test_display_refuses_nan_frames_and_exposures():
     with pytest.raises(ValueError, match="NaN"):
         Display().encode(np.array([[np.nan, 0.0, 0.0]]), 0.0)
+    for curve in ("atmosphere-plus", DEFAULT_TONE_MAP):
+        with pytest.raises(ParameterError) as caught:
+            Display(tone_map=curve).encode(np.ones((1, 3)), float("nan"))
+        assert caught.value.field == "ev"
 
 
 @pytest.mark.parametrize("args, named", [
