@@ -92,7 +92,8 @@ def _add_display_arguments(parser):
                          help="exposure in EV: frames are scaled by 2^EV (default: 0, the frames' own values; the old "
                               "multiplier x is log2(x)); with --auto-exposure, a compensation")
     display.add_argument("--auto-exposure", action="store_true",
-                         help="meter each frame's log-average luminance to mid-grey, smoothed over the frames")
+                         help="meter each frame's log-average luminance to a key of 0.36 (a stop above mid-grey), "
+                              "smoothed over the frames")
     display.add_argument("--white-balance", choices=list(WHITE_BALANCES), default="d65",
                          help="white: d65 (none, default) or the sun's colour adapted to D65 (CAT02)")
 
