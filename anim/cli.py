@@ -41,6 +41,7 @@ def _date(text):
 
 
 def _add_scene_arguments(parser, frames=True):
+    from clsky.atmosphere import EARTH_GROUND_ALBEDO
     from clsky.quality import QUALITY_LEVELS
 
     from .animate import METHODS
@@ -61,7 +62,8 @@ def _add_scene_arguments(parser, frames=True):
     sky.add_argument("--mode", choices=["atmosphere-plus", "physical"],
                      help="scheme of the higher orders (default: physical)")
     sky.add_argument("--ground-albedo", type=float, metavar="A",
-                     help="albedo of a Lambertian ground in [0, 1] (default: the preset's)")
+                     help=f"albedo of a Lambertian ground in [0, 1], e.g. {EARTH_GROUND_ALBEDO:g} for the "
+                          f"Earth's mean (default: the preset's, 0; > 0 needs --mode physical)")
     sky.add_argument("--error-budget", type=float,
                      help="relative error allowed in the frames; picks the fastest quality level within it "
                           "(default: 0.01)")

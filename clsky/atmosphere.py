@@ -8,9 +8,12 @@ Two presets share one atmosphere of air and haze:
 ``physical``
     The same air with the true Rayleigh phase 3/4 (1 + c^2) and ozone: Bruneton 2017's tent (10 to
     40 km, peak at 25 km) holding 300 Dobson units, cross-sections of Serdyuchenko et al. 2014
-    (:mod:`clsky.ozone`), and a Lambertian ground of albedo 0.1 (:data:`PHYSICAL_GROUND_ALBEDO`).
+    (:mod:`clsky.ozone`).
 
-The ground is black (albedo 0) unless ``ground_albedo`` is set (clsky/ground.py).
+Both presets have a black ground; ``ground_albedo`` (clsky/ground.py) gives a Lambertian one, e.g.
+:data:`EARTH_GROUND_ALBEDO`. (The physical preset keeps a black ground because a ground needs the
+physical scheme, and the physical preset is also used with the atmosphere-plus scheme: README,
+"Ground albedo".)
 
 All lengths are in metres, scattering coefficients in 1/m, wavelengths in nanometres.
 
@@ -104,9 +107,9 @@ OZONE_DEFAULTS = {"ozone_column_du": 0.0, "ozone_peak_altitude": 25_000.0, "ozon
                   "ozone_cross_section": DEFAULT_OZONE_CROSS_SECTION}
 #: The ground field and its default (black): left out of :meth:`AtmosphereParameters.to_dict` when 0.
 GROUND_DEFAULTS = {"ground_albedo": 0.0}
-#: Albedo of the physical preset's ground: Bruneton 2017's demo value (kGroundAlbedo = 0.1), close to
-#: the visible mean of the Earth's surface, 71 % ocean (about 0.06) and 29 % land (0.15 to 0.3).
-PHYSICAL_GROUND_ALBEDO = 0.1
+#: A ground albedo for the Earth: Bruneton 2017's demo value (kGroundAlbedo = 0.1), close to the visible
+#: mean of the Earth's surface, 71 % ocean (about 0.06) and 29 % land (0.15 to 0.3).
+EARTH_GROUND_ALBEDO = 0.1
 
 
 

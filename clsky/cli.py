@@ -135,7 +135,7 @@ def _orders(text):
 def _add_table_arguments(parser):
     """The table's options. Those that set a TableSettings field default to None: unset, they take the
     value of the --quality level (or of TableSettings)."""
-    from .atmosphere import PRESETS
+    from .atmosphere import EARTH_GROUND_ALBEDO, PRESETS
     from .quality import QUALITY_LEVELS
     from .settings import MAPPINGS, MIE_LAYOUTS, SAMPLINGS, SCATTERING_MODES, SUN_TRANSMITTANCE_METHODS
 
@@ -143,8 +143,8 @@ def _add_table_arguments(parser):
     physics.add_argument("--preset", default="atmosphere-plus", choices=sorted(PRESETS),
                          help="atmosphere preset (default: %(default)s)")
     physics.add_argument("--ground-albedo", type=float, metavar="A",
-                         help="albedo of a Lambertian ground in [0, 1] (default: the preset's; > 0 needs "
-                              "--mode physical)")
+                         help=f"albedo of a Lambertian ground in [0, 1], e.g. {EARTH_GROUND_ALBEDO:g} for the "
+                              f"Earth's mean (default: the preset's, 0; > 0 needs --mode physical)")
     grid = parser.add_argument_group("table")
     grid.add_argument("--quality", choices=list(QUALITY_LEVELS),
                       help="start from a named quality level's settings (clsky/quality.py); the options "
