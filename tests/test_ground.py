@@ -379,3 +379,23 @@ def test_cli_ground_albedo(tmp_path, capsys):
                       + arguments)
         error = capsys.readouterr().err
         assert status == 2 and expected in error and len(error.strip().splitlines()) == 1, error
+
+
+def test_animation_config_ground_albedo(tmp_path, capsys):
+    """The animation's atmosphere takes --ground-albedo; out of range or with the atmosphere-plus scheme
+    it is refused naming the option (exit status 2, one line)."""
+    from anim.animate import AnimationConfig
+    from anim.cli import main as anim_main
+
+    assert AnimationConfig().atmosphere == PHYSICAL
+    assert AnimationConfig(ground_albedo=0.2).atmosphere == PHYSICAL.replace(ground_albedo=0.2)
+    with pytest.raises(ValueError, match="ground_albedo"):
+        AnimationConfig(ground_albedo=0.2, mode="atmosphere-plus")
+    for value, expected in (("1.5", "--ground-albedo must be None or a number in [0, 1], got 1.5"), ("nan", "--ground-albedo")):
+        capsys.readouterr()
+        status = anim_main(["render", "--ground-albedo", value, "-o", str(tmp_path / "x.png")])
+        error = capsys.readouterr().err
+        assert status == 2 and expected in error and len(error.strip().splitlines()) == 1, error
+    status = anim_main(["render", "--ground-albedo", "0.2", "--mode", "atmosphere-plus", "-o", str(tmp_path / "x.png")])
+    error = capsys.readouterr().err
+    assert status == 2 and "--ground-albedo must be 0 with mode 'atmosphere-plus'" in error, error
