@@ -164,8 +164,8 @@ class SkyRenderer:
         self._gathered_d = cla.to_device(self.queue, padded)
         # the sky's irradiance on a reflecting ground per sun node (D, 4); not read for a black ground
         self._ground_depth = table.settings.size[2] if table.atmosphere.has_ground else 2
-        self._ground_d = cla.to_device(self.queue, padded4(table.ground_irradiance, dtype) if table.atmosphere.has_ground
-                                       else np.zeros((2, 4), dtype=dtype))
+        ground = padded4(table.ground_irradiance, dtype) if table.atmosphere.has_ground else np.zeros((2, 4), dtype)
+        self._ground_d = cla.to_device(self.queue, ground)
         self._sun_table_size = (self.ray_settings.transmittance_size
                                 if self.ray_settings.sun_transmittance == "table" else (2, 2))
         if self.ray_settings.sun_transmittance == "table":
