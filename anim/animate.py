@@ -65,6 +65,9 @@ class AnimationConfig:
     method : {'compare', 'lut', 'raymarch'}
     preset : str
         Atmosphere preset (:data:`clsky.PRESETS`).
+    ground_albedo : float or None
+        Albedo of a Lambertian ground in [0, 1] instead of the preset's (None: the preset's); > 0
+        needs mode 'physical'.
     mode : {'atmosphere-plus', 'physical'}
         Scheme of the table's higher orders.
     error_budget : float
@@ -131,6 +134,7 @@ class AnimationConfig:
     method: str = "compare"
     preset: str = "physical"
     mode: str = "physical"
+    ground_albedo: float | None = None
     error_budget: float = 0.01
     quality: str | None = None
     table_size: tuple | None = None
@@ -158,6 +162,9 @@ class AnimationConfig:
         if self.max_elevation_deg < self.start_elevation_deg:
             raise ParameterError("max_elevation_deg", f"at least the start elevation ({self.start_elevation_deg:g})",
                                  self.max_elevation_deg)
+        if self.ground_albedo is not None and self.ground_albedo > 0 and self.mode != "physical":
+            raise ParameterError("ground_albedo", f"0 with mode {self.mode!r} (a ground needs mode 'physical')",
+                                 self.ground_albedo)
         if self.end_hour <= self.start_hour:
             raise ParameterError("end_hour", f"after the start hour ({self.start_hour:g})", self.end_hour)
         if self.location is not None:
@@ -181,6 +188,12 @@ class AnimationConfig:
 
     def metrics_path(self, suffix) -> pathlib.Path:
         return self.output_path.with_name(self.output_path.stem + "_metrics" + suffix)
+
+    @property
+    def atmosphere(self) -> clsky.AtmosphereParameters:
+        """The preset's atmosphere, with ``ground_albedo`` if given."""
+        atmosphere = clsky.preset(self.preset)
+        return atmosphere if self.ground_albedo is None else atmosphere.replace(ground_albedo=self.ground_albedo)
 
     def image_shape(self):
         """(width, height) of a rendered frame."""
@@ -279,6 +292,7 @@ _FIELD_CHECKS = {
     "fov_deg": _real(0.0, 179.0, " degrees", low_open=True), "heading_deg": _real(-360.0, 720.0, " degrees", optional=True),
     "pitch_deg": _real(-90.0, 90.0, " degrees"), "altitude": _real(0.0, 1e8, " m"), "method": _choice(METHODS),
     "preset": _choice(tuple(sorted(clsky.PRESETS))), "mode": _choice(("atmosphere-plus", "physical")),
+    "ground_albedo": _real(0.0, 1.0, optional=True),
     "samples": _integer(2, 4096, optional=True), "error_budget": _real(0.0, 1.0, low_open=True),
     "quality": _choice(tuple(QUALITY_LEVELS), optional=True),
     "start_elevation_deg": _real(-90.0, 90.0, " degrees"), "max_elevation_deg": _real(-90.0, 90.0, " degrees"),
@@ -313,7 +327,7 @@ def plan_animation(config: AnimationConfig, positions, directions, valid, ctx=No
     error budget or quality; the ray march is planned for whenever the animation renders it."""
     if config.table_size is not None:
         return None
-    return plan_scene(_scene(config, positions, directions, valid), config.preset, config.mode, ctx=ctx,
+    return plan_scene(_scene(config, positions, directions, valid), config.atmosphere, config.mode, ctx=ctx,
                       ray_march=config.method != "lut")
 
 
@@ -342,7 +356,7 @@ def memory_estimate(config: AnimationConfig, positions) -> MemoryEstimate:
     else:
         directions, valid = _camera(dataclasses.replace(config, size=64)).directions()
         scene = _scene(config, positions, directions, valid)
-        cos_range, nodes, _, _ = sun_axis(clsky.preset(config.preset), scene, level, level.table.mapping)
+        cos_range, nodes, _, _ = sun_axis(config.atmosphere, scene, level, level.table.mapping)
         settings = level.table.replace(mode=config.mode, size=level.table.size[:2] + (nodes,),
                                        sun_cos_range=cos_range)
     return estimate_animation_memory(settings, config.image_shape(), config.method,
@@ -356,7 +370,7 @@ def build_table(config: AnimationConfig, plan: Plan | None = None, ctx=None, pro
         return clsky.ScatteringTable.build(plan.atmosphere, plan.table, ctx=ctx, progress=progress)
     size = tuple(config.table_size) if config.table_size is not None else quality(config).table.size
     settings = quality(config).table.replace(size=size, mode=config.mode)
-    return clsky.ScatteringTable.build(config.preset, settings, ctx=ctx, progress=progress)
+    return clsky.ScatteringTable.build(config.atmosphere, settings, ctx=ctx, progress=progress)
 
 
 def ray_settings(config: AnimationConfig) -> clsky.TableSettings:
