@@ -19,7 +19,7 @@ along view rays (TableSettings.sampling): like :mod:`clsky.montecarlo` it import
 * T(Pc, P), the sun leg, is a composite 8-point Gauss-Legendre rule over panels that grow
   geometrically (first 20 m, ratio 1.4) away from the leg's lowest point (the point itself, or the
   tangent point of a sun ray that first descends), so the e-folding of the haze (1.2 km) is resolved
-  wherever it lies.
+  wherever it lies; the ozone tent's kinks (10, 25, 40 km) are panel edges too.
 * Ozone (absorbing only): tau += sigma_O3 n_O3 with n_O3 = n_max max(0, 1 - |h - h_peak| / w) and
   n_max = column [DU] 2.687e20 m^-2 / w (physics.md).
 
@@ -64,6 +64,21 @@ def _panels(length, first=20.0, ratio=1.4):
     return np.asarray(points)
 
 
+def _kinks(atmosphere, start, direction, length):
+    """Distances in (0, length) along start + t direction where the ozone tent has a kink (altitudes
+    h_peak and h_peak -+ w): panel edges there keep the Gauss-Legendre rule on smooth pieces."""
+    peak = float(getattr(atmosphere, "ozone_peak_altitude", 25e3))
+    width = float(getattr(atmosphere, "ozone_half_width", 15e3))
+    b, c0 = float(start @ direction), float(start @ start)
+    found = []
+    for h in (peak - width, peak, peak + width):
+        radius = atmosphere.planet_radius + h
+        disc = b * b - (c0 - radius * radius)              # |start + t d| = radius
+        if disc > 0.0:
+            found += [t for t in (-b - math.sqrt(disc), -b + math.sqrt(disc)) if 0.0 < t < length]
+    return np.asarray(found)
+
+
 def _leg_columns(atmosphere, start, direction, lowest, length, first, ratio):
     """Columns (3,) [m] along start + t direction, t in [0, length], panels clustered at t = lowest
     (0 or length)."""
@@ -72,6 +87,7 @@ def _leg_columns(atmosphere, start, direction, lowest, length, first, ratio):
     edges = _panels(length, first, ratio)
     if lowest > 0.0:                                  # cluster at the far end
         edges = (length - edges)[::-1]
+    edges = np.union1d(edges, _kinks(atmosphere, start, direction, length))
     a, b = edges[:-1, None], edges[1:, None]
     t = (0.5 * (a + b) + 0.5 * (b - a) * _GAUSS_X).ravel()
     w = (0.5 * (b - a) * _GAUSS_W).ravel()

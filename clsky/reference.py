@@ -80,11 +80,11 @@ def view_nodes(steps, sampling, hits_ground):
     clustered at the ground, on rays that hit it (``hits_ground``, shape (cells, 1)). Shape (N + 1,),
     or (cells, N + 1) for ground_end.
     """
+    keller_bohn = quadrature_nodes(steps, sampling, power=3)
     if sampling != "ground_end":
-        return quadrature_nodes(steps, sampling, power=3)
-    x = np.arange(steps + 1) / steps
-    y = 1.0 - x
-    return np.where(hits_ground, 1.0 - y * y * y, x * x * x)
+        return keller_bohn
+    y = 1.0 - np.arange(steps + 1) / steps
+    return np.where(hits_ground, 1.0 - y * y * y, keller_bohn)     # keller_bohn's bits elsewhere
 
 
 def _trapezoid(values, half_steps):
