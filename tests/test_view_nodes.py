@@ -231,3 +231,18 @@ def test_monte_carlo_from_altitude_looking_down(cl_context, case):
     assert np.all(np.abs(new - mc) <= bound)
     if case[0] == 100e3:
         assert np.any(np.abs(old - mc) > bound)
+
+
+# The animation package: --sampling reaches the table and the ray march ------------------------------
+
+def test_animation_config_sampling():
+    from anim.animate import AnimationConfig, _with_sampling, quality, ray_settings
+
+    default = AnimationConfig()
+    assert ray_settings(default) == quality(default).ray          # unchanged unless asked for
+    assert _with_sampling(quality(default).table, default) == quality(default).table
+    config = AnimationConfig(altitude=32.7e3, sampling="ground_end", samples=30)
+    assert ray_settings(config) == quality(config).ray.replace(view_steps=30, sampling="ground_end")
+    assert _with_sampling(quality(config).table, config).sampling == "ground_end"
+    with pytest.raises(ValueError, match="sampling"):
+        AnimationConfig(sampling="lowest")
