@@ -23,8 +23,10 @@ along view rays (TableSettings.sampling): like :mod:`clsky.montecarlo` it import
 * Ozone (absorbing only): tau += sigma_O3 n_O3 with n_O3 = n_max max(0, 1 - |h - h_peak| / w) and
   n_max = column [DU] 2.687e20 m^-2 / w (physics.md).
 
-Convergence (tests/test_view_nodes.py): halving the ODE tolerance and the panel growth changes the
-result by < 1e-7 relative on the cases used there.
+Checks (tests/test_view_nodes.py): a 100x tighter ODE tolerance with finer sun-leg panels (first 5 m,
+ratio 1.2) changes the result by < 1e-7 relative (3e-12 without ozone); the closed form of a haze
+column seen straight down from the top holds to 1e-8; the Monte Carlo tracer agrees within its
+standard error from 100 km.
 """
 
 from __future__ import annotations
