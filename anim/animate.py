@@ -30,6 +30,7 @@ from clsky.errors import ParameterError, is_integer, is_real_number
 from clsky.planner import Plan, Scene, plan_scene, sun_axis
 from clsky.quality import QUALITY_LEVELS, QualityLevel, level_for_budget, quality_level
 from clsky.render import SkyRenderer
+from clsky.settings import SAMPLINGS
 from clsky.resources import MemoryEstimate, check_memory, device_of, estimate_animation_memory
 
 from . import display as display_pipeline
@@ -80,6 +81,10 @@ class AnimationConfig:
         sun path only). A size: a full table of that grid, unplanned (the level's other settings).
     samples : int or None
         Ray-march samples per ray (view steps), in [2, 4096]; None (default): the quality level's.
+    sampling : str or None
+        Node placement along rays (clsky.settings.SAMPLINGS) for the table and the ray march; None
+        (default): the quality level's (Keller & Bohn's). 'ground_end' for views from altitude
+        (README, "Views from altitude"); the scene plan's pilot keeps the level's.
     start_elevation_deg, max_elevation_deg : float
         Sweep: sun elevation before sunrise / after sunset, and at its highest.
     location : (latitude_deg, longitude_deg) or None
@@ -139,6 +144,7 @@ class AnimationConfig:
     quality: str | None = None
     table_size: tuple | None = None
     samples: int | None = None
+    sampling: str | None = None
     start_elevation_deg: float = -6.0
     max_elevation_deg: float = 60.0
     location: tuple | None = None
@@ -293,7 +299,8 @@ _FIELD_CHECKS = {
     "pitch_deg": _real(-90.0, 90.0, " degrees"), "altitude": _real(0.0, 1e8, " m"), "method": _choice(METHODS),
     "preset": _choice(tuple(sorted(clsky.PRESETS))), "mode": _choice(("atmosphere-plus", "physical")),
     "ground_albedo": _real(0.0, 1.0, optional=True),
-    "samples": _integer(2, 4096, optional=True), "error_budget": _real(0.0, 1.0, low_open=True),
+    "samples": _integer(2, 4096, optional=True), "sampling": _choice(SAMPLINGS, optional=True),
+    "error_budget": _real(0.0, 1.0, low_open=True),
     "quality": _choice(tuple(QUALITY_LEVELS), optional=True),
     "start_elevation_deg": _real(-90.0, 90.0, " degrees"), "max_elevation_deg": _real(-90.0, 90.0, " degrees"),
     "location": _location, "date": _date, "start_hour": _real(0.0, 48.0, " h"), "end_hour": _real(0.0, 48.0, " h"),
@@ -359,7 +366,7 @@ def memory_estimate(config: AnimationConfig, positions) -> MemoryEstimate:
         cos_range, nodes, _, _ = sun_axis(config.atmosphere, scene, level, level.table.mapping)
         settings = level.table.replace(mode=config.mode, size=level.table.size[:2] + (nodes,),
                                        sun_cos_range=cos_range)
-    return estimate_animation_memory(settings, config.image_shape(), config.method,
+    return estimate_animation_memory(_with_sampling(settings, config), config.image_shape(), config.method,
                                      ray_settings(config), hdr_output=config.hdr)
 
 
@@ -367,16 +374,23 @@ def build_table(config: AnimationConfig, plan: Plan | None = None, ctx=None, pro
     """The scattering table of the animation: the plan's, or a full table of ``config.table_size``
     at the quality level's other settings (orders until converged)."""
     if plan is not None:
-        return clsky.ScatteringTable.build(plan.atmosphere, plan.table, ctx=ctx, progress=progress)
+        return clsky.ScatteringTable.build(plan.atmosphere, _with_sampling(plan.table, config), ctx=ctx,
+                                           progress=progress)
     size = tuple(config.table_size) if config.table_size is not None else quality(config).table.size
     settings = quality(config).table.replace(size=size, mode=config.mode)
-    return clsky.ScatteringTable.build(config.atmosphere, settings, ctx=ctx, progress=progress)
+    return clsky.ScatteringTable.build(config.atmosphere, _with_sampling(settings, config), ctx=ctx, progress=progress)
+
+
+def _with_sampling(settings: clsky.TableSettings, config: AnimationConfig) -> clsky.TableSettings:
+    """``settings`` with ``config.sampling`` if given."""
+    return settings if config.sampling is None else settings.replace(sampling=config.sampling)
 
 
 def ray_settings(config: AnimationConfig) -> clsky.TableSettings:
-    """The ray march's quadrature: the quality level's, with ``config.samples`` if given."""
+    """The ray march's quadrature: the quality level's, with ``config.samples`` and ``config.sampling``
+    if given."""
     ray = quality(config).ray
-    return ray if config.samples is None else ray.replace(view_steps=config.samples)
+    return _with_sampling(ray if config.samples is None else ray.replace(view_steps=config.samples), config)
 
 
 def sun_positions(config: AnimationConfig):

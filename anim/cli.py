@@ -22,7 +22,7 @@ FIELD_OPTIONS = {
     "pitch_deg": "--pitch", "altitude": "--altitude", "method": "--method", "preset": "--preset", "mode": "--mode",
     "ground_albedo": "--ground-albedo",
     "table_size": ("--table-size W", "--table-size H", "--table-size D"), "samples": "--samples",
-    "error_budget": "--error-budget", "quality": "--quality", "start_elevation_deg": "--start-elevation",
+    "sampling": "--sampling", "error_budget": "--error-budget", "quality": "--quality", "start_elevation_deg": "--start-elevation",
     "max_elevation_deg": "--max-elevation", "location": "--location", "date": "--date",
     "start_hour": "--hours START", "end_hour": "--hours END", "step_minutes": "--step-minutes", "fps": "--fps",
     "exposure": "--exposure", "tone_map": "--tone-map", "white_balance": "--white-balance", "output": "--output",
@@ -43,6 +43,7 @@ def _date(text):
 def _add_scene_arguments(parser, frames=True):
     from clsky.atmosphere import EARTH_GROUND_ALBEDO
     from clsky.quality import QUALITY_LEVELS
+    from clsky.settings import SAMPLINGS
 
     from .animate import METHODS
 
@@ -71,6 +72,9 @@ def _add_scene_arguments(parser, frames=True):
     sky.add_argument("--table-size", nargs=3, type=int, metavar=("W", "H", "D"),
                      help="a full table of this grid instead of the scene plan's")
     sky.add_argument("--samples", type=int, help="ray-march samples per ray (default: the quality level's)")
+    sky.add_argument("--sampling", choices=list(SAMPLINGS),
+                     help="node placement along rays, table and ray march (default: the quality level's, "
+                          "keller_bohn; ground_end for views from altitude)")
     _add_display_arguments(parser)
     if frames:
         sun = parser.add_argument_group("sun path")
@@ -152,7 +156,7 @@ def _config(args, **extra):
     fields = dict(size=args.size, camera=args.camera, fov_deg=args.fov, heading_deg=args.heading,
                   pitch_deg=args.pitch, altitude=args.altitude, method=args.method,
                   table_size=None if args.table_size is None else tuple(args.table_size),
-                  samples=args.samples, quality=args.quality, exposure=args.exposure, tone_map=args.tone_map,
+                  samples=args.samples, sampling=args.sampling, quality=args.quality, exposure=args.exposure, tone_map=args.tone_map,
                   auto_exposure=args.auto_exposure, white_balance=args.white_balance,
                   dither=not args.no_dither, force=args.force, **extra)
     fields.update({name: getattr(args, name) for name in UNSET_DEFAULTS if getattr(args, name) is not None})

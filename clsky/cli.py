@@ -171,7 +171,9 @@ def _add_table_arguments(parser):
     numerics.add_argument("--dtype", choices=["float64", "float32"])
     numerics.add_argument("--view-steps", type=int, help="trapezoid steps per view ray (default: 30)")
     numerics.add_argument("--sun-steps", type=int, help="trapezoid steps per sun ray (default: 30)")
-    numerics.add_argument("--sampling", choices=list(SAMPLINGS))
+    numerics.add_argument("--sampling", choices=list(SAMPLINGS),
+                          help="node placement along rays (default: keller_bohn; ground_end for views from "
+                               "altitude, README 'Views from altitude')")
     numerics.add_argument("--sun-transmittance", choices=list(SUN_TRANSMITTANCE_METHODS))
     numerics.add_argument("--multiple-view-steps", type=int,
                           help="trapezoid steps per view ray for the orders k >= 2 (default: 20)")

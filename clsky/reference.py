@@ -23,7 +23,7 @@ from .settings import TableSettings
 
 __all__ = [
     "horizon_cos", "distance_to_top", "distance_to_ground", "altitude_along",
-    "quadrature_nodes", "densities", "column_density", "optical_depth", "transmittance",
+    "quadrature_nodes", "view_nodes", "densities", "column_density", "optical_depth", "transmittance",
     "transmittance_table", "column_density_from_table", "single_scattering", "enter_atmosphere",
     "lookup", "gather", "trilinear", "scatter", "render_table", "render_raymarch",
 ]
@@ -67,9 +67,24 @@ def altitude_along(h0, r0, mu, s, planet_radius):
 # Quadrature ---------------------------------------------------------------------------------------
 
 def quadrature_nodes(steps, sampling="uniform", power=2):
-    """Trapezoid nodes in [0, 1]: j / n, or (j / n)^power for Keller & Bohn sampling."""
+    """Trapezoid nodes in [0, 1]: j / n, or (j / n)^power for Keller & Bohn sampling (and for the
+    sun rays of ``ground_end``, which keep Keller & Bohn's)."""
     x = np.arange(steps + 1) / steps
-    return x**power if sampling == "keller_bohn" else x
+    return x**power if sampling in ("keller_bohn", "ground_end") else x
+
+
+def view_nodes(steps, sampling, hits_ground):
+    """Nodes f(i / N) in [0, 1] along view rays (``view_node_at`` of ``kernels/view_ray.cl``).
+
+    uniform: x; keller_bohn: x^3, clustered at the observer; ground_end: x^3, except 1 - (1 - x)^3,
+    clustered at the ground, on rays that hit it (``hits_ground``, shape (cells, 1)). Shape (N + 1,),
+    or (cells, N + 1) for ground_end.
+    """
+    keller_bohn = quadrature_nodes(steps, sampling, power=3)
+    if sampling != "ground_end":
+        return keller_bohn
+    y = 1.0 - np.arange(steps + 1) / steps
+    return np.where(hits_ground, 1.0 - y * y * y, keller_bohn)     # keller_bohn's bits elsewhere
 
 
 def _trapezoid(values, half_steps):
@@ -202,7 +217,7 @@ class _ViewRays:
         hits_ground = mu_v < horizon_cos(h0, rp)
         self.hits_ground = hits_ground[:, 0]
         length = np.where(hits_ground, distance_to_ground(h0, mu_v, rp), distance_to_top(h0, mu_v, rp, ra))
-        nodes = quadrature_nodes(settings.view_steps, settings.sampling, power=3)
+        nodes = view_nodes(settings.view_steps, settings.sampling, hits_ground)
         self.s = length * nodes
         self.h = altitude_along(h0, r0, mu_v, self.s, rp)
         self.h[:, -1] = np.where(hits_ground[:, 0], 0.0, self.h[:, -1])   # a ground hit ends on the ground
@@ -211,7 +226,7 @@ class _ViewRays:
         self.mu_view = (r0 * mu_v + self.s) / self.r                       # dot(P, V) / |P|
         self.density = densities(atmosphere, self.h)
         self.density_r, self.density_m = self.density[:2]
-        self.half_steps = 0.5 * length * np.diff(nodes)
+        self.half_steps = 0.5 * length * np.diff(nodes, axis=-1)
         self.view = tuple(np.zeros_like(self.h) for _ in self.density)
         for density, view in zip(self.density, self.view):
             np.cumsum((density[:, :-1] + density[:, 1:]) * self.half_steps, axis=1, out=view[:, 1:])

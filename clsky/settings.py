@@ -13,8 +13,10 @@ __all__ = ["TableSettings", "MAPPINGS", "SAMPLINGS", "SUN_TRANSMITTANCE_METHODS"
 
 #: Texture mappings of the 3D table, name -> index passed to OpenCL (mapping.cl).
 MAPPINGS = {"linear": 0, "nonlinear": 1}
-#: Node placement along rays: uniform, or Keller & Bohn's (i/n)^3 (view) and (i/n)^2 (sun).
-SAMPLINGS = ("uniform", "keller_bohn")
+#: Node placement along rays: uniform, Keller & Bohn's (i/n)^3 (view) and (i/n)^2 (sun), or
+#: ground_end: Keller & Bohn's, except that view rays hitting the ground get 1 - (1 - i/n)^3, clustered
+#: at the ground end (kernels/view_ray.cl).
+SAMPLINGS = ("uniform", "keller_bohn", "ground_end")
 #: How the sunlight's transmittance to a sample is found: re-marched, or read from a 2D table.
 SUN_TRANSMITTANCE_METHODS = ("march", "table")
 #: Schemes for the orders k >= 2 (see clsky/orders.py).
@@ -50,10 +52,15 @@ class TableSettings:
         Texture mapping of the axes (mapping.cl).
     view_steps, sun_steps : int
         Trapezoid steps along the view ray and along each sun ray, in [1, 4096] (default 30 each).
-    sampling : {'keller_bohn', 'uniform'}
+    sampling : {'keller_bohn', 'uniform', 'ground_end'}
         Node placement along rays. Keller & Bohn's (default) agrees with the Monte Carlo path tracer
         within 1.3 % at 30 + 30 steps where uniform nodes overestimate by up to 39 % (near the ground,
         toward a low sun), and keeps optically thick atmospheres from diverging (README).
+        'ground_end' is Keller & Bohn's except on view rays that hit the ground, whose nodes cluster
+        at the ground end (1 - (1 - i/n)^3): for views from altitude it cuts the error of single
+        scattering from 254 % to 1.6 % (95th percentile of the worst channel over observers at 1 to
+        100 km) and leaves every other ray's nodes bit for bit as they were (README, "Views from
+        altitude").
     sun_transmittance : {'table', 'march'}
         Read the sun's column densities from a 2D table of ``transmittance_size`` nodes (default), or
         re-march every sun ray. The table is 5x faster for single scattering and, at the default

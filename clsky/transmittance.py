@@ -19,12 +19,19 @@ __all__ = ["TransmittanceEngine", "check_segments", "column_channels"]
 COMMON_SOURCES = ("real.cl", "geometry.cl", "column.cl", "transmittance_table.cl")
 
 
+def sampling_defines(sampling):
+    """The -D options of a node placement (settings.SAMPLINGS): 'keller_bohn' and 'ground_end' both
+    place sun-ray nodes at (j/n)^2 (column.cl); 'ground_end' clusters the view nodes of ground-hitting
+    rays at the ground (view_ray.cl)."""
+    return {"uniform": [], "keller_bohn": ["-DKELLER_BOHN_SAMPLING=1"],
+            "ground_end": ["-DKELLER_BOHN_SAMPLING=1", "-DGROUND_END_SAMPLING=1"]}[sampling]
+
+
 def quadrature_defines(settings, vector_width):
     """The -D options of a program integrating along rays with ``settings``' quadrature (view and sun
     steps, node placement, sun transmittance method) in ``vector_width`` lanes."""
     options = [f"-DN_VIEW={settings.view_steps}", f"-DN_SUN={settings.sun_steps}", f"-DVECTOR_WIDTH={vector_width}"]
-    if settings.sampling == "keller_bohn":
-        options.append("-DKELLER_BOHN_SAMPLING=1")
+    options += sampling_defines(settings.sampling)
     if settings.sun_transmittance == "table":
         options.append("-DSUN_TRANSMITTANCE_TABLE=1")
     return options
@@ -56,8 +63,8 @@ class TransmittanceEngine(_cl.Engine):
     ----------
     steps : int
         Trapezoid steps per segment (default 30, as Bruneton & Neyret), in [1, 4096].
-    sampling : {'uniform', 'keller_bohn'}
-        Uniform nodes, or Keller & Bohn's nodes t_j = d (j/n)^2.
+    sampling : {'uniform', 'keller_bohn', 'ground_end'}
+        Uniform nodes, or Keller & Bohn's nodes t_j = d (j/n)^2 (which 'ground_end' keeps on sun rays).
     ctx, dtype, profile, fast_math
         See :class:`clsky._cl.Engine`.
     """
@@ -73,10 +80,9 @@ class TransmittanceEngine(_cl.Engine):
         return ("real.cl", declaration) + COMMON_SOURCES[1:] + ("transmittance.cl",)
 
     def build_options(self):
-        options = super().build_options() + [f"-DN_SUN={self.steps}"]
-        if self.sampling == "keller_bohn":
-            options.append("-DKELLER_BOHN_SAMPLING=1")
-        return options
+        # Sun-ray nodes only: this program integrates no view ray, so 'ground_end' builds it as 'keller_bohn'.
+        sampling = "keller_bohn" if self.sampling == "ground_end" else self.sampling
+        return super().build_options() + [f"-DN_SUN={self.steps}"] + sampling_defines(sampling)
 
     def optical_depth(self, atmosphere: AtmosphereParameters, altitude, cos_zenith, length):
         """Optical depth of segments, per wavelength.

@@ -7,7 +7,8 @@
  *   Ibar_s^(1) = beta_s / (4 pi) Integral_{Pa}^{Pb} rho_s(h(P)) T(Pc, P) T(P, Pa) ds
  *
  * Pa = observer (inside the atmosphere), Pb = top of the atmosphere or the ground. Trapezoidal rule
- * over N_VIEW + 1 nodes s_i = L f(i / N_VIEW), f(x) = x, or x^3 with -DKELLER_BOHN_SAMPLING. T(P, Pa) is
+ * over N_VIEW + 1 nodes s_i = L f(i / N_VIEW), f(x) = x, or x^3 with -DKELLER_BOHN_SAMPLING, or with
+ * -DGROUND_END_SAMPLING 1 - (1 - x)^3 on rays that hit the ground (view_ray.cl: view_node_at). T(P, Pa) is
  * accumulated by the same trapezoid along the view ray; T(Pc, P) is re-marched with N_SUN steps
  * (column.cl) or, with -DSUN_TRANSMITTANCE_TABLE, read from the 2D table (transmittance_table.cl).
  * T = exp(-tau) of every species (column.cl): with -DOZONE, tau includes ozone's absorption

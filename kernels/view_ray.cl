@@ -9,7 +9,10 @@
  * nu = cos(phi - delta), the renderer the true one.
  *
  * Trapezoidal rule over N_VIEW + 1 nodes s_i = L f(i / N_VIEW), f(x) = x, or x^3 with
- * -DKELLER_BOHN_SAMPLING; the last node of a ground-hitting ray lies at altitude exactly 0.
+ * -DKELLER_BOHN_SAMPLING (Keller & Bohn: clustered at the observer), or, with -DGROUND_END_SAMPLING,
+ * x^3 on rays that leave the atmosphere and 1 - (1 - x)^3 on rays that hit the ground: there the
+ * nodes cluster at the ground end, where the haze is, rather than at an observer far above it
+ * (README, "Views from altitude"). The last node of a ground-hitting ray lies at altitude exactly 0.
  * Transmittances T = exp(-tau) take every species' column from column.cl (column_t, optical_depth_of):
  * with -DOZONE they include ozone's absorption, tau += sigma_O3 n_max C_O.
  * With -DGROUND (a Lambertian ground of albedo a, clsky/ground.py) both integrals can also report
@@ -30,6 +33,25 @@ inline real view_node(const int i)
     return x * x * x;
 #else
     return x;
+#endif
+}
+
+/* A node's place along the ray, f(i / N_VIEW): one value for every lane, or, with
+ * -DGROUND_END_SAMPLING, one per lane (a select between the two placements, no search). */
+#ifdef GROUND_END_SAMPLING
+typedef realv view_node_t;
+#else
+typedef real view_node_t;
+#endif
+
+inline view_node_t view_node_at(const int i, const maskv hits_ground)
+{
+#ifdef GROUND_END_SAMPLING
+    const real x = (real)i / (real)N_VIEW;
+    const real y = R(1.0) - x;
+    return SELECT((realv)(x * x * x), (realv)(R(1.0) - y * y * y), hits_ground);
+#else
+    return view_node(i);
 #endif
 }
 
@@ -143,10 +165,10 @@ inline void integrate_single(__constant const atmosphere_t *atm, const realv h0,
         last[c] = V(0.0);
         sum[c] = V(0.0);
     }
-    real node_previous = R(0.0);
+    view_node_t node_previous = (view_node_t)(R(0.0));
 
     for (int i = 0; i <= N_VIEW; ++i) {
-        const real node = view_node(i);
+        const view_node_t node = view_node_at(i, hits_ground);
         const realv s = length * node;
         realv h = altitude_along(h0, r0, mu_v, s, rp);
         if (i == N_VIEW)
@@ -229,11 +251,11 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
     if (single)
         for (int c = 0; c < 6; ++c)
             single[c] = V(0.0);
-    real node_previous = R(0.0);
+    view_node_t node_previous = (view_node_t)(R(0.0));
 
     for (int i = 0; i <= N_VIEW; ++i) {
-        const real node = view_node(i);
-        const real node_next = i < N_VIEW ? view_node(i + 1) : node;
+        const view_node_t node = view_node_at(i, hits_ground);
+        const view_node_t node_next = i < N_VIEW ? view_node_at(i + 1, hits_ground) : node;
         const realv s = length * node;
         realv h = altitude_along(h0, r0, mu_v, s, rp);
         if (i == N_VIEW)

@@ -186,6 +186,7 @@ def test_cli_render_plans_for_its_one_sun(tmp_path):
     ("animate", ["--error-budget", "0"], "--error-budget"),
     ("animate", ["--error-budget", "1.5"], "--error-budget"),
     ("animate", ["--quality", "best"], "--quality"),
+    ("render", ["--sampling", "lowest"], "--sampling"),
     ("render", ["--sun-elevation", "95"], "--sun-elevation"),
 ], ids=lambda value: " ".join(value) if isinstance(value, list) else value)
 def test_cli_bad_values_one_line_exit_2(tmp_path, command, args, named):

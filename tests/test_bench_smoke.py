@@ -32,6 +32,8 @@ HEADERS = {
     "bench_accuracy": ["| candidate | knob | build [s] | render [ms] | p95 day [%] |"],
     "bench_quality": ["| level | promise | table | samples | build [s] | render [ms] | day [%] |",
                       "| doubled | day [%] |", "| table | sun axis | cells | build [s] | day [%] |"],
+    "bench_view_nodes": ["| preset | sampling | rays | n | Ibar median | Ibar p95 | Ibar max |",
+                         "| sampling | table [s] | ray march [ms] |"],
 }
 #: Measured wall time of each case (pytest, 2 shared cores): single 3-5 s, orders 5-7 s, montecarlo 10-12 s,
 #: render 9-10 s; accuracy 41 s (the four 'draft' reference tables: 21 s), quality 109 s (the reference

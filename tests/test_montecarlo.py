@@ -375,6 +375,9 @@ REAL_CASES = [
     # from 8 km, looking down to the ground, sun 1.7 degrees below the horizon: the low part of the
     # view ray is in the planet's shadow
     ("physical", dict(altitude=8000.0, cos_view=-0.2, cos_sun=-0.03, azimuth=2.5)),
+    # views from altitude down to the ground (issue 10, item 6): from 10 km, and from the top (100 km)
+    ("physical", dict(altitude=10e3, cos_view=-0.8, cos_sun=0.5, azimuth=2.0)),
+    ("atmosphere-plus", dict(altitude=100e3, cos_view=-0.5, cos_sun=0.7, azimuth=0.5)),
 ]
 
 

@@ -34,6 +34,7 @@ SETTINGS_VARIANTS = {
     "default": SMALL,
     "linear": SMALL.replace(mapping="linear"),
     "keller_bohn": SMALL.replace(sampling="keller_bohn"),
+    "ground_end": SMALL.replace(sampling="ground_end"),
     "few_steps": SMALL.replace(view_steps=3, multiple_view_steps=None),
     "single_step": SMALL.replace(view_steps=1, multiple_view_steps=None, size=(8, 17, 5)),
     # a scene's sub-range of the sun axis: the scatter looks Gbar up at the nodes' local sun angles,

@@ -22,6 +22,8 @@ SMALL = TableSettings(size=(9, 33, 7))
 SETTINGS_VARIANTS = {
     "default": SMALL,
     "keller_bohn": SMALL.replace(sampling="keller_bohn"),
+    "ground_end": SMALL.replace(sampling="ground_end"),
+    "ground_end_table": SMALL.replace(sampling="ground_end", sun_transmittance="table", transmittance_size=(16, 33)),
     "sun_table": SMALL.replace(sun_transmittance="table"),
     "linear": SMALL.replace(mapping="linear"),
     "few_steps": SMALL.replace(view_steps=4, sun_steps=3),
