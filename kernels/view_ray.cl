@@ -86,7 +86,7 @@ inline void integrate_single(__constant const atmosphere_t *atm, const realv h0,
     const real inv_hr = R(1.0) / atm->rayleigh_scale_height;
     const real inv_hm = R(1.0) / atm->mie_scale_height;
     const real4 beta = atm->beta_rayleigh;
-    const real beta_me = atm->beta_mie_extinction;
+    const real4 beta_me = atm->beta_mie_extinction;
     const real4 beta_o = atm->ozone_extinction;
     column_t view = column_zero();                          /* column densities from the observer */
     column_t last_density = column_zero();
@@ -112,9 +112,9 @@ inline void integrate_single(__constant const atmosphere_t *atm, const realv h0,
         column_t sun;
         const maskv lit = sun_column(atm, h, mu_sun_here, sun_table, tw, th, &sun);
         const column_t column = column_sum(view, sun);
-        const realv t0 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.x, beta_me, beta_o.x)), lit);
-        const realv t1 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.y, beta_me, beta_o.y)), lit);
-        const realv t2 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.z, beta_me, beta_o.z)), lit);
+        const realv t0 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.x, beta_me.x, beta_o.x)), lit);
+        const realv t1 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.y, beta_me.y, beta_o.y)), lit);
+        const realv t2 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.z, beta_me.z, beta_o.z)), lit);
         realv f[6];
         f[0] = density.r * t0; f[1] = density.r * t1; f[2] = density.r * t2;
         f[3] = density.m * t0; f[4] = density.m * t1; f[5] = density.m * t2;
@@ -165,7 +165,7 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
     const real inv_hr = R(1.0) / atm->rayleigh_scale_height;
     const real inv_hm = R(1.0) / atm->mie_scale_height;
     const real4 beta = atm->beta_rayleigh;
-    const real beta_me = atm->beta_mie_extinction;
+    const real4 beta_me = atm->beta_mie_extinction;
     const real4 beta_o = atm->ozone_extinction;
     column_t view = column_zero();
     column_t last_density = column_zero();
@@ -192,17 +192,17 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
             view = column_step(view, last_density, density, half_step);
         }
         const realv weight = R(0.5) * length * ((node - node_previous) + (node_next - node));
-        const realv t0 = exp(-optical_depth_of(view, beta.x, beta_me, beta_o.x));
-        const realv t1 = exp(-optical_depth_of(view, beta.y, beta_me, beta_o.y));
-        const realv t2 = exp(-optical_depth_of(view, beta.z, beta_me, beta_o.z));
+        const realv t0 = exp(-optical_depth_of(view, beta.x, beta_me.x, beta_o.x));
+        const realv t1 = exp(-optical_depth_of(view, beta.y, beta_me.y, beta_o.y));
+        const realv t2 = exp(-optical_depth_of(view, beta.z, beta_me.z, beta_o.z));
         const realv wr = weight * density.r, wm = weight * density.m;
         const realv fr0 = wr * t0, fr1 = wr * t1, fr2 = wr * t2, fm0 = wm * t0, fm1 = wm * t1, fm2 = wm * t2;
         if (single) {
             column_t sun;
             const maskv lit = sun_column(atm, h, mu_sun_here, sun_table, tw, th, &sun);
-            const realv s0 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.x, beta_me, beta_o.x)), lit);
-            const realv s1 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.y, beta_me, beta_o.y)), lit);
-            const realv s2 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.z, beta_me, beta_o.z)), lit);
+            const realv s0 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.x, beta_me.x, beta_o.x)), lit);
+            const realv s1 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.y, beta_me.y, beta_o.y)), lit);
+            const realv s2 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.z, beta_me.z, beta_o.z)), lit);
             single[0] += fr0 * s0; single[1] += fr1 * s1; single[2] += fr2 * s2;
             single[3] += fm0 * s0; single[4] += fm1 * s1; single[5] += fm2 * s2;
         }
