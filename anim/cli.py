@@ -24,7 +24,7 @@ FIELD_OPTIONS = {
     "error_budget": "--error-budget", "quality": "--quality", "start_elevation_deg": "--start-elevation",
     "max_elevation_deg": "--max-elevation", "location": "--location", "date": "--date",
     "start_hour": "--hours START", "end_hour": "--hours END", "step_minutes": "--step-minutes", "fps": "--fps",
-    "exposure": "--exposure", "output": "--output",
+    "exposure": "--exposure", "output": "--output", "wavelengths": "--wavelengths",
 }
 
 #: Options whose default is None so that, not given, the AnimationConfig's own default (or the
@@ -67,6 +67,10 @@ def _add_scene_arguments(parser, frames=True):
                      help="a full table of this grid instead of the scene plan's")
     sky.add_argument("--samples", type=int, help="ray-march samples per ray (default: the quality level's)")
     sky.add_argument("--exposure", type=float, default=1.0)
+    sky.add_argument("--wavelengths", type=int, metavar="N",
+                     help="N wavelengths in [3, 47] in absolute units, frames converted spectral -> XYZ -> "
+                          "linear sRGB [cd/m^2] (default: the table's three, shown as r, g, b; with N, try "
+                          "--exposure 1e-4)")
     if frames:
         sun = parser.add_argument_group("sun path")
         sun.add_argument("--frames", type=int, default=120, help="frames of the sweep (default: 120)")
@@ -130,7 +134,7 @@ def _config(args, **extra):
     fields = dict(size=args.size, camera=args.camera, fov_deg=args.fov, heading_deg=args.heading,
                   pitch_deg=args.pitch, altitude=args.altitude, method=args.method,
                   table_size=None if args.table_size is None else tuple(args.table_size),
-                  samples=args.samples, quality=args.quality, exposure=args.exposure,
+                  samples=args.samples, quality=args.quality, exposure=args.exposure, wavelengths=args.wavelengths,
                   dither=not args.no_dither, force=args.force, **extra)
     fields.update({name: getattr(args, name) for name in UNSET_DEFAULTS if getattr(args, name) is not None})
     try:
@@ -183,13 +187,10 @@ def run_animate(args):
 
 
 def run_render(args):
-    import dataclasses
     import pathlib
 
-    from clsky.render import SkyRenderer
-
     from . import metrics, tonemap, writers
-    from .animate import _camera, build_table, plan_animation, ray_settings, render_frame
+    from .animate import _camera, make_renderer, plan_animation, render_frame
     from .cameras import sun_direction
     from .sunpath import SunPosition
 
@@ -209,8 +210,7 @@ def run_render(args):
     plan = plan_animation(config, [position], directions, valid)
     if plan is not None:
         print(plan.describe())
-    table = dataclasses.replace(build_table(config, plan), orders=())   # the frame reads data and gathered only
-    renderer = SkyRenderer(table, ray_settings(config))
+    renderer, _ = make_renderer(config, plan)          # the frame reads data and gathered only
     sun = sun_direction(90.0 - args.sun_elevation, args.sun_azimuth)
     hdr = render_frame(renderer, renderer.prepare(directions, valid), sun, config)
     display = {name: tonemap.to_uint8(tonemap.tone_map(frame, config.exposure), dither=config.dither)

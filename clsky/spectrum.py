@@ -192,6 +192,21 @@ class SpectralTable:
     def units(self) -> str:
         return self.record["units"]
 
+    @property
+    def settings(self):
+        """The TableSettings every batch was built with."""
+        return self.tables[0].settings
+
+    @property
+    def orders_record(self) -> dict:
+        """Each batch's orders record, in batch order."""
+        return {"batches": [table.orders_record for table in self.tables]}
+
+    @property
+    def metadata(self) -> dict:
+        """:attr:`record` with each batch's metadata."""
+        return {**self.record, "batch_metadata": [table.metadata for table in self.tables]}
+
     def assemble(self, batch_values):
         """(..., N) from one (..., 3) array per batch, the padding dropped."""
         stacked = np.concatenate([np.asarray(v, dtype=np.float64) for v in batch_values], axis=-1)
