@@ -1,7 +1,7 @@
 /* transmittance.cl -- kernels of clsky/transmittance.py: optical depth along segments and the 2D
  * column-density table.
  *
- *   tau_lambda(P1, P2) = beta_R(lambda) Integral rho_R ds + beta_M^e Integral rho_M ds
+ *   tau_lambda(P1, P2) = beta_R(lambda) Integral rho_R ds + beta_M^e(lambda) Integral rho_M ds
  *                        (+ sigma_O3(lambda) n_max Integral f_O ds with -DOZONE)        (physics.md)
  *   T = exp(-tau)
  * Inputs: altitude h0 [m] (0 <= h0 <= Ha), direction cosine mu, length d [m]. Output: tau for r, g, b.
