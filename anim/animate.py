@@ -99,7 +99,7 @@ class AnimationConfig:
         None (default): the table's three wavelengths, shown as r, g, b. An integer N in [3, 47]: N
         wavelengths in absolute units (:mod:`clsky.spectrum`: batches of three, lit by the solar
         spectrum), each frame converted spectral -> CIE XYZ -> linear sRGB [cd/m^2]
-        (:func:`spectral_frame_to_linear_srgb`) before display; such frames are about 1e4 times brighter
+        (:func:`spectral_frame_to_linear_srgb`) before display; such frames are thousands of times brighter
         than the notes' relative ones by day, so pick the exposure accordingly (e.g. 1e-4).
     hdr : bool
         Also write each frame's HDR values as float32 .npy beside the PNGs: the ray march's frame
