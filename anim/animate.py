@@ -2,7 +2,7 @@
 
 The pipeline, one frame at a time: sun position (:mod:`anim.sunpath`) -> HDR frames
 (:class:`clsky.render.SkyRenderer`, for the camera of :mod:`anim.cameras`) -> display values
-(:mod:`anim.tonemap`) -> metrics, error image and composite (:mod:`anim.metrics`) -> files
+(:mod:`anim.display`: white balance, exposure, tone curve, sRGB) -> metrics, error image and composite (:mod:`anim.metrics`) -> files
 (:mod:`anim.writers`). The renderers never see files; the writers never see physics.
 
 Example
@@ -30,16 +30,18 @@ from clsky.errors import ParameterError, is_integer, is_real_number
 from clsky.planner import Plan, Scene, plan_scene, sun_axis
 from clsky.quality import QUALITY_LEVELS, QualityLevel, level_for_budget, quality_level
 from clsky import colorimetry, spectrum
+from clsky.solar import solar_irradiance_astm_g173
 from clsky.render import SkyRenderer
 from clsky.resources import MemoryEstimate, check_memory, device_of, estimate_animation_memory
 
-from . import metrics, sunpath, tonemap, writers
+from . import display as display_pipeline
+from . import metrics, sunpath, writers
 from .cameras import camera_from_name
 
 __all__ = ["AnimationConfig", "AnimationResult", "METHODS", "quality", "plan_animation", "build_table", "make_renderer",
            "spectral_frame_to_linear_srgb",
            "ray_settings", "sun_positions", "check_outputs", "render_animation", "render_frame",
-           "memory_estimate"]
+           "memory_estimate", "display", "display_frames"]
 
 #: What is rendered: table lookup only, ray march only, or both with the comparison.
 METHODS = ("compare", "lut", "raymarch")
@@ -66,6 +68,9 @@ class AnimationConfig:
     method : {'compare', 'lut', 'raymarch'}
     preset : str
         Atmosphere preset (:data:`clsky.PRESETS`).
+    ground_albedo : float or None
+        Albedo of a Lambertian ground in [0, 1] instead of the preset's (None: the preset's); > 0
+        needs mode 'physical'.
     mode : {'atmosphere-plus', 'physical'}
         Scheme of the table's higher orders.
     error_budget : float
@@ -90,7 +95,18 @@ class AnimationConfig:
     fps : float
         Frames per second of the MP4, in (0, 240].
     exposure : float
-        Exposure of the tone map, > 0.
+        Exposure [EV] in [-40, 40] (default 0): frames are scaled by 2^exposure before the tone curve
+        (EV 0 is the old multiplier 1; the old ``exposure=x`` is ``log2(x)``). With ``auto_exposure``,
+        a compensation added to the metered EV.
+    tone_map : str or None
+        Tone curve (:data:`anim.display.TONE_CURVES`); None (default): ``'atmosphere-plus'`` (the notes'
+        curve, frames bit for bit as before) for the atmosphere-plus preset, else
+        :data:`anim.display.DEFAULT_TONE_MAP`.
+    auto_exposure : bool
+        Meter each frame's luminance, smoothed over time (:class:`anim.display.AutoExposure`).
+    white_balance : {'d65', 'sun'}
+        'd65' (default): no balance, sRGB's own white; 'sun': the sun's colour (the incident light
+        I_I) adapted to D65 white (von Kries, CAT02).
     dither : bool
         Dither the 8-bit frames against banding.
     output : str or path
@@ -100,7 +116,7 @@ class AnimationConfig:
         wavelengths in absolute units (:mod:`clsky.spectrum`: batches of three, lit by the solar
         spectrum), each frame converted spectral -> CIE XYZ -> linear sRGB [cd/m^2]
         (:func:`spectral_frame_to_linear_srgb`) before display; such frames are thousands of times brighter
-        than the notes' relative ones by day, so pick the exposure accordingly (e.g. 1e-4).
+        than the notes' relative ones by day: use ``auto_exposure`` (or an EV near -12).
     hdr : bool
         Also write each frame's HDR values as float32 .npy beside the PNGs: the ray march's frame
         (with ``method='compare'``, the reference the lookup is compared with) or the lookup's.
@@ -127,6 +143,7 @@ class AnimationConfig:
     method: str = "compare"
     preset: str = "physical"
     mode: str = "physical"
+    ground_albedo: float | None = None
     error_budget: float = 0.01
     quality: str | None = None
     table_size: tuple | None = None
@@ -139,7 +156,10 @@ class AnimationConfig:
     end_hour: float = 24.0
     step_minutes: float = 10.0
     fps: float = 30.0
-    exposure: float = 1.0
+    exposure: float = 0.0
+    tone_map: str | None = None
+    auto_exposure: bool = False
+    white_balance: str = "d65"
     dither: bool = True
     output: str = "sky.mp4"
     hdr: bool = False
@@ -152,6 +172,9 @@ class AnimationConfig:
         if self.max_elevation_deg < self.start_elevation_deg:
             raise ParameterError("max_elevation_deg", f"at least the start elevation ({self.start_elevation_deg:g})",
                                  self.max_elevation_deg)
+        if self.ground_albedo is not None and self.ground_albedo > 0 and self.mode != "physical":
+            raise ParameterError("ground_albedo", f"0 with mode {self.mode!r} (a ground needs mode 'physical')",
+                                 self.ground_albedo)
         if self.end_hour <= self.start_hour:
             raise ParameterError("end_hour", f"after the start hour ({self.start_hour:g})", self.end_hour)
         if self.location is not None:
@@ -161,6 +184,9 @@ class AnimationConfig:
                                                      f"{self.end_hour:g} h (at most {sunpath.MAX_POSITIONS} positions)",
                                      self.step_minutes)
         object.__setattr__(self, "table_size", _check_table_size(self.table_size))
+        if self.tone_map is None:
+            object.__setattr__(self, "tone_map", "atmosphere-plus" if self.preset == "atmosphere-plus"
+                               else display_pipeline.DEFAULT_TONE_MAP)
 
     @property
     def output_path(self) -> pathlib.Path:
@@ -172,6 +198,12 @@ class AnimationConfig:
 
     def metrics_path(self, suffix) -> pathlib.Path:
         return self.output_path.with_name(self.output_path.stem + "_metrics" + suffix)
+
+    @property
+    def atmosphere(self) -> clsky.AtmosphereParameters:
+        """The preset's atmosphere, with ``ground_albedo`` if given."""
+        atmosphere = clsky.preset(self.preset)
+        return atmosphere if self.ground_albedo is None else atmosphere.replace(ground_albedo=self.ground_albedo)
 
     def image_shape(self):
         """(width, height) of a rendered frame."""
@@ -270,12 +302,14 @@ _FIELD_CHECKS = {
     "fov_deg": _real(0.0, 179.0, " degrees", low_open=True), "heading_deg": _real(-360.0, 720.0, " degrees", optional=True),
     "pitch_deg": _real(-90.0, 90.0, " degrees"), "altitude": _real(0.0, 1e8, " m"), "method": _choice(METHODS),
     "preset": _choice(tuple(sorted(clsky.PRESETS))), "mode": _choice(("atmosphere-plus", "physical")),
+    "ground_albedo": _real(0.0, 1.0, optional=True),
     "samples": _integer(2, 4096, optional=True), "error_budget": _real(0.0, 1.0, low_open=True),
     "quality": _choice(tuple(QUALITY_LEVELS), optional=True),
     "start_elevation_deg": _real(-90.0, 90.0, " degrees"), "max_elevation_deg": _real(-90.0, 90.0, " degrees"),
     "location": _location, "date": _date, "start_hour": _real(0.0, 48.0, " h"), "end_hour": _real(0.0, 48.0, " h"),
     "step_minutes": _real(0.0, 1440.0, " minutes", low_open=True), "fps": _real(0.0, 240.0, low_open=True),
-    "exposure": _real(0.0, 1e6, low_open=True), "dither": _flag, "output": _output, "hdr": _flag, "force": _flag,
+    "exposure": _real(-40.0, 40.0, " EV"), "tone_map": _choice(tuple(display_pipeline.TONE_CURVES), optional=True),
+    "auto_exposure": _flag, "white_balance": _choice(display_pipeline.WHITE_BALANCES), "dither": _flag, "output": _output, "hdr": _flag, "force": _flag,
     "wavelengths": _integer(spectrum.MIN_WAVELENGTHS, spectrum.MAX_WAVELENGTHS, optional=True),
 }
 
@@ -304,7 +338,7 @@ def plan_animation(config: AnimationConfig, positions, directions, valid, ctx=No
     error budget or quality; the ray march is planned for whenever the animation renders it."""
     if config.table_size is not None:
         return None
-    return plan_scene(_scene(config, positions, directions, valid), config.preset, config.mode, ctx=ctx,
+    return plan_scene(_scene(config, positions, directions, valid), config.atmosphere, config.mode, ctx=ctx,
                       ray_march=config.method != "lut")
 
 
@@ -333,7 +367,7 @@ def memory_estimate(config: AnimationConfig, positions) -> MemoryEstimate:
     else:
         directions, valid = _camera(dataclasses.replace(config, size=64)).directions()
         scene = _scene(config, positions, directions, valid)
-        cos_range, nodes, _, _ = sun_axis(clsky.preset(config.preset), scene, level, level.table.mapping)
+        cos_range, nodes, _, _ = sun_axis(config.atmosphere, scene, level, level.table.mapping)
         settings = level.table.replace(mode=config.mode, size=level.table.size[:2] + (nodes,),
                                        sun_cos_range=cos_range)
     return estimate_animation_memory(settings, config.image_shape(), config.method,
@@ -347,7 +381,7 @@ def build_table(config: AnimationConfig, plan: Plan | None = None, ctx=None, pro
         return clsky.ScatteringTable.build(plan.atmosphere, plan.table, ctx=ctx, progress=progress)
     size = tuple(config.table_size) if config.table_size is not None else quality(config).table.size
     settings = quality(config).table.replace(size=size, mode=config.mode)
-    return clsky.ScatteringTable.build(config.preset, settings, ctx=ctx, progress=progress)
+    return clsky.ScatteringTable.build(config.atmosphere, settings, ctx=ctx, progress=progress)
 
 
 def make_renderer(config: AnimationConfig, plan: Plan | None = None, ctx=None, progress=None):
@@ -424,6 +458,29 @@ def render_frame(renderer: SkyRenderer, prepared, sun_direction, config: Animati
     if config.wavelengths is not None:
         frames = {name: spectral_frame_to_linear_srgb(frame, renderer.wavelengths) for name, frame in frames.items()}
     return frames
+
+
+def display(config: AnimationConfig, table) -> display_pipeline.Display:
+    """The display pipeline of the animation's frames (:class:`anim.display.Display`) for ``table`` (a
+    ScatteringTable, or with ``config.wavelengths`` a :class:`clsky.spectrum.SpectralTable`)."""
+    auto = display_pipeline.AutoExposure() if config.auto_exposure else None
+    if config.wavelengths is not None:
+        # frames are linear sRGB already (render_frame); the sun's colour is its spectrum's sRGB
+        wavelengths = table.wavelengths
+        sun_white = spectral_frame_to_linear_srgb(solar_irradiance_astm_g173(wavelengths), wavelengths)
+    else:
+        # The renderer's r, g, b are taken as linear Rec. 709, and the sun's colour as its incident light I_I.
+        sun_white = table.atmosphere.incident_light
+    return display_pipeline.Display(config.tone_map, config.exposure, auto, config.white_balance,
+                                    sun_white=sun_white, source="rec709")
+
+
+def display_frames(pipeline: display_pipeline.Display, hdr, valid, config: AnimationConfig, seed=0):
+    """(EV, {name: 8-bit frame}, Delta E display) of one sun position's HDR frames: the exposure is
+    metered on the reference (the ray march when there is one) and shows every frame at that EV."""
+    ev = pipeline.exposure(hdr.get("raymarch", hdr.get("lut")), valid)
+    images = {name: pipeline.to_uint8(frame, ev, dither=config.dither, seed=seed) for name, frame in hdr.items()}
+    return ev, images, (lambda pixels: pipeline.linear(pixels, ev))
 
 
 def _frame_writer(config: AnimationConfig, total_frames: int, staging=None) -> writers.FrameWriter:
@@ -513,23 +570,23 @@ def _write_animation(config, positions, renderer, prepared, valid, table, plan, 
     """Render every frame and stage the frames, the MP4 and the metrics in ``staging``; returns the
     metric rows, the temporal jumps, the target paths and the stale frames to be deleted."""
     rows, means = [], {"lut": [], "raymarch": []}
+    pipeline = display(config, table)
     with _frame_writer(config, len(positions), staging) as writer:
         for index, sun in enumerate(positions):
             hdr = render_frame(renderer, prepared, sun.direction, config)
-            display = {name: tonemap.to_uint8(tonemap.tone_map(frame, config.exposure), dither=config.dither,
-                                              seed=index) for name, frame in hdr.items()}
+            ev, images, shown = display_frames(pipeline, hdr, valid, config, seed=index)
             row = {"frame": index, "sun_zenith_deg": sun.zenith_deg, "sun_azimuth_deg": sun.azimuth_deg,
-                   "time": sun.time.isoformat() if sun.time is not None else ""}
+                   "time": sun.time.isoformat() if sun.time is not None else "", "exposure_ev": ev}
             for name, frame in hdr.items():
                 means[name].append(metrics.mean_luminance(frame[None], valid)[0])
             if config.method == "compare":
-                row.update(metrics.compare_frames(hdr["raymarch"], hdr["lut"], valid, config.exposure))
+                row.update(metrics.compare_frames(hdr["raymarch"], hdr["lut"], valid, display=shown))
                 error = metrics.error_image(metrics.relative_error_map(hdr["raymarch"], hdr["lut"], valid), valid)
-                image = metrics.composite([display["lut"], display["raymarch"], error],
+                image = metrics.composite([images["lut"], images["raymarch"], error],
                                           ["table lookup", "ray march", "relative error"])
                 frame_hdr = hdr["raymarch"]
             else:
-                image = display[config.method]
+                image = images[config.method]
                 frame_hdr = hdr[config.method]
             writer.write(index, _even(image), hdr=frame_hdr if config.hdr else None)
             rows.append(row)
@@ -538,7 +595,8 @@ def _write_animation(config, positions, renderer, prepared, valid, table, plan, 
     paths = list(writer.paths)          # the frames and the MP4: they land when ``staging`` commits
     temporal = {}
     if config.method == "compare":
-        jumps = metrics.temporal_jumps(np.array(means["lut"]), np.array(means["raymarch"]), exposure=config.exposure)
+        jumps = metrics.temporal_jumps(np.array(means["lut"]), np.array(means["raymarch"]),
+                                       exposure=2.0 ** config.exposure)
         temporal = {"table_jumps": np.asarray(jumps["table_jumps"]).tolist(),
                     "raymarch_jumps": np.asarray(jumps["raymarch_jumps"]).tolist(),
                     "excess": np.asarray(jumps["excess"]).tolist(),
@@ -551,6 +609,7 @@ def _write_animation(config, positions, renderer, prepared, valid, table, plan, 
                    for k, v in dataclasses.asdict(config).items()},
         "table": {"settings": table.settings.to_dict(), "orders": table.orders_record,
                   "metadata": table.metadata, "frame_units": frame_units(config, table)},
+        "display": pipeline.describe(),
         "plan": None if plan is None else {"quality": plan.level.name, "work_fraction": plan.work_fraction,
                                            "decisions": [list(d) for d in plan.decisions]},
         "frames": rows, "temporal": temporal}, force=config.force, staging=staging))

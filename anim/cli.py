@@ -20,16 +20,18 @@ from clsky.errors import short
 FIELD_OPTIONS = {
     "frames": "--frames", "size": "--size", "camera": "--camera", "fov_deg": "--fov", "heading_deg": "--heading",
     "pitch_deg": "--pitch", "altitude": "--altitude", "method": "--method", "preset": "--preset", "mode": "--mode",
+    "ground_albedo": "--ground-albedo",
     "table_size": ("--table-size W", "--table-size H", "--table-size D"), "samples": "--samples",
     "error_budget": "--error-budget", "quality": "--quality", "start_elevation_deg": "--start-elevation",
     "max_elevation_deg": "--max-elevation", "location": "--location", "date": "--date",
     "start_hour": "--hours START", "end_hour": "--hours END", "step_minutes": "--step-minutes", "fps": "--fps",
-    "exposure": "--exposure", "output": "--output", "wavelengths": "--wavelengths",
+    "exposure": "--exposure", "tone_map": "--tone-map", "white_balance": "--white-balance", "output": "--output",
+    "wavelengths": "--wavelengths",
 }
 
 #: Options whose default is None so that, not given, the AnimationConfig's own default (or the
 #: quality level's / scene plan's choice) applies.
-UNSET_DEFAULTS = ("preset", "mode", "error_budget")
+UNSET_DEFAULTS = ("preset", "mode", "error_budget", "ground_albedo")
 
 
 def _date(text):
@@ -40,6 +42,7 @@ def _date(text):
 
 
 def _add_scene_arguments(parser, frames=True):
+    from clsky.atmosphere import EARTH_GROUND_ALBEDO
     from clsky.quality import QUALITY_LEVELS
 
     from .animate import METHODS
@@ -59,6 +62,9 @@ def _add_scene_arguments(parser, frames=True):
     sky.add_argument("--preset", help="atmosphere preset (default: physical)")
     sky.add_argument("--mode", choices=["atmosphere-plus", "physical"],
                      help="scheme of the higher orders (default: physical)")
+    sky.add_argument("--ground-albedo", type=float, metavar="A",
+                     help=f"albedo of a Lambertian ground in [0, 1], e.g. {EARTH_GROUND_ALBEDO:g} for the "
+                          f"Earth's mean (default: the preset's, 0; > 0 needs --mode physical)")
     sky.add_argument("--error-budget", type=float,
                      help="relative error allowed in the frames; picks the fastest quality level within it "
                           "(default: 0.01)")
@@ -66,11 +72,10 @@ def _add_scene_arguments(parser, frames=True):
     sky.add_argument("--table-size", nargs=3, type=int, metavar=("W", "H", "D"),
                      help="a full table of this grid instead of the scene plan's")
     sky.add_argument("--samples", type=int, help="ray-march samples per ray (default: the quality level's)")
-    sky.add_argument("--exposure", type=float, default=1.0)
+    _add_display_arguments(parser)
     sky.add_argument("--wavelengths", type=int, metavar="N",
                      help="N wavelengths in [3, 47] in absolute units, frames converted spectral -> XYZ -> "
-                          "linear sRGB [cd/m^2] (default: the table's three, shown as r, g, b; with N, try "
-                          "--exposure 1e-4)")
+                          "linear sRGB [cd/m^2] (default: the table's three, shown as r, g, b)")
     if frames:
         sun = parser.add_argument_group("sun path")
         sun.add_argument("--frames", type=int, default=120, help="frames of the sweep (default: 120)")
@@ -83,6 +88,23 @@ def _add_scene_arguments(parser, frames=True):
         sun.add_argument("--hours", nargs=2, type=float, metavar=("START", "END"), default=[0.0, 24.0],
                          help="time range of the real positions [h, UTC]")
         sun.add_argument("--step-minutes", type=float, default=10.0)
+
+
+def _add_display_arguments(parser):
+    from .display import DEFAULT_TONE_MAP, TONE_CURVES, WHITE_BALANCES
+
+    display = parser.add_argument_group("display")
+    display.add_argument("--tone-map", choices=list(TONE_CURVES),
+                         help=f"tone curve (default: atmosphere-plus, the notes' curve, for --preset atmosphere-plus; "
+                              f"{DEFAULT_TONE_MAP} otherwise)")
+    display.add_argument("--exposure", type=float, default=0.0, metavar="EV",
+                         help="exposure in EV: frames are scaled by 2^EV (default: 0, the frames' own values; the old "
+                              "multiplier x is log2(x)); with --auto-exposure, a compensation")
+    display.add_argument("--auto-exposure", action="store_true",
+                         help="meter each frame's log-average luminance to a key of 0.36 (a stop above mid-grey), "
+                              "smoothed over the frames")
+    display.add_argument("--white-balance", choices=list(WHITE_BALANCES), default="d65",
+                         help="white: d65 (none, default) or the sun's colour adapted to D65 (CAT02)")
 
 
 def register(commands):
@@ -134,7 +156,8 @@ def _config(args, **extra):
     fields = dict(size=args.size, camera=args.camera, fov_deg=args.fov, heading_deg=args.heading,
                   pitch_deg=args.pitch, altitude=args.altitude, method=args.method,
                   table_size=None if args.table_size is None else tuple(args.table_size),
-                  samples=args.samples, quality=args.quality, exposure=args.exposure, wavelengths=args.wavelengths,
+                  samples=args.samples, quality=args.quality, exposure=args.exposure, tone_map=args.tone_map,
+                  auto_exposure=args.auto_exposure, white_balance=args.white_balance, wavelengths=args.wavelengths,
                   dither=not args.no_dither, force=args.force, **extra)
     fields.update({name: getattr(args, name) for name in UNSET_DEFAULTS if getattr(args, name) is not None})
     try:
@@ -189,8 +212,8 @@ def run_animate(args):
 def run_render(args):
     import pathlib
 
-    from . import metrics, tonemap, writers
-    from .animate import _camera, make_renderer, plan_animation, render_frame
+    from . import metrics, writers
+    from .animate import _camera, display, display_frames, make_renderer, plan_animation, render_frame
     from .cameras import sun_direction
     from .sunpath import SunPosition
 
@@ -210,22 +233,21 @@ def run_render(args):
     plan = plan_animation(config, [position], directions, valid)
     if plan is not None:
         print(plan.describe())
-    renderer, _ = make_renderer(config, plan)          # the frame reads data and gathered only
+    renderer, table = make_renderer(config, plan)          # the frame reads data and gathered only
     sun = sun_direction(90.0 - args.sun_elevation, args.sun_azimuth)
     hdr = render_frame(renderer, renderer.prepare(directions, valid), sun, config)
-    display = {name: tonemap.to_uint8(tonemap.tone_map(frame, config.exposure), dither=config.dither)
-               for name, frame in hdr.items()}
+    ev, images, shown = display_frames(display(config, table), hdr, valid, config)
     if config.method == "compare":
         error = metrics.error_image(metrics.relative_error_map(hdr["raymarch"], hdr["lut"], valid), valid)
-        image = metrics.composite([display["lut"], display["raymarch"], error],
+        image = metrics.composite([images["lut"], images["raymarch"], error],
                                   ["table lookup", "ray march", "relative error"])
-        numbers = metrics.compare_frames(hdr["raymarch"], hdr["lut"], valid, config.exposure)
+        numbers = metrics.compare_frames(hdr["raymarch"], hdr["lut"], valid, display=shown)
         detail = f"; table vs ray march: 95th-percentile error {100 * numbers['p95_rel']:.1f} %"
     else:
-        image, detail = display[config.method], ""
+        image, detail = images[config.method], ""
     writers.write_png(output, image, force=args.force)
     print(f"frame {camera.width}x{camera.height} ({config.method}, sun elevation {args.sun_elevation:g} deg, "
-          f"azimuth {args.sun_azimuth:g} deg){detail} -> {output}")
+          f"azimuth {args.sun_azimuth:g} deg, {config.tone_map} at {ev:+.2f} EV){detail} -> {output}")
     return 0
 
 

@@ -262,7 +262,7 @@ def relative_error_map(reference, test, valid=None):
     return _relative_error(reference, test, valid)[0]
 
 
-def compare_frames(reference, test, valid=None, exposure=1.0):
+def compare_frames(reference, test, valid=None, exposure=1.0, display=None):
     """Compare a table-lookup frame with the ray-marched reference.
 
     Parameters
@@ -274,7 +274,11 @@ def compare_frames(reference, test, valid=None, exposure=1.0):
     valid : array_like of bool, shape (H, W), optional
         Pixels that count (default: all), e.g. the inside of a fisheye circle.
     exposure : float
-        Exposure of the tone map applied to both frames for Delta E [-].
+        Exposure of the tone map applied to both frames for Delta E [-] (without ``display``).
+    display : callable, optional
+        HDR pixels (N, 3) -> display-linear sRGB in [0, 1] (N, 3): the display pipeline the frames are
+        shown with, e.g. ``lambda pixels: anim.display.Display(...).linear(pixels, ev)`` at one EV for
+        both frames. Default: the notes' tone map at ``exposure``, decoded with its gamma 2.2.
 
     Returns
     -------
@@ -283,7 +287,7 @@ def compare_frames(reference, test, valid=None, exposure=1.0):
         ``rmse_relative``: rmse / mean(Y_ref) [-];
         ``median_rel``, ``p95_rel``, ``max_rel``: statistics of the relative luminance error e of
         :func:`relative_error_map` over the valid pixels [-];
-        ``mean_delta_e``: mean CIE76 Delta E between the tone-mapped frames;
+        ``mean_delta_e``: mean CIE76 Delta E between the displayed frames;
         ``floor``: the luminance floor of e [HDR units]; ``pixels``: number of valid pixels.
 
     Raises
@@ -303,7 +307,8 @@ def compare_frames(reference, test, valid=None, exposure=1.0):
     to XYZ (IEC 61966-2-1, D65) and L*a*b* (D65 white), and compared with CIE76 (Euclidean
     distance; about 2.3 is just noticeable). It measures what a viewer sees: errors in saturated
     (hdr >> 1) or black pixels count little. CIEDE2000 would be a possible refinement. The display
-    values are not quantised to 8 bits first.
+    values are not quantised to 8 bits first. With ``display``, Delta E is that of what the display
+    pipeline shows (its display-linear sRGB -> XYZ -> L*a*b*); every other number is of the HDR values.
 
     Examples
     --------
@@ -318,8 +323,12 @@ def compare_frames(reference, test, valid=None, exposure=1.0):
     rmse = float(np.sqrt(np.mean(difference * difference)))
     mean_luminance = float(y_reference[valid].mean())
     errors = error[valid]
-    delta_e = delta_e_cie76(display_to_lab(tone_map(reference[valid], exposure)),
-                            display_to_lab(tone_map(test[valid], exposure)))
+    if display is None:
+        delta_e = delta_e_cie76(display_to_lab(tone_map(reference[valid], exposure)),
+                                display_to_lab(tone_map(test[valid], exposure)))
+    else:
+        delta_e = delta_e_cie76(xyz_to_lab(linear_srgb_to_xyz(np.clip(display(reference[valid]), 0.0, 1.0))),
+                                xyz_to_lab(linear_srgb_to_xyz(np.clip(display(test[valid]), 0.0, 1.0))))
     return {
         "rmse": rmse,
         "rmse_relative": rmse / max(mean_luminance, floor),

@@ -2,7 +2,8 @@
 
 The C declaration is generated from the NumPy dtype (``pyopencl.tools.match_dtype_to_c_struct``), so
 the two can never drift apart. The ozone fields come last, so that the fields before them keep their
-offsets; the kernels read them only when built with ``-DOZONE`` (:func:`feature_defines`).
+offsets; the kernels read them only when built with ``-DOZONE`` (:func:`feature_defines`). The
+ground's albedo follows, read only with ``-DGROUND``.
 """
 
 from __future__ import annotations
@@ -34,13 +35,16 @@ def _fields(dtype):
         ("ozone_extinction", real4),       # sigma_O3 n_max for r, g, b (.w = 0) [1/m], at the tent's peak
         ("ozone_peak_altitude", real),     # tent peak [m]
         ("ozone_half_width", real),        # tent half width [m]
+        ("ground_albedo", real),           # Lambertian albedo a of the ground, in [0, 1]
     )
 
 
 def feature_defines(atmosphere: AtmosphereParameters) -> list[str]:
-    """The compile-time features of ``atmosphere``: ``-DOZONE=1`` when it has ozone, else none (the
-    program is then the ozone-free one)."""
-    return ["-DOZONE=1"] if atmosphere.has_ozone else []
+    """The compile-time features of ``atmosphere``: ``-DOZONE=1`` when it has ozone, ``-DGROUND=1``
+    when its ground reflects; none for the atmosphere-plus preset (the program is then the one
+    without either)."""
+    return ((["-DGROUND=1"] if atmosphere.has_ground else [])
+            + (["-DOZONE=1"] if atmosphere.has_ozone else []))
 
 
 def declaration(device, dtype) -> _cl.Source:
@@ -67,5 +71,6 @@ def to_device(queue, atmosphere: AtmosphereParameters, dtype):
     record["ozone_extinction"] = tuple(atmosphere.ozone_extinction) + (0.0,)
     record["ozone_peak_altitude"] = atmosphere.ozone_peak_altitude
     record["ozone_half_width"] = atmosphere.ozone_half_width
+    record["ground_albedo"] = atmosphere.ground_albedo
     mf = cl.mem_flags
     return cl.Buffer(queue.context, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=record)

@@ -10,6 +10,11 @@ Two presets share one atmosphere of air and haze:
     40 km, peak at 25 km) holding 300 Dobson units, cross-sections of Serdyuchenko et al. 2014
     (:mod:`clsky.ozone`).
 
+Both presets have a black ground; ``ground_albedo`` (clsky/ground.py) gives a Lambertian one, e.g.
+:data:`EARTH_GROUND_ALBEDO`. (The physical preset keeps a black ground because a ground needs the
+physical scheme, and the physical preset is also used with the atmosphere-plus scheme: README,
+"Ground albedo".)
+
 All lengths are in metres, scattering coefficients in 1/m, wavelengths in nanometres.
 
 References
@@ -106,6 +111,11 @@ ANGSTROM_DEFAULTS = {"mie_angstrom_exponent": 0.0, "mie_reference_wavelength": 5
 #: Largest Angstrom exponent accepted (continental aerosols reach about 2.5; beyond 4 haze would scatter
 #: more steeply than air).
 MAX_ANGSTROM_EXPONENT = 4.0
+#: The ground field and its default (black): left out of :meth:`AtmosphereParameters.to_dict` when 0.
+GROUND_DEFAULTS = {"ground_albedo": 0.0}
+#: A ground albedo for the Earth: Bruneton 2017's demo value (kGroundAlbedo = 0.1), close to the visible
+#: mean of the Earth's surface, 71 % ocean (about 0.06) and 29 % land (0.15 to 0.3).
+EARTH_GROUND_ALBEDO = 0.1
 
 
 
@@ -168,6 +178,11 @@ class AtmosphereParameters:
     ozone_cross_section : tuple of 3 floats
         O3 absorption cross-section sigma at the three wavelengths [m^2], >= 0; defaults to
         Serdyuchenko et al. (2014) at 650, 510, 475 nm (:func:`clsky.ozone.cross_section_serdyuchenko2014`).
+    ground_albedo : float
+        Albedo a of a Lambertian ground in [0, 1], the same at every wavelength: it reflects the
+        radiance a / pi E (E the irradiance on the horizontal ground, direct sun and sky). 0 (the
+        default) is a black ground, and the kernels are then built without it (bit-for-bit the
+        ground-free program). A ground needs the ``physical`` scheme (TableSettings.mode).
 
     Raises
     ------
@@ -205,6 +220,7 @@ class AtmosphereParameters:
     ozone_peak_altitude: float = 25_000.0
     ozone_half_width: float = 15_000.0
     ozone_cross_section: tuple = DEFAULT_OZONE_CROSS_SECTION
+    ground_albedo: float = 0.0
     mie_angstrom_exponent: float = 0.0
     mie_reference_wavelength: float = 550.0
 
@@ -214,7 +230,7 @@ class AtmosphereParameters:
             object.__setattr__(self, name, _as_rgb(name, getattr(self, name)))
         for name in ("planet_radius", "top_radius", "rayleigh_scale_height", "mie_scale_height",
                      "mie_scattering", "mie_extinction_ratio", "mie_g", "exposure", "ozone_column_du",
-                     "ozone_peak_altitude", "ozone_half_width", "mie_angstrom_exponent",
+                     "ozone_peak_altitude", "ozone_half_width", "ground_albedo", "mie_angstrom_exponent",
                      "mie_reference_wavelength"):
             value = getattr(self, name)
             if not _is_real_number(value):
@@ -253,6 +269,7 @@ class AtmosphereParameters:
         check("mie_angstrom_exponent", lambda v: (v >= 0) & (v <= MAX_ANGSTROM_EXPONENT),
               f"in [0, {MAX_ANGSTROM_EXPONENT:g}]")
         check("mie_reference_wavelength", lambda v: v > 0, "finite and > 0 nm")
+        check("ground_albedo", lambda v: (v >= 0) & (v <= 1), "in [0, 1]")
         self._check_optical_depth()
         if not isinstance(self.rayleigh_phase, str) or self.rayleigh_phase not in RAYLEIGH_PHASE_METHODS:
             raise ParameterError("rayleigh_phase", f"one of {sorted(RAYLEIGH_PHASE_METHODS)}", self.rayleigh_phase)
@@ -319,6 +336,11 @@ class AtmosphereParameters:
         return self.ozone_column_du > 0.0
 
     @property
+    def has_ground(self) -> bool:
+        """True when the ground reflects (albedo > 0; the kernels are then built with -DGROUND)."""
+        return self.ground_albedo > 0.0
+
+    @property
     def ozone_number_density_max(self) -> float:
         """n_max = column / half_width [1/m^3], the tent's peak (0 without ozone)."""
         from .ozone import tent_number_density_max
@@ -372,11 +394,12 @@ class AtmosphereParameters:
 
         An atmosphere without ozone whose ozone fields all keep their defaults (:data:`OZONE_DEFAULTS`)
         leaves them out, so that its dictionary and :meth:`digest` (and the hash of its saved tables)
-        are those of clsky before ozone; :meth:`from_dict` restores the defaults. The Angstrom fields
-        (:data:`ANGSTROM_DEFAULTS`) are left out alike when both keep their defaults.
+        are those of clsky before ozone; :meth:`from_dict` restores the defaults. A black ground
+        (:data:`GROUND_DEFAULTS`) and the Angstrom fields (:data:`ANGSTROM_DEFAULTS`) are left out the
+        same way.
         """
         data = {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(self).items()}
-        for defaults in (OZONE_DEFAULTS, ANGSTROM_DEFAULTS):
+        for defaults in (OZONE_DEFAULTS, GROUND_DEFAULTS, ANGSTROM_DEFAULTS):
             if all(getattr(self, name) == value for name, value in defaults.items()):
                 for name in defaults:
                     del data[name]

@@ -135,13 +135,16 @@ def _orders(text):
 def _add_table_arguments(parser):
     """The table's options. Those that set a TableSettings field default to None: unset, they take the
     value of the --quality level (or of TableSettings)."""
-    from .atmosphere import PRESETS
+    from .atmosphere import EARTH_GROUND_ALBEDO, PRESETS
     from .quality import QUALITY_LEVELS
     from .settings import MAPPINGS, MIE_LAYOUTS, SAMPLINGS, SCATTERING_MODES, SUN_TRANSMITTANCE_METHODS
 
     physics = parser.add_argument_group("atmosphere")
     physics.add_argument("--preset", default="atmosphere-plus", choices=sorted(PRESETS),
                          help="atmosphere preset (default: %(default)s)")
+    physics.add_argument("--ground-albedo", type=float, metavar="A",
+                         help=f"albedo of a Lambertian ground in [0, 1], e.g. {EARTH_GROUND_ALBEDO:g} for the "
+                              f"Earth's mean (default: the preset's, 0; > 0 needs --mode physical)")
     grid = parser.add_argument_group("table")
     grid.add_argument("--quality", choices=list(QUALITY_LEVELS),
                       help="start from a named quality level's settings (clsky/quality.py); the options "
@@ -199,7 +202,23 @@ TABLE_OPTION_NAMES = {
     "max_orders": "--max-orders", "multiple_view_steps": "--multiple-view-steps",
     "gather_theta_steps": "--gather-steps THETA", "gather_phi_steps": "--gather-steps PHI",
     "sun_cos_range": "--sun-elevations", "quality": "--quality", "preset": "--preset",
+    "ground_albedo": "--ground-albedo",
 }
+
+
+def table_atmosphere(args):
+    """The atmosphere of the table options: the --preset's, with --ground-albedo if given. UsageError
+    names the option of a bad value."""
+    from .atmosphere import preset
+    from .errors import ParameterError
+
+    atmosphere = preset(args.preset)
+    if args.ground_albedo is None:
+        return atmosphere
+    try:
+        return atmosphere.replace(ground_albedo=args.ground_albedo)
+    except ParameterError as error:
+        raise UsageError(option_message(error, TABLE_OPTION_NAMES)) from None
 
 
 def option_message(error, options):
@@ -219,8 +238,12 @@ def table_settings(args, atmosphere):
     options given, with the sun axis planned for --sun-elevations. UsageError names the option."""
     from .errors import ParameterError
 
+    from .ground import check_ground_mode
+
     try:
-        return _table_settings(args, atmosphere)
+        settings = _table_settings(args, atmosphere)
+        check_ground_mode(atmosphere, settings)
+        return settings
     except ParameterError as error:
         raise UsageError(option_message(error, TABLE_OPTION_NAMES)) from None
 
@@ -301,10 +324,10 @@ def run_table(args):
     import pathlib
 
     from ._files import StagedWrites
-    from .atmosphere import preset
     from .table import ScatteringTable
 
-    settings = table_settings(args, preset(args.preset))
+    atmosphere = table_atmosphere(args)
+    settings = table_settings(args, atmosphere)
     output = pathlib.Path(args.output)
     if output.suffix != ".npz":
         raise UsageError(f"--output must end in .npz, got {args.output!r}")
@@ -314,7 +337,7 @@ def run_table(args):
     progress, close = progress_bar(args.progress)
     start = time.perf_counter()
     try:
-        table = ScatteringTable.build(preset(args.preset), settings, backend=args.backend,
+        table = ScatteringTable.build(atmosphere, settings, backend=args.backend,
                                       fast_math=args.fast_math, progress=progress)
     finally:
         close()

@@ -5,7 +5,8 @@ rho_s(h) = exp(-h / H_s): Rayleigh (extinction = scattering, beta_R per channel)
 beta_M per channel by Angstrom's law beta_M (lambda / lambda_0)^-alpha, extinction beta_M / ratio,
 Cornette-Shanks phase), and, when ``atmosphere.ozone_column_du`` > 0,
 ozone, which only absorbs: extinction sigma_O3 n_O3(h) per channel with the tent
-n_O3 = n_max max(0, 1 - |h - h_peak| / w), n_max = column [DU] * 2.687e20 / w. The ground is black, there is no refraction,
+n_O3 = n_max max(0, 1 - |h - h_peak| / w), n_max = column [DU] * 2.687e20 / w. The ground is a Lambertian reflector of albedo
+``atmosphere.ground_albedo`` (0, black, when the field is absent or 0), there is no refraction,
 and the sun is a directional source of irradiance 1 per channel, so :func:`sky_radiance` returns radiance
 per unit incident light, comparable with ``table radiance / atmosphere.incident_light``
 (:func:`absolute_sky_radiance` multiplies by ``incident_light``).
@@ -36,8 +37,13 @@ channels are independent photon populations, processed together in one vectorise
    in the shell, the ozone tent <= n_max). A tentative collision at x is real
    with probability mu_t(x) / mu_bar, else null (the path continues unchanged). Ozone is part of
    mu_t: a real collision absorbs with probability mu_O3 / mu_t, which the weight below accounts for. Leaving through the top
-   of the atmosphere or hitting the black ground ends the path. Real collisions are distributed with
+   of the atmosphere, or hitting a black ground, ends the path. Real collisions are distributed with
    density mu_t(x) T(x0, x) along the path, so no transmittance weight is needed.
+   A path that reaches a ground of albedo a > 0 before its tentative collision (probability T(x0, x_g))
+   has a ground event there, counted as an order: next-event estimation toward the sun with the
+   Lambertian BRDF, w a / pi max(dot(n, Sun), 0) T_sun(x_g) (n the ground's normal; 0 when the planet
+   shadows the sun), then the path continues from x_g into a cosine-weighted direction about n
+   (density cos / pi, so that BRDF * cos / density = a: w *= a).
 2. Next-event estimation toward the sun at every real collision (order k = number of real collisions):
    contribution = w * sum_s mu_s(x) / mu_t(x) * F_s(dot(Sun, d)) / (4 pi) * T_sun(x), with d the current
    (backward) direction and T_sun from :func:`optical_depth_to_top` and :func:`ozone_column_to_top`
@@ -593,6 +599,23 @@ class MonteCarloResult:
     null_collisions: int
 
 
+def _sun_transmittance(r, mu, channel, rp, ra, beta_r, beta_me, scale_heights, beta_o, ozone_peak, ozone_half_width,
+                       chunk):
+    """Transmittance toward the sun from points at radii r [m] along cosines mu, each in its channel
+    (0 where the planet blocks the sun); beta_r, beta_me (and beta_o, None without ozone) per channel.
+    Computed ``chunk`` points at a time."""
+    t_sun = np.empty(r.size)
+    for start in range(0, r.size, chunk):
+        block = slice(start, start + chunk)
+        cols, blocked = optical_depth_to_top(r[block], mu[block], rp, ra, scale_heights)
+        tau = cols[0] * beta_r[channel[block]] + cols[1] * beta_me[channel[block]]
+        if beta_o is not None:
+            ozone, _ = ozone_column_to_top(r[block], mu[block], rp, ra, ozone_peak, ozone_half_width)
+            tau = tau + ozone * beta_o[channel[block]]
+        t_sun[block] = np.where(blocked, 0.0, np.exp(-tau))
+    return t_sun
+
+
 def _observer_frame(cos_view, cos_sun, azimuth):
     """V and Sun in the canonical frame (zenith +z, V in the x-z plane)."""
     cv = float(np.clip(cos_view, -1.0, 1.0))
@@ -662,6 +685,7 @@ def simulate(atmosphere, altitude, cos_view, cos_sun, azimuth=0.0, *, photons=20
     g = float(atmosphere.mie_g)
     beta_o, ozone_peak, ozone_half_width = _ozone(atmosphere)
     has_ozone = bool(np.any(beta_o > 0.0))
+    albedo = float(getattr(atmosphere, "ground_albedo", 0.0))
     rayleigh_kind = atmosphere.rayleigh_phase
     mean_r = phase_mean(rayleigh_kind)
     mean_m = phase_mean("cornette_shanks", g)
@@ -689,11 +713,36 @@ def simulate(atmosphere, altitude, cos_view, cos_sun, azimuth=0.0, *, photons=20
         t_top = ray_sphere_exit(r, mu, ra)
         t_ground = ray_sphere_entry(np.maximum(r, rp), mu, rp)
         t_bound = np.minimum(t_top, t_ground)
-        t = -np.log1p(-rng.random(ids.size)) / majorant[channel]
+        with np.errstate(divide="ignore"):      # a zero majorant (vacuum) never collides: t = inf
+            t = -np.log1p(-rng.random(ids.size)) / majorant[channel]
         inside = t < t_bound
-        # Leaving through the top or hitting the black ground ends the path.
-        ids, channel, pos, dirn, weight, order, t = (
-            a[inside] for a in (ids, channel, pos, dirn, weight, order, t))
+        reflected = ~inside & (t_ground <= t_top) if albedo > 0.0 else np.zeros(ids.size, dtype=bool)
+        if np.any(reflected):
+            # Ground events: NEE with the Lambertian BRDF, then a cosine-weighted bounce (module docstring).
+            sel = np.flatnonzero(reflected)
+            order[sel] += 1
+            hit = pos[sel] + t_ground[sel, None] * dirn[sel]
+            normal = hit / np.linalg.norm(hit, axis=1)[:, None]
+            pos[sel] = rp * normal
+            mus = normal @ sun
+            t_sun = _sun_transmittance(np.full(sel.size, rp), mus, channel[sel], rp, ra, beta_r, beta_me,
+                                       (h_r, h_m), beta_o if has_ozone else None, ozone_peak, ozone_half_width,
+                                       chunk)
+            value = weight[sel] * albedo / math.pi * np.maximum(mus, 0.0) * t_sun
+            contrib[ids[sel]] += value
+            np.add.at(orders, (order[sel] - 1, channel[sel]), value)
+            go_on = order[sel] < max_orders
+            cont = sel[go_on]
+            weight[cont] *= albedo
+            dirn[cont] = _scatter_directions(normal[go_on], np.sqrt(rng.random(cont.size)), rng)
+            stop = sel[~go_on]
+            np.add.at(trunc_paths, channel[stop], 1)
+            np.add.at(trunc_weight, channel[stop], weight[stop] * albedo)
+            inside[cont] = True
+            t[cont] = 0.0                 # the bounced path starts its next flight from the ground
+        # Leaving through the top or hitting a black ground (or the order cap) ends the path.
+        ids, channel, pos, dirn, weight, order, t, reflected = (
+            a[inside] for a in (ids, channel, pos, dirn, weight, order, t, reflected))
         if not ids.size:
             break
         pos = pos + t[:, None] * dirn
@@ -705,8 +754,9 @@ def simulate(atmosphere, altitude, cos_view, cos_sun, azimuth=0.0, *, photons=20
         mu_t = mu_r + beta_me[channel] * rho_m
         if has_ozone:   # absorption only: in mu_t, not in the scattering coefficients
             mu_t = mu_t + beta_o[channel] * _tent(h, ozone_peak, ozone_half_width)
-        real = rng.random(ids.size) * majorant[channel] < mu_t
-        null_count += int(ids.size - np.count_nonzero(real))
+        # a path bounced off the ground this round has no collision yet: it flies on in the next one
+        real = (rng.random(ids.size) * majorant[channel] < mu_t) & ~reflected
+        null_count += int(ids.size - np.count_nonzero(real) - np.count_nonzero(reflected))
         if not np.any(real):
             continue
         sel = np.flatnonzero(real)
@@ -717,15 +767,8 @@ def simulate(atmosphere, altitude, cos_view, cos_sun, azimuth=0.0, *, photons=20
         rs = np.linalg.norm(p, axis=1)
         mus = (p @ sun) / rs
         cos_theta = dirn[sel] @ sun  # angle between the light's travel before (-Sun) and after (-d)
-        t_sun = np.empty(sel.size)
-        for start in range(0, sel.size, chunk):
-            block = slice(start, start + chunk)
-            cols, blocked = optical_depth_to_top(rs[block], mus[block], rp, ra, (h_r, h_m))
-            tau = cols[0] * beta_r[channel[sel][block]] + cols[1] * beta_me[channel[sel][block]]
-            if has_ozone:
-                ozone, _ = ozone_column_to_top(rs[block], mus[block], rp, ra, ozone_peak, ozone_half_width)
-                tau = tau + ozone * beta_o[channel[sel][block]]
-            t_sun[block] = np.where(blocked, 0.0, np.exp(-tau))
+        t_sun = _sun_transmittance(rs, mus, channel[sel], rp, ra, beta_r, beta_me, (h_r, h_m),
+                                   beta_o if has_ozone else None, ozone_peak, ozone_half_width, chunk)
         phase = (mu_r[sel] * rayleigh_phase(cos_theta, rayleigh_kind)
                  + mu_ms[sel] * cornette_shanks_phase(cos_theta, g))
         value = weight[sel] * phase / (mu_t[sel] * _FOUR_PI) * t_sun

@@ -312,19 +312,35 @@ class MultipleScatteringEngine(_cl.Engine):
         self._record("gather", event)
         return out
 
-    def scatter(self, atmosphere: AtmosphereParameters, gathered, combine_species=False):
+    def scatter(self, atmosphere: AtmosphereParameters, gathered, combine_species=False, ground_radiance=None):
         """Next order from a gathered table, as a padded device array (D, H, W, 8).
 
-        With ``combine_species`` (physical mode) channels 0-2 and 3-5 both hold Rayleigh + Mie.
+        With ``combine_species`` (physical mode) channels 0-2 and 3-5 both hold Rayleigh + Mie. With a
+        reflecting ground (``atmosphere.has_ground``, which needs ``combine_species``), rays that end on
+        the ground add T L_g, ``ground_radiance`` (D, 3) the ground's radiance per sun node
+        (:mod:`clsky.ground`).
         """
+        from .ground import padded4
+
         gathered_d = gathered if isinstance(gathered, cla.Array) else self.to_device(gathered)
         depth, height, width, _ = gathered_d.shape
+        if atmosphere.has_ground:
+            if not combine_species:
+                raise ValueError("a reflecting ground (ground_albedo > 0) needs combine_species (mode 'physical')")
+            ground = np.asarray(ground_radiance, dtype=np.float64) if ground_radiance is not None else None
+            if ground is None or ground.shape != (depth, 3):
+                raise ValueError(f"ground_radiance must have shape (D, 3) = ({depth}, 3), got "
+                                 f"{None if ground is None else ground.shape}")
+            ground_d = cla.to_device(self.queue, padded4(ground, self.dtype))
+        else:
+            ground_d = cla.zeros(self.queue, 4, self.dtype)        # not read without -DGROUND
         out = cla.empty(self.queue, gathered_d.shape, self.dtype)
         atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
         event = self.kernels_with(_atmosphere_cl.feature_defines(atmosphere))["scatter"](
             self.queue, (-(-width // VECTOR_WIDTH), height, depth), None, atmosphere_d, np.int32(width),
             np.int32(height), np.int32(depth), np.int32(MAPPINGS[self.settings.mapping]),
-            self.real2(self.settings.sun_w_range), np.int32(bool(combine_species)), gathered_d.data, out.data)
+            self.real2(self.settings.sun_w_range), np.int32(bool(combine_species)), gathered_d.data,
+            ground_d.data, out.data)
         self._record("scatter", event)
         out.add_event(event)
         return out

@@ -17,8 +17,10 @@ Two schemes (``TableSettings.mode``):
     phase applied (3 channels, r, g, b) and averaged over the azimuth between view and sun, while single
     scattering stays factored so that the renderer applies its exact phase. Remaining approximations:
     (1) the table has no azimuth: higher orders are azimuth averages, and every order is computed in
-    the canonical frame (sun and view in one vertical plane) along the ray; (2) the ground is black;
-    (3) quadrature and interpolation errors of the grid (view/sun steps, trilinear lookups).
+    the canonical frame (sun and view in one vertical plane) along the ray; (2) the ground is black
+    unless ``atmosphere.ground_albedo`` > 0: then a Lambertian ground reflects a / pi of the irradiance
+    of every order into the next one (:mod:`clsky.ground`; physical mode only); (3) quadrature and
+    interpolation errors of the grid (view/sun steps, trilinear lookups).
 
 Stopping rule of ``orders="auto"``: after each order k >= 2, for every channel c, the *bright part* is
 the set of cells whose running sum S_c is at least :data:`BRIGHT_FRACTION` (1 %) of its maximum over
@@ -68,11 +70,15 @@ class OrdersResult:
         Sum of the gathered in-scatter tables Gbar_s^(k) (Rayleigh r, g, b, Mie r, g, b) whose
         scatter produced the orders 2..K: the per-pixel ray march integrates it along the true ray
         to add the higher orders. None for single scattering only.
+    ground_irradiance : numpy.ndarray (D, 3) or None
+        With a reflecting ground: E_sky = sum_{k >= 1} E_k, the sky's irradiance on the ground per
+        sun node [units of I_I] (:mod:`clsky.ground`), for the ray march. None for a black ground.
     """
 
     orders: list
     record: dict
     gathered: np.ndarray | None = None
+    ground_irradiance: np.ndarray | None = None
 
     def combined(self, mode):
         """The table's channels: factored sum (atmosphere-plus), or single + sum of higher orders."""
@@ -135,12 +141,16 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
     ------
     ValueError
         (:class:`clsky.errors.ParameterError`) for an atmosphere the kernels of ``settings.dtype``
-        cannot resolve (:meth:`AtmosphereParameters.check_dtype`).
+        cannot resolve (:meth:`AtmosphereParameters.check_dtype`), or a reflecting ground with the
+        atmosphere-plus mode (:func:`clsky.ground.check_ground_mode`).
     clsky.errors.NumericalError
         If an order comes out with non-finite values.
     """
+    from . import ground
+
     start = time.perf_counter()
     atmosphere.check_dtype(settings.dtype)
+    ground.check_ground_mode(atmosphere, settings)
     if backend not in ("opencl", "numpy"):
         raise ValueError(f"backend must be one of ['opencl', 'numpy'], got {backend!r}")
     if backend == "opencl":
@@ -166,9 +176,10 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         upload = engine.upload_matrices
         copy_queue = cl.CommandQueue(engine.ctx)     # copies to the host overlap the next gather
 
-        def scatter(gathered):
+        def scatter(gathered, ground_radiance):
             """The new order on the device, and a callable returning it on the host once copied."""
-            new_d = engine.scatter(atmosphere, gathered, combine_species=settings.mode == "physical")
+            new_d = engine.scatter(atmosphere, gathered, combine_species=settings.mode == "physical",
+                                   ground_radiance=ground_radiance)
             host = np.empty(new_d.shape, dtype=new_d.dtype)
             copied = cl.enqueue_copy(copy_queue, host, new_d.data, wait_for=new_d.events, is_blocking=False)
 
@@ -197,7 +208,10 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         def upload(matrices):
             return matrices
 
-        def scatter(gathered):
+        def scatter(gathered, ground_radiance):
+            if atmosphere.has_ground:          # physical mode (check_ground_mode): both sets combined
+                new = reference.scatter(atmosphere, settings, gathered, True, ground_radiance)
+                return new, lambda: np.ascontiguousarray(new[..., :3])
             new = reference.scatter(atmosphere, settings, gathered)
             if settings.mode == "physical":
                 phased = new[..., :3] + new[..., 3:]
@@ -206,6 +220,11 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
 
     orders = [check_finite(single, 1, atmosphere, settings)]
     totals = [_total(single)]
+    ground_sky = pending_ground = None      # E_1 + ... + E_k so far, and a / pi of what is not yet scattered
+    if atmosphere.has_ground:
+        ground_sky = ground.sky_irradiance(atmosphere, settings, single, factored=True)
+        pending_ground = ground.reflected_radiance(atmosphere, ground.direct_irradiance(atmosphere, settings)
+                                                   + ground_sky)
     gathered_sum = None
     additions, converged, reason = [], False, "orders=1: single scattering only"
     wanted = settings.max_orders if settings.orders == "auto" else settings.orders
@@ -227,7 +246,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
                 gathered_sum = gathered.copy()
             else:
                 gathered_sum += gathered
-            next_input, on_host = scatter(gathered)
+            next_input, on_host = scatter(gathered, pending_ground)
             del gathered                  # summed and scattered: its (D, H, W, 8) buffer may go
             # gather the next order from the new one where it is (on the device for OpenCL) before
             # looking at it on the host, so that the copy and the stopping test overlap that work
@@ -238,6 +257,10 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
             new = on_host()
             del on_host                   # and the padded download buffer behind that copy
             orders.append(check_finite(new, k, atmosphere, settings))
+            if ground_sky is not None:     # what order k lights the ground with joins order k + 1
+                sky = ground.sky_irradiance(atmosphere, settings, new, factored=False)
+                ground_sky = ground_sky + sky
+                pending_ground = ground.reflected_radiance(atmosphere, sky)
             running += new
             additions.append(relative_addition(new, running))
             totals.append(_total(new))
@@ -261,7 +284,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
                           f"added {additions[-1]:.2e} (tolerance {settings.order_tolerance:g})")
             else:
                 reason = f"orders={settings.orders} requested; the last order added {additions[-1]:.2e}"
-    result = OrdersResult(orders, {}, None if gathered_sum is None else to_host(gathered_sum))
+    result = OrdersResult(orders, {}, None if gathered_sum is None else to_host(gathered_sum), ground_sky)
     result.record = {
         "mode": settings.mode, "orders": len(orders), "requested": settings.orders,
         "tolerance": settings.order_tolerance, "max_orders": settings.max_orders,

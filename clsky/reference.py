@@ -200,6 +200,7 @@ class _ViewRays:
         else:
             nu = np.asarray(nu, dtype=np.float64)[:, None]
         hits_ground = mu_v < horizon_cos(h0, rp)
+        self.hits_ground = hits_ground[:, 0]
         length = np.where(hits_ground, distance_to_ground(h0, mu_v, rp), distance_to_top(h0, mu_v, rp, ra))
         nodes = quadrature_nodes(settings.view_steps, settings.sampling, power=3)
         self.s = length * nodes
@@ -228,15 +229,20 @@ class _ViewRays:
                                (atmosphere.mie_scattering_channels / (4.0 * math.pi)) * sum_m], axis=1)
 
 
+def _sun_columns(atmosphere, settings, h, mu_sun, sun_table):
+    """Column densities toward the sun from altitudes h along sun cosines mu_sun (``sun_column`` of
+    ``kernels/view_ray.cl``): from ``sun_table`` or re-marched; returns (columns, lit)."""
+    lit = mu_sun >= horizon_cos(h, atmosphere.planet_radius)
+    if sun_table is None:
+        sun_length = np.where(lit, distance_to_top(h, mu_sun, atmosphere.planet_radius, atmosphere.top_radius), 0.0)
+        return column_density(atmosphere, h, mu_sun, sun_length, settings.sun_steps, settings.sampling), lit
+    return column_density_from_table(atmosphere, sun_table, h, mu_sun), lit
+
+
 def _single_scattering_cells(atmosphere, settings, h0, mu_v, mu_s, sun_table, nu=None):
     """Ibar^(1) along the rays given by 1D arrays (h0, mu_v, mu_s[, nu]); returns (n, 6)."""
     rays = _ViewRays(atmosphere, settings, h0, mu_v, mu_s, nu)
-    lit = rays.mu_sun >= horizon_cos(rays.h, atmosphere.planet_radius)
-    if sun_table is None:
-        sun_length = np.where(lit, distance_to_top(rays.h, rays.mu_sun, atmosphere.planet_radius, atmosphere.top_radius), 0.0)
-        sun = column_density(atmosphere, rays.h, rays.mu_sun, sun_length, settings.sun_steps, settings.sampling)
-    else:
-        sun = column_density_from_table(atmosphere, sun_table, rays.h, rays.mu_sun)
+    sun, lit = _sun_columns(atmosphere, settings, rays.h, rays.mu_sun, sun_table)
     transmittance = np.exp(-_optical_depth_of(atmosphere, *(v + s for v, s in zip(rays.view, sun))))
     transmittance *= lit[..., None]                             # (n, N_VIEW + 1, 3)
     return rays.integrate(atmosphere, transmittance, 1.0, 1.0)
@@ -374,18 +380,40 @@ def _gathered_along(atmosphere, ray_settings, gathered, grid_settings, h0, mu_v,
     return rays.integrate(atmosphere, transmittance, g[..., 0:3], g[..., 3:6])
 
 
-def scatter(atmosphere: AtmosphereParameters, settings: TableSettings, gathered):
+def _ground_seen(atmosphere, rays):
+    """What rays see of the ground (``ground_view`` of ``kernels/view_ray.cl``): T(Pa, Pb) (n, 3), 0
+    where a ray does not end on the ground, and the sun cosine at the last node (n,)."""
+    transmittance = np.exp(-_optical_depth_of(atmosphere, *(view[:, -1] for view in rays.view)))
+    return transmittance * rays.hits_ground[:, None], np.clip(rays.mu_sun[:, -1], -1.0, 1.0)
+
+
+def scatter(atmosphere: AtmosphereParameters, settings: TableSettings, gathered, combine_species=False,
+            ground_radiance=None):
     """Next order from a gathered table; twin of ``MultipleScatteringEngine.scatter``.
 
     Ibar_s^(k)(lambda) = beta_s / (4 pi) Integral Gbar_s(P) rho_s(h(P)) T(P, Pa) ds, channels Rayleigh
-    r, g, b and Mie r, g, b in and out; shape (D, H, W, 6).
+    r, g, b and Mie r, g, b in and out; shape (D, H, W, 6). With ``combine_species`` both channel sets
+    hold Rayleigh + Mie; a reflecting ground (``atmosphere.has_ground``, ``ground_radiance`` L_g (D, 3)
+    per sun node, combine_species only) adds T(Pa, Pb) L_g(mu_sun(Pb)) to both along rays that end
+    on the ground (:mod:`clsky.ground`).
     """
+    from .ground import interpolate_sun_axis
+
     altitudes, cos_view, cos_sun = grid_coordinates(settings.size, atmosphere.atmosphere_height,
                                                     settings.mapping, settings.sun_cos_range)
+    ground = atmosphere.has_ground and combine_species
 
     def cells(x, y, z):
-        return _gathered_along(atmosphere, settings.scatter_settings, gathered, settings, altitudes[x], cos_view[y],
-                               cos_sun[z])
+        h0, mu_v, mu_s = altitudes[x], cos_view[y], cos_sun[z]
+        value = _gathered_along(atmosphere, settings.scatter_settings, gathered, settings, h0, mu_v, mu_s)
+        if combine_species:
+            value = np.concatenate([value[:, :3] + value[:, 3:]] * 2, axis=1)
+        if ground:
+            rays = _ViewRays(atmosphere, settings.scatter_settings, h0, mu_v, mu_s)
+            transmittance, mu_ground = _ground_seen(atmosphere, rays)
+            seen = transmittance * interpolate_sun_axis(np.asarray(ground_radiance), mu_ground, settings)
+            value = value + np.concatenate([seen, seen], axis=1)
+        return value
 
     return _cells_in_chunks(settings, (settings.view_steps + 1) * 8 * 6, cells)
 
@@ -418,13 +446,17 @@ def render_table(atmosphere, data, mapping, directions, sun_direction, altitude,
 
 
 def render_raymarch(atmosphere, ray_settings, directions, sun_direction, altitude, sun_radiance, cos_sun_radius,
-                    gathered=None, grid_settings=None, physical=True):
+                    gathered=None, grid_settings=None, physical=True, ground_irradiance=None):
     """Twin of ``SkyRenderer.render_raymarch``; (..., 3).
 
     Single scattering along each pixel's ray with the true nu (quadrature of ``ray_settings``), plus,
     with ``gathered`` (D, H, W, 6) on the grid of ``grid_settings``, the higher orders: the phase is
-    inside Gbar in the physical mode, applied per species here in the atmosphere-plus mode.
+    inside Gbar in the physical mode, applied per species here in the atmosphere-plus mode. With a
+    reflecting ground (``atmosphere.has_ground``; ``ground_irradiance`` E_sky (D, 3) on the sun axis of
+    ``grid_settings``), rays that end on the ground add T(Pa, Pb) a / pi (mu_sun T_sun + E_sky(mu_sun))
+    at the ground point (:mod:`clsky.ground`).
     """
+    from .ground import interpolate_sun_axis
     from .phase import mie_phase, rayleigh_phase
 
     shape = np.shape(directions)[:-1]
@@ -447,6 +479,13 @@ def render_raymarch(atmosphere, ray_settings, directions, sun_direction, altitud
             more = _gathered_along(atmosphere, ray_settings, gathered, grid_settings, h[part], mu_v_in[part],
                                    mu_s_in[part], nu[part])
             value += (more[:, :3] + more[:, 3:]) if physical else (f_r[part] * more[:, :3] + f_m[part] * more[:, 3:])
+        if atmosphere.has_ground:
+            rays = _ViewRays(atmosphere, ray_settings, h[part], mu_v_in[part], mu_s_in[part], nu[part])
+            transmittance, mu_ground = _ground_seen(atmosphere, rays)
+            columns, lit = _sun_columns(atmosphere, ray_settings, np.zeros_like(mu_ground), mu_ground, sun_table)
+            direct = (lit * np.maximum(mu_ground, 0.0))[:, None] * np.exp(-_optical_depth_of(atmosphere, *columns))
+            irradiance = direct + interpolate_sun_axis(np.asarray(ground_irradiance), mu_ground, grid_settings)
+            value += transmittance * (atmosphere.ground_albedo / math.pi) * irradiance
         sky[part] = value
     sky *= np.asarray(atmosphere.incident_light) * inside[:, None]
     return (sky + _sun_disc(atmosphere, mu_v, nu, altitude, sun_radiance, cos_sun_radius)).reshape(shape + (3,))

@@ -16,6 +16,7 @@ import pyopencl.array as cla
 
 from . import _atmosphere_cl, _cl, reference
 from .errors import as_real_array, is_real_number, short
+from .ground import padded4
 from .lookup import check_kernel_buffer, check_table_data
 from .resources import check_memory, device_of, estimate_directions_memory, estimate_render_memory
 from .settings import MAPPINGS, TableSettings
@@ -161,6 +162,10 @@ class SkyRenderer:
         if self._has_gathered:
             padded[..., :6] = table.gathered
         self._gathered_d = cla.to_device(self.queue, padded)
+        # the sky's irradiance on a reflecting ground per sun node (D, 4); not read for a black ground
+        self._ground_depth = table.settings.size[2] if table.atmosphere.has_ground else 2
+        ground = padded4(table.ground_irradiance, dtype) if table.atmosphere.has_ground else np.zeros((2, 4), dtype)
+        self._ground_d = cla.to_device(self.queue, ground)
         self._sun_table_size = (self.ray_settings.transmittance_size
                                 if self.ray_settings.sun_transmittance == "table" else (2, 2))
         if self.ray_settings.sun_transmittance == "table":
@@ -270,16 +275,19 @@ class SkyRenderer:
 
     def render_raymarch(self, directions, sun_direction, altitude=0.0, valid=None):
         """HDR radiance (..., 3) by per-pixel ray marching (single scattering along the true ray, higher
-        orders from the table's gathered in-scatter)."""
+        orders from the table's gathered in-scatter, and a reflecting ground lit by the sun at the ground
+        point's true sun cosine and by the table's ground_irradiance)."""
         t = self._check_table_unchanged()
         depth, height, width = self._table_shape[:3] if self._has_gathered else (2, 2, 2)
         tw, th = self._sun_table_size
         args = (self._gathered_d.data, np.int32(width), np.int32(height), np.int32(depth),
                 np.int32(MAPPINGS[t.settings.mapping]), self.engine.real2(t.settings.sun_w_range),
                 np.int32(self._has_gathered),
-                np.int32(t.settings.mode == "physical"), self._sun_table_d.data, np.int32(tw), np.int32(th))
+                np.int32(t.settings.mode == "physical"), self._sun_table_d.data, np.int32(tw), np.int32(th),
+                self._ground_d.data, np.int32(self._ground_depth))
         buffers = [("gathered", self._gathered_d, depth * height * width * 8),
-                   ("sun_table", self._sun_table_d, th * tw * column_channels(t.atmosphere))]
+                   ("sun_table", self._sun_table_d, th * tw * column_channels(t.atmosphere)),
+                   ("ground_irradiance", self._ground_d, 4 * self._ground_depth)]
         return self._launch("render_raymarch", directions, sun_direction, altitude, valid, args, buffers)
 
     def close(self):

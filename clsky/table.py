@@ -13,6 +13,10 @@ File format (``.npz``, uncompressed: compression saves little on these values an
 ``gathered``
     (D, H, W, 6), the sum of the gathered in-scatter tables for the ray march, finite, >= 0; absent
     for single scattering.
+``ground_irradiance``
+    (D, 3) float64, the sky's irradiance on a reflecting ground per sun node (clsky/ground.py), finite,
+    >= 0; present exactly when the atmosphere's ground_albedo is > 0 (files of a black ground, and so
+    every file written before the ground existed, have none: the format version stays 4).
 ``atmosphere``, ``settings``, ``metadata``, ``orders_record``
     JSON objects (0-d unicode strings): the parameters, the provenance, how the iteration stopped.
 ``parameters_hash``
@@ -168,6 +172,10 @@ class ScatteringTable:
     gathered : numpy.ndarray (D, H, W, 6) or None
         Sum of the gathered in-scatter tables of the orders (:class:`clsky.orders.OrdersResult`), for
         the per-pixel ray march; None when only single scattering was computed.
+    ground_irradiance : numpy.ndarray (D, 3) or None
+        With a reflecting ground (``atmosphere.ground_albedo`` > 0): the sky's irradiance on the ground
+        per sun node [units of I_I], sum of the orders k >= 1 (:mod:`clsky.ground`), for the ray march;
+        None (and required to be None) for a black ground.
     """
 
     atmosphere: AtmosphereParameters
@@ -177,6 +185,7 @@ class ScatteringTable:
     orders: tuple = ()
     orders_record: dict = dataclasses.field(default_factory=dict)
     gathered: np.ndarray | None = None
+    ground_irradiance: np.ndarray | None = None
 
     def __post_init__(self):
         try:
@@ -191,7 +200,8 @@ class ScatteringTable:
         ``data`` (D, H, W, C) with C = ``settings.channels``, float64 (as built) or ``settings.dtype``;
         ``orders[k - 1]`` (D, H, W, :func:`order_channels`), float32 (as stored) or float64, at most
         :func:`max_orders_kept` of them, as many as ``orders_record["orders"]`` says; ``gathered``
-        None or (D, H, W, 6), dtype as ``data``; with ``check_values``, every value finite and >= 0.
+        None or (D, H, W, 6), dtype as ``data``; ``ground_irradiance`` (D, 3) float64 with a reflecting
+        ground, None without; with ``check_values``, every value finite and >= 0.
 
         Parameters
         ----------
@@ -216,6 +226,13 @@ class ScatteringTable:
         check_table_array("data", self.data, grid + (self.settings.channels,), full_precision, check_values)
         if self.gathered is not None:
             check_table_array("gathered", self.gathered, grid + (6,), full_precision, check_values)
+        if self.atmosphere.has_ground:
+            if self.ground_irradiance is None:
+                raise TableFormatError(f"ground_irradiance is missing: the atmosphere's ground reflects "
+                                       f"(ground_albedo {self.atmosphere.ground_albedo:g})")
+            check_table_array("ground_irradiance", self.ground_irradiance, (depth, 3), ("float64",), check_values)
+        elif self.ground_irradiance is not None:
+            raise TableFormatError("ground_irradiance must be None: the atmosphere's ground is black (ground_albedo 0)")
         self._validate_orders(grid, check_values)
 
     def _validate_orders(self, grid, check_values):
@@ -281,7 +298,7 @@ class ScatteringTable:
                     "build_seconds": seconds, "fast_math": bool(fast_math), "units": radiance_units(atmosphere)}
         try:
             return cls(atmosphere, settings, to_layout(result.combined(settings.mode), settings.mie_layout),
-                       metadata, tuple(result.orders), result.record, result.gathered)
+                       metadata, tuple(result.orders), result.record, result.gathered, result.ground_irradiance)
         except TableFormatError as error:
             cause = " (or fast_math removed a guard)" if fast_math else ""
             raise TableFormatError(f"the computed table is unusable: {error}; the atmosphere or settings are "
@@ -366,6 +383,8 @@ class ScatteringTable:
                    "parameters_hash": np.array(self.parameters_hash), **orders}
         if self.gathered is not None:
             members["gathered"] = self.gathered
+        if self.ground_irradiance is not None:
+            members["ground_irradiance"] = self.ground_irradiance
         members["checksums"] = _json_text({name: array_checksum(value) for name, value in members.items()})
         return members
 
@@ -410,7 +429,7 @@ class ScatteringTable:
             raise TableFormatError("parameters hash does not match its parameters (corrupted or edited file)")
         orders = tuple(contents[f"order_{k}"] for k in range(1, order_count + 1))
         return cls(atmosphere, settings, contents["data"], _json_member(contents, "metadata"), orders,
-                   _json_member(contents, "orders_record"), contents.get("gathered"))
+                   _json_member(contents, "orders_record"), contents.get("gathered"), contents.get("ground_irradiance"))
 
     def export_raw(self, path, overwrite=False, staging=None):
         """Write ``<path>.bin`` (float32 values) and ``<path>.json`` (layout header) for GPU engines.
@@ -470,6 +489,8 @@ class ScatteringTable:
 #: Members every table file holds (besides order_1 ... order_K and the optional gathered).
 REQUIRED_MEMBERS = ("format_version", "data", "atmosphere", "settings", "metadata", "orders_record",
                     "parameters_hash", "checksums")
+#: Members a table file may hold besides those and the orders.
+OPTIONAL_MEMBERS = ("gathered", "ground_irradiance")
 #: What reading a damaged archive raises, in numpy and zipfile (a member's header, payload or CRC;
 #: numpy tokenizes an npy header, so a flipped bracket there raises TokenError).
 _READ_ERRORS = (OSError, EOFError, ValueError, KeyError, TypeError, UnicodeError, OverflowError, MemoryError,
@@ -536,13 +557,13 @@ def _format_version(contents) -> int:
 
 def _check_membership(contents) -> int:
     """Check that the archive holds the required members, order_1 ... order_K, optionally gathered
-    and nothing else; returns K."""
+    and ground_irradiance, and nothing else; returns K."""
     missing = [name for name in REQUIRED_MEMBERS if name not in contents]
     if missing:
         raise TableFormatError(f"not a clsky table file (missing {missing})")
     orders = sorted(int(match.group(1)) for match in map(re.compile(r"order_([1-9][0-9]{0,3})").fullmatch, contents)
                     if match)
-    unexpected = sorted(set(contents) - set(REQUIRED_MEMBERS) - {"gathered"} - {f"order_{k}" for k in orders})
+    unexpected = sorted(set(contents) - set(REQUIRED_MEMBERS) - set(OPTIONAL_MEMBERS) - {f"order_{k}" for k in orders})
     if unexpected:
         raise TableFormatError(f"unexpected members {unexpected}")
     if orders != list(range(1, len(orders) + 1)):

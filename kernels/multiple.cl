@@ -12,7 +12,10 @@
  *   Ibar_s^(k)(lambda) = beta_s(lambda) / (4 pi) Integral_{Pa}^{Pb} Gbar_s^(k-1)(P, V, L) rho_s(h(P)) T(P, Pa) ds
  * (T of every species, column.cl: with -DOZONE it includes ozone's absorption)
  * with Gbar looked up trilinearly (texture space) at the altitude, view and sun cosines of each node
- * P. Channels of Gbar and of the result: Rayleigh r, g, b, Mie r, g, b, padded to 8 (one real8 per
+ * P. With -DGROUND (physical mode only, combine_species) a ray that ends on the ground also sees the
+ * ground's reflected radiance, I += T(Pa, Pb) L_g(mu_sun(Pb)), with L_g = a / pi E per sun node from the
+ * host (clsky/ground.py: the ground irradiance not yet scattered) interpolated along the sun axis.
+ * Channels of Gbar and of the result: Rayleigh r, g, b, Mie r, g, b, padded to 8 (one real8 per
  * cell: a trilinear lookup is 8 vector loads).
  * Requires real.cl, atmosphere_t, geometry.cl, column.cl, transmittance_table.cl, mapping.cl,
  * view_ray.cl.
@@ -70,10 +73,12 @@ __kernel void gather(__global const real *matrices, const int species_stride, co
 /* Global size (ceil(W / VECTOR_WIDTH), H, D): VECTOR_WIDTH cells along the altitude axis per item.
  * gathered and table are padded (D, H, W, 8). combine_species != 0 (physical mode) writes
  * Rayleigh + Mie per wavelength into channels 0-2 and again 3-5 (the next gather's input).
+ * ground_radiance: D x 4 reals, L_g r, g, b (and 0) per sun node, read only with -DGROUND, where it is
+ * added to both channel sets of combine_species (the host refuses a ground without it).
  * Requires view_ray.cl (and so N_VIEW). */
 __kernel void scatter(__constant const atmosphere_t *atm, const int width, const int height,
                       const int depth, const int mapping, const real2 sun_range, const int combine_species,
-                      __global const real *gathered, __global real *table)
+                      __global const real *gathered, __global const real *ground_radiance, __global real *table)
 {
     const int gx = get_global_id(0);
     const int y = get_global_id(1);
@@ -85,8 +90,13 @@ __kernel void scatter(__constant const atmosphere_t *atm, const int width, const
     real mu_v, mu_s, nu;
     table_cell(atm, gx, y, z, width, height, depth, mapping, sun_range, &h0, &mu_v, &mu_s, &nu);
     real8 sum[VECTOR_WIDTH];
+#ifdef GROUND
+    realv ground[GROUND_VALUES];
+#else
+    realv *ground = 0;
+#endif
     integrate_gathered(atm, h0, (realv)(mu_v), (realv)(mu_s), (realv)(nu), gathered, width, height, depth,
-                       mapping, sun_range, sum, 0, 0, 0, 0);
+                       mapping, sun_range, sum, 0, 0, 0, 0, ground);
 
     const real4 beta = atm->beta_rayleigh;
     const real scale = R(1.0) / (R(4.0) * PI_REAL);
@@ -99,6 +109,13 @@ __kernel void scatter(__constant const atmosphere_t *atm, const int width, const
         real8 value = coefficient * sum[k];
         if (combine_species)
             value = (real8)(value.s012 + value.s345, value.s012 + value.s345, R(0.0), R(0.0));
+#ifdef GROUND
+        if (combine_species) {
+            const real4 seen = (real4)(LANE(ground[0], k), LANE(ground[1], k), LANE(ground[2], k), R(0.0))
+                               * sun_axis_lookup(ground_radiance, depth, mapping, sun_range, LANE(ground[3], k));
+            value += (real8)(seen.xyz, seen.xyz, R(0.0), R(0.0));
+        }
+#endif
         vstore8(value, (size_t)xk + (size_t)width * ((size_t)y + (size_t)height * (size_t)z), table);
     }
 }

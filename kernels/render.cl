@@ -12,7 +12,12 @@
  *                  atmosphere-plus mode the same with F_s(nu) on each species (the notes' scheme).
  * Transmittances are those of column.cl (with -DOZONE, including ozone's absorption).
  * Both add the sun disc: sun_radiance (I_I T_sun / Omega_sun, from the host) where nu >= cos of the
- * sun's angular radius and the ray does not hit the planet. The ground is black.
+ * sun's angular radius and the ray does not hit the planet. The ground is black, except with -DGROUND
+ * (a Lambertian ground of albedo a): render_raymarch adds, for rays that end on the ground,
+ *   I_I T(Pa, Pb) a / pi (mu_sun T_sun(Pb) + E_sky(mu_sun)),
+ * the direct irradiance at the ground point's true sun cosine (view_ray.cl: ground_direct) and the
+ * sky's from the table's 1D ground_irradiance (sum of the orders k >= 1, clsky/ground.py); the table
+ * lookup's ground is in the table's higher orders (the scatter adds it, canonical geometry).
  * Each work-item renders VECTOR_WIDTH pixels; global size ceil(n / VECTOR_WIDTH). Pixels whose
  * valid[i] is 0 (outside a fisheye's circle) are written as 0.
  * Requires real.cl, atmosphere_t, geometry.cl, column.cl, transmittance_table.cl, mapping.cl,
@@ -114,11 +119,14 @@ __kernel void render_table(__constant const atmosphere_t *atm, __global const re
 }
 
 /* has_multiple: add the higher orders from `gathered` (padded (D, H, W, 8) on the table's grid);
- * physical: 1 for the physical mode (phase inside G), 0 for atmosphere-plus (F_s(nu) applied here). */
+ * physical: 1 for the physical mode (phase inside G), 0 for atmosphere-plus (F_s(nu) applied here).
+ * ground_irradiance: ground_depth x 4 reals, the sky's irradiance E_sky r, g, b (and 0) on the ground
+ * per sun node of the table (mapping, sun_range), read only with -DGROUND. */
 __kernel void render_raymarch(__constant const atmosphere_t *atm, __global const real *gathered, const int width,
                               const int height, const int depth, const int mapping, const real2 sun_range,
                               const int has_multiple,
                               const int physical, __global const real *sun_table, const int tw, const int th,
+                              __global const real *ground_irradiance, const int ground_depth,
                               const int n, __global const real *directions, __global const uchar *valid,
                               const real4 sun, const real altitude,
                               const real4 sun_radiance, const real cos_sun_radius, __global real *out)
@@ -132,11 +140,16 @@ __kernel void render_raymarch(__constant const atmosphere_t *atm, __global const
 
     realv single[6];
     real8 multiple[VECTOR_WIDTH];
+#ifdef GROUND
+    realv ground[GROUND_VALUES];
+#else
+    realv *ground = 0;
+#endif
     if (has_multiple)   /* one pass along the ray for both */
         integrate_gathered(atm, h, mu_v, mu_s, nu, gathered, width, height, depth, mapping, sun_range, multiple,
-                           sun_table, tw, th, single);
+                           sun_table, tw, th, single, ground);
     else
-        integrate_single(atm, h, mu_v, mu_s, nu, sun_table, tw, th, single);
+        integrate_single(atm, h, mu_v, mu_s, nu, sun_table, tw, th, single, ground);
 
     const real scale = R(1.0) / (R(4.0) * PI_REAL);
     const real3 beta_r = atm->beta_rayleigh.xyz * scale;
@@ -153,6 +166,12 @@ __kernel void render_raymarch(__constant const atmosphere_t *atm, __global const
                 const real3 g_r = beta_r * multiple[k].s012, g_m = beta_m * multiple[k].s345;
                 sky += physical ? g_r + g_m : f_r * g_r + f_m * g_m;
             }
+#ifdef GROUND
+            const real3 irradiance = (real3)(LANE(ground[4], k), LANE(ground[5], k), LANE(ground[6], k))
+                + sun_axis_lookup(ground_irradiance, ground_depth, mapping, sun_range, LANE(ground[3], k)).xyz;
+            sky += (real3)(LANE(ground[0], k), LANE(ground[1], k), LANE(ground[2], k))
+                   * (atm->ground_albedo / PI_REAL) * irradiance;
+#endif
             value += light * sky;
         }
         store_radiance(out, first + k, valid[first + k] ? value : (real3)(R(0.0)));

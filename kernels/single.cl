@@ -39,7 +39,7 @@ __kernel void single_scattering(__constant const atmosphere_t *atm, const int wi
     real mu_v, mu_s, nu;
     table_cell(atm, gx, y, z, width, height, depth, mapping, sun_range, &h0, &mu_v, &mu_s, &nu);
     realv sum[6];
-    integrate_single(atm, h0, (realv)(mu_v), (realv)(mu_s), (realv)(nu), sun_table, tw, th, sum);
+    integrate_single(atm, h0, (realv)(mu_v), (realv)(mu_s), (realv)(nu), sun_table, tw, th, sum, 0);
 
     const real4 beta = atm->beta_rayleigh;
     const real scale_r = R(1.0) / (R(4.0) * PI_REAL);

@@ -12,6 +12,10 @@
  * -DKELLER_BOHN_SAMPLING; the last node of a ground-hitting ray lies at altitude exactly 0.
  * Transmittances T = exp(-tau) take every species' column from column.cl (column_t, optical_depth_of):
  * with -DOZONE they include ozone's absorption, tau += sigma_O3 n_max C_O.
+ * With -DGROUND (a Lambertian ground of albedo a, clsky/ground.py) both integrals can also report
+ * what a ray sees of the ground (ground_view, ground_direct): T(Pa, Pb) where the ray ends on the ground, the sun
+ * cosine there and, where the sun columns are computed, the direct irradiance mu_sun T_sun (units of
+ * I_I) on the horizontal ground at Pb; the callers add T a / pi E(mu_sun) (physics.md).
  * Works on realv. Requires real.cl, atmosphere_t, geometry.cl, column.cl, transmittance_table.cl,
  * mapping.cl.
  */
@@ -72,12 +76,56 @@ inline maskv sun_column(__constant const atmosphere_t *atm, const realv h, const
     return lit;
 }
 
+#ifdef GROUND
+/* ground[0..6] of a ray's last node (GROUND_VALUES per ray): T(Pa, Pb) r, g, b (0 where the ray does not
+ * hit the ground), the sun cosine at Pb, then the direct irradiance mu_sun T_sun r, g, b (0 in the
+ * planet's shadow; set by ground_direct, 0 otherwise). */
+#define GROUND_VALUES 7
+inline void ground_view(__constant const atmosphere_t *atm, const column_t view, const maskv hits_ground,
+                        const realv mu_sun, realv *ground)
+{
+    const real4 beta = atm->beta_rayleigh;
+    const real4 beta_me = atm->beta_mie_extinction;
+    const real4 beta_o = atm->ozone_extinction;
+    ground[0] = SELECT(V(0.0), exp(-optical_depth_of(view, beta.x, beta_me.x, beta_o.x)), hits_ground);
+    ground[1] = SELECT(V(0.0), exp(-optical_depth_of(view, beta.y, beta_me.y, beta_o.y)), hits_ground);
+    ground[2] = SELECT(V(0.0), exp(-optical_depth_of(view, beta.z, beta_me.z, beta_o.z)), hits_ground);
+    ground[3] = mu_sun;
+    ground[4] = ground[5] = ground[6] = V(0.0);
+}
+
+/* The direct irradiance at the ground node from its sun columns (lit: not in the planet's shadow). */
+inline void ground_direct(__constant const atmosphere_t *atm, const column_t sun, const maskv lit, realv *ground)
+{
+    const real4 beta = atm->beta_rayleigh;
+    const real4 beta_me = atm->beta_mie_extinction;
+    const real4 beta_o = atm->ozone_extinction;
+    const realv mu = fmax(ground[3], V(0.0));
+    ground[4] = SELECT(V(0.0), mu * exp(-optical_depth_of(sun, beta.x, beta_me.x, beta_o.x)), lit);
+    ground[5] = SELECT(V(0.0), mu * exp(-optical_depth_of(sun, beta.y, beta_me.y, beta_o.y)), lit);
+    ground[6] = SELECT(V(0.0), mu * exp(-optical_depth_of(sun, beta.z, beta_me.z, beta_o.z)), lit);
+}
+
+/* A per-sun-node table values[z][0..3] (D nodes over w in sun_range, mapping) interpolated linearly in
+ * the sun axis' texture coordinate at sun cosine mu_sun, as the 3D lookups do. */
+inline real4 sun_axis_lookup(__global const real *values, const int depth, const int mapping, const real2 sun_range,
+                             const real mu_sun)
+{
+    const real fz = MAPPING_SUN_T(mu_sun, mapping, sun_range) * (real)(depth - 1);
+    const int z0 = clamp((int)fz, 0, depth - 2);
+    const real az = fz - (real)z0;
+    return (R(1.0) - az) * vload4(z0, values) + az * vload4(z0 + 1, values);
+}
+#endif
+
 /* Single scattering along the ray: sum[0..2] = Integral rho_R T dt (r, g, b), sum[3..5] the same with
  * rho_M, T = T(Pc, P) T(P, Pa), zero where P is in the planet's shadow (decided from P's altitude and
- * sun cosine against the local horizon, never from rounding). Multiply by beta_s / (4 pi) for Ibar. */
+ * sun cosine against the local horizon, never from rounding). Multiply by beta_s / (4 pi) for Ibar.
+ * With -DGROUND and ground != 0, also ground[0..GROUND_VALUES - 1] of the last node (ground_view,
+ * ground_direct). */
 inline void integrate_single(__constant const atmosphere_t *atm, const realv h0, const realv mu_v,
                              const realv mu_s, const realv nu, __global const real *sun_table,
-                             const int tw, const int th, realv *sum)
+                             const int tw, const int th, realv *sum, realv *ground)
 {
     const real rp = atm->planet_radius;
     const realv r0 = rp + h0;
@@ -115,6 +163,12 @@ inline void integrate_single(__constant const atmosphere_t *atm, const realv h0,
         const realv t0 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.x, beta_me.x, beta_o.x)), lit);
         const realv t1 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.y, beta_me.y, beta_o.y)), lit);
         const realv t2 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.z, beta_me.z, beta_o.z)), lit);
+#ifdef GROUND
+        if (ground && i == N_VIEW) {
+            ground_view(atm, view, hits_ground, mu_sun_here, ground);
+            ground_direct(atm, sun, lit, ground);
+        }
+#endif
         realv f[6];
         f[0] = density.r * t0; f[1] = density.r * t1; f[2] = density.r * t2;
         f[3] = density.m * t0; f[4] = density.m * t1; f[5] = density.m * t2;
@@ -150,12 +204,13 @@ inline real8 lookup8(__global const real *table, const int width, const int heig
  * sum_i f_i (h_i + h_(i+1)) / 2, so that each lane's 6 channels are one real8 FMA per node.
  * With single != 0 (the per-pixel ray march), the same pass also accumulates single scattering into
  * single[0..5] as integrate_single does (sun columns from sun_table or re-marched), sharing the
- * geometry, densities and view transmittance of each node. */
+ * geometry, densities and view transmittance of each node. With -DGROUND and ground != 0, also
+ * ground[0..GROUND_VALUES - 1] of the last node (the direct irradiance only with single != 0). */
 inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h0, const realv mu_v,
                                const realv mu_s, const realv nu, __global const real *gathered,
                                const int width, const int height, const int depth, const int mapping,
                                const real2 sun_range, real8 *sum, __global const real *sun_table, const int tw, const int th,
-                               realv *single)
+                               realv *single, realv *ground)
 {
     const real rp = atm->planet_radius;
     const real ha = atm->top_radius - rp;
@@ -197,6 +252,10 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
         const realv t2 = exp(-optical_depth_of(view, beta.z, beta_me.z, beta_o.z));
         const realv wr = weight * density.r, wm = weight * density.m;
         const realv fr0 = wr * t0, fr1 = wr * t1, fr2 = wr * t2, fm0 = wm * t0, fm1 = wm * t1, fm2 = wm * t2;
+#ifdef GROUND
+        if (ground && i == N_VIEW)
+            ground_view(atm, view, hits_ground, mu_sun_here, ground);
+#endif
         if (single) {
             column_t sun;
             const maskv lit = sun_column(atm, h, mu_sun_here, sun_table, tw, th, &sun);
@@ -205,6 +264,10 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
             const realv s2 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.z, beta_me.z, beta_o.z)), lit);
             single[0] += fr0 * s0; single[1] += fr1 * s1; single[2] += fr2 * s2;
             single[3] += fm0 * s0; single[4] += fm1 * s1; single[5] += fm2 * s2;
+#ifdef GROUND
+            if (ground && i == N_VIEW)
+                ground_direct(atm, sun, lit, ground);
+#endif
         }
         const realv fx = MAPPING_U(h, mapping, ha) * (real)(width - 1);
         const realv fy = MAPPING_V(mu_view_here, mapping) * (real)(height - 1);
