@@ -149,7 +149,7 @@ class SpectralTable:
 
     @classmethod
     def build(cls, atmosphere: AtmosphereParameters | str = "physical", wavelengths=15, settings=None,
-              backend="opencl", ctx=None, fast_math=False, progress=None) -> "SpectralTable":
+              backend="opencl", ctx=None, fast_math=False, progress=None, keep_orders=True) -> "SpectralTable":
         """Build every batch's table with :meth:`ScatteringTable.build` (same ``settings``, ``backend``,
         ``ctx``, ``fast_math``; ``progress(stage, done, total)`` gets stage ``'batch'`` before each batch).
 
@@ -159,6 +159,9 @@ class SpectralTable:
             The base atmosphere (its coefficients at three wavelengths are replaced, module docstring).
         wavelengths : int or sequence of float
             N (:func:`spectral_wavelengths`) or the wavelengths [nm] (:func:`check_wavelengths`).
+        keep_orders : bool
+            Keep each batch's orders (K tables); False drops them as soon as the batch is built, so
+            that a build holds one batch's orders at a time (renderers read data and gathered only).
 
         Examples
         --------
@@ -183,7 +186,7 @@ class SpectralTable:
                                               progress=progress)
                 table.metadata["spectral_batch"] = {"index": index, "of": len(atmospheres),
                                                     "wavelengths_nm": list(batch.wavelengths)}
-                tables.append(table)
+                tables.append(table if keep_orders else dataclasses.replace(table, orders=()))
         record = {"units": ABSOLUTE_UNITS, "wavelengths_nm": values.tolist(), "batches": len(tables),
                   "build_seconds": time.perf_counter() - start, "build_cpu_seconds": time.process_time() - cpu}
         return cls(values, tuple(tables), record)

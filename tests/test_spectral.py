@@ -310,6 +310,13 @@ def test_spectral_batches_match_the_twin(small_spectral):
         assert_twin(kernel_table.gathered, twin_table.gathered, "single_scattering", "spectral gathered")
 
 
+def test_dropping_orders_keeps_data_and_gathered(small_spectral, cl_context):
+    lean = spectrum.SpectralTable.build(PHYSICAL, 4, small_spectral.settings, ctx=cl_context, keep_orders=False)
+    assert all(len(t.orders) == 3 for t in small_spectral.tables) and all(t.orders == () for t in lean.tables)
+    for kept, dropped in zip(small_spectral.tables, lean.tables):
+        assert np.array_equal(kept.data, dropped.data) and np.array_equal(kept.gathered, dropped.gathered)
+
+
 def test_spectral_units_are_recorded(small_spectral):
     assert small_spectral.units == "W m^-2 sr^-1 nm^-1"
     for index, table in enumerate(small_spectral.tables):
