@@ -469,3 +469,31 @@ def test_cli_refuses_bad_wavelengths_in_one_line(tmp_path):
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "--wavelengths" in lines[0] and "[3, 47]" in lines[0], result.stderr
     assert not list(tmp_path.iterdir())
+
+
+# With the ground (issue 10, item 2): its transmittances take the per-channel Mie -------------------
+
+#: A bright ground under the steep haze: the ground's view and sun transmittances differ per channel.
+STEEP_GROUND = STEEP.replace(ground_albedo=0.3)
+
+
+def test_ground_with_angstrom_matches_the_twins(cl_context):
+    """Orders, ground irradiance and the ray march (rays that end on the ground) against the NumPy twins
+    with alpha = 2: a channel mixed up in the ground's kernels (beta_me.x for .y) would show here, not
+    with alpha = 0 (where the channels are equal)."""
+    settings = TableSettings(size=(8, 33, 7), mode="physical", orders=4)
+    cl_table = ScatteringTable.build(STEEP_GROUND, settings, ctx=cl_context)
+    np_table = ScatteringTable.build(STEEP_GROUND, settings, backend="numpy")
+    assert_twin(cl_table.ground_irradiance, np_table.ground_irradiance, "single_scattering", "ground irradiance")
+    assert_twin(cl_table.data, np_table.data, "single_scattering", "data")
+    directions = np.array([[0.6, 0.0, -0.8], [0.0, 0.995, -0.0998749], [0.0, 0.0, 1.0]])
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    ray = TableSettings(view_steps=16, sun_steps=32, sun_transmittance="table", transmittance_size=(16, 33))
+    sun = np.array([math.sin(math.radians(60.0)), 0.0, math.cos(math.radians(60.0))])
+    with SkyRenderer(cl_table, ray, ctx=cl_context) as renderer:
+        image = renderer.render_raymarch(directions, sun, 1000.0)
+    expected = reference.render_raymarch(STEEP_GROUND, ray, directions, sun, 1000.0,
+                                         sun_disc_radiance(STEEP_GROUND, sun, 1000.0), math.cos(math.radians(0.2665)),
+                                         cl_table.gathered, cl_table.settings, True, cl_table.ground_irradiance)
+    assert_twin(image, expected, "render_raymarch", "ray march with ground")
+    assert not np.allclose(cl_table.ground_irradiance[:, 0], cl_table.ground_irradiance[:, 2])
