@@ -29,6 +29,8 @@ from clsky._files import StagedWrites, check_output
 from clsky.errors import ParameterError, is_integer, is_real_number
 from clsky.planner import Plan, Scene, plan_scene, sun_axis
 from clsky.quality import QUALITY_LEVELS, QualityLevel, level_for_budget, quality_level
+from clsky import colorimetry, spectrum
+from clsky.solar import solar_irradiance_astm_g173
 from clsky.render import SkyRenderer
 from clsky.settings import SAMPLINGS
 from clsky.resources import MemoryEstimate, check_memory, device_of, estimate_animation_memory
@@ -37,7 +39,8 @@ from . import display as display_pipeline
 from . import metrics, sunpath, writers
 from .cameras import camera_from_name
 
-__all__ = ["AnimationConfig", "AnimationResult", "METHODS", "quality", "plan_animation", "build_table",
+__all__ = ["AnimationConfig", "AnimationResult", "METHODS", "quality", "plan_animation", "build_table", "make_renderer",
+           "spectral_frame_to_linear_srgb",
            "ray_settings", "sun_positions", "check_outputs", "render_animation", "render_frame",
            "memory_estimate", "display", "display_frames"]
 
@@ -113,6 +116,12 @@ class AnimationConfig:
         Dither the 8-bit frames against banding.
     output : str or path
         MP4 file; PNG frames go to ``<stem>_frames/``, metrics to ``<stem>_metrics.csv`` / ``.json``.
+    wavelengths : int or None
+        None (default): the table's three wavelengths, shown as r, g, b. An integer N in [3, 47]: N
+        wavelengths in absolute units (:mod:`clsky.spectrum`: batches of three, lit by the solar
+        spectrum), each frame converted spectral -> CIE XYZ -> linear sRGB [cd/m^2]
+        (:func:`spectral_frame_to_linear_srgb`) before display; such frames are thousands of times brighter
+        than the notes' relative ones by day: use ``auto_exposure`` (or an EV near -12).
     hdr : bool
         Also write each frame's HDR values as float32 .npy beside the PNGs: the ray march's frame
         (with ``method='compare'``, the reference the lookup is compared with) or the lookup's.
@@ -161,6 +170,7 @@ class AnimationConfig:
     output: str = "sky.mp4"
     hdr: bool = False
     force: bool = False
+    wavelengths: int | None = None
 
     def __post_init__(self):
         for name, check in _FIELD_CHECKS.items():
@@ -307,6 +317,7 @@ _FIELD_CHECKS = {
     "step_minutes": _real(0.0, 1440.0, " minutes", low_open=True), "fps": _real(0.0, 240.0, low_open=True),
     "exposure": _real(-40.0, 40.0, " EV"), "tone_map": _choice(tuple(display_pipeline.TONE_CURVES), optional=True),
     "auto_exposure": _flag, "white_balance": _choice(display_pipeline.WHITE_BALANCES), "dither": _flag, "output": _output, "hdr": _flag, "force": _flag,
+    "wavelengths": _integer(spectrum.MIN_WAVELENGTHS, spectrum.MAX_WAVELENGTHS, optional=True),
 }
 
 
@@ -386,6 +397,40 @@ def _with_sampling(settings: clsky.TableSettings, config: AnimationConfig) -> cl
     return settings if config.sampling is None else settings.replace(sampling=config.sampling)
 
 
+def make_renderer(config: AnimationConfig, plan: Plan | None = None, ctx=None, progress=None):
+    """(renderer, table) of the animation: a :class:`~clsky.render.SkyRenderer` of :func:`build_table`'s
+    table, or with ``config.wavelengths`` a :class:`clsky.spectrum.SpectralRenderer` of N wavelengths
+    over the same base atmosphere and settings (the plan's, or the config's); the frames keep only the
+    data and gathered sum of each table (the higher orders are dropped)."""
+    if config.wavelengths is None:
+        table = dataclasses.replace(build_table(config, plan, ctx=ctx, progress=progress), orders=())
+        return SkyRenderer(table, ray_settings(config), ctx=ctx), table
+    if plan is not None:
+        base, settings = plan.atmosphere, plan.table
+    else:
+        size = tuple(config.table_size) if config.table_size is not None else quality(config).table.size
+        base, settings = config.preset, quality(config).table.replace(size=size, mode=config.mode)
+    table = spectrum.SpectralTable.build(base, config.wavelengths, settings, ctx=ctx, progress=progress,
+                                         keep_orders=False)
+    return spectrum.SpectralRenderer(table, ray_settings(config), ctx=ctx), table
+
+
+def spectral_frame_to_linear_srgb(frame, wavelengths):
+    """The frame conversion of spectral animations: spectral radiance (..., N) [W m^-2 sr^-1 nm^-1] ->
+    CIE 1931 XYZ -> linear sRGB (..., 3) [cd/m^2] (:mod:`clsky.colorimetry`); negative components of
+    colours outside the sRGB gamut are clipped to 0 (the display takes non-negative values)."""
+    rgb = colorimetry.xyz_to_linear_srgb(colorimetry.spectral_to_xyz(frame, wavelengths))
+    return np.maximum(rgb, 0.0)
+
+
+def frame_units(config: AnimationConfig, table) -> str:
+    """The units of the HDR frames: the table's radiance units (r, g, b at its three wavelengths), or
+    with ``config.wavelengths`` linear sRGB in cd/m^2."""
+    if config.wavelengths is not None:
+        return "linear sRGB [cd/m^2] (spectral radiance -> CIE 1931 XYZ -> sRGB)"
+    return table.metadata.get("units", "relative (incident light I_I per sr)") + " at the table's three wavelengths"
+
+
 def ray_settings(config: AnimationConfig) -> clsky.TableSettings:
     """The ray march's quadrature: the quality level's, with ``config.samples`` and ``config.sampling``
     if given."""
@@ -417,21 +462,31 @@ def _camera(config):
 
 
 def render_frame(renderer: SkyRenderer, prepared, sun_direction, config: AnimationConfig):
-    """HDR frames {'lut': ..., 'raymarch': ...} of one sun position, as ``config.method`` asks."""
+    """HDR frames {'lut': ..., 'raymarch': ...} of one sun position, as ``config.method`` asks (with
+    ``config.wavelengths``, converted to linear sRGB: :func:`spectral_frame_to_linear_srgb`)."""
     frames = {}
     if config.method in ("compare", "lut"):
         frames["lut"] = renderer.render_table(prepared, sun_direction, config.altitude)
     if config.method in ("compare", "raymarch"):
         frames["raymarch"] = renderer.render_raymarch(prepared, sun_direction, config.altitude)
+    if config.wavelengths is not None:
+        frames = {name: spectral_frame_to_linear_srgb(frame, renderer.wavelengths) for name, frame in frames.items()}
     return frames
 
 
-def display(config: AnimationConfig, atmosphere) -> display_pipeline.Display:
-    """The display pipeline of the animation's frames (:class:`anim.display.Display`)."""
+def display(config: AnimationConfig, table) -> display_pipeline.Display:
+    """The display pipeline of the animation's frames (:class:`anim.display.Display`) for ``table`` (a
+    ScatteringTable, or with ``config.wavelengths`` a :class:`clsky.spectrum.SpectralTable`)."""
     auto = display_pipeline.AutoExposure() if config.auto_exposure else None
-    # The renderer's r, g, b are taken as linear Rec. 709, and the sun's colour as its incident light I_I.
+    if config.wavelengths is not None:
+        # frames are linear sRGB already (render_frame); the sun's colour is its spectrum's sRGB
+        wavelengths = table.wavelengths
+        sun_white = spectral_frame_to_linear_srgb(solar_irradiance_astm_g173(wavelengths), wavelengths)
+    else:
+        # The renderer's r, g, b are taken as linear Rec. 709, and the sun's colour as its incident light I_I.
+        sun_white = table.atmosphere.incident_light
     return display_pipeline.Display(config.tone_map, config.exposure, auto, config.white_balance,
-                                    sun_white=atmosphere.incident_light, source="rec709")
+                                    sun_white=sun_white, source="rec709")
 
 
 def display_frames(pipeline: display_pipeline.Display, hdr, valid, config: AnimationConfig, seed=0):
@@ -499,10 +554,8 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
     plan = plan_animation(config, positions, directions, valid, ctx=ctx)
     if plan is not None and report is not None:
         report(plan.describe())
-    table = build_table(config, plan, ctx=ctx, progress=progress)
-    # the frames need the data and the gathered sum only: let the higher orders (K - 1 tables) go
-    table = dataclasses.replace(table, orders=())
-    renderer = SkyRenderer(table, ray_settings(config), ctx=ctx)
+    # the frames need the data and the gathered sum only: the higher orders (K - 1 tables) go
+    renderer, table = make_renderer(config, plan, ctx=ctx, progress=progress)
     prepared = renderer.prepare(directions, valid)
     had_frames_directory = config.frames_directory.is_dir()
     try:
@@ -531,7 +584,7 @@ def _write_animation(config, positions, renderer, prepared, valid, table, plan, 
     """Render every frame and stage the frames, the MP4 and the metrics in ``staging``; returns the
     metric rows, the temporal jumps, the target paths and the stale frames to be deleted."""
     rows, means = [], {"lut": [], "raymarch": []}
-    pipeline = display(config, table.atmosphere)
+    pipeline = display(config, table)
     with _frame_writer(config, len(positions), staging) as writer:
         for index, sun in enumerate(positions):
             hdr = render_frame(renderer, prepared, sun.direction, config)
@@ -569,7 +622,7 @@ def _write_animation(config, positions, renderer, prepared, valid, table, plan, 
         "config": {k: (str(v) if isinstance(v, (datetime.date, pathlib.Path)) else v)
                    for k, v in dataclasses.asdict(config).items()},
         "table": {"settings": table.settings.to_dict(), "orders": table.orders_record,
-                  "metadata": table.metadata},
+                  "metadata": table.metadata, "frame_units": frame_units(config, table)},
         "display": pipeline.describe(),
         "plan": None if plan is None else {"quality": plan.level.name, "work_fraction": plan.work_fraction,
                                            "decisions": [list(d) for d in plan.decisions]},

@@ -26,6 +26,7 @@ FIELD_OPTIONS = {
     "max_elevation_deg": "--max-elevation", "location": "--location", "date": "--date",
     "start_hour": "--hours START", "end_hour": "--hours END", "step_minutes": "--step-minutes", "fps": "--fps",
     "exposure": "--exposure", "tone_map": "--tone-map", "white_balance": "--white-balance", "output": "--output",
+    "wavelengths": "--wavelengths",
 }
 
 #: Options whose default is None so that, not given, the AnimationConfig's own default (or the
@@ -76,6 +77,9 @@ def _add_scene_arguments(parser, frames=True):
                      help="node placement along rays, table and ray march (default: the quality level's, "
                           "keller_bohn; ground_end for views from altitude)")
     _add_display_arguments(parser)
+    sky.add_argument("--wavelengths", type=int, metavar="N",
+                     help="N wavelengths in [3, 47] in absolute units, frames converted spectral -> XYZ -> "
+                          "linear sRGB [cd/m^2] (default: the table's three, shown as r, g, b)")
     if frames:
         sun = parser.add_argument_group("sun path")
         sun.add_argument("--frames", type=int, default=120, help="frames of the sweep (default: 120)")
@@ -157,7 +161,7 @@ def _config(args, **extra):
                   pitch_deg=args.pitch, altitude=args.altitude, method=args.method,
                   table_size=None if args.table_size is None else tuple(args.table_size),
                   samples=args.samples, sampling=args.sampling, quality=args.quality, exposure=args.exposure, tone_map=args.tone_map,
-                  auto_exposure=args.auto_exposure, white_balance=args.white_balance,
+                  auto_exposure=args.auto_exposure, white_balance=args.white_balance, wavelengths=args.wavelengths,
                   dither=not args.no_dither, force=args.force, **extra)
     fields.update({name: getattr(args, name) for name in UNSET_DEFAULTS if getattr(args, name) is not None})
     try:
@@ -210,13 +214,10 @@ def run_animate(args):
 
 
 def run_render(args):
-    import dataclasses
     import pathlib
 
-    from clsky.render import SkyRenderer
-
     from . import metrics, writers
-    from .animate import _camera, build_table, display, display_frames, plan_animation, ray_settings, render_frame
+    from .animate import _camera, display, display_frames, make_renderer, plan_animation, render_frame
     from .cameras import sun_direction
     from .sunpath import SunPosition
 
@@ -236,11 +237,10 @@ def run_render(args):
     plan = plan_animation(config, [position], directions, valid)
     if plan is not None:
         print(plan.describe())
-    table = dataclasses.replace(build_table(config, plan), orders=())   # the frame reads data and gathered only
-    renderer = SkyRenderer(table, ray_settings(config))
+    renderer, table = make_renderer(config, plan)          # the frame reads data and gathered only
     sun = sun_direction(90.0 - args.sun_elevation, args.sun_azimuth)
     hdr = render_frame(renderer, renderer.prepare(directions, valid), sun, config)
-    ev, images, shown = display_frames(display(config, table.atmosphere), hdr, valid, config)
+    ev, images, shown = display_frames(display(config, table), hdr, valid, config)
     if config.method == "compare":
         error = metrics.error_image(metrics.relative_error_map(hdr["raymarch"], hdr["lut"], valid), valid)
         image = metrics.composite([images["lut"], images["raymarch"], error],

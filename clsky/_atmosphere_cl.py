@@ -23,8 +23,8 @@ def _fields(dtype):
     return (
         ("beta_rayleigh", real4),          # beta_R for r, g, b (.w = 0) [1/m]
         ("incident_light", real4),         # I_I for r, g, b (.w = 0)
-        ("beta_mie", real),                # beta_M, scattering [1/m]
-        ("beta_mie_extinction", real),     # beta_M^e [1/m]
+        ("beta_mie", real4),               # beta_M, scattering, for r, g, b (.w = 0) [1/m]
+        ("beta_mie_extinction", real4),    # beta_M^e for r, g, b (.w = 0) [1/m]
         ("planet_radius", real),           # Rp [m]
         ("top_radius", real),              # Ra [m]
         ("rayleigh_scale_height", real),   # H_R [m]
@@ -59,8 +59,8 @@ def to_device(queue, atmosphere: AtmosphereParameters, dtype):
     record = np.zeros(1, dtype=struct)
     record["beta_rayleigh"] = tuple(atmosphere.rayleigh_scattering) + (0.0,)
     record["incident_light"] = tuple(atmosphere.incident_light) + (0.0,)
-    record["beta_mie"] = atmosphere.mie_scattering
-    record["beta_mie_extinction"] = atmosphere.mie_extinction
+    record["beta_mie"] = tuple(atmosphere.mie_scattering_channels) + (0.0,)
+    record["beta_mie_extinction"] = tuple(atmosphere.mie_extinction_channels) + (0.0,)
     record["planet_radius"] = atmosphere.planet_radius
     record["top_radius"] = atmosphere.top_radius
     record["rayleigh_scale_height"] = atmosphere.rayleigh_scale_height

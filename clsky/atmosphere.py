@@ -105,6 +105,12 @@ DEFAULT_OZONE_CROSS_SECTION = tuple(float(v) for v in cross_section_serdyuchenko
 #: The ozone fields and their defaults (Bruneton 2017's tent, no column): see :meth:`AtmosphereParameters.to_dict`.
 OZONE_DEFAULTS = {"ozone_column_du": 0.0, "ozone_peak_altitude": 25_000.0, "ozone_half_width": 15_000.0,
                   "ozone_cross_section": DEFAULT_OZONE_CROSS_SECTION}
+#: The Angstrom fields and their defaults (a wavelength-independent Mie coefficient): see
+#: :meth:`AtmosphereParameters.to_dict`.
+ANGSTROM_DEFAULTS = {"mie_angstrom_exponent": 0.0, "mie_reference_wavelength": 550.0}
+#: Largest Angstrom exponent accepted (continental aerosols reach about 2.5; beyond 4 haze would scatter
+#: more steeply than air).
+MAX_ANGSTROM_EXPONENT = 4.0
 #: The ground field and its default (black): left out of :meth:`AtmosphereParameters.to_dict` when 0.
 GROUND_DEFAULTS = {"ground_albedo": 0.0}
 #: A ground albedo for the Earth: Bruneton 2017's demo value (kGroundAlbedo = 0.1), close to the visible
@@ -140,10 +146,16 @@ class AtmosphereParameters:
     rayleigh_scattering : tuple of 3 floats
         beta_R at the three wavelengths [1/m], >= 0 (Rayleigh extinction equals scattering).
     mie_scattering : float
-        beta_M [1/m], >= 0, wavelength independent. With beta_R, at most a vertical optical depth of
-        1000 per wavelength.
+        beta_M [1/m], >= 0, at ``mie_reference_wavelength`` (at every wavelength with the default
+        Angstrom exponent 0). With beta_R, at most a vertical optical depth of 1000 per wavelength.
     mie_extinction_ratio : float
         beta_M / beta_M^e in (0, 1]: the notes' 0.9 gives beta_M^e = beta_M / 0.9.
+    mie_angstrom_exponent : float
+        Angstrom exponent alpha in [0, 4]: per channel, beta_M(lambda) = beta_M (lambda / lambda_0)^-alpha
+        (:attr:`mie_scattering_channels`; the extinction scales alike). 0, the default, is
+        wavelength-independent haze, bit for bit the coefficient of clsky before the exponent.
+    mie_reference_wavelength : float
+        lambda_0 [nm], > 0, the wavelength at which ``mie_scattering`` holds (default 550 nm).
     mie_g : float
         Cornette-Shanks asymmetry in the notes' sign convention, |g| < 1; negative g peaks toward the sun.
     rayleigh_phase : str
@@ -209,6 +221,8 @@ class AtmosphereParameters:
     ozone_half_width: float = 15_000.0
     ozone_cross_section: tuple = DEFAULT_OZONE_CROSS_SECTION
     ground_albedo: float = 0.0
+    mie_angstrom_exponent: float = 0.0
+    mie_reference_wavelength: float = 550.0
 
     def __post_init__(self):
         for name in ("rayleigh_scattering", "wavelengths", "solar_irradiance", "spectral_to_rgb",
@@ -216,7 +230,8 @@ class AtmosphereParameters:
             object.__setattr__(self, name, _as_rgb(name, getattr(self, name)))
         for name in ("planet_radius", "top_radius", "rayleigh_scale_height", "mie_scale_height",
                      "mie_scattering", "mie_extinction_ratio", "mie_g", "exposure", "ozone_column_du",
-                     "ozone_peak_altitude", "ozone_half_width", "ground_albedo"):
+                     "ozone_peak_altitude", "ozone_half_width", "ground_albedo", "mie_angstrom_exponent",
+                     "mie_reference_wavelength"):
             value = getattr(self, name)
             if not _is_real_number(value):
                 raise ParameterError(name, "a real number", value)
@@ -251,6 +266,9 @@ class AtmosphereParameters:
         check("ozone_peak_altitude", lambda v: v >= self.ozone_half_width,
               f"finite and >= ozone_half_width ({self.ozone_half_width:g} m): the tent must lie above the ground")
         check("ozone_cross_section", lambda v: np.all(v >= 0), "finite and >= 0 m^2")
+        check("mie_angstrom_exponent", lambda v: (v >= 0) & (v <= MAX_ANGSTROM_EXPONENT),
+              f"in [0, {MAX_ANGSTROM_EXPONENT:g}]")
+        check("mie_reference_wavelength", lambda v: v > 0, "finite and > 0 nm")
         check("ground_albedo", lambda v: (v >= 0) & (v <= 1), "in [0, 1]")
         self._check_optical_depth()
         if not isinstance(self.rayleigh_phase, str) or self.rayleigh_phase not in RAYLEIGH_PHASE_METHODS:
@@ -262,11 +280,11 @@ class AtmosphereParameters:
         """ParameterError naming the coefficient that makes a vertical optical depth exceed
         :data:`MAX_VERTICAL_OPTICAL_DEPTH` (beyond it, quadratures of 30 steps amplify and overflow)."""
         rayleigh = np.array(self.rayleigh_scattering) * _column(self.rayleigh_scale_height, self.atmosphere_height)
-        mie = self.mie_extinction * _column(self.mie_scale_height, self.atmosphere_height)
+        mie = self.mie_extinction_channels * _column(self.mie_scale_height, self.atmosphere_height)
         ozone = np.array(self.ozone_cross_section) * self.ozone_column_du * DOBSON_UNIT   # the whole tent's column
         depth = float(np.max(rayleigh + mie + ozone))
         if depth > MAX_VERTICAL_OPTICAL_DEPTH:
-            largest = max((np.max(ozone), "ozone_column_du"), (mie, "mie_scattering"),
+            largest = max((np.max(ozone), "ozone_column_du"), (np.max(mie), "mie_scattering"),
                           (np.max(rayleigh), "rayleigh_scattering"))
             name = largest[1]
             raise ParameterError(name, f"small enough for a vertical optical depth <= {MAX_VERTICAL_OPTICAL_DEPTH:g} "
@@ -299,6 +317,18 @@ class AtmosphereParameters:
     def mie_extinction(self) -> float:
         """beta_M^e = beta_M / ratio [1/m]."""
         return self.mie_scattering / self.mie_extinction_ratio
+
+    @property
+    def mie_scattering_channels(self) -> np.ndarray:
+        """beta_M per channel [1/m]: beta_M (lambda / lambda_0)^-alpha at the three wavelengths (Angstrom
+        1929). With alpha = 0 every channel is exactly ``mie_scattering`` (x ** -0.0 is 1.0)."""
+        ratio = np.asarray(self.wavelengths) / self.mie_reference_wavelength
+        return self.mie_scattering * ratio ** -self.mie_angstrom_exponent
+
+    @property
+    def mie_extinction_channels(self) -> np.ndarray:
+        """beta_M^e per channel [1/m]: :attr:`mie_scattering_channels` / ratio."""
+        return self.mie_scattering_channels / self.mie_extinction_ratio
 
     @property
     def has_ozone(self) -> bool:
@@ -365,10 +395,11 @@ class AtmosphereParameters:
         An atmosphere without ozone whose ozone fields all keep their defaults (:data:`OZONE_DEFAULTS`)
         leaves them out, so that its dictionary and :meth:`digest` (and the hash of its saved tables)
         are those of clsky before ozone; :meth:`from_dict` restores the defaults. A black ground
-        (:data:`GROUND_DEFAULTS`) is left out the same way.
+        (:data:`GROUND_DEFAULTS`) and the Angstrom fields (:data:`ANGSTROM_DEFAULTS`) are left out the
+        same way.
         """
         data = {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(self).items()}
-        for defaults in (OZONE_DEFAULTS, GROUND_DEFAULTS):
+        for defaults in (OZONE_DEFAULTS, GROUND_DEFAULTS, ANGSTROM_DEFAULTS):
             if all(getattr(self, name) == value for name, value in defaults.items()):
                 for name in defaults:
                     del data[name]

@@ -2,7 +2,8 @@
 
 The atmosphere is a spherical shell (planet radius Rp, top radius Ra) of two exponential species,
 rho_s(h) = exp(-h / H_s): Rayleigh (extinction = scattering, beta_R per channel) and Mie (scattering
-beta_M, extinction beta_M / ratio, Cornette-Shanks phase), and, when ``atmosphere.ozone_column_du`` > 0,
+beta_M per channel by Angstrom's law beta_M (lambda / lambda_0)^-alpha, extinction beta_M / ratio,
+Cornette-Shanks phase), and, when ``atmosphere.ozone_column_du`` > 0,
 ozone, which only absorbs: extinction sigma_O3 n_O3(h) per channel with the tent
 n_O3 = n_max max(0, 1 - |h - h_peak| / w), n_max = column [DU] * 2.687e20 / w. The ground is a Lambertian reflector of albedo
 ``atmosphere.ground_albedo`` (0, black, when the field is absent or 0), there is no refraction,
@@ -535,7 +536,7 @@ def transmittance_to_top(atmosphere, r, mu, nodes=QUADRATURE_NODES):
         r, mu, atmosphere.planet_radius, atmosphere.top_radius,
         (atmosphere.rayleigh_scale_height, atmosphere.mie_scale_height), nodes)
     beta_r = np.asarray(atmosphere.rayleigh_scattering, dtype=np.float64)
-    tau = columns[0][:, None] * beta_r[None, :] + columns[1][:, None] * _mie_extinction(atmosphere)
+    tau = columns[0][:, None] * beta_r[None, :] + columns[1][:, None] * _mie_extinction(atmosphere)[None, :]
     beta_o, peak, half_width = _ozone(atmosphere)
     if np.any(beta_o > 0.0):
         ozone, _ = ozone_column_to_top(r, mu, atmosphere.planet_radius, atmosphere.top_radius, peak, half_width,
@@ -544,8 +545,21 @@ def transmittance_to_top(atmosphere, r, mu, nodes=QUADRATURE_NODES):
     return np.where(blocked[:, None], 0.0, np.exp(-tau))
 
 
-def _mie_extinction(atmosphere) -> float:
-    return float(atmosphere.mie_scattering) / float(atmosphere.mie_extinction_ratio)
+def _mie_scattering(atmosphere) -> np.ndarray:
+    """beta_M per channel [1/m]: Angstrom's law beta_M (lambda / lambda_0)^-alpha, written here again
+    from the field definitions (``mie_angstrom_exponent`` alpha, default 0: every channel beta_M)."""
+    beta = float(atmosphere.mie_scattering)
+    alpha = float(getattr(atmosphere, "mie_angstrom_exponent", 0.0))
+    if alpha == 0.0:
+        return np.full(3, beta)
+    reference = float(getattr(atmosphere, "mie_reference_wavelength", 550.0))
+    wavelengths = np.asarray(atmosphere.wavelengths, dtype=np.float64)
+    return beta * np.power(wavelengths / reference, -alpha)
+
+
+def _mie_extinction(atmosphere) -> np.ndarray:
+    """beta_M^e per channel [1/m]: beta_M / ratio."""
+    return _mie_scattering(atmosphere) / float(atmosphere.mie_extinction_ratio)
 
 
 # Path tracer ---------------------------------------------------------------------------------------
@@ -588,12 +602,13 @@ class MonteCarloResult:
 def _sun_transmittance(r, mu, channel, rp, ra, beta_r, beta_me, scale_heights, beta_o, ozone_peak, ozone_half_width,
                        chunk):
     """Transmittance toward the sun from points at radii r [m] along cosines mu, each in its channel
-    (0 where the planet blocks the sun); beta_o None without ozone. Computed ``chunk`` points at a time."""
+    (0 where the planet blocks the sun); beta_r, beta_me (and beta_o, None without ozone) per channel.
+    Computed ``chunk`` points at a time."""
     t_sun = np.empty(r.size)
     for start in range(0, r.size, chunk):
         block = slice(start, start + chunk)
         cols, blocked = optical_depth_to_top(r[block], mu[block], rp, ra, scale_heights)
-        tau = cols[0] * beta_r[channel[block]] + cols[1] * beta_me
+        tau = cols[0] * beta_r[channel[block]] + cols[1] * beta_me[channel[block]]
         if beta_o is not None:
             ozone, _ = ozone_column_to_top(r[block], mu[block], rp, ra, ozone_peak, ozone_half_width)
             tau = tau + ozone * beta_o[channel[block]]
@@ -663,7 +678,7 @@ def simulate(atmosphere, altitude, cos_view, cos_sun, azimuth=0.0, *, photons=20
     rng = np.random.default_rng(seed)
     view, sun = _observer_frame(cos_view, cos_sun, azimuth)
     beta_r = np.asarray(atmosphere.rayleigh_scattering, dtype=np.float64)
-    beta_ms = float(atmosphere.mie_scattering)
+    beta_ms = _mie_scattering(atmosphere)          # per channel
     beta_me = _mie_extinction(atmosphere)
     h_r = float(atmosphere.rayleigh_scale_height)
     h_m = float(atmosphere.mie_scale_height)
@@ -735,8 +750,8 @@ def simulate(atmosphere, altitude, cos_view, cos_sun, azimuth=0.0, *, photons=20
         rho_r = np.exp(-h / h_r)
         rho_m = np.exp(-h / h_m)
         mu_r = beta_r[channel] * rho_r
-        mu_ms = beta_ms * rho_m
-        mu_t = mu_r + beta_me * rho_m
+        mu_ms = beta_ms[channel] * rho_m
+        mu_t = mu_r + beta_me[channel] * rho_m
         if has_ozone:   # absorption only: in mu_t, not in the scattering coefficients
             mu_t = mu_t + beta_o[channel] * _tent(h, ozone_peak, ozone_half_width)
         # a path bounced off the ground this round has no collision yet: it flies on in the next one

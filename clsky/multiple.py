@@ -24,6 +24,7 @@ NumPy twins of the kernels: :func:`clsky.reference.gather` and :func:`clsky.refe
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 
@@ -37,7 +38,7 @@ from .phase import MIE_PHASES, PHASE_MEANS, RAYLEIGH_PHASES
 from .settings import MAPPINGS, TableSettings
 from .transmittance import COMMON_SOURCES, quadrature_defines
 
-__all__ = ["gather_quadrature", "phase_azimuth_integrals", "gather_matrix", "gather_matrices",
+__all__ = ["keeping_first_gather_stacks", "gather_quadrature", "phase_azimuth_integrals", "gather_matrix", "gather_matrices",
            "first_gather_matrices", "first_gather_matrix", "first_gather_stack", "DIRECT_PAIRS",
            "CROSSED_PAIRS", "MultipleScatteringEngine", "SPECIES"]
 
@@ -68,6 +69,18 @@ def _phase(atmosphere, species):
     return functools.partial(MIE_PHASES[atmosphere.mie_phase], g=atmosphere.mie_g)
 
 
+def _gather_key(atmosphere: AtmosphereParameters):
+    """The atmosphere as the gather matrices see it: its height (the grid's altitudes) and phase
+    functions, nothing that depends on the wavelengths. Atmospheres that differ only in coefficients,
+    wavelengths or sun (the batches of a spectral build, :mod:`clsky.spectrum`) share their cache entries."""
+    return AtmosphereParameters(planet_radius=atmosphere.planet_radius, top_radius=atmosphere.top_radius,
+                                rayleigh_scale_height=atmosphere.rayleigh_scale_height,
+                                mie_scale_height=atmosphere.mie_scale_height,
+                                rayleigh_scattering=(0.0, 0.0, 0.0), mie_scattering=0.0,
+                                mie_g=atmosphere.mie_g, rayleigh_phase=atmosphere.rayleigh_phase,
+                                mie_phase=atmosphere.mie_phase)
+
+
 def phase_azimuth_integrals(phase, cosines, theta, phi, phi_weights):
     """K(i, a) = sum_b wP_b F(cos(Theta_a) c_i + sin(Theta_a) sqrt(1 - c_i^2) cos(Phi_b)).
 
@@ -93,8 +106,12 @@ def interpolation_matrix(cosines, height, mapping):
     return p
 
 
-@functools.lru_cache(maxsize=4)
 def _gather_parts(atmosphere: AtmosphereParameters, settings: TableSettings):
+    return _gather_parts_cached(_gather_key(atmosphere), settings)
+
+
+@functools.lru_cache(maxsize=4)
+def _gather_parts_cached(atmosphere: AtmosphereParameters, settings: TableSettings):
     theta, theta_weights, phi, phi_weights = gather_quadrature(settings.gather_theta_steps,
                                                                settings.gather_phi_steps)
     _, cos_view, cos_sun = grid_coordinates(settings.size, atmosphere.atmosphere_height, settings.mapping,
@@ -145,7 +162,7 @@ def _quadrature_key(settings: TableSettings) -> TableSettings:
 
 def gather_matrices(atmosphere, settings):
     """{species: M} for the Rayleigh and Mie phase functions (read-only, cached per grid and phase)."""
-    return _gather_matrices(atmosphere, _quadrature_key(settings))
+    return _gather_matrices(_gather_key(atmosphere), _quadrature_key(settings))
 
 
 @functools.lru_cache(maxsize=8)
@@ -184,13 +201,39 @@ def first_gather_stack(atmosphere, settings, pairs):
     (:data:`DIRECT_PAIRS` or :data:`CROSSED_PAIRS`), as :meth:`MultipleScatteringEngine.gather` takes it.
 
     Not cached: 2 D H^2 x 8 bytes (0.87 GB at the high quality level's 32 x 256 x 414) is worth freeing
-    once uploaded rather than keeping for a next build of the same grid.
+    once uploaded rather than keeping for a next build of the same grid; except inside
+    :func:`keeping_first_gather_stacks`, which the batches of one spectral build share.
     """
+    key = (_gather_key(atmosphere), _quadrature_key(settings), tuple(pairs))
+    if _KEPT_STACKS is not None and key in _KEPT_STACKS:
+        return _KEPT_STACKS[key]
     depth, height = settings.size[2], settings.size[1]
     stack = np.empty((2, depth, height, height))
     for index, pair in enumerate(pairs):
         first_gather_matrix(atmosphere, settings, pair, out=stack[index])
+    if _KEPT_STACKS is not None:
+        _KEPT_STACKS[key] = _read_only(stack)
     return stack
+
+
+#: The first-gather stacks kept while :func:`keeping_first_gather_stacks` is active (else None).
+_KEPT_STACKS = None
+
+
+@contextlib.contextmanager
+def keeping_first_gather_stacks():
+    """Within this context, :func:`first_gather_stack` keeps its stacks (read-only) and returns the kept
+    one for the same grid, quadrature and phase functions: the batches of a spectral build
+    (:mod:`clsky.spectrum`) differ only in wavelengths, so they compute the physical mode's first gather
+    once. The stacks are dropped on leaving (2 x 2 D H^2 x 8 bytes: 67 MB at the default 32 x 256 x 32).
+    Not thread-safe, like the engines."""
+    global _KEPT_STACKS
+    outer = _KEPT_STACKS
+    _KEPT_STACKS = {} if outer is None else outer
+    try:
+        yield
+    finally:
+        _KEPT_STACKS = outer
 
 
 def first_gather_matrices(atmosphere, settings):

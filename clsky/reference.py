@@ -127,9 +127,9 @@ def column_density(atmosphere: AtmosphereParameters, altitude, cos_zenith, lengt
 
 def _optical_depth_of(atmosphere, column_r, column_m, column_o=None):
     """tau per wavelength (last axis: r, g, b) of column densities (``optical_depth_of`` of
-    ``kernels/column.cl``): beta_R C_R + beta_M^e C_M, plus sigma_O3 n_max C_O with ozone."""
+    ``kernels/column.cl``): beta_R C_R + beta_M^e C_M (both per channel), plus sigma_O3 n_max C_O with ozone."""
     beta = np.asarray(atmosphere.rayleigh_scattering)
-    tau = beta * column_r[..., None] + atmosphere.mie_extinction * column_m[..., None]
+    tau = beta * column_r[..., None] + atmosphere.mie_extinction_channels * column_m[..., None]
     if atmosphere.has_ozone:
         tau = tau + atmosphere.ozone_extinction * column_o[..., None]
     return tau
@@ -241,7 +241,7 @@ class _ViewRays:
         sum_m = _trapezoid_along_view(self.density_m[..., None] * transmittance * weight_m, half_steps)
         beta = np.asarray(atmosphere.rayleigh_scattering)
         return np.concatenate([beta * (1.0 / (4.0 * math.pi)) * sum_r,
-                               (atmosphere.mie_scattering / (4.0 * math.pi)) * sum_m], axis=1)
+                               (atmosphere.mie_scattering_channels / (4.0 * math.pi)) * sum_m], axis=1)
 
 
 def _sun_columns(atmosphere, settings, h, mu_sun, sun_table):

@@ -59,6 +59,7 @@ from .atmosphere import AtmosphereParameters, preset
 from .errors import short
 from .lookup import check_queries
 from .settings import TableSettings
+from .solar import radiance_units
 
 __all__ = ["ScatteringTable", "TableFormatError", "FORMAT_VERSION", "BACKENDS", "atomic_write",
            "CHANNEL_NAMES", "array_checksum", "check_table_array"]
@@ -160,7 +161,8 @@ class ScatteringTable:
         (Ibar summed over orders in the atmosphere-plus mode, single scattering in the physical mode)
         carry no phase; the physical mode's 3 last channels hold the higher orders, phase applied.
     metadata : dict
-        Provenance: clsky version, backend, device, build seconds.
+        Provenance: clsky version, backend, device, build seconds, and ``units`` of the rendered radiance
+        (:func:`clsky.solar.radiance_units`: W m^-2 sr^-1 nm^-1 with the solar spectrum, else relative).
     orders : tuple of numpy.ndarray
         Every order's table (float64 when built, float32 when loaded from a file): order 1 (D, H, W, 6) factored; higher orders (D, H, W, 6)
         factored (atmosphere-plus) or (D, H, W, 3) phased (physical). See :mod:`clsky.orders`.
@@ -293,7 +295,7 @@ class ScatteringTable:
                                 progress=progress)
         seconds = time.perf_counter() - start
         metadata = {"clsky_version": __version__, "backend": backend, "device": result.record.pop("device"),
-                    "build_seconds": seconds, "fast_math": bool(fast_math)}
+                    "build_seconds": seconds, "fast_math": bool(fast_math), "units": radiance_units(atmosphere)}
         try:
             return cls(atmosphere, settings, to_layout(result.combined(settings.mode), settings.mie_layout),
                        metadata, tuple(result.orders), result.record, result.gathered, result.ground_irradiance)
@@ -467,6 +469,7 @@ class ScatteringTable:
                          "(physical mode) already include their phase"),
             "orders_record": self.orders_record,
             "incident_light": list(self.atmosphere.incident_light),
+            "units": radiance_units(self.atmosphere),
             "atmosphere": self.atmosphere.to_dict(),
             "settings": self.settings.to_dict(),
             "parameters_hash": self.parameters_hash,

@@ -9,7 +9,7 @@
  * N = 30). f(x) = x (uniform) or, with -DKELLER_BOHN_SAMPLING, f(x) = x^2, the non-uniform
  * optical-depth sampling of Keller & Bohn that puts nodes where the density is high. Optical depth
  * per wavelength (physics.md):
- *   tau = beta_R C_R + beta_M^e C_M (+ sigma_O3 n_max C_O with -DOZONE)
+ *   tau = beta_R C_R + beta_M^e C_M (+ sigma_O3 n_max C_O with -DOZONE), every coefficient per wavelength
  * Ozone absorbs only: it enters tau and nothing else. Without -DOZONE, column_t has no ozone member
  * and every expression is the ozone-free one. Works on realv (1 or 8 lanes).
  * Requires real.cl, atmosphere_t, geometry.cl.

@@ -100,8 +100,8 @@ __kernel void scatter(__constant const atmosphere_t *atm, const int width, const
 
     const real4 beta = atm->beta_rayleigh;
     const real scale = R(1.0) / (R(4.0) * PI_REAL);
-    const real8 coefficient = (real8)(beta.x, beta.y, beta.z, atm->beta_mie, atm->beta_mie, atm->beta_mie,
-                                      R(0.0), R(0.0)) * scale;
+    const real4 beta_m = atm->beta_mie;
+    const real8 coefficient = (real8)(beta.x, beta.y, beta.z, beta_m.x, beta_m.y, beta_m.z, R(0.0), R(0.0)) * scale;
     for (int k = 0; k < VECTOR_WIDTH; ++k) {
         const int xk = gx * VECTOR_WIDTH + k;
         if (xk >= width)

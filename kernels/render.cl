@@ -153,7 +153,7 @@ __kernel void render_raymarch(__constant const atmosphere_t *atm, __global const
 
     const real scale = R(1.0) / (R(4.0) * PI_REAL);
     const real3 beta_r = atm->beta_rayleigh.xyz * scale;
-    const real beta_m = atm->beta_mie * scale;
+    const real3 beta_m = atm->beta_mie.xyz * scale;
     const real3 light = atm->incident_light.xyz;
     for (int k = 0; k < VECTOR_WIDTH && first + k < n; ++k) {
         real3 value = sun_disc(LANE(nu, k), LANE(mu_v_observer, k), LANE(horizon, 0), sun_radiance, cos_sun_radius);

@@ -44,7 +44,7 @@ __kernel void single_scattering(__constant const atmosphere_t *atm, const int wi
 
     const real4 beta = atm->beta_rayleigh;
     const real scale_r = R(1.0) / (R(4.0) * PI_REAL);
-    const real scale_m = atm->beta_mie / (R(4.0) * PI_REAL);
+    const real4 scale_m = atm->beta_mie / (R(4.0) * PI_REAL);
     for (int k = 0; k < VECTOR_WIDTH; ++k) {
         const int xk = gx * VECTOR_WIDTH + k;
         if (xk >= width)
@@ -53,8 +53,8 @@ __kernel void single_scattering(__constant const atmosphere_t *atm, const int wi
         table[cell] = beta.x * scale_r * LANE(sum[0], k);
         table[cell + 1] = beta.y * scale_r * LANE(sum[1], k);
         table[cell + 2] = beta.z * scale_r * LANE(sum[2], k);
-        table[cell + 3] = scale_m * LANE(sum[3], k);
-        table[cell + 4] = scale_m * LANE(sum[4], k);
-        table[cell + 5] = scale_m * LANE(sum[5], k);
+        table[cell + 3] = scale_m.x * LANE(sum[3], k);
+        table[cell + 4] = scale_m.y * LANE(sum[4], k);
+        table[cell + 5] = scale_m.z * LANE(sum[5], k);
     }
 }

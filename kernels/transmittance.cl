@@ -1,7 +1,7 @@
 /* transmittance.cl -- kernels of clsky/transmittance.py: optical depth along segments and the 2D
  * column-density table.
  *
- *   tau_lambda(P1, P2) = beta_R(lambda) Integral rho_R ds + beta_M^e Integral rho_M ds
+ *   tau_lambda(P1, P2) = beta_R(lambda) Integral rho_R ds + beta_M^e(lambda) Integral rho_M ds
  *                        (+ sigma_O3(lambda) n_max Integral f_O ds with -DOZONE)        (physics.md)
  *   T = exp(-tau)
  * Inputs: altitude h0 [m] (0 <= h0 <= Ha), direction cosine mu, length d [m]. Output: tau for r, g, b.
@@ -18,9 +18,12 @@ __kernel void optical_depth(__constant const atmosphere_t *atm, const int n,
     if (i >= n)
         return;
     const column_t column = column_density(atm, altitude[i], mu[i], length[i]);
-    tau[3 * i] = optical_depth_of(column, atm->beta_rayleigh.x, atm->beta_mie_extinction, atm->ozone_extinction.x);
-    tau[3 * i + 1] = optical_depth_of(column, atm->beta_rayleigh.y, atm->beta_mie_extinction, atm->ozone_extinction.y);
-    tau[3 * i + 2] = optical_depth_of(column, atm->beta_rayleigh.z, atm->beta_mie_extinction, atm->ozone_extinction.z);
+    tau[3 * i] = optical_depth_of(column, atm->beta_rayleigh.x, atm->beta_mie_extinction.x,
+                                          atm->ozone_extinction.x);
+    tau[3 * i + 1] = optical_depth_of(column, atm->beta_rayleigh.y, atm->beta_mie_extinction.y,
+                                              atm->ozone_extinction.y);
+    tau[3 * i + 2] = optical_depth_of(column, atm->beta_rayleigh.z, atm->beta_mie_extinction.z,
+                                              atm->ozone_extinction.z);
 }
 
 __kernel void transmittance_table(__constant const atmosphere_t *atm, const int tw, const int th,

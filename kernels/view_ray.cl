@@ -107,11 +107,11 @@ inline void ground_view(__constant const atmosphere_t *atm, const column_t view,
                         const realv mu_sun, realv *ground)
 {
     const real4 beta = atm->beta_rayleigh;
-    const real beta_me = atm->beta_mie_extinction;
+    const real4 beta_me = atm->beta_mie_extinction;
     const real4 beta_o = atm->ozone_extinction;
-    ground[0] = SELECT(V(0.0), exp(-optical_depth_of(view, beta.x, beta_me, beta_o.x)), hits_ground);
-    ground[1] = SELECT(V(0.0), exp(-optical_depth_of(view, beta.y, beta_me, beta_o.y)), hits_ground);
-    ground[2] = SELECT(V(0.0), exp(-optical_depth_of(view, beta.z, beta_me, beta_o.z)), hits_ground);
+    ground[0] = SELECT(V(0.0), exp(-optical_depth_of(view, beta.x, beta_me.x, beta_o.x)), hits_ground);
+    ground[1] = SELECT(V(0.0), exp(-optical_depth_of(view, beta.y, beta_me.y, beta_o.y)), hits_ground);
+    ground[2] = SELECT(V(0.0), exp(-optical_depth_of(view, beta.z, beta_me.z, beta_o.z)), hits_ground);
     ground[3] = mu_sun;
     ground[4] = ground[5] = ground[6] = V(0.0);
 }
@@ -120,12 +120,12 @@ inline void ground_view(__constant const atmosphere_t *atm, const column_t view,
 inline void ground_direct(__constant const atmosphere_t *atm, const column_t sun, const maskv lit, realv *ground)
 {
     const real4 beta = atm->beta_rayleigh;
-    const real beta_me = atm->beta_mie_extinction;
+    const real4 beta_me = atm->beta_mie_extinction;
     const real4 beta_o = atm->ozone_extinction;
     const realv mu = fmax(ground[3], V(0.0));
-    ground[4] = SELECT(V(0.0), mu * exp(-optical_depth_of(sun, beta.x, beta_me, beta_o.x)), lit);
-    ground[5] = SELECT(V(0.0), mu * exp(-optical_depth_of(sun, beta.y, beta_me, beta_o.y)), lit);
-    ground[6] = SELECT(V(0.0), mu * exp(-optical_depth_of(sun, beta.z, beta_me, beta_o.z)), lit);
+    ground[4] = SELECT(V(0.0), mu * exp(-optical_depth_of(sun, beta.x, beta_me.x, beta_o.x)), lit);
+    ground[5] = SELECT(V(0.0), mu * exp(-optical_depth_of(sun, beta.y, beta_me.y, beta_o.y)), lit);
+    ground[6] = SELECT(V(0.0), mu * exp(-optical_depth_of(sun, beta.z, beta_me.z, beta_o.z)), lit);
 }
 
 /* A per-sun-node table values[z][0..3] (D nodes over w in sun_range, mapping) interpolated linearly in
@@ -156,7 +156,7 @@ inline void integrate_single(__constant const atmosphere_t *atm, const realv h0,
     const real inv_hr = R(1.0) / atm->rayleigh_scale_height;
     const real inv_hm = R(1.0) / atm->mie_scale_height;
     const real4 beta = atm->beta_rayleigh;
-    const real beta_me = atm->beta_mie_extinction;
+    const real4 beta_me = atm->beta_mie_extinction;
     const real4 beta_o = atm->ozone_extinction;
     column_t view = column_zero();                          /* column densities from the observer */
     column_t last_density = column_zero();
@@ -182,9 +182,9 @@ inline void integrate_single(__constant const atmosphere_t *atm, const realv h0,
         column_t sun;
         const maskv lit = sun_column(atm, h, mu_sun_here, sun_table, tw, th, &sun);
         const column_t column = column_sum(view, sun);
-        const realv t0 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.x, beta_me, beta_o.x)), lit);
-        const realv t1 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.y, beta_me, beta_o.y)), lit);
-        const realv t2 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.z, beta_me, beta_o.z)), lit);
+        const realv t0 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.x, beta_me.x, beta_o.x)), lit);
+        const realv t1 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.y, beta_me.y, beta_o.y)), lit);
+        const realv t2 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.z, beta_me.z, beta_o.z)), lit);
 #ifdef GROUND
         if (ground && i == N_VIEW) {
             ground_view(atm, view, hits_ground, mu_sun_here, ground);
@@ -242,7 +242,7 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
     const real inv_hr = R(1.0) / atm->rayleigh_scale_height;
     const real inv_hm = R(1.0) / atm->mie_scale_height;
     const real4 beta = atm->beta_rayleigh;
-    const real beta_me = atm->beta_mie_extinction;
+    const real4 beta_me = atm->beta_mie_extinction;
     const real4 beta_o = atm->ozone_extinction;
     column_t view = column_zero();
     column_t last_density = column_zero();
@@ -269,9 +269,9 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
             view = column_step(view, last_density, density, half_step);
         }
         const realv weight = R(0.5) * length * ((node - node_previous) + (node_next - node));
-        const realv t0 = exp(-optical_depth_of(view, beta.x, beta_me, beta_o.x));
-        const realv t1 = exp(-optical_depth_of(view, beta.y, beta_me, beta_o.y));
-        const realv t2 = exp(-optical_depth_of(view, beta.z, beta_me, beta_o.z));
+        const realv t0 = exp(-optical_depth_of(view, beta.x, beta_me.x, beta_o.x));
+        const realv t1 = exp(-optical_depth_of(view, beta.y, beta_me.y, beta_o.y));
+        const realv t2 = exp(-optical_depth_of(view, beta.z, beta_me.z, beta_o.z));
         const realv wr = weight * density.r, wm = weight * density.m;
         const realv fr0 = wr * t0, fr1 = wr * t1, fr2 = wr * t2, fm0 = wm * t0, fm1 = wm * t1, fm2 = wm * t2;
 #ifdef GROUND
@@ -281,9 +281,9 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
         if (single) {
             column_t sun;
             const maskv lit = sun_column(atm, h, mu_sun_here, sun_table, tw, th, &sun);
-            const realv s0 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.x, beta_me, beta_o.x)), lit);
-            const realv s1 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.y, beta_me, beta_o.y)), lit);
-            const realv s2 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.z, beta_me, beta_o.z)), lit);
+            const realv s0 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.x, beta_me.x, beta_o.x)), lit);
+            const realv s1 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.y, beta_me.y, beta_o.y)), lit);
+            const realv s2 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.z, beta_me.z, beta_o.z)), lit);
             single[0] += fr0 * s0; single[1] += fr1 * s1; single[2] += fr2 * s2;
             single[3] += fm0 * s0; single[4] += fm1 * s1; single[5] += fm2 * s2;
 #ifdef GROUND

@@ -266,6 +266,8 @@ def _changed_value(field, value):
         return value - 1.0
     if field == "ozone_column_du":     # 0 by default
         return value + 300.0
+    if field == "mie_angstrom_exponent":     # 0 by default
+        return value + 1.3
     if field == "ground_albedo":       # 0 (black) by default
         return value + 0.3
     return value * 1.25

@@ -1,0 +1,294 @@
+"""Colorimetry: spectral radiance -> CIE 1931 XYZ -> linear sRGB, and the three-wavelength conversion.
+
+Spectral radiance L(lambda) [W m^-2 sr^-1 nm^-1] sampled at wavelengths lambda_i becomes CIE 1931 XYZ by
+
+    (X, Y, Z) = K_m sum_i L(lambda_i) (xbar, ybar, zbar)(lambda_i) dlambda_i,   K_m = 683 lm/W,
+
+with the 2-degree colour-matching functions of colour-science (``colour.MSDS_CMFS['CIE 1931 2 Degree
+Standard Observer']``, 1 nm from 360 to 830 nm, linearly interpolated, zero outside) and dlambda_i the
+width of each sample's cell (half-way to its neighbours; the end cells as wide as their neighbour's
+half-spacing on both sides, so a uniform grid gets its spacing everywhere: the midpoint rule). Y is
+then the luminance [cd/m^2]. Linear sRGB (Rec. 709 primaries, D65 white; IEC 61966-2-1) is
+M_sRGB (X, Y, Z) with colour-science's matrix, in the same photometric units (cd/m^2 scale).
+
+Three wavelengths carry too little to integrate; :func:`three_wavelength_to_xyz` reconstructs the
+spectrum between them from three radiances (L_1, L_2, L_3) in one of three documented ways (the last two
+are 3 x 3 matrices, :func:`three_wavelength_to_xyz_matrix`):
+
+``solar_power_law`` (default)
+    The spectrum follows the sun's times a power law: L(lambda) = E_sun(lambda) r(lambda), with log r
+    linear in log lambda between the samples (r = r_c (lambda / lambda_c)^p, p from the two neighbouring
+    samples) and beyond them with the end segment's exponent (clipped to +-8), integrated against the
+    CMFs at 1 nm. Exact for any E_sun lambda^p: the sun (p = 0), Rayleigh light (p = -4) and
+    everything between. Not linear in L (a 0 channel is floored at 1e-12 of the pixel's largest).
+``solar_interpolation``
+    The same with r interpolated linearly between the three samples and held constant beyond them: a
+    3 x 3 matrix. Exact for E_sun times a function linear between the samples and flat beyond.
+``bruneton2017``
+    Bruneton's luminance factors (``ComputeSpectralRadianceToLuminanceFactors``, atmosphere/model.cc):
+    the spectrum of each channel is assumed to be E_sun(lambda) (lambda / lambda_c)^p / E_sun(lambda_c) times
+    its radiance (p = -3 for the sky), and each channel becomes one sRGB channel (the longest wavelength
+    red, the shortest blue): sRGB_c = K_m sum_lambda cbar_sRGB(lambda) E_sun(lambda) / E_sun(lambda_c)
+    (lambda / lambda_c)^p L_c, a diagonal matrix in sRGB.
+
+colour-science is imported inside the functions (``import colour`` costs about 2.5 s).
+
+References
+----------
+CIE 015:2018 Colorimetry, 4th ed., doi:10.25039/TR.015.2018 (the CMFs, K_m = 683 lm/W).
+IEC 61966-2-1:1999 (sRGB). Bruneton, E. (2017). A qualitative and quantitative evaluation of 8 clear
+sky models. IEEE TVCG 23(12), doi:10.1109/TVCG.2016.2622272, section 14.3; code:
+github.com/ebruneton/precomputed_atmospheric_scattering (atmosphere/model.cc).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from .solar import solar_irradiance_astm_g173
+
+__all__ = ["MAX_LUMINOUS_EFFICACY", "CMFS_NAME", "THREE_WAVELENGTH_METHODS", "LINEAR_METHODS",
+           "DEFAULT_THREE_WAVELENGTH_METHOD", "colour_matching_functions",
+           "band_widths", "spectral_to_xyz", "xyz_to_linear_srgb", "linear_srgb_to_xyz", "luminance",
+           "three_wavelength_to_xyz_matrix", "three_wavelength_to_xyz"]
+
+#: K_m, the maximum luminous efficacy of photopic vision [lm/W].
+MAX_LUMINOUS_EFFICACY = 683.0
+#: The colour-matching functions used (colour-science's name).
+CMFS_NAME = "CIE 1931 2 Degree Standard Observer"
+#: Exponent p of Bruneton's sky factors (lambda / lambda_c)^p (model.cc: -3 for the sky, 0 for the sun).
+BRUNETON_SKY_POWER = -3.0
+#: The three-wavelength reconstruction used unless another is asked for (chosen by bench/bench_spectral.py).
+DEFAULT_THREE_WAVELENGTH_METHOD = "solar_power_law"
+
+
+@functools.lru_cache(maxsize=1)
+def _cmfs():
+    """(wavelengths [nm], values (n, 3)) of the CIE 1931 2-degree CMFs from colour-science, read-only."""
+    import colour
+
+    cmfs = colour.MSDS_CMFS[CMFS_NAME]
+    wavelengths = np.array(cmfs.wavelengths, dtype=np.float64)
+    values = np.array(cmfs.values, dtype=np.float64)
+    wavelengths.setflags(write=False)
+    values.setflags(write=False)
+    return wavelengths, values
+
+
+@functools.lru_cache(maxsize=1)
+def _srgb_matrices():
+    """(XYZ -> linear sRGB, linear sRGB -> XYZ) 3 x 3 matrices: colour-science's sRGB colourspace matrix
+    (IEC 61966-2-1's) and its inverse."""
+    import colour
+
+    to_rgb = np.array(colour.models.RGB_COLOURSPACE_sRGB.matrix_XYZ_to_RGB, dtype=np.float64)
+    # its inverse, not colour's matrix_RGB_to_XYZ (derived from the primaries, it differs from the
+    # inverse of the 4-digit IEC matrix by 5e-5): the two conversions stay exact inverses
+    to_xyz = np.linalg.inv(to_rgb)
+    to_rgb.setflags(write=False)
+    to_xyz.setflags(write=False)
+    return to_rgb, to_xyz
+
+
+def _wavelengths(wavelengths):
+    values = np.asarray(wavelengths, dtype=np.float64)
+    if values.ndim != 1 or values.size < 1 or not np.all(np.isfinite(values) & (values > 0)):
+        raise ValueError(f"wavelengths must be a 1D array of finite numbers > 0 nm, got {wavelengths!r:.80}")
+    if values.size > 1 and not np.all(np.diff(values) > 0):
+        raise ValueError(f"wavelengths must increase strictly, got {wavelengths!r:.80}")
+    return values
+
+
+def colour_matching_functions(wavelengths):
+    """(xbar, ybar, zbar) at ``wavelengths`` [nm]: shape (N, 3), linear interpolation of the 1 nm table,
+    zero outside 360 to 830 nm.
+
+    Examples
+    --------
+    >>> colour_matching_functions([555.0]).round(4).tolist()
+    [[0.5121, 1.0, 0.0057]]
+    """
+    table_wavelengths, values = _cmfs()
+    wavelengths = _wavelengths(wavelengths)
+    return np.stack([np.interp(wavelengths, table_wavelengths, values[:, k], left=0.0, right=0.0)
+                     for k in range(3)], axis=-1)
+
+
+def band_widths(wavelengths):
+    """dlambda_i [nm] of each sample's cell: half-way to each neighbour, the ends mirrored (module
+    docstring); a single wavelength gets 1 nm.
+
+    Examples
+    --------
+    >>> band_widths([400.0, 410.0, 430.0]).tolist()
+    [10.0, 15.0, 20.0]
+    """
+    w = _wavelengths(wavelengths)
+    if w.size == 1:
+        return np.ones(1)
+    edges = np.concatenate([[w[0] - 0.5 * (w[1] - w[0])], 0.5 * (w[1:] + w[:-1]), [w[-1] + 0.5 * (w[-1] - w[-2])]])
+    return np.diff(edges)
+
+
+def spectral_to_xyz(radiance, wavelengths):
+    """CIE 1931 XYZ of spectral radiance.
+
+    Parameters
+    ----------
+    radiance : array_like, shape (..., N)
+        Spectral radiance at ``wavelengths`` [W m^-2 sr^-1 nm^-1] (or any spectral quantity per nm).
+    wavelengths : array_like, shape (N,)
+        Increasing wavelengths [nm].
+
+    Returns
+    -------
+    numpy.ndarray, shape (..., 3)
+        X, Y, Z [cd/m^2 for radiance]: K_m sum_i L_i cmf(lambda_i) dlambda_i (module docstring).
+
+    Examples
+    --------
+    A flat spectrum of 1 W m^-2 sr^-1 nm^-1 from 360 to 830 nm at 1 nm: Y = 683 x 106.86 cd/m^2.
+
+    >>> round(float(spectral_to_xyz(np.ones(471), np.arange(360.0, 831.0))[1]))
+    72983
+    """
+    wavelengths = _wavelengths(wavelengths)
+    radiance = np.asarray(radiance, dtype=np.float64)
+    if radiance.shape[-1:] != wavelengths.shape:
+        raise ValueError(f"radiance must have {wavelengths.size} values on its last axis (one per wavelength), "
+                         f"got shape {radiance.shape}")
+    weights = colour_matching_functions(wavelengths) * band_widths(wavelengths)[:, None] * MAX_LUMINOUS_EFFICACY
+    return radiance @ weights
+
+
+def xyz_to_linear_srgb(xyz):
+    """Linear sRGB / Rec. 709 (D65 white) of XYZ (..., 3), same scale (colour-science's matrix).
+
+    Examples
+    --------
+    >>> xyz_to_linear_srgb([0.95047, 1.0, 1.08883]).round(3).tolist()     # the D65 white
+    [1.0, 1.0, 1.0]
+    """
+    to_rgb, _ = _srgb_matrices()
+    return np.asarray(xyz, dtype=np.float64) @ to_rgb.T
+
+
+def linear_srgb_to_xyz(rgb):
+    """XYZ of linear sRGB (..., 3): the inverse of :func:`xyz_to_linear_srgb`."""
+    _, to_xyz = _srgb_matrices()
+    return np.asarray(rgb, dtype=np.float64) @ to_xyz.T
+
+
+def luminance(xyz):
+    """Y of XYZ (..., 3) [cd/m^2 for XYZ from radiance]."""
+    return np.asarray(xyz, dtype=np.float64)[..., 1]
+
+
+def _solar_interpolation_matrix(wavelengths):
+    grid, cmfs = _cmfs()
+    solar = solar_irradiance_astm_g173(np.clip(grid, 365.0, 835.0))    # the end bins' values beyond centres
+    order = np.argsort(wavelengths)
+    matrix = np.empty((3, 3))
+    for position, channel in enumerate(order):
+        hat = np.zeros(3)
+        hat[position] = 1.0
+        weight = np.interp(grid, wavelengths[order], hat)        # linear between samples, constant beyond
+        matrix[:, channel] = MAX_LUMINOUS_EFFICACY * (cmfs * (solar * weight)[:, None]).sum(axis=0)
+    return matrix / solar_irradiance_astm_g173(wavelengths)[None, :]
+
+
+def _bruneton2017_matrix(wavelengths, power=BRUNETON_SKY_POWER):
+    grid, cmfs = _cmfs()
+    to_rgb, to_xyz = _srgb_matrices()
+    rgb_bar = cmfs @ to_rgb.T                                     # (n, 3): r, g, b colour-matching functions
+    solar = solar_irradiance_astm_g173(np.clip(grid, 365.0, 835.0))
+    factors = np.zeros((3, 3))
+    for rank, channel in enumerate(np.argsort(wavelengths)[::-1]):   # longest -> red, shortest -> blue
+        lam = wavelengths[channel]
+        shape = solar / solar_irradiance_astm_g173(lam) * (grid / lam) ** power
+        factors[rank, channel] = MAX_LUMINOUS_EFFICACY * float(rgb_bar[:, rank] @ shape)
+    return to_xyz @ factors
+
+
+#: Least channel kept by the power-law reconstruction, relative to the pixel's largest (a shadowed channel
+#: of 0 would have no logarithm), and the largest exponent it extrapolates with beyond the end samples.
+POWER_LAW_FLOOR, POWER_LAW_MAX_EXPONENT = 1e-12, 8.0
+#: Pixels per block of :func:`_solar_power_law_xyz` (bounds its (block, 471) temporaries).
+_POWER_LAW_BLOCK = 16384
+
+
+def _solar_power_law_xyz(radiance, wavelengths):
+    """XYZ (..., 3) of L = E_sun r, log r linear in log lambda between the samples and beyond them with
+    the end segment's exponent (clipped to +-POWER_LAW_MAX_EXPONENT)."""
+    grid, cmfs = _cmfs()
+    solar_grid = solar_irradiance_astm_g173(np.clip(grid, 365.0, 835.0))
+    weights = MAX_LUMINOUS_EFFICACY * cmfs * solar_grid[:, None]             # (n, 3), 1 nm steps
+    order = np.argsort(wavelengths)
+    lam = wavelengths[order]
+    log_lam, log_grid = np.log(lam), np.log(grid)
+    flat = np.asarray(radiance, dtype=np.float64).reshape(-1, 3)[:, order]
+    ratio = flat / solar_irradiance_astm_g173(lam)[None, :]
+    top = ratio.max(axis=1, keepdims=True)
+    out = np.zeros((flat.shape[0], 3))
+    segment = np.clip(np.searchsorted(lam, grid) - 1, 0, 1)                # which pair of samples
+    for start in range(0, flat.shape[0], _POWER_LAW_BLOCK):
+        block = slice(start, start + _POWER_LAW_BLOCK)
+        lit = top[block, 0] > 0
+        log_r = np.log(np.maximum(ratio[block][lit], POWER_LAW_FLOOR * top[block][lit]))
+        exponents = np.diff(log_r, axis=1) / np.diff(log_lam)[None, :]                # (m, 2)
+        outside = (grid < lam[0]) | (grid > lam[-1])
+        p = exponents[:, segment]                                                      # (m, n)
+        p = np.where(outside[None, :], np.clip(p, -POWER_LAW_MAX_EXPONENT, POWER_LAW_MAX_EXPONENT), p)
+        anchor = np.where(segment == 0, 0, 1)
+        r = np.exp(log_r[:, anchor] + p * (log_grid - log_lam[anchor])[None, :])
+        values = np.zeros((lit.size, 3))
+        values[lit] = r @ weights
+        out[block] = values
+    return out.reshape(np.shape(radiance)[:-1] + (3,))
+
+
+#: Three-wavelength reconstructions (module docstring): name -> function of the wavelengths returning
+#: the matrix, or (for the non-linear power law) of (radiance, wavelengths) returning XYZ.
+THREE_WAVELENGTH_METHODS = {"solar_power_law": _solar_power_law_xyz, "solar_interpolation": _solar_interpolation_matrix,
+                            "bruneton2017": _bruneton2017_matrix}
+#: The methods that are a 3 x 3 matrix (:func:`three_wavelength_to_xyz_matrix`).
+LINEAR_METHODS = ("solar_interpolation", "bruneton2017")
+
+
+def _three(wavelengths, method, methods):
+    if method not in methods:
+        raise ValueError(f"method must be one of {sorted(methods)}, got {method!r}")
+    values = np.asarray(wavelengths, dtype=np.float64)
+    if values.shape != (3,) or len(set(values.tolist())) != 3:
+        raise ValueError(f"wavelengths must be 3 distinct numbers [nm], got {wavelengths!r}")
+    return values
+
+
+def three_wavelength_to_xyz_matrix(wavelengths, method="solar_interpolation"):
+    """M (3, 3) with XYZ = M @ (L_1, L_2, L_3) for radiances at three wavelengths [nm] (module docstring).
+
+    Parameters
+    ----------
+    wavelengths : sequence of 3 floats
+        Distinct wavelengths [nm] in [365, 835] (the solar spectrum's range), in the radiance's channel order.
+    method : str
+        One of :data:`LINEAR_METHODS`.
+
+    Examples
+    --------
+    >>> three_wavelength_to_xyz_matrix((650.0, 510.0, 475.0)).shape
+    (3, 3)
+    """
+    values = _three(wavelengths, method, LINEAR_METHODS)
+    return THREE_WAVELENGTH_METHODS[method](values)
+
+
+def three_wavelength_to_xyz(radiance, wavelengths, method=DEFAULT_THREE_WAVELENGTH_METHOD):
+    """XYZ (..., 3) of radiance (..., 3) [W m^-2 sr^-1 nm^-1] at three wavelengths [nm], by one of
+    :data:`THREE_WAVELENGTH_METHODS` (module docstring)."""
+    values = _three(wavelengths, method, THREE_WAVELENGTH_METHODS)
+    if method in LINEAR_METHODS:
+        return np.asarray(radiance, dtype=np.float64) @ THREE_WAVELENGTH_METHODS[method](values).T
+    return THREE_WAVELENGTH_METHODS[method](radiance, values)
