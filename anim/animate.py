@@ -178,9 +178,10 @@ class AnimationConfig:
         if self.max_elevation_deg < self.start_elevation_deg:
             raise ParameterError("max_elevation_deg", f"at least the start elevation ({self.start_elevation_deg:g})",
                                  self.max_elevation_deg)
-        if self.ground_albedo is not None and self.ground_albedo > 0 and self.mode != "physical":
-            raise ParameterError("ground_albedo", f"0 with mode {self.mode!r} (a ground needs mode 'physical')",
-                                 self.ground_albedo)
+        if self.atmosphere.has_ground and self.mode != "physical":
+            given = "" if self.ground_albedo is not None else f", the {self.preset} preset's ground"
+            raise ParameterError("ground_albedo", f"0 with mode {self.mode!r} (a ground needs mode 'physical'{given})",
+                                 self.atmosphere.ground_albedo)
         if self.end_hour <= self.start_hour:
             raise ParameterError("end_hour", f"after the start hour ({self.start_hour:g})", self.end_hour)
         if self.location is not None:

@@ -8,12 +8,12 @@ Two presets share one atmosphere of air and haze:
 ``physical``
     The same air with the true Rayleigh phase 3/4 (1 + c^2) and ozone: Bruneton 2017's tent (10 to
     40 km, peak at 25 km) holding 300 Dobson units, cross-sections of Serdyuchenko et al. 2014
-    (:mod:`clsky.ozone`).
+    (:mod:`clsky.ozone`), and a Lambertian ground of albedo :data:`EARTH_GROUND_ALBEDO` (0.1,
+    clsky/ground.py). A reflecting ground needs the physical scheme of the higher orders
+    (``TableSettings(mode="physical")``, the default of the quality levels, of ``clsky animate`` and of
+    ``clsky table --preset physical``); the atmosphere-plus scheme refuses it (README, "Ground albedo").
 
-Both presets have a black ground; ``ground_albedo`` (clsky/ground.py) gives a Lambertian one, e.g.
-:data:`EARTH_GROUND_ALBEDO`. (The physical preset keeps a black ground because a ground needs the
-physical scheme, and the physical preset is also used with the atmosphere-plus scheme: README,
-"Ground albedo".)
+The atmosphere-plus preset has a black ground.
 
 All lengths are in metres, scattering coefficients in 1/m, wavelengths in nanometres.
 
@@ -423,7 +423,8 @@ class AtmosphereParameters:
 #: Named presets (see module docstring).
 PRESETS = {
     "atmosphere-plus": AtmosphereParameters(),
-    "physical": AtmosphereParameters(rayleigh_phase="rayleigh", ozone_column_du=300.0),
+    "physical": AtmosphereParameters(rayleigh_phase="rayleigh", ozone_column_du=300.0,
+                                     ground_albedo=EARTH_GROUND_ALBEDO),
 }
 
 

@@ -161,7 +161,8 @@ def _add_table_arguments(parser):
     orders.add_argument("--orders", type=_orders, help="K: compute orders 1..K (1 = single scattering); "
                                                        "auto: until converged (default)")
     orders.add_argument("--mode", choices=list(SCATTERING_MODES),
-                        help="scheme of the higher orders (default: the --quality level's, else atmosphere-plus)")
+                        help="scheme of the higher orders (default: the --quality level's, else physical for an "
+                             "atmosphere with a reflecting ground, such as --preset physical, else atmosphere-plus)")
     orders.add_argument("--order-tolerance", type=float, help="auto stops when an order adds less than this "
                                                               "(default: 1e-4)")
     orders.add_argument("--max-orders", type=int, help="most orders auto computes (default: 100)")
@@ -256,7 +257,9 @@ def _table_settings(args, atmosphere):
     from .settings import TableSettings
 
     level = quality_level(args.quality) if args.quality else None
-    base = level.table if level else TableSettings()
+    # a reflecting ground needs the physical scheme (clsky/ground.py): the default for such an atmosphere
+    base = level.table if level else TableSettings(mode="physical" if atmosphere.has_ground else
+                                                   "atmosphere-plus")
     changes = {field: getattr(args, option) for field, option in SETTING_OPTIONS.items()
                if getattr(args, option) is not None}
     changes = {k: tuple(v) if isinstance(v, list) else v for k, v in changes.items()}

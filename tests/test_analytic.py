@@ -17,16 +17,16 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy import integrate
 
-from clsky import TableSettings, preset
+from clsky import TableSettings
 from clsky import _atmosphere_cl, _cl, reference
 from clsky.phase import mie_phase, rayleigh_phase
 from clsky import mapping as np_mapping
 from clsky.settings import MAPPINGS
 
-from conftest import compute_single, max_error_report
+from conftest import black_preset, compute_single, max_error_report
 
 EPS = np.finfo(np.float64).eps
-DEFAULT = preset("atmosphere-plus")
+DEFAULT = black_preset("atmosphere-plus")
 RP, RA = DEFAULT.planet_radius, DEFAULT.top_radius
 HA = RA - RP
 

@@ -12,10 +12,12 @@ from clsky.errors import ParameterError
 from clsky.planner import Scene
 from clsky.quality import level_for_budget
 
+from conftest import black_preset
+
 
 @pytest.fixture(scope="module")
 def table():
-    return ScatteringTable.build("physical", TableSettings(size=(4, 8, 4), mode="physical", orders=2),
+    return ScatteringTable.build(black_preset("physical"), TableSettings(size=(4, 8, 4), mode="physical", orders=2),
                                  backend="numpy")
 
 

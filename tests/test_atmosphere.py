@@ -15,6 +15,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from clsky import PRESETS, AtmosphereParameters, TableSettings, preset
+from clsky.atmosphere import EARTH_GROUND_ALBEDO
 from clsky.atmosphere import MIE_PHASE_METHODS, rayleigh_scattering_coefficient
 
 SCALAR_FIELDS = ("planet_radius", "top_radius", "rayleigh_scale_height", "mie_scale_height",
@@ -171,13 +172,15 @@ def test_replace_validates_again():
 
 # Presets and published constants -----------------------------------------------------------------
 
-def test_presets_differ_only_in_the_rayleigh_phase_and_ozone():
-    artistic = preset("atmosphere-plus").replace(ozone_column_du=300.0).to_dict()
+def test_presets_differ_only_in_the_rayleigh_phase_ozone_and_ground():
+    artistic = preset("atmosphere-plus").replace(ozone_column_du=300.0, ground_albedo=0.1).to_dict()
     physical = preset("physical").to_dict()
     assert artistic.pop("rayleigh_phase") == "modified_atmosphereplus"
     assert physical.pop("rayleigh_phase") == "rayleigh"
     assert artistic == physical
     assert preset("physical").ozone_column_du == 300.0 and preset("atmosphere-plus").ozone_column_du == 0.0
+    assert preset("physical").ground_albedo == EARTH_GROUND_ALBEDO == 0.1
+    assert preset("atmosphere-plus").ground_albedo == 0.0
     assert set(PRESETS) == {"atmosphere-plus", "physical"}
     assert preset("atmosphere-plus") == AtmosphereParameters()
 

@@ -29,7 +29,10 @@ def test_table_writes_a_loadable_file_and_raw_export(tmp_path):
     assert len(summary) == 1 and "built in" in summary[0] and "8x16x6" in summary[0]
     table = ScatteringTable.load(tmp_path / "sky.npz")
     assert table.settings.size == (8, 16, 6)
-    assert (tmp_path / "sky.bin").stat().st_size == 8 * 16 * 6 * 6 * 4
+    # the physical preset's ground (0.1) needs the physical scheme, its default without --mode: 6 factored
+    # channels of single scattering plus 3 of the higher orders
+    assert (table.settings.mode, table.settings.channels) == ("physical", 9)
+    assert (tmp_path / "sky.bin").stat().st_size == 8 * 16 * 6 * 9 * 4
     assert np.isfinite(table.data).all() and (table.data >= 0).all()
 
 

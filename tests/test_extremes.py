@@ -41,7 +41,7 @@ from clsky.multiple import gather_matrices
 from clsky.phase import mie_phase, rayleigh_phase
 from clsky.render import SUN_ANGULAR_RADIUS_DEG, SkyRenderer
 
-from conftest import require_dtype
+from conftest import black_preset, require_dtype
 
 logger = logging.getLogger(__name__)
 
@@ -51,8 +51,8 @@ METHODS = ("render_table", "render_raymarch")
 SMALL = TableSettings(size=(9, 33, 9))
 #: Default settings on a small grid: 16 sun nodes, nodes at -12.5 and -23.2 deg around -18 deg.
 MEDIUM = TableSettings(size=(16, 64, 16))
-BASE = {"atmosphere-plus": preset("atmosphere-plus"), "physical": preset("physical")}
-PHYSICAL = preset("physical")
+BASE = {"atmosphere-plus": black_preset("atmosphere-plus"), "physical": black_preset("physical")}
+PHYSICAL = black_preset("physical")
 RP = PHYSICAL.planet_radius
 HA = PHYSICAL.atmosphere_height
 COS_SUN_RADIUS = math.cos(math.radians(SUN_ANGULAR_RADIUS_DEG))

@@ -31,6 +31,8 @@ from clsky.table import TableFormatError
 from conftest import max_error_report
 
 PHYSICAL = preset("physical")
+#: The physical preset with a black ground: the atmosphere of the code before the ground.
+PHYSICAL_BLACK = PHYSICAL.replace(ground_albedo=0.0)
 PLUS = preset("atmosphere-plus")
 #: The physical preset with a bright ground (0.3, the upper end of the issue's range), so that the
 #: ground's light is a large part of every comparison below.
@@ -215,7 +217,7 @@ def test_table_file_round_trip_and_validation(tmp_path):
     path = table.save(tmp_path / "ground.npz")
     loaded = ScatteringTable.load(path)
     assert np.array_equal(loaded.ground_irradiance, table.ground_irradiance)
-    plain = ScatteringTable.build(PHYSICAL, SMALL.replace(orders=2), backend="numpy")
+    plain = ScatteringTable.build(PHYSICAL_BLACK, SMALL.replace(orders=2), backend="numpy")
     members = set(np.load(plain.save(tmp_path / "plain.npz")).files)
     assert "ground_irradiance" not in members       # a black ground's file has the members of before
     assert ScatteringTable.load(tmp_path / "plain.npz").ground_irradiance is None
@@ -230,7 +232,7 @@ def test_table_file_round_trip_and_validation(tmp_path):
         ScatteringTable(BRIGHT, table.settings, table.data, orders=table.orders, gathered=table.gathered,
                         ground_irradiance=bad)
     with pytest.raises(TableFormatError, match="ground_irradiance must be None"):
-        ScatteringTable(PHYSICAL, plain.settings, plain.data, orders=plain.orders, gathered=plain.gathered,
+        ScatteringTable(PHYSICAL_BLACK, plain.settings, plain.data, orders=plain.orders, gathered=plain.gathered,
                         ground_irradiance=table.ground_irradiance)
 
 
@@ -263,7 +265,7 @@ def upward_flux(table, sun_zenith, ctx):
 #: subsolar point is 3 % lower: the ground's light spreads radially over the larger sphere of the top,
 #: (Rp / Ra)^2 = 0.969, while the sun's beam does not; globally the power still balances. README.)
 CONSERVATIVE = PHYSICAL.replace(ozone_column_du=0.0, mie_extinction_ratio=1.0, planet_radius=1e9,
-                                top_radius=1e9 + 1e5)
+                                top_radius=1e9 + 1e5, ground_albedo=0.0)
 
 
 @pytest.mark.parametrize("sun_zenith", [0.0, 30.0])
@@ -372,8 +374,16 @@ def test_cli_ground_albedo(tmp_path, capsys):
                  "16", "6", "--orders", "2", "--progress", "none", "-o", str(out)]) == 0
     table = ScatteringTable.load(out)
     assert table.atmosphere.ground_albedo == 0.25 and table.ground_irradiance.shape == (6, 3)
+    # without --mode, an atmosphere with a ground (the physical preset's 0.1) gets the physical scheme
+    assert main(["table", "--preset", "physical", "--size", "8", "16", "6", "--orders", "2", "--progress", "none",
+                 "-o", str(tmp_path / "preset.npz")]) == 0
+    default = ScatteringTable.load(tmp_path / "preset.npz")
+    assert (default.settings.mode, default.atmosphere.ground_albedo) == ("physical", 0.1)
     for arguments, expected in ((["--ground-albedo", "1.5", "--mode", "physical"], "--ground-albedo must be in [0, 1]"),
-                                (["--ground-albedo", "0.2"], "--ground-albedo must be 0 with mode 'atmosphere-plus'")):
+                                (["--ground-albedo", "0.2", "--mode", "atmosphere-plus"],
+                                 "--ground-albedo must be 0 with mode 'atmosphere-plus'"),
+                                (["--preset", "physical", "--mode", "atmosphere-plus"],
+                                 "--ground-albedo must be 0 with mode 'atmosphere-plus'")):
         capsys.readouterr()
         status = main(["table", "--size", "8", "16", "6", "--progress", "none", "-o", str(tmp_path / "x.npz")]
                       + arguments)
@@ -405,7 +415,7 @@ def test_monte_carlo_with_a_black_ground_is_the_tracer_before():
     """A black ground draws no extra random numbers: the tracer's estimate of a ground-hitting view
     (from 2 km, looking down) is bit for bit that of the code before the ground (commit bfa2a93, NumPy
     2.4 on this machine)."""
-    result = montecarlo.simulate(PHYSICAL, 2000.0, -0.3, 0.5, 0.4, photons=3000, seed=4)
+    result = montecarlo.simulate(PHYSICAL_BLACK, 2000.0, -0.3, 0.5, 0.4, photons=3000, seed=4)
     digest = hashlib.sha256(np.concatenate([result.radiance, result.standard_error,
                                             result.orders.ravel()]).tobytes()).hexdigest()
     assert (result.real_collisions, result.null_collisions) == (1079, 2011)

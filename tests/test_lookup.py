@@ -4,9 +4,11 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from clsky import ScatteringTable, TableSettings, preset, reference
+from clsky import ScatteringTable, TableSettings, reference
 from clsky.lookup import TableLookupEngine
 from clsky.table import to_layout
+
+from conftest import black_preset
 
 SIZE = (9, 33, 7)
 
@@ -116,4 +118,4 @@ def test_invalid_queries_name_the_parameter(table, name, value):
 
 def test_bad_table_shape_is_refused(lookup_engines):
     with pytest.raises(ValueError, match="shape"):
-        lookup_engines["float64"].radiance(preset("physical"), np.zeros((4, 4, 4, 5)), 0, 0, 0, 0)
+        lookup_engines["float64"].radiance(black_preset("physical"), np.zeros((4, 4, 4, 5)), 0, 0, 0, 0)

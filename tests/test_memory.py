@@ -20,6 +20,8 @@ import pytest
 import clsky
 from clsky import resources
 from clsky.resources import (Allocation, InsufficientMemoryError, MemoryEstimate, MemoryLimits, Phase, check_memory,
+
+from conftest import black_preset
                              estimate_table_memory, format_bytes)
 
 SIZE_PATTERN = r"\d+(\.\d+)? (KiB|MiB|GiB|TiB)"
@@ -102,7 +104,7 @@ def test_api_refuses_before_any_work():
     settings = clsky.TableSettings(size=(4096, 4096, 16))
     start = time.perf_counter()
     with pytest.raises(InsufficientMemoryError, match=r"needs an OpenCL buffer of 16.0 GiB") as error:
-        clsky.ScatteringTable.build("physical", settings)
+        clsky.ScatteringTable.build(black_preset("physical"), settings)
     assert time.perf_counter() - start < 2.0
     assert "\n" not in str(error.value)
     assert isinstance(error.value, ValueError)
@@ -186,10 +188,10 @@ def test_host_arrays_estimate_matches_tracemalloc(mode):
     stopping test's temporaries are counted for every cell, only the bright ones are copied). The
     estimate is an upper bound within 25 %."""
     settings = MEASURED_SETTINGS.replace(mode=mode)
-    clsky.ScatteringTable.build("physical", settings.replace(size=(8, 16, 8)))    # programs built
+    clsky.ScatteringTable.build(black_preset("physical"), settings.replace(size=(8, 16, 8)))    # programs built
     tracemalloc.start()
     try:
-        clsky.ScatteringTable.build("physical", settings)
+        clsky.ScatteringTable.build(black_preset("physical"), settings)
         _, peak = tracemalloc.get_traced_memory()
     finally:
         tracemalloc.stop()
@@ -204,7 +206,8 @@ def test_host_arrays_estimate_matches_tracemalloc(mode):
 #: asked for, and prints the growth of the peak RSS [kB].
 _PEAK = ("import re, sys, clsky; kb = lambda key: int(re.search(key + r':\\s+(\\d+)', "
          "open('/proc/self/status').read()).group(1)); "
-         "build = lambda size: clsky.ScatteringTable.build('physical', clsky.TableSettings(size=size, "
+         "build = lambda size: clsky.ScatteringTable.build(clsky.preset('physical').replace(ground_albedo=0.0), "
+         "clsky.TableSettings(size=size, "
          "mode=sys.argv[4], orders=4)); build((8, 16, 8)); open('/proc/self/clear_refs', 'w').write('5'); "
          "base = kb('VmRSS'); build(tuple(map(int, sys.argv[1:4]))); print(kb('VmHWM') - base)")
 

@@ -17,6 +17,8 @@ from scipy import integrate, stats
 
 from clsky.atmosphere import AtmosphereParameters, preset
 from clsky.montecarlo import (
+
+from conftest import black_preset
     cornette_shanks_phase,
     henyey_greenstein_phase,
     optical_depth_to_top,
@@ -383,7 +385,7 @@ REAL_CASES = [
 
 @pytest.mark.parametrize("name, case", REAL_CASES)
 def test_single_scattering_matches_quadrature_in_the_default_atmosphere(name, case):
-    atmosphere = preset(name)
+    atmosphere = black_preset(name)
     reference = _single_scattering_reference(atmosphere, **case)
     radiance, error = sky_radiance(atmosphere, **case, photons=200_000, seed=21, single_only=True)
     assert np.all(reference > 0)
@@ -394,7 +396,7 @@ def test_single_scattering_matches_quadrature_in_the_default_atmosphere(name, ca
 
 def test_reference_quadrature_is_converged():
     """The test's deterministic reference changes by < 2e-4 relative when its grid is halved."""
-    atmosphere = preset("physical")
+    atmosphere = black_preset("physical")
     case = REAL_CASES[2][1]
     fine = _single_scattering_reference(atmosphere, **case)
     coarse = _single_scattering_reference(atmosphere, **case, nodes=3001)
@@ -404,7 +406,7 @@ def test_reference_quadrature_is_converged():
 # Whole-sky properties -------------------------------------------------------------------------------
 
 def test_multiple_scattering_adds_a_positive_amount():
-    atmosphere = preset("physical")
+    atmosphere = black_preset("physical")
     case = dict(altitude=0.0, cos_view=0.5, cos_sun=0.7, azimuth=0.5)
     single, single_error = sky_radiance(atmosphere, **case, photons=200_000, seed=31, single_only=True)
     full = simulate(atmosphere, **case, photons=200_000, seed=32)
@@ -423,7 +425,7 @@ def test_multiple_scattering_adds_a_positive_amount():
 
 
 def test_radiance_finite_nonnegative_in_various_geometries():
-    atmosphere = preset("atmosphere-plus")
+    atmosphere = black_preset("atmosphere-plus")
     for altitude, cos_view, cos_sun, azimuth in [(0.0, -0.3, 0.5, 0.0), (0.0, 0.0, 0.0, 0.0),
                                                  (100_000.0, 0.5, 0.5, 1.0), (100_000.0, -0.5, 0.5, 3.0),
                                                  (50_000.0, 1.0, -1.0, 0.0), (0.0, 1.0, 1.0, 0.0)]:
@@ -439,7 +441,7 @@ def test_radiance_finite_nonnegative_in_various_geometries():
 
 
 def test_sun_far_below_the_horizon_is_dark():
-    atmosphere = preset("physical")
+    atmosphere = black_preset("physical")
     day, _ = sky_radiance(atmosphere, 0.0, 0.5, 0.5, photons=20_000, seed=41)
     night, error = sky_radiance(atmosphere, 0.0, 0.5, -0.5, photons=200_000, seed=42)
     assert np.all(night >= 0)
@@ -447,7 +449,7 @@ def test_sun_far_below_the_horizon_is_dark():
 
 
 def test_seed_reproducibility_and_independence():
-    atmosphere = preset("physical")
+    atmosphere = black_preset("physical")
     a = sky_radiance(atmosphere, 0.0, 0.3, 0.6, 1.0, photons=20_000, seed=7)
     b = sky_radiance(atmosphere, 0.0, 0.3, 0.6, 1.0, photons=20_000, seed=7)
     c = sky_radiance(atmosphere, 0.0, 0.3, 0.6, 1.0, photons=20_000, seed=8)

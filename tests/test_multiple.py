@@ -26,7 +26,7 @@ from clsky.multiple import (SPECIES, MultipleScatteringEngine, first_gather_matr
                             gather_quadrature, phase_azimuth_integrals)
 from clsky.orders import BRIGHT_FRACTION, compute_orders, relative_addition
 
-from conftest import TOLERANCES, max_error_report, require_dtype
+from conftest import black_preset, TOLERANCES, max_error_report, require_dtype
 
 SMALL = TableSettings(size=(9, 33, 7), gather_theta_steps=64, gather_phi_steps=32)
 
@@ -140,7 +140,7 @@ def twin_inputs():
     def get(preset_name, variant):
         key = (preset_name, variant)
         if key not in cache:
-            atmosphere, settings = preset(preset_name), SETTINGS_VARIANTS[variant]
+            atmosphere, settings = black_preset(preset_name), SETTINGS_VARIANTS[variant]
             single = reference.single_scattering(atmosphere, settings)
             same = gather_matrices(atmosphere, settings)
             first = first_gather_matrices(atmosphere, settings)
@@ -225,7 +225,7 @@ def test_gather_device_input_and_overwritten_output(multiple_engine, twin_inputs
 @pytest.mark.parametrize("variant", sorted(SETTINGS_VARIANTS))
 def test_scatter_kernel_matches_twin(multiple_engine, twin_inputs, dtype, variant, preset_name):
     settings = SETTINGS_VARIANTS[variant].replace(dtype=dtype)
-    atmosphere = preset(preset_name)
+    atmosphere = black_preset(preset_name)
     gathered = twin_inputs(preset_name, variant)["gathered"]
     out = multiple_engine(settings).scatter(atmosphere, gathered).get()
     expected = reference.scatter(atmosphere, SETTINGS_VARIANTS[variant], gathered)
@@ -239,7 +239,7 @@ def test_scatter_kernel_matches_twin(multiple_engine, twin_inputs, dtype, varian
 def test_scatter_combine_species(multiple_engine, twin_inputs, dtype, preset_name):
     """combine_species: channels 0-2 and 3-5 both hold Rayleigh + Mie of the plain scatter; 6, 7 zero."""
     engine = multiple_engine(SMALL.replace(dtype=dtype))
-    atmosphere = preset(preset_name)
+    atmosphere = black_preset(preset_name)
     gathered = twin_inputs(preset_name, "default")["gathered"]
     plain = engine.scatter(atmosphere, gathered).get()
     combined = engine.scatter(atmosphere, gathered, combine_species=True).get()
@@ -256,7 +256,7 @@ def test_scatter_combine_species(multiple_engine, twin_inputs, dtype, preset_nam
 @pytest.mark.parametrize("orders", [4, "auto"])
 @pytest.mark.parametrize("mode", MODES)
 def test_compute_orders_backends_agree(orders_of, mode, orders):
-    atmosphere = preset("physical")
+    atmosphere = black_preset("physical")
     settings = SMALL.replace(mode=mode, orders=orders)
     kernel = orders_of(atmosphere, settings, "opencl")
     twin = orders_of(atmosphere, settings, "numpy")
@@ -283,9 +283,9 @@ ISOTROPIC_CASES = {
     # trapezoid is periodic (spectrally accurate). Measured at 256 x 128 steps: smooth phases 1.9e-5 raw,
     # 1.9e-10 after the term (O(h^4)); Cornette-Shanks g = -0.85, whose forward lobe (F(1) = 90.6) sits
     # on the endpoint, 5.7e-4 raw (not 1e-4: the lobe enlarges f'(0)), 4.9e-7 after the term.
-    "physical": (preset("physical"), {"rayleigh": (1e-4, 1e-9), "mie": (1e-3, 2e-6)}),
-    "physical_g0": (preset("physical").replace(mie_g=0.0), {"rayleigh": (1e-4, 1e-9), "mie": (1e-4, 1e-9)}),
-    "atmosphere-plus": (preset("atmosphere-plus"), {"rayleigh": (1e-4, 1e-9), "mie": (1e-3, 2e-6)}),
+    "physical": (black_preset("physical"), {"rayleigh": (1e-4, 1e-9), "mie": (1e-3, 2e-6)}),
+    "physical_g0": (black_preset("physical").replace(mie_g=0.0), {"rayleigh": (1e-4, 1e-9), "mie": (1e-4, 1e-9)}),
+    "atmosphere-plus": (black_preset("atmosphere-plus"), {"rayleigh": (1e-4, 1e-9), "mie": (1e-3, 2e-6)}),
 }
 
 
@@ -332,7 +332,7 @@ def test_gather_matrix_equals_literal_2d_trapezoid(preset_name, mapping):
     """M @ Ibar equals a direct 2D trapezoid over (Theta, Phi) per cell, rescaled so that a uniform field
     gathers to 4 pi mean(F) (literal(Ibar) x 4 pi mean / literal(1)). Same nodes and weights, summed in
     another order (the matrix factors the Phi sums): ~1e3 terms x u -> 1e-13; rtol 1e-12."""
-    atmosphere = preset(preset_name)
+    atmosphere = black_preset(preset_name)
     settings = TableSettings(size=(3, 17, 2), mapping=mapping, gather_theta_steps=48, gather_phi_steps=20)
     rng = np.random.default_rng(7)
     mu = view_cosines(17, mapping)
@@ -364,7 +364,7 @@ def test_gather_conserves_energy(multiple_engine, preset_name, profile):
     """For Ibar depending only on the view cosine, Integral_V Gbar dV = 4 pi mean(F) Integral Ibar d omega:
     since Integral_V F(dot(omega, V)) dV = 4 pi mean(F) for every omega, the energy scattered out of the
     incoming field is what the gathered field holds over all view directions."""
-    atmosphere = preset(preset_name)
+    atmosphere = black_preset(preset_name)
     function, bound = ENERGY_PROFILES[profile]
     settings = TableSettings(size=(2, 129, 2), mapping="linear")
     mu = view_cosines(129, "linear")
@@ -410,7 +410,7 @@ def test_first_gather_matrices_equal_literal_azimuth_average(preset_name, sun_co
     averaged over the azimuth of V, each phase's discrete integral rescaled to 4 pi x its mean (as the
     gather does). With psi on the Phi grid the discrete average separates exactly into K_s K_s' / (2 pi)
     (a periodic convolution), so only the summation order differs: rtol 1e-12."""
-    atmosphere = preset(preset_name)
+    atmosphere = black_preset(preset_name)
     settings = TableSettings(size=(2, 17, 9), gather_theta_steps=48, gather_phi_steps=20, sun_cos_range=sun_cos_range)
     first = first_gather_matrices(atmosphere, settings)
     mu_view, mu_sun = view_cosines(17, "nonlinear"), sun_cosines(9, sun_cos_range)
@@ -441,8 +441,8 @@ def test_sun_sub_range_table_matches_the_whole_axis():
     cos_scatter = np.clip(cos_view * cos_sun + np.sqrt((1 - cos_view**2) * (1 - cos_sun**2))
                           * np.cos(rng.uniform(0.0, np.pi, n)), -1.0, 1.0)
     for orders in (1, "auto"):
-        whole = ScatteringTable.build("physical", base.replace(orders=orders))
-        part = ScatteringTable.build("physical", base.replace(orders=orders, **sub_range))
+        whole = ScatteringTable.build(black_preset("physical"), base.replace(orders=orders))
+        part = ScatteringTable.build(black_preset("physical"), base.replace(orders=orders, **sub_range))
         ratio = part.radiance(altitude, cos_view, cos_sun, cos_scatter) / whole.radiance(altitude, cos_view, cos_sun,
                                                                                         cos_scatter)
         assert np.percentile(np.abs(ratio - 1.0), 95) < 1e-4, orders
@@ -452,7 +452,7 @@ def test_first_gather_reciprocity():
     """With an isotropic table, light scattered by s toward V after s' from the sun equals light scattered
     by s' toward the sun after s from V: rowsum M_{s,s'}[z, i] = rowsum M_{s',s}[i, z] (D = H, same
     mapping; exact in the discrete form up to rounding: rtol 1e-13)."""
-    atmosphere = preset("physical")
+    atmosphere = black_preset("physical")
     settings = TableSettings(size=(2, 17, 17), gather_theta_steps=64, gather_phi_steps=32)
     first = first_gather_matrices(atmosphere, settings)
     for s in SPECIES:
@@ -477,7 +477,7 @@ def test_first_gather_energy(pair):
     mean(F_s') = 4 pi for mean-1 phases, at every sun node (Integral_V F_s(dot(omega, V)) dV = 4 pi for
     every omega, then Integral F_s'(dot(omega, Sun)) d omega = 4 pi)."""
     settings = TableSettings(size=(2, 257, 5), mapping="linear")
-    matrices = first_gather_matrices(preset("physical"), settings)[pair]
+    matrices = first_gather_matrices(black_preset("physical"), settings)[pair]
     mu = view_cosines(257, "linear")
     average = np.trapezoid(matrices.sum(axis=2), mu, axis=1) / 2.0 / (4.0 * math.pi)
     print(f"{pair}: |average / 4 pi - 1| per sun node {np.abs(average - 1.0)}")
@@ -520,7 +520,7 @@ def test_scatter_of_uniform_radiance_matches_extinction(multiple_engine):
     shared: own geometry and optical depth). With 300 uniform view steps the trapezoid error is
     O(dtau^2), dtau <= 0.09 per step on the ground's horizontal ray: measured 7.9e-4; bound 2e-3.
     Without ozone: the identity needs every extinction but Mie's to scatter (ozone only absorbs)."""
-    atmosphere = preset("physical").replace(ozone_column_du=0.0)
+    atmosphere = black_preset("physical").replace(ozone_column_du=0.0)
     total, exact = scatter_of_unit_radiance(multiple_engine(SMALL.replace(view_steps=300, multiple_view_steps=None)), atmosphere, (9, 33, 7))
     print(max_error_report(total, exact, "unit radiance, 300 steps"))
     assert np.abs(total - exact).max() <= 2e-3
@@ -538,7 +538,7 @@ def test_scatter_does_not_amplify_uniform_radiance(multiple_engine, atmosphere_n
     the coarse quadrature's error (10 % at 30 steps). With 30 *uniform* steps the x20 atmosphere's
     horizontal rays have steps of optical depth ~17 whose first node the trapezoid weights dtau/2:
     radiance 1 scattered into 9.5 (see test_uniform_sampling_on_thick_atmosphere_is_reported_diverging)."""
-    atmosphere = preset("physical")
+    atmosphere = black_preset("physical")
     if atmosphere_name == "thick":
         atmosphere = thick(atmosphere)
     settings = SMALL.replace(multiple_view_steps=scatter_steps)
@@ -555,7 +555,7 @@ def test_no_mie_gives_zero_mie_channels(orders_of, mode, backend):
     """mie_scattering = 0: the Mie channels of every order are exactly 0. In the physical mode the higher
     orders (Rayleigh + Mie together) then cannot depend on the Mie phase at all: bit-identical for
     another g."""
-    atmosphere = preset("physical").replace(mie_scattering=0.0)
+    atmosphere = black_preset("physical").replace(mie_scattering=0.0)
     settings = SMALL.replace(mode=mode, orders=4)
     result = orders_of(atmosphere, settings, backend)
     assert np.all(result.orders[0][..., 3:6] == 0.0)
@@ -578,7 +578,7 @@ def test_orders_decrease_geometrically(orders_of, preset_name, mode):
     the previous one (ratio < 1 per wavelength), and from order 3 on the ratio is that of the operator's
     dominant mode: constant within 5 % (measured spread 1.2-2.5 %; ratios 0.10-0.13 r, 0.21-0.27 g,
     0.26-0.32 b)."""
-    atmosphere = preset(preset_name).replace(mie_extinction_ratio=1.0)
+    atmosphere = black_preset(preset_name).replace(mie_extinction_ratio=1.0)
     result = orders_of(atmosphere, SMALL.replace(mode=mode, orders=10))
     totals = np.array([channel_totals(order) for order in result.orders])
     ratios = totals[1:] / totals[:-1]
@@ -591,7 +591,7 @@ def test_orders_decrease_geometrically(orders_of, preset_name, mode):
 @pytest.mark.parametrize("mode", MODES)
 @pytest.mark.parametrize("preset_name", PRESETS)
 def test_orders_are_finite_and_non_negative(orders_of, preset_name, mode):
-    result = orders_of(preset(preset_name), SMALL.replace(mode=mode))
+    result = orders_of(black_preset(preset_name), SMALL.replace(mode=mode))
     assert result.record["converged"]
     for order in result.orders:
         assert np.all(np.isfinite(order)) and np.all(order >= 0.0)
@@ -602,7 +602,7 @@ def test_orders_are_finite_and_non_negative(orders_of, preset_name, mode):
 
 def test_default_size_orders_are_finite_and_non_negative(cl_context):
     """The full default 32 x 256 x 32 grid and 256 x 128 gather, physical mode, OpenCL (~3 s)."""
-    result = compute_orders(preset("physical"), TableSettings(mode="physical"), ctx=cl_context)
+    result = compute_orders(black_preset("physical"), TableSettings(mode="physical"), ctx=cl_context)
     assert result.record["converged"]
     combined = result.combined("physical")
     assert combined.shape == (32, 256, 32, 9)
@@ -619,7 +619,7 @@ THICK_SETTINGS = SMALL.replace(sampling="keller_bohn")   # resolves the opticall
 def test_thick_atmosphere_converges(orders_of, mode):
     """x20 scattering, Keller & Bohn sampling: 'auto' converges, with many more orders than the default
     atmosphere (measured 67 / 71 orders against 10; the ratio per order is ~0.88 blue)."""
-    atmosphere = preset("physical")
+    atmosphere = black_preset("physical")
     thick_result = orders_of(thick(atmosphere), THICK_SETTINGS.replace(mode=mode))
     default_result = orders_of(atmosphere, THICK_SETTINGS.replace(mode=mode))
     record = thick_result.record
@@ -635,7 +635,7 @@ def test_thick_atmosphere_converges(orders_of, mode):
 def test_uniform_sampling_on_thick_atmosphere_is_reported_diverging(cl_context):
     """30 uniform view steps on the x20 atmosphere: the orders grow (a quadrature artefact); the
     orchestrator stops early and says why instead of running to max_orders."""
-    result = compute_orders(thick(preset("physical")), SMALL.replace(sampling="uniform", max_orders=50),
+    result = compute_orders(thick(black_preset("physical")), SMALL.replace(sampling="uniform", max_orders=50),
                             ctx=cl_context)
     record = result.record
     print(record["reason"])
@@ -644,7 +644,7 @@ def test_uniform_sampling_on_thick_atmosphere_is_reported_diverging(cl_context):
 
 
 def test_thick_atmosphere_converges_with_default_sampling(cl_context):
-    result = compute_orders(thick(preset("physical")), SMALL, ctx=cl_context)
+    result = compute_orders(thick(black_preset("physical")), SMALL, ctx=cl_context)
     totals = np.array([channel_totals(order) for order in result.orders])
     print(f"per-order ratios:\n{np.array2string(totals[1:] / totals[:-1], precision=3)}")
     assert np.all(totals[2:] < totals[1:-1])
@@ -654,7 +654,7 @@ def test_thick_atmosphere_converges_with_default_sampling(cl_context):
 @pytest.mark.parametrize("mode", MODES)
 def test_max_orders_stops_without_converging(orders_of, mode):
     """max_orders = 3 on the thick atmosphere: stops after 3 orders, converged False, and says why."""
-    result = orders_of(thick(preset("physical")), THICK_SETTINGS.replace(mode=mode, max_orders=3))
+    result = orders_of(thick(black_preset("physical")), THICK_SETTINGS.replace(mode=mode, max_orders=3))
     record = result.record
     assert len(result.orders) == record["orders"] == 3
     assert record["converged"] is False
@@ -699,7 +699,7 @@ def own_relative_addition(added, running):
 @pytest.mark.parametrize("mode", MODES)
 def test_record_follows_the_definitions(orders_of, mode):
     """relative_additions and shares of the record, recomputed from the orders with own code."""
-    result = orders_of(preset("physical"), SMALL.replace(mode=mode, orders=5))
+    result = orders_of(black_preset("physical"), SMALL.replace(mode=mode, orders=5))
     single = result.orders[0]
     running = single.copy() if mode == "atmosphere-plus" else single[..., :3] + single[..., 3:]
     for k, new in enumerate(result.orders[1:]):
@@ -715,7 +715,7 @@ def test_record_follows_the_definitions(orders_of, mode):
 
 def test_table_round_trip_with_orders(cl_context, tmp_path):
     settings = SMALL.replace(mode="physical")
-    table = ScatteringTable.build("physical", settings, ctx=cl_context)
+    table = ScatteringTable.build(black_preset("physical"), settings, ctx=cl_context)
     assert table.data.shape == (7, 33, 9, 9)
     record = table.orders_record
     assert record["converged"] and len(table.orders) == record["orders"]

@@ -28,6 +28,8 @@ from clsky import ScatteringTable, TableSettings
 from clsky._files import StagedWrites, atomic_write, check_output, check_output_directory
 from anim.writers import FrameWriter, write_csv, write_json, write_png
 
+from conftest import black_preset
+
 NAME_MAX = os.pathconf(tempfile.gettempdir(), "PC_NAME_MAX")
 #: A big table: if an output check came after the build, the command would run for minutes (and the
 #: test time out) instead of exiting at once.
@@ -192,7 +194,7 @@ def test_frame_writer_checks_every_output_on_entering(tmp_path):
 
 @pytest.fixture(scope="module")
 def tiny_table(cl_context):
-    return ScatteringTable.build("physical", TableSettings(size=(4, 8, 4), orders=1), ctx=cl_context)
+    return ScatteringTable.build(black_preset("physical"), TableSettings(size=(4, 8, 4), orders=1), ctx=cl_context)
 
 
 def test_table_save_and_export_raw_check_first(tmp_path, tiny_table):

@@ -28,10 +28,10 @@ from clsky.multiple import MultipleScatteringEngine
 from clsky.render import SkyRenderer, sun_disc_radiance
 from clsky.single import SingleScatteringEngine
 
-from conftest import TOLERANCES, compute_single, max_error_report, require_dtype
+from conftest import black_preset, TOLERANCES, compute_single, max_error_report, require_dtype
 
-PHYSICAL = preset("physical")
-PLUS = preset("atmosphere-plus")
+PHYSICAL = black_preset("physical")
+PLUS = black_preset("atmosphere-plus")
 #: Ozone only: no Rayleigh, no Mie, 300 DU in the default tent.
 OZONE_ONLY = AtmosphereParameters(rayleigh_scattering=(0.0, 0.0, 0.0), mie_scattering=0.0, ozone_column_du=300.0)
 #: Ten times the ozone of the physical preset: ozone's share of tau dominates near the horizon.

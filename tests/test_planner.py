@@ -14,7 +14,9 @@ from clsky.planner import LOOKUP_ERROR, Scene, plan_scene, sun_axis, sun_margins
 from clsky.quality import QUALITY_LEVELS
 from clsky.render import SkyRenderer
 
-PHYSICAL = clsky.preset("physical")
+from conftest import black_preset
+
+PHYSICAL = black_preset("physical")
 #: acos(Rp / Ra): the central angle of a horizontal ray from the ground to the top (10.06 deg)
 GAMMA_GROUND = math.degrees(math.acos(PHYSICAL.planet_radius / PHYSICAL.top_radius))
 

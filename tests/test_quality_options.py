@@ -53,6 +53,7 @@ def test_animate_options_not_given_keep_the_config_defaults():
     default = AnimationConfig()
     assert (config.preset, config.mode, config.error_budget, config.quality) == \
         (default.preset, default.mode, default.error_budget, "high")
-    args = parser.parse_args(["animate", "--mode", "atmosphere-plus", "--error-budget", "0.2"])
+    # (the atmosphere-plus scheme needs a black ground: the physical preset's 0.1 is set to 0)
+    args = parser.parse_args(["animate", "--mode", "atmosphere-plus", "--ground-albedo", "0", "--error-budget", "0.2"])
     config = cli._config(args, output="sky.mp4")
-    assert (config.mode, config.error_budget) == ("atmosphere-plus", 0.2)
+    assert (config.mode, config.error_budget, config.ground_albedo) == ("atmosphere-plus", 0.2, 0.0)

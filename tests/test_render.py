@@ -23,7 +23,7 @@ from anim.cameras import FisheyeCamera, sun_direction
 from clsky import ScatteringTable, TableSettings, preset, reference
 from clsky.render import RAYMARCH_DEFAULTS, SUN_ANGULAR_RADIUS_DEG, SkyRenderer, sun_disc_radiance
 
-from conftest import TOLERANCES, max_error_report, require_dtype
+from conftest import black_preset, TOLERANCES, max_error_report, require_dtype
 
 logger = logging.getLogger(__name__)
 
@@ -188,7 +188,7 @@ def test_hazy_sky_brightest_pixel_is_next_to_the_sun(renderer, method):
     """20x the physical preset's Mie scattering (vertical Mie optical depth 0.048, a clear day's
     haze): the circumsolar aureole outshines every other sky pixel of the frame, horizon included
     (measured: luminance 8.2 at 1.5 deg from the sun, at most 1.7 near the horizon)."""
-    atmosphere = preset("physical")
+    atmosphere = black_preset("physical")
     hazy = atmosphere.replace(mie_scattering=20.0 * atmosphere.mie_scattering)
     sky_renderer = renderer("physical", atmosphere=hazy)
     directions, valid = FisheyeCamera(128).directions()
@@ -299,7 +299,7 @@ def test_disc_radiance_is_sunlight_over_the_solid_angle():
     is n_max w), which the trapezoid (512 Keller & Bohn steps) matches to its discretisation error
     (measured 3.2e-6 relative: rtol 1e-5)."""
     for name in ("physical", "atmosphere-plus"):
-        atmosphere = preset(name)
+        atmosphere = black_preset(name)
         solid_angle = 2.0 * math.pi * (1.0 - COS_SUN_RADIUS)
         light = np.asarray(atmosphere.incident_light)
         assert_allclose(sun_disc_radiance(atmosphere, sun_direction(30.0, 10.0), 150e3), light / solid_angle,
@@ -320,7 +320,7 @@ def test_disc_radiance_is_sunlight_over_the_solid_angle():
     (150e3, [90.0, 95.0, 100.0, 101.0, 102.0]),      # from space: T = 1 until the sun ray meets the limb
 ])
 def test_disc_radiance_decreases_toward_the_horizon(altitude, zeniths):
-    atmosphere = preset("physical")
+    atmosphere = black_preset("physical")
     radiance = np.array([sun_disc_radiance(atmosphere, sun_direction(z, 10.0), altitude) for z in zeniths])
     assert (radiance > 0.0).all()
     steps = np.diff(radiance, axis=0)

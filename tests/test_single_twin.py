@@ -15,7 +15,7 @@ from numpy.testing import assert_allclose
 from clsky import TableSettings, preset
 from clsky import reference
 
-from conftest import TOLERANCES, compute_single, max_error_report, require_dtype
+from conftest import black_preset, TOLERANCES, compute_single, max_error_report, require_dtype
 
 SMALL = TableSettings(size=(9, 33, 7))
 
@@ -37,13 +37,13 @@ SETTINGS_VARIANTS = {
 
 def dense_atmosphere():
     """The default atmosphere with 20x its Rayleigh scattering: optical depths up to ~240 near the horizon."""
-    base = preset("atmosphere-plus")
+    base = black_preset("atmosphere-plus")
     return base.replace(rayleigh_scattering=tuple(20 * np.array(base.rayleigh_scattering)))
 
 
 ATMOSPHERES = {
-    "atmosphere-plus": preset("atmosphere-plus"),
-    "physical": preset("physical"),
+    "atmosphere-plus": black_preset("atmosphere-plus"),
+    "physical": black_preset("physical"),
     "dense": dense_atmosphere(),
 }
 
@@ -89,15 +89,15 @@ def test_single_scattering_kernel_matches_twin(single_engine, single_reference, 
 def test_single_scattering_does_not_depend_on_the_phase_functions(single_engine):
     """Ibar^(1) carries no phase function (physics.md): both presets give the same table (the physical
     preset without its ozone, the presets' other difference)."""
-    artistic = compute_single(single_engine, preset("atmosphere-plus"), SMALL)
-    physical = compute_single(single_engine, preset("physical").replace(ozone_column_du=0.0), SMALL)
+    artistic = compute_single(single_engine, black_preset("atmosphere-plus"), SMALL)
+    physical = compute_single(single_engine, black_preset("physical").replace(ozone_column_du=0.0), SMALL)
     assert np.array_equal(artistic, physical)
 
 
 def test_one_engine_serves_any_size_and_mapping(single_engine):
     """Size and mapping are per-call values: an engine built for another size gives the same table."""
     engine = single_engine(TableSettings(size=(32, 256, 32)))
-    atmosphere = preset("atmosphere-plus")
+    atmosphere = black_preset("atmosphere-plus")
     for settings in (SMALL, SMALL.replace(mapping="linear", size=(5, 9, 3))):
         table = engine.compute(atmosphere, size=settings.size, mapping=settings.mapping)
         expected = reference.single_scattering(atmosphere, settings)
@@ -113,7 +113,7 @@ def test_near_ground_grid_matches_twin(single_engine, cl_context, precision):
     take the altitude.)"""
     require_dtype(cl_context, precision)
     settings = TableSettings(size=(32, 64, 2), dtype=precision)
-    atmosphere = preset("atmosphere-plus")
+    atmosphere = black_preset("atmosphere-plus")
     table = compute_single(single_engine, atmosphere, settings)
     expected = reference.single_scattering(atmosphere, settings.replace(dtype="float64"))
     assert_close_to_twin(table, expected, TOLERANCES[precision]["single_scattering"],
@@ -123,7 +123,7 @@ def test_near_ground_grid_matches_twin(single_engine, cl_context, precision):
 @pytest.mark.parametrize("preset_name", ["atmosphere-plus", "physical"])
 def test_default_size_table_is_finite_and_non_negative(single_engine, preset_name):
     """The full default 32 x 256 x 32 table (OpenCL only; ~0.7 s)."""
-    table = compute_single(single_engine, preset(preset_name), TableSettings())
+    table = compute_single(single_engine, black_preset(preset_name), TableSettings())
     assert table.shape == (32, 256, 32, 6)
     assert np.all(np.isfinite(table))
     assert np.all(table >= 0.0)
@@ -167,7 +167,7 @@ def test_optical_depth_kernel_matches_twin(transmittance_engine, dtype, steps, s
 
 
 def test_optical_depth_keeps_the_broadcast_shape(transmittance_engine):
-    atmosphere = preset("atmosphere-plus")
+    atmosphere = black_preset("atmosphere-plus")
     engine = transmittance_engine()
     altitude = np.array([[0.0], [1000.0]])
     tau = engine.optical_depth(atmosphere, altitude, np.array([0.0, 0.5, 1.0]), 10_000.0)
@@ -184,13 +184,13 @@ def test_optical_depth_keeps_the_broadcast_shape(transmittance_engine):
 def test_optical_depth_rejects_bad_segments(transmittance_engine, name, value):
     segment = {"altitude": 1000.0, "cos_zenith": 0.5, "length": 1000.0, name: value}
     with pytest.raises(ValueError, match=name):
-        transmittance_engine().optical_depth(preset("atmosphere-plus"), **segment)
+        transmittance_engine().optical_depth(black_preset("atmosphere-plus"), **segment)
 
 
 @pytest.mark.parametrize("size", [(9, 17), (64, 256), (2, 2)])
 @pytest.mark.parametrize("steps, sampling", [(30, "uniform"), (30, "keller_bohn"), (4, "keller_bohn")])
 def test_column_density_table_kernel_matches_twin(transmittance_engine, dtype, steps, sampling, size):
-    atmosphere = preset("atmosphere-plus")
+    atmosphere = black_preset("atmosphere-plus")
     table = transmittance_engine(steps, sampling, dtype).column_density_table(atmosphere, size)
     expected = reference.transmittance_table(atmosphere, size, steps, sampling)
     assert table.shape == (size[1], size[0], 2)

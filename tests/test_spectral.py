@@ -23,10 +23,10 @@ from clsky.errors import ParameterError
 from clsky.multiple import MultipleScatteringEngine
 from clsky.render import SkyRenderer, sun_disc_radiance
 
-from conftest import TOLERANCES, compute_single, max_error_report
+from conftest import black_preset, TOLERANCES, compute_single, max_error_report
 
-PHYSICAL = preset("physical")
-PLUS = preset("atmosphere-plus")
+PHYSICAL = black_preset("physical")
+PLUS = black_preset("atmosphere-plus")
 #: Ten times the haze of the physical preset, with the Angstrom exponent of continental aerosol (1.3).
 HAZY = PHYSICAL.replace(mie_scattering=2e-5, mie_angstrom_exponent=1.3)
 SMALL = TableSettings(size=(9, 33, 7))
@@ -406,7 +406,7 @@ def test_presets_are_bit_for_bit_the_code_before_per_channel_mie(cl_context, nam
     device = _cl.describe_device(cl_context.devices[0])
     if device != OLD_DEVICE:
         pytest.skip(f"hashes recorded on {OLD_DEVICE}, not {device}")
-    table = ScatteringTable.build(preset(name), TableSettings(size=(8, 32, 8), orders=3, mode=mode,
+    table = ScatteringTable.build(black_preset(name), TableSettings(size=(8, 32, 8), orders=3, mode=mode,
                                                               sun_transmittance=sun), ctx=cl_context)
     directions = np.array([[0, 0, 1.0], [0.6, 0, 0.8], [0, 0.995, -0.0998749]])
     directions /= np.linalg.norm(directions, axis=1)[:, None]

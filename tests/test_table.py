@@ -8,22 +8,24 @@ import pytest
 from clsky import ScatteringTable, TableFormatError, TableSettings, preset
 from clsky.table import FORMAT_VERSION, array_checksum
 
+from conftest import black_preset
+
 SETTINGS = TableSettings(size=(8, 16, 6))
 
 
 @pytest.fixture(scope="module")
 def table():
-    return ScatteringTable.build("physical", SETTINGS)
+    return ScatteringTable.build(black_preset("physical"), SETTINGS)
 
 
 def test_opencl_and_numpy_backends_agree(table):
-    twin = ScatteringTable.build("physical", SETTINGS, backend="numpy")
+    twin = ScatteringTable.build(black_preset("physical"), SETTINGS, backend="numpy")
     # kernel vs twin, see test_single_twin.py for the justification of 1e-12
     np.testing.assert_allclose(table.data, twin.data, rtol=1e-12, atol=1e-14 * twin.data.max())
 
 
 def test_notes_layout_averages_mie(table):
-    notes = ScatteringTable.build("physical", SETTINGS.replace(mie_layout="notes"))
+    notes = ScatteringTable.build(black_preset("physical"), SETTINGS.replace(mie_layout="notes"))
     assert notes.data.shape == (6, 16, 8, 4)
     np.testing.assert_array_equal(notes.data[..., :3], table.data[..., :3])
     np.testing.assert_allclose(notes.data[..., 3], table.data[..., 3:].mean(axis=-1), rtol=1e-15)
@@ -47,7 +49,7 @@ def test_save_never_overwrites_silently(table, tmp_path):
         other.save(path)
     assert path.read_bytes() == before
     other.save(path, overwrite=True)
-    assert ScatteringTable.load(path).atmosphere == preset("atmosphere-plus")
+    assert ScatteringTable.load(path).atmosphere == black_preset("atmosphere-plus")
 
 
 def test_interrupted_save_leaves_no_file(table, tmp_path, monkeypatch):
@@ -119,7 +121,7 @@ def test_raw_export_layout(table, tmp_path):
 
 def test_invalid_build_arguments(table):
     with pytest.raises(ValueError, match="backend"):
-        ScatteringTable.build("physical", SETTINGS, backend="cuda")
+        ScatteringTable.build(black_preset("physical"), SETTINGS, backend="cuda")
     with pytest.raises(ValueError, match="preset"):
         ScatteringTable.build("mars", SETTINGS)
     with pytest.raises(ValueError, match=r"\.npz"):

@@ -29,6 +29,8 @@ from clsky.lookup import TableLookupEngine, check_kernel_buffer
 from clsky.render import RAYMARCH_DEFAULTS, PreparedDirections, SkyRenderer
 from clsky.table import FORMAT_VERSION, array_checksum
 
+from conftest import black_preset
+
 TINY = TableSettings(size=(4, 8, 4), orders=3, view_steps=8, sun_steps=8, transmittance_size=(8, 16),
                      gather_theta_steps=16, gather_phi_steps=8)
 RAY = RAYMARCH_DEFAULTS.replace(view_steps=8, sun_steps=8, transmittance_size=(8, 16))
@@ -39,7 +41,7 @@ GRID = (4, 8, 4)      # (D, H, W) of TINY
 @pytest.fixture(scope="module")
 def tables():
     """mode -> a tiny table with three orders and a gathered sum (NumPy backend)."""
-    return {mode: ScatteringTable.build("physical", TINY.replace(mode=mode), backend="numpy") for mode in MODES}
+    return {mode: ScatteringTable.build(black_preset("physical"), TINY.replace(mode=mode), backend="numpy") for mode in MODES}
 
 
 @pytest.fixture
@@ -299,7 +301,7 @@ def test_data_as_text(saved):
 
 
 def test_float32_settings_accept_float32_data(tmp_path):
-    table = ScatteringTable.build("physical", TINY.replace(dtype="float32", orders=2), backend="numpy")
+    table = ScatteringTable.build(black_preset("physical"), TINY.replace(dtype="float32", orders=2), backend="numpy")
     assert table.data.dtype == np.float64       # the build is float64 whatever the kernels' dtype
     as_float32 = dataclasses.replace(table, data=table.data.astype(np.float32),
                                      gathered=table.gathered.astype(np.float32))
@@ -369,7 +371,7 @@ def test_construction_applies_the_same_checks(table, field, value, fragment):
 
 
 def test_save_refuses_a_table_edited_in_place(tmp_path):
-    table = ScatteringTable.build("physical", TINY.replace(orders=2), backend="numpy")
+    table = ScatteringTable.build(black_preset("physical"), TINY.replace(orders=2), backend="numpy")
     table.data[0, 0, 0, 0] = np.nan
     with pytest.raises(TableFormatError, match="NaN"):
         table.save(tmp_path / "sky.npz")
@@ -391,7 +393,7 @@ def test_build_refuses_a_table_with_nan(monkeypatch):
 
     monkeypatch.setattr(clsky.orders, "compute_orders", with_nan)
     with pytest.raises(TableFormatError, match="computed table is unusable: data holds 1 NaN"):
-        ScatteringTable.build("physical", TINY, backend="numpy")
+        ScatteringTable.build(black_preset("physical"), TINY, backend="numpy")
 
 
 def test_orders_are_kept_as_a_tuple(table):

@@ -26,10 +26,10 @@ from clsky.ray_quadrature import single_scattering_ray
 from clsky.render import RAYMARCH_DEFAULTS, SUN_ANGULAR_RADIUS_DEG, SkyRenderer, sun_disc_radiance
 from clsky.single import SingleScatteringEngine
 
-from conftest import TOLERANCES, max_error_report
+from conftest import black_preset, TOLERANCES, max_error_report
 
-PLUS = preset("atmosphere-plus")
-PHYSICAL = preset("physical")
+PLUS = black_preset("atmosphere-plus")
+PHYSICAL = black_preset("physical")
 BUDGET = 0.02
 #: A grid with nodes on the cases: altitude 100 km (u = x / 7)^2 -> x = 4: 32.65 km, x = 2: 8.16 km,
 #: x = 7: 100 km; view cosines (2 y / 32 - 1)^3: y = 0: -1, y = 4: -0.4219, y = 8: -0.125, y = 32: 1;
@@ -191,7 +191,7 @@ def test_ground_end_ray_march_matches_twin(cl_context, name, altitude):
     disc = sun_disc_radiance(table.atmosphere, sun, altitude)
     desired = reference.render_raymarch(table.atmosphere, ray, directions, sun, altitude, disc,
                                         math.cos(math.radians(SUN_ANGULAR_RADIUS_DEG)), table.gathered, settings,
-                                        physical=(name == "physical"))
+                                        physical=(name == "physical"), ground_irradiance=table.ground_irradiance)
     tolerance = TOLERANCES["float64"]["render_raymarch"]
     print(max_error_report(actual, desired, f"ground_end ray march {name} h={altitude:g} m"))
     assert np.isfinite(actual).all() and (actual >= 0.0).all() and actual.max() > 0.0
