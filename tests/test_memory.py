@@ -20,9 +20,9 @@ import pytest
 import clsky
 from clsky import resources
 from clsky.resources import (Allocation, InsufficientMemoryError, MemoryEstimate, MemoryLimits, Phase, check_memory,
+                             estimate_table_memory, format_bytes)
 
 from conftest import black_preset
-                             estimate_table_memory, format_bytes)
 
 SIZE_PATTERN = r"\d+(\.\d+)? (KiB|MiB|GiB|TiB)"
 #: Seconds a refusal may take: Python, NumPy, PyOpenCL and PoCL start in ~1.5 s on the 2-core machine

@@ -15,10 +15,8 @@ import numpy as np
 import pytest
 from scipy import integrate, stats
 
-from clsky.atmosphere import AtmosphereParameters, preset
+from clsky.atmosphere import AtmosphereParameters
 from clsky.montecarlo import (
-
-from conftest import black_preset
     cornette_shanks_phase,
     henyey_greenstein_phase,
     optical_depth_to_top,
@@ -31,6 +29,8 @@ from conftest import black_preset
     sky_radiance,
     transmittance_to_top,
 )
+
+from conftest import black_preset
 
 Z = 4.5
 RP, RA = 6_371_000.0, 6_471_000.0
