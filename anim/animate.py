@@ -70,8 +70,11 @@ class AnimationConfig:
     preset : str
         Atmosphere preset (:data:`clsky.PRESETS`).
     ground_albedo : float or None
-        Albedo of a Lambertian ground in [0, 1] instead of the preset's (None: the preset's); > 0
-        needs mode 'physical'.
+        Albedo of a Lambertian ground in [0, 1] instead of the preset's (None: the preset's, 0.1 for
+        physical, 0 for atmosphere-plus); > 0 needs mode 'physical'.
+    ozone_column_du : float or None
+        Ozone column [Dobson units] in [0, 1e5] instead of the preset's (None: the preset's, 300 for
+        physical, 0 for atmosphere-plus); 0 removes ozone (``clsky animate --ozone-column 0``).
     mode : {'atmosphere-plus', 'physical'}
         Scheme of the table's higher orders.
     error_budget : float
@@ -149,6 +152,7 @@ class AnimationConfig:
     preset: str = "physical"
     mode: str = "physical"
     ground_albedo: float | None = None
+    ozone_column_du: float | None = None
     error_budget: float = 0.01
     quality: str | None = None
     table_size: tuple | None = None
@@ -208,9 +212,10 @@ class AnimationConfig:
 
     @property
     def atmosphere(self) -> clsky.AtmosphereParameters:
-        """The preset's atmosphere, with ``ground_albedo`` if given."""
-        atmosphere = clsky.preset(self.preset)
-        return atmosphere if self.ground_albedo is None else atmosphere.replace(ground_albedo=self.ground_albedo)
+        """The preset's atmosphere, with ``ground_albedo`` and ``ozone_column_du`` if given."""
+        changes = {name: getattr(self, name) for name in ("ground_albedo", "ozone_column_du")
+                   if getattr(self, name) is not None}
+        return clsky.preset(self.preset).replace(**changes)
 
     def image_shape(self):
         """(width, height) of a rendered frame."""
@@ -309,7 +314,7 @@ _FIELD_CHECKS = {
     "fov_deg": _real(0.0, 179.0, " degrees", low_open=True), "heading_deg": _real(-360.0, 720.0, " degrees", optional=True),
     "pitch_deg": _real(-90.0, 90.0, " degrees"), "altitude": _real(0.0, 1e8, " m"), "method": _choice(METHODS),
     "preset": _choice(tuple(sorted(clsky.PRESETS))), "mode": _choice(("atmosphere-plus", "physical")),
-    "ground_albedo": _real(0.0, 1.0, optional=True),
+    "ground_albedo": _real(0.0, 1.0, optional=True), "ozone_column_du": _real(0.0, 1e5, " DU", optional=True),
     "samples": _integer(2, 4096, optional=True), "sampling": _choice(SAMPLINGS, optional=True),
     "error_budget": _real(0.0, 1.0, low_open=True),
     "quality": _choice(tuple(QUALITY_LEVELS), optional=True),
@@ -410,7 +415,7 @@ def make_renderer(config: AnimationConfig, plan: Plan | None = None, ctx=None, p
         base, settings = plan.atmosphere, plan.table
     else:
         size = tuple(config.table_size) if config.table_size is not None else quality(config).table.size
-        base, settings = config.preset, quality(config).table.replace(size=size, mode=config.mode)
+        base, settings = config.atmosphere, quality(config).table.replace(size=size, mode=config.mode)
     table = spectrum.SpectralTable.build(base, config.wavelengths, settings, ctx=ctx, progress=progress,
                                          keep_orders=False)
     return spectrum.SpectralRenderer(table, ray_settings(config), ctx=ctx), table

@@ -20,7 +20,7 @@ from clsky.errors import short
 FIELD_OPTIONS = {
     "frames": "--frames", "size": "--size", "camera": "--camera", "fov_deg": "--fov", "heading_deg": "--heading",
     "pitch_deg": "--pitch", "altitude": "--altitude", "method": "--method", "preset": "--preset", "mode": "--mode",
-    "ground_albedo": "--ground-albedo",
+    "ground_albedo": "--ground-albedo", "ozone_column_du": "--ozone-column",
     "table_size": ("--table-size W", "--table-size H", "--table-size D"), "samples": "--samples",
     "sampling": "--sampling", "error_budget": "--error-budget", "quality": "--quality", "start_elevation_deg": "--start-elevation",
     "max_elevation_deg": "--max-elevation", "location": "--location", "date": "--date",
@@ -31,7 +31,7 @@ FIELD_OPTIONS = {
 
 #: Options whose default is None so that, not given, the AnimationConfig's own default (or the
 #: quality level's / scene plan's choice) applies.
-UNSET_DEFAULTS = ("preset", "mode", "error_budget", "ground_albedo")
+UNSET_DEFAULTS = ("preset", "mode", "error_budget", "ground_albedo", "ozone_column_du")
 
 
 def _date(text):
@@ -64,8 +64,12 @@ def _add_scene_arguments(parser, frames=True):
     sky.add_argument("--mode", choices=["atmosphere-plus", "physical"],
                      help="scheme of the higher orders (default: physical)")
     sky.add_argument("--ground-albedo", type=float, metavar="A",
-                     help=f"albedo of a Lambertian ground in [0, 1], e.g. {EARTH_GROUND_ALBEDO:g} for the "
-                          f"Earth's mean (default: the preset's, 0; > 0 needs --mode physical)")
+                     help=f"albedo of a Lambertian ground in [0, 1] (default: the preset's, "
+                          f"{EARTH_GROUND_ALBEDO:g} for physical, the Earth's mean, 0 for atmosphere-plus; "
+                          f"> 0 needs --mode physical)")
+    sky.add_argument("--ozone-column", type=float, metavar="DU", dest="ozone_column_du",
+                     help="ozone column in Dobson units, >= 0 (default: the preset's, 300 for physical, 0 "
+                          "for atmosphere-plus)")
     sky.add_argument("--error-budget", type=float,
                      help="relative error allowed in the frames; picks the fastest quality level within it "
                           "(default: 0.01)")

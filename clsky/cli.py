@@ -143,8 +143,12 @@ def _add_table_arguments(parser):
     physics.add_argument("--preset", default="atmosphere-plus", choices=sorted(PRESETS),
                          help="atmosphere preset (default: %(default)s)")
     physics.add_argument("--ground-albedo", type=float, metavar="A",
-                         help=f"albedo of a Lambertian ground in [0, 1], e.g. {EARTH_GROUND_ALBEDO:g} for the "
-                              f"Earth's mean (default: the preset's, 0; > 0 needs --mode physical)")
+                         help=f"albedo of a Lambertian ground in [0, 1] (default: the preset's, "
+                              f"{EARTH_GROUND_ALBEDO:g} for physical, the Earth's mean, 0 for atmosphere-plus; "
+                              f"> 0 needs --mode physical)")
+    physics.add_argument("--ozone-column", type=float, metavar="DU", dest="ozone_column_du",
+                         help="ozone column in Dobson units, >= 0, in Bruneton 2017's tent (10 to 40 km) "
+                              "(default: the preset's, 300 for physical, 0 for atmosphere-plus)")
     grid = parser.add_argument_group("table")
     grid.add_argument("--quality", choices=list(QUALITY_LEVELS),
                       help="start from a named quality level's settings (clsky/quality.py); the options "
@@ -205,21 +209,20 @@ TABLE_OPTION_NAMES = {
     "max_orders": "--max-orders", "multiple_view_steps": "--multiple-view-steps",
     "gather_theta_steps": "--gather-steps THETA", "gather_phi_steps": "--gather-steps PHI",
     "sun_cos_range": "--sun-elevations", "quality": "--quality", "preset": "--preset",
-    "ground_albedo": "--ground-albedo",
+    "ground_albedo": "--ground-albedo", "ozone_column_du": "--ozone-column",
 }
 
 
 def table_atmosphere(args):
-    """The atmosphere of the table options: the --preset's, with --ground-albedo if given. UsageError
-    names the option of a bad value."""
+    """The atmosphere of the table options: the --preset's, with --ground-albedo and --ozone-column if
+    given. UsageError names the option of a bad value."""
     from .atmosphere import preset
     from .errors import ParameterError
 
-    atmosphere = preset(args.preset)
-    if args.ground_albedo is None:
-        return atmosphere
+    changes = {field: getattr(args, field) for field in ("ground_albedo", "ozone_column_du")
+               if getattr(args, field, None) is not None}
     try:
-        return atmosphere.replace(ground_albedo=args.ground_albedo)
+        return preset(args.preset).replace(**changes)
     except ParameterError as error:
         raise UsageError(option_message(error, TABLE_OPTION_NAMES)) from None
 

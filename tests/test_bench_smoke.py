@@ -34,6 +34,7 @@ HEADERS = {
                       "| doubled | day [%] |", "| table | sun axis | cells | build [s] | day [%] |"],
     "bench_view_nodes": ["| preset | sampling | rays | n | Ibar median | Ibar p95 | Ibar max |",
                          "| sampling | table [s] | ray march [ms] |"],
+    "bench_dusk": ["| sky | display | zenith sRGB (8 bit) | blue: b > g > r | linear b / g | linear g / r |"],
     "bench_spectral": ["| build | batches | wall [s] | CPU [s] | wall / three | load |",
                        "| mode against N = 6 | sun zenith [deg] | PSNR [dB] | mean Delta E 2000 | Bruneton's anchor |"],
 }

@@ -20,7 +20,7 @@ def lookup_engines():
 
 @pytest.fixture(scope="module", params=["atmosphere-plus", "physical"])
 def table(request):
-    return ScatteringTable.build(request.param, TableSettings(size=SIZE))
+    return ScatteringTable.build(black_preset(request.param), TableSettings(size=SIZE))
 
 
 def random_queries(n, seed=1, max_altitude=2.5e5):

@@ -415,3 +415,29 @@ def test_atmosphere_plus_is_bit_for_bit_the_code_before_ozone(cl_context, mode, 
         looked_up = renderer.render_table(directions, sun_direction, 0.0)
     hashes = (_sha256(table.data), _sha256(table.gathered), _sha256(marched), _sha256(looked_up))
     assert hashes == OLD_HASHES[(mode, sun)]
+
+
+# Command line ------------------------------------------------------------------------------------
+
+def test_ozone_column_option(tmp_path, capsys):
+    """--ozone-column DU sets the column on clsky table and in the animation's config (0 removes ozone,
+    the kernels then build without -DOZONE); a negative or non-finite column is refused naming the
+    option, one line, exit status 2, before any table is built."""
+    from anim.animate import AnimationConfig
+    from anim.cli import main
+
+    out = tmp_path / "ozone.npz"
+    assert main(["table", "--preset", "atmosphere-plus", "--ozone-column", "150", "--size", "8", "16", "6",
+                 "--orders", "1", "--progress", "none", "-o", str(out)]) == 0
+    assert ScatteringTable.load(out).atmosphere.ozone_column_du == 150.0
+    assert AnimationConfig(ozone_column_du=0.0).atmosphere == preset("physical").replace(ozone_column_du=0.0)
+    assert AnimationConfig().atmosphere.ozone_column_du == 300.0
+    for command in (["table", "--size", "8", "16", "6"], ["render"], ["animate"]):
+        for value, expected in (("-5", "--ozone-column must be"), ("nan", "--ozone-column")):
+            capsys.readouterr()
+            progress = [] if command[0] == "render" else ["--progress", "none"]
+            status = main(command + ["--ozone-column", value, *progress, "-o",
+                                     str(tmp_path / ("x" + {"table": ".npz", "render": ".png"}.get(command[0], ".mp4")))])
+            error = capsys.readouterr().err
+            assert status == 2 and expected in error and len(error.strip().splitlines()) == 1, (command, error)
+    assert not list(tmp_path.glob("x*"))

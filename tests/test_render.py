@@ -100,7 +100,8 @@ def twin(method, table, directions, sun, altitude):
         return reference.render_table(table.atmosphere, table.data, table.settings.mapping, directions, sun,
                                       altitude, disc, COS_SUN_RADIUS, table.settings.sun_cos_range)
     return reference.render_raymarch(table.atmosphere, RAY, directions, sun, altitude, disc, COS_SUN_RADIUS,
-                                     table.gathered, table.settings, physical=(table.settings.mode == "physical"))
+                                     table.gathered, table.settings, physical=(table.settings.mode == "physical"),
+                                     ground_irradiance=table.ground_irradiance)
 
 
 def beside_the_sun(sun_zenith_deg, angle_deg):
