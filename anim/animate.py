@@ -416,7 +416,8 @@ def make_renderer(config: AnimationConfig, plan: Plan | None = None, ctx=None, p
     else:
         size = tuple(config.table_size) if config.table_size is not None else quality(config).table.size
         base, settings = config.atmosphere, quality(config).table.replace(size=size, mode=config.mode)
-    table = spectrum.SpectralTable.build(base, config.wavelengths, settings, ctx=ctx, progress=progress,
+    table = spectrum.SpectralTable.build(base, config.wavelengths, _with_sampling(settings, config), ctx=ctx,
+                                         progress=progress,
                                          keep_orders=False)
     return spectrum.SpectralRenderer(table, ray_settings(config), ctx=ctx), table
 

@@ -260,9 +260,10 @@ def _table_settings(args, atmosphere):
     from .settings import TableSettings
 
     level = quality_level(args.quality) if args.quality else None
+    from .ground import default_settings
+
     # a reflecting ground needs the physical scheme (clsky/ground.py): the default for such an atmosphere
-    base = level.table if level else TableSettings(mode="physical" if atmosphere.has_ground else
-                                                   "atmosphere-plus")
+    base = level.table if level else default_settings(atmosphere)
     changes = {field: getattr(args, option) for field, option in SETTING_OPTIONS.items()
                if getattr(args, option) is not None}
     changes = {k: tuple(v) if isinstance(v, list) else v for k, v in changes.items()}

@@ -40,8 +40,14 @@ from .errors import ParameterError
 from .mapping import grid_coordinates
 from .settings import TableSettings
 
-__all__ = ["check_ground_mode", "direct_irradiance", "sky_irradiance", "reflected_radiance", "padded4",
+__all__ = ["check_ground_mode", "default_settings", "direct_irradiance", "sky_irradiance", "reflected_radiance", "padded4",
            "interpolate_sun_axis"]
+
+
+def default_settings(atmosphere: AtmosphereParameters) -> TableSettings:
+    """The default TableSettings for ``atmosphere``: the physical scheme for a reflecting ground (which
+    the atmosphere-plus scheme refuses: :func:`check_ground_mode`), else the plain defaults."""
+    return TableSettings(mode="physical") if atmosphere.has_ground else TableSettings()
 
 
 def check_ground_mode(atmosphere: AtmosphereParameters, settings: TableSettings):

@@ -171,9 +171,9 @@ def single_scattering_ray(atmosphere, altitude, cos_view, cos_sun, cos_scatter, 
     p0 = np.array([0.0, 0.0, r0])
     length, _ = _view_length(r0, cos_view, rp, ra)
     beta_r = np.asarray(atmosphere.rayleigh_scattering, dtype=np.float64)
-    beta_me = float(atmosphere.mie_scattering) / float(atmosphere.mie_extinction_ratio)
+    beta_m = _mie_scattering(atmosphere)
     beta_o = _ozone_extinction(atmosphere)
-    extinction = np.stack([beta_r, np.full(3, beta_me), beta_o])     # (species, channel)
+    extinction = np.stack([beta_r, beta_m / float(atmosphere.mie_extinction_ratio), beta_o])  # (species, channel)
 
     def rhs(s, y, lit):
         p = p0 + s * view
@@ -201,4 +201,15 @@ def single_scattering_ray(atmosphere, altitude, cos_view, cos_sun, cos_scatter, 
                              max_step=max((b - a) / 20.0, 1.0))
         y = solution.y[:, -1]
     scale = 1.0 / (4.0 * math.pi)
-    return np.concatenate([beta_r * scale * y[3:6], float(atmosphere.mie_scattering) * scale * y[6:9]])
+    return np.concatenate([beta_r * scale * y[3:6], beta_m * scale * y[6:9]])
+
+
+def _mie_scattering(atmosphere) -> np.ndarray:
+    """beta_M per channel [1/m]: Angstrom's law beta_M (lambda / lambda_0)^-alpha from the fields
+    ``mie_angstrom_exponent`` alpha (0: every channel beta_M) and ``mie_reference_wavelength``."""
+    beta = float(atmosphere.mie_scattering)
+    alpha = float(getattr(atmosphere, "mie_angstrom_exponent", 0.0))
+    if alpha == 0.0:
+        return np.full(3, beta)
+    wavelengths = np.asarray(atmosphere.wavelengths, dtype=np.float64)
+    return beta * np.power(wavelengths / float(atmosphere.mie_reference_wavelength), -alpha)

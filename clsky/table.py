@@ -282,7 +282,10 @@ class ScatteringTable:
         """
         if isinstance(atmosphere, str):
             atmosphere = preset(atmosphere)
-        settings = settings or TableSettings()
+        if settings is None:
+            from .ground import default_settings
+
+            settings = default_settings(atmosphere)
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
         from .orders import compute_orders

@@ -368,6 +368,14 @@ def test_black_ground_is_bit_for_bit_the_code_before(cl_context):
 
 # Command line ------------------------------------------------------------------------------------
 
+def test_default_settings_follow_the_ground():
+    """Without settings, a table of an atmosphere with a ground gets the physical scheme (the only one
+    that takes a ground); a black ground keeps the plain defaults."""
+    assert ground.default_settings(PHYSICAL) == TableSettings(mode="physical")
+    assert ground.default_settings(PHYSICAL_BLACK) == TableSettings()
+    assert ground.default_settings(preset("atmosphere-plus")) == TableSettings()
+
+
 def test_cli_ground_albedo(tmp_path, capsys):
     out = tmp_path / "ground.npz"
     assert main(["table", "--preset", "physical", "--mode", "physical", "--ground-albedo", "0.25", "--size", "8",

@@ -73,6 +73,17 @@ def test_reference_matches_the_closed_form_of_a_haze_column():
     assert np.all(ibar[:3] == 0.0)
 
 
+def test_reference_follows_the_angstrom_law():
+    """The same closed form per channel with Angstrom's law (alpha = 2): beta_M and beta_M^e scale as
+    (lambda / lambda_0)^-2 in each channel; the yardstick must not fall back to the scalar beta_M."""
+    haze = PLUS.replace(rayleigh_scattering=(0.0, 0.0, 0.0), mie_angstrom_exponent=2.0)
+    scale = (np.asarray(haze.wavelengths) / haze.mie_reference_wavelength) ** -2.0
+    beta, beta_e = haze.mie_scattering * scale, haze.mie_scattering / haze.mie_extinction_ratio * scale
+    height, top = haze.mie_scale_height, haze.atmosphere_height
+    exact = beta / (4 * math.pi) * (-np.expm1(-2 * beta_e * height * (1 - math.exp(-top / height))) / (2 * beta_e))
+    assert_allclose(single_scattering_ray(haze, top, -1.0, 1.0, -1.0)[3:], exact, rtol=1e-8)
+
+
 @pytest.mark.parametrize("atmosphere", [PLUS, PHYSICAL], ids=["atmosphere-plus", "physical"])
 def test_reference_is_converged(atmosphere):
     """Tighter ODE tolerance and finer sun-leg panels change the reference by < 1e-7 relative
