@@ -48,6 +48,9 @@ SKIES = [("with ozone, 3 wavelengths", "O3, 3 wl", {}),
 DISPLAYS = [("old: notes' curve, EV 0", "old", {"tone_map": "atmosphere-plus", "exposure": 0.0}),
             ("notes' curve, auto-exposure", "curve", {"tone_map": "atmosphere-plus", "auto_exposure": True}),
             ("new: luminance-reinhard, auto-exposure", "new", {"tone_map": "luminance-reinhard", "auto_exposure": True})]
+#: "Blue" means b > g > r in the linear values by at least 2 % each: about the Weber fraction (1-2 %) of
+#: a just visible difference, so that r = g within rounding (a grey-violet) does not count as blue.
+BLUE_MARGIN = 1.02
 PICTURE = pathlib.Path(__file__).resolve().parent.parent / "docs" / "dusk.png"
 
 
@@ -104,14 +107,15 @@ def main():
 
     lines = [f"Dusk, sun {SUN_ELEVATION_DEG:g} deg, physical preset, all-sky fisheye of {size} px from the ground "
              f"(ray march, default quality, table planned for this sun); zenith = mean over {ZENITH_RADIUS_DEG:g} "
-             f"deg around it. Measured {datetime.date.today()} on {machine()}: {wall:.0f} s wall, {cpu:.0f} s "
+             f"deg around it; blue = b > g > r by at least {100 * (BLUE_MARGIN - 1):.0f} % each in the linear values. Measured {datetime.date.today()} on {machine()}: {wall:.0f} s wall, {cpu:.0f} s "
              f"process CPU, load average {load:.2f} before (bench/bench_dusk.py). Linear values: I_I units with "
              f"3 wavelengths (r, g, b at 650, 510, 475 nm), linear sRGB cd/m^2 with N = 15.", "",
              "| sky | display | zenith sRGB (8 bit) | blue: b > g > r | linear b / g | linear g / r |",
              "|---|---|---|---|---:|---:|"]
     for sky, shown, pixel, linear in rows:
         r, g, b = pixel
-        lines.append(f"| {sky} | {shown} | ({r:.0f}, {g:.0f}, {b:.0f}) | {'yes' if b > g > r else 'no'} | "
+        blue = linear[2] > BLUE_MARGIN * linear[1] and linear[1] > BLUE_MARGIN * linear[0]
+        lines.append(f"| {sky} | {shown} | ({r:.0f}, {g:.0f}, {b:.0f}) | {'yes' if blue else 'no'} | "
                      f"{linear[2] / linear[1]:.3f} | {linear[1] / linear[0]:.3f} |")
     table = "\n".join(lines)
     print(table)
