@@ -53,6 +53,10 @@ channels are independent photon populations, processed together in one vectorise
    w *= (mu_R + mu_M) / mu_t * mean(F_s) (the single-scattering albedo; mean F_s = 1 except for the
    notes' modified Rayleigh phase, whose mean 1.2533 adds energy, as the notes' phase does).
 
+:func:`single_scattering` is the deterministic counterpart of ``max_orders=1``: the same phases and
+transmittances integrated along the view ray by Gauss-Legendre quadrature (no noise; the planet's
+shadow edge located and made a panel edge).
+
 The per-photon sum of contributions is an unbiased estimate of the radiance per unit irradiance; the
 standard error is the sample standard deviation over photons / sqrt(photons). The only bias is the
 truncation at ``max_orders`` (default :data:`DEFAULT_MAX_ORDERS` = 64 when ``max_orders`` is None):
