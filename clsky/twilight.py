@@ -30,6 +30,7 @@ import numpy as np
 
 from . import montecarlo
 from .atmosphere import AtmosphereParameters, preset
+from .errors import ParameterError, is_real_number
 from .planner import Scene, plan_scene
 from .render import SkyRenderer
 from .table import ScatteringTable
@@ -54,9 +55,21 @@ def black_ground_without_ozone(atmosphere="physical") -> AtmosphereParameters:
     return atmosphere.replace(ozone_column_du=0.0, ground_albedo=0.0)
 
 
+def _check_view(view):
+    if not isinstance(view, str) or view not in VIEWS:
+        raise ParameterError("view", f"one of {list(VIEWS)}", view)
+    return VIEWS[view]
+
+
+def _check_sun(elevation_deg):
+    if not is_real_number(elevation_deg) or not -90.0 <= float(elevation_deg) <= 90.0:
+        raise ParameterError("sun_elevation_deg", "a sun elevation in [-90, 90] deg", elevation_deg)
+    return float(elevation_deg)
+
+
 def sun_direction(elevation_deg: float) -> np.ndarray:
     """Unit vector to the sun at ``elevation_deg`` [deg], azimuth 0 (the +x axis; z is the zenith)."""
-    e = math.radians(elevation_deg)
+    e = math.radians(_check_sun(elevation_deg))
     return np.array([math.cos(e), 0.0, math.sin(e)])
 
 
@@ -65,7 +78,7 @@ def view_directions(views=None) -> np.ndarray:
     names = list(VIEWS) if views is None else list(views)
     out = np.empty((len(names), 3))
     for i, name in enumerate(names):
-        elevation, azimuth = (math.radians(a) for a in VIEWS[name])
+        elevation, azimuth = (math.radians(a) for a in _check_view(name))
         out[i] = (math.cos(elevation) * math.cos(azimuth), math.cos(elevation) * math.sin(azimuth),
                   math.sin(elevation))
     out[np.abs(out) < 1e-15] = 0.0
@@ -124,10 +137,21 @@ def monte_carlo(atmosphere, sun_elevation_deg, view, *, target=0.01, batch=200_0
         Seed of the first batch.
     max_orders : int or None
         The tracer's order cap (1: single scattering).
+
+    Raises
+    ------
+    ValueError
+        (:class:`~clsky.errors.ParameterError`) naming view, sun_elevation_deg, target, batch or
+        max_photons when outside its valid range.
     """
-    elevation, azimuth = VIEWS[view]
+    elevation, azimuth = _check_view(view)
     cos_view = math.sin(math.radians(elevation))
-    cos_sun = math.sin(math.radians(sun_elevation_deg))
+    cos_sun = math.sin(math.radians(_check_sun(sun_elevation_deg)))
+    if not is_real_number(target) or not 0.0 <= target < 1.0:
+        raise ParameterError("target", "a relative standard error in [0, 1)", target)
+    for name, value in (("batch", batch), ("max_photons", max_photons)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 2:
+            raise ParameterError(name, "an integer >= 2", value)
     means, variances, truncated = [], [], []
     while True:
         result = montecarlo.simulate(atmosphere, 0.0, cos_view, cos_sun, math.radians(azimuth), photons=batch,
@@ -146,9 +170,10 @@ def monte_carlo(atmosphere, sun_elevation_deg, view, *, target=0.01, batch=200_0
 def single_scattering(atmosphere, sun_elevation_deg, view) -> np.ndarray:
     """The tracer's deterministic single scattering (:func:`clsky.montecarlo.single_scattering`) for
     one view from the ground, per unit irradiance [1/sr], shape (3,)."""
-    elevation, azimuth = VIEWS[view]
+    elevation, azimuth = _check_view(view)
     return montecarlo.single_scattering(atmosphere, 0.0, math.sin(math.radians(elevation)),
-                                        math.sin(math.radians(sun_elevation_deg)), math.radians(azimuth))
+                                        math.sin(math.radians(_check_sun(sun_elevation_deg))),
+                                        math.radians(azimuth))
 
 
 def ray_march(atmosphere, sun_elevation_deg, views=None, *, quality="default", single=False, ctx=None):

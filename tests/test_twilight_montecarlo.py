@@ -61,6 +61,18 @@ def test_single_scattering_quadrature_is_converged(atmosphere):
         np.testing.assert_allclose(coarse, fine, rtol=1e-9, atol=0)
 
 
+@pytest.mark.parametrize("call, name", [
+    (lambda a: twilight.monte_carlo(a, 5.0, "north"), "view"),
+    (lambda a: twilight.single_scattering(a, 95.0, "zenith"), "sun_elevation_deg"),
+    (lambda a: twilight.monte_carlo(a, 5.0, "zenith", target=1.5), "target"),
+    (lambda a: twilight.monte_carlo(a, 5.0, "zenith", batch=1), "batch"),
+    (lambda a: twilight.view_directions(["zenith", "up"]), "view"),
+])
+def test_bad_input_names_the_parameter(atmosphere, call, name):
+    with pytest.raises(ValueError, match=f"^{name} must be"):
+        call(atmosphere)
+
+
 def test_single_scattering_quadrature_rejects_rays_into_the_ground(atmosphere):
     with pytest.raises(ValueError, match="hits the ground"):
         montecarlo.single_scattering(atmosphere, 1000.0, -0.5, 0.5)
