@@ -53,6 +53,10 @@ channels are independent photon populations, processed together in one vectorise
    w *= (mu_R + mu_M) / mu_t * mean(F_s) (the single-scattering albedo; mean F_s = 1 except for the
    notes' modified Rayleigh phase, whose mean 1.2533 adds energy, as the notes' phase does).
 
+:func:`single_scattering` is the deterministic counterpart of ``max_orders=1``: the same phases and
+transmittances integrated along the view ray by Gauss-Legendre quadrature (no noise; the planet's
+shadow edge located and made a panel edge).
+
 The per-photon sum of contributions is an unbiased estimate of the radiance per unit irradiance; the
 standard error is the sample standard deviation over photons / sqrt(photons). The only bias is the
 truncation at ``max_orders`` (default :data:`DEFAULT_MAX_ORDERS` = 64 when ``max_orders`` is None):
@@ -86,6 +90,7 @@ __all__ = [
     "simulate",
     "sky_radiance",
     "absolute_sky_radiance",
+    "single_scattering",
 ]
 
 #: Scattering-order cap used when ``max_orders`` is None (truncation reported by :func:`simulate`).
@@ -864,3 +869,87 @@ def absolute_sky_radiance(atmosphere, altitude, cos_view, cos_sun, azimuth=0.0, 
     radiance, error = sky_radiance(atmosphere, altitude, cos_view, cos_sun, azimuth, **options)
     light = np.asarray(atmosphere.incident_light, dtype=np.float64)
     return radiance * light, error * light
+
+
+# Deterministic single scattering -------------------------------------------------------------------
+
+def _sun_blocked(points, sun, rp, ra):
+    """True where the planet blocks the sun ray from ``points`` (n, 3) [m] (same test as the tracer's NEE)."""
+    radii = np.linalg.norm(points, axis=1)
+    _, blocked = optical_depth_to_top(radii, (points @ sun) / radii, rp, ra, (1.0, 1.0), nodes=2)
+    return blocked
+
+
+def single_scattering(atmosphere, altitude, cos_view, cos_sun, azimuth=0.0, *, step=100.0, nodes=8):
+    """Single-scattering radiance per unit solar irradiance [1/sr] by deterministic quadrature.
+
+    L1 = Integral_0^L sum_s beta_s rho_s(x) F_s(dot(Sun, V)) / (4 pi) T(x0, x) T_sun(x) ds along the
+    view ray (x0 the observer, L its distance to the top), with the tracer's phase functions and
+    transmittances (:func:`transmittance_to_top`; T(x0, x) = T_top(x0) / T_top(x)): the quantity the
+    tracer estimates with ``max_orders=1``, without its noise. Gauss-Legendre with ``nodes`` nodes on
+    panels of ``step`` metres along the ray; T_sun jumps to 0 where the planet shadows the ray, and
+    the jump is located by bisection (to 1e-6 m) and made a panel edge, so every panel's integrand is
+    smooth.
+
+    Parameters
+    ----------
+    atmosphere : AtmosphereParameters
+    altitude : float
+        Observer altitude [m].
+    cos_view, cos_sun : float
+        Cosines of the view and sun zenith angles.
+    azimuth : float, optional
+        Sun-view azimuth [rad].
+    step : float, optional
+        Panel length [m] (100 m: 12 panels per Mie scale height of 1.2 km).
+    nodes : int, optional
+        Gauss-Legendre nodes per panel.
+
+    Returns
+    -------
+    numpy.ndarray
+        Shape (3,) [1/sr].
+
+    Raises
+    ------
+    ValueError
+        If the view ray hits the ground (the ground's reflection is not integrated here).
+    """
+    rp = float(atmosphere.planet_radius)
+    ra = float(atmosphere.top_radius)
+    r0 = rp + float(altitude)
+    view, sun = _observer_frame(cos_view, cos_sun, azimuth)
+    if np.isfinite(ray_sphere_entry(np.array([r0]), np.array([view[2]]), rp)[0]):
+        raise ValueError("single_scattering integrates rays that reach the top: the view ray hits the ground")
+    length = float(ray_sphere_exit(np.array([r0]), np.array([view[2]]), ra)[0])
+    origin = np.array([0.0, 0.0, r0])
+    edges = np.linspace(0.0, length, max(2, int(math.ceil(length / float(step))) + 1))
+    blocked = _sun_blocked(origin + edges[:, None] * view, sun, rp, ra)
+    jumps = []
+    for i in np.flatnonzero(blocked[1:] != blocked[:-1]):
+        lo, hi = edges[i], edges[i + 1]
+        while hi - lo > 1e-6:
+            mid = 0.5 * (lo + hi)
+            if _sun_blocked((origin + mid * view)[None, :], sun, rp, ra)[0] == blocked[i]:
+                lo = mid
+            else:
+                hi = mid
+        jumps.append(0.5 * (lo + hi))
+    edges = np.unique(np.concatenate([edges, jumps]))
+    x, w = np.polynomial.legendre.leggauss(int(nodes))
+    half = 0.5 * np.diff(edges)
+    s = (0.5 * (edges[1:] + edges[:-1]))[:, None] + half[:, None] * x
+    weights = (half[:, None] * w).ravel()
+    points = origin + s.ravel()[:, None] * view
+    radii = np.linalg.norm(points, axis=1)
+    h = radii - rp
+    t_sun = transmittance_to_top(atmosphere, radii, (points @ sun) / radii)
+    t_view = (transmittance_to_top(atmosphere, np.array([r0]), np.array([view[2]]))
+              / transmittance_to_top(atmosphere, radii, (points @ view) / radii))
+    c = float(view @ sun)
+    beta_r = np.asarray(atmosphere.rayleigh_scattering, dtype=np.float64)
+    scatter = (np.exp(-h / float(atmosphere.rayleigh_scale_height))[:, None] * beta_r
+               * rayleigh_phase(c, atmosphere.rayleigh_phase)
+               + np.exp(-h / float(atmosphere.mie_scale_height))[:, None] * _mie_scattering(atmosphere)
+               * cornette_shanks_phase(c, float(atmosphere.mie_g)))
+    return (weights[:, None] * scatter * t_view * t_sun).sum(axis=0) / _FOUR_PI

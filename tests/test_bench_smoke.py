@@ -37,9 +37,11 @@ HEADERS = {
     "bench_dusk": ["| sky | display | zenith sRGB (8 bit) | blue: b > g > r | linear b / g | linear g / r |"],
     "bench_spectral": ["| build | batches | wall [s] | CPU [s] | wall / three | load |",
                        "| mode against N = 6 | sun zenith [deg] | PSNR [dB] | mean Delta E 2000 | Bruneton's anchor |"],
+    "bench_twilight": ["| | +5 deg | -6 deg |",
+                       "| sun [deg] | view | paths | SE [%] | all orders [%] | all orders [SE] | single: paths |"],
 }
 #: Measured wall time of each case (pytest, 2 shared cores): single 3-5 s, orders 5-7 s, montecarlo 10-12 s,
-#: render 9-10 s; spectral 5 s; accuracy 41 s (the four 'draft' reference tables: 21 s), quality 109 s (the reference
+#: render 9-10 s; spectral 5 s; twilight 11 s; accuracy 41 s (the four 'draft' reference tables: 21 s), quality 109 s (the reference
 #: and one doubled group).
 SLOW = {"bench_accuracy", "bench_quality"}
 

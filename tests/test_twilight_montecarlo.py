@@ -1,0 +1,177 @@
+"""Twilight against the independent Monte Carlo (issue 11, item 1): what is true today, pinned.
+
+Ground observer, the zenith and 4 deg up toward, across and away from the sun, the sun at +5 ... -6 deg
+(clsky/twilight.py), black ground and no ozone (issue 11's case). The yardsticks share no code with the
+tables or the renderer: the path tracer clsky/montecarlo.py and its deterministic single-scattering
+quadrature (montecarlo.single_scattering, same module, imports nothing from clsky).
+
+What holds today (README, "Twilight against Monte Carlo"): the ray march's single scattering agrees
+down to -6 deg; its full radiance is within 5 % at +5 deg; with the sun below the horizon the higher
+orders are far too bright (the canonical-frame azimuth average of issue 11). The last two are
+asserted as known failures (``xfail(strict=True)``) at the bars issue 11 sets for the fix (item 2):
+when the fix lands they pass, and strict xfail turns that into a failure to be flipped.
+"""
+
+import ast
+import math
+import pathlib
+
+import numpy as np
+import pytest
+
+from clsky import montecarlo, twilight
+
+
+@pytest.fixture(scope="module")
+def atmosphere():
+    return twilight.black_ground_without_ozone()
+
+
+@pytest.fixture(scope="module")
+def single_marched(atmosphere):
+    """{sun elevation: (4, 3)} single scattering of the ray march at the default level (planner's table
+    without higher orders: 32 x 256 x 4 nodes, 48 Keller & Bohn samples per ray); ~1.5 s each."""
+    return {e: twilight.ray_march(atmosphere, e, single=True)[0] for e in twilight.SUN_ELEVATIONS_DEG}
+
+
+# The deterministic yardstick -------------------------------------------------------------------------
+
+def test_the_yardstick_imports_nothing_from_clsky():
+    """clsky/montecarlo.py (tracer and quadrature) imports only the standard library and NumPy, so it
+    shares no code with the tables and the renderer it checks."""
+    tree = ast.parse(pathlib.Path(montecarlo.__file__).read_text())
+    imported = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            imported |= {alias.name.split(".")[0] for alias in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            imported.add("." if node.level else node.module.split(".")[0])
+    assert imported == {"__future__", "dataclasses", "math", "numpy"}, imported
+
+
+def test_single_scattering_quadrature_is_converged(atmosphere):
+    """Halving the panels and raising the Gauss-Legendre nodes from 8 to 12 changes the quadrature by
+    < 1e-9 relative (measured 2e-14 ... 7e-14), at a sunlit and at a half-shadowed twilight view: the
+    shadow edge is a panel edge, so the integrand is smooth on every panel."""
+    for sun, (elevation, azimuth) in ((5.0, twilight.VIEWS["toward"]), (-6.0, twilight.VIEWS["across"])):
+        args = (atmosphere, 0.0, math.sin(math.radians(elevation)), math.sin(math.radians(sun)), math.radians(azimuth))
+        coarse = montecarlo.single_scattering(*args)
+        fine = montecarlo.single_scattering(*args, step=50.0, nodes=12)
+        assert np.all(coarse > 0)
+        np.testing.assert_allclose(coarse, fine, rtol=1e-9, atol=0)
+
+
+@pytest.mark.parametrize("call, name", [
+    (lambda a: twilight.monte_carlo(a, 5.0, "north"), "view"),
+    (lambda a: twilight.single_scattering(a, 95.0, "zenith"), "sun_elevation_deg"),
+    (lambda a: twilight.monte_carlo(a, 5.0, "zenith", target=1.5), "target"),
+    (lambda a: twilight.monte_carlo(a, 5.0, "zenith", batch=1), "batch"),
+    (lambda a: twilight.view_directions(["zenith", "up"]), "view"),
+])
+def test_bad_input_names_the_parameter(atmosphere, call, name):
+    with pytest.raises(ValueError, match=f"^{name} must be"):
+        call(atmosphere)
+
+
+def test_single_scattering_quadrature_rejects_rays_into_the_ground(atmosphere):
+    with pytest.raises(ValueError, match="hits the ground"):
+        montecarlo.single_scattering(atmosphere, 1000.0, -0.5, 0.5)
+
+
+#: (sun elevation [deg], view): sunlit cases where 150 000 paths give the tracer's single scattering a
+#: standard error of 0.1-1 % (measured), one per regime: day zenith, sunset horizon, twilight toward the sun.
+TRACER_CASES = [(5.0, "zenith"), (0.0, "across"), (-4.0, "toward")]
+
+
+@pytest.mark.parametrize("sun, view", TRACER_CASES)
+def test_quadrature_and_ray_march_agree_with_the_tracer_on_single_scattering(atmosphere, single_marched, sun, view):
+    """The tracer (max_orders=1) against its quadrature: only the tracer's noise separates them, so
+    4 standard errors (a false alarm has probability 6e-5 per channel; measured within 1.7 SE at +5 and
+    0 deg). The ray march's single scattering against the tracer: issue 11's bar, 2 % (the ray march's
+    48-sample quadrature; measured within 0.5 % of the quadrature here) + 3 standard errors."""
+    pooled = twilight.monte_carlo(atmosphere, sun, view, batch=150_000, max_photons=150_000, seed=17,
+                                  max_orders=1)
+    exact = twilight.single_scattering(atmosphere, sun, view)
+    marched = single_marched[sun][list(twilight.VIEWS).index(view)]
+    print(f"tracer {pooled.radiance} +- {pooled.standard_error}, quadrature {exact}, ray march {marched}")
+    assert np.all(np.abs(pooled.radiance - exact) <= 4 * pooled.standard_error)
+    assert np.all(np.abs(marched - pooled.radiance) <= 0.02 * pooled.radiance + 3 * pooled.standard_error)
+
+
+@pytest.mark.parametrize("sun", twilight.SUN_ELEVATIONS_DEG)
+def test_ray_march_single_scattering_agrees_with_quadrature_down_to_minus_6(atmosphere, single_marched, sun):
+    """Every view, every channel within 2 % of the converged quadrature (no noise to allow for): the
+    single scattering is right through civil twilight, so the excess of issue 11 lies in the higher
+    orders. Measured: within 0.42 % by day, 1.7 % at worst (sun -2 deg, away, red: the lit layer is
+    a few of the 48 Keller & Bohn samples). A view whose whole ray lies in the planet's shadow (away
+    from the sun at -4 and -6 deg) has no single scattering: both give 0 there."""
+    marched = single_marched[sun]
+    for i, view in enumerate(twilight.VIEWS):
+        exact = twilight.single_scattering(atmosphere, sun, view)
+        if not np.any(exact > 0):
+            assert np.all(marched[i] == 0.0), (view, marched[i])
+            continue
+        deviation = marched[i] / exact - 1.0
+        print(f"sun {sun:+g} {view}: {100 * deviation} %")
+        assert np.all(np.abs(deviation) <= 0.02), (view, deviation)
+
+
+# All orders ------------------------------------------------------------------------------------------
+
+def full_deviation(atmosphere, sun, views, quality, photons, seed=5):
+    """[(view, relative deviation (3,), standard errors (3,))] of the ray march's full radiance."""
+    marched, _ = twilight.ray_march(atmosphere, sun, views, quality=quality)
+    out = []
+    for i, view in enumerate(views):
+        pooled = twilight.monte_carlo(atmosphere, sun, view, batch=photons, max_photons=photons, seed=seed + i)
+        relative, _ = twilight.deviation(marched[i], pooled)
+        out.append((view, relative, pooled.relative_error))
+        print(f"sun {sun:+g} {view}: {100 * relative} % (SE {100 * pooled.relative_error} %)")
+    return out
+
+
+def within(rows, bar):
+    """Every channel of every row within bar + 3 standard errors (relative)."""
+    return all(np.all(np.abs(relative) <= bar + 3 * error) for _, relative, error in rows)
+
+
+@pytest.mark.xfail(strict=True, reason="issue 11: the higher orders' canonical-frame azimuth average spreads "
+                                       "the lit sunward sky into the shadowed sky: +70 to +290 % at -6 deg")
+def test_draft_ray_march_at_minus_6_within_the_fix_bar(atmosphere):
+    """Issue 11's bar from -2 to -6 deg, 5 % + 3 standard errors, at the 'draft' level (16 x 128 x 48
+    table, 8 s) in the two views the excess is largest in; 100 000 paths (standard errors 5-17 %).
+    Today: +160 to +230 % across and +230 to +290 % away (measured). The draft level's own error is 10 % at
+    most (its promise), inside 5 % + 3 SE here, so the fix of item 2 makes this pass."""
+    assert within(full_deviation(atmosphere, -6.0, ("across", "away"), "draft", 100_000), 0.05)
+
+
+@pytest.fixture(scope="module")
+def plus_5_rows(atmosphere):
+    """The sun at +5 deg, default level (32 x 256 x N table, ~40 s), every view; 400 000 paths
+    (standard errors 0.1-0.9 %)."""
+    return full_deviation(atmosphere, 5.0, tuple(twilight.VIEWS), "default", 400_000)
+
+
+@pytest.mark.slow
+def test_default_ray_march_at_plus_5_within_5_percent(plus_5_rows):
+    """Every view and channel within 5 % + 3 standard errors at +5 deg. Measured: worst +3.7 % (across,
+    blue), issue 11's 3.5 %."""
+    assert within(plus_5_rows, 0.05)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="issue 11: the higher orders treat every view as if it looked toward "
+                                       "the sun; +2.4 to +3.7 % across the sun at +5 deg (16 standard errors)")
+def test_default_ray_march_at_plus_5_within_the_day_bar(plus_5_rows):
+    """Issue 11's bar at 0 deg and above: 2 % (+ 3 standard errors), default level, +5 deg."""
+    assert within(plus_5_rows, 0.02)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sun", [-4.0, -6.0])
+@pytest.mark.xfail(strict=True, reason="issue 11: the higher orders' canonical-frame azimuth average; "
+                                       "the ray march is tens to hundreds of % too bright below the horizon")
+def test_default_ray_march_in_twilight_within_the_fix_bar(atmosphere, sun):
+    """Issue 11's bar from -2 to -6 deg, 5 % + 3 standard errors, at the default level (~40 s per
+    table), every view; 300 000 paths (standard errors up to ~10 % in the shadowed views)."""
+    assert within(full_deviation(atmosphere, sun, tuple(twilight.VIEWS), "default", 300_000), 0.05)
