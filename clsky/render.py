@@ -97,6 +97,10 @@ def sun_disc_radiance(atmosphere, sun_direction, altitude, steps=512):
     return atmosphere.incident_light * transmittance / solid_angle
 
 
+#: Work-items per work-group of the render kernels (each renders VECTOR_WIDTH pixels).
+RENDER_WORK_GROUP = 64
+
+
 @dataclasses.dataclass(frozen=True)
 class PreparedDirections:
     """A camera's directions on the device (:meth:`SkyRenderer.prepare`), with their shape and mask."""
@@ -213,7 +217,12 @@ class SkyRenderer:
             check_kernel_buffer(name, argument, array_d, count, self.engine.dtype)
         check_kernel_buffer(name, "valid", directions.valid, n, np.uint8)
         kernel = self.engine.kernels_with(_atmosphere_cl.feature_defines(self.table.atmosphere))[name]
-        kernel(self.queue, (-(-n // VECTOR_WIDTH),), None, self._atmosphere_d, *extra_args, np.int32(n),
+        items = -(-n // VECTOR_WIDTH)
+        # an explicit work-group size: left to PoCL, a large frame got work-groups whose private arrays
+        # (the ray march's per-lane sums and ground values) overflowed its worker threads' stacks
+        # (segmentation fault at 256 x 256 with a ground); the kernel returns for items beyond n
+        local = min(RENDER_WORK_GROUP, items)
+        kernel(self.queue, (-(-items // local) * local,), (local,), self._atmosphere_d, *extra_args, np.int32(n),
                directions_d.data, directions.valid.data, sun4, self.engine.real(altitude), disc,
                self.engine.real(self._cos_sun_radius), out_d.data)
         return out_d.get()[:n].reshape(shape + (3,)).astype(np.float64, copy=False)

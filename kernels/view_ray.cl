@@ -134,7 +134,9 @@ inline real4 sun_axis_lookup(__global const real *values, const int depth, const
                              const real mu_sun)
 {
     const real fz = MAPPING_SUN_T(mu_sun, mapping, sun_range) * (real)(depth - 1);
-    const int z0 = clamp((int)fz, 0, depth - 2);
+    /* the node index from a coordinate clamped first: a NaN (fmax returns the other operand) or a value
+     * beyond int's range must never reach the conversion, whose result is then undefined */
+    const int z0 = clamp((int)fmin(fmax(fz, R(0.0)), (real)(depth - 2)), 0, depth - 2);
     const real az = fz - (real)z0;
     return (R(1.0) - az) * vload4(z0, values) + az * vload4(z0 + 1, values);
 }
@@ -208,7 +210,8 @@ inline void integrate_single(__constant const atmosphere_t *atm, const realv h0,
 inline real8 lookup8(__global const real *table, const int width, const int height, const int depth,
                      const real fx, const real fy, const real fz)
 {
-    const int x0 = clamp((int)fx, 0, width - 2), y0 = clamp((int)fy, 0, height - 2), z0 = clamp((int)fz, 0, depth - 2);
+    const int x0 = (int)fmin(fmax(fx, R(0.0)), (real)(width - 2)), y0 = (int)fmin(fmax(fy, R(0.0)), (real)(height - 2)),
+              z0 = (int)fmin(fmax(fz, R(0.0)), (real)(depth - 2));    /* clamped before the conversion (NaN-safe) */
     const real ax = fx - (real)x0, ay = fy - (real)y0, az = fz - (real)z0;
     const size_t base = (size_t)x0 + (size_t)width * ((size_t)y0 + (size_t)height * (size_t)z0);
     const size_t dy = (size_t)width, dz = (size_t)width * (size_t)height;

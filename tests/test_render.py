@@ -395,3 +395,18 @@ def test_prepared_directions_render_like_raw_directions(renderer, method):
         assert_array_equal(render(prepared, sun, altitude), raw)
         assert (raw_masked[~valid] == 0.0).all()
         assert_array_equal(raw_masked[valid], raw[valid])
+
+
+def test_large_frame_with_a_ground_renders(cl_context):
+    """Regression: a 256 x 256 ray march of the physical preset (ground, ozone) with the sun 6 deg below
+    the horizon crashed PoCL (segmentation fault) when PoCL chose the work-group size itself: the
+    private arrays of a large work-group overflowed its worker stacks. The renderer now launches
+    RENDER_WORK_GROUP items per group; the frame must come back finite and non-negative."""
+    from clsky.quality import quality_level
+
+    level = quality_level("draft")
+    table = ScatteringTable.build("physical", level.table.replace(size=(16, 64, 16), mode="physical"), ctx=cl_context)
+    directions, valid = FisheyeCamera(256).directions()
+    with SkyRenderer(table, level.ray, ctx=cl_context) as sky:
+        image = sky.render_raymarch(directions, sun_direction(96.0, 180.0), 0.0, valid=valid)
+    assert np.isfinite(image).all() and (image >= 0.0).all() and image[valid].max() > 0.0
