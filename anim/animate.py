@@ -213,8 +213,9 @@ class AnimationConfig:
     @property
     def atmosphere(self) -> clsky.AtmosphereParameters:
         """The preset's atmosphere, with ``ground_albedo`` and ``ozone_column_du`` if given."""
-        changes = {name: getattr(self, name) for name in ("ground_albedo", "ozone_column_du")
-                   if getattr(self, name) is not None}
+        from clsky.cli import ATMOSPHERE_OVERRIDES
+
+        changes = {name: getattr(self, name) for name in ATMOSPHERE_OVERRIDES if getattr(self, name) is not None}
         return clsky.preset(self.preset).replace(**changes)
 
     def image_shape(self):

@@ -42,7 +42,6 @@ def _date(text):
 
 
 def _add_scene_arguments(parser, frames=True):
-    from clsky.atmosphere import EARTH_GROUND_ALBEDO
     from clsky.quality import QUALITY_LEVELS
     from clsky.settings import SAMPLINGS
 
@@ -63,13 +62,7 @@ def _add_scene_arguments(parser, frames=True):
     sky.add_argument("--preset", help="atmosphere preset (default: physical)")
     sky.add_argument("--mode", choices=["atmosphere-plus", "physical"],
                      help="scheme of the higher orders (default: physical)")
-    sky.add_argument("--ground-albedo", type=float, metavar="A",
-                     help=f"albedo of a Lambertian ground in [0, 1] (default: the preset's, "
-                          f"{EARTH_GROUND_ALBEDO:g} for physical, the Earth's mean, 0 for atmosphere-plus; "
-                          f"> 0 needs --mode physical)")
-    sky.add_argument("--ozone-column", type=float, metavar="DU", dest="ozone_column_du",
-                     help="ozone column in Dobson units, >= 0 (default: the preset's, 300 for physical, 0 "
-                          "for atmosphere-plus)")
+    clsky_cli.add_atmosphere_overrides(sky)
     sky.add_argument("--error-budget", type=float,
                      help="relative error allowed in the frames; picks the fastest quality level within it "
                           "(default: 0.01)")

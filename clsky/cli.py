@@ -135,20 +135,14 @@ def _orders(text):
 def _add_table_arguments(parser):
     """The table's options. Those that set a TableSettings field default to None: unset, they take the
     value of the --quality level (or of TableSettings)."""
-    from .atmosphere import EARTH_GROUND_ALBEDO, PRESETS
+    from .atmosphere import PRESETS
     from .quality import QUALITY_LEVELS
     from .settings import MAPPINGS, MIE_LAYOUTS, SAMPLINGS, SCATTERING_MODES, SUN_TRANSMITTANCE_METHODS
 
     physics = parser.add_argument_group("atmosphere")
     physics.add_argument("--preset", default="atmosphere-plus", choices=sorted(PRESETS),
                          help="atmosphere preset (default: %(default)s)")
-    physics.add_argument("--ground-albedo", type=float, metavar="A",
-                         help=f"albedo of a Lambertian ground in [0, 1] (default: the preset's, "
-                              f"{EARTH_GROUND_ALBEDO:g} for physical, the Earth's mean, 0 for atmosphere-plus; "
-                              f"> 0 needs --mode physical)")
-    physics.add_argument("--ozone-column", type=float, metavar="DU", dest="ozone_column_du",
-                         help="ozone column in Dobson units, >= 0, in Bruneton 2017's tent (10 to 40 km) "
-                              "(default: the preset's, 300 for physical, 0 for atmosphere-plus)")
+    add_atmosphere_overrides(physics)
     grid = parser.add_argument_group("table")
     grid.add_argument("--quality", choices=list(QUALITY_LEVELS),
                       help="start from a named quality level's settings (clsky/quality.py); the options "
@@ -213,13 +207,31 @@ TABLE_OPTION_NAMES = {
 }
 
 
+#: AtmosphereParameters fields a command line may set over its preset's (add_atmosphere_overrides).
+ATMOSPHERE_OVERRIDES = ("ground_albedo", "ozone_column_du")
+
+
+def add_atmosphere_overrides(group):
+    """--ground-albedo and --ozone-column (fields ATMOSPHERE_OVERRIDES, None when not given), for
+    ``clsky table`` and the animation's commands alike."""
+    from .atmosphere import EARTH_GROUND_ALBEDO
+
+    group.add_argument("--ground-albedo", type=float, metavar="A",
+                       help=f"albedo of a Lambertian ground in [0, 1] (default: the preset's, "
+                            f"{EARTH_GROUND_ALBEDO:g} for physical, the Earth's mean, 0 for atmosphere-plus; "
+                            f"> 0 needs --mode physical)")
+    group.add_argument("--ozone-column", type=float, metavar="DU", dest="ozone_column_du",
+                       help="ozone column in Dobson units, >= 0, in Bruneton 2017's tent (10 to 40 km) "
+                            "(default: the preset's, 300 for physical, 0 for atmosphere-plus)")
+
+
 def table_atmosphere(args):
     """The atmosphere of the table options: the --preset's, with --ground-albedo and --ozone-column if
     given. UsageError names the option of a bad value."""
     from .atmosphere import preset
     from .errors import ParameterError
 
-    changes = {field: getattr(args, field) for field in ("ground_albedo", "ozone_column_du")
+    changes = {field: getattr(args, field) for field in ATMOSPHERE_OVERRIDES
                if getattr(args, field, None) is not None}
     try:
         return preset(args.preset).replace(**changes)
