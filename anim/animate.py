@@ -27,7 +27,7 @@ import numpy as np
 import clsky
 from clsky._files import StagedWrites, check_output
 from clsky.errors import ParameterError, is_integer, is_real_number
-from clsky.planner import Plan, Scene, plan_scene, sun_axis
+from clsky.planner import Plan, Scene, plan_scene, sun_axis, view_sampling
 from clsky.quality import QUALITY_LEVELS, QualityLevel, level_for_budget, quality_level
 from clsky import colorimetry, spectrum
 from clsky.solar import solar_irradiance_astm_g173
@@ -89,8 +89,9 @@ class AnimationConfig:
         Ray-march samples per ray (view steps), in [2, 4096]; None (default): the quality level's.
     sampling : str or None
         Node placement along rays (clsky.settings.SAMPLINGS) for the table and the ray march; None
-        (default): the quality level's (Keller & Bohn's). 'ground_end' for views from altitude
-        (README, "Views from altitude"); the scene plan's pilot keeps the level's.
+        (default): the scene planner's choice for ``altitude`` (:func:`clsky.planner.view_sampling`):
+        'ground_end' above the ground, Keller & Bohn's (the quality levels') on it (README, "Views
+        from altitude").
     start_elevation_deg, max_elevation_deg : float
         Sweep: sun elevation before sunrise / after sunset, and at its highest.
     location : (latitude_deg, longitude_deg) or None
@@ -400,8 +401,10 @@ def build_table(config: AnimationConfig, plan: Plan | None = None, ctx=None, pro
 
 
 def _with_sampling(settings: clsky.TableSettings, config: AnimationConfig) -> clsky.TableSettings:
-    """``settings`` with ``config.sampling`` if given."""
-    return settings if config.sampling is None else settings.replace(sampling=config.sampling)
+    """``settings`` with ``config.sampling`` if given, else with the view nodes the scene planner picks
+    for the observer's altitude (:func:`clsky.planner.view_sampling`; a plan's table has them already)."""
+    sampling = config.sampling or view_sampling((config.altitude, config.altitude))[0]
+    return settings.replace(sampling=sampling)
 
 
 def make_renderer(config: AnimationConfig, plan: Plan | None = None, ctx=None, progress=None):
