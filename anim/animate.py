@@ -27,6 +27,7 @@ import numpy as np
 import clsky
 from clsky._files import StagedWrites, check_output
 from clsky.errors import ParameterError, is_integer, is_real_number
+from clsky.ground import check_ground_mode
 from clsky.planner import Plan, Scene, plan_scene, sun_axis, view_sampling
 from clsky.quality import QUALITY_LEVELS, QualityLevel, level_for_budget, quality_level
 from clsky import colorimetry, spectrum
@@ -183,10 +184,8 @@ class AnimationConfig:
         if self.max_elevation_deg < self.start_elevation_deg:
             raise ParameterError("max_elevation_deg", f"at least the start elevation ({self.start_elevation_deg:g})",
                                  self.max_elevation_deg)
-        if self.atmosphere.has_ground and self.mode != "physical":
-            given = "" if self.ground_albedo is not None else f", the {self.preset} preset's ground"
-            raise ParameterError("ground_albedo", f"0 with mode {self.mode!r} (a ground needs mode 'physical'{given})",
-                                 self.atmosphere.ground_albedo)
+        check_ground_mode(self.atmosphere, self.mode,
+                          "" if self.ground_albedo is not None else f"the {self.preset} preset's ground")
         if self.end_hour <= self.start_hour:
             raise ParameterError("end_hour", f"after the start hour ({self.start_hour:g})", self.end_hour)
         if self.location is not None:
