@@ -26,7 +26,7 @@ import numpy as np
 
 import clsky
 from clsky._files import StagedWrites, check_output
-from clsky.errors import ParameterError, is_integer, is_real_number
+from clsky.errors import ParameterError, check_choice, check_integer, check_real, is_real_number
 from clsky.ground import check_ground_mode
 from clsky.planner import Plan, Scene, plan_scene, sun_axis, view_sampling
 from clsky.quality import QUALITY_LEVELS, QualityLevel, level_for_budget, quality_level
@@ -228,37 +228,18 @@ class AnimationConfig:
 
 
 def _integer(low, high, optional=False):
-    """A check of an integer field in [low, high] (NumPy integers too; None if optional)."""
-    def check(name, value):
-        if optional and value is None:
-            return None
-        if not is_integer(value) or not low <= value <= high:
-            raise ParameterError(name, ("None or " if optional else "") + f"an integer in [{low}, {high}]", value)
-        return int(value)
-    return check
+    """The field check ``(name, value) -> int`` of :func:`clsky.errors.check_integer` in [low, high]."""
+    return lambda name, value: check_integer(name, value, low, high, optional=optional)
 
 
 def _real(low, high, unit="", low_open=False, optional=False):
-    """A check of a finite real field in [low, high] (or (low, high]; NumPy scalars too)."""
-    def check(name, value):
-        if optional and value is None:
-            return None
-        if (not is_real_number(value) or not math.isfinite(value) or not (low < value if low_open else low <= value)
-                or not value <= high):
-            valid = f"{'(' if low_open else '['}{low:g}, {high:g}]{unit}"
-            raise ParameterError(name, ("None or " if optional else "") + f"a number in {valid}", value)
-        return float(value)
-    return check
+    """The field check ``(name, value) -> float`` of :func:`clsky.errors.check_real` in [low, high]."""
+    return lambda name, value: check_real(name, value, low, high, low_open=low_open, unit=unit, optional=optional)
 
 
 def _choice(choices, optional=False):
-    def check(name, value):
-        if optional and value is None:
-            return None
-        if not isinstance(value, str) or value not in choices:
-            raise ParameterError(name, ("None or " if optional else "") + f"one of {list(choices)}", value)
-        return value
-    return check
+    """The field check ``(name, value) -> str`` of :func:`clsky.errors.check_choice`."""
+    return lambda name, value: check_choice(name, value, choices, optional=optional)
 
 
 def _flag(name, value):
