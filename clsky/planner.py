@@ -33,7 +33,7 @@ What the plan decides, and why:
   observer is above the ground, Keller & Bohn's otherwise. Keller & Bohn's nodes bunch at the
   observer while, looking down, the haze lies at the ground end: on rays that hit the ground their
   single scattering is 4.6 % off from 10 km and 291 % from 100 km (worst channel, 30 steps), where
-  'ground_end' stays within 1.82 %; no altitude measured (0.1 to 100 km) does worse with it, and it
+  'ground_end' stays within 1.82 %; no altitude measured (1 to 100 km) does worse with it, and it
   moves no node of a ray that leaves the atmosphere. From the ground no view ray hits the ground, so
   the quality levels' nodes (measured as they are) stay, and ground scenes keep their tables and
   frames bit for bit (README, "Views from altitude").
@@ -184,12 +184,23 @@ def view_sampling(altitudes_m) -> tuple:
     observers at altitudes ``altitudes_m`` = (low, high) [m].
 
     'ground_end' when the highest observer is above the ground: its rays that hit the ground then get
-    nodes clustered at the ground end, where the haze is; Keller & Bohn's on them are 4.6 % off from
-    10 km, 49 % from 32.7 km and 291 % from 100 km, 'ground_end' at most 1.82 % at any altitude, and no
-    worse than Keller & Bohn's from 0.1 km up (worst of the six Ibar channels, 30 view steps, against
-    :mod:`clsky.ray_quadrature`; README, "Views from altitude", measured by bench/bench_view_nodes.py).
-    Every other ray keeps Keller & Bohn's nodes bit for bit. 'keller_bohn' (the quality levels') for
-    observers on the ground, none of whose view rays hits the ground.
+    nodes clustered at the ground end, where the haze is. On those rays Keller & Bohn's nodes are up to
+    4.6 % off from 10 km, 50 % from 32.7 km and 291 % from 100 km; 'ground_end' at most 1.82 %, and
+    no worse than Keller & Bohn's at any altitude measured (1 to 100 km; worst of the six Ibar
+    channels, 30 view steps, against :mod:`clsky.ray_quadrature`; README, "Views from altitude",
+    bench/bench_view_nodes.py). Every other ray keeps Keller & Bohn's nodes bit for bit.
+    'keller_bohn' (the quality levels') for observers on the ground, none of whose view rays hits the
+    ground.
+
+    Parameters
+    ----------
+    altitudes_m : (low, high)
+        Lowest and highest observer altitude [m], 0 <= low <= high <= 1e8 (as :class:`Scene`).
+
+    Returns
+    -------
+    (str, str)
+        The ``TableSettings.sampling`` name and the reason, as :meth:`Plan.describe` prints it.
     """
     low, high = _check_range("altitudes_m", altitudes_m, 0.0, 1e8)
     if high > 0.0:
