@@ -33,6 +33,7 @@ HEADERS = {
     "bench_quality": ["| level | promise | table | samples | build [s] | render [ms] | day [%] |",
                       "| doubled | day [%] |", "| table | sun axis | cells | build [s] | day [%] |"],
     "bench_view_nodes": ["| preset | sampling | rays | n | Ibar median | Ibar p95 | Ibar max |",
+                         "| preset | observer [km] | planner picks | rays hitting the ground |",
                          "| sampling | table [s] | ray march [ms] |"],
     "bench_dusk": ["| sky | display | zenith sRGB (8 bit) | blue: b > g > r | linear b / g | linear g / r |"],
     "bench_spectral": ["| build | batches | wall [s] | CPU [s] | wall / three | load |",
