@@ -15,19 +15,6 @@ import sys
 from clsky import cli as clsky_cli
 from clsky.errors import short
 
-#: AnimationConfig field -> command-line option (one per item for a tuple field), for error messages
-#: that name what the user typed.
-FIELD_OPTIONS = {
-    "frames": "--frames", "size": "--size", "camera": "--camera", "fov_deg": "--fov", "heading_deg": "--heading",
-    "pitch_deg": "--pitch", "altitude": "--altitude", "method": "--method", "preset": "--preset", "mode": "--mode",
-    "ground_albedo": "--ground-albedo", "ozone_column_du": "--ozone-column",
-    "table_size": ("--table-size W", "--table-size H", "--table-size D"), "samples": "--samples",
-    "sampling": "--sampling", "error_budget": "--error-budget", "quality": "--quality", "start_elevation_deg": "--start-elevation",
-    "max_elevation_deg": "--max-elevation", "location": "--location", "date": "--date",
-    "start_hour": "--hours START", "end_hour": "--hours END", "step_minutes": "--step-minutes", "fps": "--fps",
-    "exposure": "--exposure", "tone_map": "--tone-map", "white_balance": "--white-balance", "output": "--output",
-    "wavelengths": "--wavelengths",
-}
 
 def _date(text):
     try:
@@ -181,7 +168,7 @@ def _config(args):
         if where is not None:
             raise clsky_cli.UsageError(error.reworded(where if error.index is None else f"{where}[{error.index}]")) \
                 from None
-        raise clsky_cli.UsageError(clsky_cli.option_message(error, FIELD_OPTIONS)) from None
+        raise clsky_cli.UsageError(clsky_cli.option_message(error, scene.field_options(args.scene_parser))) from None
 
 
 def _printed_scene(args, config, **extra):

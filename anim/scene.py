@@ -44,7 +44,8 @@ if sys.version_info >= (3, 11):
 else:                                            # Python 3.10: the same parser, as a package
     import tomli as tomllib
 
-__all__ = ["SceneKey", "SCENE_KEYS", "SECTIONS", "track_given_options", "load_scene", "apply_scene",
+__all__ = ["SceneKey", "SCENE_KEYS", "SECTIONS", "track_given_options", "command_keys", "field_options",
+           "load_scene", "apply_scene",
            "field_values", "scene_values", "scene_text", "output_metadata", "source_of", "METADATA_KEYS"]
 
 
@@ -137,6 +138,18 @@ def command_keys(parser):
         parser = command_parser(parser)
     actions = _actions(parser)
     return {key.name: (key, actions[key.dest]) for key in SCENE_KEYS if key.dest in actions}
+
+
+def field_options(parser):
+    """{AnimationConfig field: the option a user types} of a command (:func:`command_keys`), or one
+    option per item of a tuple field ('--table-size W', ...), for :func:`clsky.cli.option_message`."""
+    options = {}
+    for key, action in command_keys(parser).values():
+        if key.index is None and isinstance(action.metavar, tuple):
+            options[key.key] = tuple(f"{max(action.option_strings, key=len)} {name}" for name in action.metavar)
+        else:
+            options[key.key] = _option(action, key)
+    return options
 
 
 def _type_error(path, key, action, value):
