@@ -57,6 +57,27 @@ EVERY_OPTION = ["--camera", "perspective", "--size", "20", "--fov", "60", "--hea
                 "--no-dither", "--fps", "12", "-o", "x.mp4", "--hdr"]
 
 
+#: Options of a run that are no part of its scene.
+RUN_OPTIONS = {"help", "force", "progress", "scene", "print_scene"}
+
+
+@pytest.mark.parametrize("command", ["animate", "render"])
+def test_every_option_and_config_field_has_a_scene_key(command):
+    """SCENE_KEYS is the one table from options to AnimationConfig fields (the command line's config is
+    built through it): an option or field added without its key would be dropped silently, so this
+    fails instead."""
+    import dataclasses
+
+    from anim import scene
+    from anim.animate import AnimationConfig
+
+    parser = scene.command_parser(command)
+    options = {action.dest for action in parser._actions if action.option_strings} - RUN_OPTIONS
+    assert options == {key.dest for key, _ in scene.command_keys(parser).values()}
+    fields = {field.name for field in dataclasses.fields(AnimationConfig)} - {"force"}
+    assert fields <= {key.key for key in scene.SCENE_KEYS}
+
+
 def test_print_scene_round_trip(tmp_path, capsys, monkeypatch):
     """Every option of a command line lands in its scene with its value, and the scene of that scene is
     the same text: ``--scene`` of ``--print-scene``'s output is the same run. Nothing is written."""
