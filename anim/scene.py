@@ -192,6 +192,8 @@ def load_scene(path, parser):
             document = tomllib.load(file)
     except OSError as error:
         raise UsageError(f"--scene: cannot read {path}: {error.strerror or error}") from None
+    except UnicodeDecodeError:
+        raise UsageError(f"--scene {path}: not a TOML file (not UTF-8 text)") from None
     except tomllib.TOMLDecodeError as error:
         raise UsageError(f"--scene {path}: not a valid TOML file: {error}") from None
     keys = command_keys(parser)

@@ -168,6 +168,11 @@ def test_a_missing_scene_is_one_line(tmp_path, capsys, monkeypatch):
     status, _, err = run(capsys, "animate", "--scene", "nowhere.toml")
     assert "--scene: cannot read nowhere.toml: No such file or directory" in one_line_error(status, err)
     assert list(tmp_path.iterdir()) == []
+    status, _, err = run(capsys, "animate", "--scene", tmp_path)
+    assert f"--scene: cannot read {tmp_path}: Is a directory" in one_line_error(status, err)
+    (tmp_path / "binary.toml").write_bytes(b"\xff\xfe[camera]")
+    status, _, err = run(capsys, "render", "--scene", "binary.toml")
+    assert "--scene binary.toml: not a TOML file (not UTF-8 text)" in one_line_error(status, err)
 
 
 @pytest.fixture(scope="module")
