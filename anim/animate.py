@@ -125,9 +125,16 @@ class AnimationConfig:
         spectrum), each frame converted spectral -> CIE XYZ -> linear sRGB [cd/m^2]
         (:func:`spectral_frame_to_linear_srgb`) before display; such frames are thousands of times brighter
         than the notes' relative ones by day: use ``auto_exposure`` (or an EV near -12).
-    hdr : bool
-        Also write each frame's HDR values as float32 .npy beside the PNGs: the ray march's frame
-        (with ``method='compare'``, the reference the lookup is compared with) or the lookup's.
+    hdr : {None, 'exr', 'npy'} or bool
+        Also write each frame's HDR values beside the PNGs: the ray march's frame (with
+        ``method='compare'``, the reference the lookup is compared with) or the lookup's. 'exr': an
+        OpenEXR image per frame with its units, the clsky version and the sun in the header (an
+        equirectangular panorama is tagged as a latitude-longitude environment map:
+        :mod:`anim.exr`); 'npy': a float32 NumPy array. None or False (default): none; True is 'npy'
+        (the former flag).
+    hdr_precision : {'float', 'half'}
+        Pixel type of the EXR frames: 32-bit (default, the frames' float32 values exactly) or 16-bit
+        half floats (values up to 65504); 'half' needs ``hdr='exr'``.
     force : bool
         Overwrite existing outputs.
 
@@ -172,7 +179,8 @@ class AnimationConfig:
     white_balance: str = "d65"
     dither: bool = True
     output: str = "sky.mp4"
-    hdr: bool = False
+    hdr: str | None = None
+    hdr_precision: str = "float"
     force: bool = False
     wavelengths: int | None = None
 
@@ -186,6 +194,9 @@ class AnimationConfig:
             given = "" if self.ground_albedo is not None else f", the {self.preset} preset's ground"
             raise ParameterError("ground_albedo", f"0 with mode {self.mode!r} (a ground needs mode 'physical'{given})",
                                  self.atmosphere.ground_albedo)
+        if self.hdr_precision != "float" and self.hdr != "exr":
+            raise ParameterError("hdr_precision", "'float' without EXR frames (hdr='exr', --hdr exr): .npy frames are float32",
+                                 self.hdr_precision)
         if self.end_hour <= self.start_hour:
             raise ParameterError("end_hour", f"after the start hour ({self.start_hour:g})", self.end_hour)
         if self.location is not None:
@@ -293,6 +304,18 @@ def _date(name, value):
     raise ParameterError(name, "None, a datetime.date or an ISO date 'YYYY-MM-DD'", value)
 
 
+def _hdr(name, value):
+    """None (False), 'exr' or 'npy'; True, the former flag, is 'npy'."""
+    if value is None or value is False or (isinstance(value, np.bool_) and not value):
+        return None
+    if value is True or isinstance(value, np.bool_):
+        return "npy"
+    formats = [f for f in writers.FrameWriter.HDR_FORMATS if f is not None]
+    if not isinstance(value, str) or value not in formats:
+        raise ParameterError(name, f"None, False, True or one of {formats}", value)
+    return value
+
+
 def _output(name, value):
     if not isinstance(value, (str, pathlib.PurePath)) or not str(value).endswith(".mp4"):
         raise ParameterError(name, "a path ending in .mp4", value)
@@ -323,7 +346,8 @@ _FIELD_CHECKS = {
     "location": _location, "date": _date, "start_hour": _real(0.0, 48.0, " h"), "end_hour": _real(0.0, 48.0, " h"),
     "step_minutes": _real(0.0, 1440.0, " minutes", low_open=True), "fps": _real(0.0, 240.0, low_open=True),
     "exposure": _real(-40.0, 40.0, " EV"), "tone_map": _choice(tuple(display_pipeline.TONE_CURVES), optional=True),
-    "auto_exposure": _flag, "white_balance": _choice(display_pipeline.WHITE_BALANCES), "dither": _flag, "output": _output, "hdr": _flag, "force": _flag,
+    "auto_exposure": _flag, "white_balance": _choice(display_pipeline.WHITE_BALANCES), "dither": _flag, "output": _output, "hdr": _hdr,
+    "hdr_precision": _choice(("float", "half")), "force": _flag,
     "wavelengths": _integer(spectrum.MIN_WAVELENGTHS, spectrum.MAX_WAVELENGTHS, optional=True),
 }
 
@@ -385,7 +409,7 @@ def memory_estimate(config: AnimationConfig, positions) -> MemoryEstimate:
         settings = level.table.replace(mode=config.mode, size=level.table.size[:2] + (nodes,),
                                        sun_cos_range=cos_range)
     return estimate_animation_memory(_with_sampling(settings, config), config.image_shape(), config.method,
-                                     ray_settings(config), hdr_output=config.hdr)
+                                     ray_settings(config), hdr_output=config.hdr is not None)
 
 
 def build_table(config: AnimationConfig, plan: Plan | None = None, ctx=None, progress=None) -> clsky.ScatteringTable:
@@ -437,6 +461,16 @@ def frame_units(config: AnimationConfig, table) -> str:
     if config.wavelengths is not None:
         return "linear sRGB [cd/m^2] (spectral radiance -> CIE 1931 XYZ -> sRGB)"
     return table.metadata.get("units", "relative (incident light I_I per sr)") + " at the table's three wavelengths"
+
+
+def _exr_attributes(config: AnimationConfig, table, sun) -> dict:
+    """The EXR header of the frame of sun position ``sun`` (:func:`anim.exr.frame_attributes`)."""
+    from .exr import frame_attributes
+
+    width, height = config.image_shape()
+    wavelengths = None if config.wavelengths is not None else table.atmosphere.wavelengths
+    return frame_attributes(frame_units(config, table), config.camera, width, height, sun.zenith_deg,
+                            sun.azimuth_deg, config.altitude, wavelengths_nm=wavelengths)
 
 
 def ray_settings(config: AnimationConfig) -> clsky.TableSettings:
@@ -507,8 +541,8 @@ def display_frames(pipeline: display_pipeline.Display, hdr, valid, config: Anima
 
 def _frame_writer(config: AnimationConfig, total_frames: int, staging=None) -> writers.FrameWriter:
     return writers.FrameWriter(directory=config.frames_directory, mp4_path=config.output_path, fps=config.fps,
-                               total_frames=total_frames, hdr="npy" if config.hdr else None, force=config.force,
-                               prefix="frame", staging=staging)
+                               total_frames=total_frames, hdr=config.hdr, hdr_precision=config.hdr_precision,
+                               force=config.force, prefix="frame", staging=staging)
 
 
 def check_outputs(config: AnimationConfig, total_frames: int | None = None, option: str | None = None):
@@ -610,7 +644,8 @@ def _write_animation(config, positions, renderer, prepared, valid, table, plan, 
             else:
                 image = images[config.method]
                 frame_hdr = hdr[config.method]
-            writer.write(index, _even(image), hdr=frame_hdr if config.hdr else None)
+            writer.write(index, _even(image), hdr=frame_hdr if config.hdr else None,
+                         hdr_attributes=_exr_attributes(config, table, sun) if config.hdr == "exr" else None)
             rows.append(row)
             if progress is not None:
                 progress("frames", index + 1, len(positions))

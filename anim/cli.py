@@ -26,7 +26,7 @@ FIELD_OPTIONS = {
     "max_elevation_deg": "--max-elevation", "location": "--location", "date": "--date",
     "start_hour": "--hours START", "end_hour": "--hours END", "step_minutes": "--step-minutes", "fps": "--fps",
     "exposure": "--exposure", "tone_map": "--tone-map", "white_balance": "--white-balance", "output": "--output",
-    "wavelengths": "--wavelengths",
+    "wavelengths": "--wavelengths", "hdr": "--hdr", "hdr_precision": "--hdr-precision",
 }
 
 #: Options whose default is None so that, not given, the AnimationConfig's own default (or the
@@ -117,8 +117,14 @@ def register(commands):
                         help="MP4 file; frames go to <stem>_frames/, metrics to <stem>_metrics.csv/.json")
     output.add_argument("--fps", type=float, default=30.0)
     output.add_argument("--no-dither", action="store_true", help="do not dither the 8-bit frames")
-    output.add_argument("--hdr", action="store_true", help="also write float32 HDR frames (.npy): the ray march's "
-                             "(with --method compare) or the lookup's")
+    output.add_argument("--hdr", nargs="?", const="npy", choices=["exr", "npy"], metavar="{exr,npy}",
+                        help="also write HDR frames: the ray march's (with --method compare) or the lookup's; exr: "
+                             "OpenEXR with units, version and sun in the header, a latitude-longitude environment "
+                             "map for --camera equirectangular (docs/exr.md); npy (the default of a bare --hdr): "
+                             "float32 NumPy arrays")
+    output.add_argument("--hdr-precision", choices=["float", "half"], default="float",
+                        help="pixel type of the EXR frames: float (32-bit, default) or half (16-bit, values up to "
+                             "65504)")
     output.add_argument("--force", action="store_true", help="overwrite existing outputs")
     output.add_argument("--progress", default="leave", choices=["display", "leave", "none"])
 
@@ -195,10 +201,10 @@ def run_animate(args):
                      max_elevation_deg=args.max_elevation,
                      location=None if args.location is None else tuple(args.location), date=args.date,
                      start_hour=args.hours[0], end_hour=args.hours[1], step_minutes=args.step_minutes,
-                     fps=args.fps, output=args.output, hdr=args.hdr)
+                     fps=args.fps, output=args.output, hdr=args.hdr, hdr_precision=args.hdr_precision)
     try:                                         # the MP4, <stem>_frames/, <stem>_metrics.csv/.json
         check_outputs(config, option="--output")
-    except (OSError, ValueError) as error:
+    except (OSError, ValueError, ImportError) as error:
         raise clsky_cli.UsageError(str(error)) from None
     _check_memory(args, config, sun_positions(config))
     progress, close = clsky_cli.progress_bar(args.progress)
