@@ -34,6 +34,12 @@ the y-up frame of OpenGL, three.js and Mitsuba 3. Mitsuba 3's ``envmap`` emitter
 Blender's world (Z up) puts the image centre at +X and a quarter from the left at +Y; three.js puts
 the centre at +X and a quarter from the left at -Z: see ``docs/exr.md`` for the rotation each needs.
 
+Where within a pixel: clsky's directions are those of the pixel centres, ``u = (x + 0.5) / width``,
+``v = (y + 0.5) / height``, as GPU texture sampling (Blender, three.js) reads them. OpenEXR's reference
+functions (``LatLongMap``) and Mitsuba 3 (measured, 3.9) put the first and last rows on the poles
+(row ``y`` at ``v = y / (height - 1)``), so they see the rows up to half a row from clsky's elevations
+(none at the horizon, half a row at the poles); Mitsuba reads the columns at clsky's azimuths.
+
 References
 ----------
 .. [1] OpenEXR, "ImfEnvmap.h" (latitude-longitude environment maps) and "Standard attributes"
