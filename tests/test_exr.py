@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import math
+import pathlib
 import subprocess
 import sys
 
@@ -231,6 +232,52 @@ def test_mitsuba_finds_every_direction_where_the_map_says(tmp_path, mitsuba):
     column, row = (int(c) for c in np.floor(header["sunPixel"]))
     angle = math.degrees(math.acos(np.clip(directions[row, column] @ header["sunDirectionENU"], -1, 1)))
     assert angle <= math.hypot(360.0 / width, 180.0 / height) / 2
+
+
+def bpy_python():
+    """A Python with Blender's bpy module: this one if it has bpy, else $CLSKY_BPY_PYTHON (bpy's
+    wheels are 350 MB and for Python 3.11 only, so they are not in clsky's test extra)."""
+    import importlib.util
+    import os
+
+    if importlib.util.find_spec("bpy") is not None:
+        return sys.executable
+    return os.environ.get("CLSKY_BPY_PYTHON") or pytest.skip("no Python with bpy (set CLSKY_BPY_PYTHON)")
+
+
+@pytest.mark.slow                                      # ~30 s of Cycles where bpy is at hand
+def test_blender_snippet_puts_north_on_plus_y(tmp_path):
+    """docs/exr.md's Blender script, run in bpy on a map whose pixels hold their direction + 2: Cycles
+    sees, along each Blender axis, the clsky direction the doc promises (x east, y north, z up), and
+    its sun lamp shines away from the sun. 1e-3: bilinear interpolation between pixel centres 1.4 deg
+    apart (error (2 pi / 256)^2 / 4 = 1.5e-4) and the 1 deg camera's pixels (symmetric about the
+    axis: second order, 4e-5)."""
+    import json
+
+    python = bpy_python()
+    directions, _ = EquirectangularCamera(256, 128).directions()
+    path = write_exr(tmp_path / "directions.exr", directions + 2.0)
+    # Not the poles themselves: Blender's lookup wraps vertically too, and blends the top and bottom rows
+    # within half a row of the zenith and the nadir (measured, 4.2: up = 0 at the zenith; docs/exr.md).
+    views = np.array([[0, 1, 0], [1, 0, 0], [0, -1, 0], [0.3, 0.2, 0.93], [-0.9, 0.1, 0.3], [0.05, 0, 1],
+                      [0.5, 0, -1]], float)
+    root = pathlib.Path(__file__).resolve().parent.parent
+    result = subprocess.run([python, str(root / "tests" / "blender_world.py"), str(root / "docs" / "exr.md"),
+                             str(path), str(tmp_path), *(",".join(str(c) for c in view) for view in views)],
+                            capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-2000:]
+    lamp = json.loads(result.stdout.strip().splitlines()[-1])["lamp_shines_along"]
+    sun = np.array([0.17, -0.62, 0.77])                   # the snippet's sun_enu
+    assert_allclose(lamp, -sun / np.linalg.norm(sun), rtol=0, atol=1e-6)
+    for index, view in enumerate(views):
+        rendered = _rgba(tmp_path / f"view_{index}.exr")
+        assert_allclose(rendered.mean(axis=(0, 1)) - 2.0, view / np.linalg.norm(view), rtol=0, atol=1e-3)
+
+
+def _rgba(path):
+    """The R, G, B of a Blender render (channels R, G, B, A)."""
+    with OpenEXR.File(str(path)) as exr:
+        return np.array(exr.channels()["RGBA"].pixels)[..., :3]
 
 
 # 4. An animation's panorama -----------------------------------------------------------------------
