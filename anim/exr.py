@@ -154,7 +154,8 @@ def frame_attributes(units, camera, width, height, sun_zenith_deg, sun_azimuth_d
         "software": f"clsky {clsky.__version__}", "clskyVersion": clsky.__version__,
         "radianceUnits": str(units), "camera": str(camera), "observerAltitude": float(altitude_m),
         "sunAzimuthDeg": float(sun_azimuth_deg) % 360.0, "sunElevationDeg": 90.0 - float(sun_zenith_deg),
-        "sunDirectionENU": sun,                                  # float64: stored as a v3d
+        # float32 (v3f): three.js's EXRLoader skips v3d attributes
+        "sunDirectionENU": sun.astype(np.float32),
     }
     if str(units) == LUMINANCE_UNITS or str(units).startswith(f"linear sRGB [{LUMINANCE_UNITS}]"):
         attributes["whiteLuminance"] = 1.0
@@ -164,7 +165,7 @@ def frame_attributes(units, camera, width, height, sun_zenith_deg, sun_azimuth_d
     if camera == "equirectangular":
         attributes["envmap"] = OpenEXR.ENVMAP_LATLONG
         attributes["envmapOrientation"] = ENVMAP_ORIENTATION
-        attributes["sunDirectionEnvmap"] = enu_to_envmap(sun)
+        attributes["sunDirectionEnvmap"] = enu_to_envmap(sun).astype(np.float32)
         attributes["sunPixel"] = np.array(envmap_pixel(sun_zenith_deg, sun_azimuth_deg, width, height), np.float32)
     return attributes
 

@@ -4,7 +4,9 @@
 2. FrameWriter(hdr='exr'): atomic, checked first, header per frame, stale frames of an earlier run.
 3. The orientation, through a renderer's own loader: Mitsuba 3's ``envmap`` emitter (scalar_rgb, CPU)
    loads a map whose pixels hold their own directions, and returns each direction where the module
-   docstring says it is; the header's sun attributes point at the same place.
+   docstring says it is; the header's sun attributes point at the same place. docs/exr.md's Blender
+   script, run in bpy where a Python with it is at hand (slow), and three.js's EXRLoader in Node
+   (tests/js, installed by scripts/setup.sh where npm is).
 4. An animation's panorama (render_animation, ``clsky animate --hdr exr``): the EXR holds the very
    values of the .npy frames, its header the units, version and sun, and Mitsuba reads the sun's pixel
    and the zenith row back; bad options give one line and exit status 2.
@@ -107,9 +109,11 @@ def test_header_attributes():
     assert pano["whiteLuminance"] == 1.0 and len(pano["chromaticities"]) == 8
     assert pano["sunAzimuthDeg"] == 135.0 and pano["sunElevationDeg"] == 30.0 and pano["observerAltitude"] == 250.0
     # the ENU vector of anim.cameras.sun_direction, and the same in the map's axes (east, up, south)
-    assert_allclose(pano["sunDirectionENU"], sun_direction(60.0, 135.0), rtol=0, atol=1e-15)
+    # stored as float32 (v3f, which three.js reads too): within its rounding, 2^-24 of components <= 1
+    assert pano["sunDirectionENU"].dtype == np.float32 and pano["sunDirectionEnvmap"].dtype == np.float32
+    assert_allclose(pano["sunDirectionENU"], sun_direction(60.0, 135.0), rtol=0, atol=6e-8)
     east, north, up = sun_direction(60.0, 135.0)
-    assert_allclose(pano["sunDirectionEnvmap"], [east, up, -north], rtol=0, atol=1e-15)
+    assert_allclose(pano["sunDirectionEnvmap"], [east, up, -north], rtol=0, atol=6e-8)
     assert_allclose(pano["sunPixel"], [64 * 135.0 / 360.0, 32 * 60.0 / 180.0], rtol=1e-7)
     relative = frame_attributes("relative (incident light I_I per sr)", "fisheye", 32, 32, 80.0, 10.0,
                                 wavelengths_nm=(680.0, 550.0, 440.0))
@@ -278,6 +282,50 @@ def _rgba(path):
     """The R, G, B of a Blender render (channels R, G, B, A)."""
     with OpenEXR.File(str(path)) as exr:
         return np.array(exr.channels()["RGBA"].pixels)[..., :3]
+
+
+JS = pathlib.Path(__file__).resolve().parent / "js"
+
+
+def three_js():
+    """``node`` with three.js installed in tests/js (``npm ci --prefix tests/js``, which
+    scripts/setup.sh runs where npm is), else skip."""
+    import shutil
+
+    node = shutil.which("node")
+    if node is None or not (JS / "node_modules" / "three" / "package.json").is_file():
+        pytest.skip("no node, or no three.js in tests/js/node_modules (npm ci --prefix tests/js)")
+    return node
+
+
+def test_three_js_exr_loader_reads_the_frames(tmp_path):
+    """three.js's EXRLoader (the loader of the doc's snippet), in Node: the values come out exactly
+    (float as float32, half as the same halves), bottom row first as WebGL textures want it (so v = 1,
+    the zenith, is the file's top row), with the envmap tag, the units and the sun in its header."""
+    import json
+
+    node = three_js()
+    directions, _ = EquirectangularCamera(16, 8).directions()
+    attributes = frame_attributes("cd/m^2", "equirectangular", 16, 8, 60.0, 250.0)
+    for precision, dtype in (("float", np.float32), ("half", np.float16)):
+        path = write_exr(tmp_path / f"{precision}.exr", directions + 2.0, precision, attributes)
+        result = subprocess.run([node, str(JS / "load_exr.mjs"), precision, str(path)], cwd=JS,
+                                capture_output=True, text=True, timeout=120)
+        assert result.returncode == 0, result.stderr
+        assert "Skipped" not in result.stderr, result.stderr      # every attribute type is one it reads
+        loaded = json.loads(result.stdout.strip().splitlines()[-1])
+        assert (loaded["width"], loaded["height"], loaded["rgba"]) == (16, 8, True)
+        assert loaded["float"] == (precision == "float")
+        rgba = np.array(loaded["values"], dtype=np.float64).reshape(8, 16, 4)
+        stored = read_exr(path)[0]
+        assert stored.dtype == dtype
+        assert_array_equal(rgba[::-1, :, :3], stored.astype(np.float64))    # rows bottom first, exactly
+        assert_array_equal(rgba[..., 3], 1.0)
+        header = loaded["header"]
+        assert header["envmap"] == "ENVMAP_LATLONG" and header["radianceUnits"] == "cd/m^2"
+        assert header["whiteLuminance"] == 1.0 and header["clskyVersion"] == clsky.__version__
+        assert_allclose(header["sunDirectionEnvmap"], attributes["sunDirectionEnvmap"], rtol=0, atol=0)
+        assert_allclose(header["sunPixel"], attributes["sunPixel"], rtol=0, atol=0)
 
 
 # 4. An animation's panorama -----------------------------------------------------------------------
