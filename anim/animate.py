@@ -125,12 +125,13 @@ class AnimationConfig:
         spectrum), each frame converted spectral -> CIE XYZ -> linear sRGB [cd/m^2]
         (:func:`spectral_frame_to_linear_srgb`) before display; such frames are thousands of times brighter
         than the notes' relative ones by day: use ``auto_exposure`` (or an EV near -12).
-    hdr : {None, 'exr', 'npy'} or bool
+    hdr : {None, 'exr', 'hdr', 'npy'} or bool
         Also write each frame's HDR values beside the PNGs: the ray march's frame (with
         ``method='compare'``, the reference the lookup is compared with) or the lookup's. 'exr': an
         OpenEXR image per frame with its units, the clsky version and the sun in the header (an
         equirectangular panorama is tagged as a latitude-longitude environment map:
-        :mod:`anim.exr`); 'npy': a float32 NumPy array. None or False (default): none; True is 'npy'
+        :mod:`anim.exr`); 'hdr': a Radiance RGBE image with the same header lines (:mod:`anim.rgbe`,
+        8-bit mantissas); 'npy': a float32 NumPy array. None or False (default): none; True is 'npy'
         (the former flag).
     hdr_precision : {'float', 'half'}
         Pixel type of the EXR frames: 32-bit (default, the frames' float32 values exactly) or 16-bit
@@ -645,7 +646,7 @@ def _write_animation(config, positions, renderer, prepared, valid, table, plan, 
                 image = images[config.method]
                 frame_hdr = hdr[config.method]
             writer.write(index, _even(image), hdr=frame_hdr if config.hdr else None,
-                         hdr_attributes=_exr_attributes(config, table, sun) if config.hdr == "exr" else None)
+                         hdr_attributes=_exr_attributes(config, table, sun) if config.hdr in ("exr", "hdr") else None)
             rows.append(row)
             if progress is not None:
                 progress("frames", index + 1, len(positions))

@@ -117,11 +117,11 @@ def register(commands):
                         help="MP4 file; frames go to <stem>_frames/, metrics to <stem>_metrics.csv/.json")
     output.add_argument("--fps", type=float, default=30.0)
     output.add_argument("--no-dither", action="store_true", help="do not dither the 8-bit frames")
-    output.add_argument("--hdr", nargs="?", const="npy", choices=["exr", "npy"], metavar="{exr,npy}",
+    output.add_argument("--hdr", nargs="?", const="npy", choices=["exr", "hdr", "npy"], metavar="{exr,hdr,npy}",
                         help="also write HDR frames: the ray march's (with --method compare) or the lookup's; exr: "
                              "OpenEXR with units, version and sun in the header, a latitude-longitude environment "
-                             "map for --camera equirectangular (docs/exr.md); npy (the default of a bare --hdr): "
-                             "float32 NumPy arrays")
+                             "map for --camera equirectangular (docs/exr.md); hdr: Radiance RGBE, the same header "
+                             "(8-bit mantissas); npy (the default of a bare --hdr): float32 NumPy arrays")
     output.add_argument("--hdr-precision", choices=["float", "half"], default="float",
                         help="pixel type of the EXR frames: float (32-bit, default) or half (16-bit, values up to "
                              "65504)")

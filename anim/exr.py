@@ -144,10 +144,10 @@ def frame_attributes(units, camera, width, height, sun_zenith_deg, sun_azimuth_d
     Returns
     -------
     dict
-        Attribute name -> value, as OpenEXR.File takes them (the envmap attribute as
-        ``OpenEXR.ENVMAP_LATLONG``).
+        Attribute name -> value, as OpenEXR.File takes them, except ``envmap``: the string
+        ``'latlong'`` (:func:`save_exr` stores it as ``OpenEXR.ENVMAP_LATLONG``), so that the
+        attributes need no OpenEXR (the Radiance frames of :mod:`anim.rgbe` take them as text).
     """
-    OpenEXR = require_openexr()
     zenith, azimuth = math.radians(sun_zenith_deg), math.radians(sun_azimuth_deg)
     sun = np.array([math.sin(zenith) * math.sin(azimuth), math.sin(zenith) * math.cos(azimuth), math.cos(zenith)])
     attributes = {
@@ -163,7 +163,7 @@ def frame_attributes(units, camera, width, height, sun_zenith_deg, sun_azimuth_d
     if wavelengths_nm is not None:
         attributes["channelWavelengthsNm"] = np.asarray(wavelengths_nm, dtype=np.float32).reshape(3)
     if camera == "equirectangular":
-        attributes["envmap"] = OpenEXR.ENVMAP_LATLONG
+        attributes["envmap"] = "latlong"
         attributes["envmapOrientation"] = ENVMAP_ORIENTATION
         attributes["sunDirectionEnvmap"] = enu_to_envmap(sun).astype(np.float32)
         attributes["sunPixel"] = np.array(envmap_pixel(sun_zenith_deg, sun_azimuth_deg, width, height), np.float32)
@@ -236,6 +236,11 @@ def save_exr(file, pixels, attributes=None):
     temporary files."""
     OpenEXR = require_openexr()
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage, **(attributes or {})}
+    if isinstance(header.get("envmap"), str):
+        envmaps = {"latlong": OpenEXR.ENVMAP_LATLONG, "cube": OpenEXR.ENVMAP_CUBE}
+        if header["envmap"] not in envmaps:
+            raise ValueError(f"envmap must be one of {list(envmaps)}, got {header['envmap']!r}")
+        header["envmap"] = envmaps[header["envmap"]]
     OpenEXR.File(header, {"RGB": pixels}).write(str(file))
 
 

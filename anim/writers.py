@@ -183,11 +183,11 @@ def write_csv(path, rows, force=False, fieldnames=None, staging=None):
 
 def frame_files(directory, prefix="frame"):
     """The files of ``directory`` named as a :class:`FrameWriter` names its frames:
-    ``<prefix>_<digits>.png``, ``.npy`` or ``.exr`` (sorted); nothing else is ever counted as a frame."""
+    ``<prefix>_<digits>.png``, ``.npy``, ``.exr`` or ``.hdr`` (sorted); nothing else is ever counted as a frame."""
     directory = pathlib.Path(directory)
     if not directory.is_dir():
         return []
-    pattern = re.compile(re.escape(prefix) + r"_\d+\.(png|npy|exr)")
+    pattern = re.compile(re.escape(prefix) + r"_\d+\.(png|npy|exr|hdr)")
     return sorted(directory / name for name in os.listdir(directory) if pattern.fullmatch(name))
 
 
@@ -205,10 +205,12 @@ class FrameWriter:
     total_frames : int, optional
         Number of frames, if known: sets the zero padding of the names to max(5, its digits) and
         bounds the indices.
-    hdr : {None, 'exr', 'npy'}
+    hdr : {None, 'exr', 'hdr', 'npy'}
         Also store each frame's HDR values in ``directory``: 'exr', an OpenEXR image
         ``<prefix>_<index>.exr`` (:func:`anim.exr.write_exr`, with the header attributes given to
-        :meth:`write`); 'npy', a float32 NumPy array ``<prefix>_<index>.npy``.
+        :meth:`write`); 'hdr', a Radiance RGBE image ``<prefix>_<index>.hdr`` (:mod:`anim.rgbe`, 8-bit
+        mantissas, the same attributes as header lines); 'npy', a float32 NumPy array
+        ``<prefix>_<index>.npy``.
     hdr_precision : {'float', 'half'}
         Pixel type of the EXR frames: 32-bit floats (default) or 16-bit half floats (values up to
         65504). The .npy frames are always float32: 'half' needs ``hdr='exr'``.
@@ -226,7 +228,7 @@ class FrameWriter:
         The targets written so far: frames, then the MP4 (added at the end of the block). They are
         in place once the staging set has committed (at the end of the block by default).
     stale_paths : list of pathlib.Path
-        After a forced run: the frame files of an earlier run (``<prefix>_<digits>.png``, ``.npy``, ``.exr``)
+        After a forced run: the frame files of an earlier run (``<prefix>_<digits>.png``, ``.npy``, ``.exr``, ``.hdr``)
         that this run did not rewrite. They are deleted when the set commits, so the directory holds
         this run's frames only.
 
@@ -234,7 +236,7 @@ class FrameWriter:
     ------
     FileExistsError
         On entering (or :meth:`check`): the MP4, or any frame file (``<prefix>_<digits>.png``,
-        ``.npy`` or ``.exr``) in ``directory`` exists and not ``force``. Nothing is touched then.
+        ``.npy``, ``.exr`` or ``.hdr``) in ``directory`` exists and not ``force``. Nothing is touched then.
     ImportError
         On entering (or :meth:`check`): an MP4 without imageio-ffmpeg, EXR frames without OpenEXR.
     IsADirectoryError, FileNotFoundError, NotADirectoryError, PermissionError
@@ -245,7 +247,7 @@ class FrameWriter:
 
     Notes
     -----
-    - Everything lands together: each frame (PNG, .npy or .exr) and the MP4 are written to hidden temporary
+    - Everything lands together: each frame (PNG and its HDR file) and the MP4 are written to hidden temporary
       files with unique names (``.<name>.XXXXXXXX<suffix>``) beside their targets, and renamed when
       the block exits normally (with ``staging``, when that set commits): the frames first, the MP4
       last (when it is there, its frames are too), then the stale frames are deleted. An exception inside the block (KeyboardInterrupt
@@ -276,7 +278,7 @@ class FrameWriter:
     """
 
     #: HDR frame formats (None: none) -> file suffix.
-    HDR_FORMATS = {None: None, "exr": ".exr", "npy": ".npy"}
+    HDR_FORMATS = {None: None, "exr": ".exr", "hdr": ".hdr", "npy": ".npy"}
 
     def __init__(self, directory=None, mp4_path=None, fps=30, total_frames=None, hdr=None, force=False,
                  prefix="frame", staging=None, hdr_precision="float"):
@@ -361,7 +363,7 @@ class FrameWriter:
         if self.directory is not None:
             last = (self.total_frames or 1) - 1
             check_output_directory(self.directory, option, names=[self.frame_path(last, suffix).name
-                                                                  for suffix in (".png", ".npy", ".exr")])
+                                                                  for suffix in (".png", ".npy", ".exr", ".hdr")])
             existing = frame_files(self.directory, self.prefix)
             if existing and not self.force:
                 raise _exists_error(existing[0], option)
@@ -457,6 +459,14 @@ class FrameWriter:
                 self._temporaries.append(temporary)
                 save_exr(temporary, hdr, hdr_attributes)
             written.append(target)
+        elif self.hdr == "hdr":
+            from .rgbe import save_rgbe
+
+            target = self.frame_path(index, ".hdr")
+            with atomic_write(target, self.force, suffix=".hdr", staging=self._staging) as temporary:
+                self._temporaries.append(temporary)
+                save_rgbe(temporary, hdr, hdr_attributes)
+            written.append(target)
         return written
 
     def write(self, index, display_u8, hdr=None, hdr_attributes=None):
@@ -476,8 +486,8 @@ class FrameWriter:
             finite, and at most 65504 with ``hdr_precision='half'`` (ValueError before anything of
             the frame is written).
         hdr_attributes : dict, optional
-            EXR header attributes of this frame (:func:`anim.exr.frame_attributes`); ignored
-            without ``hdr='exr'``.
+            Header attributes of this frame (:func:`anim.exr.frame_attributes`) for EXR and RGBE
+            frames; ignored with 'npy'.
 
         Returns
         -------
@@ -505,6 +515,9 @@ class FrameWriter:
             if self.hdr == "exr":
                 from .exr import exr_pixels
                 hdr = exr_pixels(hdr, self.hdr_precision)
+            elif self.hdr == "hdr":
+                from .rgbe import encode_rgbe
+                encode_rgbe(hdr)                       # refuse what RGBE cannot hold before writing the frame
             if self._hdr_shape is not None and hdr.shape != self._hdr_shape:
                 raise ValueError(f"frame {index}: hdr has shape {hdr.shape}, the first frame's had {self._hdr_shape}")
         if self._size is None and self.mp4_path is not None:

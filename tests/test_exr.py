@@ -10,6 +10,8 @@
 4. An animation's panorama (render_animation, ``clsky animate --hdr exr``): the EXR holds the very
    values of the .npy frames, its header the units, version and sun, and Mitsuba reads the sun's pixel
    and the zenith row back; bad options give one line and exit status 2.
+5. Radiance RGBE frames (anim/rgbe.py, ``--hdr hdr``): within the format's 8-bit mantissas of the
+   values, and read by Mitsuba's own image reader as the same bytes.
 """
 
 from __future__ import annotations
@@ -104,7 +106,7 @@ def test_existing_file_is_refused_without_force(tmp_path):
 def test_header_attributes():
     pano = frame_attributes("linear sRGB [cd/m^2] (spectral radiance -> CIE 1931 XYZ -> sRGB)", "equirectangular",
                             64, 32, 60.0, 135.0, altitude_m=250.0)
-    assert pano["envmap"] == OpenEXR.ENVMAP_LATLONG
+    assert pano["envmap"] == "latlong"                  # stored as OpenEXR.ENVMAP_LATLONG (below)
     assert pano["software"] == f"clsky {clsky.__version__}" and pano["clskyVersion"] == clsky.__version__
     assert pano["whiteLuminance"] == 1.0 and len(pano["chromaticities"]) == 8
     assert pano["sunAzimuthDeg"] == 135.0 and pano["sunElevationDeg"] == 30.0 and pano["observerAltitude"] == 250.0
@@ -332,12 +334,12 @@ def test_three_js_exr_loader_reads_the_frames(tmp_path):
 
 @pytest.fixture(scope="module")
 def panoramas(tmp_path_factory, cl_context):
-    """The same small panorama animation with EXR and with .npy frames."""
+    """The same small panorama animation with EXR, RGBE and .npy frames."""
     from anim.animate import AnimationConfig, render_animation
 
     directory = tmp_path_factory.mktemp("panorama")
     runs = {}
-    for hdr in ("exr", "npy"):
+    for hdr in ("exr", "hdr", "npy"):
         config = AnimationConfig(hdr=hdr, output=str(directory / f"{hdr}.mp4"), **TINY)
         runs[hdr] = (config, render_animation(config, ctx=cl_context))
     return runs
@@ -362,6 +364,19 @@ def test_panorama_exr_holds_the_frames_values_and_says_what_they_are(panoramas):
         assert_array_equal(header["channelWavelengthsNm"], np.float32(preset(config.preset).wavelengths))
     table_units = result.paths[-1].read_text(encoding="utf-8")          # the metrics JSON
     assert header["radianceUnits"] in table_units
+
+
+def test_panorama_rgbe_frames(panoramas):
+    from anim.rgbe import read_rgbe
+
+    config, result = panoramas["hdr"]
+    npy_config, _ = panoramas["npy"]
+    for row in result.rows:
+        pixels, header = read_rgbe(config.frames_directory / f"frame_{row['frame']:05d}.hdr")
+        frame = np.load(npy_config.frames_directory / f"frame_{row['frame']:05d}.npy").astype(np.float64)
+        assert (np.abs(pixels - frame) <= frame.max(axis=2, keepdims=True) / 256.0).all()   # RGBE's mantissas
+        assert header["envmap"] == "latlong" and header["clskyVersion"] == clsky.__version__
+        assert float(header["sunElevationDeg"]) == pytest.approx(90.0 - row["sun_zenith_deg"], abs=1e-6)
 
 
 def test_mitsuba_loads_the_panorama(panoramas, mitsuba):
@@ -400,6 +415,7 @@ def test_cli_hdr_exr_panorama(tmp_path):
     (["--hdr", "exr", "--hdr-precision", "double"], "--hdr-precision"),
     (["--hdr-precision", "half"], "--hdr-precision"),
     (["--hdr", "npy", "--hdr-precision", "half"], "--hdr-precision"),
+    (["--hdr", "hdr", "--hdr-precision", "half"], "--hdr-precision"),
 ], ids=lambda value: " ".join(value) if isinstance(value, list) else value)
 def test_cli_bad_hdr_options_one_line_exit_2(tmp_path, args, named):
     result = subprocess.run([sys.executable, "-m", "anim", "animate", *args, "--progress", "none"],
@@ -421,3 +437,69 @@ def test_envmap_pixel_matches_the_camera():
             zenith = math.degrees(math.acos(up))
             azimuth = math.degrees(math.atan2(east, north))
             assert_allclose(envmap_pixel(zenith, azimuth, width, height), (column + 0.5, row + 0.5), atol=1e-12)
+
+
+# 5. Radiance RGBE ---------------------------------------------------------------------------------
+
+def test_rgbe_round_trip_within_its_mantissas(tmp_path):
+    from anim.rgbe import read_rgbe, write_rgbe
+
+    rng = np.random.default_rng(5)
+    rgb = 10.0 ** rng.uniform(-12, 8, size=(9, 40, 3))          # 20 decades, channels far apart too
+    rgb[0, 0] = 0.0
+    attributes = frame_attributes("cd/m^2", "equirectangular", 40, 9, 60.0, 250.0)
+    write_rgbe(tmp_path / "a.hdr", rgb, attributes)
+    pixels, header = read_rgbe(tmp_path / "a.hdr")
+    # Each channel is read at the middle of its mantissa step 2^(e - 8), v = max(r, g, b) in
+    # [2^(e - 1), 2^e): |error| <= 2^(e - 9) <= v / 256, i.e. 2^-8 relative for the largest channel.
+    largest = rgb.max(axis=2, keepdims=True)
+    assert (np.abs(pixels - rgb) <= largest / 256.0).all()
+    assert_array_equal(pixels[0, 0], 0.0)
+    brightest = rgb.argmax(axis=2)[..., None]
+    lit = largest > 0
+    assert (np.abs(np.take_along_axis(pixels, brightest, 2)[lit] / largest[lit] - 1.0) <= 2.0 ** -8).all()
+    assert header["FORMAT"] == "32-bit_rle_rgbe" and header["SOFTWARE"] == f"clsky {clsky.__version__}"
+    assert header["envmap"] == "latlong" and header["radianceUnits"] == "cd/m^2"
+    assert_allclose([float(v) for v in header["sunDirectionEnvmap"].split()], attributes["sunDirectionEnvmap"],
+                    rtol=0, atol=1e-9)
+    assert _listing(tmp_path) == ["a.hdr"]
+
+
+@pytest.mark.parametrize("width", [40, 5])                     # run-length encoded scan lines, and flat ones
+def test_mitsuba_reads_the_rgbe_bytes(tmp_path, mitsuba, width):
+    """Mitsuba's Bitmap decodes each channel as byte 2^(e - 8) (Ward's rgbe2float, without Radiance's
+    half step): exactly that, in float32, for every pixel in its place."""
+    from anim.rgbe import encode_rgbe, write_rgbe
+
+    rng = np.random.default_rng(6)
+    rgb = 10.0 ** rng.uniform(-6, 6, size=(7, width, 3))
+    write_rgbe(tmp_path / "b.hdr", rgb)
+    bitmap = np.array(mitsuba.Bitmap(str(tmp_path / "b.hdr")))
+    rgbe = encode_rgbe(rgb)
+    expected = rgbe[..., :3] * np.ldexp(1.0, rgbe[..., 3:].astype(int) - 136)
+    assert bitmap.shape == (7, width, 3)
+    assert_array_equal(bitmap, expected.astype(np.float32))
+
+
+@pytest.mark.parametrize("bad", [np.full((2, 9, 3), -1.0), np.full((2, 9, 3), np.nan), np.full((2, 9, 3), 1e39),
+                                 np.zeros((2, 9))])
+def test_rgbe_refuses_what_it_cannot_hold(tmp_path, bad):
+    from anim.rgbe import write_rgbe
+
+    with pytest.raises(ValueError):
+        write_rgbe(tmp_path / "x.hdr", bad)
+    assert _listing(tmp_path) == []
+
+
+def test_frame_writer_rgbe_frames(tmp_path):
+    from anim.rgbe import read_rgbe
+
+    hdr = np.random.default_rng(7).uniform(0, 3, size=(8, 16, 3))
+    attributes = frame_attributes("relative (incident light I_I per sr)", "fisheye", 16, 8, 70.0, 200.0)
+    with FrameWriter(directory=tmp_path, hdr="hdr", total_frames=1) as writer:
+        writer.write(0, _frame(), hdr=hdr, hdr_attributes=attributes)
+    assert _listing(tmp_path) == ["frame_00000.hdr", "frame_00000.png"]
+    pixels, header = read_rgbe(tmp_path / "frame_00000.hdr")
+    assert (np.abs(pixels - hdr.astype(np.float32)) <= hdr.max(axis=2, keepdims=True) / 256.0).all()
+    assert header["camera"] == "fisheye" and "envmap" not in header
+    assert frame_files(tmp_path) == [tmp_path / "frame_00000.hdr", tmp_path / "frame_00000.png"]
