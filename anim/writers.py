@@ -191,6 +191,18 @@ def frame_files(directory, prefix="frame"):
     return sorted(directory / name for name in os.listdir(directory) if pattern.fullmatch(name))
 
 
+def _hdr_saver(hdr_format):
+    """The function ``(file, values, attributes)`` that writes one HDR frame of ``hdr_format`` to a file
+    as it is (the frame writer calls it inside its temporary files)."""
+    if hdr_format == "exr":
+        from .exr import save_exr
+        return save_exr
+    if hdr_format == "hdr":
+        from .rgbe import save_rgbe
+        return save_rgbe
+    return lambda file, values, attributes: np.save(file, values)
+
+
 class FrameWriter:
     """Context manager storing an animation as PNG frames, HDR frames (EXR or .npy) and/or an MP4.
 
@@ -445,27 +457,12 @@ class FrameWriter:
             self._temporaries.append(temporary)
             Image.fromarray(image).save(temporary, format="PNG", compress_level=PNG_COMPRESS_LEVEL)
         written.append(self.frame_path(index))
-        if self.hdr == "npy":
-            target = self.frame_path(index, ".npy")
-            with atomic_write(target, self.force, suffix=".npy", staging=self._staging) as temporary:
+        if self.hdr is not None:
+            suffix = self.HDR_FORMATS[self.hdr]
+            target = self.frame_path(index, suffix)
+            with atomic_write(target, self.force, suffix=suffix, staging=self._staging) as temporary:
                 self._temporaries.append(temporary)
-                np.save(temporary, hdr)
-            written.append(target)
-        elif self.hdr == "exr":
-            from .exr import save_exr
-
-            target = self.frame_path(index, ".exr")
-            with atomic_write(target, self.force, suffix=".exr", staging=self._staging) as temporary:
-                self._temporaries.append(temporary)
-                save_exr(temporary, hdr, hdr_attributes)
-            written.append(target)
-        elif self.hdr == "hdr":
-            from .rgbe import save_rgbe
-
-            target = self.frame_path(index, ".hdr")
-            with atomic_write(target, self.force, suffix=".hdr", staging=self._staging) as temporary:
-                self._temporaries.append(temporary)
-                save_rgbe(temporary, hdr, hdr_attributes)
+                _hdr_saver(self.hdr)(temporary, hdr, hdr_attributes)
             written.append(target)
         return written
 
