@@ -38,6 +38,7 @@ from clsky.resources import MemoryEstimate, check_memory, device_of, estimate_an
 from . import display as display_pipeline
 from . import metrics, sunpath, writers
 from .cameras import camera_from_name
+from .exr import PRECISIONS
 
 __all__ = ["AnimationConfig", "AnimationResult", "METHODS", "quality", "plan_animation", "build_table", "make_renderer",
            "spectral_frame_to_linear_srgb",
@@ -196,7 +197,7 @@ class AnimationConfig:
             raise ParameterError("ground_albedo", f"0 with mode {self.mode!r} (a ground needs mode 'physical'{given})",
                                  self.atmosphere.ground_albedo)
         if self.hdr_precision != "float" and self.hdr != "exr":
-            raise ParameterError("hdr_precision", "'float' without EXR frames (hdr='exr', --hdr exr): .npy frames are float32",
+            raise ParameterError("hdr_precision", "'float' without EXR frames (hdr='exr', --hdr exr): .npy and .hdr frames have their own",
                                  self.hdr_precision)
         if self.end_hour <= self.start_hour:
             raise ParameterError("end_hour", f"after the start hour ({self.start_hour:g})", self.end_hour)
@@ -306,7 +307,8 @@ def _date(name, value):
 
 
 def _hdr(name, value):
-    """None (False), 'exr' or 'npy'; True, the former flag, is 'npy'."""
+    """None (or False), or a format of :attr:`anim.writers.FrameWriter.HDR_FORMATS` ('exr', 'hdr',
+    'npy'); True, the former flag, is 'npy'."""
     if value is None or value is False or (isinstance(value, np.bool_) and not value):
         return None
     if value is True or isinstance(value, np.bool_):
@@ -348,7 +350,7 @@ _FIELD_CHECKS = {
     "step_minutes": _real(0.0, 1440.0, " minutes", low_open=True), "fps": _real(0.0, 240.0, low_open=True),
     "exposure": _real(-40.0, 40.0, " EV"), "tone_map": _choice(tuple(display_pipeline.TONE_CURVES), optional=True),
     "auto_exposure": _flag, "white_balance": _choice(display_pipeline.WHITE_BALANCES), "dither": _flag, "output": _output, "hdr": _hdr,
-    "hdr_precision": _choice(("float", "half")), "force": _flag,
+    "hdr_precision": _choice(tuple(PRECISIONS)), "force": _flag,
     "wavelengths": _integer(spectrum.MIN_WAVELENGTHS, spectrum.MAX_WAVELENGTHS, optional=True),
 }
 
@@ -464,8 +466,8 @@ def frame_units(config: AnimationConfig, table) -> str:
     return table.metadata.get("units", "relative (incident light I_I per sr)") + " at the table's three wavelengths"
 
 
-def _exr_attributes(config: AnimationConfig, table, sun) -> dict:
-    """The EXR header of the frame of sun position ``sun`` (:func:`anim.exr.frame_attributes`)."""
+def _hdr_attributes(config: AnimationConfig, table, sun) -> dict:
+    """The header of the EXR or RGBE frame of sun position ``sun`` (:func:`anim.exr.frame_attributes`)."""
     from .exr import frame_attributes
 
     width, height = config.image_shape()
@@ -646,7 +648,7 @@ def _write_animation(config, positions, renderer, prepared, valid, table, plan, 
                 image = images[config.method]
                 frame_hdr = hdr[config.method]
             writer.write(index, _even(image), hdr=frame_hdr if config.hdr else None,
-                         hdr_attributes=_exr_attributes(config, table, sun) if config.hdr in ("exr", "hdr") else None)
+                         hdr_attributes=_hdr_attributes(config, table, sun) if config.hdr in ("exr", "hdr") else None)
             rows.append(row)
             if progress is not None:
                 progress("frames", index + 1, len(positions))

@@ -110,6 +110,9 @@ def _add_display_arguments(parser):
 
 def register(commands):
     """Adds ``animate`` and ``render`` to clsky's sub-command parsers; returns their handlers."""
+    from .exr import PRECISIONS
+    from .writers import FrameWriter
+
     animate = commands.add_parser("animate", help="render a sunrise-to-sunset animation (MP4 + PNG frames)")
     _add_scene_arguments(animate)
     output = animate.add_argument_group("output")
@@ -117,14 +120,15 @@ def register(commands):
                         help="MP4 file; frames go to <stem>_frames/, metrics to <stem>_metrics.csv/.json")
     output.add_argument("--fps", type=float, default=30.0)
     output.add_argument("--no-dither", action="store_true", help="do not dither the 8-bit frames")
-    output.add_argument("--hdr", nargs="?", const="npy", choices=["exr", "hdr", "npy"], metavar="{exr,hdr,npy}",
+    formats = [name for name in FrameWriter.HDR_FORMATS if name is not None]
+    output.add_argument("--hdr", nargs="?", const="npy", choices=formats, metavar="{" + ",".join(formats) + "}",
                         help="also write HDR frames: the ray march's (with --method compare) or the lookup's; exr: "
                              "OpenEXR with units, version and sun in the header, a latitude-longitude environment "
                              "map for --camera equirectangular (docs/exr.md); hdr: Radiance RGBE, the same header "
                              "(8-bit mantissas); npy (the default of a bare --hdr): float32 NumPy arrays")
-    output.add_argument("--hdr-precision", choices=["float", "half"], default="float",
-                        help="pixel type of the EXR frames: float (32-bit, default) or half (16-bit, values up to "
-                             "65504)")
+    output.add_argument("--hdr-precision", choices=list(PRECISIONS), default="float",
+                        help="pixel type of the EXR frames: float (32-bit, default) or half (16-bit; a frame with a "
+                             "value above 65504 is refused)")
     output.add_argument("--force", action="store_true", help="overwrite existing outputs")
     output.add_argument("--progress", default="leave", choices=["display", "leave", "none"])
 
