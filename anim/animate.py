@@ -136,7 +136,7 @@ class AnimationConfig:
         (the former flag).
     hdr_precision : {'float', 'half'}
         Pixel type of the EXR frames: 32-bit (default, the frames' float32 values exactly) or 16-bit
-        half floats (values up to 65504); 'half' needs ``hdr='exr'``.
+        half floats (values above 65504, the sun's disc, clipped to it); 'half' needs ``hdr='exr'``.
     force : bool
         Overwrite existing outputs.
 

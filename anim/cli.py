@@ -127,8 +127,8 @@ def register(commands):
                              "map for --camera equirectangular (docs/exr.md); hdr: Radiance RGBE, the same header "
                              "(8-bit mantissas); npy (the default of a bare --hdr): float32 NumPy arrays")
     output.add_argument("--hdr-precision", choices=list(PRECISIONS), default="float",
-                        help="pixel type of the EXR frames: float (32-bit, default) or half (16-bit; a frame with a "
-                             "value above 65504 is refused)")
+                        help="pixel type of the EXR frames: float (32-bit, default) or half (16-bit; values above "
+                             "65504, the sun's disc, are clipped to it and counted in the header)")
     output.add_argument("--force", action="store_true", help="overwrite existing outputs")
     output.add_argument("--progress", default="leave", choices=["display", "leave", "none"])
 

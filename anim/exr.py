@@ -2,7 +2,8 @@
 
 A frame is written as one scan-line EXR image with channels R, G, B (ZIP compression, lossless), in
 float32 (``precision='float'``, the frame's float32 values exactly) or float16 (``'half'``, the usual
-format of environment maps: 3 significant decimal digits, values up to 65504). The header says what
+format of environment maps: 3 significant decimal digits, values up to 65504, larger ones clipped
+to it and counted in ``halfClippedPixels``). The header says what
 the numbers are and where they point (:func:`frame_attributes`):
 
 - ``software`` ("clsky X.Y.Z") and ``clskyVersion``;
@@ -171,9 +172,11 @@ def frame_attributes(units, camera, width, height, sun_zenith_deg, sun_azimuth_d
 
 
 def exr_pixels(rgb, precision="float"):
-    """``rgb`` as a C-contiguous (H, W, 3) array of the precision's dtype (float32 or float16);
-    ValueError for a bad shape or precision and for values a file must not hold (NaN, infinity, or
-    above the half-float range with 'half')."""
+    """(pixels, clipped): ``rgb`` as a C-contiguous (H, W, 3) array of the precision's dtype (float32
+    or float16), and the number of pixels with a channel above :data:`HALF_MAX` clipped to it with
+    'half' (0 with 'float'). A sky's half-float file can hold everything but the sun's disc (I_I / 6.8e-5
+    sr, 3e5 in relative units, 1e9 cd/m^2): those few pixels are clipped rather than made infinite.
+    ValueError for a bad shape or precision, and NaN or infinite values."""
     if precision not in PRECISIONS:
         raise ValueError(f"precision must be one of {list(PRECISIONS)}, got {precision!r}")
     rgb = np.asarray(rgb)
@@ -181,12 +184,13 @@ def exr_pixels(rgb, precision="float"):
         raise ValueError(f"rgb must have shape (H, W, 3), got {rgb.shape}")
     if not np.isfinite(rgb).all():
         raise ValueError("rgb holds NaN or infinite values: an EXR frame holds finite values only")
+    clipped = 0
     if precision == "half":
-        largest = float(np.abs(rgb).max())
-        if largest > HALF_MAX:
-            raise ValueError(f"precision 'half' holds values up to {HALF_MAX:g}, this frame reaches {largest:.6g}: "
-                             f"use precision 'float' (--hdr-precision float)")
-    return np.ascontiguousarray(rgb, dtype=PRECISIONS[precision])
+        over = np.abs(rgb) > HALF_MAX
+        clipped = int(over.any(axis=2).sum())
+        if clipped:
+            rgb = np.clip(rgb, -HALF_MAX, HALF_MAX)
+    return np.ascontiguousarray(rgb, dtype=PRECISIONS[precision]), clipped
 
 
 def write_exr(path, rgb, precision="float", attributes=None, force=False, staging=None):
@@ -200,7 +204,8 @@ def write_exr(path, rgb, precision="float", attributes=None, force=False, stagin
         Linear values, row 0 at the top (stored as the file's first scan line).
     precision : {'float', 'half'}
         32-bit floats (the float32 values exactly) or 16-bit half floats (round to nearest: relative
-        error <= 2^-11 from 6.1e-5 to 65504, absolute <= 2^-25 below).
+        error <= 2^-11 from 6.1e-5 to 65504, absolute <= 2^-25 below; values above 65504 are clipped to
+        it, and the header's ``halfClippedPixels`` counts the pixels that were).
     attributes : dict, optional
         Header attributes (:func:`frame_attributes`), as OpenEXR.File takes them.
     force : bool
@@ -215,15 +220,16 @@ def write_exr(path, rgb, precision="float", attributes=None, force=False, stagin
     Raises
     ------
     ValueError
-        A bad shape or precision; NaN or infinite values; values above 65504 with 'half'. Nothing is
-        written then.
+        A bad shape or precision; NaN or infinite values. Nothing is written then.
     ImportError
         The OpenEXR bindings are missing.
     FileExistsError, IsADirectoryError, FileNotFoundError, NotADirectoryError, PermissionError
         As :func:`anim.writers.write_png`.
     """
     require_openexr()
-    pixels = exr_pixels(rgb, precision)
+    pixels, clipped = exr_pixels(rgb, precision)
+    if precision == "half":
+        attributes = {**(attributes or {}), "halfClippedPixels": clipped}
     path = pathlib.Path(path)
     with atomic_write(path, overwrite=force, suffix=".exr", staging=staging) as temporary:
         save_exr(temporary, pixels, attributes)

@@ -225,7 +225,7 @@ class FrameWriter:
         ``<prefix>_<index>.npy``.
     hdr_precision : {'float', 'half'}
         Pixel type of the EXR frames: 32-bit floats (default) or 16-bit half floats (values up to
-        65504). The .npy frames are always float32: 'half' needs ``hdr='exr'``.
+        65504, larger ones clipped). The .npy frames are always float32: 'half' needs ``hdr='exr'``.
     force : bool
         Overwrite existing outputs, and delete the stale frames of an earlier run (see Notes).
     prefix : str
@@ -480,8 +480,8 @@ class FrameWriter:
             HDR values, stored when the writer was made with ``hdr='exr'`` or ``'npy'`` (then
             required); ignored otherwise. Its shape need not be the display's (a display frame may be
             a composite of several renders), but it is the same for every frame. EXR frames must be
-            finite, and at most 65504 with ``hdr_precision='half'`` (ValueError before anything of
-            the frame is written).
+            finite (ValueError before anything of the frame is written); with
+            ``hdr_precision='half'``, values above 65504 are clipped to it (:func:`anim.exr.exr_pixels`).
         hdr_attributes : dict, optional
             Header attributes of this frame (:func:`anim.exr.frame_attributes`) for EXR and RGBE
             frames; ignored with 'npy'.
@@ -511,7 +511,9 @@ class FrameWriter:
                 raise ValueError(f"hdr must have shape (H, W, 3), got {hdr.shape}")
             if self.hdr == "exr":
                 from .exr import exr_pixels
-                hdr = exr_pixels(hdr, self.hdr_precision)
+                hdr, clipped = exr_pixels(hdr, self.hdr_precision)
+                if self.hdr_precision == "half":
+                    hdr_attributes = {**(hdr_attributes or {}), "halfClippedPixels": clipped}
             elif self.hdr == "hdr":
                 from .rgbe import encode_rgbe
                 encode_rgbe(hdr)                       # refuse what RGBE cannot hold before writing the frame

@@ -84,14 +84,24 @@ def test_bad_pixels_are_refused_before_writing(tmp_path, bad, match):
     assert _listing(tmp_path) == []
 
 
-def test_half_refuses_values_it_cannot_hold(tmp_path):
-    rgb = np.full((2, 2, 3), 7.0e4)                      # above 65504: would be infinity in a half file
-    with pytest.raises(ValueError, match="--hdr-precision float"):
-        write_exr(tmp_path / "x.exr", rgb, precision="half")
+def test_half_clips_what_it_cannot_hold_and_counts_it(tmp_path):
+    """Above 65504 a half would be infinity: those pixels (a sky's sun disc) are clipped to 65504,
+    and the header counts them; everything else is as in the round trip above."""
+    rgb = np.full((3, 4, 3), 2.0)
+    rgb[0, 1] = (3.0e5, 1.0e5, 5.0e4)                     # the sun's disc, in relative units
+    rgb[2, 3, 2] = 7.0e4
+    write_exr(tmp_path / "x.exr", rgb, precision="half")
+    pixels, header = read_exr(tmp_path / "x.exr")
+    assert np.isfinite(pixels).all() and header["halfClippedPixels"] == 2
+    assert_array_equal(pixels[0, 1], np.float16([HALF_MAX, HALF_MAX, 5.0e4]))
+    assert pixels[2, 3, 2] == HALF_MAX
+    assert_array_equal(np.delete(pixels.reshape(-1, 3), [1, 11], axis=0), 2.0)
+    write_exr(tmp_path / "none.exr", np.ones((2, 2, 3)), precision="half")
+    assert read_exr(tmp_path / "none.exr")[1]["halfClippedPixels"] == 0
     with pytest.raises(ValueError, match="precision"):
-        write_exr(tmp_path / "x.exr", rgb, precision="double")
-    write_exr(tmp_path / "x.exr", rgb, precision="float")
-    assert_array_equal(read_exr(tmp_path / "x.exr")[0], rgb.astype(np.float32))
+        write_exr(tmp_path / "y.exr", rgb, precision="double")
+    write_exr(tmp_path / "y.exr", rgb, precision="float")                # float keeps the sun
+    assert_array_equal(read_exr(tmp_path / "y.exr")[0], rgb.astype(np.float32))
 
 
 def test_existing_file_is_refused_without_force(tmp_path):
@@ -138,11 +148,15 @@ def test_frame_writer_exr_frames(tmp_path):
         assert_array_equal(pixels, hdr[index].astype(np.float32))
         assert header["sunElevationDeg"] == pytest.approx(20.0 - index, abs=1e-5)   # stored as float32
     with FrameWriter(directory=tmp_path / "half", hdr="exr", hdr_precision="half") as writer:
-        writer.write(0, _frame(), hdr=hdr[0])
-        with pytest.raises(ValueError, match="65504"):
-            writer.write(1, _frame(), hdr=np.full((8, 16, 3), 1e5))
-    assert read_exr(tmp_path / "half" / "frame_00000.exr")[0].dtype == np.float16
-    assert _listing(tmp_path / "half") == ["frame_00000.exr", "frame_00000.png"]   # the refused frame: nothing
+        writer.write(0, _frame(), hdr=hdr[0], hdr_attributes=attributes[0])
+        writer.write(1, _frame(), hdr=np.full((8, 16, 3), 1e5))
+        with pytest.raises(ValueError, match="NaN"):
+            writer.write(2, _frame(), hdr=np.full((8, 16, 3), np.nan))
+    first, header = read_exr(tmp_path / "half" / "frame_00000.exr")
+    assert first.dtype == np.float16 and header["halfClippedPixels"] == 0 and "sunPixel" in header
+    assert read_exr(tmp_path / "half" / "frame_00001.exr")[1]["halfClippedPixels"] == 8 * 16
+    assert _listing(tmp_path / "half") == ["frame_00000.exr", "frame_00000.png", "frame_00001.exr",
+                                           "frame_00001.png"]                      # the refused frame: nothing
 
 
 def test_frame_writer_exr_checks_and_stale_frames(tmp_path):
