@@ -26,8 +26,9 @@ import numpy as np
 
 import clsky
 from clsky._files import StagedWrites, check_output
-from clsky.errors import ParameterError, is_integer, is_real_number
-from clsky.planner import Plan, Scene, plan_scene, sun_axis
+from clsky.errors import ParameterError, check_choice, check_integer, check_real, is_real_number
+from clsky.ground import check_ground_mode
+from clsky.planner import Plan, Scene, plan_scene, sun_axis, view_sampling
 from clsky.quality import QUALITY_LEVELS, QualityLevel, level_for_budget, quality_level
 from clsky import colorimetry, spectrum
 from clsky.solar import solar_irradiance_astm_g173
@@ -90,8 +91,9 @@ class AnimationConfig:
         Ray-march samples per ray (view steps), in [2, 4096]; None (default): the quality level's.
     sampling : str or None
         Node placement along rays (clsky.settings.SAMPLINGS) for the table and the ray march; None
-        (default): the quality level's (Keller & Bohn's). 'ground_end' for views from altitude
-        (README, "Views from altitude"); the scene plan's pilot keeps the level's.
+        (default): the scene planner's choice for ``altitude`` (:func:`clsky.planner.view_sampling`):
+        'ground_end' above the ground, Keller & Bohn's (the quality levels') on it (README, "Views
+        from altitude").
     start_elevation_deg, max_elevation_deg : float
         Sweep: sun elevation before sunrise / after sunset, and at its highest.
     location : (latitude_deg, longitude_deg) or None
@@ -192,10 +194,8 @@ class AnimationConfig:
         if self.max_elevation_deg < self.start_elevation_deg:
             raise ParameterError("max_elevation_deg", f"at least the start elevation ({self.start_elevation_deg:g})",
                                  self.max_elevation_deg)
-        if self.atmosphere.has_ground and self.mode != "physical":
-            given = "" if self.ground_albedo is not None else f", the {self.preset} preset's ground"
-            raise ParameterError("ground_albedo", f"0 with mode {self.mode!r} (a ground needs mode 'physical'{given})",
-                                 self.atmosphere.ground_albedo)
+        check_ground_mode(self.atmosphere, self.mode,
+                          "" if self.ground_albedo is not None else f"the {self.preset} preset's ground")
         if self.hdr_precision != "float" and self.hdr != "exr":
             raise ParameterError("hdr_precision", "'float' without EXR frames (hdr='exr', --hdr exr): .npy and .hdr frames have their own",
                                  self.hdr_precision)
@@ -241,37 +241,18 @@ class AnimationConfig:
 
 
 def _integer(low, high, optional=False):
-    """A check of an integer field in [low, high] (NumPy integers too; None if optional)."""
-    def check(name, value):
-        if optional and value is None:
-            return None
-        if not is_integer(value) or not low <= value <= high:
-            raise ParameterError(name, ("None or " if optional else "") + f"an integer in [{low}, {high}]", value)
-        return int(value)
-    return check
+    """The field check ``(name, value) -> int`` of :func:`clsky.errors.check_integer` in [low, high]."""
+    return lambda name, value: check_integer(name, value, low, high, optional=optional)
 
 
 def _real(low, high, unit="", low_open=False, optional=False):
-    """A check of a finite real field in [low, high] (or (low, high]; NumPy scalars too)."""
-    def check(name, value):
-        if optional and value is None:
-            return None
-        if (not is_real_number(value) or not math.isfinite(value) or not (low < value if low_open else low <= value)
-                or not value <= high):
-            valid = f"{'(' if low_open else '['}{low:g}, {high:g}]{unit}"
-            raise ParameterError(name, ("None or " if optional else "") + f"a number in {valid}", value)
-        return float(value)
-    return check
+    """The field check ``(name, value) -> float`` of :func:`clsky.errors.check_real` in [low, high]."""
+    return lambda name, value: check_real(name, value, low, high, low_open=low_open, unit=unit, optional=optional)
 
 
 def _choice(choices, optional=False):
-    def check(name, value):
-        if optional and value is None:
-            return None
-        if not isinstance(value, str) or value not in choices:
-            raise ParameterError(name, ("None or " if optional else "") + f"one of {list(choices)}", value)
-        return value
-    return check
+    """The field check ``(name, value) -> str`` of :func:`clsky.errors.check_choice`."""
+    return lambda name, value: check_choice(name, value, choices, optional=optional)
 
 
 def _flag(name, value):
@@ -427,8 +408,10 @@ def build_table(config: AnimationConfig, plan: Plan | None = None, ctx=None, pro
 
 
 def _with_sampling(settings: clsky.TableSettings, config: AnimationConfig) -> clsky.TableSettings:
-    """``settings`` with ``config.sampling`` if given."""
-    return settings if config.sampling is None else settings.replace(sampling=config.sampling)
+    """``settings`` with ``config.sampling`` if given, else with the view nodes the scene planner picks
+    for the observer's altitude (:func:`clsky.planner.view_sampling`; a plan's table has them already)."""
+    sampling = config.sampling or view_sampling((config.altitude, config.altitude))[0]
+    return settings.replace(sampling=sampling)
 
 
 def make_renderer(config: AnimationConfig, plan: Plan | None = None, ctx=None, progress=None):

@@ -36,7 +36,7 @@ import numpy as np
 
 from clsky.errors import short
 
-from ._validate import check_integer, check_real
+from clsky.errors import check_integer, check_real
 
 __all__ = ["Camera", "FisheyeCamera", "PerspectiveCamera", "EquirectangularCamera", "CAMERAS",
            "camera_from_name", "sun_direction", "MIN_SIZE", "MAX_SIZE"]

@@ -71,8 +71,8 @@ def _add_scene_arguments(parser, frames=True):
                      help="a full table of this grid instead of the scene plan's")
     sky.add_argument("--samples", type=int, help="ray-march samples per ray (default: the quality level's)")
     sky.add_argument("--sampling", choices=list(SAMPLINGS),
-                     help="node placement along rays, table and ray march (default: the quality level's, "
-                          "keller_bohn; ground_end for views from altitude)")
+                     help="node placement along rays, table and ray march (default: the scene planner's, "
+                          "ground_end above the ground, keller_bohn on it)")
     _add_display_arguments(parser)
     sky.add_argument("--wavelengths", type=int, metavar="N",
                      help="N wavelengths in [3, 47] in absolute units, frames converted spectral -> XYZ -> "

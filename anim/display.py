@@ -54,7 +54,7 @@ import numpy as np
 from clsky.errors import ParameterError
 
 from . import tonemap
-from ._validate import check_real
+from clsky.errors import check_real
 
 __all__ = ["TONE_CURVES", "DEFAULT_TONE_MAP", "WHITE_BALANCES", "SOURCES", "AutoExposure", "Display",
            "meter_ev", "smoothed_ev", "white_balance_matrix", "linear_srgb_to_oklab", "oklab_to_linear_srgb",

@@ -24,7 +24,7 @@ import numpy as np
 
 from clsky.errors import short
 
-from ._validate import check_real
+from clsky.errors import check_real
 from .cameras import sun_direction
 
 __all__ = ["SunPosition", "sweep", "real_positions", "MAX_POSITIONS"]

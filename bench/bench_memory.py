@@ -7,6 +7,10 @@ PyOpenCL's program cache (a first compile adds up to ~150 MiB of LLVM memory); t
 process' ``ru_maxrss``, read by a wrapper process of its own.
 
 Usage: python bench/bench_memory.py [--reference] [--no-readme] [--only NAME ...] [--smoke]
+                                    [--ground-albedo A] [--ozone-column DU]
+
+``--ground-albedo`` / ``--ozone-column`` (clsky.cli.add_atmosphere_overrides) reach every measured
+command and its estimate, as they reach ``clsky table`` and ``clsky animate``.
 
 ``--smoke``: one table and one animation at bench/_report.py's SMOKE sizes, outputs in a temporary
 directory, the table printed only.
@@ -24,7 +28,7 @@ import time
 
 from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
 
-from clsky import preset
+from clsky.cli import ATMOSPHERE_OVERRIDES, add_atmosphere_overrides
 from clsky.resources import BASE_PROCESS_BYTES, estimate_table_memory, format_bytes
 
 #: Runs the command in argv[1:] and prints its peak RSS [KiB] (ru_maxrss of the only child).
@@ -59,6 +63,15 @@ def cases(reference=False):
     return rows
 
 
+def with_overrides(arguments, args):
+    """``arguments`` followed by the --ground-albedo / --ozone-column options given to the benchmark."""
+    options = {"ground_albedo": "--ground-albedo", "ozone_column_du": "--ozone-column"}
+    assert set(options) == set(ATMOSPHERE_OVERRIDES)
+    extra = [item for field, option in options.items() if getattr(args, field, None) is not None
+             for item in (option, repr(float(getattr(args, field))))]
+    return list(arguments) + extra
+
+
 def peak_rss(arguments, output):
     """(exit status, peak RSS [bytes], seconds) of ``clsky ARGUMENTS -o OUTPUT`` in a fresh process."""
     command = [sys.executable, "-c", _WRAPPER, sys.executable, "-m", "anim", *arguments, "-o", output]
@@ -78,7 +91,7 @@ def estimate(arguments):
     parser, _ = cli.build_parser(extensions=(anim_cli.register,))
     args = parser.parse_args(arguments + ["-o", "x.mp4" if arguments[0] == "animate" else "x.npz"])
     if arguments[0] == "table":
-        settings = cli.table_settings(args, preset(args.preset))
+        settings = cli.table_settings(args, cli.table_atmosphere(args))
         result = estimate_table_memory(settings, saving=True)
         size = settings.size
     else:
@@ -94,6 +107,7 @@ def main():
     parser.add_argument("--reference", action="store_true", help="also the reference level (~6 min)")
     parser.add_argument("--only", nargs="+", help="run only these cases (names as printed)")
     parser.add_argument("--directory", default="/tmp/clsky_bench_memory", help="where outputs go")
+    add_atmosphere_overrides(parser.add_argument_group("atmosphere (every case)"))
     add_output_arguments(parser)
     args = parse_arguments(parser)
     if args.smoke:                               # a temporary directory, removed afterwards
@@ -106,14 +120,18 @@ def main():
 
 def measure(args, directory):
     """Run the selected cases with their outputs in ``directory``; print (and write) the table."""
-    selected = [c for c in (smoke_cases() if args.smoke else cases(args.reference)) if not args.only or c[0] in args.only]
-    peak_rss(["table", "--size", "8", "16", "8", "--progress", "none", "--force"],
+    selected = [(name, description, with_overrides(arguments, args))
+                for name, description, arguments in (smoke_cases() if args.smoke else cases(args.reference))
+                if not args.only or name in args.only]
+    overridden = with_overrides([], args)
+    peak_rss(with_overrides(["table", "--size", "8", "16", "8", "--progress", "none", "--force"], args),
              os.path.join(directory, "warm.npz"))
     lines = [f"Peak resident memory (`ru_maxrss` of the whole process) measured {datetime.date.today()} on "
              f"{machine()}, load average {os.getloadavg()[0]:.1f} at the start (a machine shared with other "
              f"work: the times are not benchmarks), PyOpenCL's program cache warm. Estimate: "
              f"`clsky.resources` (the arrays' peak, host and OpenCL buffers, one memory on a CPU device) + "
-             f"{format_bytes(BASE_PROCESS_BYTES)} for the process itself.", "",
+             f"{format_bytes(BASE_PROCESS_BYTES)} for the process itself."
+             + (f" Every run with `{' '.join(overridden)}`." if overridden else ""), "",
              "| run | table (W x H x D) | measured peak | estimate | estimate / measured | wall time [s] |",
              "|---|---|---:|---:|---:|---:|"]
     for name, description, arguments in selected:

@@ -5,7 +5,8 @@ the default 30 view steps, for Keller & Bohn's nodes (the default) and 'ground_e
 :mod:`clsky.ray_quadrature` (independent of clsky). Errors are those of the NumPy twin, which the
 table, scatter and ray-march kernels match to ~1e-14 (tests/test_single_twin.py, test_multiple.py,
 test_view_nodes.py). Also times the OpenCL single-scattering table and a ray-marched frame with each
-placement. Prints the tables and writes them into README.md ("Views from altitude").
+placement, and gives per observer altitude the placement the scene planner picks there
+(clsky.planner.view_sampling). Prints the tables and writes them into README.md ("Views from altitude").
 
 Usage: python bench/bench_view_nodes.py [--repeat N] [--no-readme] [--smoke]
 
@@ -25,6 +26,7 @@ from _report import SMOKE, add_output_arguments, best_of, machine, parse_argumen
 from clsky import ScatteringTable, TableSettings, preset, reference
 from clsky._cl import describe_device
 from clsky.phase import mie_phase, rayleigh_phase
+from clsky.planner import view_sampling
 from clsky.ray_quadrature import single_scattering_ray
 from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
 from clsky.single import SingleScatteringEngine
@@ -64,21 +66,34 @@ def errors(atmosphere, rays, exact, sampling):
 
 
 def accuracy_rows(smoke):
-    rows = []
+    """(rows by ray group, rows by observer altitude): the first per preset, sampling and group of
+    :func:`groups`; the second per preset and altitude, over the rays that hit the ground, with the
+    node placement the scene planner picks for an observer there (clsky.planner.view_sampling)."""
+    rows, altitude_rows = [], []
     for name in ("atmosphere-plus", "physical"):
         atmosphere = preset(name)
         rays = sweep(smoke)
         exact = np.array([single_scattering_ray(atmosphere, *ray) for ray in rays])
         lit = np.all(exact > 0.0, axis=1)        # rays that see any sunlit air (100 km looking up: none)
+        rays, exact = rays[lit], exact[lit]
+        found = {sampling: errors(atmosphere, rays, exact, sampling) for sampling in SAMPLINGS}
         for sampling in SAMPLINGS:
-            ibar_error, radiance_error = errors(atmosphere, rays[lit], exact[lit], sampling)
-            for group, mask in groups(atmosphere, rays[lit]).items():
+            ibar_error, radiance_error = found[sampling]
+            for group, mask in groups(atmosphere, rays).items():
                 if mask.any():
                     stats = [100 * f(e[mask]) for e in (ibar_error, radiance_error)
                              for f in (np.median, lambda x: np.percentile(x, 95), np.max)]
                     rows.append((name, sampling, group, int(mask.sum()), stats))
                     print(name, sampling, group, int(mask.sum()), np.round(stats, 2), flush=True)
-    return rows
+        hits = groups(atmosphere, rays)["altitude, hitting the ground"]
+        for altitude in np.unique(rays[:, 0]):
+            mask = hits & (rays[:, 0] == altitude)
+            stats = [100 * f(found[sampling][kind][mask]) if mask.any() else None
+                     for kind in (0, 1) for sampling in SAMPLINGS for f in (lambda x: np.percentile(x, 95), np.max)]
+            picked = view_sampling((altitude, altitude))[0]
+            altitude_rows.append((name, altitude, picked, int(mask.sum()), stats))
+            print(name, altitude, picked, int(mask.sum()), stats, flush=True)
+    return rows, altitude_rows
 
 
 def cost_rows(size, frame, repeat):
@@ -114,7 +129,7 @@ def main():
     size, frame = (SMOKE.table, SMOKE.frame) if args.smoke else (TableSettings().size, 256)
     if args.smoke:
         args.repeat = SMOKE.repeat
-    accuracy = accuracy_rows(args.smoke)
+    accuracy, by_altitude = accuracy_rows(args.smoke)
     cost, device = cost_rows(size, frame, args.repeat)
 
     rays = sweep(args.smoke)
@@ -130,6 +145,16 @@ def main():
              "radiance p95 | radiance max |", "|---|---|---|---:|---:|---:|---:|---:|---:|---:|"]
     lines += [f"| {name} | {sampling} | {group} | {n} | " + " | ".join(f"{v:.2f}" for v in stats) + " |"
               for name, sampling, group, n, stats in accuracy]
+    lines += ["", "By observer altitude: the node placement the scene planner picks for an observer there "
+              "(clsky.planner.view_sampling, table and ray march), and the error [%] of the rays from there that "
+              "hit the ground (the only rays the two placements treat differently), 95th percentile / maximum "
+              "of the worst channel.", "",
+              "| preset | observer [km] | planner picks | rays hitting the ground | Ibar keller_bohn | "
+              "Ibar ground_end | radiance keller_bohn | radiance ground_end |",
+              "|---|---:|---|---:|---:|---:|---:|---:|"]
+    for name, altitude, picked, n, stats in by_altitude:
+        pairs = ["none" if stats[i] is None else f"{stats[i]:.2f} / {stats[i + 1]:.2f}" for i in range(0, 8, 2)]
+        lines.append(f"| {name} | {altitude / 1e3:g} | {picked} | {n} | " + " | ".join(pairs) + " |")
     lines += ["", f"Cost, atmosphere-plus, OpenCL device {device}, best of {args.repeat} interleaved runs after a "
               f"warm-up (load average {os.getloadavg()[0]:.1f} on the shared machine): the single-scattering "
               f"table {' x '.join(map(str, size))} and a {frame} x {frame} ray-marched frame (48 samples, single "

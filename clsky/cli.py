@@ -260,7 +260,8 @@ def table_settings(args, atmosphere):
 
     try:
         settings = _table_settings(args, atmosphere)
-        check_ground_mode(atmosphere, settings)
+        check_ground_mode(atmosphere, settings.mode, "" if getattr(args, "ground_albedo", None) is not None
+                          else f"the {args.preset} preset's ground")
         return settings
     except ParameterError as error:
         raise UsageError(option_message(error, TABLE_OPTION_NAMES)) from None

@@ -13,7 +13,8 @@ import numbers
 
 import numpy as np
 
-__all__ = ["ParameterError", "NumericalError", "short", "is_real_number", "is_integer", "as_real_array"]
+__all__ = ["ParameterError", "NumericalError", "short", "is_real_number", "is_integer", "as_real_array",
+           "check_integer", "check_real", "check_choice"]
 
 #: Longest text of a value echoed in a message.
 _MAX_ECHO = 60
@@ -67,6 +68,105 @@ def as_real_array(name, value, valid="real numbers"):
         return array.astype(np.float64)
     except (TypeError, ValueError):
         raise ParameterError(name, valid, value) from None
+
+
+def check_integer(name, value, low, high, index=None, optional=False):
+    """``value`` as an int if it is an integer (Python's or NumPy's, not a bool) in [low, high].
+
+    Parameters
+    ----------
+    name : str
+        The parameter's name, for the message.
+    value : object
+    low, high : int
+        The valid range, both ends included.
+    index : int, optional
+        The item of a tuple parameter (``size[0]``).
+    optional : bool
+        None is valid too (and returned).
+
+    Raises
+    ------
+    ParameterError
+        ``'{name} must be [None or ]an integer in [low, high], got {value}'``.
+
+    Examples
+    --------
+    >>> check_integer("steps", np.int64(30), 1, 4096)
+    30
+    >>> check_integer("size", 1, 2, 4096, index=0)
+    Traceback (most recent call last):
+    ...
+    clsky.errors.ParameterError: size[0] must be an integer in [2, 4096], got 1
+    """
+    if optional and value is None:
+        return None
+    if not is_integer(value) or not low <= value <= high:
+        raise ParameterError(name, ("None or " if optional else "") + f"an integer in [{low}, {high}]", value, index)
+    return int(value)
+
+
+def check_real(name, value, low=-math.inf, high=math.inf, low_open=False, unit="", optional=False):
+    """``value`` as a float if it is a finite real number (Python's or NumPy's, not a bool or a string)
+    in [low, high], or in (low, high] with ``low_open``.
+
+    Parameters
+    ----------
+    name : str
+        The parameter's name, for the message.
+    value : object
+    low, high : float
+        The valid range (default: any finite number).
+    low_open : bool
+        Exclude ``low``.
+    unit : str
+        Appended to the range in the message (e.g. ``" degrees"``).
+    optional : bool
+        None is valid too (and returned).
+
+    Raises
+    ------
+    ParameterError
+        ``'{name} must be [None or ]a number in [low, high]{unit}, got {value}'`` (``a finite number``
+        without bounds); NaN and infinities are refused.
+
+    Examples
+    --------
+    >>> check_real("fov_deg", 0.0, 0.0, 179.0, low_open=True, unit=" degrees")
+    Traceback (most recent call last):
+    ...
+    clsky.errors.ParameterError: fov_deg must be a number in (0, 179] degrees, got 0
+    """
+    if optional and value is None:
+        return None
+    if (not is_real_number(value) or not math.isfinite(value) or not (low < value if low_open else low <= value)
+            or not value <= high):
+        bounded = (low, high) != (-math.inf, math.inf)
+        valid = f"a number in {'(' if low_open else '['}{low:g}, {high:g}]{unit}" if bounded else f"a finite number{unit}"
+        raise ParameterError(name, ("None or " if optional else "") + valid, value)
+    return float(value)
+
+
+def check_choice(name, value, choices, optional=False):
+    """``value`` if it is one of the strings ``choices`` (listed in their order in the message).
+
+    Raises
+    ------
+    ParameterError
+        ``'{name} must be [None or ]one of [...], got {value}'``.
+
+    Examples
+    --------
+    >>> check_choice("mapping", "cubic", ("linear", "nonlinear"))
+    Traceback (most recent call last):
+    ...
+    clsky.errors.ParameterError: mapping must be one of ['linear', 'nonlinear'], got 'cubic'
+    """
+    if optional and value is None:
+        return None
+    if not isinstance(value, str) or value not in choices:
+        raise ParameterError(name, ("None or " if optional else "") + f"one of {list(choices)}", value)
+    return value
 
 
 class ParameterError(ValueError):

@@ -50,14 +50,24 @@ def default_settings(atmosphere: AtmosphereParameters) -> TableSettings:
     return TableSettings(mode="physical") if atmosphere.has_ground else TableSettings()
 
 
-def check_ground_mode(atmosphere: AtmosphereParameters, settings: TableSettings):
+def check_ground_mode(atmosphere: AtmosphereParameters, mode: str, origin: str = ""):
     """ParameterError naming ``ground_albedo`` for a reflecting ground with the atmosphere-plus scheme
-    (the scheme applies the first event's phase to every order; the ground's light has none)."""
-    if atmosphere.has_ground and settings.mode != "physical":
-        raise ParameterError("ground_albedo", f"0 with mode {settings.mode!r} (the notes' scheme applies the "
-                                              f"first event's phase to every order, which light reflected by "
-                                              f"the ground does not have: use mode 'physical')",
-                             atmosphere.ground_albedo)
+    (the scheme applies the first event's phase to every order; the ground's light has none).
+
+    Parameters
+    ----------
+    atmosphere : AtmosphereParameters
+    mode : str
+        The scheme of the higher orders (``TableSettings.mode``).
+    origin : str
+        Where the ground comes from, when the user did not give it (e.g. "the physical preset's
+        ground"): appended to the message.
+    """
+    if atmosphere.has_ground and mode != "physical":
+        raise ParameterError("ground_albedo", f"0 with mode {mode!r} (the notes' scheme applies the first event's "
+                                              f"phase to every order, which light reflected by the ground does "
+                                              f"not have: use mode 'physical'" + (f"; here {origin}" if origin else "")
+                             + ")", atmosphere.ground_albedo)
 
 
 def direct_irradiance(atmosphere: AtmosphereParameters, settings: TableSettings) -> np.ndarray:

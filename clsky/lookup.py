@@ -10,9 +10,9 @@ import pyopencl.array as cla
 
 from . import _atmosphere_cl, _cl
 from .atmosphere import AtmosphereParameters
-from .errors import ParameterError, as_real_array
+from .errors import ParameterError, as_real_array, check_choice
 from .mapping import FULL_SUN_RANGE, sun_w_range
-from .settings import MAPPINGS, _check_choice
+from .settings import MAPPINGS
 
 __all__ = ["TableLookupEngine", "check_queries", "check_table_data", "check_kernel_buffer"]
 
@@ -129,7 +129,7 @@ class TableLookupEngine(_cl.Engine):
             Radiance r, g, b (HDR, before exposure tone mapping).
         """
         data = check_table_data(data)
-        _check_choice("mapping", mapping, MAPPINGS)
+        check_choice("mapping", mapping, MAPPINGS)
         queries = check_queries(altitude, cos_view, cos_sun, cos_scatter)
         shape, n = queries[0].shape, queries[0].size
         depth, height, width, channels = data.shape

@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .settings import MAPPINGS, _check_choice
+from .errors import check_choice
+from .settings import MAPPINGS
 
 __all__ = ["altitude_to_u", "u_to_altitude", "cos_to_v", "v_to_cos", "grid_coordinates", "FULL_SUN_RANGE",
            "sun_w_range", "cos_to_sun_t"]
@@ -26,25 +27,25 @@ FULL_SUN_RANGE = (-1.0, 1.0)
 def altitude_to_u(altitude, atmosphere_height, mapping="nonlinear"):
     """Texture coordinate u in [0, 1] of altitude [m] (clamped to [0, Ha])."""
     x = np.clip(np.asarray(altitude, dtype=np.float64) / atmosphere_height, 0.0, 1.0)
-    return np.sqrt(x) if _check_choice("mapping", mapping, MAPPINGS) == "nonlinear" else x
+    return np.sqrt(x) if check_choice("mapping", mapping, MAPPINGS) == "nonlinear" else x
 
 
 def u_to_altitude(u, atmosphere_height, mapping="nonlinear"):
     """Altitude [m] of texture coordinate u in [0, 1]."""
     u = np.asarray(u, dtype=np.float64)
-    return (u * u if _check_choice("mapping", mapping, MAPPINGS) == "nonlinear" else u) * atmosphere_height
+    return (u * u if check_choice("mapping", mapping, MAPPINGS) == "nonlinear" else u) * atmosphere_height
 
 
 def cos_to_v(cosine, mapping="nonlinear"):
     """Texture coordinate v (or w) in [0, 1] of a zenith cosine (clamped to [-1, 1])."""
     c = np.clip(np.asarray(cosine, dtype=np.float64), -1.0, 1.0)
-    return 0.5 * (1.0 + (np.cbrt(c) if _check_choice("mapping", mapping, MAPPINGS) == "nonlinear" else c))
+    return 0.5 * (1.0 + (np.cbrt(c) if check_choice("mapping", mapping, MAPPINGS) == "nonlinear" else c))
 
 
 def v_to_cos(v, mapping="nonlinear"):
     """Zenith cosine of texture coordinate v (or w) in [0, 1]."""
     t = 2.0 * np.asarray(v, dtype=np.float64) - 1.0
-    return t * t * t if _check_choice("mapping", mapping, MAPPINGS) == "nonlinear" else t
+    return t * t * t if check_choice("mapping", mapping, MAPPINGS) == "nonlinear" else t
 
 
 def sun_w_range(mapping="nonlinear", sun_cos_range=FULL_SUN_RANGE):

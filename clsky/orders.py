@@ -150,7 +150,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
 
     start = time.perf_counter()
     atmosphere.check_dtype(settings.dtype)
-    ground.check_ground_mode(atmosphere, settings)
+    ground.check_ground_mode(atmosphere, settings.mode)
     if backend not in ("opencl", "numpy"):
         raise ValueError(f"backend must be one of ['opencl', 'numpy'], got {backend!r}")
     if backend == "opencl":

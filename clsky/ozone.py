@@ -28,9 +28,10 @@ doi:10.1109/TVCG.2016.2622272; code: github.com/ebruneton/precomputed_atmospheri
 from __future__ import annotations
 
 import functools
-import importlib.resources
 
 import numpy as np
+
+from ._data import read_binned_table
 
 __all__ = ["DOBSON_UNIT", "CROSS_SECTION_FILE", "cross_section_table", "cross_section_serdyuchenko2014",
            "tent_profile", "tent_number_density_max"]
@@ -43,7 +44,8 @@ CROSS_SECTION_FILE = "data/ozone_cross_section_serdyuchenko2014_233K.csv"
 
 @functools.lru_cache(maxsize=1)
 def cross_section_table():
-    """The shipped bins: (lower edge [nm], upper edge [nm], mean cross-section [m^2]), three arrays.
+    """The shipped bins: (lower edge [nm], upper edge [nm], mean cross-section [m^2]), three read-only
+    arrays, checked by :func:`clsky._data.read_binned_table` (DataFileError for a malformed file).
 
     Examples
     --------
@@ -51,12 +53,7 @@ def cross_section_table():
     >>> float(low[0]), float(high[-1]), len(sigma)
     (360.0, 840.0, 48)
     """
-    text = importlib.resources.files("clsky").joinpath(CROSS_SECTION_FILE).read_text(encoding="utf-8")
-    rows = [line for line in text.splitlines() if line and not line.startswith("#")]
-    data = np.array([[float(v) for v in row.split(",")] for row in rows[1:]])
-    for column in data.T:
-        column.setflags(write=False)
-    return data[:, 0], data[:, 1], data[:, 2]
+    return read_binned_table(CROSS_SECTION_FILE, "cross_section_m2")
 
 
 def cross_section_serdyuchenko2014(wavelengths_nm):

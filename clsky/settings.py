@@ -6,7 +6,7 @@ import dataclasses
 
 import numpy as np
 
-from .errors import ParameterError, is_integer, is_real_number
+from .errors import ParameterError, check_choice, check_integer, is_real_number
 
 __all__ = ["TableSettings", "MAPPINGS", "SAMPLINGS", "SUN_TRANSMITTANCE_METHODS", "MIE_LAYOUTS",
            "SCATTERING_MODES"]
@@ -25,19 +25,6 @@ SCATTERING_MODES = ("atmosphere-plus", "physical")
 MIE_LAYOUTS = {"per-wavelength": 6, "notes": 4}
 
 _MAX_CELLS = 2**31 // 8   # keeps every flat index (times channels) inside a signed 32-bit int
-
-
-def _check_int(name, value, low, high, index=None):
-    """``value`` as an int if it is an integer (Python's or NumPy's, not a bool) in [low, high]."""
-    if not is_integer(value) or not low <= value <= high:
-        raise ParameterError(name, f"an integer in [{low}, {high}]", value, index)
-    return int(value)
-
-
-def _check_choice(name, value, choices):
-    if not isinstance(value, str) or value not in choices:
-        raise ParameterError(name, f"one of {sorted(choices)}", value)
-    return value
 
 
 @dataclasses.dataclass(frozen=True)
@@ -120,21 +107,21 @@ class TableSettings:
                            self._check_size("transmittance_size", self.transmittance_size, 2))
         if int(np.prod(self.size)) > _MAX_CELLS:
             raise ParameterError("size", f"at most {_MAX_CELLS} cells (W x H x D)", self.size)
-        object.__setattr__(self, "view_steps", _check_int("view_steps", self.view_steps, 1, 4096))
-        object.__setattr__(self, "sun_steps", _check_int("sun_steps", self.sun_steps, 1, 4096))
-        _check_choice("mapping", self.mapping, MAPPINGS)
-        _check_choice("sampling", self.sampling, SAMPLINGS)
-        _check_choice("sun_transmittance", self.sun_transmittance, SUN_TRANSMITTANCE_METHODS)
-        _check_choice("mie_layout", self.mie_layout, MIE_LAYOUTS)
-        _check_choice("mode", self.mode, SCATTERING_MODES)
+        object.__setattr__(self, "view_steps", check_integer("view_steps", self.view_steps, 1, 4096))
+        object.__setattr__(self, "sun_steps", check_integer("sun_steps", self.sun_steps, 1, 4096))
+        check_choice("mapping", self.mapping, MAPPINGS)
+        check_choice("sampling", self.sampling, SAMPLINGS)
+        check_choice("sun_transmittance", self.sun_transmittance, SUN_TRANSMITTANCE_METHODS)
+        check_choice("mie_layout", self.mie_layout, MIE_LAYOUTS)
+        check_choice("mode", self.mode, SCATTERING_MODES)
         if not (isinstance(self.orders, str) and self.orders == "auto"):
-            object.__setattr__(self, "orders", _check_int("orders", self.orders, 1, 1000))
-        object.__setattr__(self, "max_orders", _check_int("max_orders", self.max_orders, 2, 1000))
-        object.__setattr__(self, "gather_theta_steps", _check_int("gather_theta_steps", self.gather_theta_steps, 2, 8192))
-        object.__setattr__(self, "gather_phi_steps", _check_int("gather_phi_steps", self.gather_phi_steps, 2, 8192))
+            object.__setattr__(self, "orders", check_integer("orders", self.orders, 1, 1000))
+        object.__setattr__(self, "max_orders", check_integer("max_orders", self.max_orders, 2, 1000))
+        object.__setattr__(self, "gather_theta_steps", check_integer("gather_theta_steps", self.gather_theta_steps, 2, 8192))
+        object.__setattr__(self, "gather_phi_steps", check_integer("gather_phi_steps", self.gather_phi_steps, 2, 8192))
         if self.multiple_view_steps is not None:
             object.__setattr__(self, "multiple_view_steps",
-                               _check_int("multiple_view_steps", self.multiple_view_steps, 1, 4096))
+                               check_integer("multiple_view_steps", self.multiple_view_steps, 1, 4096))
         object.__setattr__(self, "sun_cos_range", self._check_sun_cos_range(self.sun_cos_range))
         tolerance = self.order_tolerance
         if not is_real_number(tolerance) or not 0.0 < tolerance < 1.0:
@@ -156,7 +143,7 @@ class TableSettings:
             raise ParameterError(name, f"{count} integers", value) from None
         if len(items) != count:
             raise ParameterError(name, f"{count} integers", value)
-        return tuple(_check_int(name, v, 2, 4096, index=i) for i, v in enumerate(items))
+        return tuple(check_integer(name, v, 2, 4096, index=i) for i, v in enumerate(items))
 
     @staticmethod
     def _check_sun_cos_range(value):

@@ -24,9 +24,10 @@ doi:10.1016/j.solener.2003.08.039. Bruneton, E. (2017), github.com/ebruneton/pre
 from __future__ import annotations
 
 import functools
-import importlib.resources
 
 import numpy as np
+
+from ._data import read_binned_table
 
 __all__ = ["SOLAR_SPECTRUM_FILE", "ABSOLUTE_UNITS", "RELATIVE_UNITS", "solar_spectrum_table",
            "solar_irradiance_astm_g173", "with_solar_spectrum", "radiance_units"]
@@ -43,7 +44,8 @@ _SAME = 1e-12
 
 @functools.lru_cache(maxsize=1)
 def solar_spectrum_table():
-    """The shipped bins: (lower edge [nm], upper edge [nm], mean irradiance [W m^-2 nm^-1]), read-only.
+    """The shipped bins: (lower edge [nm], upper edge [nm], mean irradiance [W m^-2 nm^-1]), read-only,
+    checked by :func:`clsky._data.read_binned_table` (DataFileError for a malformed file).
 
     Examples
     --------
@@ -51,12 +53,7 @@ def solar_spectrum_table():
     >>> float(low[0]), float(high[-1]), len(irradiance), float(irradiance[0])
     (360.0, 840.0, 48, 1.11776)
     """
-    text = importlib.resources.files("clsky").joinpath(SOLAR_SPECTRUM_FILE).read_text(encoding="utf-8")
-    rows = [line for line in text.splitlines() if line and not line.startswith("#")]
-    data = np.array([[float(v) for v in row.split(",")] for row in rows[1:]])
-    for column in data.T:
-        column.setflags(write=False)
-    return data[:, 0], data[:, 1], data[:, 2]
+    return read_binned_table(SOLAR_SPECTRUM_FILE, "irradiance_w_m2_nm")
 
 
 def solar_irradiance_astm_g173(wavelengths_nm):

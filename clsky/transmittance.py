@@ -11,8 +11,8 @@ import pyopencl.array as cla
 
 from . import _atmosphere_cl, _cl
 from .atmosphere import AtmosphereParameters
-from .errors import as_real_array
-from .settings import SAMPLINGS, _check_choice, _check_int
+from .errors import as_real_array, check_choice, check_integer
+from .settings import SAMPLINGS
 
 __all__ = ["TransmittanceEngine", "check_segments", "column_channels"]
 
@@ -71,8 +71,8 @@ class TransmittanceEngine(_cl.Engine):
 
     def __init__(self, ctx=None, dtype=np.float64, profile=False, fast_math=False, *, steps=30,
                  sampling="uniform"):
-        self.steps = _check_int("steps", steps, 1, 4096)
-        self.sampling = _check_choice("sampling", sampling, SAMPLINGS)
+        self.steps = check_integer("steps", steps, 1, 4096)
+        self.sampling = check_choice("sampling", sampling, SAMPLINGS)
         super().__init__(ctx, dtype, profile, fast_math)
 
     def program_sources(self):
@@ -126,7 +126,7 @@ class TransmittanceEngine(_cl.Engine):
         3 with ozone (C_O: column of the ozone tent, :mod:`clsky.ozone`) (or, with ``queue_only``, the
         device array, for use by other kernels of the same context).
         """
-        tw, th = (_check_int(f"size[{i}]", v, 2, 4096) for i, v in enumerate(size))
+        tw, th = (check_integer(f"size[{i}]", v, 2, 4096) for i, v in enumerate(size))
         table_d = cla.empty(self.queue, (th, tw, column_channels(atmosphere)), self.dtype)
         atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
         event = self.kernels_with(_atmosphere_cl.feature_defines(atmosphere))["transmittance_table"](self.queue, (tw, th), None, atmosphere_d,

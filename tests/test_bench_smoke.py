@@ -33,6 +33,7 @@ HEADERS = {
     "bench_quality": ["| level | promise | table | samples | build [s] | render [ms] | day [%] |",
                       "| doubled | day [%] |", "| table | sun axis | cells | build [s] | day [%] |"],
     "bench_view_nodes": ["| preset | sampling | rays | n | Ibar median | Ibar p95 | Ibar max |",
+                         "| preset | observer [km] | planner picks | rays hitting the ground |",
                          "| sampling | table [s] | ray march [ms] |"],
     "bench_dusk": ["| sky | display | zenith sRGB (8 bit) | blue: b > g > r | linear b / g | linear g / r |"],
     "bench_spectral": ["| build | batches | wall [s] | CPU [s] | wall / three | load |",
@@ -127,3 +128,31 @@ def test_accuracy_smoke_writes_its_files_where_asked(tmp_path):
     run_smoke("bench_accuracy", "--docs", str(tmp_path))
     assert (tmp_path / "accuracy.csv").read_text().startswith("candidate,")
     assert (tmp_path / "accuracy.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_memory_bench_honours_the_atmosphere_options():
+    """bench_memory's --ground-albedo / --ozone-column reach every measured command and its estimate: an
+    atmosphere-plus table with a ground is built in the physical mode (clsky.ground.default_settings:
+    3 more channels), and the estimate is that table's, not the preset's."""
+    import argparse
+
+    from clsky import TableSettings
+    from clsky.resources import BASE_PROCESS_BYTES, estimate_table_memory
+
+    sys.path.insert(0, str(BENCH))
+    try:
+        import bench_memory
+    finally:
+        sys.path.remove(str(BENCH))
+    arguments = ["table", "--preset", "atmosphere-plus", "--size", "8", "16", "8", "--progress", "none"]
+    given = argparse.Namespace(ground_albedo=0.3, ozone_column_du=250.0)
+    overridden = bench_memory.with_overrides(arguments, given)
+    assert overridden == arguments + ["--ground-albedo", "0.3", "--ozone-column", "250.0"]
+    assert bench_memory.with_overrides(arguments, argparse.Namespace(ground_albedo=None, ozone_column_du=None)) \
+        == arguments
+    plain, size = bench_memory.estimate(arguments)
+    ground, _ = bench_memory.estimate(overridden)
+    assert size == (8, 16, 8)
+    assert plain == estimate_table_memory(TableSettings(size=size), saving=True).peak_bytes() + BASE_PROCESS_BYTES
+    physical = TableSettings(size=size, mode="physical")
+    assert ground == estimate_table_memory(physical, saving=True).peak_bytes() + BASE_PROCESS_BYTES > plain

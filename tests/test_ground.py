@@ -421,10 +421,22 @@ def test_animation_config_ground_albedo(tmp_path, capsys):
 
 def test_monte_carlo_with_a_black_ground_is_the_tracer_before():
     """A black ground draws no extra random numbers: the tracer's estimate of a ground-hitting view
-    (from 2 km, looking down) is bit for bit that of the code before the ground (commit bfa2a93, NumPy
-    2.4 on this machine)."""
+    (from 2 km, looking down) is that of the code before the ground (commit bfa2a93).
+
+    The collision counts pin the random stream exactly. The values are pinned to rtol 1e-12, not by a
+    hash of their bytes: NumPy's SIMD exp/log differ in the last bits between CPUs (the hash recorded on
+    an Intel machine failed on an AMD EPYC one with the same counts), while one extra random draw would
+    change the estimate at the percent level (its standard error is 3-10 %)."""
     result = montecarlo.simulate(PHYSICAL_BLACK, 2000.0, -0.3, 0.5, 0.4, photons=3000, seed=4)
-    digest = hashlib.sha256(np.concatenate([result.radiance, result.standard_error,
-                                            result.orders.ravel()]).tobytes()).hexdigest()
     assert (result.real_collisions, result.null_collisions) == (1079, 2011)
-    assert digest == "a0356bdf3d3fdacee8f0aabb4a3a4b0cf7c2476e6191223c4937ee2685bdf472"
+    np.testing.assert_allclose(result.radiance, [0.00290132337069731, 0.00840291218692248, 0.01006786456078857],
+                               rtol=1e-12, atol=0)
+    np.testing.assert_allclose(result.standard_error, [0.0002820335914587, 0.00048153018560303,
+                                                       0.00056125041469862], rtol=1e-12, atol=0)
+    np.testing.assert_allclose(result.orders[:5], [
+        [2.4941961092508290e-03, 6.7389826251895713e-03, 7.2833108525677970e-03],
+        [3.5801081156918780e-04, 1.3529488365773795e-03, 1.9732574782331622e-03],
+        [4.4825762682926402e-05, 2.4903622540352154e-04, 5.9946195927957008e-04],
+        [3.3816206598471787e-06, 6.1944499752008807e-05, 2.1183427070804332e-04],
+        [9.0906653451802222e-07, 0.0, 0.0]], rtol=1e-12, atol=0)
+    assert not result.orders[5:].any()
