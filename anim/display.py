@@ -2,7 +2,7 @@
 
 The pipeline (issue 10, item 5), one frame at a time::
 
-    frame (CIE XYZ or linear Rec. 709)  -> linear sRGB (IEC 61966-2-1 matrix, colour-science)
+    frame (CIE XYZ or linear Rec. 709)  -> linear sRGB (IEC 61966-2-1, clsky.colorimetry.XYZ_TO_SRGB)
       -> white balance: D65 (none) or the sun's colour adapted to D65 (von Kries, CAT02)
       -> exposure: x 2^EV, EV fixed or metered from the frame and smoothed over time
       -> tone curve (:data:`TONE_CURVES`): display-linear sRGB in [0, 1]
@@ -51,6 +51,7 @@ import math
 
 import numpy as np
 
+from clsky import colorimetry
 from clsky.errors import ParameterError
 
 from . import tonemap
@@ -72,14 +73,11 @@ GAMUT_STEPS = 16
 
 @functools.lru_cache(maxsize=None)
 def _matrices():
-    """(sRGB -> XYZ, XYZ -> sRGB, sRGB -> Oklab LMS, Oklab LMS' -> Lab, and inverses) from colour-science's
-    sRGB colourspace (the IEC 61966-2-1 matrix) and Oklab's forward matrices."""
-    import colour
+    """(sRGB -> XYZ, XYZ -> sRGB, sRGB -> Oklab LMS, Oklab LMS' -> Lab, and inverses): clsky's sRGB
+    matrix (:data:`clsky.colorimetry.SRGB_TO_XYZ` and its inverse) and colour-science's Oklab matrices."""
     from colour.models import oklab
 
-    srgb = colour.RGB_COLOURSPACES["sRGB"]
-    to_xyz = np.asarray(srgb.matrix_RGB_to_XYZ, dtype=np.float64)
-    to_rgb = np.linalg.inv(to_xyz)                # its printed inverse has 4 digits: white would be off 5e-5
+    to_xyz, to_rgb = colorimetry.SRGB_TO_XYZ, colorimetry.XYZ_TO_SRGB
     to_lms = np.asarray(oklab.MATRIX_1_XYZ_TO_LMS, dtype=np.float64) @ to_xyz
     to_lab = np.asarray(oklab.MATRIX_2_LMS_TO_LAB, dtype=np.float64)
     # the inverses to double precision (colour-science prints them to fewer digits: a round trip
@@ -91,7 +89,7 @@ def _matrices():
 
 
 def _luminance(rgb):
-    """Y of linear sRGB (the Y row of colour-science's sRGB matrix: 0.2126, 0.7152, 0.0722)."""
+    """Y of linear sRGB (the Y row of :data:`clsky.colorimetry.SRGB_TO_XYZ`: 0.2126, 0.7152, 0.0722 to 4 digits)."""
     return rgb @ _matrices()["rgb_to_xyz"][1]
 
 
