@@ -405,7 +405,7 @@ def memory_estimate(config: AnimationConfig, positions) -> MemoryEstimate:
 
     The table is the plan's sun axis (view elevations from the camera at 64 pixels, ray-march margins)
     with the higher orders kept, an upper bound of the plan (whose pilot may drop them); with
-    ``table_size``, that full table.
+    ``table_size``, that full table; with ``wavelengths``, one such table per batch of three.
     """
     level = quality(config)
     if config.table_size is not None:
@@ -416,8 +416,9 @@ def memory_estimate(config: AnimationConfig, positions) -> MemoryEstimate:
         cos_range, nodes, _, _ = sun_axis(config.atmosphere, scene, level, level.table.mapping)
         settings = level.table.replace(mode=config.mode, size=level.table.size[:2] + (nodes,),
                                        sun_cos_range=cos_range)
+    batches = None if config.wavelengths is None else len(spectrum.wavelength_batches(config.wavelengths))
     return estimate_animation_memory(_with_sampling(settings, config), config.image_shape(), config.method,
-                                     ray_settings(config), hdr_output=config.hdr)
+                                     ray_settings(config), hdr_output=config.hdr, batches=batches)
 
 
 def build_table(config: AnimationConfig, plan: Plan | None = None, ctx=None, progress=None) -> clsky.ScatteringTable:
