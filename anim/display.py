@@ -13,8 +13,10 @@ which keeps it): with it, D65 and a fixed EV the pipeline *is* ``tone_map(frame,
 code and the same bits as before this module (EV 0 is exposure 1). Its power law 2.2 replaces the sRGB
 function, as in the notes.
 
-Units. EV is relative to the frame's own units: EV 0 shows the frame's values as they are (I_I units for
-the 3-wavelength renderer: a day sky has Y of about 0.5), EV +1 doubles them. Auto-exposure meters the
+Units. EV is relative to the frame's own units: EV 0 shows the frame's values as they are, EV +1 doubles
+them. The animation's frames are linear sRGB in cd/m^2 for every preset but atmosphere-plus (a day sky
+has a mean Y of about 3600: EV -13 shows it), and the notes' relative I_I units for atmosphere-plus
+(a day sky has Y of about 0.5: EV 0). Auto-exposure meters the
 log-average luminance (Reinhard et al. 2002) and aims it at ``key`` (0.36: a sky is a high-key scene), so it works in
 any unit, absolute luminance [cd/m^2] included.
 
@@ -267,8 +269,8 @@ class AutoExposure:
     key : float
         Scene luminance, after exposure, that the log-average of the frame is mapped to [-], in (0, 1].
         Reinhard et al. 2002 use 0.18 for average scenes and up to 0.72 for high-key ones; 0.36 (one
-        stop above mid-grey) keeps a day sky about as bright as the frames' own values (EV -0.2 for
-        the physical preset's day sky) and lifts twilight.
+        stop above mid-grey) shows a day sky about as bright as the notes' display showed its relative
+        values at EV 0 (the relative day sky meters at EV -0.2) and lifts twilight.
     smoothing : float
         Fraction of the difference between the metered and the current EV corrected per frame, in
         (0, 1] (1: no smoothing).
