@@ -1,7 +1,8 @@
 """Sunrise-to-sunset animations: render every frame by table lookup and by ray march, compare, write.
 
 The pipeline, one frame at a time: sun position (:mod:`anim.sunpath`) -> HDR frames
-(:class:`clsky.render.SkyRenderer`, for the camera of :mod:`anim.cameras`) -> display values
+(:class:`clsky.render.SkyRenderer`, for the camera of :mod:`anim.cameras`; for every preset but
+atmosphere-plus in absolute units, converted to linear sRGB in cd/m^2 by :mod:`clsky.colorimetry`) -> display values
 (:mod:`anim.display`: white balance, exposure, tone curve, sRGB) -> metrics, error image and composite (:mod:`anim.metrics`) -> files
 (:mod:`anim.writers`). The renderers never see files; the writers never see physics.
 

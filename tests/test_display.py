@@ -110,7 +110,8 @@ def test_atmosphere_plus_frames_are_those_before_the_display(tmp_path, cl_contex
 
 def sky_blues():
     """Three saturated sky blues, linear sRGB scaled to Y = 0.18 (mid-grey at EV 0): the physical
-    preset's zenith with the sun 30 deg high (3-wavelength r, g, b), and the ColorChecker's 'blue sky'
+    preset's zenith with the sun 30 deg high (its relative 3-wavelength r, g, b, as they were shown
+    before the colorimetric conversion), and the ColorChecker's 'blue sky'
     and 'blue' patches (colour-science's xyY, 2014 batch, taken as XYZ)."""
     import colour
 
