@@ -76,7 +76,8 @@ def _add_scene_arguments(parser, frames=True):
     _add_display_arguments(parser)
     sky.add_argument("--wavelengths", type=int, metavar="N",
                      help="N wavelengths in [3, 47] in absolute units, frames converted spectral -> XYZ -> "
-                          "linear sRGB [cd/m^2] (default: the table's three, shown as r, g, b)")
+                          "linear sRGB [cd/m^2] (default: the table's three, converted the same way in cd/m^2; "
+                          "shown as r, g, b in the notes' units for --preset atmosphere-plus)")
     if frames:
         sun = parser.add_argument_group("sun path")
         sun.add_argument("--frames", type=int, default=120, help="frames of the sweep (default: 120)")
@@ -100,12 +101,15 @@ def _add_display_arguments(parser):
                               f"{DEFAULT_TONE_MAP} otherwise)")
     display.add_argument("--exposure", type=float, default=0.0, metavar="EV",
                          help="exposure in EV: frames are scaled by 2^EV (default: 0, the frames' own values; the old "
-                              "multiplier x is log2(x)); with --auto-exposure, a compensation")
-    display.add_argument("--auto-exposure", action="store_true",
+                              "multiplier x is log2(x); about -12 shows a day sky in cd/m^2); with auto-exposure, "
+                              "a compensation")
+    display.add_argument("--auto-exposure", action=argparse.BooleanOptionalAction,
                          help="meter each frame's log-average luminance to a key of 0.36 (a stop above mid-grey), "
-                              "smoothed over the frames")
-    display.add_argument("--white-balance", choices=list(WHITE_BALANCES), default="d65",
-                         help="white: d65 (none, default) or the sun's colour adapted to D65 (CAT02)")
+                              "smoothed over the frames (default: on for frames in cd/m^2, every preset but "
+                              "atmosphere-plus; off for atmosphere-plus); --no-auto-exposure: the fixed --exposure")
+    display.add_argument("--white-balance", choices=list(WHITE_BALANCES),
+                         help="white: d65 (none) or the sun's colour adapted to D65 (CAT02) (default: sun for "
+                              "frames in cd/m^2, d65 for --preset atmosphere-plus)")
 
 
 def register(commands):
