@@ -450,15 +450,21 @@ def test_presets_are_bit_for_bit_the_code_before_per_channel_mie(cl_context, nam
         OLD_HASHES[(name, mode, sun)]
 
 
-#: SHA-256 of montecarlo.sky_radiance(physical, 0, 0.5, 0.6, 0, photons=2000, seed=4) at commit bfa2a93
-#: (radiance then standard error, float64): NumPy only, so the same on every machine with the same NumPy.
-OLD_MC_HASH = "02cc5d16cd92d3503ed24e64aaf3170267e6deedd7ac7f3e957ab2dd86fd7c5d"
+#: montecarlo.sky_radiance(physical, 0, 0.5, 0.6, 0, photons=2000, seed=4): radiance, then standard
+#: error. Recorded at commit bfa2a93 as a SHA-256 of the bytes; NumPy's SIMD exp/log differ in the last
+#: bits between CPUs (that hash failed on an AMD EPYC machine), so the values are pinned to rtol 1e-12
+#: instead, recorded there: far below what one changed random draw or a channel mix-up would move
+#: (standard errors of 4-8 %).
+OLD_MC_RADIANCE = ([0.03013973654399687, 0.04328237633877961, 0.05080346435009415],
+                   [0.00254408446128628, 0.00190801698995634, 0.00187284278881777])
 
 
 def test_monte_carlo_is_bit_for_bit_with_exponent_zero():
-    """The tracer's per-channel Mie arrays reproduce its scalar results (commit bfa2a93) exactly."""
+    """The tracer's per-channel Mie arrays reproduce its scalar results (commit bfa2a93) to the last
+    bits the CPU's exp/log allow."""
     result = montecarlo.sky_radiance(PHYSICAL, 0.0, 0.5, 0.6, 0.0, photons=2000, seed=4)
-    assert _sha256(np.concatenate(result)) == OLD_MC_HASH
+    np.testing.assert_allclose(result[0], OLD_MC_RADIANCE[0], rtol=1e-12, atol=0)
+    np.testing.assert_allclose(result[1], OLD_MC_RADIANCE[1], rtol=1e-12, atol=0)
 
 
 # Animation and command line ------------------------------------------------------------------------
