@@ -1,7 +1,8 @@
 """Sunrise-to-sunset animations: render every frame by table lookup and by ray march, compare, write.
 
 The pipeline, one frame at a time: sun position (:mod:`anim.sunpath`) -> HDR frames
-(:class:`clsky.render.SkyRenderer`, for the camera of :mod:`anim.cameras`) -> display values
+(:class:`clsky.render.SkyRenderer`, for the camera of :mod:`anim.cameras`; for every preset but
+atmosphere-plus in absolute units, converted to linear sRGB in cd/m^2 by :mod:`clsky.colorimetry`) -> display values
 (:mod:`anim.display`: white balance, exposure, tone curve, sRGB) -> metrics, error image and composite (:mod:`anim.metrics`) -> files
 (:mod:`anim.writers`). The renderers never see files; the writers never see physics.
 
@@ -31,7 +32,7 @@ from clsky.ground import check_ground_mode
 from clsky.planner import Plan, Scene, plan_scene, sun_axis, view_sampling
 from clsky.quality import QUALITY_LEVELS, QualityLevel, level_for_budget, quality_level
 from clsky import colorimetry, spectrum
-from clsky.solar import solar_irradiance_astm_g173
+from clsky.solar import ABSOLUTE_UNITS, RELATIVE_UNITS, solar_irradiance_astm_g173, with_solar_spectrum
 from clsky.render import SkyRenderer
 from clsky.settings import SAMPLINGS
 from clsky.resources import MemoryEstimate, check_memory, device_of, estimate_animation_memory
@@ -39,14 +40,24 @@ from clsky.resources import MemoryEstimate, check_memory, device_of, estimate_an
 from . import display as display_pipeline
 from . import metrics, sunpath, writers
 from .cameras import camera_from_name
+from .exr import PRECISIONS
 
 __all__ = ["AnimationConfig", "AnimationResult", "METHODS", "quality", "plan_animation", "build_table", "make_renderer",
-           "spectral_frame_to_linear_srgb",
+           "spectral_frame_to_linear_srgb", "three_wavelength_frame_to_linear_srgb", "frame_units",
+           "THREE_WAVELENGTH_CONVERSION",
            "ray_settings", "sun_positions", "check_outputs", "render_animation", "render_frame",
            "memory_estimate", "display", "display_frames"]
 
 #: What is rendered: table lookup only, ray march only, or both with the comparison.
 METHODS = ("compare", "lut", "raymarch")
+
+#: The conversion of absolute three-wavelength frames to XYZ (:func:`clsky.colorimetry.three_wavelength_to_xyz`):
+#: the default ``solar_power_law`` reconstruction, tabulated. Measured per 512 x 512 frame (process CPU,
+#: 2-core machine at load average 5.6): solar_power_law 2.3 s, solar_power_law_tabulated 0.067 s (5e-7
+#: from it), the 3 x 3 matrices 0.005 s; the matrices are 11.5 dB (solar_interpolation) and 3.7 dB
+#: (bruneton2017) further from 47 wavelengths by day (README, "Spectral radiance and units"), and the
+#: exact one would add 2 x 120 x 2.3 s = 9 minutes to the default animation.
+THREE_WAVELENGTH_CONVERSION = "solar_power_law_tabulated"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -112,24 +123,40 @@ class AnimationConfig:
         Tone curve (:data:`anim.display.TONE_CURVES`); None (default): ``'atmosphere-plus'`` (the notes'
         curve, frames bit for bit as before) for the atmosphere-plus preset, else
         :data:`anim.display.DEFAULT_TONE_MAP`.
-    auto_exposure : bool
-        Meter each frame's luminance, smoothed over time (:class:`anim.display.AutoExposure`).
-    white_balance : {'d65', 'sun'}
-        'd65' (default): no balance, sRGB's own white; 'sun': the sun's colour (the incident light
-        I_I) adapted to D65 white (von Kries, CAT02).
+    auto_exposure : bool or None
+        Meter each frame's luminance, smoothed over time (:class:`anim.display.AutoExposure`). None
+        (default): True for frames in absolute units (:attr:`absolute`: a fixed EV cannot show both
+        the day sky, thousands of cd/m^2, and the dusk, tens), False for the atmosphere-plus preset's
+        relative frames (the notes' fixed exposure, frames bit for bit as before).
+    white_balance : {'d65', 'sun'} or None
+        'd65': no balance, sRGB's own white; 'sun': the sun's colour adapted to D65 white (von Kries,
+        CAT02): the sRGB of the solar spectrum for absolute frames, the incident light I_I for
+        relative ones. None (default): 'sun' for absolute frames (the scene's illuminant shown white, as
+        a camera's daylight balance does), 'd65' for the atmosphere-plus preset.
     dither : bool
         Dither the 8-bit frames against banding.
     output : str or path
         MP4 file; PNG frames go to ``<stem>_frames/``, metrics to ``<stem>_metrics.csv`` / ``.json``.
     wavelengths : int or None
-        None (default): the table's three wavelengths, shown as r, g, b. An integer N in [3, 47]: N
-        wavelengths in absolute units (:mod:`clsky.spectrum`: batches of three, lit by the solar
-        spectrum), each frame converted spectral -> CIE XYZ -> linear sRGB [cd/m^2]
-        (:func:`spectral_frame_to_linear_srgb`) before display; such frames are thousands of times brighter
-        than the notes' relative ones by day: use ``auto_exposure`` (or an EV near -12).
-    hdr : bool
-        Also write each frame's HDR values as float32 .npy beside the PNGs: the ray march's frame
-        (with ``method='compare'``, the reference the lookup is compared with) or the lookup's.
+        None (default): the table's three wavelengths; for the atmosphere-plus preset in the notes'
+        relative units (I_I), shown as r, g, b; for any other preset lit by the solar spectrum
+        (absolute units) and converted to CIE XYZ -> linear sRGB [cd/m^2]
+        (:func:`three_wavelength_frame_to_linear_srgb`). An integer N in [3, 47]: N wavelengths in
+        absolute units (:mod:`clsky.spectrum`: batches of three, lit by the solar spectrum), each
+        frame converted spectral -> CIE XYZ -> linear sRGB [cd/m^2] (:func:`spectral_frame_to_linear_srgb`).
+        Absolute frames are thousands of times brighter than the notes' relative ones by day: hence
+        auto-exposure by default (or an EV near -12 by day).
+    hdr : {None, 'exr', 'hdr', 'npy'} or bool
+        Also write each frame's HDR values beside the PNGs: the ray march's frame (with
+        ``method='compare'``, the reference the lookup is compared with) or the lookup's. 'exr': an
+        OpenEXR image per frame with its units, the clsky version and the sun in the header (an
+        equirectangular panorama is tagged as a latitude-longitude environment map:
+        :mod:`anim.exr`); 'hdr': a Radiance RGBE image with the same header lines (:mod:`anim.rgbe`,
+        8-bit mantissas); 'npy': a float32 NumPy array. None or False (default): none; True is 'npy'
+        (the former flag).
+    hdr_precision : {'float', 'half'}
+        Pixel type of the EXR frames: 32-bit (default, the frames' float32 values exactly) or 16-bit
+        half floats (values above 65504, the sun's disc, clipped to it); 'half' needs ``hdr='exr'``.
     force : bool
         Overwrite existing outputs.
 
@@ -170,11 +197,12 @@ class AnimationConfig:
     fps: float = 30.0
     exposure: float = 0.0
     tone_map: str | None = None
-    auto_exposure: bool = False
-    white_balance: str = "d65"
+    auto_exposure: bool | None = None
+    white_balance: str | None = None
     dither: bool = True
     output: str = "sky.mp4"
-    hdr: bool = False
+    hdr: str | None = None
+    hdr_precision: str = "float"
     force: bool = False
     wavelengths: int | None = None
 
@@ -186,6 +214,9 @@ class AnimationConfig:
                                  self.max_elevation_deg)
         check_ground_mode(self.atmosphere, self.mode,
                           "" if self.ground_albedo is not None else f"the {self.preset} preset's ground")
+        if self.hdr_precision != "float" and self.hdr != "exr":
+            raise ParameterError("hdr_precision", "'float' without EXR frames (hdr='exr', --hdr exr): .npy and .hdr frames have their own",
+                                 self.hdr_precision)
         if self.end_hour <= self.start_hour:
             raise ParameterError("end_hour", f"after the start hour ({self.start_hour:g})", self.end_hour)
         if self.location is not None:
@@ -198,6 +229,16 @@ class AnimationConfig:
         if self.tone_map is None:
             object.__setattr__(self, "tone_map", "atmosphere-plus" if self.preset == "atmosphere-plus"
                                else display_pipeline.DEFAULT_TONE_MAP)
+        if self.auto_exposure is None:
+            object.__setattr__(self, "auto_exposure", self.absolute)
+        if self.white_balance is None:
+            object.__setattr__(self, "white_balance", "sun" if self.absolute else "d65")
+
+    @property
+    def absolute(self) -> bool:
+        """Whether the frames are in absolute units (linear sRGB, cd/m^2): with ``wavelengths``, and
+        for every preset but atmosphere-plus (whose frames keep the notes' relative I_I)."""
+        return self.wavelengths is not None or self.preset != "atmosphere-plus"
 
     @property
     def output_path(self) -> pathlib.Path:
@@ -248,6 +289,10 @@ def _flag(name, value):
     return bool(value)
 
 
+def _optional_flag(name, value):
+    return None if value is None else _flag(name, value)
+
+
 def _location(name, value):
     """None or (latitude in [-90, 90], longitude in [-180, 180]) degrees, from any pair of numbers."""
     if value is None:
@@ -272,6 +317,19 @@ def _date(name, value):
         except ValueError:
             pass
     raise ParameterError(name, "None, a datetime.date or an ISO date 'YYYY-MM-DD'", value)
+
+
+def _hdr(name, value):
+    """None (or False), or a format of :attr:`anim.writers.FrameWriter.HDR_FORMATS` ('exr', 'hdr',
+    'npy'); True, the former flag, is 'npy'."""
+    if value is None or value is False or (isinstance(value, np.bool_) and not value):
+        return None
+    if value is True or isinstance(value, np.bool_):
+        return "npy"
+    formats = [f for f in writers.FrameWriter.HDR_FORMATS if f is not None]
+    if not isinstance(value, str) or value not in formats:
+        raise ParameterError(name, f"None, False, True or one of {formats}", value)
+    return value
 
 
 def _output(name, value):
@@ -304,7 +362,8 @@ _FIELD_CHECKS = {
     "location": _location, "date": _date, "start_hour": _real(0.0, 48.0, " h"), "end_hour": _real(0.0, 48.0, " h"),
     "step_minutes": _real(0.0, 1440.0, " minutes", low_open=True), "fps": _real(0.0, 240.0, low_open=True),
     "exposure": _real(-40.0, 40.0, " EV"), "tone_map": _choice(tuple(display_pipeline.TONE_CURVES), optional=True),
-    "auto_exposure": _flag, "white_balance": _choice(display_pipeline.WHITE_BALANCES), "dither": _flag, "output": _output, "hdr": _flag, "force": _flag,
+    "auto_exposure": _optional_flag, "white_balance": _choice(display_pipeline.WHITE_BALANCES, optional=True),
+    "dither": _flag, "output": _output, "hdr": _hdr, "hdr_precision": _choice(tuple(PRECISIONS)), "force": _flag,
     "wavelengths": _integer(spectrum.MIN_WAVELENGTHS, spectrum.MAX_WAVELENGTHS, optional=True),
 }
 
@@ -354,7 +413,7 @@ def memory_estimate(config: AnimationConfig, positions) -> MemoryEstimate:
 
     The table is the plan's sun axis (view elevations from the camera at 64 pixels, ray-march margins)
     with the higher orders kept, an upper bound of the plan (whose pilot may drop them); with
-    ``table_size``, that full table.
+    ``table_size``, that full table; with ``wavelengths``, one such table per batch of three.
     """
     level = quality(config)
     if config.table_size is not None:
@@ -365,19 +424,30 @@ def memory_estimate(config: AnimationConfig, positions) -> MemoryEstimate:
         cos_range, nodes, _, _ = sun_axis(config.atmosphere, scene, level, level.table.mapping)
         settings = level.table.replace(mode=config.mode, size=level.table.size[:2] + (nodes,),
                                        sun_cos_range=cos_range)
+    batches = None if config.wavelengths is None else len(spectrum.wavelength_batches(config.wavelengths))
     return estimate_animation_memory(_with_sampling(settings, config), config.image_shape(), config.method,
-                                     ray_settings(config), hdr_output=config.hdr)
+                                     ray_settings(config), hdr_output=config.hdr is not None, batches=batches)
 
 
 def build_table(config: AnimationConfig, plan: Plan | None = None, ctx=None, progress=None) -> clsky.ScatteringTable:
     """The scattering table of the animation: the plan's, or a full table of ``config.table_size``
-    at the quality level's other settings (orders until converged)."""
+    at the quality level's other settings (orders until converged). For absolute frames
+    (``config.absolute``) its atmosphere is lit by the solar spectrum (:func:`clsky.solar.with_solar_spectrum`:
+    the same table data, rendered in W m^-2 sr^-1 nm^-1); the scene plan itself is made on the preset's."""
+    atmosphere, settings = _base(config, plan)
+    if config.absolute:
+        atmosphere = with_solar_spectrum(atmosphere)
+    return clsky.ScatteringTable.build(atmosphere, settings, ctx=ctx, progress=progress)
+
+
+def _base(config: AnimationConfig, plan: Plan | None):
+    """(atmosphere, table settings) of the animation's tables: the plan's, or the config's atmosphere
+    and a full table of ``config.table_size`` (default: the quality level's size) at the level's
+    other settings; with ``config.sampling`` if given."""
     if plan is not None:
-        return clsky.ScatteringTable.build(plan.atmosphere, _with_sampling(plan.table, config), ctx=ctx,
-                                           progress=progress)
+        return plan.atmosphere, _with_sampling(plan.table, config)
     size = tuple(config.table_size) if config.table_size is not None else quality(config).table.size
-    settings = quality(config).table.replace(size=size, mode=config.mode)
-    return clsky.ScatteringTable.build(config.atmosphere, _with_sampling(settings, config), ctx=ctx, progress=progress)
+    return config.atmosphere, _with_sampling(quality(config).table.replace(size=size, mode=config.mode), config)
 
 
 def _with_sampling(settings: clsky.TableSettings, config: AnimationConfig) -> clsky.TableSettings:
@@ -395,13 +465,8 @@ def make_renderer(config: AnimationConfig, plan: Plan | None = None, ctx=None, p
     if config.wavelengths is None:
         table = dataclasses.replace(build_table(config, plan, ctx=ctx, progress=progress), orders=())
         return SkyRenderer(table, ray_settings(config), ctx=ctx), table
-    if plan is not None:
-        base, settings = plan.atmosphere, plan.table
-    else:
-        size = tuple(config.table_size) if config.table_size is not None else quality(config).table.size
-        base, settings = config.atmosphere, quality(config).table.replace(size=size, mode=config.mode)
-    table = spectrum.SpectralTable.build(base, config.wavelengths, _with_sampling(settings, config), ctx=ctx,
-                                         progress=progress,
+    base, settings = _base(config, plan)
+    table = spectrum.SpectralTable.build(base, config.wavelengths, settings, ctx=ctx, progress=progress,
                                          keep_orders=False)
     return spectrum.SpectralRenderer(table, ray_settings(config), ctx=ctx), table
 
@@ -414,12 +479,35 @@ def spectral_frame_to_linear_srgb(frame, wavelengths):
     return np.maximum(rgb, 0.0)
 
 
+def three_wavelength_frame_to_linear_srgb(frame, wavelengths):
+    """The frame conversion of absolute three-wavelength animations: spectral radiance (..., 3)
+    [W m^-2 sr^-1 nm^-1] at three ``wavelengths`` [nm] -> CIE 1931 XYZ (:data:`THREE_WAVELENGTH_CONVERSION`)
+    -> linear sRGB (..., 3) [cd/m^2]; negative components clipped to 0 (as
+    :func:`spectral_frame_to_linear_srgb`)."""
+    xyz = colorimetry.three_wavelength_to_xyz(frame, wavelengths, THREE_WAVELENGTH_CONVERSION)
+    return np.maximum(colorimetry.xyz_to_linear_srgb(xyz), 0.0)
+
+
 def frame_units(config: AnimationConfig, table) -> str:
-    """The units of the HDR frames: the table's radiance units (r, g, b at its three wavelengths), or
-    with ``config.wavelengths`` linear sRGB in cd/m^2."""
+    """The units of the HDR frames: linear sRGB in cd/m^2 for absolute frames (``config.absolute``),
+    else the table's relative radiance units (r, g, b at its three wavelengths)."""
     if config.wavelengths is not None:
         return "linear sRGB [cd/m^2] (spectral radiance -> CIE 1931 XYZ -> sRGB)"
-    return table.metadata.get("units", "relative (incident light I_I per sr)") + " at the table's three wavelengths"
+    wavelengths = ", ".join(f"{w:g}" for w in table.atmosphere.wavelengths)
+    if config.absolute:
+        return (f"linear sRGB [cd/m^2] (spectral radiance [{ABSOLUTE_UNITS}] at {wavelengths} nm -> CIE 1931 XYZ "
+                f"({THREE_WAVELENGTH_CONVERSION}) -> sRGB)")
+    return f"{table.metadata.get('units', RELATIVE_UNITS)} at the table's three wavelengths ({wavelengths} nm)"
+
+
+def _hdr_attributes(config: AnimationConfig, table, sun) -> dict:
+    """The header of the EXR or RGBE frame of sun position ``sun`` (:func:`anim.exr.frame_attributes`)."""
+    from .exr import frame_attributes
+
+    width, height = config.image_shape()
+    wavelengths = None if config.wavelengths is not None else table.atmosphere.wavelengths
+    return frame_attributes(frame_units(config, table), config.camera, width, height, sun.zenith_deg,
+                            sun.azimuth_deg, config.altitude, wavelengths_nm=wavelengths)
 
 
 def ray_settings(config: AnimationConfig) -> clsky.TableSettings:
@@ -453,8 +541,9 @@ def _camera(config):
 
 
 def render_frame(renderer: SkyRenderer, prepared, sun_direction, config: AnimationConfig):
-    """HDR frames {'lut': ..., 'raymarch': ...} of one sun position, as ``config.method`` asks (with
-    ``config.wavelengths``, converted to linear sRGB: :func:`spectral_frame_to_linear_srgb`)."""
+    """HDR frames {'lut': ..., 'raymarch': ...} of one sun position, as ``config.method`` asks; absolute
+    frames converted to linear sRGB [cd/m^2] (:func:`spectral_frame_to_linear_srgb` with
+    ``config.wavelengths``, else :func:`three_wavelength_frame_to_linear_srgb`)."""
     frames = {}
     if config.method in ("compare", "lut"):
         frames["lut"] = renderer.render_table(prepared, sun_direction, config.altitude)
@@ -462,6 +551,9 @@ def render_frame(renderer: SkyRenderer, prepared, sun_direction, config: Animati
         frames["raymarch"] = renderer.render_raymarch(prepared, sun_direction, config.altitude)
     if config.wavelengths is not None:
         frames = {name: spectral_frame_to_linear_srgb(frame, renderer.wavelengths) for name, frame in frames.items()}
+    elif config.absolute:
+        wavelengths = renderer.table.atmosphere.wavelengths
+        frames = {name: three_wavelength_frame_to_linear_srgb(frame, wavelengths) for name, frame in frames.items()}
     return frames
 
 
@@ -469,12 +561,16 @@ def display(config: AnimationConfig, table) -> display_pipeline.Display:
     """The display pipeline of the animation's frames (:class:`anim.display.Display`) for ``table`` (a
     ScatteringTable, or with ``config.wavelengths`` a :class:`clsky.spectrum.SpectralTable`)."""
     auto = display_pipeline.AutoExposure() if config.auto_exposure else None
+    # absolute frames are linear sRGB already (render_frame); the sun's colour is its spectrum's sRGB,
+    # through the frames' own conversion
     if config.wavelengths is not None:
-        # frames are linear sRGB already (render_frame); the sun's colour is its spectrum's sRGB
         wavelengths = table.wavelengths
         sun_white = spectral_frame_to_linear_srgb(solar_irradiance_astm_g173(wavelengths), wavelengths)
+    elif config.absolute:
+        wavelengths = table.atmosphere.wavelengths
+        sun_white = three_wavelength_frame_to_linear_srgb(solar_irradiance_astm_g173(wavelengths), wavelengths)
     else:
-        # The renderer's r, g, b are taken as linear Rec. 709, and the sun's colour as its incident light I_I.
+        # relative frames (the notes' I_I): r, g, b taken as linear Rec. 709, the sun's colour as I_I
         sun_white = table.atmosphere.incident_light
     return display_pipeline.Display(config.tone_map, config.exposure, auto, config.white_balance,
                                     sun_white=sun_white, source="rec709")
@@ -490,13 +586,13 @@ def display_frames(pipeline: display_pipeline.Display, hdr, valid, config: Anima
 
 def _frame_writer(config: AnimationConfig, total_frames: int, staging=None) -> writers.FrameWriter:
     return writers.FrameWriter(directory=config.frames_directory, mp4_path=config.output_path, fps=config.fps,
-                               total_frames=total_frames, hdr="npy" if config.hdr else None, force=config.force,
-                               prefix="frame", staging=staging, text=metadata(config))
+                               total_frames=total_frames, hdr=config.hdr, hdr_precision=config.hdr_precision,
+                               force=config.force, prefix="frame", staging=staging, text=metadata(config))
 
 
 def metadata(config: AnimationConfig) -> dict:
-    """What every output of the animation carries (PNG text chunks, metrics JSON): clsky's version and
-    the TOML scene that reproduces it (``clsky animate --scene``; :mod:`anim.scene`)."""
+    """What every output of the animation carries (PNG text chunks, EXR header, metrics JSON): clsky's
+    version and the TOML scene that reproduces it (``clsky animate --scene``; :mod:`anim.scene`)."""
     from . import scene
 
     return scene.output_metadata(scene.scene_text(scene.scene_values(config, "animate"), "animate"))
@@ -601,15 +697,17 @@ def _write_animation(config, positions, renderer, prepared, valid, table, plan, 
             else:
                 image = images[config.method]
                 frame_hdr = hdr[config.method]
-            writer.write(index, _even(image), hdr=frame_hdr if config.hdr else None)
+            writer.write(index, _even(image), hdr=frame_hdr if config.hdr else None,
+                         hdr_attributes=_hdr_attributes(config, table, sun) if config.hdr in ("exr", "hdr") else None)
             rows.append(row)
             if progress is not None:
                 progress("frames", index + 1, len(positions))
     paths = list(writer.paths)          # the frames and the MP4: they land when ``staging`` commits
     temporal = {}
     if config.method == "compare":
+        # the floor: what is invisible at the most sensitive exposure shown (with a fixed EV, that EV)
         jumps = metrics.temporal_jumps(np.array(means["lut"]), np.array(means["raymarch"]),
-                                       exposure=2.0 ** config.exposure)
+                                       exposure=2.0 ** max(row["exposure_ev"] for row in rows))
         temporal = {"table_jumps": np.asarray(jumps["table_jumps"]).tolist(),
                     "raymarch_jumps": np.asarray(jumps["raymarch_jumps"]).tolist(),
                     "excess": np.asarray(jumps["excess"]).tolist(),

@@ -323,8 +323,10 @@ class EquirectangularCamera(Camera):
     Equivalently, normalised texture coordinates ``u = x / width = phi / 360 deg`` and
     ``v = y / height = (90 deg - e) / 180 deg`` with v = 0 at the top row (image order, as stored
     by image files). To load the map into an engine whose equirectangular lookup puts another
-    direction at u = 0.5, rotate it about the vertical so that u = 0.5 is south. Every pixel is valid;
-    a 2:1 aspect ratio gives square pixels at the horizon.
+    direction at u = 0.5, rotate it about the vertical so that u = 0.5 is south. This is OpenEXR's
+    latitude-longitude layout with the world axes X = east, Y = up, Z = south (:mod:`anim.exr`, which
+    writes such maps; ``docs/exr.md`` gives the rotations for Blender and three.js). Every pixel is
+    valid; a 2:1 aspect ratio gives square pixels at the horizon.
 
     Parameters
     ----------

@@ -58,7 +58,8 @@ def _add_scene_arguments(parser, frames=True):
     _add_display_arguments(parser)
     sky.add_argument("--wavelengths", type=int, metavar="N",
                      help="N wavelengths in [3, 47] in absolute units, frames converted spectral -> XYZ -> "
-                          "linear sRGB [cd/m^2] (default: the table's three, shown as r, g, b)")
+                          "linear sRGB [cd/m^2] (default: the table's three, converted the same way in cd/m^2; "
+                          "shown as r, g, b in the notes' units for --preset atmosphere-plus)")
     if frames:
         sun = parser.add_argument_group("sun path")
         sun.add_argument("--frames", type=int, default=120, help="frames of the sweep (default: 120)")
@@ -82,12 +83,15 @@ def _add_display_arguments(parser):
                               f"{DEFAULT_TONE_MAP} otherwise)")
     display.add_argument("--exposure", type=float, default=0.0, metavar="EV",
                          help="exposure in EV: frames are scaled by 2^EV (default: 0, the frames' own values; the old "
-                              "multiplier x is log2(x)); with --auto-exposure, a compensation")
-    display.add_argument("--auto-exposure", action="store_true",
+                              "multiplier x is log2(x); about -12 shows a day sky in cd/m^2); with auto-exposure, "
+                              "a compensation")
+    display.add_argument("--auto-exposure", action=argparse.BooleanOptionalAction,
                          help="meter each frame's log-average luminance to a key of 0.36 (a stop above mid-grey), "
-                              "smoothed over the frames")
-    display.add_argument("--white-balance", choices=list(WHITE_BALANCES), default="d65",
-                         help="white: d65 (none, default) or the sun's colour adapted to D65 (CAT02)")
+                              "smoothed over the frames (default: on for frames in cd/m^2, every preset but "
+                              "atmosphere-plus; off for atmosphere-plus); --no-auto-exposure: the fixed --exposure")
+    display.add_argument("--white-balance", choices=list(WHITE_BALANCES),
+                         help="white: d65 (none) or the sun's colour adapted to D65 (CAT02) (default: sun for "
+                              "frames in cd/m^2, d65 for --preset atmosphere-plus)")
 
 
 def _add_scene_file_arguments(parser):
@@ -106,6 +110,9 @@ def _add_scene_file_arguments(parser):
 
 def register(commands):
     """Adds ``animate`` and ``render`` to clsky's sub-command parsers; returns their handlers."""
+    from .exr import PRECISIONS
+    from .writers import FrameWriter
+
     animate = commands.add_parser("animate", help="render a sunrise-to-sunset animation (MP4 + PNG frames)")
     _add_scene_arguments(animate)
     output = animate.add_argument_group("output")
@@ -113,8 +120,15 @@ def register(commands):
                         help="MP4 file; frames go to <stem>_frames/, metrics to <stem>_metrics.csv/.json")
     output.add_argument("--fps", type=float, default=30.0)
     output.add_argument("--no-dither", action="store_true", help="do not dither the 8-bit frames")
-    output.add_argument("--hdr", action="store_true", help="also write float32 HDR frames (.npy): the ray march's "
-                             "(with --method compare) or the lookup's")
+    formats = [name for name in FrameWriter.HDR_FORMATS if name is not None]
+    output.add_argument("--hdr", nargs="?", const="npy", choices=formats, metavar="{" + ",".join(formats) + "}",
+                        help="also write HDR frames: the ray march's (with --method compare) or the lookup's; exr: "
+                             "OpenEXR with units, version and sun in the header, a latitude-longitude environment "
+                             "map for --camera equirectangular (docs/exr.md); hdr: Radiance RGBE, the same header "
+                             "(8-bit mantissas); npy (the default of a bare --hdr): float32 NumPy arrays")
+    output.add_argument("--hdr-precision", choices=list(PRECISIONS), default="float",
+                        help="pixel type of the EXR frames: float (32-bit, default) or half (16-bit; values above "
+                             "65504, the sun's disc, are clipped to it and counted in the header)")
     output.add_argument("--force", action="store_true", help="overwrite existing outputs")
     output.add_argument("--progress", default="leave", choices=["display", "leave", "none"])
 
@@ -212,7 +226,7 @@ def run_animate(args):
         return 0
     try:                                         # the MP4, <stem>_frames/, <stem>_metrics.csv/.json
         check_outputs(config, option=scene.source_of(args, "output") or "--output")
-    except (OSError, ValueError) as error:
+    except (OSError, ValueError, ImportError) as error:
         raise clsky_cli.UsageError(str(error)) from None
     _check_memory(args, config, sun_positions(config))
     progress, close = clsky_cli.progress_bar(args.progress)

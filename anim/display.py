@@ -2,7 +2,7 @@
 
 The pipeline (issue 10, item 5), one frame at a time::
 
-    frame (CIE XYZ or linear Rec. 709)  -> linear sRGB (IEC 61966-2-1 matrix, colour-science)
+    frame (CIE XYZ or linear Rec. 709)  -> linear sRGB (IEC 61966-2-1, clsky.colorimetry.XYZ_TO_SRGB)
       -> white balance: D65 (none) or the sun's colour adapted to D65 (von Kries, CAT02)
       -> exposure: x 2^EV, EV fixed or metered from the frame and smoothed over time
       -> tone curve (:data:`TONE_CURVES`): display-linear sRGB in [0, 1]
@@ -13,8 +13,10 @@ which keeps it): with it, D65 and a fixed EV the pipeline *is* ``tone_map(frame,
 code and the same bits as before this module (EV 0 is exposure 1). Its power law 2.2 replaces the sRGB
 function, as in the notes.
 
-Units. EV is relative to the frame's own units: EV 0 shows the frame's values as they are (I_I units for
-the 3-wavelength renderer: a day sky has Y of about 0.5), EV +1 doubles them. Auto-exposure meters the
+Units. EV is relative to the frame's own units: EV 0 shows the frame's values as they are, EV +1 doubles
+them. The animation's frames are linear sRGB in cd/m^2 for every preset but atmosphere-plus (a day sky
+has a mean Y of about 3600: EV -13 shows it), and the notes' relative I_I units for atmosphere-plus
+(a day sky has Y of about 0.5: EV 0). Auto-exposure meters the
 log-average luminance (Reinhard et al. 2002) and aims it at ``key`` (0.36: a sky is a high-key scene), so it works in
 any unit, absolute luminance [cd/m^2] included.
 
@@ -51,6 +53,7 @@ import math
 
 import numpy as np
 
+from clsky import colorimetry
 from clsky.errors import ParameterError
 
 from . import tonemap
@@ -72,14 +75,11 @@ GAMUT_STEPS = 16
 
 @functools.lru_cache(maxsize=None)
 def _matrices():
-    """(sRGB -> XYZ, XYZ -> sRGB, sRGB -> Oklab LMS, Oklab LMS' -> Lab, and inverses) from colour-science's
-    sRGB colourspace (the IEC 61966-2-1 matrix) and Oklab's forward matrices."""
-    import colour
+    """(sRGB -> XYZ, XYZ -> sRGB, sRGB -> Oklab LMS, Oklab LMS' -> Lab, and inverses): clsky's sRGB
+    matrix (:data:`clsky.colorimetry.SRGB_TO_XYZ` and its inverse) and colour-science's Oklab matrices."""
     from colour.models import oklab
 
-    srgb = colour.RGB_COLOURSPACES["sRGB"]
-    to_xyz = np.asarray(srgb.matrix_RGB_to_XYZ, dtype=np.float64)
-    to_rgb = np.linalg.inv(to_xyz)                # its printed inverse has 4 digits: white would be off 5e-5
+    to_xyz, to_rgb = colorimetry.SRGB_TO_XYZ, colorimetry.XYZ_TO_SRGB
     to_lms = np.asarray(oklab.MATRIX_1_XYZ_TO_LMS, dtype=np.float64) @ to_xyz
     to_lab = np.asarray(oklab.MATRIX_2_LMS_TO_LAB, dtype=np.float64)
     # the inverses to double precision (colour-science prints them to fewer digits: a round trip
@@ -91,7 +91,7 @@ def _matrices():
 
 
 def _luminance(rgb):
-    """Y of linear sRGB (the Y row of colour-science's sRGB matrix: 0.2126, 0.7152, 0.0722)."""
+    """Y of linear sRGB (the Y row of :data:`clsky.colorimetry.SRGB_TO_XYZ`: 0.2126, 0.7152, 0.0722 to 4 digits)."""
     return rgb @ _matrices()["rgb_to_xyz"][1]
 
 
@@ -269,8 +269,8 @@ class AutoExposure:
     key : float
         Scene luminance, after exposure, that the log-average of the frame is mapped to [-], in (0, 1].
         Reinhard et al. 2002 use 0.18 for average scenes and up to 0.72 for high-key ones; 0.36 (one
-        stop above mid-grey) keeps a day sky about as bright as the frames' own values (EV -0.2 for
-        the physical preset's day sky) and lifts twilight.
+        stop above mid-grey) shows a day sky about as bright as the notes' display showed its relative
+        values at EV 0 (the relative day sky meters at EV -0.2) and lifts twilight.
     smoothing : float
         Fraction of the difference between the metered and the current EV corrected per frame, in
         (0, 1] (1: no smoothing).

@@ -25,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from clsky import colorimetry
 from clsky.errors import short
 
 from .tonemap import GAMMA, luminance, tone_map
@@ -46,22 +47,10 @@ BLACK_FRAME_FLOOR = 1e-30
 
 # Colour science -------------------------------------------------------------------------------------
 
-def _rgb_to_xyz_matrix(primaries_xy, white_xy):
-    """RGB -> XYZ matrix from the primaries' and the white's chromaticities (Y_white = 1)."""
-    columns = np.array([[x / y, 1.0, (1.0 - x - y) / y] for x, y in primaries_xy]).T
-    x, y = white_xy
-    white = np.array([x / y, 1.0, (1.0 - x - y) / y])
-    return columns * np.linalg.solve(columns, white)
-
-
-#: Linear sRGB -> CIE XYZ, derived at full precision from the IEC 61966-2-1 primaries
-#: (0.64, 0.33), (0.30, 0.60), (0.15, 0.06) and D65 white (0.3127, 0.3290). Rounded to 4 digits it is
-#: the matrix printed in IEC 61966-2-1 ((0.4124, 0.3576, 0.1805), (0.2126, 0.7152, 0.0722),
-#: (0.0193, 0.1192, 0.9505)); the 4-digit rounding would move a* and b* of the red primary by 0.02.
-SRGB_TO_XYZ = _rgb_to_xyz_matrix([(0.64, 0.33), (0.30, 0.60), (0.15, 0.06)], (0.3127, 0.3290))
-
-#: XYZ of the D65 white of sRGB (Y = 1): the image of sRGB white (1, 1, 1), (0.95046, 1, 1.08906).
-D65_WHITE_XYZ = SRGB_TO_XYZ.sum(axis=1)
+#: Linear sRGB -> CIE XYZ and the XYZ of its D65 white (Y = 1, (0.95046, 1, 1.08906)): clsky's one sRGB
+#: matrix, derived at full precision from the IEC 61966-2-1 primaries and D65
+#: (:data:`clsky.colorimetry.SRGB_TO_XYZ`; its docstring says why this one and not the printed one).
+SRGB_TO_XYZ, D65_WHITE_XYZ = colorimetry.SRGB_TO_XYZ, colorimetry.D65_WHITE_XYZ
 
 
 def linear_srgb_to_xyz(rgb):

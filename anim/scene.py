@@ -8,7 +8,7 @@ A scene holds what a command line of ``clsky animate`` or ``clsky render`` sets,
     [sun]     animate: frames, start_elevation_deg, max_elevation_deg, location, date, start_hour,
               end_hour, step_minutes; render: sun_elevation_deg, sun_azimuth_deg
     [display] tone_map, exposure, auto_exposure, white_balance, dither
-    [output]  output; animate: fps, hdr
+    [output]  output; animate: fps, hdr, hdr_precision
 
 Its keys are :class:`anim.animate.AnimationConfig`'s field names (``sun_elevation_deg`` and
 ``sun_azimuth_deg`` are ``clsky render``'s sun), with the same units and ranges. :data:`SCENE_KEYS` is
@@ -80,7 +80,7 @@ SCENE_KEYS = (
             "location", "date", ("start_hour", "hours", 0), ("end_hour", "hours", 1), "step_minutes",
             ("sun_elevation_deg", "sun_elevation"), ("sun_azimuth_deg", "sun_azimuth"))
     + _keys("display", "tone_map", "exposure", "auto_exposure", "white_balance", ("dither", "no_dither", None, True))
-    + _keys("output", "output", "fps", "hdr")
+    + _keys("output", "output", "fps", "hdr", "hdr_precision")
 )
 
 SECTIONS = tuple(dict.fromkeys(key.section for key in SCENE_KEYS))
@@ -113,9 +113,18 @@ def _actions(parser):
     return {action.dest: action for action in parser._actions if action.option_strings}
 
 
+def _long_option(action):
+    """The first long option of ``action`` ('--output' of '-o', '--auto-exposure' of its '--no-' pair)."""
+    return next((o for o in action.option_strings if o.startswith("--")), action.option_strings[0])
+
+
+def _is_flag(action):
+    return isinstance(action, (argparse._StoreTrueAction, argparse.BooleanOptionalAction))
+
+
 def _option(action, key):
     """The option a user types for ``key`` ('--hours END' for an item)."""
-    option = max(action.option_strings, key=len)
+    option = _long_option(action)
     if key.index is not None and isinstance(action.metavar, tuple):
         option += f" {action.metavar[key.index]}"
     return option
@@ -146,7 +155,7 @@ def field_options(parser):
     options = {}
     for key, action in command_keys(parser).values():
         if key.index is None and isinstance(action.metavar, tuple):
-            options[key.key] = tuple(f"{max(action.option_strings, key=len)} {name}" for name in action.metavar)
+            options[key.key] = tuple(f"{_long_option(action)} {name}" for name in action.metavar)
         else:
             options[key.key] = _option(action, key)
     return options
@@ -157,7 +166,7 @@ def _type_error(path, key, action, value):
     def is_number(v):
         return isinstance(v, (int, float)) and not isinstance(v, bool)
 
-    if isinstance(action, argparse._StoreTrueAction):
+    if _is_flag(action):
         return None if isinstance(value, bool) else "true or false"
     if key.key == "date":
         return None if isinstance(value, datetime.date) and not isinstance(value, datetime.datetime) else \
@@ -240,7 +249,7 @@ def apply_scene(args, parser):
             typed = typed[key.index] if key.index is not None else typed
             shown = (not typed) if key.inverted else typed
             print(f"clsky: {given[key.dest]} {_shown(typed, action)} overrides {args.scene}'s {name} = "
-                  f"{_toml_value(value)}" if not isinstance(action, argparse._StoreTrueAction) else
+                  f"{_toml_value(value)}" if not _is_flag(action) else
                   f"clsky: {given[key.dest]} overrides {args.scene}'s {name} = {_toml_value(value)}"
                   f" (now {_toml_value(shown)})", file=sys.stderr)
             continue

@@ -9,8 +9,8 @@ before anything is written (:func:`clsky._files.check_output`); existing outputs
 FileExistsError unless ``force`` (``--force`` on the command line). Each writer takes ``staging=``
 (a :class:`clsky._files.StagedWrites`) to make several files land together.
 
-PNG needs Pillow; the MP4 needs imageio and imageio-ffmpeg (the ``anim`` extra of clsky), imported
-only when an MP4 is requested.
+PNG needs Pillow; the MP4 needs imageio and imageio-ffmpeg, and EXR frames the OpenEXR bindings (all
+in the ``anim`` extra of clsky), imported only when an MP4 or EXR frames are requested.
 
 Examples
 --------
@@ -199,16 +199,28 @@ def write_csv(path, rows, force=False, fieldnames=None, staging=None):
 
 def frame_files(directory, prefix="frame"):
     """The files of ``directory`` named as a :class:`FrameWriter` names its frames:
-    ``<prefix>_<digits>.png`` or ``.npy`` (sorted); nothing else is ever counted as a frame."""
+    ``<prefix>_<digits>.png``, ``.npy``, ``.exr`` or ``.hdr`` (sorted); nothing else is ever counted as a frame."""
     directory = pathlib.Path(directory)
     if not directory.is_dir():
         return []
-    pattern = re.compile(re.escape(prefix) + r"_\d+\.(png|npy)")
+    pattern = re.compile(re.escape(prefix) + r"_\d+\.(png|npy|exr|hdr)")
     return sorted(directory / name for name in os.listdir(directory) if pattern.fullmatch(name))
 
 
+def _hdr_saver(hdr_format):
+    """The function ``(file, values, attributes)`` that writes one HDR frame of ``hdr_format`` to a file
+    as it is (the frame writer calls it inside its temporary files)."""
+    if hdr_format == "exr":
+        from .exr import save_exr
+        return save_exr
+    if hdr_format == "hdr":
+        from .rgbe import save_rgbe
+        return save_rgbe
+    return lambda file, values, attributes: np.save(file, values)
+
+
 class FrameWriter:
-    """Context manager storing an animation as PNG frames, HDR .npy frames and/or an MP4.
+    """Context manager storing an animation as PNG frames, HDR frames (EXR or .npy) and/or an MP4.
 
     Parameters
     ----------
@@ -221,8 +233,15 @@ class FrameWriter:
     total_frames : int, optional
         Number of frames, if known: sets the zero padding of the names to max(5, its digits) and
         bounds the indices.
-    hdr : {None, 'npy'}
-        Also store each frame's HDR values as float32 ``<prefix>_<index>.npy`` in ``directory``.
+    hdr : {None, 'exr', 'hdr', 'npy'}
+        Also store each frame's HDR values in ``directory``: 'exr', an OpenEXR image
+        ``<prefix>_<index>.exr`` (:func:`anim.exr.write_exr`, with the header attributes given to
+        :meth:`write`); 'hdr', a Radiance RGBE image ``<prefix>_<index>.hdr`` (:mod:`anim.rgbe`, 8-bit
+        mantissas, the same attributes as header lines); 'npy', a float32 NumPy array
+        ``<prefix>_<index>.npy``.
+    hdr_precision : {'float', 'half'}
+        Pixel type of the EXR frames: 32-bit floats (default) or 16-bit half floats (values up to
+        65504, larger ones clipped). The .npy frames are always float32: 'half' needs ``hdr='exr'``.
     force : bool
         Overwrite existing outputs, and delete the stale frames of an earlier run (see Notes).
     prefix : str
@@ -239,15 +258,17 @@ class FrameWriter:
         The targets written so far: frames, then the MP4 (added at the end of the block). They are
         in place once the staging set has committed (at the end of the block by default).
     stale_paths : list of pathlib.Path
-        After a forced run: the frame files of an earlier run (``<prefix>_<digits>.png`` / ``.npy``)
+        After a forced run: the frame files of an earlier run (``<prefix>_<digits>.png``, ``.npy``, ``.exr``, ``.hdr``)
         that this run did not rewrite. They are deleted when the set commits, so the directory holds
         this run's frames only.
 
     Raises
     ------
     FileExistsError
-        On entering (or :meth:`check`): the MP4, or any frame file (``<prefix>_<digits>.png`` or
-        ``.npy``) in ``directory`` exists and not ``force``. Nothing is touched then.
+        On entering (or :meth:`check`): the MP4, or any frame file (``<prefix>_<digits>.png``,
+        ``.npy``, ``.exr`` or ``.hdr``) in ``directory`` exists and not ``force``. Nothing is touched then.
+    ImportError
+        On entering (or :meth:`check`): an MP4 without imageio-ffmpeg, EXR frames without OpenEXR.
     IsADirectoryError, FileNotFoundError, NotADirectoryError, PermissionError
         On entering (or :meth:`check`): an output that cannot be written (see
         :func:`clsky._files.check_output`). Nothing is touched then.
@@ -256,7 +277,7 @@ class FrameWriter:
 
     Notes
     -----
-    - Everything lands together: each frame (PNG, .npy) and the MP4 are written to hidden temporary
+    - Everything lands together: each frame (PNG and its HDR file) and the MP4 are written to hidden temporary
       files with unique names (``.<name>.XXXXXXXX<suffix>``) beside their targets, and renamed when
       the block exits normally (with ``staging``, when that set commits): the frames first, the MP4
       last (when it is there, its frames are too), then the stale frames are deleted. An exception inside the block (KeyboardInterrupt
@@ -286,16 +307,23 @@ class FrameWriter:
     ['sky.mp4']
     """
 
-    HDR_FORMATS = (None, "npy")
+    #: HDR frame formats (None: none) -> file suffix.
+    HDR_FORMATS = {None: None, "exr": ".exr", "hdr": ".hdr", "npy": ".npy"}
 
     def __init__(self, directory=None, mp4_path=None, fps=30, total_frames=None, hdr=None, force=False,
-                 prefix="frame", staging=None, text=None):
+                 prefix="frame", staging=None, hdr_precision="float", text=None):
+        from .exr import PRECISIONS
+
         if directory is None and mp4_path is None:
             raise ValueError("give a frame directory, an mp4_path, or both")
-        if hdr not in self.HDR_FORMATS:
-            raise ValueError(f"hdr must be one of {self.HDR_FORMATS}, got {hdr!r}")
+        if not (hdr is None or isinstance(hdr, str)) or hdr not in self.HDR_FORMATS:
+            raise ValueError(f"hdr must be one of {list(self.HDR_FORMATS)}, got {hdr!r}")
         if hdr is not None and directory is None:
-            raise ValueError("hdr='npy' needs a frame directory")
+            raise ValueError(f"hdr={hdr!r} needs a frame directory")
+        if not isinstance(hdr_precision, str) or hdr_precision not in PRECISIONS:
+            raise ValueError(f"hdr_precision must be one of {list(PRECISIONS)}, got {hdr_precision!r}")
+        if hdr_precision != "float" and hdr != "exr":
+            raise ValueError(f"hdr_precision {hdr_precision!r} needs hdr='exr' (.npy frames are float32)")
         fps = float(fps)
         if not (np.isfinite(fps) and fps > 0):
             raise ValueError(f"fps must be finite and > 0, got {short(fps)}")
@@ -310,6 +338,7 @@ class FrameWriter:
         self.fps = fps
         self.total_frames = total_frames
         self.hdr = hdr
+        self.hdr_precision = hdr_precision
         self.force = bool(force)
         self.prefix = prefix
         self.text = dict(text or {})
@@ -364,11 +393,14 @@ class FrameWriter:
                                   "pip install 'clsky[anim]'") from error
         if self.directory is not None:
             last = (self.total_frames or 1) - 1
-            check_output_directory(self.directory, option, names=[self.frame_path(last, ".png").name,
-                                                                  self.frame_path(last, ".npy").name])
+            check_output_directory(self.directory, option, names=[self.frame_path(last, suffix).name
+                                                                  for suffix in (".png", ".npy", ".exr", ".hdr")])
             existing = frame_files(self.directory, self.prefix)
             if existing and not self.force:
                 raise _exists_error(existing[0], option)
+        if self.hdr == "exr":
+            from .exr import require_openexr
+            require_openexr()                      # fail before writing anything
 
     # Context --------------------------------------------------------------------------------------
     def __enter__(self):
@@ -437,23 +469,26 @@ class FrameWriter:
                                          codec="libx264", pixelformat="yuv420p", quality=None,
                                          macro_block_size=1, output_params=list(MP4_OUTPUT_PARAMS))
 
-    def _write_files(self, index, image, hdr):
-        """Stage frame ``index``'s PNG (and .npy); returns their targets."""
+    def _write_files(self, index, image, hdr, hdr_attributes):
+        """Stage frame ``index``'s PNG (and HDR file); returns their targets."""
         written = []
         with atomic_write(self.frame_path(index), self.force, suffix=".png", staging=self._staging) as temporary:
             self._temporaries.append(temporary)
             Image.fromarray(image).save(temporary, format="PNG", compress_level=PNG_COMPRESS_LEVEL,
                                         pnginfo=png_text(self.text))
         written.append(self.frame_path(index))
-        if self.hdr == "npy":
-            target = self.frame_path(index, ".npy")
-            with atomic_write(target, self.force, suffix=".npy", staging=self._staging) as temporary:
+        if self.hdr is not None:
+            suffix = self.HDR_FORMATS[self.hdr]
+            target = self.frame_path(index, suffix)
+            with atomic_write(target, self.force, suffix=suffix, staging=self._staging) as temporary:
                 self._temporaries.append(temporary)
-                np.save(temporary, hdr)
+                if self.hdr == "exr" and "scene" in self.text:   # the version is the header's clskyVersion;
+                    hdr_attributes = {"scene": self.text["scene"], **(hdr_attributes or {})}   # Radiance: one line each
+                _hdr_saver(self.hdr)(temporary, hdr, hdr_attributes)
             written.append(target)
         return written
 
-    def write(self, index, display_u8, hdr=None):
+    def write(self, index, display_u8, hdr=None, hdr_attributes=None):
         """Store frame ``index`` (in a temporary file, renamed at the end of the block).
 
         Parameters
@@ -464,9 +499,14 @@ class FrameWriter:
         display_u8 : numpy.ndarray of uint8, shape (H, W, 3)
             Tone-mapped pixels; every frame has the same size.
         hdr : numpy.ndarray, shape (H', W', 3), optional
-            HDR values, stored as float32 .npy when the writer was made with ``hdr='npy'`` (then
+            HDR values, stored when the writer was made with ``hdr='exr'`` or ``'npy'`` (then
             required); ignored otherwise. Its shape need not be the display's (a display frame may be
-            a composite of several renders), but it is the same for every frame.
+            a composite of several renders), but it is the same for every frame. EXR frames must be
+            finite (ValueError before anything of the frame is written); with
+            ``hdr_precision='half'``, values above 65504 are clipped to it (:func:`anim.exr.exr_pixels`).
+        hdr_attributes : dict, optional
+            Header attributes of this frame (:func:`anim.exr.frame_attributes`) for EXR and RGBE
+            frames; ignored with 'npy'.
 
         Returns
         -------
@@ -485,20 +525,28 @@ class FrameWriter:
         image = _check_image("display_u8", display_u8)
         if self._size is not None and image.shape != self._size:
             raise ValueError(f"frame {index} has shape {image.shape}, the first frame had {self._size}")
-        if self.hdr == "npy":
+        if self.hdr is not None:
             if hdr is None:
-                raise ValueError("this FrameWriter stores HDR frames (hdr='npy'): pass hdr=")
+                raise ValueError(f"this FrameWriter stores HDR frames (hdr={self.hdr!r}): pass hdr=")
             hdr = np.asarray(hdr, dtype=np.float32)
             if hdr.ndim != 3 or hdr.shape[2] != 3:
                 raise ValueError(f"hdr must have shape (H, W, 3), got {hdr.shape}")
+            if self.hdr == "exr":
+                from .exr import exr_pixels
+                hdr, clipped = exr_pixels(hdr, self.hdr_precision)
+                if self.hdr_precision == "half":
+                    hdr_attributes = {**(hdr_attributes or {}), "halfClippedPixels": clipped}
+            elif self.hdr == "hdr":
+                from .rgbe import encode_rgbe
+                encode_rgbe(hdr)                       # refuse what RGBE cannot hold before writing the frame
             if self._hdr_shape is not None and hdr.shape != self._hdr_shape:
                 raise ValueError(f"frame {index}: hdr has shape {hdr.shape}, the first frame's had {self._hdr_shape}")
         if self._size is None and self.mp4_path is not None:
             self._open_video(*image.shape[:2])
         self._size = image.shape
-        if hdr is not None and self.hdr == "npy":
+        if self.hdr is not None:
             self._hdr_shape = hdr.shape
-        written = self._write_files(index, image, hdr) if self.directory is not None else []
+        written = self._write_files(index, image, hdr, hdr_attributes) if self.directory is not None else []
         if self._video is not None:
             self._video.append_data(image)
         self._indices.add(index)

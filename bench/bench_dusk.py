@@ -1,9 +1,12 @@
 """Benchmark (picture): one dusk, sun 3 deg below the horizon, shown with and without ozone, with three
 and with N = 15 wavelengths, and through the old and the new display.
 
-The old display is the notes' curve at EV 0 (three wavelengths only: N wavelengths give frames in
-cd/m^2, which need an exposure), then the notes' curve at the auto-exposure's EV, then the new one
-(``luminance-reinhard`` with auto-exposure, anim/display.py). Each sky
+The old display is the one before issue 10: the relative three-wavelength frames (the notes' I_I, the
+same table rendered with the preset's incident light) taken as linear Rec. 709 r, g, b, through the
+notes' curve at EV 0 (three wavelengths only). The others show the frames the animation now renders, in
+cd/m^2 (three wavelengths converted through clsky.colorimetry, or N = 15): the notes' curve at the
+auto-exposure's EV without white balance, then the new display, the defaults (``luminance-reinhard``,
+auto-exposure, white balance ``sun``; anim/display.py). Each sky
 is the physical preset's (ozone 300 DU, ground albedo 0.1; "without ozone": the same with
 ``--ozone-column 0``), ray-marched on an all-sky fisheye from the ground at the default quality level
 over a table planned for this sun, as ``clsky render --method raymarch --sun-elevation -3`` does.
@@ -18,6 +21,7 @@ Usage: python bench/bench_dusk.py [--size PX] [--no-readme] [--smoke]
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import datetime
 import os
 import pathlib
@@ -29,7 +33,9 @@ from _report import SMOKE, add_output_arguments, machine, parse_arguments, write
 
 from anim import metrics, writers
 from anim.animate import (AnimationConfig, _camera, display, display_frames, make_renderer, plan_animation,
-                          render_frame)
+                          ray_settings, render_frame)
+from anim.display import Display
+from clsky.render import SkyRenderer
 from anim.cameras import sun_direction
 from anim.sunpath import SunPosition
 
@@ -44,10 +50,13 @@ SKIES = [("with ozone, 3 wavelengths", "O3, 3 wl", {}),
          ("without ozone, N = 15", "no O3, 15 wl", {"ozone_column_du": 0.0, "wavelengths": 15})]
 #: (label, AnimationConfig fields) of the displays.
 #: The old display (the notes' curve at EV 0) exists for the relative frames of three wavelengths only:
-#: frames in cd/m^2 (N wavelengths) need an exposure, so they get the notes' curve at the metered EV.
-DISPLAYS = [("old: notes' curve, EV 0", "old", {"tone_map": "atmosphere-plus", "exposure": 0.0}),
-            ("notes' curve, auto-exposure", "curve", {"tone_map": "atmosphere-plus", "auto_exposure": True}),
-            ("new: luminance-reinhard, auto-exposure", "new", {"tone_map": "luminance-reinhard", "auto_exposure": True})]
+#: frames in cd/m^2 need an exposure, so they get the notes' curve at the metered EV.
+DISPLAYS = [("old: relative r, g, b, notes' curve, EV 0", "old",
+             {"tone_map": "atmosphere-plus", "exposure": 0.0, "auto_exposure": False, "white_balance": "d65"}),
+            ("notes' curve, auto-exposure", "curve",
+             {"tone_map": "atmosphere-plus", "auto_exposure": True, "white_balance": "d65"}),
+            ("new (defaults): luminance-reinhard, auto-exposure, white balance sun", "new",
+             {"tone_map": "luminance-reinhard", "auto_exposure": True, "white_balance": "sun"})]
 #: "Blue" means b > g > r in the linear values by at least 2 % each: about the Weber fraction (1-2 %) of
 #: a just visible difference, so that r = g within rounding (a grey-violet) does not count as blue.
 BLUE_MARGIN = 1.02
@@ -63,7 +72,9 @@ def zenith_mean(values, directions, valid):
 
 
 def render_sky(fields, size, smoke):
-    """(HDR ray-marched frame, directions, valid, build seconds, table) of one sky."""
+    """(HDR ray-marched frame, directions, valid, build seconds, table, config, relative frame) of one
+    sky; the relative frame (three wavelengths only, else None) is the same table rendered with the
+    preset's incident light I_I, as before issue 10."""
     config = AnimationConfig(size=size, method="raymarch", dither=False, **fields)
     position = SunPosition(90.0 - SUN_ELEVATION_DEG, SUN_AZIMUTH_DEG)
     directions, valid = _camera(config).directions()
@@ -75,9 +86,13 @@ def render_sky(fields, size, smoke):
         plan = plan_animation(config, [position], directions, valid)
     renderer, table = make_renderer(config, plan)
     seconds = time.perf_counter() - start
-    hdr = render_frame(renderer, renderer.prepare(directions, valid),
-                       sun_direction(90.0 - SUN_ELEVATION_DEG, SUN_AZIMUTH_DEG), config)["raymarch"]
-    return hdr, directions, valid, seconds, table, config
+    sun = sun_direction(90.0 - SUN_ELEVATION_DEG, SUN_AZIMUTH_DEG)
+    hdr = render_frame(renderer, renderer.prepare(directions, valid), sun, config)["raymarch"]
+    relative = None
+    if config.wavelengths is None:
+        with SkyRenderer(dataclasses.replace(table, atmosphere=config.atmosphere), ray_settings(config)) as notes:
+            relative = notes.render_raymarch(directions, sun, valid=valid)
+    return hdr, directions, valid, seconds, table, config, relative
 
 
 def main():
@@ -90,26 +105,32 @@ def main():
     cpu_start, wall_start = time.process_time(), time.perf_counter()
     rows, panels, labels = [], [], []
     for sky, sky_short, fields in SKIES:
-        hdr, directions, valid, seconds, table, config = render_sky(fields, size, args.smoke)
-        linear = zenith_mean(hdr, directions, valid)
+        hdr, directions, valid, seconds, table, config, relative = render_sky(fields, size, args.smoke)
         for shown, shown_short, options in DISPLAYS:
-            if shown_short == "old" and "wavelengths" in fields:
+            if shown_short == "old" and relative is None:
                 continue
             shown_config = AnimationConfig(**{**config.__dict__, **options})
-            _, images, _ = display_frames(display(shown_config, table), {"raymarch": hdr}, valid, shown_config)
+            if shown_short == "old":          # the display before issue 10: the notes' curve of I_I r, g, b
+                frame, pipeline = relative, Display(tone_map="atmosphere-plus")
+            else:
+                frame, pipeline = hdr, display(shown_config, table)
+            linear = zenith_mean(frame, directions, valid)
+            _, images, _ = display_frames(pipeline, {"raymarch": frame}, valid, shown_config)
             image = images["raymarch"]
             pixel = zenith_mean(image, directions, valid)
             rows.append((sky, shown, pixel, linear))
             panels.append(image)
             labels.append(f"{sky_short}, {shown_short}")
-        print(f"{sky}: built in {seconds:.1f} s, zenith linear {np.round(linear, 4)}", flush=True)
+        print(f"{sky}: built in {seconds:.1f} s, zenith linear {np.round(zenith_mean(hdr, directions, valid), 4)}",
+              flush=True)
     cpu, wall = time.process_time() - cpu_start, time.perf_counter() - wall_start
 
     lines = [f"Dusk, sun {SUN_ELEVATION_DEG:g} deg, physical preset, all-sky fisheye of {size} px from the ground "
              f"(ray march, default quality, table planned for this sun); zenith = mean over {ZENITH_RADIUS_DEG:g} "
              f"deg around it; blue = b > g > r by at least {100 * (BLUE_MARGIN - 1):.0f} % each in the linear values. Measured {datetime.date.today()} on {machine()}: {wall:.0f} s wall, {cpu:.0f} s "
-             f"process CPU, load average {load:.2f} before (bench/bench_dusk.py). Linear values: I_I units with "
-             f"3 wavelengths (r, g, b at 650, 510, 475 nm), linear sRGB cd/m^2 with N = 15.", "",
+             f"process CPU, load average {load:.2f} before (bench/bench_dusk.py). Linear values: linear sRGB "
+             f"[cd/m^2] (three wavelengths through clsky.colorimetry's power-law reconstruction, or N = 15); "
+             f"the old display's: the relative r, g, b at 650, 510, 475 nm (I_I units).", "",
              "| sky | display | zenith sRGB (8 bit) | blue: b > g > r | linear b / g | linear g / r |",
              "|---|---|---|---|---:|---:|"]
     for sky, shown, pixel, linear in rows:

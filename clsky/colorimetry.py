@@ -9,10 +9,20 @@ Standard Observer']``, 1 nm from 360 to 830 nm, linearly interpolated, zero outs
 width of each sample's cell (half-way to its neighbours; the end cells as wide as their neighbour's
 half-spacing on both sides, so a uniform grid gets its spacing everywhere: the midpoint rule). Y is
 then the luminance [cd/m^2]. Linear sRGB (Rec. 709 primaries, D65 white; IEC 61966-2-1) is
-M_sRGB (X, Y, Z) with colour-science's matrix, in the same photometric units (cd/m^2 scale).
+M_sRGB (X, Y, Z) (:data:`XYZ_TO_SRGB`), in the same photometric units (cd/m^2 scale).
+
+One sRGB matrix. :data:`SRGB_TO_XYZ` is derived at full precision from the primaries' and D65's
+chromaticities (:func:`rgb_to_xyz_matrix`), and :data:`XYZ_TO_SRGB` is its inverse; the display
+(anim/display.py) and the metrics' Delta E (anim/metrics.py) use these two. The 4-digit matrices
+printed in IEC 61966-2-1 (colour-science's ``RGB_COLOURSPACE_sRGB`` carries them) differ from them by
+up to 5e-5 and are not exact inverses of each other. The chromaticity-derived one is kept because the
+atmosphere-plus preset's pinned metrics (tests/test_display.py: its Delta E, bit for bit) were written
+with it. The one other set of sRGB numbers is :data:`anim.tonemap.REC709_LUMINANCE_WEIGHTS`, BT.709's
+printed Y row (0.2126, 0.7152, 0.0722), 4e-5 from this matrix's: the relative luminance errors of the
+same pinned metrics were written with it, so it stays.
 
 Three wavelengths carry too little to integrate; :func:`three_wavelength_to_xyz` reconstructs the
-spectrum between them from three radiances (L_1, L_2, L_3) in one of three documented ways (the last two
+spectrum between them from three radiances (L_1, L_2, L_3) in one of four documented ways (the last two
 are 3 x 3 matrices, :func:`three_wavelength_to_xyz_matrix`):
 
 ``solar_power_law`` (default)
@@ -21,6 +31,16 @@ are 3 x 3 matrices, :func:`three_wavelength_to_xyz_matrix`):
     samples) and beyond them with the end segment's exponent (clipped to +-8), integrated against the
     CMFs at 1 nm. Exact for any E_sun lambda^p: the sun (p = 0), Rayleigh light (p = -4) and
     everything between. Not linear in L (a 0 channel is floored at 1e-12 of the pixel's largest).
+``solar_power_law_tabulated``
+    The same reconstruction at about the cost of a matrix (what the animation's frames use): the
+    spectrum splits at the middle sample into two sums, each the anchor's ratio r_k times a function
+    of one number, q_k = log r_(k+1) - log r_k: B_k(q) = sum W e^(q a / Delta_k) between the samples
+    (a = log lambda - log lambda_k, Delta_k = log lambda_(k+1) - log lambda_k, W = K_m cmf E_sun at
+    1 nm) and O_k(p) = sum W e^(p a) beyond them (p = q / Delta_k clipped to +-8). B_k is tabulated
+    at steps of 1/512 in q over |q| <= log 1e12 (the floor bounds q), O_k at steps of 1/256 in p; all
+    terms are positive, so linear interpolation is off by at most h_q^2 / 8 (B_k: a / Delta_k in
+    [0, 1]) and h_p^2 max a^2 / 8 (O_k) relative: 5e-7 at 650 / 510 / 475 nm (tested against
+    ``solar_power_law``).
 ``solar_interpolation``
     The same with r interpolated linearly between the three samples and held constant beyond them: a
     3 x 3 matrix. Exact for E_sun times a function linear between the samples and flat beyond.
@@ -49,7 +69,8 @@ import numpy as np
 
 from .solar import solar_irradiance_astm_g173
 
-__all__ = ["MAX_LUMINOUS_EFFICACY", "CMFS_NAME", "THREE_WAVELENGTH_METHODS", "LINEAR_METHODS",
+__all__ = ["MAX_LUMINOUS_EFFICACY", "SRGB_PRIMARIES_XY", "D65_WHITE_XY", "SRGB_TO_XYZ", "XYZ_TO_SRGB",
+           "D65_WHITE_XYZ", "rgb_to_xyz_matrix", "CMFS_NAME", "THREE_WAVELENGTH_METHODS", "LINEAR_METHODS",
            "DEFAULT_THREE_WAVELENGTH_METHOD", "colour_matching_functions",
            "band_widths", "spectral_to_xyz", "xyz_to_linear_srgb", "linear_srgb_to_xyz", "luminance",
            "three_wavelength_to_xyz_matrix", "three_wavelength_to_xyz"]
@@ -77,19 +98,34 @@ def _cmfs():
     return wavelengths, values
 
 
-@functools.lru_cache(maxsize=1)
-def _srgb_matrices():
-    """(XYZ -> linear sRGB, linear sRGB -> XYZ) 3 x 3 matrices: colour-science's sRGB colourspace matrix
-    (IEC 61966-2-1's) and its inverse."""
-    import colour
+#: Chromaticities (x, y) of the sRGB / Rec. 709 primaries r, g, b and of its D65 white (IEC 61966-2-1).
+SRGB_PRIMARIES_XY, D65_WHITE_XY = ((0.64, 0.33), (0.30, 0.60), (0.15, 0.06)), (0.3127, 0.3290)
 
-    to_rgb = np.array(colour.models.RGB_COLOURSPACE_sRGB.matrix_XYZ_to_RGB, dtype=np.float64)
-    # its inverse, not colour's matrix_RGB_to_XYZ (derived from the primaries, it differs from the
-    # inverse of the 4-digit IEC matrix by 5e-5): the two conversions stay exact inverses
-    to_xyz = np.linalg.inv(to_rgb)
-    to_rgb.setflags(write=False)
-    to_xyz.setflags(write=False)
-    return to_rgb, to_xyz
+
+def rgb_to_xyz_matrix(primaries_xy, white_xy):
+    """RGB -> XYZ matrix of an RGB space from its primaries' and white's chromaticities (Y_white = 1):
+    the columns are the primaries' XYZ (x/y, 1, (1 - x - y)/y), each scaled so that they sum to the white's.
+
+    Examples
+    --------
+    >>> rgb_to_xyz_matrix(SRGB_PRIMARIES_XY, D65_WHITE_XY)[1].round(4).tolist()     # the luminance row
+    [0.2126, 0.7152, 0.0722]
+    """
+    columns = np.array([[x / y, 1.0, (1.0 - x - y) / y] for x, y in primaries_xy]).T
+    x, y = white_xy
+    white = np.array([x / y, 1.0, (1.0 - x - y) / y])
+    return columns * np.linalg.solve(columns, white)
+
+
+#: Linear sRGB -> CIE XYZ, derived at full precision from :data:`SRGB_PRIMARIES_XY` and
+#: :data:`D65_WHITE_XY`: clsky's one sRGB matrix (module docstring, "One sRGB matrix"). Read-only.
+SRGB_TO_XYZ = rgb_to_xyz_matrix(SRGB_PRIMARIES_XY, D65_WHITE_XY)
+#: CIE XYZ -> linear sRGB: the inverse of :data:`SRGB_TO_XYZ` (the two conversions are exact inverses).
+XYZ_TO_SRGB = np.linalg.inv(SRGB_TO_XYZ)
+#: XYZ of sRGB white (1, 1, 1), Y = 1: D65 as the matrix has it, (0.95046, 1, 1.08906).
+D65_WHITE_XYZ = SRGB_TO_XYZ.sum(axis=1)
+for _matrix in (SRGB_TO_XYZ, XYZ_TO_SRGB, D65_WHITE_XYZ):
+    _matrix.setflags(write=False)
 
 
 def _wavelengths(wavelengths):
@@ -164,21 +200,19 @@ def spectral_to_xyz(radiance, wavelengths):
 
 
 def xyz_to_linear_srgb(xyz):
-    """Linear sRGB / Rec. 709 (D65 white) of XYZ (..., 3), same scale (colour-science's matrix).
+    """Linear sRGB / Rec. 709 (D65 white) of XYZ (..., 3), same scale (:data:`XYZ_TO_SRGB`).
 
     Examples
     --------
     >>> xyz_to_linear_srgb([0.95047, 1.0, 1.08883]).round(3).tolist()     # the D65 white
     [1.0, 1.0, 1.0]
     """
-    to_rgb, _ = _srgb_matrices()
-    return np.asarray(xyz, dtype=np.float64) @ to_rgb.T
+    return np.asarray(xyz, dtype=np.float64) @ XYZ_TO_SRGB.T
 
 
 def linear_srgb_to_xyz(rgb):
     """XYZ of linear sRGB (..., 3): the inverse of :func:`xyz_to_linear_srgb`."""
-    _, to_xyz = _srgb_matrices()
-    return np.asarray(rgb, dtype=np.float64) @ to_xyz.T
+    return np.asarray(rgb, dtype=np.float64) @ SRGB_TO_XYZ.T
 
 
 def luminance(xyz):
@@ -201,15 +235,14 @@ def _solar_interpolation_matrix(wavelengths):
 
 def _bruneton2017_matrix(wavelengths, power=BRUNETON_SKY_POWER):
     grid, cmfs = _cmfs()
-    to_rgb, to_xyz = _srgb_matrices()
-    rgb_bar = cmfs @ to_rgb.T                                     # (n, 3): r, g, b colour-matching functions
+    rgb_bar = cmfs @ XYZ_TO_SRGB.T                                    # (n, 3): r, g, b colour-matching functions
     solar = solar_irradiance_astm_g173(np.clip(grid, 365.0, 835.0))
     factors = np.zeros((3, 3))
     for rank, channel in enumerate(np.argsort(wavelengths)[::-1]):   # longest -> red, shortest -> blue
         lam = wavelengths[channel]
         shape = solar / solar_irradiance_astm_g173(lam) * (grid / lam) ** power
         factors[rank, channel] = MAX_LUMINOUS_EFFICACY * float(rgb_bar[:, rank] @ shape)
-    return to_xyz @ factors
+    return SRGB_TO_XYZ @ factors
 
 
 #: Least channel kept by the power-law reconstruction, relative to the pixel's largest (a shadowed channel
@@ -249,10 +282,81 @@ def _solar_power_law_xyz(radiance, wavelengths):
     return out.reshape(np.shape(radiance)[:-1] + (3,))
 
 
+#: Steps of :func:`_solar_power_law_tabulated_xyz`'s tables: in q (the log ratio of two neighbouring
+#: samples) for the part of the spectrum between them, in p (the exponent, |p| <= 8) beyond the end samples.
+POWER_LAW_TABLE_STEPS = (1.0 / 512.0, 1.0 / 256.0)
+
+
+@functools.lru_cache(maxsize=8)
+def _power_law_tables(lam):
+    """For increasing wavelengths ``lam`` (3 floats [nm]), per pair k of neighbouring samples:
+    (Delta_k = log lam_(k+1) - log lam_k, B_k (nq, 3) on the q nodes, O_k (np, 3) on the p nodes) with
+    B_k(q) = sum_between W e^(q a / Delta_k), O_k(p) = sum_beyond W e^(p a), a = log lambda - log lam_k,
+    W = K_m cmf E_sun at 1 nm (the sums of :func:`_solar_power_law_xyz`, split by where lambda lies)."""
+    grid, cmfs = _cmfs()
+    weights = MAX_LUMINOUS_EFFICACY * cmfs * solar_irradiance_astm_g173(np.clip(grid, 365.0, 835.0))[:, None]
+    lam = np.asarray(lam)
+    log_lam, log_grid = np.log(lam), np.log(grid)
+    segment = np.clip(np.searchsorted(lam, grid) - 1, 0, 1)
+    outside = (grid < lam[0]) | (grid > lam[-1])
+    step_q, step_p = POWER_LAW_TABLE_STEPS
+    q_nodes = np.arange(-_Q_NODES, _Q_NODES + 1) * step_q
+    p_nodes = np.arange(-_P_NODES, _P_NODES + 1) * step_p
+    tables = []
+    for k in (0, 1):
+        a = log_grid - log_lam[k]
+        delta = log_lam[k + 1] - log_lam[k]
+        between, beyond = (segment == k) & ~outside, (segment == k) & outside
+        inner = np.exp(np.outer(q_nodes, a[between] / delta)) @ weights[between]
+        outer = np.exp(np.outer(p_nodes, a[beyond])) @ weights[beyond]
+        tables.append((delta, inner, outer))
+    return tuple(tables)
+
+
+#: Half the node counts of the q and p tables: |q| <= log(1 / POWER_LAW_FLOOR) (two logarithms of
+#: channels floored at POWER_LAW_FLOOR of the largest), |p| <= POWER_LAW_MAX_EXPONENT beyond the samples.
+_Q_NODES = int(np.ceil(np.log(1.0 / POWER_LAW_FLOOR) / POWER_LAW_TABLE_STEPS[0]))
+_P_NODES = int(round(POWER_LAW_MAX_EXPONENT / POWER_LAW_TABLE_STEPS[1]))
+
+
+def _interpolate(table, x, step, half):
+    """Linear interpolation of ``table`` (2 half + 1, 3) on the nodes (i - half) step at ``x`` (m,),
+    clamped to the end nodes."""
+    position = np.clip(x / step + half, 0.0, 2.0 * half)
+    index = np.minimum(position.astype(np.intp), 2 * half - 1)
+    t = (position - index)[:, None]
+    return table[index] * (1.0 - t) + table[index + 1] * t
+
+
+def _solar_power_law_tabulated_xyz(radiance, wavelengths):
+    """:func:`_solar_power_law_xyz`'s reconstruction, its sums over 1 nm tabulated (module docstring):
+    XYZ = r_1 (B_1(q_1) + O_1(clip(q_1 / Delta_1))) + r_2 (B_2(q_2) + O_2(clip(q_2 / Delta_2))), with
+    r_k the floored ratios L_k / E_sun(lambda_k) and q_k = log r_(k+1) - log r_k."""
+    order = np.argsort(wavelengths)
+    lam = wavelengths[order]
+    flat = np.asarray(radiance, dtype=np.float64).reshape(-1, 3)[:, order]
+    ratio = flat / solar_irradiance_astm_g173(lam)[None, :]
+    top = ratio.max(axis=1, keepdims=True)
+    lit = top[:, 0] > 0
+    ratio = np.maximum(ratio[lit], POWER_LAW_FLOOR * top[lit])
+    log_r = np.log(ratio)
+    step_q, step_p = POWER_LAW_TABLE_STEPS
+    values = np.zeros((lit.size, 3))
+    xyz = 0.0
+    for k, (delta, inner, outer) in enumerate(_power_law_tables(tuple(lam.tolist()))):
+        q = log_r[:, k + 1] - log_r[:, k]
+        exponent = np.clip(q / delta, -POWER_LAW_MAX_EXPONENT, POWER_LAW_MAX_EXPONENT)
+        xyz = xyz + ratio[:, k, None] * (_interpolate(inner, q, step_q, _Q_NODES)
+                                         + _interpolate(outer, exponent, step_p, _P_NODES))
+    values[lit] = xyz
+    return values.reshape(np.shape(radiance)[:-1] + (3,))
+
+
 #: Three-wavelength reconstructions (module docstring): name -> function of the wavelengths returning
 #: the matrix, or (for the non-linear power law) of (radiance, wavelengths) returning XYZ.
-THREE_WAVELENGTH_METHODS = {"solar_power_law": _solar_power_law_xyz, "solar_interpolation": _solar_interpolation_matrix,
-                            "bruneton2017": _bruneton2017_matrix}
+THREE_WAVELENGTH_METHODS = {"solar_power_law": _solar_power_law_xyz,
+                            "solar_power_law_tabulated": _solar_power_law_tabulated_xyz,
+                            "solar_interpolation": _solar_interpolation_matrix, "bruneton2017": _bruneton2017_matrix}
 #: The methods that are a 3 x 3 matrix (:func:`three_wavelength_to_xyz_matrix`).
 LINEAR_METHODS = ("solar_interpolation", "bruneton2017")
 

@@ -6,6 +6,8 @@
 - A PNG frame: its size and the text chunks clsky writes (clsky_version, the TOML scene;
   :mod:`anim.scene`), read with Pillow.
 - A metrics JSON (``<stem>_metrics.json``): the version, the scene, the frames and the table's units.
+- An EXR frame (``clsky animate --hdr exr``): its size, channels and header (units, orientation of an
+  environment map, the scene and clsky's version), read with the OpenEXR bindings.
 
 A damaged or foreign file is a :class:`clsky.table.TableFormatError` (a ValueError) naming the file:
 one line and exit status 2 on the command line.
@@ -15,6 +17,8 @@ from __future__ import annotations
 
 import json
 import pathlib
+
+import numpy as np
 
 from .table import TableFormatError
 
@@ -93,18 +97,46 @@ def _metrics(path):
     return _block(f"{path}:", items)
 
 
-READERS = {".npz": _table, ".png": _png, ".json": _metrics}
+def _exr(path):
+    try:
+        import OpenEXR
+    except ImportError as error:
+        raise ImportError("describing an EXR file needs the OpenEXR bindings: pip install 'clsky[anim]'") from error
+    try:
+        with OpenEXR.File(str(path)) as exr:
+            header, channels = dict(exr.header()), sorted(exr.channels())
+    except Exception as error:  # noqa: BLE001  (the bindings raise RuntimeError and others for a bad file)
+        raise TableFormatError(f"{path}: not a readable EXR file ({str(error).splitlines()[0] if str(error) else error})") \
+            from None
+    window = header.get("dataWindow")
+    items = [("kind", "OpenEXR image"),
+             ("size", "-" if window is None else f"{window[1][0] - window[0][0] + 1} x {window[1][1] - window[0][1] + 1}"
+                                                  f" pixels, channels {', '.join(channels)}"),
+             ("clsky version", header.get("clskyVersion", "- (not written by clsky)"))]
+    for name in sorted(header):
+        if name in ("clskyVersion", "scene", "dataWindow", "displayWindow", "channels"):
+            continue
+        value = header[name]
+        if not isinstance(value, str) and np.ndim(value) == 1 and np.issubdtype(np.asarray(value).dtype, np.number):
+            value = " ".join(f"{v:g}" for v in np.asarray(value).tolist())
+        items.append((name, value))
+    if "scene" in header:
+        items += _scene_lines(header["scene"])
+    return _block(f"{path}:", items)
+
+
+READERS = {".npz": _table, ".png": _png, ".json": _metrics, ".exr": _exr}
 
 
 def describe(path) -> str:
-    """A readable block of text describing ``path``: a table (.npz), a PNG, or a metrics JSON.
+    """A readable block of text describing ``path``: a table (.npz), a PNG, a metrics JSON or an EXR frame.
 
     Raises
     ------
     FileNotFoundError
         ``path`` does not exist.
     ValueError
-        Its suffix is none of :data:`READERS`' (``.npz``, ``.png``, ``.json``).
+        Its suffix is none of :data:`READERS`' (``.npz``, ``.png``, ``.json``, ``.exr``).
     TableFormatError
         A damaged or foreign file (message names the file).
     """

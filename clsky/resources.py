@@ -39,7 +39,8 @@ import numpy as np
 from .settings import TableSettings
 
 __all__ = ["InsufficientMemoryError", "Allocation", "Phase", "MemoryEstimate", "MemoryLimits",
-           "estimate_table_memory", "estimate_render_memory", "estimate_animation_memory", "expected_orders",
+           "estimate_table_memory", "estimate_spectral_table_memory", "estimate_render_memory",
+           "estimate_animation_memory", "expected_orders",
            "estimate_directions_memory", "machine_limits", "device_of", "check_memory", "host_available_bytes",
            "format_bytes", "BASE_PROCESS_BYTES", "FRAME_BYTES_PER_PIXEL"]
 
@@ -350,7 +351,7 @@ def _table_held(settings, cells, orders, keep_orders=True):
 
 def estimate_render_memory(settings: TableSettings, image_shape, method="compare",
                            ray_settings: TableSettings | None = None, keep_orders=False,
-                           hdr_output=False, count_table=True) -> MemoryEstimate:
+                           hdr_output=False, count_table=True, batches=1) -> MemoryEstimate:
     """Peak memory of rendering frames of ``image_shape`` from a table of ``settings``.
 
     Parameters
@@ -370,6 +371,9 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
     count_table : bool
         Count the table's host arrays (False where the table exists already, e.g. in
         :class:`clsky.render.SkyRenderer`: the memory available then no longer includes them).
+    batches : int
+        Tables rendered side by side (:class:`clsky.spectrum.SpectralRenderer`: one per batch of three
+        wavelengths, ceil(N / 3)); 1: a :class:`~clsky.render.SkyRenderer`.
 
     Returns
     -------
@@ -377,6 +381,10 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
         The table held on the host, its device copy (N C s) and padded gathered sum (N 8 s), and per
         pixel: directions (24 bytes host, 3 s device), the mask, the output buffer (3 s device, 3 s
         host), the HDR frames (24 bytes each) and :data:`FRAME_BYTES_PER_PIXEL` of frame processing.
+        With B = ``batches`` > 1: B tables on the host and on the device, B copies of the directions
+        and masks on the device (each batch's renderer prepares its own), and the spectral frames
+        before their conversion to sRGB: each method's (pixels, 3 B) float64 assembly, and while the
+        last is assembled its B (pixels, 3) pieces (:meth:`clsky.spectrum.SpectralTable.assemble`).
     """
     from .render import RAYMARCH_DEFAULTS
 
@@ -386,21 +394,29 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
     width, height = image_shape
     pixels = int(width) * int(height)
     held = _table_held(settings, cells, orders, keep_orders) if count_table else ()
+    held = tuple(dataclasses.replace(a, count=a.count * batches) for a in held)
     gathered = cells * 8 * s if orders > 1 else 2 * 2 * 2 * 8 * s
     upload = (Allocation(f"table data on the device (D, H, W, {settings.channels})", cells * settings.channels * s,
-                         on_device=True),
-              Allocation("padded gathered sum on the device (D, H, W, 8)", gathered, on_device=True),
+                         count=batches, on_device=True),
+              Allocation("padded gathered sum on the device (D, H, W, 8)", gathered, count=batches, on_device=True),
               # 2 columns per node, 3 with ozone (transmittance.column_channels): counted as 3
               Allocation("ray-march transmittance table", int(np.prod(ray_settings.transmittance_size)) * 3 * s,
-                         on_device=True))
+                         count=batches, on_device=True))
     phases = [Phase("renderer", held + upload + (Allocation("upload staging (D, H, W, 8)", gathered),))]
     if pixels:
         frames = 2 if method == "compare" else 1
-        per_pixel = (
+        spectral = ()
+        if batches > 1:
+            spectral = (Allocation(f"spectral frames (pixels, 3 x {batches}) float64", pixels * 24 * batches,
+                                   count=frames, source="frames"),
+                        Allocation("spectral frame pieces (pixels, 3) float64", pixels * 24, count=batches,
+                                   source="frames"))
+        per_pixel = spectral + (
             Allocation("ray directions (pixels, 3) float64", pixels * 24, source="frames"),
             Allocation("pixel mask", pixels * 2, source="frames"),
-            Allocation("ray directions on the device (pixels, 3)", pixels * 3 * s, on_device=True, source="frames"),
-            Allocation("pixel mask on the device", pixels, on_device=True, source="frames"),
+            Allocation("ray directions on the device (pixels, 3)", pixels * 3 * s, count=batches, on_device=True,
+                       source="frames"),
+            Allocation("pixel mask on the device", pixels, count=batches, on_device=True, source="frames"),
             Allocation("frame output on the device (pixels, 3)", pixels * 3 * s, on_device=True, source="frames"),
             Allocation("frame download (pixels, 3)", pixels * 3 * s, source="frames"),
             Allocation("HDR frames (pixels, 3) float64", pixels * 24, count=frames, source="frames"),
@@ -423,17 +439,55 @@ def estimate_directions_memory(pixels, dtype="float64") -> MemoryEstimate:
         Allocation("frame download (pixels, 3)", pixels * 3 * s, source="frames"))),))
 
 
+def estimate_spectral_table_memory(settings: TableSettings, batches: int) -> MemoryEstimate:
+    """Peak memory of :meth:`clsky.spectrum.SpectralTable.build` with ``keep_orders=False`` (what an
+    animation builds): ``batches`` tables built one after the other.
+
+    Returns
+    -------
+    MemoryEstimate
+        The last batch's build (:func:`estimate_table_memory`'s phases: the batches grow, the last is
+        the largest) beside the B - 1 built tables without their orders (data, single scattering,
+        gathered sum) and, for the physical mode's higher orders, the two first-gather stacks
+        (2, D, H, H) float64 that :func:`clsky.multiple.keeping_first_gather_stacks` keeps for the
+        whole build (the last batch computes none: its first-gather phase holds the kept two instead
+        of one of its own).
+    """
+    cells, height, depth, _ = _table_sizes(settings)
+    orders = expected_orders(settings)
+    built = tuple(dataclasses.replace(a, count=a.count * (batches - 1))
+                  for a in _table_held(settings, cells, orders, keep_orders=False))
+    kept = ()
+    if settings.mode == "physical" and orders > 1:
+        kept = (Allocation("first-gather matrix stacks kept for the batches (2, D, H, H) float64",
+                           2 * depth * height * height * _F64, count=2),)
+    phases = []
+    for phase in estimate_table_memory(settings).phases:
+        own = tuple(a for a in phase.allocations if not a.label.startswith("first-gather matrix stack (2, D, H, H) "
+                                                                           "float64"))
+        phases.append(Phase(f"last batch: {phase.name}", (built if batches > 1 else ()) + kept + own))
+    width, height, depth = settings.size
+    return MemoryEstimate(f"{batches} tables {width} x {height} x {depth} ({settings.mode}, {settings.dtype})",
+                          tuple(phases))
+
+
 def estimate_animation_memory(settings: TableSettings, image_shape, method="compare",
-                              ray_settings: TableSettings | None = None, hdr_output=False) -> MemoryEstimate:
+                              ray_settings: TableSettings | None = None, hdr_output=False,
+                              batches=None) -> MemoryEstimate:
     """The table build, then the frames (:func:`estimate_table_memory`, :func:`estimate_render_memory`
-    without the higher orders, which an animation drops once the table is built)."""
-    build = estimate_table_memory(settings)
+    without the higher orders, which an animation drops once the table is built). ``batches``: None
+    for the three-wavelength animation, else the spectral one's ceil(N / 3) batches
+    (:func:`estimate_spectral_table_memory`, ``estimate_render_memory(..., batches=B)``)."""
+    if batches is None:
+        build = estimate_table_memory(settings)
+    else:
+        build = estimate_spectral_table_memory(settings, batches)
     render = estimate_render_memory(settings, image_shape, method, ray_settings, keep_orders=False,
-                                    hdr_output=hdr_output)
+                                    hdr_output=hdr_output, batches=batches or 1)
     width, height = image_shape
     w, h, d = settings.size
-    return MemoryEstimate(f"the animation ({width} x {height} frames, table {w} x {h} x {d})",
-                          build.phases + render.phases)
+    tables = f"table {w} x {h} x {d}" if batches is None else f"{batches} tables {w} x {h} x {d}"
+    return MemoryEstimate(f"the animation ({width} x {height} frames, {tables})", build.phases + render.phases)
 
 
 def host_available_bytes() -> int | None:

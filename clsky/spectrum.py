@@ -187,6 +187,7 @@ class SpectralTable:
                 table.metadata["spectral_batch"] = {"index": index, "of": len(atmospheres),
                                                     "wavelengths_nm": list(batch.wavelengths)}
                 tables.append(table if keep_orders else dataclasses.replace(table, orders=()))
+                del table       # else the last batch's orders stay alive through the next batch's build
         record = {"units": ABSOLUTE_UNITS, "wavelengths_nm": values.tolist(), "batches": len(tables),
                   "build_seconds": time.perf_counter() - start, "build_cpu_seconds": time.process_time() - cpu}
         return cls(values, tuple(tables), record)

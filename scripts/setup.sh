@@ -27,6 +27,10 @@ if ! .venv/bin/python -c "import pyopencl as cl, sys; sys.exit(0 if any(p.get_de
     log "no OpenCL device found: installing the PoCL pip build (pyopencl[pocl])"
     .venv/bin/python -m pip install -q -e ".[anim,test,bench,pocl]"
 fi
+# three.js's EXRLoader (tests/js, pinned by its package-lock.json) for tests/test_exr.py; optional
+if command -v npm >/dev/null 2>&1; then
+    npm ci --prefix tests/js --no-audit --no-fund --silent || log "npm ci in tests/js failed: the three.js test will skip"
+fi
 log "OpenCL devices (* = the one clsky uses):"
 .venv/bin/clsky devices >&2
 log "clsky will use: $(.venv/bin/python -c 'import clsky._cl as c; print(c.describe_device(c.default_device()))')"

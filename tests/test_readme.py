@@ -137,7 +137,16 @@ def check_outputs(argv, directory):
         assert len(list(pathlib.Path(f"{stem}_frames").glob("frame_*.png"))) == 3
         assert pathlib.Path(f"{stem}_metrics.csv").is_file() and pathlib.Path(f"{stem}_metrics.json").is_file()
         if "--hdr" in argv:
-            hdr = [np.load(path) for path in sorted(pathlib.Path(f"{stem}_frames").glob("frame_*.npy"))]
+            frames = pathlib.Path(f"{stem}_frames")
+            if option_value(argv, "--hdr") == "exr":
+                from anim.exr import read_exr
+
+                exr = [read_exr(path) for path in sorted(frames.glob("frame_*.exr"))]
+                hdr = [pixels for pixels, _ in exr]
+                if option_value(argv, "--camera") == "equirectangular":   # tagged as an environment map
+                    assert all("envmap" in header and "sunDirectionEnvmap" in header for _, header in exr)
+            else:                                   # a bare --hdr, or --hdr npy
+                hdr = [np.load(path) for path in sorted(frames.glob("frame_*.npy"))]
             assert len(hdr) == 3 and all(np.isfinite(h).all() and (h >= 0).all() for h in hdr)
     elif command == "render":
         imageio = pytest.importorskip("imageio.v3")

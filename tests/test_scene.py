@@ -11,6 +11,7 @@ from __future__ import annotations
 import datetime
 import json
 import pathlib
+import re
 import sys
 
 import numpy as np
@@ -54,7 +55,7 @@ EVERY_OPTION = ["--camera", "perspective", "--size", "20", "--fov", "60", "--hea
                 "--location", "48.1", "11.6", "--date", "2026-06-21", "--hours", "2.5", "4.5",
                 "--step-minutes", "30", "--frames", "7", "--start-elevation", "-4", "--max-elevation", "50",
                 "--tone-map", "atmosphere-plus", "--exposure", "1.5", "--auto-exposure", "--white-balance", "sun",
-                "--no-dither", "--fps", "12", "-o", "x.mp4", "--hdr"]
+                "--no-dither", "--fps", "12", "-o", "x.mp4", "--hdr", "exr", "--hdr-precision", "half"]
 
 
 #: Options of a run that are no part of its scene.
@@ -95,7 +96,7 @@ def test_print_scene_round_trip(tmp_path, capsys, monkeypatch):
                             "end_hour": 4.5, "step_minutes": 30.0}
     assert scene["display"] == {"tone_map": "atmosphere-plus", "exposure": 1.5, "auto_exposure": True,
                                 "white_balance": "sun", "dither": False}
-    assert scene["output"] == {"output": "x.mp4", "fps": 12.0, "hdr": True}
+    assert scene["output"] == {"output": "x.mp4", "fps": 12.0, "hdr": "exr", "hdr_precision": "half"}
     (tmp_path / "x.toml").write_text(text)
     status, again, err = run(capsys, "animate", "--scene", "x.toml", "--print-scene")
     assert status == 0 and err == "" and again == text
@@ -118,16 +119,19 @@ def test_the_command_line_wins_and_says_so(tmp_path, capsys, monkeypatch):
     """An option typed wins over the scene, even typed with its default value (--pitch 10), and one
     line on stderr per option names it, its value and the scene's value it replaces."""
     monkeypatch.chdir(tmp_path)
-    (tmp_path / "s.toml").write_text('[camera]\nsize = 16\npitch_deg = 5.0\n[display]\nexposure = 1.0\ndither = true\n')
+    (tmp_path / "s.toml").write_text('[camera]\nsize = 16\npitch_deg = 5.0\n[display]\nexposure = 1.0\ndither = true\n'
+                                     'auto_exposure = true\n')
     status, text, err = run(capsys, "animate", "--scene", "s.toml", "--size", "24", "--no-dither", "--pitch", "10",
-                            "--print-scene")
+                            "--no-auto-exposure", "--print-scene")
     assert status == 0
     assert err.splitlines() == ["clsky: --size 24 overrides s.toml's camera.size = 16",
                                 "clsky: --pitch 10 overrides s.toml's camera.pitch_deg = 5.0",
-                                "clsky: --no-dither overrides s.toml's display.dither = true (now false)"]
+                                "clsky: --no-dither overrides s.toml's display.dither = true (now false)",
+                                "clsky: --no-auto-exposure overrides s.toml's display.auto_exposure = true (now false)"]
     scene = tomllib.loads(text)
     assert (scene["camera"]["size"], scene["camera"]["pitch_deg"]) == (24, 10.0)
-    assert (scene["display"]["exposure"], scene["display"]["dither"]) == (1.0, False)
+    assert (scene["display"]["exposure"], scene["display"]["dither"], scene["display"]["auto_exposure"]) == \
+        (1.0, False, False)
 
 
 @pytest.mark.parametrize("command,text,message", [
@@ -280,8 +284,27 @@ def test_info_of_a_damaged_table_is_one_line(small_table, tmp_path, capsys, dama
     assert f"clsky: error: {broken}" in one_line_error(*run(capsys, "info", broken)[::2])
 
 
+def test_exr_frames_carry_the_scene_and_info_reads_them(tmp_path, capsys, monkeypatch):
+    """--hdr exr: each EXR frame's header holds the scene and clsky's version beside its units;
+    clsky info prints them; a damaged EXR is one line."""
+    pytest.importorskip("OpenEXR")
+    monkeypatch.chdir(tmp_path)
+    assert run(capsys, "animate", *SMALL, "--hdr", "exr", "-o", "sky.mp4")[0] == 0
+    exr = tmp_path / "sky_frames" / "frame_00001.exr"
+    status, out, _ = run(capsys, "info", exr)
+    assert status == 0, out
+    assert "OpenEXR image" in out and "16 x 16 pixels, channels RGB" in out
+    assert re.search(rf"\n  clsky version +{re.escape(clsky.__version__)}\n", out), out
+    assert "size = 16" in out and 'hdr = "exr"' in out and "radianceUnits" in out
+    with Image.open(tmp_path / "sky_frames" / "frame_00001.png") as image:
+        assert image.text["scene"].splitlines()[-1] in out
+    broken = tmp_path / "broken.exr"
+    broken.write_bytes(exr.read_bytes()[:100])
+    assert f"clsky: error: {broken}: not a readable EXR file" in one_line_error(*run(capsys, "info", broken)[::2])
+
+
 def test_info_refuses_other_files(tmp_path, capsys):
-    assert "clsky info reads .npz, .png, .json files" in one_line_error(*run(capsys, "info", tmp_path / "x.toml")[::2])
+    assert "clsky info reads .npz, .png, .json, .exr files" in one_line_error(*run(capsys, "info", tmp_path / "x.toml")[::2])
     assert "no such file" in one_line_error(*run(capsys, "info", tmp_path / "x.npz")[::2])
     (tmp_path / "x.png").write_bytes(b"not a png")
     assert "not a readable PNG" in one_line_error(*run(capsys, "info", tmp_path / "x.png")[::2])
@@ -294,7 +317,7 @@ def test_the_dusk_scene_reproduces_the_readme_picture(tmp_path, capsys, monkeypa
     """``clsky animate --scene examples/dusk.toml`` (README 'Scene files') writes docs/scene_dusk.png
     as its third frame, byte for byte, text chunks included; its scene is the example's. Slow: the
     scene's own size and quality (a default-level table; 111 s wall on the 2-core machine at load
-    average 8.7)."""
+    average 7.3)."""
     monkeypatch.chdir(tmp_path)
     example = ROOT / "examples" / "dusk.toml"
     assert run(capsys, "animate", "--scene", example, "--progress", "none")[0] == 0

@@ -1,0 +1,266 @@
+"""OpenEXR frames and latitude-longitude environment maps, through the official OpenEXR bindings.
+
+A frame is written as one scan-line EXR image with channels R, G, B (ZIP compression, lossless), in
+float32 (``precision='float'``, the frame's float32 values exactly) or float16 (``'half'``, the usual
+format of environment maps: 3 significant decimal digits, values up to 65504, larger ones clipped
+to it and counted in ``halfClippedPixels``). The header says what
+the numbers are and where they point (:func:`frame_attributes`):
+
+- ``software`` ("clsky X.Y.Z") and ``clskyVersion``;
+- ``radianceUnits``: the frames' units (see :func:`anim.animate.frame_units`); where they are cd/m^2
+  (spectral frames converted to linear sRGB) also the standard ``whiteLuminance`` = 1 (the luminance
+  of RGB (1, 1, 1) [cd/m^2]) and ``chromaticities`` (Rec. 709 primaries, D65 white); for the table's
+  three wavelengths, ``channelWavelengthsNm`` (R, G, B);
+- ``camera``, ``observerAltitude`` [m], the sun as ``sunAzimuthDeg`` (from north, clockwise seen from
+  above), ``sunElevationDeg`` and the unit vector ``sunDirectionENU`` (east, north, up);
+- for an equirectangular panorama: the standard ``envmap`` attribute = latitude-longitude, the sun in
+  the map's own axes (``sunDirectionEnvmap``), the sun's position in the image (``sunPixel``), and the
+  orientation in words (``envmapOrientation``).
+
+Orientation of the latitude-longitude maps
+------------------------------------------
+The panorama is :class:`anim.cameras.EquirectangularCamera`'s: column ``x`` (pixel centres at
+``x + 0.5``) looks at azimuth ``phi = 360 deg * (x + 0.5) / width`` from north, clockwise seen from above
+(the left edge is north, a quarter of the way east, the centre south, three quarters west), row ``y``
+at elevation ``90 deg - 180 deg * (y + 0.5) / height`` (the top row is the zenith, the bottom row the
+nadir). The map is seen from inside the sphere, not mirrored. This is exactly OpenEXR's
+latitude-longitude convention (ImfEnvmap.h: the left edge is longitude +pi, the centre longitude 0
+= +Z, a quarter from the left longitude +pi/2 = +X, the top row latitude +pi/2 = +Y) with the world
+axes
+
+    X = east,  Y = up (zenith),  Z = south  (so -Z = north; right-handed),
+
+the y-up frame of OpenGL, three.js and Mitsuba 3. Mitsuba 3's ``envmap`` emitter uses this very mapping
+(``u = atan2(x, -z) / 2 pi``, ``v = acos(y) / pi``), so the file loads there unrotated with -Z north.
+Blender's world (Z up) puts the image centre at +X and a quarter from the left at +Y; three.js puts
+the centre at +X and a quarter from the left at -Z: see ``docs/exr.md`` for the rotation each needs.
+
+Where within a pixel: clsky's directions are those of the pixel centres, ``u = (x + 0.5) / width``,
+``v = (y + 0.5) / height``, as GPU texture sampling (Blender, three.js) reads them. OpenEXR's reference
+functions (``LatLongMap``) and Mitsuba 3 (measured, 3.9) put the first and last rows on the poles
+(row ``y`` at ``v = y / (height - 1)``), so they see the rows up to half a row from clsky's elevations
+(none at the horizon, half a row at the poles); Mitsuba reads the columns at clsky's azimuths.
+
+References
+----------
+.. [1] OpenEXR, "ImfEnvmap.h" (latitude-longitude environment maps) and "Standard attributes"
+   (``envmap``, ``whiteLuminance``, ``chromaticities``), https://openexr.com.
+.. [2] W. Jakob et al., Mitsuba 3 documentation, "Environment emitter (envmap)" (2022).
+
+Examples
+--------
+>>> import numpy as np, pathlib, tempfile
+>>> path = pathlib.Path(tempfile.mkdtemp()) / "sky.exr"
+>>> rgb = np.linspace(0.0, 1.0, 4 * 8 * 3, dtype=np.float32).reshape(4, 8, 3)
+>>> _ = write_exr(path, rgb, precision="float", attributes={"radianceUnits": "cd/m^2"})
+>>> pixels, header = read_exr(path)
+>>> bool((pixels == rgb).all()), header["radianceUnits"]
+(True, 'cd/m^2')
+"""
+
+from __future__ import annotations
+
+import math
+import pathlib
+
+import numpy as np
+
+import clsky
+from clsky._files import atomic_write
+
+__all__ = ["PRECISIONS", "HALF_MAX", "ENVMAP_ORIENTATION", "write_exr", "read_exr", "exr_pixels", "save_exr",
+           "frame_attributes", "enu_to_envmap", "envmap_pixel", "require_openexr"]
+
+#: EXR pixel types by option value: 16-bit half floats or 32-bit floats.
+PRECISIONS = {"half": np.float16, "float": np.float32}
+
+#: Largest finite half float (65504): larger values would become infinity in a 'half' file.
+HALF_MAX = float(np.finfo(np.float16).max)
+
+#: The orientation of clsky's latitude-longitude maps in words, stored in their header.
+ENVMAP_ORIENTATION = ("OpenEXR latlong with X=east, Y=up, Z=south (-Z=north); u = azimuth from north "
+                      "clockwise / 360 deg (left edge north, u=0.25 east, centre south, u=0.75 west); "
+                      "top row zenith, bottom row nadir; seen from inside, not mirrored")
+
+#: Rec. 709 / sRGB primaries and D65 white (x, y of red, green, blue, white), as OpenEXR's chromaticities.
+REC709_CHROMATICITIES = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
+
+#: Units of frames in linear sRGB luminance units (anim.animate.frame_units starts with this then).
+LUMINANCE_UNITS = "cd/m^2"
+
+
+def require_openexr():
+    """The ``OpenEXR`` module; ImportError saying how to install it when it is missing."""
+    try:
+        import OpenEXR
+    except ImportError as error:
+        raise ImportError("writing EXR files needs the OpenEXR bindings: pip install 'clsky[anim]' "
+                          "(or pip install OpenEXR)") from error
+    return OpenEXR
+
+
+def enu_to_envmap(direction_enu):
+    """A direction (east, north, up) in the axes of the latitude-longitude map: (x, y, z) = (east, up,
+    south), OpenEXR's and Mitsuba 3's y-up frame (module docstring).
+
+    >>> [float(c) for c in enu_to_envmap([0.0, 1.0, 0.0])]      # north is -Z
+    [0.0, 0.0, -1.0]
+    """
+    east, north, up = np.moveaxis(np.asarray(direction_enu, dtype=np.float64), -1, 0)
+    return np.stack([east, up, -north], axis=-1)
+
+
+def envmap_pixel(zenith_deg, azimuth_deg, width, height):
+    """Continuous image position (x, y) [pixels] of a direction in the panorama: ``x = width * phi /
+    360 deg`` (phi the azimuth from north, clockwise, in [0, 360)), ``y = height * theta / 180 deg``
+    (theta the zenith angle); pixel (col, row) covers [col, col + 1) x [row, row + 1).
+
+    >>> envmap_pixel(90.0, 180.0, 64, 32)                     # south, on the horizon: the centre
+    (32.0, 16.0)
+    """
+    return width * ((float(azimuth_deg) % 360.0) / 360.0), height * (float(zenith_deg) / 180.0)
+
+
+def frame_attributes(units, camera, width, height, sun_zenith_deg, sun_azimuth_deg, altitude_m=0.0,
+                     wavelengths_nm=None):
+    """The EXR header attributes of one frame (module docstring).
+
+    Parameters
+    ----------
+    units : str
+        Units of the pixel values (:func:`anim.animate.frame_units`); cd/m^2 when it starts with
+        ``'linear sRGB [cd/m^2]'`` or equals ``'cd/m^2'``.
+    camera : str
+        Camera name ('fisheye', 'perspective', 'equirectangular'); 'equirectangular' tags the file
+        as a latitude-longitude environment map.
+    width, height : int
+        Image size [pixels].
+    sun_zenith_deg, sun_azimuth_deg : float
+        The sun's zenith angle and azimuth (from north, clockwise) [deg].
+    altitude_m : float
+        Observer altitude [m].
+    wavelengths_nm : sequence of 3 float, optional
+        The wavelengths of the R, G, B channels, for frames at the table's three wavelengths.
+
+    Returns
+    -------
+    dict
+        Attribute name -> value, as OpenEXR.File takes them, except ``envmap``: the string
+        ``'latlong'`` (:func:`save_exr` stores it as ``OpenEXR.ENVMAP_LATLONG``), so that the
+        attributes need no OpenEXR (the Radiance frames of :mod:`anim.rgbe` take them as text).
+    """
+    zenith, azimuth = math.radians(sun_zenith_deg), math.radians(sun_azimuth_deg)
+    sun = np.array([math.sin(zenith) * math.sin(azimuth), math.sin(zenith) * math.cos(azimuth), math.cos(zenith)])
+    attributes = {
+        "software": f"clsky {clsky.__version__}", "clskyVersion": clsky.__version__,
+        "radianceUnits": str(units), "camera": str(camera), "observerAltitude": float(altitude_m),
+        "sunAzimuthDeg": float(sun_azimuth_deg) % 360.0, "sunElevationDeg": 90.0 - float(sun_zenith_deg),
+        # float32 (v3f): three.js's EXRLoader skips v3d attributes
+        "sunDirectionENU": sun.astype(np.float32),
+    }
+    if str(units) == LUMINANCE_UNITS or str(units).startswith(f"linear sRGB [{LUMINANCE_UNITS}]"):
+        attributes["whiteLuminance"] = 1.0
+        attributes["chromaticities"] = REC709_CHROMATICITIES
+    if wavelengths_nm is not None:
+        attributes["channelWavelengthsNm"] = np.asarray(wavelengths_nm, dtype=np.float32).reshape(3)
+    if camera == "equirectangular":
+        attributes["envmap"] = "latlong"
+        attributes["envmapOrientation"] = ENVMAP_ORIENTATION
+        attributes["sunDirectionEnvmap"] = enu_to_envmap(sun).astype(np.float32)
+        attributes["sunPixel"] = np.array(envmap_pixel(sun_zenith_deg, sun_azimuth_deg, width, height), np.float32)
+    return attributes
+
+
+def exr_pixels(rgb, precision="float"):
+    """(pixels, clipped): ``rgb`` as a C-contiguous (H, W, 3) array of the precision's dtype (float32
+    or float16), and the number of pixels with a channel above :data:`HALF_MAX` clipped to it with
+    'half' (0 with 'float'). A sky's half-float file can hold everything but the sun's disc (I_I / 6.8e-5
+    sr, 3e5 in relative units, 1e9 cd/m^2): those few pixels are clipped rather than made infinite.
+    ValueError for a bad shape or precision, and NaN or infinite values."""
+    if precision not in PRECISIONS:
+        raise ValueError(f"precision must be one of {list(PRECISIONS)}, got {precision!r}")
+    rgb = np.asarray(rgb)
+    if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.shape[0] < 1 or rgb.shape[1] < 1:
+        raise ValueError(f"rgb must have shape (H, W, 3), got {rgb.shape}")
+    if not np.isfinite(rgb).all():
+        raise ValueError("rgb holds NaN or infinite values: an EXR frame holds finite values only")
+    clipped = 0
+    if precision == "half":
+        over = np.abs(rgb) > HALF_MAX
+        clipped = int(over.any(axis=2).sum())
+        if clipped:
+            rgb = np.clip(rgb, -HALF_MAX, HALF_MAX)
+    return np.ascontiguousarray(rgb, dtype=PRECISIONS[precision]), clipped
+
+
+def write_exr(path, rgb, precision="float", attributes=None, force=False, staging=None):
+    """Write an RGB image to a scan-line OpenEXR file atomically (ZIP compression).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Target file; its directory must exist.
+    rgb : array_like, shape (H, W, 3)
+        Linear values, row 0 at the top (stored as the file's first scan line).
+    precision : {'float', 'half'}
+        32-bit floats (the float32 values exactly) or 16-bit half floats (round to nearest: relative
+        error <= 2^-11 from 6.1e-5 to 65504, absolute <= 2^-25 below; values above 65504 are clipped to
+        it, and the header's ``halfClippedPixels`` counts the pixels that were).
+    attributes : dict, optional
+        Header attributes (:func:`frame_attributes`), as OpenEXR.File takes them.
+    force : bool
+        Replace an existing file.
+    staging : clsky._files.StagedWrites, optional
+        Stage the file in this set: it lands when the set commits.
+
+    Returns
+    -------
+    pathlib.Path
+
+    Raises
+    ------
+    ValueError
+        A bad shape or precision; NaN or infinite values. Nothing is written then.
+    ImportError
+        The OpenEXR bindings are missing.
+    FileExistsError, IsADirectoryError, FileNotFoundError, NotADirectoryError, PermissionError
+        As :func:`anim.writers.write_png`.
+    """
+    require_openexr()
+    pixels, clipped = exr_pixels(rgb, precision)
+    if precision == "half":
+        attributes = {**(attributes or {}), "halfClippedPixels": clipped}
+    path = pathlib.Path(path)
+    with atomic_write(path, overwrite=force, suffix=".exr", staging=staging) as temporary:
+        save_exr(temporary, pixels, attributes)
+    return path
+
+
+def save_exr(file, pixels, attributes=None):
+    """Write ``pixels`` (from :func:`exr_pixels`) and ``attributes`` to ``file`` as it is, not
+    atomically: the step :func:`write_exr` and :class:`anim.writers.FrameWriter` take inside their
+    temporary files."""
+    OpenEXR = require_openexr()
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage, **(attributes or {})}
+    if isinstance(header.get("envmap"), str):
+        envmaps = {"latlong": OpenEXR.ENVMAP_LATLONG, "cube": OpenEXR.ENVMAP_CUBE}
+        if header["envmap"] not in envmaps:
+            raise ValueError(f"envmap must be one of {list(envmaps)}, got {header['envmap']!r}")
+        header["envmap"] = envmaps[header["envmap"]]
+    OpenEXR.File(header, {"RGB": pixels}).write(str(file))
+
+
+def read_exr(path):
+    """(pixels (H, W, 3) float16 or float32 as stored, header dict) of an RGB EXR file.
+
+    Raises
+    ------
+    ValueError
+        The file has no R, G, B channels.
+    """
+    OpenEXR = require_openexr()
+    with OpenEXR.File(str(path)) as exr:
+        channels, header = exr.channels(), dict(exr.header())
+        if "RGB" not in channels:
+            raise ValueError(f"{path}: no R, G, B channels (has {sorted(channels)})")
+        return np.array(channels["RGB"].pixels), header

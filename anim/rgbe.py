@@ -1,0 +1,188 @@
+"""Radiance RGBE (``.hdr``) frames: the older HDR format every renderer and image tool still reads.
+
+A pixel is three 8-bit mantissas sharing one 8-bit exponent (G. Ward, "Real pixels", Graphics Gems II,
+1991): for ``v = max(r, g, b)`` written as ``v = m 2^e`` with ``m`` in [0.5, 1), the bytes are
+``floor(c * 256 / 2^e)`` for each channel c and ``e + 128``; values below 1e-38 are 0 (exponent byte 0).
+A channel is decoded as ``(byte + 0.5) 2^(e - 8)`` (Radiance's own ``colr_color``), so each channel is
+within ``2^(e - 9) <= v / 256`` of its value: a relative error of at most 2^-8 for the largest channel,
+and the same absolute error for the others (a dark channel beside a bright one loses its digits).
+Channels are not negative (frames are radiances).
+
+Scan lines are written run-length encoded in Radiance's "new" format with literal runs only (lossless,
+no ambiguity with flat data), top row first (``-Y H +X W``); images narrower than 8 or wider than 32767
+pixels, which that format cannot hold, are written flat. The header holds ``FORMAT=32-bit_rle_rgbe``,
+``SOFTWARE=`` and one ``NAME= value`` line per attribute given (units, sun, orientation: as the EXR
+header of :mod:`anim.exr`, whose orientation conventions hold here too).
+
+References
+----------
+.. [1] G. Ward, "Real pixels", in Graphics Gems II, J. Arvo (ed.), Academic Press, 80-83 (1991),
+   doi:10.1016/B978-0-08-050754-5.50025-0.
+.. [2] G. Ward Larson and R. Shakespeare, "Rendering with Radiance" (1998), ch. "The Radiance picture
+   file format".
+
+Examples
+--------
+>>> import numpy as np, pathlib, tempfile
+>>> path = pathlib.Path(tempfile.mkdtemp()) / "sky.hdr"
+>>> _ = write_rgbe(path, np.full((2, 16, 3), 0.75))
+>>> pixels, header = read_rgbe(path)
+>>> float(pixels[0, 0, 0]), header["FORMAT"]       # 192 / 256 stored, read at the middle of its step
+(0.751953125, '32-bit_rle_rgbe')
+"""
+
+from __future__ import annotations
+
+import pathlib
+import re
+
+import numpy as np
+
+import clsky
+from clsky._files import atomic_write
+
+__all__ = ["encode_rgbe", "decode_rgbe", "write_rgbe", "read_rgbe", "save_rgbe"]
+
+#: Widths the run-length encoded scan lines can hold.
+_RLE_WIDTHS = range(8, 0x8000)
+
+
+def encode_rgbe(rgb):
+    """(H, W, 3) non-negative finite values -> (H, W, 4) uint8 RGBE; ValueError for other values."""
+    rgb = np.asarray(rgb, dtype=np.float64)
+    if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.shape[0] < 1 or rgb.shape[1] < 1:
+        raise ValueError(f"rgb must have shape (H, W, 3), got {rgb.shape}")
+    if not np.isfinite(rgb).all() or (rgb < 0).any():
+        raise ValueError("rgb must be finite and >= 0 for an RGBE file")
+    largest = rgb.max(axis=2)
+    lit = largest >= 1e-38
+    _, exponent = np.frexp(np.where(lit, largest, 1.0))              # largest = m 2^exponent, m in [0.5, 1)
+    if (exponent > 127).any():
+        raise ValueError("rgb holds values above 2^127, beyond RGBE's exponent")
+    scale = np.where(lit, np.ldexp(256.0, -exponent), 0.0)
+    rgbe = np.empty(rgb.shape[:2] + (4,), np.uint8)
+    rgbe[..., :3] = np.minimum(np.floor(rgb * scale[..., None]), 255.0)
+    rgbe[..., 3] = np.where(lit, exponent + 128, 0)
+    return rgbe
+
+
+def decode_rgbe(rgbe):
+    """(H, W, 4) uint8 RGBE -> (H, W, 3) float64: ``(byte + 0.5) 2^(e - 136)``, 0 where e is 0."""
+    rgbe = np.asarray(rgbe, dtype=np.uint8)
+    exponent = rgbe[..., 3].astype(np.int64)
+    scale = np.where(exponent > 0, np.ldexp(1.0, exponent - 136), 0.0)
+    return (rgbe[..., :3] + 0.5) * scale[..., None]
+
+
+def _scanline_bytes(row):
+    """One scan line (W, 4) in the new RLE format with literal runs of at most 128 bytes."""
+    width = row.shape[0]
+    parts = [bytes([2, 2, width >> 8, width & 0xFF])]
+    for component in range(4):
+        data = row[:, component].tobytes()
+        for start in range(0, width, 128):
+            chunk = data[start:start + 128]
+            parts.append(bytes([len(chunk)]) + chunk)
+    return b"".join(parts)
+
+
+def _header_value(value):
+    """An attribute as one header line's text (arrays as space-separated numbers)."""
+    if isinstance(value, np.ndarray):
+        value = " ".join(f"{float(v):.9g}" for v in value.ravel())
+    elif isinstance(value, (tuple, list)):
+        value = " ".join(str(v) for v in value)
+    text = str(getattr(value, "name", value))          # enums (OpenEXR's envmap) by name
+    return text.replace("\n", " ")
+
+
+def save_rgbe(file, rgb, attributes=None):
+    """Write ``rgb`` (H, W, 3) and ``attributes`` to ``file`` as it is, not atomically (the step inside
+    :func:`write_rgbe`'s and :class:`anim.writers.FrameWriter`'s temporary files)."""
+    rgbe = encode_rgbe(rgb)
+    height, width = rgbe.shape[:2]
+    lines = ["#?RADIANCE", "FORMAT=32-bit_rle_rgbe", f"SOFTWARE=clsky {clsky.__version__}"]
+    for name, value in (attributes or {}).items():
+        if name in ("software", "compression", "type"):
+            continue
+        if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", name):
+            raise ValueError(f"attribute names must be identifiers, got {name!r}")
+        lines.append(f"{name}= {_header_value(value)}")
+    head = ("\n".join(lines) + f"\n\n-Y {height} +X {width}\n").encode("ascii", "replace")
+    if width in _RLE_WIDTHS:
+        body = b"".join(_scanline_bytes(row) for row in rgbe)
+    else:
+        body = rgbe.tobytes()
+    pathlib.Path(file).write_bytes(head + body)
+
+
+def write_rgbe(path, rgb, attributes=None, force=False, staging=None):
+    """Write an RGB image to a Radiance ``.hdr`` file atomically (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Target file; its directory must exist.
+    rgb : array_like, shape (H, W, 3)
+        Finite values >= 0, row 0 at the top.
+    attributes : dict, optional
+        Header lines ``NAME= value`` (:func:`anim.exr.frame_attributes`).
+    force : bool
+        Replace an existing file.
+    staging : clsky._files.StagedWrites, optional
+        Stage the file in this set: it lands when the set commits.
+
+    Returns
+    -------
+    pathlib.Path
+
+    Raises
+    ------
+    ValueError
+        A bad shape, negative or non-finite values, values above 2^127 (before anything is written).
+    FileExistsError, IsADirectoryError, FileNotFoundError, NotADirectoryError, PermissionError
+        As :func:`anim.writers.write_png`.
+    """
+    encode_rgbe(rgb)                                     # refuse bad values before the temporary exists
+    path = pathlib.Path(path)
+    with atomic_write(path, overwrite=force, suffix=".hdr", staging=staging) as temporary:
+        save_rgbe(temporary, rgb, attributes)
+    return path
+
+
+def read_rgbe(path):
+    """(pixels (H, W, 3) float64, header {NAME: text}) of a Radiance file with a ``-Y H +X W``
+    resolution line, its scan lines flat or in the new run-length format (runs and literals); the old
+    run-length format is not read. ValueError for a file without the signature or resolution line."""
+    data = pathlib.Path(path).read_bytes()
+    if not data.startswith(b"#?"):
+        raise ValueError(f"{path}: not a Radiance picture (no '#?' signature)")
+    end = data.find(b"\n\n")
+    head = data[:end].decode("ascii", "replace").split("\n")[1:]
+    newline = data.find(b"\n", end + 2)
+    match = re.fullmatch(r"-Y (\d+) \+X (\d+)", data[end + 2:newline].decode("ascii", "replace"))
+    if end < 0 or newline < 0 or match is None:
+        raise ValueError(f"{path}: no '-Y H +X W' resolution line")
+    header = dict(line.split("=", 1) for line in head if "=" in line and not line.startswith("#"))
+    header = {name: value.strip() for name, value in header.items()}
+    height, width = int(match.group(1)), int(match.group(2))
+    body = memoryview(data)[newline + 1:]
+    rgbe = np.empty((height, width, 4), np.uint8)
+    at = 0
+    for row in range(height):
+        if width in _RLE_WIDTHS and bytes(body[at:at + 2]) == b"\x02\x02" and body[at + 2] < 128:
+            at += 4
+            for component in range(4):
+                column = 0
+                while column < width:
+                    count = body[at]
+                    if count > 128:                      # a run: one byte repeated count - 128 times
+                        rgbe[row, column:column + count - 128, component] = body[at + 1]
+                        column, at = column + count - 128, at + 2
+                    else:
+                        rgbe[row, column:column + count, component] = np.frombuffer(body[at + 1:at + 1 + count], np.uint8)
+                        column, at = column + count, at + 1 + count
+        else:
+            rgbe[row] = np.frombuffer(body[at:at + 4 * width], np.uint8).reshape(width, 4)
+            at += 4 * width
+    return decode_rgbe(rgbe), header
