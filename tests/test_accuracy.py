@@ -58,6 +58,18 @@ def test_bench_accuracy_bad_arguments(tmp_path, args, named):
     assert result.stderr.count("\n") == 1 and named in result.stderr
 
 
+def test_bench_accuracy_checks_the_derived_elevation_plot_before_work(tmp_path):
+    """--elevation-plot defaults to <--plot stem>_elevation.png; an existing one stops the run at once
+    (before the minutes of the sweep), naming the option, and nothing else is written."""
+    (tmp_path / "sky_elevation.png").write_bytes(b"kept")
+    result = subprocess.run([sys.executable, "-m", "anim", "bench", "accuracy", "--plot", "sky.png"], cwd=tmp_path,
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    assert result.stderr.startswith("clsky: error: --elevation-plot") and "sky_elevation.png exists" in result.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["sky_elevation.png"]
+    assert (tmp_path / "sky_elevation.png").read_bytes() == b"kept"
+
+
 @pytest.mark.slow
 def test_bench_accuracy_quick_run_writes_csv_and_plot(tmp_path):
     pytest.importorskip("matplotlib")
@@ -68,7 +80,8 @@ def test_bench_accuracy_quick_run_writes_csv_and_plot(tmp_path):
     with open(tmp_path / "accuracy.csv") as stream:
         rows = list(csv.DictReader(stream))
     assert [r["candidate"] for r in rows] == ["default", "ray march 16 samples", "ray march 48 samples"]
-    assert (tmp_path / "accuracy.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    for name in ("accuracy.png", "accuracy_elevation.png"):
+        assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 # --- the plots (anim/accuracy_plot.py), on hand-made rows: no OpenCL, no sweep ---------------------------

@@ -127,7 +127,8 @@ def test_accuracy_smoke_writes_its_files_where_asked(tmp_path):
     pytest.importorskip("matplotlib")
     run_smoke("bench_accuracy", "--docs", str(tmp_path))
     assert (tmp_path / "accuracy.csv").read_text().startswith("candidate,")
-    assert (tmp_path / "accuracy.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    for name in ("accuracy.png", "accuracy_elevation.png"):
+        assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_memory_bench_honours_the_atmosphere_options():
