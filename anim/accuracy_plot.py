@@ -129,7 +129,16 @@ def _limits(values, margin):
 
 
 def _pareto_panel(axes, rows, error, styles, fontsize):
-    """One panel: every candidate by knob, its Pareto front joined and labelled (labels stacked)."""
+    """One panel: every candidate by knob, its Pareto front joined and labelled (labels stacked). A log
+    axis cannot show a zero error or time: such rows (an exact match, a timer too coarse) are left out
+    of the panel and named in its corner."""
+    hidden = [r["candidate"] for r in rows if not (r[error] > 0 and r["render_s"] > 0)]
+    rows = [r for r in rows if r["candidate"] not in hidden]
+    if hidden:
+        axes.text(0.99, 0.01, "not shown (0 on a log axis): " + ", ".join(hidden), transform=axes.transAxes,
+                  ha="right", va="bottom", fontsize=fontsize, color="0.3", gid="hidden")
+    if not rows:
+        return
     times = [1e3 * r["render_s"] for r in rows]
     errors = [100 * r[error] for r in rows]
     front = pareto_front(rows, error=error)

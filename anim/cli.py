@@ -147,7 +147,8 @@ def register(commands):
     out.add_argument("--no-dither", action="store_true")
     bench = commands.add_parser("bench", help="measurements: `clsky bench accuracy`")
     kinds = bench.add_subparsers(dest="bench", required=True, parser_class=clsky_cli._Parser)
-    accuracy = kinds.add_parser("accuracy", help="what each numerical knob costs and buys (CSV + Pareto plot)")
+    accuracy = kinds.add_parser("accuracy", help="what each numerical knob costs and buys (CSV, Pareto plot, "
+                                                 "error per sun elevation)")
     accuracy.add_argument("--size", type=int, default=128, help="fisheye frames of SIZE x SIZE (default: 128)")
     accuracy.add_argument("-o", "--output", default="accuracy.csv", help="CSV of the candidates (default: %(default)s)")
     accuracy.add_argument("--plot", default="accuracy.png", help="Pareto plot, PNG (default: %(default)s)")

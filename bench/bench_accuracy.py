@@ -16,12 +16,12 @@ rendering them again (minutes). How far the reference converged: bench/bench_qua
 overwrites the published data unless asked.
 
 ``--smoke``: 16 x 16 frames, the 'draft' quality level as the reference, three candidates (the default
-table, a halved view axis, a 16-sample ray march) over an 8 x 32 x 8 table; the CSV and the plot go to
+table, a halved view axis, a 16-sample ray march) over an 8 x 32 x 8 table; the CSV and the plots go to
 a temporary directory (or ``--docs DIR``); print only (bench/_report.py).
 
 ``--replot CSV``: measure nothing; draw the two plots again from a sweep's CSV into ``--docs DIR``
-(default docs/), replacing them; ``--size`` must be that sweep's (the CSV does not record it). The
-published plots came from a 64-pixel sweep:
+(default docs/; a temporary directory with --smoke), replacing them; ``--size`` must be that sweep's
+(the CSV does not record it). The published plots came from a 64-pixel sweep:
 ``python bench/bench_accuracy.py --replot docs/accuracy.csv --size 64``.
 """
 
@@ -50,30 +50,35 @@ def main():
     parser.add_argument("--size", type=int, default=128)
     parser.add_argument("--reference-cache", type=pathlib.Path)
     parser.add_argument("--docs", type=pathlib.Path, metavar="DIR",
-                        help="write accuracy.csv and accuracy.png into DIR (default: docs/ when writing the "
+                        help="write accuracy.csv and the two plots into DIR (default: docs/ when writing the "
                              "README; none with --no-readme; a temporary directory with --smoke)")
     parser.add_argument("--replot", type=pathlib.Path, metavar="CSV",
                         help="only draw the plots again from CSV, a sweep's accuracy.csv, into --docs DIR "
                              "(default docs/); --size: that sweep's frame size")
     add_output_arguments(parser)
     args = parse_arguments(parser)
-    if args.replot is not None:
-        docs = args.docs or DOCS
-        written = accuracy_plot.plot_csv(args.replot, docs / "accuracy.png", docs / "accuracy_elevation.png",
-                                         size=args.size, force=True)
-        print("wrote " + ", ".join(map(str, written)))
-        return
     candidates, level = accuracy.default_candidates(), "reference"
     if args.smoke:
         args.size, level = SMOKE.frame, SMOKE.reference_level
         base = clsky.TableSettings(mode="physical", size=SMOKE.table)
         candidates = [c for c in accuracy.default_candidates(base) if c.label in SMOKE_CANDIDATES]
     with tempfile.TemporaryDirectory() as temporary:
+        if args.replot is not None:
+            replot(args.replot, args.docs or (pathlib.Path(temporary) if args.smoke else DOCS), args.size)
+            return
         if args.docs is None and args.smoke:
             args.docs = pathlib.Path(temporary)
         elif args.docs is None and not args.no_readme:
             args.docs = DOCS
         run(args, candidates, level)
+
+
+def replot(csv_path, docs, size):
+    """Draw the two plots of a sweep's CSV into ``docs`` (created if needed), replacing them."""
+    docs.mkdir(parents=True, exist_ok=True)
+    written = accuracy_plot.plot_csv(csv_path, docs / "accuracy.png", docs / "accuracy_elevation.png", size=size,
+                                     force=True)
+    print("wrote " + ", ".join(map(str, written)), flush=True)
 
 
 def run(args, candidates, level):

@@ -243,3 +243,31 @@ def test_read_csv_names_a_bad_cell(tmp_path):
     path.write_text(",".join(columns) + "\n" + "x,k,lut,fast,0.1,0.1,0.1,0.1,0.1\n")
     with pytest.raises(ValueError, match="line 2: column 'render_s'"):
         read_csv(path)
+
+
+def test_a_zero_error_is_named_not_drawn_on_the_log_axes():
+    """An exact match (error 0) has no place on a log axis: the panel leaves it out and names it; the
+    front of the rest is labelled as before, and both figures draw without error."""
+    pytest.importorskip("matplotlib")
+    import matplotlib.pyplot as plt
+
+    from anim.accuracy_plot import draw_elevation, draw_pareto
+
+    rows = synthetic_rows()
+    rows[6]["p95_rel day"] = 0.0                                   # 'slow' matches the reference by day
+    day = f"sun {accuracy.SUN_ELEVATIONS['day']:g} deg"
+    figure = draw_pareto(rows)
+    try:
+        axes = next(a for a in figure.axes if day in a.get_title())
+        hidden = [t for t in axes.texts if t.get_gid() == "hidden"]
+        assert len(hidden) == 1 and hidden[0].get_text().endswith(": slow")
+        labels = [t.get_text() for t in axes.texts if t.get_gid() != "hidden"]
+        assert labels == [r["candidate"] for r in accuracy.pareto_front(rows[:6], error="p95_rel day")]
+        figure.canvas.draw()
+    finally:
+        plt.close(figure)
+    figure = draw_elevation(rows)
+    try:
+        figure.canvas.draw()
+    finally:
+        plt.close(figure)
