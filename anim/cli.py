@@ -145,10 +145,14 @@ def register(commands):
     _add_scene_file_arguments(render)
     bench = commands.add_parser("bench", help="measurements: `clsky bench accuracy`")
     kinds = bench.add_subparsers(dest="bench", required=True, parser_class=clsky_cli._Parser)
-    accuracy = kinds.add_parser("accuracy", help="what each numerical knob costs and buys (CSV + Pareto plot)")
+    accuracy = kinds.add_parser("accuracy", help="what each numerical knob costs and buys (CSV, Pareto plot, "
+                                                 "error per sun elevation)")
     accuracy.add_argument("--size", type=int, default=128, help="fisheye frames of SIZE x SIZE (default: 128)")
     accuracy.add_argument("-o", "--output", default="accuracy.csv", help="CSV of the candidates (default: %(default)s)")
     accuracy.add_argument("--plot", default="accuracy.png", help="Pareto plot, PNG (default: %(default)s)")
+    accuracy.add_argument("--elevation-plot", metavar="PNG",
+                          help="error against sun elevation per renderer, PNG (default: beside --plot, "
+                               "accuracy_elevation.png for accuracy.png)")
     accuracy.add_argument("--reference-quality", default="reference", choices=["reference", "high", "default"],
                           help="quality level of the reference frames (default: reference, ~5 min to build; "
                                "a cheaper one for smoke runs)")
@@ -296,14 +300,17 @@ def run_bench(args):
 
     from clsky._files import StagedWrites
 
-    from . import accuracy, writers
+    from . import accuracy, accuracy_plot, writers
 
     if not 16 <= args.size <= 2048:
         raise clsky_cli.UsageError(f"--size must be an integer in [16, 2048], got {short(args.size)}")
-    targets = {"--output": pathlib.Path(args.output), "--plot": pathlib.Path(args.plot)}
-    for option, suffix in (("--output", ".csv"), ("--plot", ".png")):
+    targets = {"--output": pathlib.Path(args.output), "--plot": pathlib.Path(args.plot),
+               "--elevation-plot": pathlib.Path(args.elevation_plot or accuracy_plot.elevation_plot_path(args.plot))}
+    for option, suffix in (("--output", ".csv"), ("--plot", ".png"), ("--elevation-plot", ".png")):
         if targets[option].suffix != suffix:
             raise clsky_cli.UsageError(f"{option} must end in {suffix}, got {str(targets[option])!r}")
+    if targets["--elevation-plot"].resolve() == targets["--plot"].resolve():
+        raise clsky_cli.UsageError(f"--elevation-plot must differ from --plot, got {str(targets['--plot'])!r} twice")
     clsky_cli.check_outputs(targets.items(), args.force)
     candidates = accuracy.default_candidates()
     if args.quick:
@@ -314,13 +321,14 @@ def run_bench(args):
         rows = accuracy.measure(candidates, reference, valid, progress=progress)
     finally:
         close()
-    with StagedWrites() as staging:                # the CSV and its plot land together
+    with StagedWrites() as staging:                # the CSV and its plots land together
         writers.write_csv(targets["--output"], rows, force=args.force, staging=staging)
-        accuracy.pareto_plot(rows, targets["--plot"], force=args.force, size=args.size, staging=staging)
+        accuracy_plot.pareto_plot(rows, targets["--plot"], force=args.force, size=args.size, staging=staging)
+        accuracy_plot.elevation_plot(rows, targets["--elevation-plot"], force=args.force, staging=staging)
     for row in rows:
         print(f"{row['candidate']:>24}: build {row['build_s']:6.2f} s, frame {1e3 * row['render_s']:7.1f} ms, "
               f"worst p95 error {100 * row['p95_rel']:8.2f} %, worst mean Delta E {row['mean_delta_e']:6.2f}")
-    print(f"{len(rows)} candidates -> {targets['--output']}, {targets['--plot']}")
+    print(f"{len(rows)} candidates -> {targets['--output']}, {targets['--plot']}, {targets['--elevation-plot']}")
     return 0
 
 
