@@ -206,15 +206,11 @@ inline void integrate_single(__constant const atmosphere_t *atm, const realv h0,
     }
 }
 
-/* Trilinear lookup in a padded table (D, H, W, 8) at node coordinates (fx, fy, fz). */
-inline real8 lookup8(__global const real *table, const int width, const int height, const int depth,
-                     const real fx, const real fy, const real fz)
+/* The trilinear interpolation of a padded table (D, H, W, 8) between the cells base, base + 1, base + dy,
+ * base + dz, ... with weights ax, ay, az along x, y, z (the corner cell base: lookup8). */
+inline real8 trilinear8(__global const real *table, const size_t base, const size_t dy, const size_t dz,
+                        const real ax, const real ay, const real az)
 {
-    const int x0 = (int)fmin(fmax(fx, R(0.0)), (real)(width - 2)), y0 = (int)fmin(fmax(fy, R(0.0)), (real)(height - 2)),
-              z0 = (int)fmin(fmax(fz, R(0.0)), (real)(depth - 2));    /* clamped before the conversion (NaN-safe) */
-    const real ax = fx - (real)x0, ay = fy - (real)y0, az = fz - (real)z0;
-    const size_t base = (size_t)x0 + (size_t)width * ((size_t)y0 + (size_t)height * (size_t)z0);
-    const size_t dy = (size_t)width, dz = (size_t)width * (size_t)height;
     const real8 c00 = (R(1.0) - ax) * vload8(base, table) + ax * vload8(base + 1, table);
     const real8 c10 = (R(1.0) - ax) * vload8(base + dy, table) + ax * vload8(base + dy + 1, table);
     const real8 c01 = (R(1.0) - ax) * vload8(base + dz, table) + ax * vload8(base + dz + 1, table);
@@ -297,10 +293,18 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
         const realv fx = MAPPING_U(h, mapping, ha) * (real)(width - 1);
         const realv fy = MAPPING_V(mu_view_here, mapping) * (real)(height - 1);
         const realv fz = MAPPING_SUN_T(mu_sun_here, mapping, sun_range) * (real)(depth - 1);
+        /* every lane's corner cell and weights at once; the coordinates are clamped before the conversion
+         * (NaN-safe: fmax returns the other operand) */
+        const realv x0 = fmin(fmax(fx, V(0.0)), (real)(width - 2)), y0 = fmin(fmax(fy, V(0.0)), (real)(height - 2)),
+                    z0 = fmin(fmax(fz, V(0.0)), (real)(depth - 2));
+        const intv ix = CONVERT_INTV(x0), iy = CONVERT_INTV(y0), iz = CONVERT_INTV(z0);
+        const realv ax = fx - CONVERT_REALV(ix), ay = fy - CONVERT_REALV(iy), az = fz - CONVERT_REALV(iz);
         for (int k = 0; k < VECTOR_WIDTH; ++k) {
             const real8 factor = (real8)(LANE(fr0, k), LANE(fr1, k), LANE(fr2, k), LANE(fm0, k), LANE(fm1, k),
                                          LANE(fm2, k), R(0.0), R(0.0));
-            sum[k] += factor * lookup8(gathered, width, height, depth, LANE(fx, k), LANE(fy, k), LANE(fz, k));
+            const size_t base = (size_t)INT_LANE(ix, k) + (size_t)width * ((size_t)INT_LANE(iy, k) + (size_t)height * (size_t)INT_LANE(iz, k));
+            sum[k] += factor * trilinear8(gathered, base, (size_t)width, (size_t)width * (size_t)height,
+                                          LANE(ax, k), LANE(ay, k), LANE(az, k));
         }
         last_density = density;
         node_previous = node;
