@@ -44,7 +44,7 @@ __all__ = ["keeping_first_gather_stacks", "gather_quadrature", "phase_azimuth_in
 
 SPECIES = ("rayleigh", "mie")
 VECTOR_WIDTH = 8
-#: Rows and cells of the gather computed per work-item (kernels/multiple.cl, GATHER_ROWS, GATHER_CELLS).
+#: Rows and cells of the gather computed per work-item (-DGATHER_ROWS, -DGATHER_CELLS of kernels/multiple.cl).
 GATHER_ROWS = 4
 GATHER_CELLS = 4
 
@@ -264,7 +264,8 @@ class MultipleScatteringEngine(_cl.Engine):
         return ("real.cl", declaration) + COMMON_SOURCES[1:] + ("mapping.cl", "view_ray.cl", "multiple.cl")
 
     def build_options(self):
-        return super().build_options() + quadrature_defines(self.settings, VECTOR_WIDTH)
+        return (super().build_options() + quadrature_defines(self.settings, VECTOR_WIDTH)
+                + [f"-DGATHER_ROWS={GATHER_ROWS}", f"-DGATHER_CELLS={GATHER_CELLS}"])
 
     def to_device(self, table):
         """A host table (D, H, W, 6) as a padded device table (D, H, W, 8) (channels 6, 7 zero)."""

@@ -28,8 +28,9 @@
  * Register blocking: a work-item computes GATHER_ROWS rows i for GATHER_CELLS cells x; per j it forms
  * each row's per-channel coefficient vector once (select of the two species' entries) and applies it
  * to every cell's real8. Global size (ceil(W / GATHER_CELLS), ceil(H / GATHER_ROWS), D). */
-#define GATHER_ROWS 4
-#define GATHER_CELLS 4
+#ifndef GATHER_ROWS
+#error "GATHER_ROWS and GATHER_CELLS (the register block of a gather work-item) must be defined"
+#endif
 __kernel void gather(__global const real *matrices, const int species_stride, const int matrix_z_stride,
                      __global const real *table_in, __global real *table_out, const int accumulate,
                      const int width, const int height, const int depth)
@@ -46,26 +47,35 @@ __kernel void gather(__global const real *matrices, const int species_stride, co
     const int cells = min(GATHER_CELLS, width - x0);
     int rows[GATHER_ROWS];
     real8 sum[GATHER_ROWS][GATHER_CELLS];
+    #pragma unroll
     for (int r = 0; r < GATHER_ROWS; ++r) {
         rows[r] = min(i0 + r, height - 1);
+        #pragma unroll
         for (int c = 0; c < GATHER_CELLS; ++c)
             sum[r][c] = (real8)(R(0.0));
     }
     for (int j = 0; j < height; ++j) {
         real8 column[GATHER_CELLS];
+        #pragma unroll
         for (int c = 0; c < GATHER_CELLS; ++c)
             column[c] = vload8(slab + (size_t)j * (size_t)width + (size_t)(x0 + min(c, cells - 1)), table_in);
+        #pragma unroll
         for (int r = 0; r < GATHER_ROWS; ++r) {
             const size_t entry = (size_t)rows[r] * (size_t)height + (size_t)j;
             const real8 coefficient = select((real8)(rayleigh[entry]), (real8)(mie[entry]), is_mie);
+            #pragma unroll
             for (int c = 0; c < GATHER_CELLS; ++c)
                 sum[r][c] += coefficient * column[c];
         }
     }
-    for (int r = 0; r < GATHER_ROWS && i0 + r < height; ++r) {
-        for (int c = 0; c < cells; ++c) {
-            const size_t cell = slab + (size_t)(i0 + r) * (size_t)width + (size_t)(x0 + c);
-            vstore8((accumulate ? vload8(cell, table_out) : (real8)(R(0.0))) + sum[r][c], cell, table_out);
+    #pragma unroll
+    for (int r = 0; r < GATHER_ROWS; ++r) {
+        #pragma unroll
+        for (int c = 0; c < GATHER_CELLS; ++c) {
+            if (i0 + r < height && c < cells) {
+                const size_t cell = slab + (size_t)(i0 + r) * (size_t)width + (size_t)(x0 + c);
+                vstore8((accumulate ? vload8(cell, table_out) : (real8)(R(0.0))) + sum[r][c], cell, table_out);
+            }
         }
     }
 }
