@@ -81,9 +81,9 @@ __kernel void gather(__global const real *matrices, const int species_stride, co
 }
 
 /* Along one view ray (VECTOR_WIDTH cells x = VECTOR_WIDTH gx + lane of row y) for SCATTER_SUN_NODES sun
- * nodes z = z0 + b at once: the ray's geometry, densities and view transmittance (ray_step) do not
- * depend on the sun, so each node computes them once and only the sun cosine there and the lookups
- * per sun node (the same operations as integrate_gathered: the same sums). sum[b][k] as
+ * nodes z = z0 + b at once: the ray's geometry, densities and view transmittance (ray_step) and the
+ * lookups' altitude and view parts (prepare_lookups) do not depend on the sun, so each node computes
+ * them once and only the sun cosine there and the lookups per sun node (the same operations as integrate_gathered: the same sums). sum[b][k] as
  * integrate_gathered's sum[k] for sun node z0 + b; mu_s[b], nu[b] that node's sun cosine and canonical
  * scattering cosine. With -DGROUND, ground_t[0..2] the view transmittance T(Pa, Pb) r, g, b of rays
  * that end on the ground (0 elsewhere) and ground_mu[b] the sun cosine at Pb. */
@@ -104,6 +104,8 @@ inline void integrate_gathered_suns(__constant const atmosphere_t *atm, const re
         ray_step(atm, i, &ray);
         const realv fx = MAPPING_U(ray.h, mapping, ha) * (real)(width - 1);
         const realv fy = MAPPING_V(ray.mu_view_here, mapping) * (real)(height - 1);
+        node_lookup_t node;
+        prepare_lookups(width, height, ray.f, fx, fy, &node);
         for (int b = 0; b < SCATTER_SUN_NODES; ++b) {
             const realv mu_sun_here = ray_sun_cos(&ray, (realv)(mu_s[b]), (realv)(nu[b]));
 #ifdef GROUND
@@ -115,7 +117,7 @@ inline void integrate_gathered_suns(__constant const atmosphere_t *atm, const re
             }
 #endif
             const realv fz = MAPPING_SUN_T(mu_sun_here, mapping, sun_range) * (real)(depth - 1);
-            add_lookups(gathered, width, height, depth, ray.f, fx, fy, fz, sum[b]);
+            add_lookups(gathered, width, height, depth, &node, fz, sum[b]);
         }
     }
 }

@@ -291,23 +291,42 @@ inline realv ray_sun_cos(const view_march_t *ray, const realv mu_s, const realv 
     return clamp((ray->r0 * mu_s + ray->s * nu) * ray->inv_r, R(-1.0), R(1.0));
 }
 
-/* sum[k] += f (lane k's 6 integrands) x the trilinear lookup of the padded table (D, H, W, 8) at node
- * coordinates (fx, fy, fz) of lane k, for every lane k. */
-inline void add_lookups(__global const real *gathered, const int width, const int height, const int depth,
-                        const realv *f, const realv fx, const realv fy, const realv fz, real8 *sum)
+/* What the lookups of one ray node share whatever the sun: each lane's integrands as one real8
+ * (f[0..5], 2 zeros) and the table's altitude and view corner cells and weights at node coordinates
+ * (fx, fy); the coordinates are clamped before the conversion (NaN-safe: fmax returns the other
+ * operand). */
+typedef struct {
+    real8 factor[VECTOR_WIDTH];
+    intv ix, iy;
+    realv ax, ay;
+} node_lookup_t;
+
+inline void prepare_lookups(const int width, const int height, const realv *f, const realv fx, const realv fy,
+                            node_lookup_t *node)
 {
-    /* every lane's corner cell and weights at once; the coordinates are clamped before the conversion
-     * (NaN-safe: fmax returns the other operand) */
-    const realv x0 = fmin(fmax(fx, V(0.0)), (real)(width - 2)), y0 = fmin(fmax(fy, V(0.0)), (real)(height - 2)),
-                z0 = fmin(fmax(fz, V(0.0)), (real)(depth - 2));
-    const intv ix = CONVERT_INTV(x0), iy = CONVERT_INTV(y0), iz = CONVERT_INTV(z0);
-    const realv ax = fx - CONVERT_REALV(ix), ay = fy - CONVERT_REALV(iy), az = fz - CONVERT_REALV(iz);
+    const realv x0 = fmin(fmax(fx, V(0.0)), (real)(width - 2)), y0 = fmin(fmax(fy, V(0.0)), (real)(height - 2));
+    node->ix = CONVERT_INTV(x0);
+    node->iy = CONVERT_INTV(y0);
+    node->ax = fx - CONVERT_REALV(node->ix);
+    node->ay = fy - CONVERT_REALV(node->iy);
+    for (int k = 0; k < VECTOR_WIDTH; ++k)
+        node->factor[k] = (real8)(LANE(f[0], k), LANE(f[1], k), LANE(f[2], k), LANE(f[3], k), LANE(f[4], k),
+                                  LANE(f[5], k), R(0.0), R(0.0));
+}
+
+/* sum[k] += lane k's integrands x the trilinear lookup of the padded table (D, H, W, 8) at the node's
+ * altitude and view coordinates (prepare_lookups) and sun coordinate fz, for every lane k. */
+inline void add_lookups(__global const real *gathered, const int width, const int height, const int depth,
+                        const node_lookup_t *node, const realv fz, real8 *sum)
+{
+    const realv z0 = fmin(fmax(fz, V(0.0)), (real)(depth - 2));
+    const intv iz = CONVERT_INTV(z0);
+    const realv az = fz - CONVERT_REALV(iz);
     for (int k = 0; k < VECTOR_WIDTH; ++k) {
-        const real8 factor = (real8)(LANE(f[0], k), LANE(f[1], k), LANE(f[2], k), LANE(f[3], k), LANE(f[4], k),
-                                     LANE(f[5], k), R(0.0), R(0.0));
-        const size_t base = (size_t)INT_LANE(ix, k) + (size_t)width * ((size_t)INT_LANE(iy, k) + (size_t)height * (size_t)INT_LANE(iz, k));
-        sum[k] += factor * trilinear8(gathered, base, (size_t)width, (size_t)width * (size_t)height,
-                                      LANE(ax, k), LANE(ay, k), LANE(az, k));
+        const size_t base = (size_t)INT_LANE(node->ix, k)
+                            + (size_t)width * ((size_t)INT_LANE(node->iy, k) + (size_t)height * (size_t)INT_LANE(iz, k));
+        sum[k] += node->factor[k] * trilinear8(gathered, base, (size_t)width, (size_t)width * (size_t)height,
+                                               LANE(node->ax, k), LANE(node->ay, k), LANE(az, k));
     }
 }
 
@@ -361,6 +380,8 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
         const realv fx = MAPPING_U(ray.h, mapping, ha) * (real)(width - 1);
         const realv fy = MAPPING_V(ray.mu_view_here, mapping) * (real)(height - 1);
         const realv fz = MAPPING_SUN_T(mu_sun_here, mapping, sun_range) * (real)(depth - 1);
-        add_lookups(gathered, width, height, depth, ray.f, fx, fy, fz, sum);
+        node_lookup_t node;
+        prepare_lookups(width, height, ray.f, fx, fy, &node);
+        add_lookups(gathered, width, height, depth, &node, fz, sum);
     }
 }
