@@ -23,7 +23,8 @@ BENCH = ROOT / "bench"
 #: script: the start of the header line of each Markdown table it prints
 HEADERS = {
     "bench_single": ["| settings | OpenCL [s] | NumPy twin [s] | NumPy / OpenCL |"],
-    "bench_orders": ["| mode | orders | OpenCL [s] | NumPy twins [s] | NumPy / OpenCL |",
+    "bench_orders": ["| table | W x H x D | orders | first build: wall | CPU | repeated: wall | CPU | load |",
+                     "| mode | orders | OpenCL wall | CPU | NumPy twins wall | CPU | NumPy / OpenCL: wall | CPU | load |",
                      "| mode | sun zenith [deg] | order 1 | order 2 | order 3 | order 4 | orders 5+ |"],
     "bench_montecarlo": ["| mode (preset) | quadrature | altitude [m] | cos view | sun zenith [deg] | deviation [%] | "
                          "deviation [SE] |"],
