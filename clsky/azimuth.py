@@ -40,7 +40,8 @@ source along that true ray (nu = mu mu_s + sqrt(1 - mu^2) sqrt(1 - mu_s^2) cos p
 altitude, view cosine, sun cosine and azimuth change:
 
     G_s(P) = max(0, sum_m sigma_m G_{s,m}(h, mu_view, mu_sun) T_m(cos phi_local)),
-    cos phi_local = (nu - mu_view mu_sun) / (sqrt(1 - mu_view^2) sqrt(1 - mu_sun^2)),
+    cos phi_local = (nu - mu_view mu_sun) / (sqrt(1 - mu_view^2) sqrt(1 - mu_sun^2))
+                  (evaluated without cancellation near the vertical: :func:`local_cos_azimuth`),
 
 T_m the Chebyshev polynomials (cos(m phi) = T_m(cos phi)), sigma_m optional Fejer or Lanczos factors
 (:data:`SIGMA_FACTORS`), and the clamp at 0 keeping a truncated series that rings negative from
@@ -64,23 +65,22 @@ from .atmosphere import AtmosphereParameters
 from .errors import ParameterError, is_integer
 from .mapping import altitude_to_u, cos_to_sun_t, cos_to_v, grid_coordinates
 from .multiple import SPECIES, _gather_parts, _phase, _quadrature_key, gather_quadrature
-from .orders import relative_addition
-from .settings import TableSettings
+from .orders import check_finite, relative_addition
+from .settings import MAX_AZIMUTH_HARMONICS, TableSettings
 
 __all__ = ["SIGMA_FACTORS", "azimuth_nodes", "harmonic_transform", "sigma_factors", "harmonic_phase_integrals",
            "HarmonicGather", "single_scattering_nodes", "scatter_nodes", "HarmonicOrders", "compute_orders",
+           "orders_result", "azimuth_average", "gathered_along",
            "raymarch_higher_orders", "local_cos_azimuth"]
 
 #: Factors sigma_m applied to the harmonics when a series is summed: none, Fejer's 1 - m / (M + 1)
 #: (a non-negative function stays non-negative), or Lanczos' sinc(m / (M + 1)).
 SIGMA_FACTORS = ("none", "fejer", "lanczos")
-#: Largest number of harmonics accepted.
-MAX_HARMONICS = 64
 
 
 def _check_harmonics(harmonics):
-    if not is_integer(harmonics) or not 0 <= harmonics <= MAX_HARMONICS:
-        raise ParameterError("azimuth_harmonics", f"an integer in [0, {MAX_HARMONICS}]", harmonics)
+    if not is_integer(harmonics) or not 0 <= harmonics <= MAX_AZIMUTH_HARMONICS:
+        raise ParameterError("azimuth_harmonics", f"an integer in [0, {MAX_AZIMUTH_HARMONICS}]", harmonics)
     return int(harmonics)
 
 
@@ -129,12 +129,18 @@ def chebyshev(cos_phi, harmonics):
     return out
 
 
-def local_cos_azimuth(mu_view, mu_sun, nu):
-    """cos of the azimuth between the horizontal projections of V and Sun at a point where their
-    zenith cosines are mu_view, mu_sun and dot(V, Sun) = nu; 1 where either is vertical (undefined)."""
-    sines = np.sqrt(np.maximum(1.0 - mu_view * mu_view, 0.0) * np.maximum(1.0 - mu_sun * mu_sun, 0.0))
+def local_cos_azimuth(r0, s, mu_v, mu_s, nu):
+    """cos of the azimuth between the horizontal projections of V and Sun at distance s [m] along a ray
+    from radius r0 [m] whose view and sun cosines at its start are mu_v, mu_s, with dot(V, Sun) = nu
+    (``gathered_source`` of kernels/view_ray.cl; cancellation-free near the vertical):
+    (r0 (nu - mu_v mu_s) + s (mu_v nu - mu_s)) / (sqrt(1 - mu_v^2) |P x Sun|), 1 where the view or the
+    sun is vertical (no azimuth)."""
+    cross2 = (r0 * r0 * np.maximum(1.0 - mu_s * mu_s, 0.0) + 2.0 * r0 * s * (mu_v - mu_s * nu)
+              + s * s * np.maximum(1.0 - nu * nu, 0.0))
+    denominator = np.sqrt(np.maximum(1.0 - mu_v * mu_v, 0.0)) * np.sqrt(np.maximum(cross2, 0.0))
+    numerator = r0 * (nu - mu_v * mu_s) + s * (mu_v * nu - mu_s)
     with np.errstate(divide="ignore", invalid="ignore"):
-        value = np.where(sines > 1e-12, (nu - mu_view * mu_sun) / sines, 1.0)
+        value = np.where(denominator > 0.0, numerator / denominator, 1.0)
     return np.clip(value, -1.0, 1.0)
 
 
@@ -248,8 +254,9 @@ def _over_cells(settings, per_cell, function, channels):
     return out.reshape(depth, height, width, channels)
 
 
-def single_scattering_nodes(atmosphere: AtmosphereParameters, settings: TableSettings, harmonics: int):
-    """Ibar^(1) (M + 1, D, H, W, 6) at the azimuth nodes, along the true view rays (node 0 is
+def single_scattering_nodes(atmosphere: AtmosphereParameters, settings: TableSettings):
+    """Ibar^(1) (M + 1, D, H, W, 6) at the azimuth nodes of M = ``settings.azimuth_harmonics``, along the
+    true view rays; twin of ``SingleScatteringEngine.compute`` at each node's cos_azimuth (node 0 is
     :func:`clsky.reference.single_scattering`)."""
     altitudes, cos_view, cos_sun = grid_coordinates(settings.size, atmosphere.atmosphere_height,
                                                     settings.mapping, settings.sun_cos_range)
@@ -258,7 +265,7 @@ def single_scattering_nodes(atmosphere: AtmosphereParameters, settings: TableSet
         sun_table = reference.transmittance_table(atmosphere, settings.transmittance_size, settings.sun_steps,
                                                   settings.sampling)
     out = []
-    for azimuth in azimuth_nodes(harmonics):
+    for azimuth in azimuth_nodes(settings.azimuth_harmonics):
         def cells(x, y, z, azimuth=azimuth):
             nu = None if azimuth == 0.0 else _cos_scatter(cos_view[y], cos_sun[z], azimuth)
             return reference._single_scattering_cells(atmosphere, settings, altitudes[x], cos_view[y], cos_sun[z],
@@ -282,8 +289,9 @@ def gathered_along(atmosphere, ray_settings, gathered, grid_settings, h0, mu_v, 
         g = g.reshape(g.shape[:-1] + (count, 6))
         if nu is None:
             nu = _cos_scatter(np.asarray(mu_v), np.asarray(mu_s), 0.0)
-        cos_phi = local_cos_azimuth(np.clip(rays.mu_view, -1.0, 1.0), np.clip(rays.mu_sun, -1.0, 1.0),
-                                    np.asarray(nu, dtype=np.float64)[:, None])
+        column = (lambda a: np.asarray(a, dtype=np.float64)[:, None])
+        cos_phi = local_cos_azimuth(atmosphere.planet_radius + column(h0), rays.s, column(mu_v), column(mu_s),
+                                    column(nu))
         weights = chebyshev(cos_phi, count - 1) * (np.ones(count) if sigma is None else sigma)
         g = np.maximum(np.einsum("cnm,cnmk->cnk", weights, g), 0.0)
     transmittance = np.exp(-reference._optical_depth_of(atmosphere, *rays.view))
@@ -292,7 +300,8 @@ def gathered_along(atmosphere, ray_settings, gathered, grid_settings, h0, mu_v, 
 
 def scatter_nodes(atmosphere: AtmosphereParameters, settings: TableSettings, gathered, sigma=None):
     """The next order L^(k+1) (M + 1, D, H, W, 3) at the azimuth nodes from the gathered harmonics
-    ``gathered`` (M + 1, D, H, W, 6), phase applied and both species combined."""
+    ``gathered`` (M + 1, D, H, W, 6), phase applied and both species combined; twin of
+    ``MultipleScatteringEngine.scatter(combine_species=True)`` at each node's cos_azimuth."""
     count = gathered.shape[0]
     altitudes, cos_view, cos_sun = grid_coordinates(settings.size, atmosphere.atmosphere_height,
                                                     settings.mapping, settings.sun_cos_range)
@@ -337,28 +346,80 @@ class HarmonicOrders:
     record: dict
 
 
-def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, harmonics: int = 0,
-                   sigma: str = "none", progress=None) -> HarmonicOrders:
-    """Single scattering and the orders k >= 2 with M = ``harmonics`` azimuthal harmonics (module
-    docstring), in the physical mode's stopping rule (:mod:`clsky.orders`), NumPy in float64.
+def _numpy_backend(atmosphere, settings, sigma):
+    """(single at node n, scatter of gathered harmonics at node n) of the NumPy twins."""
+    factors = sigma_factors(settings.azimuth_harmonics, sigma)
+    single = single_scattering_nodes(atmosphere, settings)
+
+    def scatter(gathered):
+        return scatter_nodes(atmosphere, settings, gathered, factors)
+
+    return single, scatter, "numpy"
+
+
+def _opencl_backend(atmosphere, settings, ctx, fast_math):
+    """The same on OpenCL: ``SingleScatteringEngine.compute`` and ``MultipleScatteringEngine.scatter`` at
+    each azimuth node's cos_azimuth (kernels/view_ray.cl: table_cell, gathered_source)."""
+    import pyopencl.array as cla
+
+    from . import _cl
+    from .multiple import MultipleScatteringEngine
+    from .single import SingleScatteringEngine
+
+    single_engine = SingleScatteringEngine(settings, ctx=ctx, fast_math=fast_math)
+    engine = MultipleScatteringEngine(settings, ctx=single_engine.ctx, fast_math=fast_math)
+    cosines = np.cos(azimuth_nodes(settings.azimuth_harmonics))
+    single = np.stack([single_engine.compute(atmosphere, cos_azimuth=c) for c in cosines])
+
+    def scatter(gathered):
+        padded = np.zeros(gathered.shape[:-1] + (8,), dtype=engine.dtype)
+        padded[..., :6] = gathered
+        gathered_d = cla.to_device(engine.queue, padded)
+        return np.stack([engine.scatter(atmosphere, gathered_d, combine_species=True, cos_azimuth=c).get()[..., :3]
+                         .astype(np.float64) for c in cosines])
+
+    return single, scatter, _cl.describe_device(single_engine.device)
+
+
+def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, backend="numpy", ctx=None,
+                   fast_math=False, sigma: str = "none", progress=None) -> HarmonicOrders:
+    """Single scattering and the orders k >= 2 with M = ``settings.azimuth_harmonics`` azimuthal
+    harmonics (module docstring), with the physical mode's stopping rule (:mod:`clsky.orders`).
+
+    Parameters
+    ----------
+    backend : {'numpy', 'opencl'}
+        Where the ray integrals run (single scattering and the scatter at each azimuth node); the
+        gathers are matrix products on the host either way (:class:`HarmonicGather`).
+    sigma : str
+        Factors of :data:`SIGMA_FACTORS` on the series (NumPy backend only; the kernels sum it as is).
+    progress : callable, optional
+        ``progress(k, relative_addition)`` after each order.
 
     Raises
     ------
     ValueError
-        (ParameterError) for harmonics outside [0, 64], a sigma not in :data:`SIGMA_FACTORS`, a mode
-        other than 'physical', or a reflecting ground with harmonics > 0.
+        (ParameterError) for a mode other than 'physical', a reflecting ground with harmonics > 0, a
+        sigma not in :data:`SIGMA_FACTORS` (or other than 'none' on OpenCL), or an unknown backend.
     """
-    harmonics = _check_harmonics(harmonics)
-    factors = sigma_factors(harmonics, sigma)
+    harmonics = settings.azimuth_harmonics
     if settings.mode != "physical":
         raise ParameterError("mode", "'physical' with azimuth harmonics", settings.mode)
     if atmosphere.has_ground and harmonics > 0:
         raise ParameterError("ground_albedo", "0 with azimuth harmonics (a reflecting ground is not implemented "
                                               "in the harmonic scheme)", atmosphere.ground_albedo)
-    single_nodes = single_scattering_nodes(atmosphere, settings, harmonics)
+    if backend == "numpy":
+        single_nodes, scatter, device = _numpy_backend(atmosphere, settings, sigma)
+    elif backend == "opencl":
+        if sigma != "none":
+            raise ParameterError("sigma", "'none' with backend 'opencl'", sigma)
+        single_nodes, scatter, device = _opencl_backend(atmosphere, settings, ctx, fast_math)
+    else:
+        raise ParameterError("backend", "one of ['numpy', 'opencl']", backend)
     operators = HarmonicGather(atmosphere, settings, harmonics)
     wanted = settings.max_orders if settings.orders == "auto" else settings.orders
-    record = {"harmonics": harmonics, "sigma": sigma, "converged": False, "relative_additions": []}
+    record = {"harmonics": harmonics, "sigma": sigma, "converged": False, "relative_additions": [],
+              "device": device}
     if wanted == 1:
         record["orders"] = 1
         return HarmonicOrders(single_nodes[0], None, [], record)
@@ -367,8 +428,8 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ha
     gathered_sum, orders = None, []
     for k in range(2, wanted + 1):
         gathered_sum = gathered.copy() if gathered_sum is None else gathered_sum + gathered
-        new = scatter_nodes(atmosphere, settings, gathered, factors)
-        orders.append(new)
+        new = scatter(gathered)
+        orders.append(check_finite(new, k, atmosphere, settings))
         running += new
         addition = relative_addition(new.reshape((-1,) + new.shape[2:]), running.reshape((-1,) + new.shape[2:]))
         record["relative_additions"].append(addition)
@@ -381,6 +442,41 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ha
             gathered = operators.gather(_to_harmonics(new))
     record["orders"] = len(orders) + 1
     return HarmonicOrders(single_nodes[0], gathered_sum, orders, record)
+
+
+def azimuth_average(order_nodes):
+    """The m = 0 harmonic (M + 1, ...) -> (...): the azimuth average of an order, what the 3D table's
+    lookup (which has no azimuth) stores."""
+    return _to_harmonics(order_nodes)[0]
+
+
+def orders_result(atmosphere: AtmosphereParameters, settings: TableSettings, backend="opencl", ctx=None,
+                  fast_math=False, progress=None):
+    """:func:`compute_orders` as :class:`clsky.orders.OrdersResult` (what :func:`clsky.orders.compute_orders`
+    returns for ``settings.azimuth_harmonics`` > 0): orders[0] single scattering in the canonical frame
+    (factored, the lookup applies its exact phase), orders k >= 2 their azimuth average (the 3D lookup
+    has no azimuth), ``gathered`` the (M + 1, D, H, W, 6) harmonics for the ray march."""
+    import time
+
+    from .orders import OrdersResult, _total, order_shares
+
+    start = time.perf_counter()
+    result = compute_orders(atmosphere, settings, backend=backend, ctx=ctx, fast_math=fast_math,
+                            progress=None if progress is None else (lambda k, _: progress("orders", k, 0)))
+    orders = [result.single] + [azimuth_average(order) for order in result.orders]
+    additions = result.record["relative_additions"]
+    if settings.orders == "auto":
+        reason = (f"converged: order {len(orders)} added at most {additions[-1]:.2e} of the running sum (tolerance "
+                  f"{settings.order_tolerance:g})" if result.record["converged"] else
+                  f"not converged: stopped at max_orders = {settings.max_orders}")
+    else:
+        reason = f"orders={settings.orders} requested"
+    record = {"mode": settings.mode, "orders": len(orders), "requested": settings.orders,
+              "tolerance": settings.order_tolerance, "max_orders": settings.max_orders,
+              "converged": result.record["converged"], "reason": reason, "relative_additions": additions,
+              "shares": order_shares([_total(order) for order in orders]), "seconds": time.perf_counter() - start,
+              "device": result.record["device"], "azimuth_harmonics": settings.azimuth_harmonics}
+    return OrdersResult(orders, record, result.gathered, None)
 
 
 def raymarch_higher_orders(atmosphere, ray_settings, gathered, grid_settings, directions, sun_direction, altitude,

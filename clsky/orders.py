@@ -153,6 +153,10 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
     ground.check_ground_mode(atmosphere, settings)
     if backend not in ("opencl", "numpy"):
         raise ValueError(f"backend must be one of ['opencl', 'numpy'], got {backend!r}")
+    if settings.azimuth_harmonics:     # the higher orders carry azimuth (clsky/azimuth.py)
+        from . import azimuth
+
+        return azimuth.orders_result(atmosphere, settings, backend, ctx, fast_math, progress)
     if backend == "opencl":
         from .multiple import MultipleScatteringEngine
         from .single import SingleScatteringEngine

@@ -24,6 +24,8 @@ SCATTERING_MODES = ("atmosphere-plus", "physical")
 #: Channels stored per cell: Rayleigh r, g, b + Mie r, g, b, or the notes' Rayleigh r, g, b + one Mie.
 MIE_LAYOUTS = {"per-wavelength": 6, "notes": 4}
 
+#: Most azimuthal harmonics of the higher orders (``azimuth_harmonics``; clsky/azimuth.py).
+MAX_AZIMUTH_HARMONICS = 64
 _MAX_CELLS = 2**31 // 8   # keeps every flat index (times channels) inside a signed 32-bit int
 
 
@@ -90,6 +92,13 @@ class TableSettings:
         (-1, 1), the whole axis). The D nodes are spread evenly in the mapping's w between them
         (clsky/mapping.py); a scene planner (clsky/planner.py) narrows it to a sun path plus the margin
         that higher orders need. Lookups outside the range read its nearest end.
+    azimuth_harmonics : int
+        In [0, 64] (default 0): the orders k >= 2 of the physical mode carry the view-sun azimuth as a
+        cosine series of this many harmonics, computed at as many + 1 azimuths along true rays
+        (clsky/azimuth.py); 0 is the azimuth-averaged canonical-frame scheme. 2 brings the ray march
+        within the Monte Carlo's noise down to -6 deg sun elevation where 0 is 2.3x too bright there
+        (README, "Twilight against Monte Carlo"). Needs mode 'physical' and a black ground; costs
+        about (M + 1)x the scatter of each order.
     multiple_view_steps : int or None
         Trapezoid steps along the view ray when scattering the orders k >= 2, in [1, 4096]; None
         uses ``view_steps``. The higher orders are smooth and dim: 20 (default) instead of 30 makes
@@ -113,6 +122,7 @@ class TableSettings:
     gather_phi_steps: int = 128
     multiple_view_steps: object = 20
     sun_cos_range: tuple = (-1.0, 1.0)
+    azimuth_harmonics: int = 0
 
     def __post_init__(self):
         object.__setattr__(self, "size", self._check_size("size", self.size, 3))
@@ -136,6 +146,10 @@ class TableSettings:
             object.__setattr__(self, "multiple_view_steps",
                                _check_int("multiple_view_steps", self.multiple_view_steps, 1, 4096))
         object.__setattr__(self, "sun_cos_range", self._check_sun_cos_range(self.sun_cos_range))
+        object.__setattr__(self, "azimuth_harmonics",
+                           _check_int("azimuth_harmonics", self.azimuth_harmonics, 0, MAX_AZIMUTH_HARMONICS))
+        if self.azimuth_harmonics and self.mode != "physical":
+            raise ParameterError("azimuth_harmonics", "0 unless mode is 'physical'", self.azimuth_harmonics)
         tolerance = self.order_tolerance
         if not is_real_number(tolerance) or not 0.0 < tolerance < 1.0:
             raise ParameterError("order_tolerance", "a number in (0, 1)", tolerance)

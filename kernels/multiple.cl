@@ -75,10 +75,13 @@ __kernel void gather(__global const real *matrices, const int species_stride, co
  * Rayleigh + Mie per wavelength into channels 0-2 and again 3-5 (the next gather's input).
  * ground_radiance: D x 4 reals, L_g r, g, b (and 0) per sun node, read only with -DGROUND, where it is
  * added to both channel sets of combine_species (the host refuses a ground without it).
+ * cos_azimuth: the cells' view-sun azimuth (1: canonical frame); with -DAZIMUTH_HARMONICS=M, gathered
+ * holds M + 1 harmonics (view_ray.cl: gathered_source; clsky/azimuth.py).
  * Requires view_ray.cl (and so N_VIEW). */
 __kernel void scatter(__constant const atmosphere_t *atm, const int width, const int height,
                       const int depth, const int mapping, const real2 sun_range, const int combine_species,
-                      __global const real *gathered, __global const real *ground_radiance, __global real *table)
+                      const real cos_azimuth, __global const real *gathered, __global const real *ground_radiance,
+                      __global real *table)
 {
     const int gx = get_global_id(0);
     const int y = get_global_id(1);
@@ -88,7 +91,7 @@ __kernel void scatter(__constant const atmosphere_t *atm, const int width, const
 
     realv h0;
     real mu_v, mu_s, nu;
-    table_cell(atm, gx, y, z, width, height, depth, mapping, sun_range, &h0, &mu_v, &mu_s, &nu);
+    table_cell(atm, gx, y, z, width, height, depth, mapping, sun_range, cos_azimuth, &h0, &mu_v, &mu_s, &nu);
     real8 sum[VECTOR_WIDTH];
 #ifdef GROUND
     realv ground[GROUND_VALUES];

@@ -56,11 +56,12 @@ inline view_node_t view_node_at(const int i, const maskv hits_ground)
 }
 
 /* The cells x = VECTOR_WIDTH gx + lane of row (y, z) of a table (W, H, D, mapping, sun nodes over
- * w in sun_range): altitudes h0, view and sun cosines, and the canonical frame's scattering cosine
- * nu = cos(phi - delta). */
+ * w in sun_range): altitudes h0, view and sun cosines, and the scattering cosine of a view at azimuth
+ * phi from the sun's, nu = mu_v mu_s + sqrt(1 - mu_v^2) sqrt(1 - mu_s^2) cos_azimuth: cos_azimuth = 1
+ * is the canonical frame's nu = cos(phi - delta) (clsky/azimuth.py: the nodes of the harmonic orders). */
 inline void table_cell(__constant const atmosphere_t *atm, const int gx, const int y, const int z, const int width,
-                       const int height, const int depth, const int mapping, const real2 sun_range, realv *h0,
-                       real *mu_v, real *mu_s, real *nu)
+                       const int height, const int depth, const int mapping, const real2 sun_range,
+                       const real cos_azimuth, realv *h0, real *mu_v, real *mu_s, real *nu)
 {
     const real ha = atm->top_radius - atm->planet_radius;
     const realv u = fmin((real)(gx * VECTOR_WIDTH) + LANE_INDEX, (real)(width - 1)) / (real)(width - 1);
@@ -69,7 +70,7 @@ inline void table_cell(__constant const atmosphere_t *atm, const int gx, const i
     *h0 = MAPPING_ALTITUDE(u, mapping, ha);
     *mu_v = MAPPING_COS(v, mapping);
     *mu_s = MAPPING_COS(w, mapping);
-    *nu = *mu_v * *mu_s + sqrt(fmax(R(1.0) - *mu_v * *mu_v, R(0.0)) * fmax(R(1.0) - *mu_s * *mu_s, R(0.0)));
+    *nu = *mu_v * *mu_s + sqrt(fmax(R(1.0) - *mu_v * *mu_v, R(0.0)) * fmax(R(1.0) - *mu_s * *mu_s, R(0.0))) * cos_azimuth;
 }
 
 /* Length [m] of the view ray to the top of the atmosphere or to the ground (*hits_ground). */
@@ -222,10 +223,49 @@ inline real8 lookup8(__global const real *table, const int width, const int heig
     return (R(1.0) - az) * ((R(1.0) - ay) * c00 + ay * c10) + az * ((R(1.0) - ay) * c01 + ay * c11);
 }
 
+#ifndef AZIMUTH_HARMONICS
+#define AZIMUTH_HARMONICS 0
+#endif
+/* The gathered source at a node: with -DAZIMUTH_HARMONICS=M (clsky/azimuth.py) `gathered` holds the
+ * M + 1 cosine harmonics G_m, each a padded (D, H, W, 8) table, one after the other, and the source is
+ *   max(0, sum_m G_m(h, mu_view, mu_sun) cos(m phi)),
+ * phi the local azimuth between the view's and the sun's horizontal directions at the node, distance s
+ * along a ray from radius r0 with (mu_v, mu_s, nu) at its start, in a form free of cancellation near
+ * the vertical (P = r0 Z + s V; r sin(view zenith) = r0 sqrt(1 - mu_v^2), r sin(sun zenith) = |P x Sun|,
+ * r^2 (nu - mu_view mu_sun) = r0 (r0 (nu - mu_v mu_s) + s (mu_v nu - mu_s))):
+ *   cos phi = (r0 (nu - mu_v mu_s) + s (mu_v nu - mu_s)) / (sqrt(1 - mu_v^2) |P x Sun|),
+ *   |P x Sun|^2 = r0^2 (1 - mu_s^2) + 2 r0 s (mu_v - mu_s nu) + s^2 (1 - nu^2),
+ * 1 where the denominator is 0 (view or sun vertical: no azimuth), cos(m phi) by the Chebyshev
+ * recurrence. Without it (M = 0) the one table's trilinear lookup. */
+inline real8 gathered_source(__global const real *gathered, const int width, const int height, const int depth,
+                             const real fx, const real fy, const real fz, const real r0, const real s,
+                             const real mu_v, const real mu_s, const real nu)
+{
+    real8 g = lookup8(gathered, width, height, depth, fx, fy, fz);
+#if AZIMUTH_HARMONICS > 0
+    const size_t stride = (size_t)8 * (size_t)width * (size_t)height * (size_t)depth;
+    const real cross2 = r0 * r0 * fmax(R(1.0) - mu_s * mu_s, R(0.0)) + R(2.0) * r0 * s * (mu_v - mu_s * nu)
+                        + s * s * fmax(R(1.0) - nu * nu, R(0.0));
+    const real denominator = sqrt(fmax(R(1.0) - mu_v * mu_v, R(0.0))) * sqrt(fmax(cross2, R(0.0)));
+    const real numerator = r0 * (nu - mu_v * mu_s) + s * (mu_v * nu - mu_s);
+    const real c = denominator > R(0.0) ? clamp(numerator / denominator, R(-1.0), R(1.0)) : R(1.0);
+    real previous = R(1.0), current = c;
+    for (int m = 1; m <= AZIMUTH_HARMONICS; ++m) {
+        g += current * lookup8(gathered + (size_t)m * stride, width, height, depth, fx, fy, fz);
+        const real next = R(2.0) * c * current - previous;
+        previous = current;
+        current = next;
+    }
+    g = fmax(g, (real8)(R(0.0)));
+#endif
+    return g;
+}
+
 /* In-scattering of a gathered table along the ray, per lane k:
  *   sum[k].s012 = Integral rho_R T(P, Pa) Gbar_R dt (r, g, b), sum[k].s345 the same with rho_M, Gbar_M
  * with Gbar (padded (D, H, W, 8), the table's grid, mapping and sun_range) looked up trilinearly at each node's
- * altitude, view and sun cosines. The trapezoid sum_i (f_(i-1) + f_i) h_i / 2 is accumulated as
+ * altitude, view and sun cosines (and, with -DAZIMUTH_HARMONICS, summed over its harmonics at the local
+ * azimuth: gathered_source). The trapezoid sum_i (f_(i-1) + f_i) h_i / 2 is accumulated as
  * sum_i f_i (h_i + h_(i+1)) / 2, so that each lane's 6 channels are one real8 FMA per node.
  * With single != 0 (the per-pixel ray march), the same pass also accumulates single scattering into
  * single[0..5] as integrate_single does (sun columns from sun_table or re-marched), sharing the
@@ -300,7 +340,8 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
         for (int k = 0; k < VECTOR_WIDTH; ++k) {
             const real8 factor = (real8)(LANE(fr0, k), LANE(fr1, k), LANE(fr2, k), LANE(fm0, k), LANE(fm1, k),
                                          LANE(fm2, k), R(0.0), R(0.0));
-            sum[k] += factor * lookup8(gathered, width, height, depth, LANE(fx, k), LANE(fy, k), LANE(fz, k));
+            sum[k] += factor * gathered_source(gathered, width, height, depth, LANE(fx, k), LANE(fy, k), LANE(fz, k),
+                                               LANE(r0, k), LANE(s, k), LANE(mu_v, k), LANE(mu_s, k), LANE(nu, k));
         }
         last_density = density;
         node_previous = node;

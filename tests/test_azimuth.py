@@ -24,6 +24,8 @@ from clsky.multiple import _gather_parts, _phase, gather_quadrature
 from clsky.orders import compute_orders
 from clsky.twilight import black_ground_without_ozone
 
+from conftest import TOLERANCES, max_error_report, require_dtype
+
 TINY = TableSettings(size=(5, 12, 6), mode="physical", orders=4, gather_theta_steps=24, gather_phi_steps=16,
                      sun_cos_range=(-0.3, 0.4))
 
@@ -37,7 +39,7 @@ def test_zero_harmonics_is_the_physical_mode(atmosphere):
     """M = 0: same single scattering, orders and gathered sum as compute_orders (rounding only: the
     first gather's products are associated differently, 1e-15 relative)."""
     expected = compute_orders(atmosphere, TINY, backend="numpy")
-    result = azimuth.compute_orders(atmosphere, TINY, 0)
+    result = azimuth.compute_orders(atmosphere, TINY)
     assert_allclose(result.single, expected.orders[0], rtol=0, atol=0)
     for k, order in enumerate(result.orders):
         assert_allclose(order[0], expected.orders[k + 1], rtol=1e-12, atol=1e-14 * expected.orders[k + 1].max())
@@ -73,7 +75,7 @@ def test_local_azimuth_against_vectors():
         hv = view - view @ zenith * zenith
         hs = sun - sun @ zenith * zenith
         expected = hv @ hs / (np.linalg.norm(hv) * np.linalg.norm(hs))
-        got = azimuth.local_cos_azimuth(view @ zenith, sun @ zenith, view @ sun)
+        got = azimuth.local_cos_azimuth(r0, s, view[2], sun[2], view @ sun)
         assert abs(got - expected) < 1e-12                  # closed form vs vectors: rounding of radii
 
 
@@ -156,7 +158,7 @@ def test_first_gather_against_literal_sphere_integral(atmosphere, species):
 
 
 def test_orders_finite_and_non_negative(atmosphere):
-    result = azimuth.compute_orders(atmosphere, TINY.replace(sun_cos_range=(-0.2, 0.1)), 3)
+    result = azimuth.compute_orders(atmosphere, TINY.replace(sun_cos_range=(-0.2, 0.1), azimuth_harmonics=3))
     for order in result.orders:
         assert np.isfinite(order).all() and order.min() >= 0.0
     assert result.orders[0].shape == (4,) + TINY.size[::-1] + (3,)
@@ -181,10 +183,106 @@ def test_harmonics_validated(value):
         azimuth.azimuth_nodes(value)
 
 
-def test_sigma_and_mode_validated(atmosphere):
+def test_settings_validated():
+    with pytest.raises(ParameterError, match="azimuth_harmonics"):
+        TableSettings(azimuth_harmonics=2)                  # mode atmosphere-plus
+    for value in (-1, 65, 1.5, "2"):
+        with pytest.raises(ParameterError, match="azimuth_harmonics"):
+            TableSettings(mode="physical", azimuth_harmonics=value)
+
+
+def test_sigma_backend_and_ground_validated(atmosphere):
     with pytest.raises(ParameterError, match="sigma"):
         azimuth.sigma_factors(2, "hann")
-    with pytest.raises(ParameterError, match="mode"):
-        azimuth.compute_orders(atmosphere, TINY.replace(mode="atmosphere-plus"), 2)
+    with pytest.raises(ParameterError, match="backend"):
+        azimuth.compute_orders(atmosphere, TINY, backend="cuda")
     with pytest.raises(ParameterError, match="ground_albedo"):
-        azimuth.compute_orders(atmosphere.replace(ground_albedo=0.1), TINY, 2)
+        azimuth.compute_orders(atmosphere.replace(ground_albedo=0.1), TINY.replace(azimuth_harmonics=2))
+
+
+# Kernels against their twins (float64; tolerances of conftest.TOLERANCES: the same formulas at the same
+# nodes, differing by summation order and FMA contraction) ------------------------------------------
+
+KERNEL_GRID = TableSettings(size=(9, 17, 7), mode="physical", orders=3, gather_theta_steps=32, gather_phi_steps=16,
+                            sun_cos_range=(-0.3, 0.4), azimuth_harmonics=2)
+
+
+def _assert_per_channel(actual, desired, tolerance, label):
+    assert np.all(np.isfinite(actual))
+    for c in range(desired.shape[-1]):
+        print(max_error_report(actual[..., c], desired[..., c], f"{label} channel {c}"))
+        assert_allclose(actual[..., c], desired[..., c], rtol=tolerance.rtol, atol=tolerance.atol(desired[..., c]),
+                        err_msg=f"{label} channel {c}")
+
+
+def test_single_at_azimuth_nodes_matches_twin(cl_context, atmosphere):
+    from clsky.single import SingleScatteringEngine
+
+    require_dtype(cl_context, "float64")
+    engine = SingleScatteringEngine(KERNEL_GRID, ctx=cl_context)
+    expected = azimuth.single_scattering_nodes(atmosphere, KERNEL_GRID)
+    for n, phi in enumerate(azimuth.azimuth_nodes(2)):
+        got = engine.compute(atmosphere, cos_azimuth=math.cos(phi))
+        _assert_per_channel(got, expected[n], TOLERANCES["float64"]["single_scattering_table"], f"node {n}")
+    # the canonical node is the 3D table's single scattering, bit for bit
+    assert np.array_equal(engine.compute(atmosphere, cos_azimuth=1.0), engine.compute(atmosphere))
+
+
+def _random_harmonics(seed, settings):
+    """Gathered harmonics (M + 1, D, H, W, 6): m = 0 positive, m >= 1 of both signs and as large, so that
+    the series goes negative at some azimuths and the clamp at 0 is exercised."""
+    width, height, depth = settings.size
+    rng = np.random.default_rng(seed)
+    gathered = rng.random((settings.azimuth_harmonics + 1, depth, height, width, 6))
+    gathered[1:] = 1.2 * (gathered[1:] - 0.5)
+    return gathered * 1e-3
+
+
+def test_scatter_at_azimuth_nodes_matches_twin(cl_context, atmosphere):
+    from clsky.multiple import MultipleScatteringEngine
+
+    require_dtype(cl_context, "float64")
+    engine = MultipleScatteringEngine(KERNEL_GRID, ctx=cl_context)
+    gathered = _random_harmonics(1, KERNEL_GRID)
+    expected = azimuth.scatter_nodes(atmosphere, KERNEL_GRID, gathered)
+    padded = np.zeros(gathered.shape[:-1] + (8,))
+    padded[..., :6] = gathered
+    import pyopencl.array as cla
+    gathered_d = cla.to_device(engine.queue, padded)
+    for n, phi in enumerate(azimuth.azimuth_nodes(2)):
+        got = engine.scatter(atmosphere, gathered_d, combine_species=True, cos_azimuth=math.cos(phi)).get()
+        _assert_per_channel(got[..., :3], expected[n], TOLERANCES["float64"]["scatter"], f"scatter node {n}")
+        assert np.all(got >= 0.0)
+
+
+def test_orders_backends_agree(cl_context, atmosphere):
+    require_dtype(cl_context, "float64")
+    kernel = azimuth.compute_orders(atmosphere, KERNEL_GRID, backend="opencl", ctx=cl_context)
+    twin = azimuth.compute_orders(atmosphere, KERNEL_GRID, backend="numpy")
+    assert kernel.record["orders"] == twin.record["orders"] == 3
+    for k, (a, b) in enumerate(zip(kernel.orders, twin.orders)):
+        _assert_per_channel(a, b, TOLERANCES["float64"]["orders"], f"order {k + 2}")
+    _assert_per_channel(kernel.gathered, twin.gathered, TOLERANCES["float64"]["orders"], "gathered")
+
+
+def test_raymarch_matches_twin(cl_context, atmosphere):
+    """SkyRenderer.render_raymarch of a table with harmonics against reference.render_raymarch (single)
+    plus azimuth.raymarch_higher_orders, sun 3 deg below the horizon, views all around."""
+    from clsky import ScatteringTable
+    from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
+
+    require_dtype(cl_context, "float64")
+    table = ScatteringTable.build(atmosphere, KERNEL_GRID, ctx=cl_context)
+    assert table.gathered.shape == (3,) + KERNEL_GRID.size[::-1] + (6,)
+    ray = RAYMARCH_DEFAULTS.replace(view_steps=24, sun_steps=24)
+    azimuths = np.radians(np.arange(0, 360, 30))
+    elevations = np.radians([-5.0, 1.0, 4.0, 20.0, 60.0])
+    a, e = np.meshgrid(azimuths, elevations)
+    directions = np.stack([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)], axis=-1)
+    sun = np.array([math.cos(math.radians(-3.0)), 0.0, math.sin(math.radians(-3.0))])
+    with SkyRenderer(table, ray, ctx=cl_context) as renderer:
+        got = renderer.render_raymarch(directions, sun, 100.0)
+    disc = np.zeros(3)
+    expected = (reference.render_raymarch(atmosphere, ray, directions, sun, 100.0, disc, 2.0)
+                + azimuth.raymarch_higher_orders(atmosphere, ray, table.gathered, table.settings, directions, sun, 100.0))
+    _assert_per_channel(got, expected, TOLERANCES["float64"]["scatter"], "ray march")
