@@ -286,3 +286,20 @@ def test_raymarch_matches_twin(cl_context, atmosphere):
     expected = (reference.render_raymarch(atmosphere, ray, directions, sun, 100.0, disc, 2.0)
                 + azimuth.raymarch_higher_orders(atmosphere, ray, table.gathered, table.settings, directions, sun, 100.0))
     _assert_per_channel(got, expected, TOLERANCES["float64"]["scatter"], "ray march")
+
+
+def test_table_file_round_trip_keeps_the_harmonics(cl_context, atmosphere, tmp_path):
+    """A table with azimuth harmonics saves and loads its (M + 1, D, H, W, 6) gathered harmonics and its
+    setting; a gathered array of the wrong shape is refused."""
+    from clsky import ScatteringTable
+    from clsky.table import TableFormatError
+
+    require_dtype(cl_context, "float64")
+    table = ScatteringTable.build(atmosphere, KERNEL_GRID, ctx=cl_context)
+    table.save(tmp_path / "t.npz")
+    loaded = ScatteringTable.load(tmp_path / "t.npz")
+    assert loaded.settings.azimuth_harmonics == 2
+    assert_allclose(loaded.gathered, table.gathered, rtol=1e-6, atol=0)   # float32 storage at most
+    with pytest.raises(TableFormatError, match="gathered"):
+        ScatteringTable(table.atmosphere, table.settings, table.data, table.metadata, table.orders,
+                        table.orders_record, table.gathered[0], None)
