@@ -236,24 +236,6 @@ def _cos_scatter(cos_view, cos_sun, azimuth):
                                         * np.maximum(1.0 - cos_sun * cos_sun, 0.0)) * math.cos(azimuth)
 
 
-def _cells(settings):
-    width, height, depth = settings.size
-    index = np.arange(width * height * depth)
-    return index % width, (index // width) % height, index // (width * height)
-
-
-def _over_cells(settings, per_cell, function, channels):
-    """function(x, y, z) -> (n, channels) over every cell in chunks; (D, H, W, channels)."""
-    width, height, depth = settings.size
-    x, y, z = _cells(settings)
-    chunk = max(1, reference.CHUNK_ELEMENTS // per_cell)
-    out = np.empty((x.size, channels))
-    for start in range(0, x.size, chunk):
-        part = slice(start, start + chunk)
-        out[part] = function(x[part], y[part], z[part])
-    return out.reshape(depth, height, width, channels)
-
-
 def single_scattering_nodes(atmosphere: AtmosphereParameters, settings: TableSettings):
     """Ibar^(1) (M + 1, D, H, W, 6) at the azimuth nodes of M = ``settings.azimuth_harmonics``, along the
     true view rays; twin of ``SingleScatteringEngine.compute`` at each node's cos_azimuth (node 0 is
@@ -270,7 +252,7 @@ def single_scattering_nodes(atmosphere: AtmosphereParameters, settings: TableSet
             nu = None if azimuth == 0.0 else _cos_scatter(cos_view[y], cos_sun[z], azimuth)
             return reference._single_scattering_cells(atmosphere, settings, altitudes[x], cos_view[y], cos_sun[z],
                                                       sun_table, nu)
-        out.append(_over_cells(settings, (settings.view_steps + 1) * (settings.sun_steps + 1), cells, 6))
+        out.append(reference._cells_in_chunks(settings, (settings.view_steps + 1) * (settings.sun_steps + 1), cells))
     return np.stack(out)
 
 
@@ -313,7 +295,7 @@ def scatter_nodes(atmosphere: AtmosphereParameters, settings: TableSettings, gat
             value = gathered_along(atmosphere, scatter_settings, gathered, settings, altitudes[x], cos_view[y],
                                    cos_sun[z], nu, sigma)
             return value[:, :3] + value[:, 3:]
-        out.append(_over_cells(settings, (scatter_settings.view_steps + 1) * 8 * 6 * count, cells, 3))
+        out.append(reference._cells_in_chunks(settings, (scatter_settings.view_steps + 1) * 8 * 6 * count, cells, 3))
     return np.stack(out)
 
 
