@@ -191,9 +191,7 @@ def test_settings_validated():
             TableSettings(mode="physical", azimuth_harmonics=value)
 
 
-def test_sigma_backend_and_ground_validated(atmosphere):
-    with pytest.raises(ParameterError, match="sigma"):
-        azimuth.sigma_factors(2, "hann")
+def test_backend_and_ground_validated(atmosphere):
     with pytest.raises(ParameterError, match="backend"):
         azimuth.compute_orders(atmosphere, TINY, backend="cuda")
     with pytest.raises(ParameterError, match="ground_albedo"):
