@@ -48,9 +48,13 @@ series that rings negative from adding negative light (Fejer factors were not ne
 M = 2, 4 and 8 agree within 3 %, README "Twilight against Monte Carlo"). The ray march (:func:`raymarch_higher_orders`) integrates the same sum of the
 gathered tables of all orders along each pixel's ray.
 
-This module is the NumPy implementation, in float64; M = 0 reproduces the physical mode of
-:func:`clsky.orders.compute_orders` (backend 'numpy') to rounding. A black ground only (a reflecting
-ground raises ParameterError for M > 0).
+Ground. A Lambertian ground (``ground_albedo`` > 0) works as in :mod:`clsky.ground`: the rays of every
+azimuth node that end on the ground see its radiance at their true ground point's sun cosine; the
+horizontal ground's irradiance of an order k >= 2 is that of its azimuth average (m = 0), and single
+scattering's is :meth:`HarmonicGather.single_ground_irradiance`.
+
+The ray integrals run on OpenCL or in their NumPy twins here (``backend``); M = 0 reproduces the
+physical mode of :func:`clsky.orders.compute_orders` to rounding.
 """
 
 from __future__ import annotations
@@ -60,7 +64,7 @@ import math
 
 import numpy as np
 
-from . import reference
+from . import ground, reference
 from .atmosphere import AtmosphereParameters
 from .errors import ParameterError, is_integer
 from .mapping import altitude_to_u, cos_to_sun_t, cos_to_v, grid_coordinates
@@ -161,7 +165,7 @@ class HarmonicGather:
         theta, _, phi, phi_weights = gather_quadrature(key.gather_theta_steps, key.gather_phi_steps)
         _, cos_view, cos_sun = grid_coordinates(key.size, atmosphere.atmosphere_height, key.mapping,
                                                 key.sun_cos_range)
-        self.p = p
+        self.p, self.weights, self.cos_theta = p, weights, np.cos(theta)
         self.view, self.sun = {}, {}
         m = np.arange(harmonics + 1)
         eps = np.where(m == 0, 1.0, 2.0)
@@ -185,6 +189,18 @@ class HarmonicGather:
                     else:
                         c[i, j] = 0.5 * (k_sun[i + j] + k_sun[abs(i - j)])
             self.sun[species] = c * (eps / (2.0 * math.pi))[:, None, None, None]
+
+    def single_ground_irradiance(self, single_harmonics):
+        """E_1 (D, 3) on the ground of single scattering's harmonics (M + 1, D, H, W, 6) [units of I_I]:
+        sum_s sum_a wT_a sin(Theta_a) max(cos(Theta_a), 0) 2 pi sum_n C_{s,0,n}(z, a) (P Ibar_{s,n})(a) at
+        altitude 0, the azimuth integral of the phase to the sun times each harmonic (M = 0 is
+        :func:`clsky.ground.sky_irradiance` of a factored order)."""
+        hemisphere = self.weights * np.maximum(self.cos_theta, 0.0)
+        total = 0.0
+        for index, species in enumerate(SPECIES):
+            seen = np.matmul(self.p, single_harmonics[:, :, :, 0, 3 * index:3 * index + 3])   # (n, D, Theta, 3)
+            total = total + 2.0 * math.pi * np.einsum("a,nza,nzac->zc", hemisphere, self.sun[species][0], seen)
+        return total
 
     def gather(self, harmonics_table):
         """G_{s,m} (M + 1, D, H, W, 6) of an order's harmonics L_m (M + 1, D, H, W, 3), phase applied."""
@@ -263,10 +279,14 @@ def gathered_along(atmosphere, ray_settings, gathered, grid_settings, h0, mu_v, 
     return rays.integrate(atmosphere, transmittance, g[..., 0:3], g[..., 3:6])
 
 
-def scatter_nodes(atmosphere: AtmosphereParameters, settings: TableSettings, gathered):
+def scatter_nodes(atmosphere: AtmosphereParameters, settings: TableSettings, gathered, ground_radiance=None):
     """The next order L^(k+1) (M + 1, D, H, W, 3) at the azimuth nodes from the gathered harmonics
     ``gathered`` (M + 1, D, H, W, 6), phase applied and both species combined; twin of
-    ``MultipleScatteringEngine.scatter(combine_species=True)`` at each node's cos_azimuth."""
+    ``MultipleScatteringEngine.scatter(combine_species=True)`` at each node's cos_azimuth. With a
+    reflecting ground, rays that end on it add T L_g(mu_sun there), ``ground_radiance`` L_g (D, 3) per
+    sun node (:mod:`clsky.ground`), as :func:`clsky.reference.scatter` does along the true ray."""
+    from .ground import interpolate_sun_axis
+
     count = gathered.shape[0]
     altitudes, cos_view, cos_sun = grid_coordinates(settings.size, atmosphere.atmosphere_height,
                                                     settings.mapping, settings.sun_cos_range)
@@ -277,7 +297,12 @@ def scatter_nodes(atmosphere: AtmosphereParameters, settings: TableSettings, gat
             nu = None if azimuth == 0.0 else _cos_scatter(cos_view[y], cos_sun[z], azimuth)
             value = gathered_along(atmosphere, scatter_settings, gathered, settings, altitudes[x], cos_view[y],
                                    cos_sun[z], nu)
-            return value[:, :3] + value[:, 3:]
+            value = value[:, :3] + value[:, 3:]
+            if atmosphere.has_ground:
+                rays = reference._ViewRays(atmosphere, scatter_settings, altitudes[x], cos_view[y], cos_sun[z], nu)
+                transmittance, mu_ground = reference._ground_seen(atmosphere, rays)
+                value = value + transmittance * interpolate_sun_axis(np.asarray(ground_radiance), mu_ground, settings)
+            return value
         out.append(reference._cells_in_chunks(settings, (scatter_settings.view_steps + 1) * 8 * 6 * count, cells, 3))
     return np.stack(out)
 
@@ -303,20 +328,23 @@ class HarmonicOrders:
         L^(k) at the azimuth nodes, k = 2..K.
     record : dict
         harmonics, orders, converged, relative additions, device.
+    ground_irradiance : (D, 3) or None
+        With a reflecting ground, E_sky = sum_{k >= 1} E_k on the ground per sun node (:mod:`clsky.ground`).
     """
 
     single: np.ndarray
     gathered: np.ndarray | None
     orders: list
     record: dict
+    ground_irradiance: np.ndarray | None = None
 
 
 def _numpy_backend(atmosphere, settings):
     """(single at node n, scatter of gathered harmonics at node n) of the NumPy twins."""
     single = single_scattering_nodes(atmosphere, settings)
 
-    def scatter(gathered):
-        return scatter_nodes(atmosphere, settings, gathered)
+    def scatter(gathered, ground_radiance):
+        return scatter_nodes(atmosphere, settings, gathered, ground_radiance)
 
     return single, scatter, "numpy"
 
@@ -335,12 +363,12 @@ def _opencl_backend(atmosphere, settings, ctx, fast_math):
     cosines = np.cos(azimuth_nodes(settings.azimuth_harmonics))
     single = np.stack([single_engine.compute(atmosphere, cos_azimuth=c) for c in cosines])
 
-    def scatter(gathered):
+    def scatter(gathered, ground_radiance):
         padded = np.zeros(gathered.shape[:-1] + (8,), dtype=engine.dtype)
         padded[..., :6] = gathered
         gathered_d = cla.to_device(engine.queue, padded)
-        return np.stack([engine.scatter(atmosphere, gathered_d, combine_species=True, cos_azimuth=c).get()[..., :3]
-                         .astype(np.float64) for c in cosines])
+        return np.stack([engine.scatter(atmosphere, gathered_d, combine_species=True, ground_radiance=ground_radiance,
+                                        cos_azimuth=c).get()[..., :3].astype(np.float64) for c in cosines])
 
     return single, scatter, _cl.describe_device(single_engine.device)
 
@@ -361,15 +389,11 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
     Raises
     ------
     ValueError
-        (ParameterError) for a mode other than 'physical', a reflecting ground with harmonics > 0, or an
-        unknown backend.
+        (ParameterError) for a mode other than 'physical' or an unknown backend.
     """
     harmonics = settings.azimuth_harmonics
     if settings.mode != "physical":
         raise ParameterError("mode", "'physical' with azimuth harmonics", settings.mode)
-    if atmosphere.has_ground and harmonics > 0:
-        raise ParameterError("ground_albedo", "0 with azimuth harmonics (a reflecting ground is not implemented "
-                                              "in the harmonic scheme)", atmosphere.ground_albedo)
     if backend == "numpy":
         single_nodes, scatter, device = _numpy_backend(atmosphere, settings)
     elif backend == "opencl":
@@ -383,13 +407,23 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
     if wanted == 1:
         record["orders"] = 1
         return HarmonicOrders(single_nodes[0], None, [], record)
-    gathered = operators.first_gather(_to_harmonics(single_nodes))
+    single_harmonics = _to_harmonics(single_nodes)
+    gathered = operators.first_gather(single_harmonics)
+    ground_sky = pending_ground = None      # as in clsky.orders: E_1 + ... + E_k, and a / pi of what is pending
+    if atmosphere.has_ground:
+        ground_sky = operators.single_ground_irradiance(single_harmonics)
+        pending_ground = ground.reflected_radiance(atmosphere, ground.direct_irradiance(atmosphere, settings)
+                                                   + ground_sky)
     running = single_nodes[..., :3] + single_nodes[..., 3:]
     gathered_sum, orders = None, []
     for k in range(2, wanted + 1):
         gathered_sum = gathered.copy() if gathered_sum is None else gathered_sum + gathered
-        new = scatter(gathered)
+        new = scatter(gathered, pending_ground)
         orders.append(check_finite(new, k, atmosphere, settings))
+        if ground_sky is not None:     # the horizontal ground sees the azimuth average (m = 0)
+            sky = ground.sky_irradiance(atmosphere, settings, azimuth_average(new), factored=False)
+            ground_sky = ground_sky + sky
+            pending_ground = ground.reflected_radiance(atmosphere, sky)
         running += new
         addition = relative_addition(new.reshape((-1,) + new.shape[2:]), running.reshape((-1,) + new.shape[2:]))
         record["relative_additions"].append(addition)
@@ -401,7 +435,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         if k < wanted:
             gathered = operators.gather(_to_harmonics(new))
     record["orders"] = len(orders) + 1
-    return HarmonicOrders(single_nodes[0], gathered_sum, orders, record)
+    return HarmonicOrders(single_nodes[0], gathered_sum, orders, record, ground_sky)
 
 
 def azimuth_average(order_nodes):
@@ -436,7 +470,7 @@ def orders_result(atmosphere: AtmosphereParameters, settings: TableSettings, bac
               "converged": result.record["converged"], "reason": reason, "relative_additions": additions,
               "shares": order_shares([_total(order) for order in orders]), "seconds": time.perf_counter() - start,
               "device": result.record["device"], "azimuth_harmonics": settings.azimuth_harmonics}
-    return OrdersResult(orders, record, result.gathered, None)
+    return OrdersResult(orders, record, result.gathered, result.ground_irradiance)
 
 
 def raymarch_higher_orders(atmosphere, ray_settings, gathered, grid_settings, directions, sun_direction, altitude):

@@ -35,11 +35,16 @@ def atmosphere():
     return black_ground_without_ozone()
 
 
-def test_zero_harmonics_is_the_physical_mode(atmosphere):
-    """M = 0: same single scattering, orders and gathered sum as compute_orders (rounding only: the
-    first gather's products are associated differently, 1e-15 relative)."""
+@pytest.mark.parametrize("albedo", [0.0, 0.3])
+def test_zero_harmonics_is_the_physical_mode(atmosphere, albedo):
+    """M = 0: same single scattering, orders, gathered sum and ground irradiance as compute_orders, with
+    a black and with a reflecting ground (rounding only: the first gather's products are associated
+    differently, 1e-15 relative)."""
+    atmosphere = atmosphere.replace(ground_albedo=albedo)
     expected = compute_orders(atmosphere, TINY, backend="numpy")
     result = azimuth.compute_orders(atmosphere, TINY)
+    if albedo:
+        assert_allclose(result.ground_irradiance, expected.ground_irradiance, rtol=1e-12, atol=0)
     assert_allclose(result.single, expected.orders[0], rtol=0, atol=0)
     for k, order in enumerate(result.orders):
         assert_allclose(order[0], expected.orders[k + 1], rtol=1e-12, atol=1e-14 * expected.orders[k + 1].max())
@@ -191,11 +196,9 @@ def test_settings_validated():
             TableSettings(mode="physical", azimuth_harmonics=value)
 
 
-def test_backend_and_ground_validated(atmosphere):
+def test_backend_validated(atmosphere):
     with pytest.raises(ParameterError, match="backend"):
         azimuth.compute_orders(atmosphere, TINY, backend="cuda")
-    with pytest.raises(ParameterError, match="ground_albedo"):
-        azimuth.compute_orders(atmosphere.replace(ground_albedo=0.1), TINY.replace(azimuth_harmonics=2))
 
 
 # Kernels against their twins (float64; tolerances of conftest.TOLERANCES: the same formulas at the same
@@ -255,19 +258,26 @@ def test_scatter_at_azimuth_nodes_matches_twin(cl_context, atmosphere, dtype):
         assert np.all(got >= 0.0)
 
 
-def test_orders_backends_agree(cl_context, atmosphere):
+@pytest.mark.parametrize("albedo", [0.0, 0.3])
+def test_orders_backends_agree(cl_context, atmosphere, albedo):
     require_dtype(cl_context, "float64")
+    atmosphere = atmosphere.replace(ground_albedo=albedo)
     kernel = azimuth.compute_orders(atmosphere, KERNEL_GRID, backend="opencl", ctx=cl_context)
     twin = azimuth.compute_orders(atmosphere, KERNEL_GRID, backend="numpy")
     assert kernel.record["orders"] == twin.record["orders"] == 3
     for k, (a, b) in enumerate(zip(kernel.orders, twin.orders)):
         _assert_per_channel(a, b, TOLERANCES["float64"]["orders"], f"order {k + 2}")
     _assert_per_channel(kernel.gathered, twin.gathered, TOLERANCES["float64"]["orders"], "gathered")
+    if albedo:
+        _assert_per_channel(kernel.ground_irradiance, twin.ground_irradiance, TOLERANCES["float64"]["orders"],
+                            "ground irradiance")
 
 
-def test_raymarch_matches_twin(cl_context, atmosphere):
-    """SkyRenderer.render_raymarch of a table with harmonics against reference.render_raymarch (single)
-    plus azimuth.raymarch_higher_orders, sun 3 deg below the horizon, views all around."""
+@pytest.mark.parametrize("albedo", [0.0, 0.3])
+def test_raymarch_matches_twin(cl_context, atmosphere, albedo):
+    """SkyRenderer.render_raymarch of a table with harmonics against reference.render_raymarch (single,
+    and the ground) plus azimuth.raymarch_higher_orders, sun 3 deg below the horizon, views all around."""
+    atmosphere = atmosphere.replace(ground_albedo=albedo)
     from clsky import ScatteringTable
     from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
 
@@ -283,7 +293,8 @@ def test_raymarch_matches_twin(cl_context, atmosphere):
     with SkyRenderer(table, ray, ctx=cl_context) as renderer:
         got = renderer.render_raymarch(directions, sun, 100.0)
     disc = np.zeros(3)
-    expected = (reference.render_raymarch(atmosphere, ray, directions, sun, 100.0, disc, 2.0)
+    expected = (reference.render_raymarch(atmosphere, ray, directions, sun, 100.0, disc, 2.0,
+                                          grid_settings=table.settings, ground_irradiance=table.ground_irradiance)
                 + azimuth.raymarch_higher_orders(atmosphere, ray, table.gathered, table.settings, directions, sun, 100.0))
     _assert_per_channel(got, expected, TOLERANCES["float64"]["scatter"], "ray march")
 
