@@ -161,6 +161,10 @@ def _add_table_arguments(parser):
     orders.add_argument("--mode", choices=list(SCATTERING_MODES),
                         help="scheme of the higher orders (default: the --quality level's, else physical for an "
                              "atmosphere with a reflecting ground, such as --preset physical, else atmosphere-plus)")
+    orders.add_argument("--azimuth-harmonics", type=int, metavar="M",
+                        help="the physical mode's orders k >= 2 carry M cosine harmonics of the view-sun "
+                             "azimuth (clsky/azimuth.py; 2 fixes twilight, README 'Twilight against Monte "
+                             "Carlo'; default: 0, the azimuth average)")
     orders.add_argument("--order-tolerance", type=float, help="auto stops when an order adds less than this "
                                                               "(default: 1e-4)")
     orders.add_argument("--max-orders", type=int, help="most orders auto computes (default: 100)")
@@ -192,7 +196,8 @@ SETTING_OPTIONS = {"size": "size", "mapping": "mapping", "view_steps": "view_ste
                    "sampling": "sampling", "sun_transmittance": "sun_transmittance",
                    "transmittance_size": "transmittance_size", "mie_layout": "mie_layout", "dtype": "dtype",
                    "mode": "mode", "orders": "orders", "order_tolerance": "order_tolerance",
-                   "max_orders": "max_orders", "multiple_view_steps": "multiple_view_steps"}
+                   "max_orders": "max_orders", "multiple_view_steps": "multiple_view_steps",
+                   "azimuth_harmonics": "azimuth_harmonics"}
 
 #: TableSettings field -> the option a user types, or one per item of a tuple field; for messages.
 TABLE_OPTION_NAMES = {
@@ -201,7 +206,7 @@ TABLE_OPTION_NAMES = {
     "transmittance_size": ("--transmittance-size TW", "--transmittance-size TH"), "mie_layout": "--mie-layout",
     "dtype": "--dtype", "mode": "--mode", "orders": "--orders", "order_tolerance": "--order-tolerance",
     "max_orders": "--max-orders", "multiple_view_steps": "--multiple-view-steps",
-    "gather_theta_steps": "--gather-steps THETA", "gather_phi_steps": "--gather-steps PHI",
+    "azimuth_harmonics": "--azimuth-harmonics", "gather_theta_steps": "--gather-steps THETA", "gather_phi_steps": "--gather-steps PHI",
     "sun_cos_range": "--sun-elevations", "quality": "--quality", "preset": "--preset",
     "ground_albedo": "--ground-albedo", "ozone_column_du": "--ozone-column",
 }

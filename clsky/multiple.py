@@ -36,7 +36,7 @@ from .atmosphere import AtmosphereParameters
 from .mapping import cos_to_v, grid_coordinates
 from .phase import MIE_PHASES, PHASE_MEANS, RAYLEIGH_PHASES
 from .settings import MAPPINGS, TableSettings
-from .transmittance import COMMON_SOURCES, quadrature_defines
+from .transmittance import COMMON_SOURCES, azimuth_defines, quadrature_defines
 
 __all__ = ["keeping_first_gather_stacks", "gather_quadrature", "phase_azimuth_integrals", "gather_matrix", "gather_matrices",
            "first_gather_matrices", "first_gather_matrix", "first_gather_stack", "DIRECT_PAIRS",
@@ -284,7 +284,7 @@ class MultipleScatteringEngine(_cl.Engine):
     def build_options(self):
         return (super().build_options() + quadrature_defines(self.settings, VECTOR_WIDTH)
                 + [f"-DGATHER_ROWS={GATHER_ROWS}", f"-DGATHER_CELLS={GATHER_CELLS}",
-                   f"-DSCATTER_SUN_NODES={SCATTER_SUN_NODES}"])
+                   f"-DSCATTER_SUN_NODES={SCATTER_SUN_NODES}"] + azimuth_defines(self.settings))
 
     def to_device(self, table):
         """A host table (D, H, W, 6) as a padded device table (D, H, W, 8) (channels 6, 7 zero)."""
@@ -332,18 +332,21 @@ class MultipleScatteringEngine(_cl.Engine):
         self._record("gather", event)
         return out
 
-    def scatter(self, atmosphere: AtmosphereParameters, gathered, combine_species=False, ground_radiance=None):
+    def scatter(self, atmosphere: AtmosphereParameters, gathered, combine_species=False, ground_radiance=None,
+                cos_azimuth=1.0):
         """Next order from a gathered table, as a padded device array (D, H, W, 8).
 
         With ``combine_species`` (physical mode) channels 0-2 and 3-5 both hold Rayleigh + Mie. With a
         reflecting ground (``atmosphere.has_ground``, which needs ``combine_species``), rays that end on
         the ground add T L_g, ``ground_radiance`` (D, 3) the ground's radiance per sun node
-        (:mod:`clsky.ground`).
+        (:mod:`clsky.ground`). With ``settings.azimuth_harmonics`` = M > 0, ``gathered`` is the padded
+        device array (M + 1, D, H, W, 8) of the harmonics and ``cos_azimuth`` the cells' view-sun azimuth
+        (:mod:`clsky.azimuth`).
         """
         from .ground import padded4
 
         gathered_d = gathered if isinstance(gathered, cla.Array) else self.to_device(gathered)
-        depth, height, width, _ = gathered_d.shape
+        depth, height, width, _ = gathered_d.shape[-4:]
         if atmosphere.has_ground:
             if not combine_species:
                 raise ValueError("a reflecting ground (ground_albedo > 0) needs combine_species (mode 'physical')")
@@ -354,12 +357,13 @@ class MultipleScatteringEngine(_cl.Engine):
             ground_d = cla.to_device(self.queue, padded4(ground, self.dtype))
         else:
             ground_d = cla.zeros(self.queue, 4, self.dtype)        # not read without -DGROUND
-        out = cla.empty(self.queue, gathered_d.shape, self.dtype)
+        out = cla.empty(self.queue, (depth, height, width, 8), self.dtype)
         atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
         event = self.kernels_with(_atmosphere_cl.feature_defines(atmosphere))["scatter"](
             self.queue, _scatter_global_size(width, height, depth), SCATTER_WORK_GROUP, atmosphere_d, np.int32(width),
             np.int32(height), np.int32(depth), np.int32(MAPPINGS[self.settings.mapping]),
-            self.real2(self.settings.sun_w_range), np.int32(bool(combine_species)), gathered_d.data,
+            self.real2(self.settings.sun_w_range), np.int32(bool(combine_species)), self.real(cos_azimuth),
+            gathered_d.data,
             ground_d.data, out.data)
         self._record("scatter", event)
         out.add_event(event)

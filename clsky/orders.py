@@ -17,7 +17,9 @@ Two schemes (``TableSettings.mode``):
     phase applied (3 channels, r, g, b) and averaged over the azimuth between view and sun, while single
     scattering stays factored so that the renderer applies its exact phase. Remaining approximations:
     (1) the table has no azimuth: higher orders are azimuth averages, and every order is computed in
-    the canonical frame (sun and view in one vertical plane) along the ray; (2) the ground is black
+    the canonical frame (sun and view in one vertical plane) along the ray (too bright at dusk: README,
+    "Twilight against Monte Carlo"), unless ``settings.azimuth_harmonics`` > 0, where the orders carry
+    a cosine series in the azimuth (:mod:`clsky.azimuth`, which this function hands the build to); (2) the ground is black
     unless ``atmosphere.ground_albedo`` > 0: then a Lambertian ground reflects a / pi of the irradiance
     of every order into the next one (:mod:`clsky.ground`; physical mode only); (3) quadrature and
     interpolation errors of the grid (view/sun steps, trilinear lookups).
@@ -156,6 +158,10 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
     ground.check_ground_mode(atmosphere, settings.mode)
     if backend not in ("opencl", "numpy"):
         raise ValueError(f"backend must be one of ['opencl', 'numpy'], got {backend!r}")
+    if settings.azimuth_harmonics:     # the higher orders carry azimuth (clsky/azimuth.py)
+        from . import azimuth
+
+        return azimuth.orders_result(atmosphere, settings, backend, ctx, fast_math, progress)
     if backend == "opencl":
         from .multiple import MultipleScatteringEngine
         from .single import SingleScatteringEngine

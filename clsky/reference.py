@@ -263,18 +263,18 @@ def _single_scattering_cells(atmosphere, settings, h0, mu_v, mu_s, sun_table, nu
     return rays.integrate(atmosphere, transmittance, 1.0, 1.0)
 
 
-def _cells_in_chunks(settings, per_cell, function):
-    """Evaluate function(x, y, z) -> (n, 6) over every cell, in chunks; returns (D, H, W, 6)."""
+def _cells_in_chunks(settings, per_cell, function, channels=6):
+    """Evaluate function(x, y, z) -> (n, channels) over every cell, in chunks; returns (D, H, W, channels)."""
     width, height, depth = settings.size
     cells = width * height * depth
     index = np.arange(cells)
     x, y, z = index % width, (index // width) % height, index // (width * height)
     chunk = max(1, CHUNK_ELEMENTS // per_cell)
-    out = np.empty((cells, 6))
+    out = np.empty((cells, channels))
     for start in range(0, cells, chunk):
         part = slice(start, start + chunk)
         out[part] = function(x[part], y[part], z[part])
-    return out.reshape(depth, height, width, 6)
+    return out.reshape(depth, height, width, channels)
 
 
 def single_scattering(atmosphere: AtmosphereParameters, settings: TableSettings = TableSettings()):

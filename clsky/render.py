@@ -21,7 +21,7 @@ from .lookup import check_kernel_buffer, check_table_data
 from .resources import check_memory, device_of, estimate_directions_memory, estimate_render_memory
 from .settings import MAPPINGS, TableSettings
 from .table import ScatteringTable
-from .transmittance import COMMON_SOURCES, TransmittanceEngine, column_channels, quadrature_defines
+from .transmittance import COMMON_SOURCES, TransmittanceEngine, azimuth_defines, column_channels, quadrature_defines
 
 __all__ = ["SkyRenderer", "RenderEngine", "SUN_ANGULAR_RADIUS_DEG", "RAYMARCH_DEFAULTS", "sun_disc_radiance",
            "check_directions", "check_render_table"]
@@ -162,9 +162,11 @@ class SkyRenderer:
         self._has_gathered = table.gathered is not None
         self._atmosphere_d = _atmosphere_cl.to_device(self.queue, table.atmosphere, dtype)
         self._table_d = cla.to_device(self.queue, np.ascontiguousarray(table.data, dtype=dtype))
-        padded = np.zeros(self._table_shape[:3] + (8,) if self._has_gathered else (2, 2, 2, 8), dtype=dtype)
-        if self._has_gathered:
+        padded = np.zeros(self._gathered_shape[:-1] + (8,) if self._has_gathered else (2, 2, 2, 8), dtype=dtype)
+        if self._has_gathered:   # (D, H, W, 6), or with azimuth harmonics (M + 1, D, H, W, 6)
             padded[..., :6] = table.gathered
+        self._defines = (_atmosphere_cl.feature_defines(table.atmosphere)
+                         + (azimuth_defines(table.settings) if self._has_gathered else []))
         self._gathered_d = cla.to_device(self.queue, padded)
         # the sky's irradiance on a reflecting ground per sun node (D, 4); not read for a black ground
         self._ground_depth = table.settings.size[2] if table.atmosphere.has_ground else 2
@@ -216,7 +218,7 @@ class SkyRenderer:
         for argument, array_d, count in buffers + [("directions", directions_d, 3 * n), ("out", out_d, 3 * max(n, 1))]:
             check_kernel_buffer(name, argument, array_d, count, self.engine.dtype)
         check_kernel_buffer(name, "valid", directions.valid, n, np.uint8)
-        kernel = self.engine.kernels_with(_atmosphere_cl.feature_defines(self.table.atmosphere))[name]
+        kernel = self.engine.kernels_with(self._defines)[name]
         items = -(-n // VECTOR_WIDTH)
         # an explicit work-group size: left to PoCL, a large frame got work-groups whose private arrays
         # (the ray march's per-lane sums and ground values) overflowed its worker threads' stacks
@@ -294,7 +296,8 @@ class SkyRenderer:
                 np.int32(self._has_gathered),
                 np.int32(t.settings.mode == "physical"), self._sun_table_d.data, np.int32(tw), np.int32(th),
                 self._ground_d.data, np.int32(self._ground_depth))
-        buffers = [("gathered", self._gathered_d, depth * height * width * 8),
+        harmonics = t.settings.azimuth_harmonics if self._has_gathered else 0
+        buffers = [("gathered", self._gathered_d, (harmonics + 1) * depth * height * width * 8),
                    ("sun_table", self._sun_table_d, th * tw * column_channels(t.atmosphere)),
                    ("ground_irradiance", self._ground_d, 4 * self._ground_depth)]
         return self._launch("render_raymarch", directions, sun_direction, altitude, valid, args, buffers)

@@ -342,7 +342,9 @@ def _table_held(settings, cells, orders, keep_orders=True):
     held = [Allocation(f"table data (D, H, W, {settings.channels}) float64", cells * settings.channels * 8),
             Allocation("single scattering (D, H, W, 6) float64", cells * 6 * 8)]
     if orders > 1:
-        held.append(Allocation("gathered sum (D, H, W, 6) float64", cells * 6 * 8))
+        # with azimuth harmonics (clsky/azimuth.py) the gathered sum is M + 1 such tables
+        held.append(Allocation("gathered sum (D, H, W, 6) float64", cells * 6 * 8,
+                               count=settings.azimuth_harmonics + 1))
         if keep_orders:
             held.append(Allocation(f"higher orders kept (D, H, W, {kept}) float64", cells * kept * 8,
                                    count=orders - 1))
@@ -395,7 +397,7 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
     pixels = int(width) * int(height)
     held = _table_held(settings, cells, orders, keep_orders) if count_table else ()
     held = tuple(dataclasses.replace(a, count=a.count * batches) for a in held)
-    gathered = cells * 8 * s if orders > 1 else 2 * 2 * 2 * 8 * s
+    gathered = cells * 8 * s * (settings.azimuth_harmonics + 1) if orders > 1 else 2 * 2 * 2 * 8 * s
     upload = (Allocation(f"table data on the device (D, H, W, {settings.channels})", cells * settings.channels * s,
                          count=batches, on_device=True),
               Allocation("padded gathered sum on the device (D, H, W, 8)", gathered, count=batches, on_device=True),

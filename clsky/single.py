@@ -49,7 +49,7 @@ class SingleScatteringEngine(_cl.Engine):
     def build_options(self):
         return super().build_options() + quadrature_defines(self.settings, VECTOR_WIDTH)
 
-    def compute(self, atmosphere: AtmosphereParameters, size=None, mapping=None, progress=None):
+    def compute(self, atmosphere: AtmosphereParameters, size=None, mapping=None, progress=None, cos_azimuth=1.0):
         """The single-scattering table.
 
         Parameters
@@ -61,6 +61,9 @@ class SingleScatteringEngine(_cl.Engine):
             Defaults to ``settings.mapping``.
         progress : callable, optional
             Called as ``progress(done, total)`` after each slab of sun-zenith layers.
+        cos_azimuth : float
+            Cosine of the view-sun azimuth of every cell: 1 (default) is the canonical frame of the 3D
+            table; other values are the azimuth nodes of :mod:`clsky.azimuth`.
 
         Returns
         -------
@@ -86,7 +89,7 @@ class SingleScatteringEngine(_cl.Engine):
                            np.int32(width), np.int32(height), np.int32(depth), np.int32(z_offset),
                            np.int32(MAPPINGS[settings.mapping]), self.real2(settings.sun_w_range),
                            sun_table_d.data, np.int32(tw),
-                           np.int32(th), table_d.data)
+                           np.int32(th), self.real(cos_azimuth), table_d.data)
             self._record("single_scattering", event)
             if progress is not None:
                 event.wait()

@@ -171,7 +171,9 @@ class ScatteringTable:
         addition and share.
     gathered : numpy.ndarray (D, H, W, 6) or None
         Sum of the gathered in-scatter tables of the orders (:class:`clsky.orders.OrdersResult`), for
-        the per-pixel ray march; None when only single scattering was computed.
+        the per-pixel ray march; None when only single scattering was computed. With
+        ``settings.azimuth_harmonics`` = M > 0: (M + 1, D, H, W, 6), its cosine harmonics
+        (:mod:`clsky.azimuth`).
     ground_irradiance : numpy.ndarray (D, 3) or None
         With a reflecting ground (``atmosphere.ground_albedo`` > 0): the sky's irradiance on the ground
         per sun node [units of I_I], sum of the orders k >= 1 (:mod:`clsky.ground`), for the ray march;
@@ -225,7 +227,14 @@ class ScatteringTable:
         full_precision = sorted({"float64", self.settings.dtype}, reverse=True)
         check_table_array("data", self.data, grid + (self.settings.channels,), full_precision, check_values)
         if self.gathered is not None:
-            check_table_array("gathered", self.gathered, grid + (6,), full_precision, check_values)
+            harmonics = self.settings.azimuth_harmonics
+            if harmonics:   # M + 1 cosine harmonics: m >= 1 may be negative (clsky/azimuth.py)
+                check_table_array("gathered", self.gathered, (harmonics + 1,) + grid + (6,), full_precision, False)
+                if check_values:
+                    check_finite_nonnegative("gathered", self.gathered[0])
+                    check_finite_nonnegative("gathered", np.abs(self.gathered[1:]))
+            else:
+                check_table_array("gathered", self.gathered, grid + (6,), full_precision, check_values)
         if self.atmosphere.has_ground:
             if self.ground_irradiance is None:
                 raise TableFormatError(f"ground_irradiance is missing: the atmosphere's ground reflects "

@@ -14,7 +14,7 @@ from .atmosphere import AtmosphereParameters
 from .errors import as_real_array, check_choice, check_integer
 from .settings import SAMPLINGS
 
-__all__ = ["TransmittanceEngine", "check_segments", "column_channels"]
+__all__ = ["TransmittanceEngine", "azimuth_defines", "check_segments", "column_channels"]
 
 COMMON_SOURCES = ("real.cl", "geometry.cl", "column.cl", "transmittance_table.cl")
 
@@ -35,6 +35,12 @@ def quadrature_defines(settings, vector_width):
     if settings.sun_transmittance == "table":
         options.append("-DSUN_TRANSMITTANCE_TABLE=1")
     return options
+
+
+def azimuth_defines(settings):
+    """``-DAZIMUTH_HARMONICS=M`` for a table whose higher orders carry M > 0 azimuthal harmonics
+    (``settings.azimuth_harmonics``; kernels/view_ray.cl: add_lookups), else none."""
+    return [f"-DAZIMUTH_HARMONICS={settings.azimuth_harmonics}"] if settings.azimuth_harmonics else []
 
 
 def column_channels(atmosphere) -> int:

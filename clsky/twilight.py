@@ -176,18 +176,23 @@ def single_scattering(atmosphere, sun_elevation_deg, view) -> np.ndarray:
                                         math.radians(azimuth))
 
 
-def ray_march(atmosphere, sun_elevation_deg, views=None, *, quality="default", single=False, ctx=None):
+def ray_march(atmosphere, sun_elevation_deg, views=None, *, quality="default", single=False, ctx=None,
+              azimuth_harmonics=None):
     """The ray march's radiance per unit irradiance [1/sr], shape (n views, 3), and the table settings.
 
     The table and ray quadrature are the scene planner's for a fixed sun at ``sun_elevation_deg`` and
     the level ``quality`` (an all-sky fisheye from the ground). ``single=True`` plans the scene without
     the higher orders (the planner's table with ``orders=1``, no gathered light), so the ray march
-    returns its single scattering alone, with the same ray quadrature.
+    returns its single scattering alone, with the same ray quadrature. ``azimuth_harmonics`` (an
+    integer in [0, 64]) replaces the planned table's ``azimuth_harmonics`` (the higher orders' azimuth
+    harmonics, :mod:`clsky.azimuth`); None keeps the planner's.
     """
     components = ("rayleigh", "mie") if single else ("rayleigh", "mie", "multiple")
     plan = plan_scene(Scene((sun_elevation_deg, sun_elevation_deg), components=components, quality=quality),
                       atmosphere, ctx=ctx, ray_march=True)
     settings = plan.table
+    if azimuth_harmonics is not None and not single:
+        settings = settings.replace(azimuth_harmonics=azimuth_harmonics)
     table = ScatteringTable.build(plan.atmosphere, settings, ctx=ctx)
     with SkyRenderer(table, plan.ray, ctx=ctx) as renderer:
         radiance = renderer.render_raymarch(view_directions(views), sun_direction(sun_elevation_deg), 0.0)

@@ -83,10 +83,12 @@ __kernel void gather(__global const real *matrices, const int species_stride, co
 /* Along one view ray (VECTOR_WIDTH cells x = VECTOR_WIDTH gx + lane of row y) for SCATTER_SUN_NODES sun
  * nodes z = z0 + b at once: the ray's geometry, densities and view transmittance (ray_step) and the
  * lookups' altitude and view parts (prepare_lookups) do not depend on the sun, so each node computes
- * them once and only the sun cosine there and the lookups per sun node (the same operations as integrate_gathered: the same sums). sum[b][k] as
- * integrate_gathered's sum[k] for sun node z0 + b; mu_s[b], nu[b] that node's sun cosine and canonical
- * scattering cosine. With -DGROUND, ground_t[0..2] the view transmittance T(Pa, Pb) r, g, b of rays
- * that end on the ground (0 elsewhere) and ground_mu[b] the sun cosine at Pb. */
+ * them once and only the sun cosine there and the lookups per sun node (the same operations as
+ * integrate_gathered: the same sums). sum[b][k] as integrate_gathered's sum[k] for sun node z0 + b;
+ * mu_s[b], nu[b] that node's sun cosine and scattering cosine (table_cell: at the cells' azimuth; with
+ * -DAZIMUTH_HARMONICS, add_lookups sums the harmonics at each lane's local azimuth for that sun).
+ * With -DGROUND, ground_t[0..2] the view transmittance T(Pa, Pb) r, g, b of rays that end on the ground
+ * (0 elsewhere) and ground_mu[b] the sun cosine at Pb. */
 inline void integrate_gathered_suns(__constant const atmosphere_t *atm, const realv h0, const real mu_v,
                                     const real *mu_s, const real *nu, __global const real *gathered,
                                     const int width, const int height, const int depth, const int mapping,
@@ -117,7 +119,7 @@ inline void integrate_gathered_suns(__constant const atmosphere_t *atm, const re
             }
 #endif
             const realv fz = MAPPING_SUN_T(mu_sun_here, mapping, sun_range) * (real)(depth - 1);
-            add_lookups(gathered, width, height, depth, &node, fz, sum[b]);
+            add_lookups(gathered, width, height, depth, &node, fz, &ray, (realv)(mu_s[b]), (realv)(nu[b]), sum[b]);
         }
     }
 }
@@ -128,13 +130,16 @@ inline void integrate_gathered_suns(__constant const atmosphere_t *atm, const re
  * Rayleigh + Mie per wavelength into channels 0-2 and again 3-5 (the next gather's input).
  * ground_radiance: D x 4 reals, L_g r, g, b (and 0) per sun node, read only with -DGROUND, where it is
  * added to both channel sets of combine_species (the host refuses a ground without it).
+ * cos_azimuth: the cells' view-sun azimuth (1: canonical frame); with -DAZIMUTH_HARMONICS=M, gathered
+ * holds M + 1 harmonics (view_ray.cl: add_lookups; clsky/azimuth.py).
  * Requires view_ray.cl (and so N_VIEW). */
 #ifndef SCATTER_SUN_NODES
 #error "SCATTER_SUN_NODES (sun nodes per scatter work-item) must be defined"
 #endif
 __kernel void scatter(__constant const atmosphere_t *atm, const int width, const int height,
                       const int depth, const int mapping, const real2 sun_range, const int combine_species,
-                      __global const real *gathered, __global const real *ground_radiance, __global real *table)
+                      const real cos_azimuth, __global const real *gathered, __global const real *ground_radiance,
+                      __global real *table)
 {
     const int gx = get_global_id(0);
     const int y = get_global_id(1);
@@ -145,8 +150,8 @@ __kernel void scatter(__constant const atmosphere_t *atm, const int width, const
     realv h0;
     real mu_v, mu_s[SCATTER_SUN_NODES], nu[SCATTER_SUN_NODES];
     for (int b = 0; b < SCATTER_SUN_NODES; ++b)      /* nodes past the last one repeat it, unstored */
-        table_cell(atm, gx, y, min(z0 + b, depth - 1), width, height, depth, mapping, sun_range, &h0, &mu_v,
-                   &mu_s[b], &nu[b]);
+        table_cell(atm, gx, y, min(z0 + b, depth - 1), width, height, depth, mapping, sun_range, cos_azimuth, &h0,
+                   &mu_v, &mu_s[b], &nu[b]);
     real8 sum[SCATTER_SUN_NODES][VECTOR_WIDTH];
     realv ground_t[3], ground_mu[SCATTER_SUN_NODES];
     integrate_gathered_suns(atm, h0, mu_v, mu_s, nu, gathered, width, height, depth, mapping, sun_range, sum,

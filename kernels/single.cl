@@ -21,6 +21,8 @@
  * branch-free in realv arithmetic. Global size (ceil(W / VECTOR_WIDTH), H, slab): a launch covers the
  * sun-zenith layers z_offset .. z_offset + slab - 1 (the host launches slabs to report progress).
  *
+ * cos_azimuth: cosine of the azimuth between view and sun (1: the canonical frame; other values are the
+ * azimuth nodes of clsky/azimuth.py).
  * Output: 6 reals per cell at index i = x + y W + z W H: Rayleigh r, g, b, then Mie r, g, b [1/sr].
  * Requires real.cl, atmosphere_t, geometry.cl, column.cl, transmittance_table.cl, mapping.cl,
  * view_ray.cl.
@@ -28,7 +30,7 @@
 __kernel void single_scattering(__constant const atmosphere_t *atm, const int width, const int height,
                                 const int depth, const int z_offset, const int mapping, const real2 sun_range,
                                 __global const real *sun_table, const int tw, const int th,
-                                __global real *table)
+                                const real cos_azimuth, __global real *table)
 {
     const int gx = get_global_id(0);
     const int y = get_global_id(1);
@@ -38,7 +40,7 @@ __kernel void single_scattering(__constant const atmosphere_t *atm, const int wi
 
     realv h0;
     real mu_v, mu_s, nu;
-    table_cell(atm, gx, y, z, width, height, depth, mapping, sun_range, &h0, &mu_v, &mu_s, &nu);
+    table_cell(atm, gx, y, z, width, height, depth, mapping, sun_range, cos_azimuth, &h0, &mu_v, &mu_s, &nu);
     realv sum[6];
     integrate_single(atm, h0, (realv)(mu_v), (realv)(mu_s), (realv)(nu), sun_table, tw, th, sum, 0);
 

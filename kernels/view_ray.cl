@@ -56,11 +56,12 @@ inline view_node_t view_node_at(const int i, const maskv hits_ground)
 }
 
 /* The cells x = VECTOR_WIDTH gx + lane of row (y, z) of a table (W, H, D, mapping, sun nodes over
- * w in sun_range): altitudes h0, view and sun cosines, and the canonical frame's scattering cosine
- * nu = cos(phi - delta). */
+ * w in sun_range): altitudes h0, view and sun cosines, and the scattering cosine of a view at azimuth
+ * phi from the sun's, nu = mu_v mu_s + sqrt(1 - mu_v^2) sqrt(1 - mu_s^2) cos_azimuth: cos_azimuth = 1
+ * is the canonical frame's nu = cos(phi - delta) (clsky/azimuth.py: the nodes of the harmonic orders). */
 inline void table_cell(__constant const atmosphere_t *atm, const int gx, const int y, const int z, const int width,
-                       const int height, const int depth, const int mapping, const real2 sun_range, realv *h0,
-                       real *mu_v, real *mu_s, real *nu)
+                       const int height, const int depth, const int mapping, const real2 sun_range,
+                       const real cos_azimuth, realv *h0, real *mu_v, real *mu_s, real *nu)
 {
     const real ha = atm->top_radius - atm->planet_radius;
     const realv u = fmin((real)(gx * VECTOR_WIDTH) + LANE_INDEX, (real)(width - 1)) / (real)(width - 1);
@@ -69,7 +70,7 @@ inline void table_cell(__constant const atmosphere_t *atm, const int gx, const i
     *h0 = MAPPING_ALTITUDE(u, mapping, ha);
     *mu_v = MAPPING_COS(v, mapping);
     *mu_s = MAPPING_COS(w, mapping);
-    *nu = *mu_v * *mu_s + sqrt(fmax(R(1.0) - *mu_v * *mu_v, R(0.0)) * fmax(R(1.0) - *mu_s * *mu_s, R(0.0)));
+    *nu = *mu_v * *mu_s + sqrt(fmax(R(1.0) - *mu_v * *mu_v, R(0.0)) * fmax(R(1.0) - *mu_s * *mu_s, R(0.0))) * cos_azimuth;
 }
 
 /* Length [m] of the view ray to the top of the atmosphere or to the ground (*hits_ground). */
@@ -207,7 +208,7 @@ inline void integrate_single(__constant const atmosphere_t *atm, const realv h0,
 }
 
 /* The trilinear interpolation of a padded table (D, H, W, 8) between the cells base, base + 1, base + dy,
- * base + dz, ... with weights ax, ay, az along x, y, z (the corner cell base: lookup8). */
+ * base + dz, ... with weights ax, ay, az along x, y, z (the corner cell base: add_lookups). */
 inline real8 trilinear8(__global const real *table, const size_t base, const size_t dy, const size_t dz,
                         const real ax, const real ay, const real az)
 {
@@ -314,26 +315,75 @@ inline void prepare_lookups(const int width, const int height, const realv *f, c
                                   LANE(f[5], k), R(0.0), R(0.0));
 }
 
-/* sum[k] += lane k's integrands x the trilinear lookup of the padded table (D, H, W, 8) at the node's
- * altitude and view coordinates (prepare_lookups) and sun coordinate fz, for every lane k. */
+#ifndef AZIMUTH_HARMONICS
+#define AZIMUTH_HARMONICS 0
+#endif
+#if AZIMUTH_HARMONICS > 0
+/* cos phi per lane, phi the local azimuth between the view's and the sun's horizontal directions at the
+ * ray's current node (distance s from radius r0, the ray's start mu_v, a sun of zenith cosine mu_s and
+ * scattering cosine nu at the start), in a form free of cancellation near the vertical (P = r0 Z + s V;
+ * r sin(view zenith) = r0 sqrt(1 - mu_v^2), r sin(sun zenith) = |P x Sun|,
+ * r^2 (nu - mu_view mu_sun) = r0 (r0 (nu - mu_v mu_s) + s (mu_v nu - mu_s))):
+ *   cos phi = (r0 (nu - mu_v mu_s) + s (mu_v nu - mu_s)) / (sqrt(1 - mu_v^2) |P x Sun|),
+ *   |P x Sun|^2 = r0^2 (1 - mu_s^2) + 2 r0 s (mu_v - mu_s nu) + s^2 (1 - nu^2),
+ * 1 where the denominator is 0 (view or sun vertical: no azimuth). */
+inline realv ray_azimuth_cos(const view_march_t *ray, const realv mu_s, const realv nu)
+{
+    const realv r0 = ray->r0, s = ray->s, mu_v = ray->mu_v;
+    const realv cross2 = r0 * r0 * fmax(R(1.0) - mu_s * mu_s, V(0.0)) + R(2.0) * r0 * s * (mu_v - mu_s * nu)
+                         + s * s * fmax(R(1.0) - nu * nu, V(0.0));
+    const realv denominator = sqrt(fmax(R(1.0) - mu_v * mu_v, V(0.0))) * sqrt(fmax(cross2, V(0.0)));
+    const realv numerator = r0 * (nu - mu_v * mu_s) + s * (mu_v * nu - mu_s);
+    return SELECT(V(1.0), clamp(numerator / denominator, R(-1.0), R(1.0)), isgreater(denominator, V(0.0)));
+}
+#endif
+
+/* sum[k] += lane k's integrands x the gathered source at the ray's current node, for every lane k: the
+ * trilinear lookup of the padded table (D, H, W, 8) at the node's altitude and view coordinates
+ * (prepare_lookups) and sun coordinate fz. With -DAZIMUTH_HARMONICS=M > 0 (clsky/azimuth.py) `gathered`
+ * holds the M + 1 cosine harmonics G_m, each a padded (D, H, W, 8) table, one after the other, and the
+ * source is max(0, sum_m G_m cos(m phi)), each G_m looked up at the same corner cells and weights, phi
+ * the local azimuth of the lane (ray_azimuth_cos, for the sun of zenith cosine mu_s and scattering cosine
+ * nu at the ray's start), cos(m phi) by the Chebyshev recurrence. Without it (M = 0) ray, mu_s and nu are
+ * not read and the source is the one table's lookup. */
 inline void add_lookups(__global const real *gathered, const int width, const int height, const int depth,
-                        const node_lookup_t *node, const realv fz, real8 *sum)
+                        const node_lookup_t *node, const realv fz, const view_march_t *ray, const realv mu_s,
+                        const realv nu, real8 *sum)
 {
     const realv z0 = fmin(fmax(fz, V(0.0)), (real)(depth - 2));
     const intv iz = CONVERT_INTV(z0);
     const realv az = fz - CONVERT_REALV(iz);
+#if AZIMUTH_HARMONICS > 0
+    const size_t stride = (size_t)8 * (size_t)width * (size_t)height * (size_t)depth;
+    const realv cos_phi = ray_azimuth_cos(ray, mu_s, nu);
+#endif
     for (int k = 0; k < VECTOR_WIDTH; ++k) {
         const size_t base = (size_t)INT_LANE(node->ix, k)
                             + (size_t)width * ((size_t)INT_LANE(node->iy, k) + (size_t)height * (size_t)INT_LANE(iz, k));
-        sum[k] += node->factor[k] * trilinear8(gathered, base, (size_t)width, (size_t)width * (size_t)height,
-                                               LANE(node->ax, k), LANE(node->ay, k), LANE(az, k));
+        real8 g = trilinear8(gathered, base, (size_t)width, (size_t)width * (size_t)height,
+                             LANE(node->ax, k), LANE(node->ay, k), LANE(az, k));
+#if AZIMUTH_HARMONICS > 0
+        const real c = LANE(cos_phi, k);
+        real previous = R(1.0), current = c;
+        for (int m = 1; m <= AZIMUTH_HARMONICS; ++m) {
+            g += current * trilinear8(gathered + (size_t)m * stride, base, (size_t)width,
+                                      (size_t)width * (size_t)height, LANE(node->ax, k), LANE(node->ay, k),
+                                      LANE(az, k));
+            const real next = R(2.0) * c * current - previous;
+            previous = current;
+            current = next;
+        }
+        g = fmax(g, (real8)(R(0.0)));
+#endif
+        sum[k] += node->factor[k] * g;
     }
 }
 
 /* In-scattering of a gathered table along the ray, per lane k:
  *   sum[k].s012 = Integral rho_R T(P, Pa) Gbar_R dt (r, g, b), sum[k].s345 the same with rho_M, Gbar_M
  * with Gbar (padded (D, H, W, 8), the table's grid, mapping and sun_range) looked up trilinearly at each node's
- * altitude, view and sun cosines. The trapezoid sum_i (f_(i-1) + f_i) h_i / 2 is accumulated as
+ * altitude, view and sun cosines (and, with -DAZIMUTH_HARMONICS, summed over its harmonics at the local
+ * azimuth: add_lookups). The trapezoid sum_i (f_(i-1) + f_i) h_i / 2 is accumulated as
  * sum_i f_i (h_i + h_(i+1)) / 2, so that each lane's 6 channels are one real8 FMA per node.
  * With single != 0 (the per-pixel ray march), the same pass also accumulates single scattering into
  * single[0..5] as integrate_single does (sun columns from sun_table or re-marched), sharing the
@@ -382,6 +432,6 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
         const realv fz = MAPPING_SUN_T(mu_sun_here, mapping, sun_range) * (real)(depth - 1);
         node_lookup_t node;
         prepare_lookups(width, height, ray.f, fx, fy, &node);
-        add_lookups(gathered, width, height, depth, &node, fz, sum);
+        add_lookups(gathered, width, height, depth, &node, fz, &ray, mu_s, nu, sum);
     }
 }

@@ -35,6 +35,8 @@ def one_line_error(result):
     (["--view-steps", "0"], "--view-steps must be"),
     (["--sun-steps", "99999"], "--sun-steps must be"),
     (["--multiple-view-steps", "0"], "--multiple-view-steps must be"),
+    (["--azimuth-harmonics", "-1", "--mode", "physical"], "--azimuth-harmonics must be"),
+    (["--azimuth-harmonics", "2", "--mode", "atmosphere-plus"], "--azimuth-harmonics must be"),
     (["--max-orders", "1"], "--max-orders must be"),
     (["--orders", "0"], "--orders must be"),
     (["--gather-steps", "1", "8"], "--gather-steps THETA must be"),

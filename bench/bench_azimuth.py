@@ -1,0 +1,105 @@
+"""Twilight against Monte Carlo with higher orders that carry azimuth (issue 11, item 2).
+
+The ray march of clsky/twilight.py (the scene planner's table and quadrature at a quality level) with
+the table's ``azimuth_harmonics`` set to each of ``--harmonics`` (clsky/azimuth.py; 0 is today's
+azimuth-averaged scheme), against the path tracer clsky/montecarlo.py run until every channel's
+standard error is below ``--target``, with the sun at +5, +2, 0, -2, -4 and -6 deg, black ground and
+no ozone. Writes the summary (signed mean over the four views and three channels, worst in brackets,
+and the 95th percentile of |deviation|, issue 11's measure), the per-view deviations and the table
+build times into README.md.
+
+Usage: python bench/bench_azimuth.py [--harmonics 0,2] [--quality LEVEL] [--target SE]
+       [--elevations 5,2,0,-2,-4,-6] [--no-readme] [--smoke]
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import time
+
+import numpy as np
+
+from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
+from bench_twilight import BATCH, cells, summary
+
+from clsky import twilight
+
+
+def p95(deviations):
+    values = np.abs(np.concatenate([np.ravel(d) for d in deviations]))
+    values = values[np.isfinite(values)]
+    return f"{100 * np.percentile(values, 95):.1f} %" if values.size else "n/a"
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--harmonics", default="0,2", help="comma-separated azimuth_harmonics to compare")
+    parser.add_argument("--quality", default="default", help="quality level of the ray march (clsky/quality.py)")
+    parser.add_argument("--target", type=float, default=0.02, help="relative standard error per channel to reach")
+    parser.add_argument("--max-photons", type=int, default=40_000_000, help="most paths per channel and case")
+    parser.add_argument("--elevations", default=",".join(f"{e:g}" for e in twilight.SUN_ELEVATIONS_DEG),
+                        help="comma-separated sun elevations [deg]")
+    add_output_arguments(parser)
+    args = parse_arguments(parser)
+    harmonics = [int(m) for m in args.harmonics.split(",")]
+    elevations = [float(e) for e in args.elevations.split(",")]
+    batch = BATCH
+    if args.smoke:
+        args.quality, elevations, harmonics = SMOKE.reference_level, [-6.0], [0, 1]
+        batch = args.max_photons = SMOKE.photons
+    atmosphere = twilight.black_ground_without_ozone()
+
+    wall, cpu = time.perf_counter(), time.process_time()
+    deviations = {m: {} for m in harmonics}
+    seconds = {m: {} for m in harmonics}
+    rows, sizes = [], set()
+    for elevation in elevations:
+        marched = {}
+        for m in harmonics:
+            start = time.perf_counter()
+            marched[m], settings = twilight.ray_march(atmosphere, elevation, quality=args.quality,
+                                                      azimuth_harmonics=m)
+            seconds[m][elevation] = time.perf_counter() - start
+            sizes.add(settings.size)
+            deviations[m][elevation] = []
+        for i, view in enumerate(twilight.VIEWS):
+            pooled = twilight.monte_carlo(atmosphere, elevation, view, target=args.target, batch=batch,
+                                          max_photons=args.max_photons, seed=1000 * i)
+            row = f"| {elevation:+.0f} | {view} | {pooled.photons / 1e6:g} M | {cells(100 * pooled.relative_error, 2, '')} |"
+            for m in harmonics:
+                relative, _ = twilight.deviation(marched[m][i], pooled)
+                deviations[m][elevation].append(relative)
+                row += f" {cells(100 * relative)} |"
+            rows.append(row)
+            print(row, flush=True)
+    wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+    load = os.getloadavg()
+
+    lines = [f"Ray march at the '{args.quality}' level as the scene planner sets it for each sun (tables "
+             f"{', '.join(' x '.join(map(str, s)) for s in sorted(sizes))}), with the table's "
+             f"`azimuth_harmonics` M set as shown; the physical preset without ozone and with a black ground. "
+             f"Monte Carlo: batches of {batch} paths per channel until every channel's standard error is below "
+             f"{100 * args.target:g} % or {args.max_photons / 1e6:g} M paths are spent. Measured "
+             f"{datetime.date.today()} on {machine()}: {wall:.0f} s wall, {cpu:.0f} s CPU, load average "
+             f"{load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} (1 / 5 / 15 min) at the end.", "",
+             "| | " + " | ".join(f"{e:+.0f} deg" for e in elevations) + " |",
+             "|---|" + "---|" * len(elevations)]
+    for m in harmonics:
+        lines.append(f"| M = {m}: mean (worst) | " + " | ".join(summary(deviations[m][e]) for e in elevations) + " |")
+        lines.append(f"| M = {m}: p95 of abs. deviation | " + " | ".join(p95(deviations[m][e]) for e in elevations)
+                     + " |")
+        lines.append(f"| M = {m}: table build + ray march [s] | "
+                     + " | ".join(f"{seconds[m][e]:.0f}" for e in elevations) + " |")
+    lines += ["", "Per view: deviation = ray march / Monte Carlo - 1 per channel (r, g, b) [%].", "",
+              "| sun [deg] | view | paths | SE [%] | " + " | ".join(f"M = {m} [%]" for m in harmonics) + " |",
+              "|---:|---|---:|---|" + "---|" * len(harmonics), *rows]
+    markdown = "\n".join(lines)
+    print(markdown)
+    if not args.no_readme:
+        write_readme_section("twilight-azimuth", markdown)
+
+
+if __name__ == "__main__":
+    main()

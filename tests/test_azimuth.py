@@ -1,0 +1,316 @@
+"""Higher orders with azimuthal harmonics (clsky/azimuth.py), NumPy: checks that share no formula with it.
+
+1. M = 0 is the physical mode of clsky.orders.compute_orders (backend 'numpy') to rounding.
+2. The cosine series through the azimuth nodes interpolates them (DCT-I round trip).
+3. The local azimuth along a ray against explicit 3D vectors.
+4. The harmonic gather and first gather against a literal 2D (Theta, Phi) trapezoid of the
+   azimuth-dependent field, projected on cos(m phi_V) over the same Phi grid (a discrete circular
+   convolution: exact to rounding).
+5. Orders are finite and non-negative; parameters are validated.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from clsky import TableSettings, azimuth, reference
+from clsky.errors import ParameterError
+from clsky.mapping import grid_coordinates
+from clsky.multiple import _gather_parts, _phase, gather_quadrature
+from clsky.orders import compute_orders
+from clsky.twilight import black_ground_without_ozone
+
+from conftest import TOLERANCES, max_error_report, require_dtype
+
+TINY = TableSettings(size=(5, 12, 6), mode="physical", orders=4, gather_theta_steps=24, gather_phi_steps=16,
+                     sun_cos_range=(-0.3, 0.4))
+
+
+@pytest.fixture(scope="module")
+def atmosphere():
+    return black_ground_without_ozone()
+
+
+@pytest.mark.parametrize("albedo", [0.0, 0.3])
+def test_zero_harmonics_is_the_physical_mode(atmosphere, albedo):
+    """M = 0: same single scattering, orders, gathered sum and ground irradiance as compute_orders, with
+    a black and with a reflecting ground (rounding only: the first gather's products are associated
+    differently, 1e-15 relative)."""
+    atmosphere = atmosphere.replace(ground_albedo=albedo)
+    expected = compute_orders(atmosphere, TINY, backend="numpy")
+    result = azimuth.compute_orders(atmosphere, TINY)
+    if albedo:
+        assert_allclose(result.ground_irradiance, expected.ground_irradiance, rtol=1e-12, atol=0)
+    assert_allclose(result.single, expected.orders[0], rtol=0, atol=0)
+    for k, order in enumerate(result.orders):
+        assert_allclose(order[0], expected.orders[k + 1], rtol=1e-12, atol=1e-14 * expected.orders[k + 1].max())
+    assert_allclose(result.gathered[0], expected.gathered, rtol=1e-12, atol=1e-14 * expected.gathered.max())
+
+
+@pytest.mark.parametrize("harmonics", [1, 2, 4, 7])
+def test_series_interpolates_the_nodes(harmonics):
+    rng = np.random.default_rng(harmonics)
+    values = rng.random((harmonics + 1, 3))
+    coefficients = azimuth.harmonic_transform(harmonics) @ values
+    nodes = azimuth.azimuth_nodes(harmonics)
+    series = np.cos(np.outer(nodes, np.arange(harmonics + 1))) @ coefficients
+    assert_allclose(series, values, rtol=1e-13, atol=1e-14)     # rounding of an (M + 1)-term sum
+
+
+def test_chebyshev_is_cosine():
+    phi = np.linspace(0.0, math.pi, 17)
+    assert_allclose(azimuth.chebyshev(np.cos(phi), 6), np.cos(np.outer(phi, np.arange(7))), atol=1e-14)
+
+
+def test_local_azimuth_against_vectors():
+    """cos of the angle between the horizontal projections of V and Sun at points along a ray, from
+    explicit vectors (observer at altitude 2 km, view 10 deg up at azimuth 130 deg, sun 3 deg below)."""
+    rp = 6371e3
+    r0 = rp + 2e3
+    view = np.array([math.cos(math.radians(10)) * math.cos(math.radians(130)),
+                     math.cos(math.radians(10)) * math.sin(math.radians(130)), math.sin(math.radians(10))])
+    sun = np.array([math.cos(math.radians(-3)), 0.0, math.sin(math.radians(-3))])
+    for s in (0.0, 5e3, 80e3, 400e3):
+        p = np.array([0.0, 0.0, r0]) + s * view
+        zenith = p / np.linalg.norm(p)
+        hv = view - view @ zenith * zenith
+        hs = sun - sun @ zenith * zenith
+        expected = hv @ hs / (np.linalg.norm(hv) * np.linalg.norm(hs))
+        got = azimuth.local_cos_azimuth(r0, s, view[2], sun[2], view @ sun)
+        assert abs(got - expected) < 1e-12                  # closed form vs vectors: rounding of radii
+
+
+def _scaled_phase(atmosphere, settings, species, cosines, phi_shift=0.0):
+    """F_s(cos Theta_a c_i + sin Theta_a s_i cos(Phi_b - phi_shift)) (i, a, b) times the gather's
+    energy rescaling of row i (a scalar per row, :func:`clsky.multiple._conserving`), written here:
+    4 pi mean / (sum_a wT_a sin Theta_a sum_b wP_b F)."""
+    theta, wt, phi, wp = gather_quadrature(settings.gather_theta_steps, settings.gather_phi_steps)
+    sines = np.sqrt(np.maximum(1.0 - cosines**2, 0.0))
+    cos_angle = (np.cos(theta)[None, :, None] * cosines[:, None, None]
+                 + np.sin(theta)[None, :, None] * sines[:, None, None] * np.cos(phi[None, None, :] - phi_shift))
+    phase = _phase(atmosphere, species)(cos_angle)
+    unshifted = _phase(atmosphere, species)(np.cos(theta)[None, :, None] * cosines[:, None, None]
+                                             + np.sin(theta)[None, :, None] * sines[:, None, None]
+                                             * np.cos(phi)[None, None, :])
+    integral = np.einsum("iab,a,b->i", unshifted, wt * np.sin(theta), wp)
+    return phase * (4.0 * math.pi / integral)[:, None, None]          # both phases have mean 1
+
+
+def _literal(atmosphere, settings, field, species):
+    """G(phi_V) = sum_ab wT_a sin Theta_a wP_b F_s(omega_ab . V) field(..., a, b) at every phi_V of the Phi
+    grid, for V at the grid's view cosines; field (D, W, Theta, Phi, C) -> (Phi, D, H, W, C)."""
+    theta, wt, phi, wp = gather_quadrature(settings.gather_theta_steps, settings.gather_phi_steps)
+    _, cos_view, _ = grid_coordinates(settings.size, atmosphere.atmosphere_height, settings.mapping,
+                                      settings.sun_cos_range)
+    weights = (wt * np.sin(theta))[:, None] * wp[None, :]
+    return np.stack([np.einsum("iab,ab,zxabc->zixc", _scaled_phase(atmosphere, settings, species, cos_view, pv),
+                               weights, field) for pv in phi])
+
+
+def _project(values, m):
+    """(eps_m / 2 pi) sum_c wP_c values(phi_c) cos(m phi_c) over the first axis (the Phi grid)."""
+    _, _, phi, wp = gather_quadrature(TINY.gather_theta_steps, TINY.gather_phi_steps)
+    eps = 1.0 if m == 0 else 2.0
+    return eps / (2.0 * math.pi) * np.tensordot(wp * np.cos(m * phi), values, axes=(0, 0))
+
+
+HARMONICS = 2
+
+
+@pytest.mark.parametrize("species", ["rayleigh", "mie"])
+def test_gather_against_literal_sphere_integral(atmosphere, species):
+    """G_{s,m} of L(Theta, Phi) = sum_n L_n(Theta) cos(n Phi) (the table's L_n interpolated along Theta)
+    against the literal 2D trapezoid at every phi_V of the Phi grid, projected on cos(m phi_V): a
+    discrete circular convolution, so equal to rounding (1e-12 of the peak)."""
+    operators = azimuth.HarmonicGather(atmosphere, TINY, HARMONICS)
+    width, height, depth = TINY.size
+    table = np.random.default_rng(5).random((HARMONICS + 1, depth, height, width, 3))
+    _, _, phi, _ = gather_quadrature(TINY.gather_theta_steps, TINY.gather_phi_steps)
+    p = _gather_parts(atmosphere, TINY)[0]
+    field = np.einsum("aj,nzjxc,nb->zxabc", p, table, np.cos(np.outer(np.arange(HARMONICS + 1), phi)))
+    literal = _literal(atmosphere, TINY, field, species)
+    channels = slice(0, 3) if species == "rayleigh" else slice(3, 6)
+    gathered = operators.gather(table)[..., channels]
+    for m in range(HARMONICS + 1):
+        expected = _project(literal, m)
+        assert_allclose(gathered[m], expected, rtol=0, atol=1e-12 * np.abs(literal).max())
+
+
+@pytest.mark.parametrize("species", ["rayleigh", "mie"])
+def test_first_gather_against_literal_sphere_integral(atmosphere, species):
+    """The first gather: single scattering Ibar_s'(Theta, Phi) = sum_n I_n(Theta) cos(n Phi) seen with
+    the exact phase F_s'(omega . Sun) of both species, same literal check."""
+    operators = azimuth.HarmonicGather(atmosphere, TINY, HARMONICS)
+    width, height, depth = TINY.size
+    single = np.random.default_rng(7).random((HARMONICS + 1, depth, height, width, 6))
+    _, _, phi, _ = gather_quadrature(TINY.gather_theta_steps, TINY.gather_phi_steps)
+    _, _, cos_sun = grid_coordinates(TINY.size, atmosphere.atmosphere_height, TINY.mapping, TINY.sun_cos_range)
+    p = _gather_parts(atmosphere, TINY)[0]
+    field = 0.0
+    for index, other in enumerate(("rayleigh", "mie")):
+        sun_phase = _scaled_phase(atmosphere, TINY, other, cos_sun)       # (D, Theta, Phi)
+        field = field + np.einsum("aj,nzjxc,nb,zab->zxabc", p, single[..., 3 * index:3 * index + 3],
+                                  np.cos(np.outer(np.arange(HARMONICS + 1), phi)), sun_phase)
+    literal = _literal(atmosphere, TINY, field, species)
+    channels = slice(0, 3) if species == "rayleigh" else slice(3, 6)
+    gathered = operators.first_gather(single)[..., channels]
+    for m in range(HARMONICS + 1):
+        assert_allclose(gathered[m], _project(literal, m), rtol=0, atol=1e-12 * np.abs(literal).max())
+
+
+def test_orders_finite_and_non_negative(atmosphere):
+    result = azimuth.compute_orders(atmosphere, TINY.replace(sun_cos_range=(-0.2, 0.1), azimuth_harmonics=3))
+    for order in result.orders:
+        assert np.isfinite(order).all() and order.min() >= 0.0
+    assert result.orders[0].shape == (4,) + TINY.size[::-1] + (3,)
+
+
+def test_zero_harmonic_gathered_along_is_the_reference(atmosphere):
+    """A gathered table with only the m = 0 harmonic: the integral along true rays is reference's."""
+    rng = np.random.default_rng(11)
+    width, height, depth = TINY.size
+    gathered = np.zeros((3, depth, height, width, 6))
+    gathered[0] = rng.random((depth, height, width, 6))
+    h0, mu_v, mu_s = np.array([0.0, 3e3, 20e3]), np.array([0.1, -0.05, 0.8]), np.array([-0.1, 0.05, 0.3])
+    nu = mu_v * mu_s + np.sqrt((1 - mu_v**2) * (1 - mu_s**2)) * np.array([-1.0, 0.2, 0.7])
+    got = azimuth.gathered_along(atmosphere, TINY, gathered, TINY, h0, mu_v, mu_s, nu)
+    expected = reference._gathered_along(atmosphere, TINY, gathered[0], TINY, h0, mu_v, mu_s, nu)
+    assert_allclose(got, expected, rtol=1e-13, atol=0)
+
+
+@pytest.mark.parametrize("value", [-1, 65, 1.5, "2", True])
+def test_harmonics_validated(value):
+    with pytest.raises(ParameterError, match="azimuth_harmonics"):
+        azimuth.azimuth_nodes(value)
+
+
+def test_settings_validated():
+    with pytest.raises(ParameterError, match="azimuth_harmonics"):
+        TableSettings(azimuth_harmonics=2)                  # mode atmosphere-plus
+    for value in (-1, 65, 1.5, "2"):
+        with pytest.raises(ParameterError, match="azimuth_harmonics"):
+            TableSettings(mode="physical", azimuth_harmonics=value)
+
+
+def test_backend_validated(atmosphere):
+    with pytest.raises(ParameterError, match="backend"):
+        azimuth.compute_orders(atmosphere, TINY, backend="cuda")
+
+
+# Kernels against their twins (float64; tolerances of conftest.TOLERANCES: the same formulas at the same
+# nodes, differing by summation order and FMA contraction) ------------------------------------------
+
+KERNEL_GRID = TableSettings(size=(9, 17, 7), mode="physical", orders=3, gather_theta_steps=32, gather_phi_steps=16,
+                            sun_cos_range=(-0.3, 0.4), azimuth_harmonics=2)
+
+
+def _assert_per_channel(actual, desired, tolerance, label):
+    assert np.all(np.isfinite(actual))
+    for c in range(desired.shape[-1]):
+        print(max_error_report(actual[..., c], desired[..., c], f"{label} channel {c}"))
+        assert_allclose(actual[..., c], desired[..., c], rtol=tolerance.rtol, atol=tolerance.atol(desired[..., c]),
+                        err_msg=f"{label} channel {c}")
+
+
+def test_single_at_azimuth_nodes_matches_twin(cl_context, atmosphere):
+    from clsky.single import SingleScatteringEngine
+
+    require_dtype(cl_context, "float64")
+    engine = SingleScatteringEngine(KERNEL_GRID, ctx=cl_context)
+    expected = azimuth.single_scattering_nodes(atmosphere, KERNEL_GRID)
+    for n, phi in enumerate(azimuth.azimuth_nodes(2)):
+        got = engine.compute(atmosphere, cos_azimuth=math.cos(phi))
+        _assert_per_channel(got, expected[n], TOLERANCES["float64"]["single_scattering_table"], f"node {n}")
+    # the canonical node is the 3D table's single scattering, bit for bit
+    assert np.array_equal(engine.compute(atmosphere, cos_azimuth=1.0), engine.compute(atmosphere))
+
+
+def _random_harmonics(seed, settings):
+    """Gathered harmonics (M + 1, D, H, W, 6): m = 0 positive, m >= 1 of both signs and as large, so that
+    the series goes negative at some azimuths and the clamp at 0 is exercised."""
+    width, height, depth = settings.size
+    rng = np.random.default_rng(seed)
+    gathered = rng.random((settings.azimuth_harmonics + 1, depth, height, width, 6))
+    gathered[1:] = 1.2 * (gathered[1:] - 0.5)
+    return gathered * 1e-3
+
+
+def test_scatter_at_azimuth_nodes_matches_twin(cl_context, atmosphere, dtype):
+    """Both kernel dtypes against the float64 twin (conftest.TOLERANCES' scatter: the series adds M
+    products of the same lookups, a few ulps more)."""
+    from clsky.multiple import MultipleScatteringEngine
+
+    engine = MultipleScatteringEngine(KERNEL_GRID.replace(dtype=dtype), ctx=cl_context)
+    gathered = _random_harmonics(1, KERNEL_GRID)
+    expected = azimuth.scatter_nodes(atmosphere, KERNEL_GRID, gathered)
+    padded = np.zeros(gathered.shape[:-1] + (8,), dtype=dtype)
+    padded[..., :6] = gathered
+    import pyopencl.array as cla
+    gathered_d = cla.to_device(engine.queue, padded)
+    for n, phi in enumerate(azimuth.azimuth_nodes(2)):
+        got = engine.scatter(atmosphere, gathered_d, combine_species=True, cos_azimuth=math.cos(phi)).get()
+        _assert_per_channel(got[..., :3].astype(np.float64), expected[n], TOLERANCES[dtype]["scatter"],
+                            f"scatter node {n} {dtype}")
+        assert np.all(got >= 0.0)
+
+
+@pytest.mark.parametrize("albedo", [0.0, 0.3])
+def test_orders_backends_agree(cl_context, atmosphere, albedo):
+    require_dtype(cl_context, "float64")
+    atmosphere = atmosphere.replace(ground_albedo=albedo)
+    kernel = azimuth.compute_orders(atmosphere, KERNEL_GRID, backend="opencl", ctx=cl_context)
+    twin = azimuth.compute_orders(atmosphere, KERNEL_GRID, backend="numpy")
+    assert kernel.record["orders"] == twin.record["orders"] == 3
+    for k, (a, b) in enumerate(zip(kernel.orders, twin.orders)):
+        _assert_per_channel(a, b, TOLERANCES["float64"]["orders"], f"order {k + 2}")
+    _assert_per_channel(kernel.gathered, twin.gathered, TOLERANCES["float64"]["orders"], "gathered")
+    if albedo:
+        _assert_per_channel(kernel.ground_irradiance, twin.ground_irradiance, TOLERANCES["float64"]["orders"],
+                            "ground irradiance")
+
+
+@pytest.mark.parametrize("albedo", [0.0, 0.3])
+def test_raymarch_matches_twin(cl_context, atmosphere, albedo):
+    """SkyRenderer.render_raymarch of a table with harmonics against reference.render_raymarch (single,
+    and the ground) plus azimuth.raymarch_higher_orders, sun 3 deg below the horizon, views all around."""
+    atmosphere = atmosphere.replace(ground_albedo=albedo)
+    from clsky import ScatteringTable
+    from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
+
+    require_dtype(cl_context, "float64")
+    table = ScatteringTable.build(atmosphere, KERNEL_GRID, ctx=cl_context)
+    assert table.gathered.shape == (3,) + KERNEL_GRID.size[::-1] + (6,)
+    ray = RAYMARCH_DEFAULTS.replace(view_steps=24, sun_steps=24)
+    azimuths = np.radians(np.arange(0, 360, 30))
+    elevations = np.radians([-5.0, 1.0, 4.0, 20.0, 60.0])
+    a, e = np.meshgrid(azimuths, elevations)
+    directions = np.stack([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)], axis=-1)
+    sun = np.array([math.cos(math.radians(-3.0)), 0.0, math.sin(math.radians(-3.0))])
+    with SkyRenderer(table, ray, ctx=cl_context) as renderer:
+        got = renderer.render_raymarch(directions, sun, 100.0)
+    disc = np.zeros(3)
+    expected = (reference.render_raymarch(atmosphere, ray, directions, sun, 100.0, disc, 2.0,
+                                          grid_settings=table.settings, ground_irradiance=table.ground_irradiance)
+                + azimuth.raymarch_higher_orders(atmosphere, ray, table.gathered, table.settings, directions, sun, 100.0))
+    _assert_per_channel(got, expected, TOLERANCES["float64"]["scatter"], "ray march")
+
+
+def test_table_file_round_trip_keeps_the_harmonics(cl_context, atmosphere, tmp_path):
+    """A table with azimuth harmonics saves and loads its (M + 1, D, H, W, 6) gathered harmonics and its
+    setting; a gathered array of the wrong shape is refused."""
+    from clsky import ScatteringTable
+    from clsky.table import TableFormatError
+
+    require_dtype(cl_context, "float64")
+    table = ScatteringTable.build(atmosphere, KERNEL_GRID, ctx=cl_context)
+    table.save(tmp_path / "t.npz")
+    loaded = ScatteringTable.load(tmp_path / "t.npz")
+    assert loaded.settings.azimuth_harmonics == 2
+    assert_allclose(loaded.gathered, table.gathered, rtol=1e-6, atol=0)   # float32 storage at most
+    with pytest.raises(TableFormatError, match="gathered"):
+        ScatteringTable(table.atmosphere, table.settings, table.data, table.metadata, table.orders,
+                        table.orders_record, table.gathered[0], None)
