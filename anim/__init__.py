@@ -1,4 +1,6 @@
-"""anim: frames and animations of clsky skies (cameras, sun paths, rendering, writers).
+"""clsky.anim: frames and animations of clsky skies (cameras, sun paths, rendering, writers).
 
-``anim`` imports ``clsky``; ``clsky`` never imports ``anim``.
+The repository keeps this package in the top-level ``anim/`` folder; it installs as ``clsky.anim``
+(pyproject's package-dir), so nothing outside the ``clsky`` name lands in site-packages.
+``clsky.anim`` imports the core (``clsky``, ``clsky.render``, ...); the core never imports ``clsky.anim``.
 """

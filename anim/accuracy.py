@@ -7,7 +7,7 @@ render) and compared, frame by frame, with a *reference*: the 'reference' qualit
 whose sun axis covers only the sun angles that frame needs (:func:`clsky.planner.sun_axis`) with nodes
 every 0.002 in w. Frames: an all-sky fisheye from the ground at four sun elevations (day, golden hour,
 sunset, civil twilight). Errors: the 95th percentile of the relative HDR luminance error and the mean
-CIELAB Delta E (:func:`anim.metrics.compare_frames`), worst over the four frames.
+CIELAB Delta E (:func:`clsky.anim.metrics.compare_frames`), worst over the four frames.
 
 How far the reference has converged is measured by doubling each group of its counts in turn
 (:func:`reference_convergence`, :data:`REFERENCE_GROUPS`), frame by frame: errors below the sum of

@@ -1,9 +1,9 @@
-"""The plots of the speed/accuracy sweep (:mod:`anim.accuracy`): the Pareto plot and error versus sun elevation.
+"""The plots of the speed/accuracy sweep (:mod:`clsky.anim.accuracy`): the Pareto plot and error versus sun elevation.
 
-Both read the sweep's rows (:func:`anim.accuracy.measure`, or its CSV through :func:`read_csv`):
+Both read the sweep's rows (:func:`clsky.anim.accuracy.measure`, or its CSV through :func:`read_csv`):
 
 - :func:`pareto_plot`: error against render time (log-log), one panel for the worst of the frames and one
-  per sun elevation (:data:`anim.accuracy.SUN_ELEVATIONS`). Only the candidates on each panel's Pareto
+  per sun elevation (:data:`clsky.anim.accuracy.SUN_ELEVATIONS`). Only the candidates on each panel's Pareto
   front carry a text label, stacked so that no two labels overlap (:func:`stack_labels`) and tied to
   their points by a leader line; every other candidate is an unlabelled marker whose colour and shape
   name its knob in the legend (the numbers of each: the README's table, or the CSV).
@@ -53,7 +53,7 @@ def _pyplot():
 
 
 def read_csv(path):
-    """The rows of a sweep's CSV (:func:`anim.writers.write_csv` of :func:`anim.accuracy.measure`): a list
+    """The rows of a sweep's CSV (:func:`clsky.anim.writers.write_csv` of :func:`clsky.anim.accuracy.measure`): a list
     of dicts, numbers as float. Raises ValueError naming the file and column when a number does not parse
     or a column the plots need (render time, worst and per-elevation errors) is missing."""
     with open(path, newline="", encoding="utf-8") as stream:

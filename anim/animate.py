@@ -1,14 +1,14 @@
 """Sunrise-to-sunset animations: render every frame by table lookup and by ray march, compare, write.
 
-The pipeline, one frame at a time: sun position (:mod:`anim.sunpath`) -> HDR frames
-(:class:`clsky.render.SkyRenderer`, for the camera of :mod:`anim.cameras`; for every preset but
+The pipeline, one frame at a time: sun position (:mod:`clsky.anim.sunpath`) -> HDR frames
+(:class:`clsky.render.SkyRenderer`, for the camera of :mod:`clsky.anim.cameras`; for every preset but
 atmosphere-plus in absolute units, converted to linear sRGB in cd/m^2 by :mod:`clsky.colorimetry`) -> display values
-(:mod:`anim.display`: white balance, exposure, tone curve, sRGB) -> metrics, error image and composite (:mod:`anim.metrics`) -> files
-(:mod:`anim.writers`). The renderers never see files; the writers never see physics.
+(:mod:`clsky.anim.display`: white balance, exposure, tone curve, sRGB) -> metrics, error image and composite (:mod:`clsky.anim.metrics`) -> files
+(:mod:`clsky.anim.writers`). The renderers never see files; the writers never see physics.
 
 Example
 -------
->>> from anim.animate import AnimationConfig, render_animation
+>>> from clsky.anim.animate import AnimationConfig, render_animation
 >>> result = render_animation(AnimationConfig(frames=4, size=32, output="sky.mp4"))   # doctest: +SKIP
 >>> result.summary                                                                     # doctest: +SKIP
 """
@@ -120,11 +120,11 @@ class AnimationConfig:
         (EV 0 is the old multiplier 1; the old ``exposure=x`` is ``log2(x)``). With ``auto_exposure``,
         a compensation added to the metered EV.
     tone_map : str or None
-        Tone curve (:data:`anim.display.TONE_CURVES`); None (default): ``'atmosphere-plus'`` (the notes'
+        Tone curve (:data:`clsky.anim.display.TONE_CURVES`); None (default): ``'atmosphere-plus'`` (the notes'
         curve, frames bit for bit as before) for the atmosphere-plus preset, else
-        :data:`anim.display.DEFAULT_TONE_MAP`.
+        :data:`clsky.anim.display.DEFAULT_TONE_MAP`.
     auto_exposure : bool or None
-        Meter each frame's luminance, smoothed over time (:class:`anim.display.AutoExposure`). None
+        Meter each frame's luminance, smoothed over time (:class:`clsky.anim.display.AutoExposure`). None
         (default): True for frames in absolute units (:attr:`absolute`: a fixed EV cannot show both
         the day sky, thousands of cd/m^2, and the dusk, tens), False for the atmosphere-plus preset's
         relative frames (the notes' fixed exposure, frames bit for bit as before).
@@ -151,7 +151,7 @@ class AnimationConfig:
         ``method='compare'``, the reference the lookup is compared with) or the lookup's. 'exr': an
         OpenEXR image per frame with its units, the clsky version and the sun in the header (an
         equirectangular panorama is tagged as a latitude-longitude environment map:
-        :mod:`anim.exr`); 'hdr': a Radiance RGBE image with the same header lines (:mod:`anim.rgbe`,
+        :mod:`clsky.anim.exr`); 'hdr': a Radiance RGBE image with the same header lines (:mod:`clsky.anim.rgbe`,
         8-bit mantissas); 'npy': a float32 NumPy array. None or False (default): none; True is 'npy'
         (the former flag).
     hdr_precision : {'float', 'half'}
@@ -320,7 +320,7 @@ def _date(name, value):
 
 
 def _hdr(name, value):
-    """None (or False), or a format of :attr:`anim.writers.FrameWriter.HDR_FORMATS` ('exr', 'hdr',
+    """None (or False), or a format of :attr:`clsky.anim.writers.FrameWriter.HDR_FORMATS` ('exr', 'hdr',
     'npy'); True, the former flag, is 'npy'."""
     if value is None or value is False or (isinstance(value, np.bool_) and not value):
         return None
@@ -501,7 +501,7 @@ def frame_units(config: AnimationConfig, table) -> str:
 
 
 def _hdr_attributes(config: AnimationConfig, table, sun) -> dict:
-    """The header of the EXR or RGBE frame of sun position ``sun`` (:func:`anim.exr.frame_attributes`)."""
+    """The header of the EXR or RGBE frame of sun position ``sun`` (:func:`clsky.anim.exr.frame_attributes`)."""
     from .exr import frame_attributes
 
     width, height = config.image_shape()
@@ -558,7 +558,7 @@ def render_frame(renderer: SkyRenderer, prepared, sun_direction, config: Animati
 
 
 def display(config: AnimationConfig, table) -> display_pipeline.Display:
-    """The display pipeline of the animation's frames (:class:`anim.display.Display`) for ``table`` (a
+    """The display pipeline of the animation's frames (:class:`clsky.anim.display.Display`) for ``table`` (a
     ScatteringTable, or with ``config.wavelengths`` a :class:`clsky.spectrum.SpectralTable`)."""
     auto = display_pipeline.AutoExposure() if config.auto_exposure else None
     # absolute frames are linear sRGB already (render_frame); the sun's colour is its spectrum's sRGB,
@@ -592,7 +592,7 @@ def _frame_writer(config: AnimationConfig, total_frames: int, staging=None) -> w
 
 def metadata(config: AnimationConfig) -> dict:
     """What every output of the animation carries (PNG text chunks, EXR header, metrics JSON): clsky's
-    version and the TOML scene that reproduces it (``clsky animate --scene``; :mod:`anim.scene`)."""
+    version and the TOML scene that reproduces it (``clsky animate --scene``; :mod:`clsky.anim.scene`)."""
     from . import scene
 
     return scene.output_metadata(scene.scene_text(scene.scene_values(config, "animate"), "animate"))

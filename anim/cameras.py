@@ -1,6 +1,6 @@
 """Cameras: one unit view direction per pixel, in the observer's local frame.
 
-Frame and conventions shared by every camera and by :mod:`anim.sunpath`:
+Frame and conventions shared by every camera and by :mod:`clsky.anim.sunpath`:
 
 - x = east, y = north, z = up (zenith): a right-handed East-North-Up (ENU) frame.
 - Azimuth phi is measured from north, clockwise seen from above (north 0, east 90, south 180,
@@ -16,7 +16,7 @@ the zenith ``(0, 0, 1)``, a harmless direction) and ``valid`` bool of shape ``(h
 
 Examples
 --------
->>> from anim.cameras import camera_from_name
+>>> from clsky.anim.cameras import camera_from_name
 >>> camera = camera_from_name("fisheye", 65, 65)
 >>> dirs, valid = camera.directions()
 >>> dirs.shape, valid.shape
@@ -324,7 +324,7 @@ class EquirectangularCamera(Camera):
     ``v = y / height = (90 deg - e) / 180 deg`` with v = 0 at the top row (image order, as stored
     by image files). To load the map into an engine whose equirectangular lookup puts another
     direction at u = 0.5, rotate it about the vertical so that u = 0.5 is south. This is OpenEXR's
-    latitude-longitude layout with the world axes X = east, Y = up, Z = south (:mod:`anim.exr`, which
+    latitude-longitude layout with the world axes X = east, Y = up, Z = south (:mod:`clsky.anim.exr`, which
     writes such maps; ``docs/exr.md`` gives the rotations for Blender and three.js). Every pixel is
     valid; a 2:1 aspect ratio gives square pixels at the horizon.
 

@@ -1,8 +1,8 @@
 """``clsky animate`` and ``clsky render``: the animation commands, added to clsky's command line.
 
-Thin by design: parse -> :class:`anim.animate.AnimationConfig` -> library call -> one summary line.
+Thin by design: parse -> :class:`clsky.anim.animate.AnimationConfig` -> library call -> one summary line.
 The ``clsky`` console script runs :func:`main`, which is clsky's own command line extended with
-these two commands (clsky never imports anim).
+these two commands (the core never imports clsky.anim).
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ The pipeline (issue 10, item 5), one frame at a time::
       -> tone curve (:data:`TONE_CURVES`): display-linear sRGB in [0, 1]
       -> sRGB transfer function (IEC 61966-2-1 piecewise, ``colour.cctf_encoding``) -> 8 bits
 
-``atmosphere-plus`` is the notes' curve ``(1 - exp(-x))^(1/2.2)`` (:func:`anim.tonemap.tone_map`,
+``atmosphere-plus`` is the notes' curve ``(1 - exp(-x))^(1/2.2)`` (:func:`clsky.anim.tonemap.tone_map`,
 which keeps it): with it, D65 and a fixed EV the pipeline *is* ``tone_map(frame, 2^EV)``, the same
 code and the same bits as before this module (EV 0 is exposure 1). Its power law 2.2 replaces the sRGB
 function, as in the notes.
@@ -37,10 +37,10 @@ ACES RRT + ODT). B. Ottosson, "A perceptual color space for image processing" (O
 Examples
 --------
 >>> import numpy as np
->>> from anim.display import Display
+>>> from clsky.anim.display import Display
 >>> display = Display(tone_map="atmosphere-plus")
 >>> frame = np.full((2, 2, 3), 0.5)
->>> from anim.tonemap import tone_map
+>>> from clsky.anim.tonemap import tone_map
 >>> bool((display.encode(frame, 0.0) == tone_map(frame)).all())
 True
 """
@@ -205,7 +205,7 @@ class ToneCurve:
 
 
 #: Tone curves by name (``--tone-map``). ``atmosphere-plus`` has no entry's function: the pipeline calls
-#: :func:`anim.tonemap.tone_map` for it (its own gamma 2.2 instead of the sRGB function).
+#: :func:`clsky.anim.tonemap.tone_map` for it (its own gamma 2.2 instead of the sRGB function).
 TONE_CURVES = {
     "atmosphere-plus": ToneCurve(None, False, "the notes' (1 - exp(-x))^(1/2.2) per channel"),
     "reinhard": ToneCurve(_per_channel(_reinhard), False, "x / (1 + x) per channel"),
@@ -454,5 +454,5 @@ class Display:
         return TONE_CURVES[self.tone_map].function(exposed)
 
     def to_uint8(self, frame, ev, dither=False, seed=0):
-        """8-bit display values (:func:`anim.tonemap.to_uint8` of :meth:`encode`)."""
+        """8-bit display values (:func:`clsky.anim.tonemap.to_uint8` of :meth:`encode`)."""
         return tonemap.to_uint8(self.encode(frame, ev), dither=dither, seed=seed)

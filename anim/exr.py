@@ -7,7 +7,7 @@ to it and counted in ``halfClippedPixels``). The header says what
 the numbers are and where they point (:func:`frame_attributes`):
 
 - ``software`` ("clsky X.Y.Z") and ``clskyVersion``;
-- ``radianceUnits``: the frames' units (see :func:`anim.animate.frame_units`); where they are cd/m^2
+- ``radianceUnits``: the frames' units (see :func:`clsky.anim.animate.frame_units`); where they are cd/m^2
   (spectral frames converted to linear sRGB) also the standard ``whiteLuminance`` = 1 (the luminance
   of RGB (1, 1, 1) [cd/m^2]) and ``chromaticities`` (Rec. 709 primaries, D65 white); for the table's
   three wavelengths, ``channelWavelengthsNm`` (R, G, B);
@@ -19,7 +19,7 @@ the numbers are and where they point (:func:`frame_attributes`):
 
 Orientation of the latitude-longitude maps
 ------------------------------------------
-The panorama is :class:`anim.cameras.EquirectangularCamera`'s: column ``x`` (pixel centres at
+The panorama is :class:`clsky.anim.cameras.EquirectangularCamera`'s: column ``x`` (pixel centres at
 ``x + 0.5``) looks at azimuth ``phi = 360 deg * (x + 0.5) / width`` from north, clockwise seen from above
 (the left edge is north, a quarter of the way east, the centre south, three quarters west), row ``y``
 at elevation ``90 deg - 180 deg * (y + 0.5) / height`` (the top row is the zenith, the bottom row the
@@ -85,7 +85,7 @@ ENVMAP_ORIENTATION = ("OpenEXR latlong with X=east, Y=up, Z=south (-Z=north); u 
 #: Rec. 709 / sRGB primaries and D65 white (x, y of red, green, blue, white), as OpenEXR's chromaticities.
 REC709_CHROMATICITIES = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
 
-#: Units of frames in linear sRGB luminance units (anim.animate.frame_units starts with this then).
+#: Units of frames in linear sRGB luminance units (clsky.anim.animate.frame_units starts with this then).
 LUMINANCE_UNITS = "cd/m^2"
 
 
@@ -128,7 +128,7 @@ def frame_attributes(units, camera, width, height, sun_zenith_deg, sun_azimuth_d
     Parameters
     ----------
     units : str
-        Units of the pixel values (:func:`anim.animate.frame_units`); cd/m^2 when it starts with
+        Units of the pixel values (:func:`clsky.anim.animate.frame_units`); cd/m^2 when it starts with
         ``'linear sRGB [cd/m^2]'`` or equals ``'cd/m^2'``.
     camera : str
         Camera name ('fisheye', 'perspective', 'equirectangular'); 'equirectangular' tags the file
@@ -147,7 +147,7 @@ def frame_attributes(units, camera, width, height, sun_zenith_deg, sun_azimuth_d
     dict
         Attribute name -> value, as OpenEXR.File takes them, except ``envmap``: the string
         ``'latlong'`` (:func:`save_exr` stores it as ``OpenEXR.ENVMAP_LATLONG``), so that the
-        attributes need no OpenEXR (the Radiance frames of :mod:`anim.rgbe` take them as text).
+        attributes need no OpenEXR (the Radiance frames of :mod:`clsky.anim.rgbe` take them as text).
     """
     zenith, azimuth = math.radians(sun_zenith_deg), math.radians(sun_azimuth_deg)
     sun = np.array([math.sin(zenith) * math.sin(azimuth), math.sin(zenith) * math.cos(azimuth), math.cos(zenith)])
@@ -224,7 +224,7 @@ def write_exr(path, rgb, precision="float", attributes=None, force=False, stagin
     ImportError
         The OpenEXR bindings are missing.
     FileExistsError, IsADirectoryError, FileNotFoundError, NotADirectoryError, PermissionError
-        As :func:`anim.writers.write_png`.
+        As :func:`clsky.anim.writers.write_png`.
     """
     require_openexr()
     pixels, clipped = exr_pixels(rgb, precision)
@@ -238,7 +238,7 @@ def write_exr(path, rgb, precision="float", attributes=None, force=False, stagin
 
 def save_exr(file, pixels, attributes=None):
     """Write ``pixels`` (from :func:`exr_pixels`) and ``attributes`` to ``file`` as it is, not
-    atomically: the step :func:`write_exr` and :class:`anim.writers.FrameWriter` take inside their
+    atomically: the step :func:`write_exr` and :class:`clsky.anim.writers.FrameWriter` take inside their
     temporary files."""
     OpenEXR = require_openexr()
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage, **(attributes or {})}

@@ -13,7 +13,7 @@ Colour conversions (:func:`display_to_lab`, :func:`linear_srgb_to_xyz`, :func:`x
 Examples
 --------
 >>> import numpy as np
->>> from anim.metrics import compare_frames
+>>> from clsky.anim.metrics import compare_frames
 >>> reference = np.full((4, 4, 3), 0.5)
 >>> result = compare_frames(reference, 1.1 * reference)
 >>> round(result["median_rel"], 12), round(result["max_rel"], 12)
@@ -103,7 +103,7 @@ def xyz_to_lab(xyz, white=D65_WHITE_XYZ):
 
 
 def display_to_lab(display, gamma=GAMMA):
-    """L*a*b* (D65) of gamma-encoded display values, as :func:`anim.tonemap.tone_map` returns them.
+    """L*a*b* (D65) of gamma-encoded display values, as :func:`clsky.anim.tonemap.tone_map` returns them.
 
     Decodes ``display ** gamma`` -> linear sRGB -> XYZ -> L*a*b*. The tone map's gamma is a pure
     power law of 2.2 (physics.md), so the decoding is the same power law, not the piecewise sRGB
@@ -266,7 +266,7 @@ def compare_frames(reference, test, valid=None, exposure=1.0, display=None):
         Exposure of the tone map applied to both frames for Delta E [-] (without ``display``).
     display : callable, optional
         HDR pixels (N, 3) -> display-linear sRGB in [0, 1] (N, 3): the display pipeline the frames are
-        shown with, e.g. ``lambda pixels: anim.display.Display(...).linear(pixels, ev)`` at one EV for
+        shown with, e.g. ``lambda pixels: clsky.anim.display.Display(...).linear(pixels, ev)`` at one EV for
         both frames. Default: the notes' tone map at ``exposure``, decoded with its gamma 2.2.
 
     Returns
@@ -292,7 +292,7 @@ def compare_frames(reference, test, valid=None, exposure=1.0, display=None):
     (linear interpolation).
 
     Delta E: both frames are tone mapped with the same ``exposure``
-    (:func:`anim.tonemap.tone_map`), decoded with the power law 2.2 back to linear sRGB, converted
+    (:func:`clsky.anim.tonemap.tone_map`), decoded with the power law 2.2 back to linear sRGB, converted
     to XYZ (IEC 61966-2-1, D65) and L*a*b* (D65 white), and compared with CIE76 (Euclidean
     distance; about 2.3 is just noticeable). It measures what a viewer sees: errors in saturated
     (hdr >> 1) or black pixels count little. CIEDE2000 would be a possible refinement. The display

@@ -12,7 +12,7 @@ Scan lines are written run-length encoded in Radiance's "new" format with litera
 no ambiguity with flat data), top row first (``-Y H +X W``); images narrower than 8 or wider than 32767
 pixels, which that format cannot hold, are written flat. The header holds ``FORMAT=32-bit_rle_rgbe``,
 ``SOFTWARE=`` and one ``NAME= value`` line per attribute given (units, sun, orientation: as the EXR
-header of :mod:`anim.exr`, whose orientation conventions hold here too).
+header of :mod:`clsky.anim.exr`, whose orientation conventions hold here too).
 
 References
 ----------
@@ -98,7 +98,7 @@ def _header_value(value):
 
 def save_rgbe(file, rgb, attributes=None):
     """Write ``rgb`` (H, W, 3) and ``attributes`` to ``file`` as it is, not atomically (the step inside
-    :func:`write_rgbe`'s and :class:`anim.writers.FrameWriter`'s temporary files)."""
+    :func:`write_rgbe`'s and :class:`clsky.anim.writers.FrameWriter`'s temporary files)."""
     rgbe = encode_rgbe(rgb)
     height, width = rgbe.shape[:2]
     lines = ["#?RADIANCE", "FORMAT=32-bit_rle_rgbe", f"SOFTWARE=clsky {clsky.__version__}"]
@@ -126,7 +126,7 @@ def write_rgbe(path, rgb, attributes=None, force=False, staging=None):
     rgb : array_like, shape (H, W, 3)
         Finite values >= 0, row 0 at the top.
     attributes : dict, optional
-        Header lines ``NAME= value`` (:func:`anim.exr.frame_attributes`).
+        Header lines ``NAME= value`` (:func:`clsky.anim.exr.frame_attributes`).
     force : bool
         Replace an existing file.
     staging : clsky._files.StagedWrites, optional
@@ -141,7 +141,7 @@ def write_rgbe(path, rgb, attributes=None, force=False, staging=None):
     ValueError
         A bad shape, negative or non-finite values, values above 2^127 (before anything is written).
     FileExistsError, IsADirectoryError, FileNotFoundError, NotADirectoryError, PermissionError
-        As :func:`anim.writers.write_png`.
+        As :func:`clsky.anim.writers.write_png`.
     """
     encode_rgbe(rgb)                                     # refuse bad values before the temporary exists
     path = pathlib.Path(path)

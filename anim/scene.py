@@ -10,7 +10,7 @@ A scene holds what a command line of ``clsky animate`` or ``clsky render`` sets,
     [display] tone_map, exposure, auto_exposure, white_balance, dither
     [output]  output; animate: fps, hdr, hdr_precision
 
-Its keys are :class:`anim.animate.AnimationConfig`'s field names (``sun_elevation_deg`` and
+Its keys are :class:`clsky.anim.animate.AnimationConfig`'s field names (``sun_elevation_deg`` and
 ``sun_azimuth_deg`` are ``clsky render``'s sun), with the same units and ranges. :data:`SCENE_KEYS` is
 the one mapping of a key to its section and to the command-line option that sets it (its argparse
 ``dest``); the option's name, type and choices come from the parser itself, and the ranges from

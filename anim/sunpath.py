@@ -1,12 +1,12 @@
 """Sun positions for animations: a synthetic sunrise-to-sunset sweep, or the real sun from pvlib.
 
-Angles follow :mod:`anim.cameras`: zenith angle from the zenith, azimuth from north clockwise seen
+Angles follow :mod:`clsky.anim.cameras`: zenith angle from the zenith, azimuth from north clockwise seen
 from above (east = 90 deg), both in degrees. Positions are geometric (no atmospheric refraction):
 clsky's atmosphere has no refraction, so the sun is drawn where it geometrically is.
 
 Examples
 --------
->>> from anim.sunpath import sweep
+>>> from clsky.anim.sunpath import sweep
 >>> path = sweep(frames=5, start_elevation_deg=0.0, max_elevation_deg=60.0)
 >>> [round(p.elevation_deg, 6) for p in path]
 [0.0, 42.426407, 60.0, 42.426407, 0.0]

@@ -11,7 +11,7 @@ applied to each of r, g, b. The incident light I_I of clsky already contains the
 Examples
 --------
 >>> import numpy as np
->>> from anim.tonemap import tone_map, to_uint8, luminance
+>>> from clsky.anim.tonemap import tone_map, to_uint8, luminance
 >>> [round(float(v), 5) for v in tone_map(np.array([0.0, 1.0, 100.0]))]
 [0.0, 0.81181, 1.0]
 >>> to_uint8(np.array([0.0, 0.5, 1.0]))

@@ -15,7 +15,7 @@ in the ``anim`` extra of clsky), imported only when an MP4 or EXR frames are req
 Examples
 --------
 >>> import numpy as np, tempfile, os
->>> from anim.writers import FrameWriter
+>>> from clsky.anim.writers import FrameWriter
 >>> directory = tempfile.mkdtemp()
 >>> with FrameWriter(directory=directory, total_frames=2) as writer:
 ...     for index in range(2):
@@ -98,7 +98,7 @@ def write_png(path, image_u8, force=False, staging=None, text=None):
         Stage the file in this set: it lands when the set commits.
     text : dict of str, optional
         PNG text chunks {keyword: text} (iTXt, UTF-8): the scene and clsky's version of a rendered
-        frame (:func:`anim.scene.output_metadata`); read back by Pillow's ``Image.open(path).text``.
+        frame (:func:`clsky.anim.scene.output_metadata`); read back by Pillow's ``Image.open(path).text``.
 
     Returns
     -------
@@ -235,8 +235,8 @@ class FrameWriter:
         bounds the indices.
     hdr : {None, 'exr', 'hdr', 'npy'}
         Also store each frame's HDR values in ``directory``: 'exr', an OpenEXR image
-        ``<prefix>_<index>.exr`` (:func:`anim.exr.write_exr`, with the header attributes given to
-        :meth:`write`); 'hdr', a Radiance RGBE image ``<prefix>_<index>.hdr`` (:mod:`anim.rgbe`, 8-bit
+        ``<prefix>_<index>.exr`` (:func:`clsky.anim.exr.write_exr`, with the header attributes given to
+        :meth:`write`); 'hdr', a Radiance RGBE image ``<prefix>_<index>.hdr`` (:mod:`clsky.anim.rgbe`, 8-bit
         mantissas, the same attributes as header lines); 'npy', a float32 NumPy array
         ``<prefix>_<index>.npy``.
     hdr_precision : {'float', 'half'}
@@ -503,9 +503,9 @@ class FrameWriter:
             required); ignored otherwise. Its shape need not be the display's (a display frame may be
             a composite of several renders), but it is the same for every frame. EXR frames must be
             finite (ValueError before anything of the frame is written); with
-            ``hdr_precision='half'``, values above 65504 are clipped to it (:func:`anim.exr.exr_pixels`).
+            ``hdr_precision='half'``, values above 65504 are clipped to it (:func:`clsky.anim.exr.exr_pixels`).
         hdr_attributes : dict, optional
-            Header attributes of this frame (:func:`anim.exr.frame_attributes`) for EXR and RGBE
+            Header attributes of this frame (:func:`clsky.anim.exr.frame_attributes`) for EXR and RGBE
             frames; ignored with 'npy'.
 
         Returns

@@ -37,7 +37,7 @@ import numpy as np
 from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
 
 import clsky
-from anim import accuracy, accuracy_plot, writers
+from clsky.anim import accuracy, accuracy_plot, writers
 from clsky._cl import default_device, describe_device
 
 DOCS = pathlib.Path(__file__).resolve().parent.parent / "docs"

@@ -31,13 +31,13 @@ import numpy as np
 
 from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
 
-from anim import metrics, writers
-from anim.animate import (AnimationConfig, _camera, display, display_frames, make_renderer, plan_animation,
+from clsky.anim import metrics, writers
+from clsky.anim.animate import (AnimationConfig, _camera, display, display_frames, make_renderer, plan_animation,
                           ray_settings, render_frame)
-from anim.display import Display
+from clsky.anim.display import Display
 from clsky.render import SkyRenderer
-from anim.cameras import sun_direction
-from anim.sunpath import SunPosition
+from clsky.anim.cameras import sun_direction
+from clsky.anim.sunpath import SunPosition
 
 #: The dusk of the issue: the sun 3 deg below the horizon, in the south.
 SUN_ELEVATION_DEG, SUN_AZIMUTH_DEG = -3.0, 180.0

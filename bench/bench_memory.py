@@ -74,7 +74,7 @@ def with_overrides(arguments, args):
 
 def peak_rss(arguments, output):
     """(exit status, peak RSS [bytes], seconds) of ``clsky ARGUMENTS -o OUTPUT`` in a fresh process."""
-    command = [sys.executable, "-c", _WRAPPER, sys.executable, "-m", "anim", *arguments, "-o", output]
+    command = [sys.executable, "-c", _WRAPPER, sys.executable, "-m", "clsky.anim", *arguments, "-o", output]
     start = time.perf_counter()
     result = subprocess.run(command, capture_output=True, text=True, check=True)
     seconds = time.perf_counter() - start
@@ -84,8 +84,8 @@ def peak_rss(arguments, output):
 
 def estimate(arguments):
     """The estimated peak [bytes] of a case (arrays + :data:`BASE_PROCESS_BYTES`), and its table size."""
-    from anim import cli as anim_cli
-    from anim.animate import memory_estimate, sun_positions
+    from clsky.anim import cli as anim_cli
+    from clsky.anim.animate import memory_estimate, sun_positions
     from clsky import cli
 
     parser, _ = cli.build_parser(extensions=(anim_cli.register,))

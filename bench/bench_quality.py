@@ -13,7 +13,7 @@ Writes the README sections "quality" and "plan", and docs/quality.csv.
 Usage: python bench/bench_quality.py [--size 64] [--groups GROUP ...] [--reference-cache FILE] [--no-readme]
 [--docs DIR] [--smoke]
 
-``--groups`` names the reference's count groups to double (anim.accuracy.REFERENCE_GROUPS; default all;
+``--groups`` names the reference's count groups to double (clsky.anim.accuracy.REFERENCE_GROUPS; default all;
 each costs a rebuild of the four reference tables, 5 to 15 min); ``--reference-cache FILE`` keeps the
 reference frames and their convergence in an .npz, read back by later runs (and by
 bench/bench_accuracy.py) instead of being computed again.
@@ -40,8 +40,8 @@ import numpy as np
 from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
 
 import clsky
-from anim import accuracy, animate, metrics, writers
-from anim.cameras import FisheyeCamera
+from clsky.anim import accuracy, animate, metrics, writers
+from clsky.anim.cameras import FisheyeCamera
 from clsky._cl import default_device, describe_device
 from clsky.planner import Scene, plan_scene
 from clsky.quality import QUALITY_LEVELS

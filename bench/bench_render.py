@@ -23,7 +23,7 @@ import time
 from _report import SMOKE, add_output_arguments, best_of, machine, parse_arguments, write_readme_section
 
 import clsky
-from anim.cameras import FisheyeCamera, sun_direction
+from clsky.anim.cameras import FisheyeCamera, sun_direction
 from clsky._cl import describe_device
 from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
 
@@ -34,7 +34,7 @@ def main():
     parser.add_argument("--skip-animation", action="store_true")
     add_output_arguments(parser)
     args = parse_arguments(parser)
-    sizes, animate = (1024, 512), [sys.executable, "-m", "anim", "animate", "--progress", "none"]
+    sizes, animate = (1024, 512), [sys.executable, "-m", "clsky.anim", "animate", "--progress", "none"]
     settings = clsky.TableSettings(mode="physical")
     if args.smoke:
         args.repeat, sizes = SMOKE.repeat, (SMOKE.frame, SMOKE.frame)

@@ -35,7 +35,7 @@ import numpy as np
 from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
 
 import clsky
-from anim.cameras import FisheyeCamera, sun_direction
+from clsky.anim.cameras import FisheyeCamera, sun_direction
 from clsky import colorimetry, spectrum
 from clsky._cl import describe_device, make_context
 from clsky.render import SkyRenderer

@@ -17,7 +17,7 @@ chromaticities (:func:`rgb_to_xyz_matrix`), and :data:`XYZ_TO_SRGB` is its inver
 printed in IEC 61966-2-1 (colour-science's ``RGB_COLOURSPACE_sRGB`` carries them) differ from them by
 up to 5e-5 and are not exact inverses of each other. The chromaticity-derived one is kept because the
 atmosphere-plus preset's pinned metrics (tests/test_display.py: its Delta E, bit for bit) were written
-with it. The one other set of sRGB numbers is :data:`anim.tonemap.REC709_LUMINANCE_WEIGHTS`, BT.709's
+with it. The one other set of sRGB numbers is :data:`clsky.anim.tonemap.REC709_LUMINANCE_WEIGHTS`, BT.709's
 printed Y row (0.2126, 0.7152, 0.0722), 4e-5 from this matrix's: the relative luminance errors of the
 same pinned metrics were written with it, so it stays.
 

@@ -4,7 +4,7 @@
   every member's checksum, the parameters hash, shapes, dtypes and values first; then its grid, dtype,
   size in memory and on disk, units, atmosphere, settings, orders record and provenance.
 - A PNG frame: its size and the text chunks clsky writes (clsky_version, the TOML scene;
-  :mod:`anim.scene`), read with Pillow.
+  :mod:`clsky.anim.scene`), read with Pillow.
 - A metrics JSON (``<stem>_metrics.json``): the version, the scene, the frames and the table's units.
 - An EXR frame (``clsky animate --hdr exr``): its size, channels and header (units, orientation of an
   environment map, the scene and clsky's version), read with the OpenEXR bindings.

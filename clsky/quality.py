@@ -1,7 +1,7 @@
 """Named quality levels: table and ray-march settings for an error budget (``--quality``).
 
 Each level is a promise about rendered frames: the 95th percentile of the relative HDR luminance error
-of ray-marched frames, against the reference of :mod:`anim.accuracy`, on an all-sky fisheye from the
+of ray-marched frames, against the reference of :mod:`clsky.anim.accuracy`, on an all-sky fisheye from the
 ground at four sun elevations (day, golden hour, sunset, civil twilight). The numbers come from
 ``bench/bench_quality.py`` and ``bench/bench_accuracy.py`` (README "Quality levels" and "Speed versus
 accuracy"); ``tests/test_quality.py`` checks each level at a reduced size.

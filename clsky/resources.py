@@ -363,7 +363,7 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
     image_shape : (width, height)
         Pixels of a frame (0 x 0: the renderer's table upload only).
     method : {'compare', 'lut', 'raymarch'}
-        What each frame renders (:mod:`anim.animate`).
+        What each frame renders (:mod:`clsky.anim.animate`).
     ray_settings : TableSettings, optional
         The ray march's quadrature (its transmittance table); default :data:`clsky.render.RAYMARCH_DEFAULTS`.
     keep_orders : bool

@@ -165,7 +165,7 @@ def stand_in_reference(cl_context):
     """The accuracy reference's four 24 x 24 fisheye frames and valid mask (anim/accuracy.py), rendered at
     the 'default' quality level (1 %) as a cheap stand-in for the 'reference' level (minutes to build);
     shared by tests/test_accuracy.py and tests/test_quality.py."""
-    from anim import accuracy
+    from clsky.anim import accuracy
 
     return accuracy.render_reference(size=24, level="default")
 

@@ -7,7 +7,7 @@ import sys
 import numpy as np
 import pytest
 
-from anim import accuracy
+from clsky.anim import accuracy
 
 
 def test_pareto_front_keeps_only_undominated_rows():
@@ -52,7 +52,7 @@ def test_measure_on_tiny_frames(stand_in_reference):
                                         (["--elevation-plot", "x.jpg"], "--elevation-plot"),
                                         (["--elevation-plot", "accuracy.png"], "--elevation-plot")])
 def test_bench_accuracy_bad_arguments(tmp_path, args, named):
-    result = subprocess.run([sys.executable, "-m", "anim", "bench", "accuracy", *args], cwd=tmp_path,
+    result = subprocess.run([sys.executable, "-m", "clsky.anim", "bench", "accuracy", *args], cwd=tmp_path,
                             capture_output=True, text=True)
     assert result.returncode == 2
     assert result.stderr.count("\n") == 1 and named in result.stderr
@@ -62,7 +62,7 @@ def test_bench_accuracy_checks_the_derived_elevation_plot_before_work(tmp_path):
     """--elevation-plot defaults to <--plot stem>_elevation.png; an existing one stops the run at once
     (before the minutes of the sweep), naming the option, and nothing else is written."""
     (tmp_path / "sky_elevation.png").write_bytes(b"kept")
-    result = subprocess.run([sys.executable, "-m", "anim", "bench", "accuracy", "--plot", "sky.png"], cwd=tmp_path,
+    result = subprocess.run([sys.executable, "-m", "clsky.anim", "bench", "accuracy", "--plot", "sky.png"], cwd=tmp_path,
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 2
     assert result.stderr.startswith("clsky: error: --elevation-plot") and "sky_elevation.png exists" in result.stderr
@@ -73,7 +73,7 @@ def test_bench_accuracy_checks_the_derived_elevation_plot_before_work(tmp_path):
 @pytest.mark.slow
 def test_bench_accuracy_quick_run_writes_csv_and_plot(tmp_path):
     pytest.importorskip("matplotlib")
-    result = subprocess.run([sys.executable, "-m", "anim", "bench", "accuracy", "--quick", "--size", "16",
+    result = subprocess.run([sys.executable, "-m", "clsky.anim", "bench", "accuracy", "--quick", "--size", "16",
                              "--reference-quality", "default", "--progress", "none"], cwd=tmp_path,
                             capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
@@ -115,7 +115,7 @@ def test_front_of_the_synthetic_rows():
 
 
 def test_stack_labels_least_squares_with_gaps():
-    from anim.accuracy_plot import stack_labels
+    from clsky.anim.accuracy_plot import stack_labels
 
     # two at 0.5, gap 0.1: 0.45 and 0.55 (centred, least squares); apart already: unchanged
     np.testing.assert_allclose(stack_labels([0.5, 0.5], 0.1), [0.45, 0.55], rtol=0, atol=1e-12)
@@ -133,7 +133,7 @@ def test_pareto_figure_labels_only_the_front():
 
     from matplotlib.text import Text
 
-    from anim.accuracy_plot import draw_pareto
+    from clsky.anim.accuracy_plot import draw_pareto
 
     rows = synthetic_rows()
     figure = draw_pareto(rows, size=32)
@@ -169,7 +169,7 @@ def test_worst_frame_front_labels_do_not_overlap_in_a_tie():
 
     from matplotlib.text import Text
 
-    from anim.accuracy_plot import draw_pareto
+    from clsky.anim.accuracy_plot import draw_pareto
 
     rows = synthetic_rows()
     rows[1].update(render_s=1.001e-3, p95_rel=0.4999)            # 'cluster a' joins the front beside 'fast'
@@ -188,7 +188,7 @@ def test_elevation_figure_has_one_line_per_front_candidate():
     pytest.importorskip("matplotlib")
     import matplotlib.pyplot as plt
 
-    from anim.accuracy_plot import draw_elevation
+    from clsky.anim.accuracy_plot import draw_elevation
 
     rows = synthetic_rows()
     figure = draw_elevation(rows)
@@ -213,8 +213,8 @@ def test_elevation_figure_has_one_line_per_front_candidate():
 
 def test_plots_from_a_csv_are_written_atomically(tmp_path):
     pytest.importorskip("matplotlib")
-    from anim import writers
-    from anim.accuracy_plot import plot_csv, read_csv
+    from clsky.anim import writers
+    from clsky.anim.accuracy_plot import plot_csv, read_csv
 
     rows = synthetic_rows()
     writers.write_csv(tmp_path / "sweep.csv", rows)
@@ -233,7 +233,7 @@ def test_plots_from_a_csv_are_written_atomically(tmp_path):
 
 
 def test_read_csv_names_a_bad_cell(tmp_path):
-    from anim.accuracy_plot import read_csv
+    from clsky.anim.accuracy_plot import read_csv
 
     path = tmp_path / "sweep.csv"
     path.write_text("candidate,knob,method,render_s,p95_rel,p95_rel day\nx,k,lut,1e-3,0.1,0.01\n")
@@ -251,7 +251,7 @@ def test_a_zero_error_is_named_not_drawn_on_the_log_axes():
     pytest.importorskip("matplotlib")
     import matplotlib.pyplot as plt
 
-    from anim.accuracy_plot import draw_elevation, draw_pareto
+    from clsky.anim.accuracy_plot import draw_elevation, draw_pareto
 
     rows = synthetic_rows()
     rows[6]["p95_rel day"] = 0.0                                   # 'slow' matches the reference by day

@@ -1,4 +1,4 @@
-"""anim.cameras: per-pixel view directions of the fisheye, perspective and equirectangular cameras.
+"""clsky.anim.cameras: per-pixel view directions of the fisheye, perspective and equirectangular cameras.
 
 Frame: x = east, y = north, z = up; azimuth from north clockwise (east = 90 deg); row 0 at the top.
 Angles are measured with atan2 (never arccos near 1, which loses half the digits), so tolerances of
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from anim.cameras import (CAMERAS, Camera, EquirectangularCamera, FisheyeCamera, PerspectiveCamera,
+from clsky.anim.cameras import (CAMERAS, Camera, EquirectangularCamera, FisheyeCamera, PerspectiveCamera,
                           camera_from_name, sun_direction)
 
 #: Direction arithmetic is a handful of float64 sin/cos/products: a few ulps (~1e-16) of error.

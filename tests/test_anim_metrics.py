@@ -1,4 +1,4 @@
-"""anim.tonemap and anim.metrics: tone map, dither, frame comparison, colour science, images."""
+"""clsky.anim.tonemap and clsky.anim.metrics: tone map, dither, frame comparison, colour science, images."""
 
 from __future__ import annotations
 
@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from anim.metrics import (BLACK_FRAME_FLOOR, D65_WHITE_XYZ, INVALID_COLOUR, SRGB_TO_XYZ, colormap_viridis,
+from clsky.anim.metrics import (BLACK_FRAME_FLOOR, D65_WHITE_XYZ, INVALID_COLOUR, SRGB_TO_XYZ, colormap_viridis,
                           compare_frames, composite, delta_e_cie76, display_floor, display_to_lab,
                           error_image, frame_changes, linear_srgb_to_xyz, relative_error_map,
                           temporal_jumps, xyz_to_lab)
-from anim.tonemap import luminance, to_uint8, tone_map
+from clsky.anim.tonemap import luminance, to_uint8, tone_map
 
 
 def _sky(height=24, width=32, seed=1):

@@ -1,4 +1,4 @@
-"""anim.sunpath: the synthetic sunrise-to-sunset sweep and the real sun from pvlib's NREL SPA."""
+"""clsky.anim.sunpath: the synthetic sunrise-to-sunset sweep and the real sun from pvlib's NREL SPA."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from anim.cameras import sun_direction
-from anim.sunpath import MAX_POSITIONS, SunPosition, real_positions, sweep
+from clsky.anim.cameras import sun_direction
+from clsky.anim.sunpath import MAX_POSITIONS, SunPosition, real_positions, sweep
 
 UTC = datetime.timezone.utc
 

@@ -1,4 +1,4 @@
-"""anim.writers: atomic, never-overwriting PNG frames, HDR frames, MP4, PNG, JSON and CSV."""
+"""clsky.anim.writers: atomic, never-overwriting PNG frames, HDR frames, MP4, PNG, JSON and CSV."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import pytest
 from numpy.testing import assert_array_equal
 from PIL import Image
 
-from anim.writers import FrameWriter, write_csv, write_json, write_png
+from clsky.anim.writers import FrameWriter, write_csv, write_json, write_png
 
 try:
     import imageio.v3 as imageio_v3

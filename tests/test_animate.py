@@ -17,13 +17,13 @@ import sys
 import numpy as np
 import pytest
 
-from anim import metrics
-from anim.animate import AnimationConfig, render_animation
+from clsky.anim import metrics
+from clsky.anim.animate import AnimationConfig, render_animation
 
 imageio_v3 = pytest.importorskip("imageio.v3")
 
 TINY = dict(size=32, table_size=(9, 33, 7))
-#: metric columns of a 'compare' run (anim.metrics.compare_frames plus the temporal excess)
+#: metric columns of a 'compare' run (clsky.anim.metrics.compare_frames plus the temporal excess)
 METRIC_COLUMNS = ("rmse", "median_rel", "p95_rel", "max_rel", "mean_delta_e", "temporal_excess_jump")
 
 
@@ -123,7 +123,7 @@ def test_rerun_without_force_refuses_and_touches_nothing(tmp_path, cl_context):
 # 2. The command line ------------------------------------------------------------------------------
 
 def clsky(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "anim", *args], cwd=cwd, capture_output=True, text=True)
+    return subprocess.run([sys.executable, "-m", "clsky.anim", *args], cwd=cwd, capture_output=True, text=True)
 
 
 SMALL_ARGS = ("--size", "32", "--table-size", "9", "33", "7")

@@ -6,7 +6,7 @@ import datetime
 import numpy as np
 import pytest
 
-from anim.animate import AnimationConfig, quality
+from clsky.anim.animate import AnimationConfig, quality
 from clsky import AtmosphereParameters, ScatteringTable, TableSettings
 from clsky.errors import ParameterError
 from clsky.planner import Scene

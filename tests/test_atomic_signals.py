@@ -26,7 +26,7 @@ import pytest
 from clsky import _files
 from clsky._files import StagedWrites, atomic_write
 from clsky.cli import Interrupted, signals_interrupt
-from anim.writers import FrameWriter
+from clsky.anim.writers import FrameWriter
 
 imageio_v3 = pytest.importorskip("imageio.v3")
 pytest.importorskip("imageio_ffmpeg")
@@ -145,7 +145,7 @@ def default_signals():
 
 
 def clsky_process(*args, cwd, script=None, **kwargs):
-    command = [sys.executable, "-m", "anim"] if script is None else [sys.executable, str(script)]
+    command = [sys.executable, "-m", "clsky.anim"] if script is None else [sys.executable, str(script)]
     return subprocess.Popen([*command, *args], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, preexec_fn=default_signals, **kwargs)
 
@@ -236,20 +236,20 @@ def slow_savez(*args, **kwargs):                     # the table file half done:
     savez(*args, **kwargs)
     time.sleep(60)
 np.savez = slow_savez
-from anim.cli import main
+from clsky.anim.cli import main
 sys.exit(main(sys.argv[1:]))
 """
 
 SLOW_FRAMES = """
 import sys, time
-from anim import writers
+from clsky.anim import writers
 write = writers.FrameWriter.write
 def slow_write(self, *args, **kwargs):               # a long animation: frames and MP4 half done
     written = write(self, *args, **kwargs)
     time.sleep(0.5)
     return written
 writers.FrameWriter.write = slow_write
-from anim.cli import main
+from clsky.anim.cli import main
 sys.exit(main(sys.argv[1:]))
 """
 

@@ -1,7 +1,7 @@
 """The colour-true display (anim/display.py, issue 10 item 5).
 
 1. ``--tone-map atmosphere-plus`` is the notes' curve bit for bit: the same arrays as
-   :func:`anim.tonemap.tone_map` for any input, and the atmosphere-plus preset's animation frames and
+   :func:`clsky.anim.tonemap.tone_map` for any input, and the atmosphere-plus preset's animation frames and
    metrics hash to what the code before this module wrote.
 2. The chosen curve keeps the hue of saturated sky blues (Oklab) where the notes' curve turns it, and
    keeps more of their saturation; the table in the README's "Display" section is these numbers.
@@ -24,9 +24,9 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 from PIL import Image
 
-from anim import metrics, tonemap
-from anim.animate import AnimationConfig, _camera, render_animation
-from anim.display import (DEFAULT_TONE_MAP, TONE_CURVES, AutoExposure, Display, linear_srgb_to_oklab, meter_ev,
+from clsky.anim import metrics, tonemap
+from clsky.anim.animate import AnimationConfig, _camera, render_animation
+from clsky.anim.display import (DEFAULT_TONE_MAP, TONE_CURVES, AutoExposure, Display, linear_srgb_to_oklab, meter_ev,
                           smoothed_ev, srgb_encode, white_balance_matrix)
 from clsky import _cl
 from clsky.errors import ParameterError
@@ -205,7 +205,7 @@ def test_white_balance_maps_the_sun_to_d65():
     """The sun's colour becomes sRGB white of the same luminance (von Kries maps the source white
     exactly: 1e-12), both the atmosphere-plus preset's I_I taken as linear Rec. 709 and the physical
     preset's sRGB of the solar spectrum through the frames' conversion; D65 white stays white."""
-    from anim.animate import three_wavelength_frame_to_linear_srgb
+    from clsky.anim.animate import three_wavelength_frame_to_linear_srgb
     from clsky import colorimetry
     from clsky.solar import solar_irradiance_astm_g173
 
@@ -250,7 +250,7 @@ def sweep(tmp_path_factory, cl_context):
 
 
 def test_auto_exposure_sweep_is_smoother_than_the_scene(sweep):
-    """Temporal-jump metric (anim.metrics.temporal_jumps: the displayed frames' mean luminance against
+    """Temporal-jump metric (clsky.anim.metrics.temporal_jumps: the displayed frames' mean luminance against
     the scene's HDR mean): the largest jump of the display is at most 0.6 of the scene's (measured 0.43
     against 0.83, frames in cd/m^2), the mean jump at most half (0.034 against 0.088), the excess over the
     scene's jump at most 0.05 at every frame (measured +0.007, the exposure's lag after sunrise); and no flicker: the
@@ -337,7 +337,7 @@ def test_display_refuses_nan_frames_and_exposures():
     (["--exposure", "41"], "--exposure"), (["--exposure", "nan"], "--exposure"),
 ])
 def test_cli_bad_display_options_one_line_exit_2(tmp_path, args, named):
-    result = subprocess.run([sys.executable, "-m", "anim", "render", *args, "-o", "x.png"], cwd=tmp_path,
+    result = subprocess.run([sys.executable, "-m", "clsky.anim", "render", *args, "-o", "x.png"], cwd=tmp_path,
                             capture_output=True, text=True, timeout=120)
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
@@ -385,8 +385,8 @@ def physical_frame(cl_context):
     the animation converts it, and the same table rendered with the preset's relative I_I."""
     import dataclasses
 
-    from anim.animate import make_renderer, ray_settings, render_frame
-    from anim.cameras import sun_direction
+    from clsky.anim.animate import make_renderer, ray_settings, render_frame
+    from clsky.anim.cameras import sun_direction
     from clsky.render import SkyRenderer
 
     config = AnimationConfig(size=16, method="raymarch", table_size=(9, 33, 7), dither=False,
@@ -409,7 +409,7 @@ def test_physical_frame_is_the_conversion_by_hand(physical_frame):
     the sRGB function, 8 bits (within one code value where rounding meets the 1e-6), and the
     auto-exposure's first EV: log2(0.36 / log-average Y) with the 1e-3 P99 floor (2e-6 EV: Y to 1e-6
     is 1.4e-6 EV)."""
-    from anim.animate import display, display_frames
+    from clsky.anim.animate import display, display_frames
     from clsky.solar import ABSOLUTE_UNITS, solar_irradiance_astm_g173
 
     config, table, valid, hdr, notes = physical_frame
@@ -443,7 +443,7 @@ def test_physical_frames_sun_white_balance(physical_frame):
     sun's sRGB by hand (the reconstruction is exact for E_sun itself) is balanced to r = g = b (1e-6: the
     pipeline's sun is the tabulated conversion's), and it has the solar spectrum's chromaticity (x 0.3236,
     y 0.3331, README "Spectral radiance and units"; to 1e-4, the printed digits)."""
-    from anim.animate import display
+    from clsky.anim.animate import display
     from clsky.solar import solar_irradiance_astm_g173
 
     config, table, _, _, _ = physical_frame
@@ -484,8 +484,8 @@ def test_dusk_zenith_is_still_blue(cl_context):
     the zenith is blue in bench_dusk's sense, b > g > r by at least 2 % each in the linear values
     (24 px fisheye, 16 x 64 x 32 table, ray march; measured b/g 1.854, g/r 1.036; the README's
     128 px, default-quality figures are bench/bench_dusk.py's), and in the 8-bit frame."""
-    from anim.animate import display, display_frames, make_renderer, render_frame
-    from anim.cameras import sun_direction
+    from clsky.anim.animate import display, display_frames, make_renderer, render_frame
+    from clsky.anim.cameras import sun_direction
 
     config = AnimationConfig(size=24, method="raymarch", table_size=(16, 64, 32), dither=False)
     directions, valid = _camera(config).directions()

@@ -26,9 +26,9 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 import clsky
-from anim.cameras import EquirectangularCamera, sun_direction
-from anim.exr import HALF_MAX, enu_to_envmap, envmap_pixel, frame_attributes, read_exr, write_exr
-from anim.writers import FrameWriter, frame_files
+from clsky.anim.cameras import EquirectangularCamera, sun_direction
+from clsky.anim.exr import HALF_MAX, enu_to_envmap, envmap_pixel, frame_attributes, read_exr, write_exr
+from clsky.anim.writers import FrameWriter, frame_files
 
 OpenEXR = pytest.importorskip("OpenEXR", reason="the OpenEXR bindings (clsky[anim]) are not installed")
 
@@ -120,7 +120,7 @@ def test_header_attributes():
     assert pano["software"] == f"clsky {clsky.__version__}" and pano["clskyVersion"] == clsky.__version__
     assert pano["whiteLuminance"] == 1.0 and len(pano["chromaticities"]) == 8
     assert pano["sunAzimuthDeg"] == 135.0 and pano["sunElevationDeg"] == 30.0 and pano["observerAltitude"] == 250.0
-    # the ENU vector of anim.cameras.sun_direction, and the same in the map's axes (east, up, south)
+    # the ENU vector of clsky.anim.cameras.sun_direction, and the same in the map's axes (east, up, south)
     # stored as float32 (v3f, which three.js reads too): within its rounding, 2^-24 of components <= 1
     assert pano["sunDirectionENU"].dtype == np.float32 and pano["sunDirectionEnvmap"].dtype == np.float32
     assert_allclose(pano["sunDirectionENU"], sun_direction(60.0, 135.0), rtol=0, atol=6e-8)
@@ -349,7 +349,7 @@ def test_three_js_exr_loader_reads_the_frames(tmp_path):
 @pytest.fixture(scope="module")
 def panoramas(tmp_path_factory, cl_context):
     """The same small panorama animation with EXR, RGBE and .npy frames."""
-    from anim.animate import AnimationConfig, render_animation
+    from clsky.anim.animate import AnimationConfig, render_animation
 
     directory = tmp_path_factory.mktemp("panorama")
     runs = {}
@@ -381,7 +381,7 @@ def test_panorama_exr_holds_the_frames_values_and_says_what_they_are(panoramas):
 
 
 def test_panorama_rgbe_frames(panoramas):
-    from anim.rgbe import read_rgbe
+    from clsky.anim.rgbe import read_rgbe
 
     config, result = panoramas["hdr"]
     npy_config, _ = panoramas["npy"]
@@ -412,7 +412,7 @@ def test_mitsuba_loads_the_panorama(panoramas, mitsuba):
 
 
 def test_cli_hdr_exr_panorama(tmp_path):
-    result = subprocess.run([sys.executable, "-m", "anim", "animate", "--camera", "equirectangular", "--hdr", "exr",
+    result = subprocess.run([sys.executable, "-m", "clsky.anim", "animate", "--camera", "equirectangular", "--hdr", "exr",
                              "--hdr-precision", "half", "--size", "16", "--frames", "2", "--table-size", "9", "33",
                              "7", "--method", "lut", "--progress", "none", "-o", "pano.mp4"],
                             cwd=tmp_path, capture_output=True, text=True, timeout=600)
@@ -432,7 +432,7 @@ def test_cli_hdr_exr_panorama(tmp_path):
     (["--hdr", "hdr", "--hdr-precision", "half"], "--hdr-precision"),
 ], ids=lambda value: " ".join(value) if isinstance(value, list) else value)
 def test_cli_bad_hdr_options_one_line_exit_2(tmp_path, args, named):
-    result = subprocess.run([sys.executable, "-m", "anim", "animate", *args, "--progress", "none"],
+    result = subprocess.run([sys.executable, "-m", "clsky.anim", "animate", *args, "--progress", "none"],
                             cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
@@ -456,7 +456,7 @@ def test_envmap_pixel_matches_the_camera():
 # 5. Radiance RGBE ---------------------------------------------------------------------------------
 
 def test_rgbe_round_trip_within_its_mantissas(tmp_path):
-    from anim.rgbe import read_rgbe, write_rgbe
+    from clsky.anim.rgbe import read_rgbe, write_rgbe
 
     rng = np.random.default_rng(5)
     rgb = 10.0 ** rng.uniform(-12, 8, size=(9, 40, 3))          # 20 decades, channels far apart too
@@ -483,7 +483,7 @@ def test_rgbe_round_trip_within_its_mantissas(tmp_path):
 def test_mitsuba_reads_the_rgbe_bytes(tmp_path, mitsuba, width):
     """Mitsuba's Bitmap decodes each channel as byte 2^(e - 8) (Ward's rgbe2float, without Radiance's
     half step): exactly that, in float32, for every pixel in its place."""
-    from anim.rgbe import encode_rgbe, write_rgbe
+    from clsky.anim.rgbe import encode_rgbe, write_rgbe
 
     rng = np.random.default_rng(6)
     rgb = 10.0 ** rng.uniform(-6, 6, size=(7, width, 3))
@@ -498,7 +498,7 @@ def test_mitsuba_reads_the_rgbe_bytes(tmp_path, mitsuba, width):
 @pytest.mark.parametrize("bad", [np.full((2, 9, 3), -1.0), np.full((2, 9, 3), np.nan), np.full((2, 9, 3), 1e39),
                                  np.zeros((2, 9))])
 def test_rgbe_refuses_what_it_cannot_hold(tmp_path, bad):
-    from anim.rgbe import write_rgbe
+    from clsky.anim.rgbe import write_rgbe
 
     with pytest.raises(ValueError):
         write_rgbe(tmp_path / "x.hdr", bad)
@@ -506,7 +506,7 @@ def test_rgbe_refuses_what_it_cannot_hold(tmp_path, bad):
 
 
 def test_frame_writer_rgbe_frames(tmp_path):
-    from anim.rgbe import read_rgbe
+    from clsky.anim.rgbe import read_rgbe
 
     hdr = np.random.default_rng(7).uniform(0, 3, size=(8, 16, 3))
     attributes = frame_attributes("relative (incident light I_I per sr)", "fisheye", 16, 8, 70.0, 200.0)

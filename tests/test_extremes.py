@@ -37,7 +37,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 from numpy.testing import assert_allclose
 from scipy import integrate
 
-from anim.cameras import FisheyeCamera, sun_direction
+from clsky.anim.cameras import FisheyeCamera, sun_direction
 from clsky import AtmosphereParameters, ScatteringTable, TableSettings, preset, reference
 from clsky.atmosphere import MIE_PHASE_METHODS, MIN_SCALE_HEIGHT_FRACTION, RAYLEIGH_PHASE_METHODS
 from clsky.mapping import grid_coordinates

@@ -402,8 +402,8 @@ def test_cli_ground_albedo(tmp_path, capsys):
 def test_animation_config_ground_albedo(tmp_path, capsys):
     """The animation's atmosphere takes --ground-albedo; out of range or with the atmosphere-plus scheme
     it is refused naming the option (exit status 2, one line)."""
-    from anim.animate import AnimationConfig
-    from anim.cli import main as anim_main
+    from clsky.anim.animate import AnimationConfig
+    from clsky.anim.cli import main as anim_main
 
     assert AnimationConfig().atmosphere == PHYSICAL
     assert AnimationConfig(ground_albedo=0.2).atmosphere == PHYSICAL.replace(ground_albedo=0.2)

@@ -15,7 +15,7 @@ imageio = pytest.importorskip("imageio.v3")
 
 @pytest.mark.slow
 def test_default_animate_writes_a_decodable_mp4_and_png_frames(tmp_path):
-    result = subprocess.run([sys.executable, "-m", "anim", "animate", "--progress", "none"], cwd=tmp_path,
+    result = subprocess.run([sys.executable, "-m", "clsky.anim", "animate", "--progress", "none"], cwd=tmp_path,
                             capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
     lines = result.stdout.strip().splitlines()

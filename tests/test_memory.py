@@ -32,7 +32,7 @@ REFUSAL_SECONDS = 15.0
 
 def run_clsky(*arguments, cwd):
     start = time.perf_counter()
-    result = subprocess.run([sys.executable, "-m", "anim", *arguments], capture_output=True, text=True, cwd=cwd,
+    result = subprocess.run([sys.executable, "-m", "clsky.anim", *arguments], capture_output=True, text=True, cwd=cwd,
                             timeout=120)
     return result, time.perf_counter() - start
 
@@ -73,7 +73,7 @@ def test_cli_refuses_a_table_too_big(tmp_path):
 def test_cli_refuses_an_animation_table_too_big(tmp_path, table_size):
     """128 x 1024 x 256 needs 19.0 GiB (estimate): refused on the 24 GiB development machine while
     other work holds a few GiB (it was, with 11.7 GiB of PoCL global memory), skipped where it fits."""
-    from anim.animate import AnimationConfig, memory_estimate, sun_positions
+    from clsky.anim.animate import AnimationConfig, memory_estimate, sun_positions
 
     config = AnimationConfig(table_size=table_size)
     skip_if_it_fits(memory_estimate(config, sun_positions(config)))
@@ -88,8 +88,8 @@ def test_cli_refuses_an_animation_table_too_big(tmp_path, table_size):
 def test_cli_refuses_frames_too_big(tmp_path, command, camera):
     """``--size 8192``: 8192^2 (fisheye) or 16384 x 8192 (equirectangular) pixels, about 390 bytes each
     (README, Memory): 25 and 49 GiB, refused on the 24 GiB development machine; skipped where they fit."""
-    from anim.animate import AnimationConfig, memory_estimate, sun_positions
-    from anim.sunpath import SunPosition
+    from clsky.anim.animate import AnimationConfig, memory_estimate, sun_positions
+    from clsky.anim.sunpath import SunPosition
 
     output = "a.mp4" if command == "animate" else "a.png"
     config = AnimationConfig(size=8192, camera=camera)
@@ -244,7 +244,7 @@ def test_whole_estimate_matches_peak_rss(mode):
 def test_frame_estimate_matches_the_measured_slope(tmp_path):
     """Peak RSS of 2-frame animations at 256^2 and 1024^2 pixels (draft, table 16 x 64 x 16): the
     growth per pixel against the estimate's, within 25 % (the table part cancels)."""
-    from anim.animate import AnimationConfig, memory_estimate, sun_positions
+    from clsky.anim.animate import AnimationConfig, memory_estimate, sun_positions
 
     wrapper = ("import resource, subprocess, sys; subprocess.run(sys.argv[1:], check=True, capture_output=True); "
                "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024)")
@@ -252,7 +252,7 @@ def test_frame_estimate_matches_the_measured_slope(tmp_path):
     for size in (256, 1024):
         arguments = ["animate", "--frames", "2", "--size", str(size), "--quality", "draft", "--table-size", "16",
                      "64", "16", "--progress", "none", "-o", str(tmp_path / f"a{size}.mp4")]
-        result = subprocess.run([sys.executable, "-c", wrapper, sys.executable, "-m", "anim", *arguments],
+        result = subprocess.run([sys.executable, "-c", wrapper, sys.executable, "-m", "clsky.anim", *arguments],
                                 capture_output=True, text=True, check=True, timeout=600)
         peaks.append(int(result.stdout.split()[-1]))
         config = AnimationConfig(frames=2, size=size, quality="draft", table_size=(16, 64, 16))
@@ -265,7 +265,7 @@ def test_frame_estimate_matches_the_measured_slope(tmp_path):
 def test_animation_estimate_drops_the_higher_orders():
     """An animation keeps the table's data and gathered sum for its frames, not the orders (they are
     dropped once the table is built)."""
-    from anim.animate import AnimationConfig, memory_estimate, sun_positions
+    from clsky.anim.animate import AnimationConfig, memory_estimate, sun_positions
 
     config = AnimationConfig(frames=2, size=64)
     frames = memory_estimate(config, sun_positions(config)).phases[-1]
@@ -279,7 +279,7 @@ def test_spectral_animation_estimate_counts_every_batch():
     """``clsky animate --wavelengths N`` holds ceil(N / 3) tables on the host and the device and the
     batches' directions: the estimate's frames phase has 5 tables for N = 15 (the padded batch counts
     whole), and the build keeps the two first-gather stacks (physical mode)."""
-    from anim.animate import AnimationConfig, memory_estimate, sun_positions
+    from clsky.anim.animate import AnimationConfig, memory_estimate, sun_positions
 
     config = AnimationConfig(frames=2, size=64, table_size=(16, 64, 16), wavelengths=14)
     estimate = memory_estimate(config, sun_positions(config))
@@ -294,7 +294,7 @@ def test_spectral_animation_estimate_counts_every_batch():
     assert any(a.label.startswith("first-gather matrix stacks kept") and a.count == 2 for a in build.allocations)
 
 
-_SPECTRAL_PEAK = ("import re, sys, tempfile, pathlib; from anim.animate import AnimationConfig, render_animation; "
+_SPECTRAL_PEAK = ("import re, sys, tempfile, pathlib; from clsky.anim.animate import AnimationConfig, render_animation; "
                   "kb = lambda key: int(re.search(key + r':\\s+(\\d+)', open('/proc/self/status').read()).group(1)); "
                   "d = pathlib.Path(tempfile.mkdtemp()); n = int(sys.argv[1]) or None; "
                   "run = lambda size, table, name: render_animation(AnimationConfig(wavelengths=n, frames=2, size=size, "
@@ -311,7 +311,7 @@ def test_spectral_animation_estimate_matches_the_measured_peak():
     built for the new table size, about 45 MiB here, which cancels). Measured (PoCL 3.1, 2 cores,
     load 9): 233 and 104 MiB, estimate 211 and 61 MiB: extra 129 MiB measured, 150 MiB estimated (1.16;
     the frames phase counts every batch's directions and pieces at once, an upper bound)."""
-    from anim.animate import AnimationConfig, memory_estimate, sun_positions
+    from clsky.anim.animate import AnimationConfig, memory_estimate, sun_positions
 
     device = resources.device_of()
     if not resources.machine_limits(device).unified:

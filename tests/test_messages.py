@@ -14,8 +14,8 @@ ANIMATION_COMMANDS = ("animate", "render", "bench")
 
 
 def clsky(*args, cwd, env=None):
-    """The ``clsky`` console script: clsky's commands, extended by anim's (``python -m anim``)."""
-    package = "anim" if args[0] in ANIMATION_COMMANDS else "clsky"
+    """The ``clsky`` console script: clsky's commands, extended by anim's (``python -m clsky.anim``)."""
+    package = "clsky.anim" if args[0] in ANIMATION_COMMANDS else "clsky"
     return subprocess.run([sys.executable, "-m", package, *args], cwd=cwd, capture_output=True, text=True, env=env)
 
 

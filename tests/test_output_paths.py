@@ -26,7 +26,7 @@ import pytest
 
 from clsky import ScatteringTable, TableSettings
 from clsky._files import StagedWrites, atomic_write, check_output, check_output_directory
-from anim.writers import FrameWriter, write_csv, write_json, write_png
+from clsky.anim.writers import FrameWriter, write_csv, write_json, write_png
 
 from conftest import black_preset
 
@@ -65,7 +65,7 @@ def immutable_directory(tmp_path):
 
 
 def clsky(*args, cwd, timeout=60):
-    return subprocess.run([sys.executable, "-m", "anim", *args], cwd=cwd, capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "clsky.anim", *args], cwd=cwd, capture_output=True, text=True,
                           timeout=timeout)
 
 
@@ -212,7 +212,7 @@ def test_table_save_and_export_raw_check_first(tmp_path, tiny_table):
 
 
 def test_render_animation_checks_before_building_the_table(tmp_path, monkeypatch):
-    from anim import animate
+    from clsky.anim import animate
 
     def no_build(*args, **kwargs):
         raise AssertionError("the table was built before the outputs were checked")

@@ -423,8 +423,8 @@ def test_ozone_column_option(tmp_path, capsys):
     """--ozone-column DU sets the column on clsky table and in the animation's config (0 removes ozone,
     the kernels then build without -DOZONE); a negative or non-finite column is refused naming the
     option, one line, exit status 2, before any table is built."""
-    from anim.animate import AnimationConfig
-    from anim.cli import main
+    from clsky.anim.animate import AnimationConfig
+    from clsky.anim.cli import main
 
     out = tmp_path / "ozone.npz"
     assert main(["table", "--preset", "atmosphere-plus", "--ozone-column", "150", "--size", "8", "16", "6",

@@ -174,8 +174,8 @@ def test_higher_orders_are_dropped_when_the_pilot_finds_them_negligible(cl_conte
 
 def _ray_marched(table, level, size=24):
     """The accuracy benchmark's four frames (sun 45, 8, 1, -4 deg), ray-marched over ``table``."""
-    from anim.accuracy import render_frames
-    from anim.cameras import FisheyeCamera
+    from clsky.anim.accuracy import render_frames
+    from clsky.anim.cameras import FisheyeCamera
 
     directions, valid = FisheyeCamera(size).directions()
     with SkyRenderer(table, level.ray) as renderer:
@@ -187,7 +187,7 @@ def test_planned_table_matches_the_full_table_within_the_budget(cl_context):
     the full table of the same quality (same node spacing over the whole sun axis) agree within the
     10 % budget (measured: 0.75 % worst p95, in twilight, where the two grids' different nodes matter
     most; 0.003 % by day), and the plan builds fewer cells (81 %)."""
-    from anim.metrics import compare_frames
+    from clsky.anim.metrics import compare_frames
 
     plan = plan_scene(Scene((-4.0, 45.0), error_budget=0.1), ctx=cl_context)
     assert plan.level.name == "draft" and plan.work_fraction < 0.9
@@ -244,7 +244,7 @@ def test_view_sampling_checks_its_altitudes():
 def test_animation_follows_the_planner_without_sampling():
     """Without --sampling the animation's table and ray march take the planner's choice for its
     altitude (also with --table-size, which has no plan); --sampling still overrides it."""
-    from anim.animate import AnimationConfig, _with_sampling, quality, ray_settings
+    from clsky.anim.animate import AnimationConfig, _with_sampling, quality, ray_settings
 
     for altitude, expected in ((0.0, "keller_bohn"), (1e4, "ground_end"), (1e5, "ground_end")):
         config = AnimationConfig(altitude=altitude)

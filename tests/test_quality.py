@@ -14,8 +14,8 @@ from __future__ import annotations
 import pytest
 
 import clsky
-from anim import accuracy, metrics
-from anim.cameras import FisheyeCamera, sun_direction
+from clsky.anim import accuracy, metrics
+from clsky.anim.cameras import FisheyeCamera, sun_direction
 from clsky.planner import Scene, plan_scene
 from clsky.quality import QUALITY_LEVELS, level_for_budget, quality_level
 from clsky.render import SkyRenderer

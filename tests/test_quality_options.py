@@ -42,8 +42,8 @@ def test_without_quality_the_defaults_hold(tmp_path):
 
 def test_animate_options_not_given_keep_the_config_defaults():
     """animate's --preset, --mode and --error-budget default to None: the AnimationConfig decides."""
-    from anim import cli
-    from anim.animate import AnimationConfig
+    from clsky.anim import cli
+    from clsky.anim.animate import AnimationConfig
     from clsky.cli import build_parser
 
     parser, _ = build_parser((cli.register,))

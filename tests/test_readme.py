@@ -139,7 +139,7 @@ def check_outputs(argv, directory):
         if "--hdr" in argv:
             frames = pathlib.Path(f"{stem}_frames")
             if option_value(argv, "--hdr") == "exr":
-                from anim.exr import read_exr
+                from clsky.anim.exr import read_exr
 
                 exr = [read_exr(path) for path in sorted(frames.glob("frame_*.exr"))]
                 hdr = [pixels for pixels, _ in exr]

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from anim.cameras import FisheyeCamera, sun_direction
+from clsky.anim.cameras import FisheyeCamera, sun_direction
 from clsky import ScatteringTable, TableSettings, preset, reference
 from clsky.render import RAYMARCH_DEFAULTS, SUN_ANGULAR_RADIUS_DEG, SkyRenderer, sun_disc_radiance
 

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import clsky
-from anim import cli
+from clsky.anim import cli
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -69,8 +69,8 @@ def test_every_option_and_config_field_has_a_scene_key(command):
     fails instead."""
     import dataclasses
 
-    from anim import scene
-    from anim.animate import AnimationConfig
+    from clsky.anim import scene
+    from clsky.anim.animate import AnimationConfig
 
     parser = scene.command_parser(command)
     options = {action.dest for action in parser._actions if action.option_strings} - RUN_OPTIONS

@@ -470,7 +470,7 @@ def test_monte_carlo_is_bit_for_bit_with_exponent_zero():
 # Animation and command line ------------------------------------------------------------------------
 
 def test_animation_config_wavelengths():
-    from anim.animate import AnimationConfig
+    from clsky.anim.animate import AnimationConfig
 
     assert AnimationConfig().wavelengths is None
     assert AnimationConfig(wavelengths=np.int64(15)).wavelengths == 15
@@ -484,7 +484,7 @@ def test_frame_conversion_is_the_colorimetry():
     """spectral -> XYZ -> linear sRGB, gamut-clipped at 0: the sun's spectrum comes out a warm white
     (r > g > b within 20 %, measured 146 / 130 / 125 kcd/m^2-scale: the sun's 5900 K is redder than
     D65's 6500 K); a 455 nm line, outside the gamut, is mostly blue and loses its negative green."""
-    from anim.animate import spectral_frame_to_linear_srgb
+    from clsky.anim.animate import spectral_frame_to_linear_srgb
 
     wavelengths = spectrum.spectral_wavelengths(47)
     sun = spectral_frame_to_linear_srgb(solar.solar_irradiance_astm_g173(wavelengths), wavelengths)
@@ -500,7 +500,7 @@ def test_cli_refuses_bad_wavelengths_in_one_line(tmp_path):
     import subprocess
     import sys
 
-    result = subprocess.run([sys.executable, "-m", "anim", "animate", "--wavelengths", "50", "--progress", "none"],
+    result = subprocess.run([sys.executable, "-m", "clsky.anim", "animate", "--wavelengths", "50", "--progress", "none"],
                             cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()

@@ -247,7 +247,7 @@ def test_monte_carlo_from_altitude_looking_down(cl_context, case):
 # The animation package: --sampling reaches the table and the ray march ------------------------------
 
 def test_animation_config_sampling():
-    from anim.animate import AnimationConfig, _with_sampling, quality, ray_settings
+    from clsky.anim.animate import AnimationConfig, _with_sampling, quality, ray_settings
 
     default = AnimationConfig()
     assert ray_settings(default) == quality(default).ray          # unchanged unless asked for

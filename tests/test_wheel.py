@@ -51,3 +51,38 @@ def test_wheel_ships_kernels_and_builds_every_program(tmp_path):
                             env=environment, capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
     assert "built every program" in result.stdout
+
+
+def test_wheel_installs_nothing_but_clsky(tmp_path):
+    """Issue 13 item 3: the animation package (the repository's top-level anim/) installs as
+    clsky.anim; nothing outside the clsky name lands in site-packages (an installed top-level
+    ``anim`` could collide with any other package of that generic name)."""
+    wheels = tmp_path / "wheels"
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(wheels), str(ROOT)],
+                   check=True, cwd=tmp_path)
+    (wheel,) = wheels.glob("clsky-*.whl")
+    top_level = {name.split("/")[0] for name in zipfile.ZipFile(wheel).namelist()}
+    assert {name for name in top_level if not name.endswith(".dist-info")} == {"clsky"}
+    assert len(top_level) == 2, top_level                     # clsky/ and its one dist-info
+    target = tmp_path / "site"
+    subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(target),
+                    str(wheel)], check=True, cwd=tmp_path)
+    installed = {p.name for p in target.iterdir()} - {"bin"}  # --target puts the console script in bin/
+    assert {name for name in installed if not name.endswith(".dist-info")} == {"clsky"}
+    assert not (target / "anim").exists()
+    check = textwrap.dedent("""
+        import pathlib, sys
+        import clsky.anim.animate, clsky.anim.cli
+        installed = pathlib.Path(sys.argv[1]).resolve()
+        assert pathlib.Path(clsky.anim.animate.__file__).resolve().is_relative_to(installed / "clsky" / "anim")
+        try:
+            import anim
+        except ImportError:
+            print("no top-level anim")
+    """)
+    result = subprocess.run([sys.executable, "-c", check, str(target)], cwd=tmp_path,
+                            env=dict(os.environ, PYTHONPATH=str(target)), capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert "no top-level anim" in result.stdout
+    entry_points = (next(target.glob("clsky-*.dist-info")) / "entry_points.txt").read_text()
+    assert "clsky = clsky.anim.cli:main" in entry_points
