@@ -81,7 +81,7 @@ def best_timing(function, repeat):
 
 def build_cases(smoke):
     """[(label, atmosphere, settings)]: the default physical table and the default quality's planned one."""
-    from anim import animate
+    from clsky.anim import animate
 
     physical = clsky.preset("physical")
     default = ground.default_settings(physical)
