@@ -95,8 +95,7 @@ def estimate(arguments):
         result = estimate_table_memory(settings, saving=True)
         size = settings.size
     else:
-        config = anim_cli._config(args, frames=args.frames, start_elevation_deg=args.start_elevation,
-                                  max_elevation_deg=args.max_elevation, output="x.mp4")
+        config = anim_cli._config(args)          # every field from the parsed options, as `clsky animate` does
         result = memory_estimate(config, sun_positions(config))
         size = result.what.rsplit("table ", 1)[1].rstrip(")")
     return result.peak_bytes() + BASE_PROCESS_BYTES, size

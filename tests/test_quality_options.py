@@ -49,11 +49,11 @@ def test_animate_options_not_given_keep_the_config_defaults():
     parser, _ = build_parser((cli.register,))
     args = parser.parse_args(["animate", "--quality", "high"])
     assert (args.preset, args.mode, args.error_budget) == (None, None, None)
-    config = cli._config(args, output="sky.mp4")
+    config = cli._config(args)
     default = AnimationConfig()
     assert (config.preset, config.mode, config.error_budget, config.quality) == \
         (default.preset, default.mode, default.error_budget, "high")
     # (the atmosphere-plus scheme needs a black ground: the physical preset's 0.1 is set to 0)
     args = parser.parse_args(["animate", "--mode", "atmosphere-plus", "--ground-albedo", "0", "--error-budget", "0.2"])
-    config = cli._config(args, output="sky.mp4")
+    config = cli._config(args)
     assert (config.mode, config.error_budget, config.ground_albedo) == ("atmosphere-plus", 0.2, 0.0)

@@ -3,6 +3,7 @@ directory, and build every OpenCL program from that installed copy in a fresh in
 
 import os
 import pathlib
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -10,6 +11,29 @@ import zipfile
 
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
+
+
+def build_wheel(tmp_path):
+    """The wheel of the repository's files as a clean clone has them: setuptools builds in the
+    source tree and reuses its build/ folder, so a stale build/lib (an earlier layout's packages) in a
+    developer's checkout would otherwise end up in the wheel. Tracked and untracked-not-ignored files
+    are copied (git ls-files); outside a git checkout, the tree without build/ and the usual caches."""
+    source = tmp_path / "source"
+    listed = subprocess.run(["git", "ls-files", "--cached", "--others", "--exclude-standard", "-z"], cwd=ROOT,
+                            capture_output=True)
+    if listed.returncode == 0:
+        for name in filter(None, listed.stdout.decode().split("\0")):
+            if (ROOT / name).is_file():
+                (source / name).parent.mkdir(parents=True, exist_ok=True)
+                shutil.copy2(ROOT / name, source / name)
+    else:
+        shutil.copytree(ROOT, source, ignore=shutil.ignore_patterns("build", ".venv", "node_modules", ".git",
+                                                                     "*.egg-info", "__pycache__"))
+    wheels = tmp_path / "wheels"
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(wheels), str(source)],
+                   check=True, cwd=tmp_path)
+    (wheel,) = wheels.glob("clsky-*.whl")
+    return wheel
 
 BUILD_EVERY_PROGRAM = textwrap.dedent("""
     import pathlib, sys
@@ -36,10 +60,7 @@ BUILD_EVERY_PROGRAM = textwrap.dedent("""
 
 
 def test_wheel_ships_kernels_and_builds_every_program(tmp_path):
-    wheels = tmp_path / "wheels"
-    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(wheels), str(ROOT)],
-                   check=True, cwd=tmp_path)
-    (wheel,) = wheels.glob("clsky-*.whl")
+    wheel = build_wheel(tmp_path)
     names = zipfile.ZipFile(wheel).namelist()
     kernel_files = sorted(p.name for p in (ROOT / "kernels").glob("*.cl"))
     assert sorted(n.split("/")[-1] for n in names if n.startswith("clsky/kernels/")) == kernel_files
@@ -57,10 +78,7 @@ def test_wheel_installs_nothing_but_clsky(tmp_path):
     """Issue 13 item 3: the animation package (the repository's top-level anim/) installs as
     clsky.anim; nothing outside the clsky name lands in site-packages (an installed top-level
     ``anim`` could collide with any other package of that generic name)."""
-    wheels = tmp_path / "wheels"
-    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(wheels), str(ROOT)],
-                   check=True, cwd=tmp_path)
-    (wheel,) = wheels.glob("clsky-*.whl")
+    wheel = build_wheel(tmp_path)
     top_level = {name.split("/")[0] for name in zipfile.ZipFile(wheel).namelist()}
     assert {name for name in top_level if not name.endswith(".dist-info")} == {"clsky"}
     assert len(top_level) == 2, top_level                     # clsky/ and its one dist-info
