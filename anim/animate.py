@@ -26,6 +26,7 @@ from typing import Callable
 import numpy as np
 
 import clsky
+from clsky._cl import host_blas_single_threaded
 from clsky._files import StagedWrites, check_output
 from clsky.errors import ParameterError, check_choice, check_integer, check_real, is_real_number
 from clsky.ground import check_ground_mode
@@ -672,7 +673,9 @@ def _write_animation(config, positions, renderer, prepared, valid, table, plan, 
     metric rows, the temporal jumps, the target paths and the stale frames to be deleted."""
     rows, means = [], {"lut": [], "raymarch": []}
     pipeline = display(config, table)
-    with _frame_writer(config, len(positions), staging) as writer:
+    # the frames' host products (sRGB and white-balance matrices, Oklab, XYZ for Delta E) on one BLAS
+    # thread: beside PoCL's workers OpenBLAS's threads cost ~100x the CPU of one (README, "Speed")
+    with _frame_writer(config, len(positions), staging) as writer, host_blas_single_threaded():
         for index, sun in enumerate(positions):
             hdr = render_frame(renderer, prepared, sun.direction, config)
             ev, images, shown = display_frames(pipeline, hdr, valid, config, seed=index)

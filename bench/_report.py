@@ -18,6 +18,7 @@ import pathlib
 import platform
 import re
 import statistics
+import sys
 import time
 
 README = pathlib.Path(__file__).resolve().parent.parent / "README.md"
@@ -95,3 +96,35 @@ def write_readme_section(name: str, markdown: str, readme: pathlib.Path = README
     if not pattern.search(text):
         raise SystemExit(f"README.md has no {begin} ... {end} section")
     readme.write_text(pattern.sub(lambda _: f"{begin}\n{markdown.strip()}\n{end}", text))
+
+
+def timed_with_cpu(function):
+    """(result, wall [s], process CPU [s]) of one call. The process CPU time counts every thread of this
+    process (PoCL's workers too): on a loaded machine it stays close to the quiet figure while the wall
+    time does not (issue 12)."""
+    wall, cpu = time.perf_counter(), time.process_time()
+    result = function()
+    return result, time.perf_counter() - wall, time.process_time() - cpu
+
+
+def load_average() -> float:
+    """The 1-minute load average, with a warning on stderr the first time it exceeds the core count
+    (the wall times measured meanwhile are then inflated: compare CPU times)."""
+    global _LOAD_WARNED
+    load = os.getloadavg()[0]
+    if load > (os.cpu_count() or 1) and not _LOAD_WARNED:
+        _LOAD_WARNED = True
+        print(f"warning: load average {load:.1f} exceeds the {os.cpu_count()} cores: wall times are inflated, "
+              f"compare the CPU times", file=sys.stderr, flush=True)
+    return load
+
+
+def load_note(highest: float) -> str:
+    """A sentence for a benchmark's README text when the highest load average seen exceeded the cores."""
+    if highest <= (os.cpu_count() or 1):
+        return ""
+    return (f" The load average reached {highest:.1f} on {os.cpu_count()} cores during the run: the wall times "
+            f"are inflated by other processes, the CPU times much less.")
+
+
+_LOAD_WARNED = False

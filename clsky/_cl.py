@@ -35,7 +35,7 @@ except ImportError as error:  # pragma: no cover - exercised only on broken inst
 
 __all__ = ["KernelBuildError", "NoDeviceError", "Source", "Engine", "list_devices", "default_device",
            "make_context", "real_vector_dtype", "check_dtype", "INSTALL_HINT", "pocl_cache_problem",
-           "no_device_hint"]
+           "no_device_hint", "host_blas_single_threaded"]
 
 INSTALL_HINT = ("install a CPU OpenCL driver: as root `apt-get install pocl-opencl-icd` (fast PoCL 3.1), "
                 "or `pip install 'pyopencl[pocl]'` (PoCL pip build)")
@@ -55,6 +55,22 @@ class Source:
 
     label: str
     text: str
+
+
+# Host BLAS beside a CPU device ----------------------------------------------------------------------------
+
+def host_blas_single_threaded():
+    """A context in which NumPy's BLAS (OpenBLAS, MKL, ...) runs on one thread (``threadpoolctl``).
+
+    On a CPU device PoCL's worker threads own the cores; a multi-threaded BLAS call made meanwhile on
+    the host (the physical mode's first-gather matrices, :func:`clsky.multiple.first_gather_matrix`)
+    fought them: on the 2-core machine its CPU time was 0.5-1.2 s instead of 0.085 s on one thread
+    (bench/bench_orders.py). BLAS splits a product's rows and columns among its threads, not the sum
+    over the inner index, so the results are the same bit for bit.
+    """
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1, user_api="blas")
 
 
 # PoCL's kernel cache -----------------------------------------------------------------------------------
