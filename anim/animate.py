@@ -39,7 +39,7 @@ from clsky.settings import SAMPLINGS
 from clsky.resources import MemoryEstimate, check_memory, device_of, estimate_animation_memory
 
 from . import display as display_pipeline
-from . import metrics, sunpath, writers
+from . import metrics, sunpath, tonemap, writers
 from .cameras import camera_from_name
 from .exr import PRECISIONS
 
@@ -579,9 +579,16 @@ def display(config: AnimationConfig, table) -> display_pipeline.Display:
 
 def display_frames(pipeline: display_pipeline.Display, hdr, valid, config: AnimationConfig, seed=0):
     """(EV, {name: 8-bit frame}, Delta E display) of one sun position's HDR frames: the exposure is
-    metered on the reference (the ray march when there is one) and shows every frame at that EV."""
+    metered on the reference (the ray march when there is one) and shows every frame at that EV. The
+    Delta E display is the ``display`` of :func:`anim.metrics.compare_frames`: with both frames, their
+    display-linear values (ray march, table lookup), computed once with the 8-bit frames
+    (:meth:`anim.display.Display.encode_and_linear`; the tone curve and gamut mapping were half the
+    frame loop's host time when Delta E evaluated them again); else the pipeline at that EV."""
     ev = pipeline.exposure(hdr.get("raymarch", hdr.get("lut")), valid)
-    images = {name: pipeline.to_uint8(frame, ev, dither=config.dither, seed=seed) for name, frame in hdr.items()}
+    shown = {name: pipeline.encode_and_linear(frame, ev) for name, frame in hdr.items()}
+    images = {name: tonemap.to_uint8(encoded, dither=config.dither, seed=seed) for name, (encoded, _) in shown.items()}
+    if "raymarch" in shown and "lut" in shown:
+        return ev, images, (shown["raymarch"][1], shown["lut"][1])
     return ev, images, (lambda pixels: pipeline.linear(pixels, ev))
 
 

@@ -274,7 +274,7 @@ def test_one_blas_thread_gives_the_same_bytes_as_two(tmp_path, cl_context, monke
     animation with BLAS on two threads (BLAS splits rows among threads, not the three-term sums).
     256 x 256 frames: the products' (N, 3) @ (3, 3) sizes (N ~ 51 000 valid pixels for Delta E,
     65 536 for the display) are above OpenBLAS's threshold for threading them (m n k > 262 144), so
-    the two-thread run really splits them; 48-pixel frames would not. Slow: 7 s of CPU, 45 s wall on
+    the two-thread run really splits them; 48-pixel frames would not. Slow: 7 s of CPU, 11-47 s wall on
     the loaded 2-core machine."""
     from threadpoolctl import threadpool_limits
 
