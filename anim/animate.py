@@ -595,7 +595,15 @@ def display_frames(pipeline: display_pipeline.Display, hdr, valid, config: Anima
 def _frame_writer(config: AnimationConfig, total_frames: int, staging=None) -> writers.FrameWriter:
     return writers.FrameWriter(directory=config.frames_directory, mp4_path=config.output_path, fps=config.fps,
                                total_frames=total_frames, hdr=config.hdr, hdr_precision=config.hdr_precision,
-                               force=config.force, prefix="frame", staging=staging)
+                               force=config.force, prefix="frame", staging=staging, text=metadata(config))
+
+
+def metadata(config: AnimationConfig) -> dict:
+    """What every output of the animation carries (PNG text chunks, EXR header, metrics JSON): clsky's
+    version and the TOML scene that reproduces it (``clsky animate --scene``; :mod:`anim.scene`)."""
+    from . import scene
+
+    return scene.output_metadata(scene.scene_text(scene.scene_values(config, "animate"), "animate"))
 
 
 def check_outputs(config: AnimationConfig, total_frames: int | None = None, option: str | None = None):
@@ -718,6 +726,7 @@ def _write_animation(config, positions, renderer, prepared, valid, table, plan, 
             row["temporal_excess_jump"] = float(excess)
     paths.append(writers.write_csv(config.metrics_path(".csv"), rows, force=config.force, staging=staging))
     paths.append(writers.write_json(config.metrics_path(".json"), {
+        **metadata(config),
         "config": {k: (str(v) if isinstance(v, (datetime.date, pathlib.Path)) else v)
                    for k, v in dataclasses.asdict(config).items()},
         "table": {"settings": table.settings.to_dict(), "orders": table.orders_record,

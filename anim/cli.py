@@ -15,24 +15,6 @@ import sys
 from clsky import cli as clsky_cli
 from clsky.errors import short
 
-#: AnimationConfig field -> command-line option (one per item for a tuple field), for error messages
-#: that name what the user typed.
-FIELD_OPTIONS = {
-    "frames": "--frames", "size": "--size", "camera": "--camera", "fov_deg": "--fov", "heading_deg": "--heading",
-    "pitch_deg": "--pitch", "altitude": "--altitude", "method": "--method", "preset": "--preset", "mode": "--mode",
-    "ground_albedo": "--ground-albedo", "ozone_column_du": "--ozone-column",
-    "table_size": ("--table-size W", "--table-size H", "--table-size D"), "samples": "--samples",
-    "sampling": "--sampling", "error_budget": "--error-budget", "quality": "--quality", "start_elevation_deg": "--start-elevation",
-    "max_elevation_deg": "--max-elevation", "location": "--location", "date": "--date",
-    "start_hour": "--hours START", "end_hour": "--hours END", "step_minutes": "--step-minutes", "fps": "--fps",
-    "exposure": "--exposure", "tone_map": "--tone-map", "white_balance": "--white-balance", "output": "--output",
-    "wavelengths": "--wavelengths", "hdr": "--hdr", "hdr_precision": "--hdr-precision",
-}
-
-#: Options whose default is None so that, not given, the AnimationConfig's own default (or the
-#: quality level's / scene plan's choice) applies.
-UNSET_DEFAULTS = ("preset", "mode", "error_budget", "ground_albedo", "ozone_column_du")
-
 
 def _date(text):
     try:
@@ -112,6 +94,20 @@ def _add_display_arguments(parser):
                               "frames in cd/m^2, d65 for --preset atmosphere-plus)")
 
 
+def _add_scene_file_arguments(parser):
+    """--scene and --print-scene (anim/scene.py), and the record of the options typed, which win over
+    the scene's values."""
+    from . import scene
+
+    group = parser.add_argument_group("scene file")
+    group.add_argument("--scene", metavar="FILE", help="read the options from a TOML scene (README 'Scene "
+                                                       "files'); options typed here win over its values")
+    group.add_argument("--print-scene", action="store_true",
+                       help="write the TOML scene of this command line to stdout and exit (no work)")
+    scene.track_given_options(parser)
+    parser.set_defaults(scene_parser=parser)
+
+
 def register(commands):
     """Adds ``animate`` and ``render`` to clsky's sub-command parsers; returns their handlers."""
     from .exr import PRECISIONS
@@ -145,12 +141,18 @@ def register(commands):
     out.add_argument("-o", "--output", default="sky.png", help="PNG file (default: sky.png)")
     out.add_argument("--force", action="store_true", help="overwrite an existing file")
     out.add_argument("--no-dither", action="store_true")
+    _add_scene_file_arguments(animate)
+    _add_scene_file_arguments(render)
     bench = commands.add_parser("bench", help="measurements: `clsky bench accuracy`")
     kinds = bench.add_subparsers(dest="bench", required=True, parser_class=clsky_cli._Parser)
-    accuracy = kinds.add_parser("accuracy", help="what each numerical knob costs and buys (CSV + Pareto plot)")
+    accuracy = kinds.add_parser("accuracy", help="what each numerical knob costs and buys (CSV, Pareto plot, "
+                                                 "error per sun elevation)")
     accuracy.add_argument("--size", type=int, default=128, help="fisheye frames of SIZE x SIZE (default: 128)")
     accuracy.add_argument("-o", "--output", default="accuracy.csv", help="CSV of the candidates (default: %(default)s)")
     accuracy.add_argument("--plot", default="accuracy.png", help="Pareto plot, PNG (default: %(default)s)")
+    accuracy.add_argument("--elevation-plot", metavar="PNG",
+                          help="error against sun elevation per renderer, PNG (default: beside --plot, "
+                               "accuracy_elevation.png for accuracy.png)")
     accuracy.add_argument("--reference-quality", default="reference", choices=["reference", "high", "default"],
                           help="quality level of the reference frames (default: reference, ~5 min to build; "
                                "a cheaper one for smoke runs)")
@@ -161,24 +163,40 @@ def register(commands):
     return {"animate": run_animate, "render": run_render, "bench": run_bench}
 
 
-def _config(args, **extra):
-    """The AnimationConfig of the options; options not given (None) keep the config's defaults.
-    UsageError names the option of a bad value."""
+def _config(args):
+    """The AnimationConfig of the options (with --scene's values for those not typed); options not
+    given (None) keep the config's defaults. UsageError names the option, or the scene file and key,
+    of a bad value."""
+    import dataclasses
+
     from clsky.errors import ParameterError
 
+    from . import scene
     from .animate import AnimationConfig
 
-    fields = dict(size=args.size, camera=args.camera, fov_deg=args.fov, heading_deg=args.heading,
-                  pitch_deg=args.pitch, altitude=args.altitude, method=args.method,
-                  table_size=None if args.table_size is None else tuple(args.table_size),
-                  samples=args.samples, sampling=args.sampling, quality=args.quality, exposure=args.exposure, tone_map=args.tone_map,
-                  auto_exposure=args.auto_exposure, white_balance=args.white_balance, wavelengths=args.wavelengths,
-                  dither=not args.no_dither, force=args.force, **extra)
-    fields.update({name: getattr(args, name) for name in UNSET_DEFAULTS if getattr(args, name) is not None})
+    names = {field.name for field in dataclasses.fields(AnimationConfig)}
+    values = scene.field_values(args, args.scene_parser)
+    if args.command == "render":                 # its --output is a PNG, not the animation's MP4
+        values.pop("output")
+    fields = {name: value for name, value in values.items() if name in names and value is not None}
     try:
-        return AnimationConfig(**fields)
+        return AnimationConfig(force=args.force, **fields)
     except ParameterError as error:
-        raise clsky_cli.UsageError(clsky_cli.option_message(error, FIELD_OPTIONS)) from None
+        where = scene.source_of(args, error.field)
+        if where is not None:
+            raise clsky_cli.UsageError(error.reworded(where if error.index is None else f"{where}[{error.index}]")) \
+                from None
+        raise clsky_cli.UsageError(clsky_cli.option_message(error, scene.field_options(args.scene_parser))) from None
+
+
+def _printed_scene(args, config, **extra):
+    """With --print-scene: the TOML scene of the command line, printed (True); else False."""
+    from . import scene
+
+    if not args.print_scene:
+        return False
+    print(scene.scene_text(scene.scene_values(config, args.scene_parser, extra), args.command), end="")
+    return True
 
 
 def _memory_options(args, config):
@@ -203,15 +221,15 @@ def _check_memory(args, config, positions):
 
 
 def run_animate(args):
+    from . import scene
     from .animate import check_outputs, render_animation, sun_positions
 
-    config = _config(args, frames=args.frames, start_elevation_deg=args.start_elevation,
-                     max_elevation_deg=args.max_elevation,
-                     location=None if args.location is None else tuple(args.location), date=args.date,
-                     start_hour=args.hours[0], end_hour=args.hours[1], step_minutes=args.step_minutes,
-                     fps=args.fps, output=args.output, hdr=args.hdr, hdr_precision=args.hdr_precision)
+    scene.apply_scene(args, args.scene_parser)
+    config = _config(args)
+    if _printed_scene(args, config):
+        return 0
     try:                                         # the MP4, <stem>_frames/, <stem>_metrics.csv/.json
-        check_outputs(config, option="--output")
+        check_outputs(config, option=scene.source_of(args, "output") or "--output")
     except (OSError, ValueError, ImportError) as error:
         raise clsky_cli.UsageError(str(error)) from None
     _check_memory(args, config, sun_positions(config))
@@ -227,20 +245,30 @@ def run_animate(args):
 def run_render(args):
     import pathlib
 
-    from . import metrics, writers
+    from . import metrics, scene, writers
     from .animate import _camera, display, display_frames, make_renderer, plan_animation, render_frame
     from .cameras import sun_direction
     from .sunpath import SunPosition
 
+    scene.apply_scene(args, args.scene_parser)
+
+    def name(key, option):
+        return scene.source_of(args, key) or option
+
     if not -90.0 <= args.sun_elevation <= 90.0:
-        raise clsky_cli.UsageError(f"--sun-elevation must be in [-90, 90] degrees, got {short(args.sun_elevation)}")
+        raise clsky_cli.UsageError(f"{name('sun_elevation_deg', '--sun-elevation')} must be in [-90, 90] degrees, "
+                                   f"got {short(args.sun_elevation)}")
     if not math.isfinite(args.sun_azimuth):
-        raise clsky_cli.UsageError(f"--sun-azimuth must be a finite number of degrees, got {short(args.sun_azimuth)}")
+        raise clsky_cli.UsageError(f"{name('sun_azimuth_deg', '--sun-azimuth')} must be a finite number of degrees, "
+                                   f"got {short(args.sun_azimuth)}")
     output = pathlib.Path(args.output)
     if output.suffix != ".png":
-        raise clsky_cli.UsageError(f"--output must end in .png, got {args.output!r}")
-    clsky_cli.check_outputs([("--output", output)], args.force)
+        raise clsky_cli.UsageError(f"{name('output', '--output')} must end in .png, got {args.output!r}")
     config = _config(args)
+    extra = {"sun_elevation_deg": args.sun_elevation, "sun_azimuth_deg": args.sun_azimuth, "output": args.output}
+    if _printed_scene(args, config, **extra):
+        return 0
+    clsky_cli.check_outputs([(name("output", "--output"), output)], args.force)
     position = SunPosition(90.0 - args.sun_elevation, args.sun_azimuth)
     _check_memory(args, config, [position])
     camera = _camera(config)
@@ -260,7 +288,8 @@ def run_render(args):
         detail = f"; table vs ray march: 95th-percentile error {100 * numbers['p95_rel']:.1f} %"
     else:
         image, detail = images[config.method], ""
-    writers.write_png(output, image, force=args.force)
+    text = scene.output_metadata(scene.scene_text(scene.scene_values(config, args.scene_parser, extra), "render"))
+    writers.write_png(output, image, force=args.force, text=text)
     print(f"frame {camera.width}x{camera.height} ({config.method}, sun elevation {args.sun_elevation:g} deg, "
           f"azimuth {args.sun_azimuth:g} deg, {config.tone_map} at {ev:+.2f} EV){detail} -> {output}")
     return 0
@@ -271,14 +300,17 @@ def run_bench(args):
 
     from clsky._files import StagedWrites
 
-    from . import accuracy, writers
+    from . import accuracy, accuracy_plot, writers
 
     if not 16 <= args.size <= 2048:
         raise clsky_cli.UsageError(f"--size must be an integer in [16, 2048], got {short(args.size)}")
-    targets = {"--output": pathlib.Path(args.output), "--plot": pathlib.Path(args.plot)}
-    for option, suffix in (("--output", ".csv"), ("--plot", ".png")):
+    targets = {"--output": pathlib.Path(args.output), "--plot": pathlib.Path(args.plot),
+               "--elevation-plot": pathlib.Path(args.elevation_plot or accuracy_plot.elevation_plot_path(args.plot))}
+    for option, suffix in (("--output", ".csv"), ("--plot", ".png"), ("--elevation-plot", ".png")):
         if targets[option].suffix != suffix:
             raise clsky_cli.UsageError(f"{option} must end in {suffix}, got {str(targets[option])!r}")
+    if targets["--elevation-plot"].resolve() == targets["--plot"].resolve():
+        raise clsky_cli.UsageError(f"--elevation-plot must differ from --plot, got {str(targets['--plot'])!r} twice")
     clsky_cli.check_outputs(targets.items(), args.force)
     candidates = accuracy.default_candidates()
     if args.quick:
@@ -289,13 +321,14 @@ def run_bench(args):
         rows = accuracy.measure(candidates, reference, valid, progress=progress)
     finally:
         close()
-    with StagedWrites() as staging:                # the CSV and its plot land together
+    with StagedWrites() as staging:                # the CSV and its plots land together
         writers.write_csv(targets["--output"], rows, force=args.force, staging=staging)
-        accuracy.pareto_plot(rows, targets["--plot"], force=args.force, size=args.size, staging=staging)
+        accuracy_plot.pareto_plot(rows, targets["--plot"], force=args.force, size=args.size, staging=staging)
+        accuracy_plot.elevation_plot(rows, targets["--elevation-plot"], force=args.force, staging=staging)
     for row in rows:
         print(f"{row['candidate']:>24}: build {row['build_s']:6.2f} s, frame {1e3 * row['render_s']:7.1f} ms, "
               f"worst p95 error {100 * row['p95_rel']:8.2f} %, worst mean Delta E {row['mean_delta_e']:6.2f}")
-    print(f"{len(rows)} candidates -> {targets['--output']}, {targets['--plot']}")
+    print(f"{len(rows)} candidates -> {targets['--output']}, {targets['--plot']}, {targets['--elevation-plot']}")
     return 0
 
 

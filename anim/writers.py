@@ -40,7 +40,7 @@ from PIL import Image
 from clsky._files import StagedWrites, atomic_write, check_output, check_output_directory
 from clsky.errors import short
 
-__all__ = ["FrameWriter", "frame_files", "write_png", "write_json", "write_csv", "MP4_OUTPUT_PARAMS"]
+__all__ = ["FrameWriter", "frame_files", "png_text", "write_png", "write_json", "write_csv", "MP4_OUTPUT_PARAMS"]
 
 #: ffmpeg output options of the MP4: constant-quality H.264 at CRF 18 (visually lossless for x264),
 #: the RGB -> YUV conversion and the stream tagged as BT.709 (so players decode the colours as they
@@ -71,7 +71,19 @@ def _exists_error(path, option=None):
 PNG_COMPRESS_LEVEL = 1
 
 
-def write_png(path, image_u8, force=False, staging=None):
+def png_text(text):
+    """Pillow's PngInfo of the text chunks ``text`` ({keyword: str}; iTXt, UTF-8), or None."""
+    if not text:
+        return None
+    from PIL.PngImagePlugin import PngInfo
+
+    info = PngInfo()
+    for keyword, value in text.items():
+        info.add_itxt(keyword, str(value))
+    return info
+
+
+def write_png(path, image_u8, force=False, staging=None, text=None):
     """Write a uint8 image to a PNG file atomically.
 
     Parameters
@@ -84,6 +96,9 @@ def write_png(path, image_u8, force=False, staging=None):
         Replace an existing file.
     staging : clsky._files.StagedWrites, optional
         Stage the file in this set: it lands when the set commits.
+    text : dict of str, optional
+        PNG text chunks {keyword: text} (iTXt, UTF-8): the scene and clsky's version of a rendered
+        frame (:func:`anim.scene.output_metadata`); read back by Pillow's ``Image.open(path).text``.
 
     Returns
     -------
@@ -107,7 +122,8 @@ def write_png(path, image_u8, force=False, staging=None):
     path = pathlib.Path(path)
     with atomic_write(path, overwrite=force, suffix=".png", staging=staging) as temporary:
         # zlib level 1: 4.6x faster than PIL's default 6 on a 1614 x 512 composite frame, 27 % larger
-        Image.fromarray(np.ascontiguousarray(image)).save(temporary, format="PNG", compress_level=PNG_COMPRESS_LEVEL)
+        Image.fromarray(np.ascontiguousarray(image)).save(temporary, format="PNG", compress_level=PNG_COMPRESS_LEVEL,
+                                                          pnginfo=png_text(text))
     return path
 
 
@@ -233,6 +249,8 @@ class FrameWriter:
     staging : clsky._files.StagedWrites, optional
         Stage every file in this set, to land with the caller's other files when the set commits
         (an animation's metrics); default: the writer's own set, committed when the block ends.
+    text : dict of str, optional
+        Text chunks of every PNG frame, as in :func:`write_png`.
 
     Attributes
     ----------
@@ -293,7 +311,7 @@ class FrameWriter:
     HDR_FORMATS = {None: None, "exr": ".exr", "hdr": ".hdr", "npy": ".npy"}
 
     def __init__(self, directory=None, mp4_path=None, fps=30, total_frames=None, hdr=None, force=False,
-                 prefix="frame", staging=None, hdr_precision="float"):
+                 prefix="frame", staging=None, hdr_precision="float", text=None):
         from .exr import PRECISIONS
 
         if directory is None and mp4_path is None:
@@ -323,6 +341,7 @@ class FrameWriter:
         self.hdr_precision = hdr_precision
         self.force = bool(force)
         self.prefix = prefix
+        self.text = dict(text or {})
         self.width = max(5, len(str(total_frames))) if total_frames else 5
         self.paths = []
         self.stale_paths = []
@@ -455,13 +474,16 @@ class FrameWriter:
         written = []
         with atomic_write(self.frame_path(index), self.force, suffix=".png", staging=self._staging) as temporary:
             self._temporaries.append(temporary)
-            Image.fromarray(image).save(temporary, format="PNG", compress_level=PNG_COMPRESS_LEVEL)
+            Image.fromarray(image).save(temporary, format="PNG", compress_level=PNG_COMPRESS_LEVEL,
+                                        pnginfo=png_text(self.text))
         written.append(self.frame_path(index))
         if self.hdr is not None:
             suffix = self.HDR_FORMATS[self.hdr]
             target = self.frame_path(index, suffix)
             with atomic_write(target, self.force, suffix=suffix, staging=self._staging) as temporary:
                 self._temporaries.append(temporary)
+                if self.hdr == "exr" and "scene" in self.text:   # the version is the header's clskyVersion;
+                    hdr_attributes = {"scene": self.text["scene"], **(hdr_attributes or {})}   # Radiance: one line each
                 _hdr_saver(self.hdr)(temporary, hdr, hdr_attributes)
             written.append(target)
         return written

@@ -2,21 +2,27 @@
 
 Builds the reference (the 'reference' quality level, anim/accuracy.py); then times each candidate (table build, frame render) and
 measures its error on four fisheye frames (day, golden hour, sunset, civil twilight). Writes
-docs/accuracy.csv, the Pareto plot docs/accuracy.png, and the table into README.md.
+docs/accuracy.csv, the Pareto plot docs/accuracy.png, the error against sun elevation
+docs/accuracy_elevation.png (anim/accuracy_plot.py), and the table into README.md.
 
 Usage: python bench/bench_accuracy.py [--size 128] [--reference-cache FILE] [--no-readme] [--docs DIR]
-[--smoke]
+[--smoke] [--replot CSV]
 
 ``--reference-cache``: the reference frames saved by bench/bench_quality.py (same size), instead of
 rendering them again (minutes). How far the reference converged: bench/bench_quality.py.
 
-``--docs DIR``: where accuracy.csv and accuracy.png go. Default: docs/ when the run writes the README
+``--docs DIR``: where accuracy.csv and the two plots go. Default: docs/ when the run writes the README
 (they belong together); with ``--no-readme``, nowhere (print only), so that a trial run never
 overwrites the published data unless asked.
 
 ``--smoke``: 16 x 16 frames, the 'draft' quality level as the reference, three candidates (the default
-table, a halved view axis, a 16-sample ray march) over an 8 x 32 x 8 table; the CSV and the plot go to
+table, a halved view axis, a 16-sample ray march) over an 8 x 32 x 8 table; the CSV and the plots go to
 a temporary directory (or ``--docs DIR``); print only (bench/_report.py).
+
+``--replot CSV``: measure nothing; draw the two plots again from a sweep's CSV into ``--docs DIR``
+(default docs/; a temporary directory with --smoke), replacing them; ``--size`` must be that sweep's
+(the CSV does not record it). The published plots came from a 64-pixel sweep:
+``python bench/bench_accuracy.py --replot docs/accuracy.csv --size 64``.
 """
 
 from __future__ import annotations
@@ -31,7 +37,7 @@ import numpy as np
 from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
 
 import clsky
-from anim import accuracy, writers
+from anim import accuracy, accuracy_plot, writers
 from clsky._cl import default_device, describe_device
 
 DOCS = pathlib.Path(__file__).resolve().parent.parent / "docs"
@@ -44,8 +50,11 @@ def main():
     parser.add_argument("--size", type=int, default=128)
     parser.add_argument("--reference-cache", type=pathlib.Path)
     parser.add_argument("--docs", type=pathlib.Path, metavar="DIR",
-                        help="write accuracy.csv and accuracy.png into DIR (default: docs/ when writing the "
+                        help="write accuracy.csv and the two plots into DIR (default: docs/ when writing the "
                              "README; none with --no-readme; a temporary directory with --smoke)")
+    parser.add_argument("--replot", type=pathlib.Path, metavar="CSV",
+                        help="only draw the plots again from CSV, a sweep's accuracy.csv, into --docs DIR "
+                             "(default docs/); --size: that sweep's frame size")
     add_output_arguments(parser)
     args = parse_arguments(parser)
     candidates, level = accuracy.default_candidates(), "reference"
@@ -54,11 +63,22 @@ def main():
         base = clsky.TableSettings(mode="physical", size=SMOKE.table)
         candidates = [c for c in accuracy.default_candidates(base) if c.label in SMOKE_CANDIDATES]
     with tempfile.TemporaryDirectory() as temporary:
+        if args.replot is not None:
+            replot(args.replot, args.docs or (pathlib.Path(temporary) if args.smoke else DOCS), args.size)
+            return
         if args.docs is None and args.smoke:
             args.docs = pathlib.Path(temporary)
         elif args.docs is None and not args.no_readme:
             args.docs = DOCS
         run(args, candidates, level)
+
+
+def replot(csv_path, docs, size):
+    """Draw the two plots of a sweep's CSV into ``docs`` (created if needed), replacing them."""
+    docs.mkdir(parents=True, exist_ok=True)
+    written = accuracy_plot.plot_csv(csv_path, docs / "accuracy.png", docs / "accuracy_elevation.png", size=size,
+                                     force=True)
+    print("wrote " + ", ".join(map(str, written)), flush=True)
 
 
 def run(args, candidates, level):
@@ -74,8 +94,10 @@ def run(args, candidates, level):
     if args.docs is not None:
         args.docs.mkdir(parents=True, exist_ok=True)
         writers.write_csv(args.docs / "accuracy.csv", rows, force=True)
-        accuracy.pareto_plot(rows, args.docs / "accuracy.png", force=True, size=args.size)
-        print(f"wrote {args.docs / 'accuracy.csv'}, {args.docs / 'accuracy.png'}", flush=True)
+        written = [args.docs / "accuracy.csv",
+                   *accuracy_plot.plot_csv(args.docs / "accuracy.csv", args.docs / "accuracy.png",
+                                           args.docs / "accuracy_elevation.png", size=args.size, force=True)]
+        print("wrote " + ", ".join(map(str, written)), flush=True)
     front = {r["candidate"] for r in accuracy.pareto_front(rows)}
     names = list(accuracy.SUN_ELEVATIONS)
     lines = [f"Measured {datetime.date.today()} on {machine()}, {describe_device(default_device())}: "

@@ -1,33 +1,98 @@
-"""Benchmark: the full default table (32 x 256 x 32, float64, single scattering + every order until
-1e-4) through OpenCL and through the NumPy twins, side by side in one run, for both modes; and the
-share of each order at a few sun angles. Prints both tables and writes them into README.md.
+"""Benchmark: how fast the tables build, side by side in one run, and the share of each order.
+
+Three measurements (issue 10: the default physical table within 2 s; issue 12: the default quality's
+planned table within 4 s, the full default table 10x or more faster than its NumPy twins):
+
+1. **Table builds**, ``ScatteringTable.build`` (single scattering, every order until 1e-4, the table's
+   combination): the default physical table (``preset("physical")``: ozone, ground albedo 0.1, three
+   wavelengths, 32 x 256 x 32) and the default quality's table planned for the default animation's
+   scene (``plan_animation`` -> ``clsky.planner.plan_scene``, as ``clsky animate`` plans it). Each twice:
+   *first build*, in a fresh Python process after ``import clsky`` (the kernels come from the warm
+   PyOpenCL / PoCL disk caches, which a warm-up process fills first; the in-process caches, the compiled
+   programs and the gather matrices, are empty), and *repeated build*, the best of ``--repeat`` builds
+   after one in the same process.
+2. **OpenCL against the NumPy twins**: ``clsky.orders.compute_orders`` on the full default table
+   (32 x 256 x 32), ``backend="opencl"`` (best of ``--repeat`` after a warm-up) against
+   ``backend="numpy"`` (one run), for both modes; ratios in wall and in CPU time.
+3. The share of each order at a few sun angles (from the same OpenCL results).
+
+Every timing has its wall time, this process' CPU time (all threads: PoCL's workers included) and the
+load average; a load above the core count is warned about (the wall times are then inflated).
 
 Usage: python bench/bench_orders.py [--repeat N] [--no-readme] [--smoke]
 
-``--smoke``: 8 x 32 x 8 tables, one repetition, print only (bench/_report.py).
+``--smoke``: 8 x 32 x 8 tables (the planned one too), one repetition, print only (bench/_report.py).
 """
 
 from __future__ import annotations
 
 import argparse
 import datetime
-import time
+import json
+import subprocess
+import sys
 
 import numpy as np
 
-from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
+from _report import (SMOKE, add_output_arguments, load_average, load_note, machine, parse_arguments,
+                     timed_with_cpu, write_readme_section)
 
 import clsky
+from clsky import ground
 from clsky.mapping import grid_coordinates
 from clsky.orders import compute_orders
 
 SUN_ZENITHS = (0.0, 60.0, 80.0, 90.0, 96.0)   # [deg], looked up at the nearest sun node
 
+#: Run by a fresh interpreter (``python -c``): one build of the atmosphere and settings given as JSON in
+#: its argument, timed after the imports; prints the timings as JSON.
+FRESH_BUILD = """
+import json, sys, time
+wall, cpu = time.perf_counter(), time.process_time()
+import clsky
+from clsky.atmosphere import AtmosphereParameters
+imported = (time.perf_counter() - wall, time.process_time() - cpu)
+case = json.loads(sys.argv[1])
+atmosphere, settings = AtmosphereParameters.from_dict(case["atmosphere"]), clsky.TableSettings.from_dict(case["settings"])
+wall, cpu = time.perf_counter(), time.process_time()
+table = clsky.ScatteringTable.build(atmosphere, settings)
+print(json.dumps({"wall": time.perf_counter() - wall, "cpu": time.process_time() - cpu, "import_wall": imported[0],
+                  "import_cpu": imported[1], "orders": table.orders_record["orders"]}))
+"""
 
-def timed(function):
-    start = time.perf_counter()
-    result = function()
-    return result, time.perf_counter() - start
+
+def fresh_process_build(atmosphere, settings):
+    """{wall, cpu, import_wall, import_cpu, orders} of the first build in a new Python process."""
+    case = json.dumps({"atmosphere": atmosphere.to_dict(), "settings": settings.to_dict()})
+    output = subprocess.run([sys.executable, "-c", FRESH_BUILD, case], check=True, capture_output=True, text=True)
+    return json.loads(output.stdout.strip().splitlines()[-1])
+
+
+def best_timing(function, repeat):
+    """(last result, least wall [s], least CPU [s], highest load average) over ``repeat`` calls."""
+    walls, cpus, loads, result = [], [], [], None
+    for _ in range(repeat):
+        result, wall, cpu = timed_with_cpu(function)
+        walls.append(wall)
+        cpus.append(cpu)
+        loads.append(load_average())
+    return result, min(walls), min(cpus), max(loads)
+
+
+def build_cases(smoke):
+    """[(label, atmosphere, settings)]: the default physical table and the default quality's planned one."""
+    from anim import animate
+
+    physical = clsky.preset("physical")
+    default = ground.default_settings(physical)
+    config = animate.AnimationConfig(size=SMOKE.frame) if smoke else animate.AnimationConfig()
+    directions, valid = animate._camera(config).directions()
+    plan = animate.plan_animation(config, animate.sun_positions(config), directions, valid)
+    planned = plan.table
+    if smoke:
+        default, planned = default.replace(size=SMOKE.table), planned.replace(size=SMOKE.table)
+    return [("default physical table", physical, default),
+            (f"default quality, planned for `clsky animate` ({plan.level.name})", plan.atmosphere, planned)]
 
 
 def shares_at_sun_nodes(result, settings, atmosphere):
@@ -48,17 +113,44 @@ def shares_at_sun_nodes(result, settings, atmosphere):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeat", type=int, default=3, help="OpenCL repetitions (NumPy runs once)")
+    parser.add_argument("--repeat", type=int, default=3, help="repeated OpenCL builds (NumPy runs once)")
     add_output_arguments(parser)
     args = parse_arguments(parser)
     size = SMOKE.table if args.smoke else clsky.TableSettings().size
     if args.smoke:
         args.repeat = SMOKE.repeat
+    start_load = load_average()
+    stamp = f"measured {datetime.date.today()} on {machine()} (load average {start_load:.2f} at the start)"
+
+    builds = [f"Table builds (`ScatteringTable.build`: single scattering, every order until 1e-4, the table), {stamp}. "
+              "*First build*: in a fresh Python process, timed after `import clsky`, with the PyOpenCL / PoCL "
+              "disk caches warm (a warm-up process ran first) and the in-process caches (compiled programs, "
+              f"gather matrices) empty. *Repeated*: the least of {args.repeat} builds after one in the same "
+              "process. Wall and process CPU time (all threads) [s]; load: the highest 1-minute load average "
+              "seen after the builds of the row.", "",
+              "| table | W x H x D | orders | first build: wall | CPU | repeated: wall | CPU | load |",
+              "|---|---|---:|---:|---:|---:|---:|---:|"]
+    cases = build_cases(args.smoke)
+    fresh_process_build(*cases[0][1:])                                        # warm-up: fills the disk caches
+    highest = start_load
+    for label, atmosphere, settings in cases:
+        first = fresh_process_build(atmosphere, settings)
+        first_load = load_average()
+        clsky.ScatteringTable.build(atmosphere, settings)                    # warm-up in this process
+        table, wall, cpu, load = best_timing(lambda: clsky.ScatteringTable.build(atmosphere, settings), args.repeat)
+        builds.append(f"| {label} | {' x '.join(map(str, settings.size))} | {table.orders_record['orders']} | "
+                      f"{first['wall']:.2f} | {first['cpu']:.2f} | {wall:.2f} | {cpu:.2f} | "
+                      f"{max(first_load, load):.2f} |")
+        highest = max(highest, first_load, load)
+        print(builds[-1], f"(import clsky: {first['import_wall']:.2f} s wall)", flush=True)
 
     timing = [f"Full default table ({' x '.join(map(str, size))}, float64, default settings: orders until 1e-4), "
-              f"measured {datetime.date.today()} on {machine()}. OpenCL: best of {args.repeat} after a warm-up "
-              f"(kernel compilation excluded); NumPy twins: one run, same process.", "",
-              "| mode | orders | OpenCL [s] | NumPy twins [s] | NumPy / OpenCL |", "|---|---:|---:|---:|---:|"]
+              f"`clsky.orders.compute_orders` with `backend=\"opencl\"` (the least of {args.repeat} runs after a "
+              "warm-up; kernel compilation excluded) and `backend=\"numpy\"` (the NumPy twins, one run, same "
+              f"process), {stamp}. Wall and process CPU time [s]; load: the highest 1-minute load average seen "
+              "after the runs of the row.", "",
+              "| mode | orders | OpenCL wall | CPU | NumPy twins wall | CPU | NumPy / OpenCL: wall | CPU | load |",
+              "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     shares = ["Share of each order in the table (sum over altitudes and view directions at the sun node "
               "nearest the given zenith; r / g / b, in %). The physical mode's order 1 counts Rayleigh + "
               "Mie with phase 1 (their mean over the sphere).", "",
@@ -68,19 +160,23 @@ def main():
         atmosphere = clsky.preset(mode)
         settings = clsky.TableSettings(mode=mode, size=size)
         compute_orders(atmosphere, settings)                                     # warm-up
-        best = min(timed(lambda: compute_orders(atmosphere, settings))[1] for _ in range(args.repeat))
-        result = compute_orders(atmosphere, settings)
-        twins, numpy_seconds = timed(lambda: compute_orders(atmosphere, settings, backend="numpy"))
+        result, wall, cpu, load = best_timing(lambda: compute_orders(atmosphere, settings), args.repeat)
+        twins, numpy_wall, numpy_cpu = timed_with_cpu(lambda: compute_orders(atmosphere, settings, backend="numpy"))
+        load = max(load, load_average())
+        highest = max(highest, load)
         difference = max(np.abs(a - b).max() / np.abs(b).max() for a, b in zip(result.orders, twins.orders))
-        timing.append(f"| {mode} | {result.record['orders']} | {best:.2f} | {numpy_seconds:.1f} | "
-                      f"{numpy_seconds / best:.1f}x |")
+        timing.append(f"| {mode} | {result.record['orders']} | {wall:.2f} | {cpu:.2f} | {numpy_wall:.1f} | "
+                      f"{numpy_cpu:.1f} | {numpy_wall / wall:.1f}x | {numpy_cpu / cpu:.1f}x | {load:.2f} |")
         print(timing[-1], f"(max difference of any order: {difference:.1e} of its maximum)", flush=True)
         for zenith, share in shares_at_sun_nodes(result, settings, atmosphere):
             columns = [share[0], share[1], share[2], share[3], share[4:].sum(axis=0)]
             cells = " | ".join("/".join(f"{100 * v:.1f}" for v in column) for column in columns)
             shares.append(f"| {mode} | {zenith:.1f} | {cells} |")
-    print("\n".join(timing + [""] + shares))
+    builds[0] += load_note(highest)
+    timing[0] += load_note(highest)
+    print("\n".join(builds + [""] + timing + [""] + shares))
     if not args.no_readme:
+        write_readme_section("builds", "\n".join(builds))
         write_readme_section("orders", "\n".join(timing))
         write_readme_section("shares", "\n".join(shares))
 

@@ -307,6 +307,8 @@ def build_parser(extensions=()):
     commands.add_parser("devices", help="list OpenCL platforms and devices, and the one clsky uses")
     table = commands.add_parser("table", help="compute a scattering table and save it")
     _add_table_arguments(table)
+    info = commands.add_parser("info", help="describe a table file (.npz) or an output (PNG, metrics JSON)")
+    info.add_argument("file", help="a .npz table, a PNG frame or a <stem>_metrics.json")
     handlers = dict(COMMANDS)
     for register in extensions:
         handlers.update(register(commands))
@@ -378,7 +380,17 @@ def run_table(args):
     return 0
 
 
-COMMANDS = {"devices": run_devices, "table": run_table}
+def run_info(args):
+    from .info import describe
+
+    try:
+        print(describe(args.file))
+    except FileNotFoundError as error:
+        raise UsageError(str(error)) from None
+    return 0
+
+
+COMMANDS = {"devices": run_devices, "table": run_table, "info": run_info}
 
 
 def main(argv=None, extensions=()):

@@ -44,9 +44,17 @@ __all__ = ["keeping_first_gather_stacks", "gather_quadrature", "phase_azimuth_in
 
 SPECIES = ("rayleigh", "mie")
 VECTOR_WIDTH = 8
-#: Rows and cells of the gather computed per work-item (kernels/multiple.cl, GATHER_ROWS, GATHER_CELLS).
+#: Rows and cells of the gather computed per work-item (-DGATHER_ROWS, -DGATHER_CELLS of kernels/multiple.cl).
 GATHER_ROWS = 4
 GATHER_CELLS = 4
+#: Sun nodes per scatter work-item (-DSCATTER_SUN_NODES): a view ray's geometry, densities and
+#: transmittances do not depend on the sun, so one work-item marches a ray once for this many sun nodes.
+SCATTER_SUN_NODES = 4
+#: Work-group of the scatter kernel (altitude blocks, view rows, sun blocks). Explicit, because PoCL's own
+#: choice (thousands of work-items) keeps every work-item's private sums in one work-group frame on a
+#: worker thread's stack: SCATTER_SUN_NODES x 512 bytes each overflowed it (a crash). The view axis of
+#: the launch is padded to a multiple of its rows; the kernel skips the padding.
+SCATTER_WORK_GROUP = (1, 8, 1)
 
 
 def gather_quadrature(theta_steps, phi_steps):
@@ -150,7 +158,8 @@ def _read_only(array):
 def gather_matrix(atmosphere: AtmosphereParameters, settings: TableSettings, species):
     """M (H, H) of one species' phase function: Gbar[:, j-axis] = M @ Ibar (see module docstring)."""
     p, weights, view, _ = _gather_parts(atmosphere, settings)
-    return (view[species] * weights) @ p
+    with _cl.host_blas_single_threaded():
+        return (view[species] * weights) @ p
 
 
 def _quadrature_key(settings: TableSettings) -> TableSettings:
@@ -183,16 +192,18 @@ def first_gather_matrix(atmosphere, settings, pair, out=None):
 
     Computed FIRST_GATHER_CHUNK sun nodes at a time, into ``out`` if given (float64, (D, H, H)): the
     temporary of the product is (chunk, H, Theta + 1) instead of (D, H, Theta + 1). Each sun node's matrix
-    is its own matrix product, so chunking changes no value.
+    is its own matrix product, so chunking changes no value; BLAS runs on one thread
+    (:func:`clsky._cl.host_blas_single_threaded`: beside PoCL that is 6-10x less CPU time, same values).
     """
     p, weights, view, sun = _gather_parts(atmosphere, _quadrature_key(settings))
     species, other = pair
     depth, height = sun[other].shape[0], view[species].shape[0]
     out = np.empty((depth, height, p.shape[1])) if out is None else out
     factor = weights * sun[other] / (2.0 * math.pi)           # (D, Theta + 1)
-    for start in range(0, depth, FIRST_GATHER_CHUNK):
-        stop = min(start + FIRST_GATHER_CHUNK, depth)
-        np.matmul(view[species][None] * factor[start:stop, None, :], p, out=out[start:stop])
+    with _cl.host_blas_single_threaded():
+        for start in range(0, depth, FIRST_GATHER_CHUNK):
+            stop = min(start + FIRST_GATHER_CHUNK, depth)
+            np.matmul(view[species][None] * factor[start:stop, None, :], p, out=out[start:stop])
     return out
 
 
@@ -244,6 +255,13 @@ def first_gather_matrices(atmosphere, settings):
     return {pair: first_gather_matrix(atmosphere, settings, pair) for pair in DIRECT_PAIRS + CROSSED_PAIRS}
 
 
+def _scatter_global_size(width, height, depth):
+    """The scatter kernel's global size: VECTOR_WIDTH cells, one view row and SCATTER_SUN_NODES sun nodes per
+    work-item, each axis rounded up to a multiple of SCATTER_WORK_GROUP."""
+    items = (-(-width // VECTOR_WIDTH), height, -(-depth // SCATTER_SUN_NODES))
+    return tuple(-(-n // group) * group for n, group in zip(items, SCATTER_WORK_GROUP))
+
+
 class MultipleScatteringEngine(_cl.Engine):
     """Applies gather matrices and scatters gathered tables along view rays (``kernels/multiple.cl``).
 
@@ -264,7 +282,9 @@ class MultipleScatteringEngine(_cl.Engine):
         return ("real.cl", declaration) + COMMON_SOURCES[1:] + ("mapping.cl", "view_ray.cl", "multiple.cl")
 
     def build_options(self):
-        return super().build_options() + quadrature_defines(self.settings, VECTOR_WIDTH)
+        return (super().build_options() + quadrature_defines(self.settings, VECTOR_WIDTH)
+                + [f"-DGATHER_ROWS={GATHER_ROWS}", f"-DGATHER_CELLS={GATHER_CELLS}",
+                   f"-DSCATTER_SUN_NODES={SCATTER_SUN_NODES}"])
 
     def to_device(self, table):
         """A host table (D, H, W, 6) as a padded device table (D, H, W, 8) (channels 6, 7 zero)."""
@@ -337,7 +357,7 @@ class MultipleScatteringEngine(_cl.Engine):
         out = cla.empty(self.queue, gathered_d.shape, self.dtype)
         atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
         event = self.kernels_with(_atmosphere_cl.feature_defines(atmosphere))["scatter"](
-            self.queue, (-(-width // VECTOR_WIDTH), height, depth), None, atmosphere_d, np.int32(width),
+            self.queue, _scatter_global_size(width, height, depth), SCATTER_WORK_GROUP, atmosphere_d, np.int32(width),
             np.int32(height), np.int32(depth), np.int32(MAPPINGS[self.settings.mapping]),
             self.real2(self.settings.sun_w_range), np.int32(bool(combine_species)), gathered_d.data,
             ground_d.data, out.data)

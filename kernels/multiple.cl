@@ -28,8 +28,9 @@
  * Register blocking: a work-item computes GATHER_ROWS rows i for GATHER_CELLS cells x; per j it forms
  * each row's per-channel coefficient vector once (select of the two species' entries) and applies it
  * to every cell's real8. Global size (ceil(W / GATHER_CELLS), ceil(H / GATHER_ROWS), D). */
-#define GATHER_ROWS 4
-#define GATHER_CELLS 4
+#ifndef GATHER_ROWS
+#error "GATHER_ROWS and GATHER_CELLS (the register block of a gather work-item) must be defined"
+#endif
 __kernel void gather(__global const real *matrices, const int species_stride, const int matrix_z_stride,
                      __global const real *table_in, __global real *table_out, const int accumulate,
                      const int width, const int height, const int depth)
@@ -46,76 +47,132 @@ __kernel void gather(__global const real *matrices, const int species_stride, co
     const int cells = min(GATHER_CELLS, width - x0);
     int rows[GATHER_ROWS];
     real8 sum[GATHER_ROWS][GATHER_CELLS];
+    #pragma unroll
     for (int r = 0; r < GATHER_ROWS; ++r) {
         rows[r] = min(i0 + r, height - 1);
+        #pragma unroll
         for (int c = 0; c < GATHER_CELLS; ++c)
             sum[r][c] = (real8)(R(0.0));
     }
     for (int j = 0; j < height; ++j) {
         real8 column[GATHER_CELLS];
+        #pragma unroll
         for (int c = 0; c < GATHER_CELLS; ++c)
             column[c] = vload8(slab + (size_t)j * (size_t)width + (size_t)(x0 + min(c, cells - 1)), table_in);
+        #pragma unroll
         for (int r = 0; r < GATHER_ROWS; ++r) {
             const size_t entry = (size_t)rows[r] * (size_t)height + (size_t)j;
             const real8 coefficient = select((real8)(rayleigh[entry]), (real8)(mie[entry]), is_mie);
+            #pragma unroll
             for (int c = 0; c < GATHER_CELLS; ++c)
                 sum[r][c] += coefficient * column[c];
         }
     }
-    for (int r = 0; r < GATHER_ROWS && i0 + r < height; ++r) {
-        for (int c = 0; c < cells; ++c) {
-            const size_t cell = slab + (size_t)(i0 + r) * (size_t)width + (size_t)(x0 + c);
-            vstore8((accumulate ? vload8(cell, table_out) : (real8)(R(0.0))) + sum[r][c], cell, table_out);
+    #pragma unroll
+    for (int r = 0; r < GATHER_ROWS; ++r) {
+        #pragma unroll
+        for (int c = 0; c < GATHER_CELLS; ++c) {
+            if (i0 + r < height && c < cells) {
+                const size_t cell = slab + (size_t)(i0 + r) * (size_t)width + (size_t)(x0 + c);
+                vstore8((accumulate ? vload8(cell, table_out) : (real8)(R(0.0))) + sum[r][c], cell, table_out);
+            }
         }
     }
 }
 
-/* Global size (ceil(W / VECTOR_WIDTH), H, D): VECTOR_WIDTH cells along the altitude axis per item.
+/* Along one view ray (VECTOR_WIDTH cells x = VECTOR_WIDTH gx + lane of row y) for SCATTER_SUN_NODES sun
+ * nodes z = z0 + b at once: the ray's geometry, densities and view transmittance (ray_step) and the
+ * lookups' altitude and view parts (prepare_lookups) do not depend on the sun, so each node computes
+ * them once and only the sun cosine there and the lookups per sun node (the same operations as integrate_gathered: the same sums). sum[b][k] as
+ * integrate_gathered's sum[k] for sun node z0 + b; mu_s[b], nu[b] that node's sun cosine and canonical
+ * scattering cosine. With -DGROUND, ground_t[0..2] the view transmittance T(Pa, Pb) r, g, b of rays
+ * that end on the ground (0 elsewhere) and ground_mu[b] the sun cosine at Pb. */
+inline void integrate_gathered_suns(__constant const atmosphere_t *atm, const realv h0, const real mu_v,
+                                    const real *mu_s, const real *nu, __global const real *gathered,
+                                    const int width, const int height, const int depth, const int mapping,
+                                    const real2 sun_range, real8 sum[SCATTER_SUN_NODES][VECTOR_WIDTH],
+                                    realv *ground_t, realv *ground_mu)
+{
+    const real ha = atm->top_radius - atm->planet_radius;
+    view_march_t ray;
+    ray_begin(atm, h0, (realv)(mu_v), &ray);
+    for (int b = 0; b < SCATTER_SUN_NODES; ++b)
+        for (int k = 0; k < VECTOR_WIDTH; ++k)
+            sum[b][k] = (real8)(R(0.0));
+
+    for (int i = 0; i <= N_VIEW; ++i) {
+        ray_step(atm, i, &ray);
+        const realv fx = MAPPING_U(ray.h, mapping, ha) * (real)(width - 1);
+        const realv fy = MAPPING_V(ray.mu_view_here, mapping) * (real)(height - 1);
+        node_lookup_t node;
+        prepare_lookups(width, height, ray.f, fx, fy, &node);
+        for (int b = 0; b < SCATTER_SUN_NODES; ++b) {
+            const realv mu_sun_here = ray_sun_cos(&ray, (realv)(mu_s[b]), (realv)(nu[b]));
+#ifdef GROUND
+            if (i == N_VIEW) {
+                realv seen[GROUND_VALUES];
+                ground_view(atm, ray.view, ray.hits_ground, mu_sun_here, seen);
+                ground_t[0] = seen[0]; ground_t[1] = seen[1]; ground_t[2] = seen[2];
+                ground_mu[b] = seen[3];
+            }
+#endif
+            const realv fz = MAPPING_SUN_T(mu_sun_here, mapping, sun_range) * (real)(depth - 1);
+            add_lookups(gathered, width, height, depth, &node, fz, sum[b]);
+        }
+    }
+}
+
+/* Global size (ceil(W / VECTOR_WIDTH), H, ceil(D / SCATTER_SUN_NODES)): VECTOR_WIDTH cells along the
+ * altitude axis and SCATTER_SUN_NODES sun nodes per item (integrate_gathered_suns).
  * gathered and table are padded (D, H, W, 8). combine_species != 0 (physical mode) writes
  * Rayleigh + Mie per wavelength into channels 0-2 and again 3-5 (the next gather's input).
  * ground_radiance: D x 4 reals, L_g r, g, b (and 0) per sun node, read only with -DGROUND, where it is
  * added to both channel sets of combine_species (the host refuses a ground without it).
  * Requires view_ray.cl (and so N_VIEW). */
+#ifndef SCATTER_SUN_NODES
+#error "SCATTER_SUN_NODES (sun nodes per scatter work-item) must be defined"
+#endif
 __kernel void scatter(__constant const atmosphere_t *atm, const int width, const int height,
                       const int depth, const int mapping, const real2 sun_range, const int combine_species,
                       __global const real *gathered, __global const real *ground_radiance, __global real *table)
 {
     const int gx = get_global_id(0);
     const int y = get_global_id(1);
-    const int z = get_global_id(2);
-    if (gx * VECTOR_WIDTH >= width || y >= height || z >= depth)
+    const int z0 = SCATTER_SUN_NODES * get_global_id(2);
+    if (gx * VECTOR_WIDTH >= width || y >= height || z0 >= depth)
         return;
 
     realv h0;
-    real mu_v, mu_s, nu;
-    table_cell(atm, gx, y, z, width, height, depth, mapping, sun_range, &h0, &mu_v, &mu_s, &nu);
-    real8 sum[VECTOR_WIDTH];
-#ifdef GROUND
-    realv ground[GROUND_VALUES];
-#else
-    realv *ground = 0;
-#endif
-    integrate_gathered(atm, h0, (realv)(mu_v), (realv)(mu_s), (realv)(nu), gathered, width, height, depth,
-                       mapping, sun_range, sum, 0, 0, 0, 0, ground);
+    real mu_v, mu_s[SCATTER_SUN_NODES], nu[SCATTER_SUN_NODES];
+    for (int b = 0; b < SCATTER_SUN_NODES; ++b)      /* nodes past the last one repeat it, unstored */
+        table_cell(atm, gx, y, min(z0 + b, depth - 1), width, height, depth, mapping, sun_range, &h0, &mu_v,
+                   &mu_s[b], &nu[b]);
+    real8 sum[SCATTER_SUN_NODES][VECTOR_WIDTH];
+    realv ground_t[3], ground_mu[SCATTER_SUN_NODES];
+    integrate_gathered_suns(atm, h0, mu_v, mu_s, nu, gathered, width, height, depth, mapping, sun_range, sum,
+                            ground_t, ground_mu);
 
     const real4 beta = atm->beta_rayleigh;
     const real scale = R(1.0) / (R(4.0) * PI_REAL);
     const real4 beta_m = atm->beta_mie;
     const real8 coefficient = (real8)(beta.x, beta.y, beta.z, beta_m.x, beta_m.y, beta_m.z, R(0.0), R(0.0)) * scale;
-    for (int k = 0; k < VECTOR_WIDTH; ++k) {
-        const int xk = gx * VECTOR_WIDTH + k;
-        if (xk >= width)
-            break;
-        real8 value = coefficient * sum[k];
-        if (combine_species)
-            value = (real8)(value.s012 + value.s345, value.s012 + value.s345, R(0.0), R(0.0));
+    for (int b = 0; b < SCATTER_SUN_NODES && z0 + b < depth; ++b) {
+        const int z = z0 + b;
+        for (int k = 0; k < VECTOR_WIDTH; ++k) {
+            const int xk = gx * VECTOR_WIDTH + k;
+            if (xk >= width)
+                break;
+            real8 value = coefficient * sum[b][k];
+            if (combine_species)
+                value = (real8)(value.s012 + value.s345, value.s012 + value.s345, R(0.0), R(0.0));
 #ifdef GROUND
-        if (combine_species) {
-            const real4 seen = (real4)(LANE(ground[0], k), LANE(ground[1], k), LANE(ground[2], k), R(0.0))
-                               * sun_axis_lookup(ground_radiance, depth, mapping, sun_range, LANE(ground[3], k));
-            value += (real8)(seen.xyz, seen.xyz, R(0.0), R(0.0));
-        }
+            if (combine_species) {
+                const real4 seen = (real4)(LANE(ground_t[0], k), LANE(ground_t[1], k), LANE(ground_t[2], k), R(0.0))
+                                   * sun_axis_lookup(ground_radiance, depth, mapping, sun_range, LANE(ground_mu[b], k));
+                value += (real8)(seen.xyz, seen.xyz, R(0.0), R(0.0));
+            }
 #endif
-        vstore8(value, (size_t)xk + (size_t)width * ((size_t)y + (size_t)height * (size_t)z), table);
+            vstore8(value, (size_t)xk + (size_t)width * ((size_t)y + (size_t)height * (size_t)z), table);
+        }
     }
 }

@@ -11,6 +11,7 @@ typedef double3 real3;
 typedef double4 real4;
 typedef double8 real8;
 #define R(x) ((real)(x))
+#define CONVERT_REAL8(v) convert_double8(v)
 #define REAL_EPSILON DBL_EPSILON
 #define REAL_TINY DBL_MIN
 #else
@@ -20,6 +21,7 @@ typedef float3 real3;
 typedef float4 real4;
 typedef float8 real8;
 #define R(x) ((real)(x##f))
+#define CONVERT_REAL8(v) convert_float8(v)
 #define REAL_EPSILON FLT_EPSILON
 #define REAL_TINY FLT_MIN
 #endif
@@ -49,6 +51,19 @@ typedef int maskv;
 #error "VECTOR_WIDTH must be 1 or 8"
 #endif
 #define V(x) ((realv)(R(x)))
+/* intv: integer node indices of a realv (CONVERT_INTV truncates toward zero, as a (int) cast does;
+ * CONVERT_REALV converts back), INT_LANE(v, k) lane k of one */
+#if VECTOR_WIDTH == 8
+typedef int8 intv;
+#define CONVERT_INTV(v) convert_int8(v)
+#define CONVERT_REALV(v) CONVERT_REAL8(v)
+#define INT_LANE(v, k) (((int *)&(v))[k])
+#else
+typedef int intv;
+#define CONVERT_INTV(v) ((int)(v))
+#define CONVERT_REALV(v) ((real)(v))
+#define INT_LANE(v, k) (v)
+#endif
 /* mask type of real8 comparisons */
 #ifdef REAL_IS_DOUBLE
 typedef long8 maskv8;

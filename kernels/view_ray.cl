@@ -206,20 +206,128 @@ inline void integrate_single(__constant const atmosphere_t *atm, const realv h0,
     }
 }
 
-/* Trilinear lookup in a padded table (D, H, W, 8) at node coordinates (fx, fy, fz). */
-inline real8 lookup8(__global const real *table, const int width, const int height, const int depth,
-                     const real fx, const real fy, const real fz)
+/* The trilinear interpolation of a padded table (D, H, W, 8) between the cells base, base + 1, base + dy,
+ * base + dz, ... with weights ax, ay, az along x, y, z (the corner cell base: lookup8). */
+inline real8 trilinear8(__global const real *table, const size_t base, const size_t dy, const size_t dz,
+                        const real ax, const real ay, const real az)
 {
-    const int x0 = (int)fmin(fmax(fx, R(0.0)), (real)(width - 2)), y0 = (int)fmin(fmax(fy, R(0.0)), (real)(height - 2)),
-              z0 = (int)fmin(fmax(fz, R(0.0)), (real)(depth - 2));    /* clamped before the conversion (NaN-safe) */
-    const real ax = fx - (real)x0, ay = fy - (real)y0, az = fz - (real)z0;
-    const size_t base = (size_t)x0 + (size_t)width * ((size_t)y0 + (size_t)height * (size_t)z0);
-    const size_t dy = (size_t)width, dz = (size_t)width * (size_t)height;
     const real8 c00 = (R(1.0) - ax) * vload8(base, table) + ax * vload8(base + 1, table);
     const real8 c10 = (R(1.0) - ax) * vload8(base + dy, table) + ax * vload8(base + dy + 1, table);
     const real8 c01 = (R(1.0) - ax) * vload8(base + dz, table) + ax * vload8(base + dz + 1, table);
     const real8 c11 = (R(1.0) - ax) * vload8(base + dy + dz, table) + ax * vload8(base + dy + dz + 1, table);
     return (R(1.0) - az) * ((R(1.0) - ay) * c00 + ay * c10) + az * ((R(1.0) - ay) * c01 + ay * c11);
+}
+
+/* A view ray's march (integrate_gathered, integrate_gathered_suns): the ray, its quadrature state, and
+ * what node i holds whatever the sun's direction. ray_begin sets the ray up; ray_step(i) moves to
+ * node i: its distance s, altitude h (exactly 0 at a ground end), 1 / r, view cosine and densities
+ * there, the view column from the observer (trapezoid), the node's trapezoid weight
+ * (h_i + h_(i+1)) / 2 and the integrands f[c] = weight rho_s T(P, Pa) (Rayleigh r, g, b, Mie r, g, b).
+ * Both integrals take their sun-independent work from here, so that it is written once. */
+typedef struct {
+    realv h0, r0, mu_v, length;
+    maskv hits_ground;
+    real inv_hr, inv_hm;
+    column_t view, last_density;
+    view_node_t node_previous;
+    /* node i */
+    realv s, h, inv_r, mu_view_here;
+    column_t density;
+    realv f[6];
+} view_march_t;
+
+inline void ray_begin(__constant const atmosphere_t *atm, const realv h0, const realv mu_v, view_march_t *ray)
+{
+    ray->h0 = h0;
+    ray->r0 = atm->planet_radius + h0;
+    ray->mu_v = mu_v;
+    ray->length = view_ray_length(atm, h0, mu_v, &ray->hits_ground);
+    ray->inv_hr = R(1.0) / atm->rayleigh_scale_height;
+    ray->inv_hm = R(1.0) / atm->mie_scale_height;
+    ray->view = column_zero();
+    ray->last_density = column_zero();
+    ray->node_previous = (view_node_t)(R(0.0));
+}
+
+inline void ray_step(__constant const atmosphere_t *atm, const int i, view_march_t *ray)
+{
+    const real rp = atm->planet_radius;
+    const real4 beta = atm->beta_rayleigh;
+    const real4 beta_me = atm->beta_mie_extinction;
+    const real4 beta_o = atm->ozone_extinction;
+    if (i > 0) {
+        ray->last_density = ray->density;
+        ray->node_previous = view_node_at(i - 1, ray->hits_ground);
+    }
+    const view_node_t node = view_node_at(i, ray->hits_ground);
+    const view_node_t node_next = i < N_VIEW ? view_node_at(i + 1, ray->hits_ground) : node;
+    const realv length = ray->length;
+    ray->s = length * node;
+    realv h = altitude_along(ray->h0, ray->r0, ray->mu_v, ray->s, rp);
+    if (i == N_VIEW)
+        h = SELECT(h, V(0.0), ray->hits_ground);
+    ray->h = h;
+    ray->inv_r = R(1.0) / (rp + h);
+    ray->mu_view_here = clamp((ray->r0 * ray->mu_v + ray->s) * ray->inv_r, R(-1.0), R(1.0));
+    const column_t density = densities_at(atm, h, ray->inv_hr, ray->inv_hm);
+    if (i > 0) {
+        const realv half_step = R(0.5) * length * (node - ray->node_previous);
+        ray->view = column_step(ray->view, ray->last_density, density, half_step);
+    }
+    ray->density = density;
+    const realv weight = R(0.5) * length * ((node - ray->node_previous) + (node_next - node));
+    const realv t0 = exp(-optical_depth_of(ray->view, beta.x, beta_me.x, beta_o.x));
+    const realv t1 = exp(-optical_depth_of(ray->view, beta.y, beta_me.y, beta_o.y));
+    const realv t2 = exp(-optical_depth_of(ray->view, beta.z, beta_me.z, beta_o.z));
+    const realv wr = weight * density.r, wm = weight * density.m;
+    ray->f[0] = wr * t0; ray->f[1] = wr * t1; ray->f[2] = wr * t2;
+    ray->f[3] = wm * t0; ray->f[4] = wm * t1; ray->f[5] = wm * t2;
+}
+
+/* The sun's zenith cosine at the current node of a ray, for a sun of zenith cosine mu_s at the observer
+ * and scattering cosine nu (dot(P, Sun) / |P|). */
+inline realv ray_sun_cos(const view_march_t *ray, const realv mu_s, const realv nu)
+{
+    return clamp((ray->r0 * mu_s + ray->s * nu) * ray->inv_r, R(-1.0), R(1.0));
+}
+
+/* What the lookups of one ray node share whatever the sun: each lane's integrands as one real8
+ * (f[0..5], 2 zeros) and the table's altitude and view corner cells and weights at node coordinates
+ * (fx, fy); the coordinates are clamped before the conversion (NaN-safe: fmax returns the other
+ * operand). */
+typedef struct {
+    real8 factor[VECTOR_WIDTH];
+    intv ix, iy;
+    realv ax, ay;
+} node_lookup_t;
+
+inline void prepare_lookups(const int width, const int height, const realv *f, const realv fx, const realv fy,
+                            node_lookup_t *node)
+{
+    const realv x0 = fmin(fmax(fx, V(0.0)), (real)(width - 2)), y0 = fmin(fmax(fy, V(0.0)), (real)(height - 2));
+    node->ix = CONVERT_INTV(x0);
+    node->iy = CONVERT_INTV(y0);
+    node->ax = fx - CONVERT_REALV(node->ix);
+    node->ay = fy - CONVERT_REALV(node->iy);
+    for (int k = 0; k < VECTOR_WIDTH; ++k)
+        node->factor[k] = (real8)(LANE(f[0], k), LANE(f[1], k), LANE(f[2], k), LANE(f[3], k), LANE(f[4], k),
+                                  LANE(f[5], k), R(0.0), R(0.0));
+}
+
+/* sum[k] += lane k's integrands x the trilinear lookup of the padded table (D, H, W, 8) at the node's
+ * altitude and view coordinates (prepare_lookups) and sun coordinate fz, for every lane k. */
+inline void add_lookups(__global const real *gathered, const int width, const int height, const int depth,
+                        const node_lookup_t *node, const realv fz, real8 *sum)
+{
+    const realv z0 = fmin(fmax(fz, V(0.0)), (real)(depth - 2));
+    const intv iz = CONVERT_INTV(z0);
+    const realv az = fz - CONVERT_REALV(iz);
+    for (int k = 0; k < VECTOR_WIDTH; ++k) {
+        const size_t base = (size_t)INT_LANE(node->ix, k)
+                            + (size_t)width * ((size_t)INT_LANE(node->iy, k) + (size_t)height * (size_t)INT_LANE(iz, k));
+        sum[k] += node->factor[k] * trilinear8(gathered, base, (size_t)width, (size_t)width * (size_t)height,
+                                               LANE(node->ax, k), LANE(node->ay, k), LANE(az, k));
+    }
 }
 
 /* In-scattering of a gathered table along the ray, per lane k:
@@ -237,72 +345,43 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
                                const real2 sun_range, real8 *sum, __global const real *sun_table, const int tw, const int th,
                                realv *single, realv *ground)
 {
-    const real rp = atm->planet_radius;
-    const real ha = atm->top_radius - rp;
-    const realv r0 = rp + h0;
-    maskv hits_ground;
-    const realv length = view_ray_length(atm, h0, mu_v, &hits_ground);
-    const real inv_hr = R(1.0) / atm->rayleigh_scale_height;
-    const real inv_hm = R(1.0) / atm->mie_scale_height;
+    const real ha = atm->top_radius - atm->planet_radius;
     const real4 beta = atm->beta_rayleigh;
     const real4 beta_me = atm->beta_mie_extinction;
     const real4 beta_o = atm->ozone_extinction;
-    column_t view = column_zero();
-    column_t last_density = column_zero();
+    view_march_t ray;
+    ray_begin(atm, h0, mu_v, &ray);
     for (int k = 0; k < VECTOR_WIDTH; ++k)
         sum[k] = (real8)(R(0.0));
     if (single)
         for (int c = 0; c < 6; ++c)
             single[c] = V(0.0);
-    view_node_t node_previous = (view_node_t)(R(0.0));
 
     for (int i = 0; i <= N_VIEW; ++i) {
-        const view_node_t node = view_node_at(i, hits_ground);
-        const view_node_t node_next = i < N_VIEW ? view_node_at(i + 1, hits_ground) : node;
-        const realv s = length * node;
-        realv h = altitude_along(h0, r0, mu_v, s, rp);
-        if (i == N_VIEW)
-            h = SELECT(h, V(0.0), hits_ground);
-        const realv inv_r = R(1.0) / (rp + h);
-        const realv mu_view_here = clamp((r0 * mu_v + s) * inv_r, R(-1.0), R(1.0));
-        const realv mu_sun_here = clamp((r0 * mu_s + s * nu) * inv_r, R(-1.0), R(1.0));
-        const column_t density = densities_at(atm, h, inv_hr, inv_hm);
-        if (i > 0) {
-            const realv half_step = R(0.5) * length * (node - node_previous);
-            view = column_step(view, last_density, density, half_step);
-        }
-        const realv weight = R(0.5) * length * ((node - node_previous) + (node_next - node));
-        const realv t0 = exp(-optical_depth_of(view, beta.x, beta_me.x, beta_o.x));
-        const realv t1 = exp(-optical_depth_of(view, beta.y, beta_me.y, beta_o.y));
-        const realv t2 = exp(-optical_depth_of(view, beta.z, beta_me.z, beta_o.z));
-        const realv wr = weight * density.r, wm = weight * density.m;
-        const realv fr0 = wr * t0, fr1 = wr * t1, fr2 = wr * t2, fm0 = wm * t0, fm1 = wm * t1, fm2 = wm * t2;
+        ray_step(atm, i, &ray);
+        const realv mu_sun_here = ray_sun_cos(&ray, mu_s, nu);
 #ifdef GROUND
         if (ground && i == N_VIEW)
-            ground_view(atm, view, hits_ground, mu_sun_here, ground);
+            ground_view(atm, ray.view, ray.hits_ground, mu_sun_here, ground);
 #endif
         if (single) {
             column_t sun;
-            const maskv lit = sun_column(atm, h, mu_sun_here, sun_table, tw, th, &sun);
+            const maskv lit = sun_column(atm, ray.h, mu_sun_here, sun_table, tw, th, &sun);
             const realv s0 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.x, beta_me.x, beta_o.x)), lit);
             const realv s1 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.y, beta_me.y, beta_o.y)), lit);
             const realv s2 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.z, beta_me.z, beta_o.z)), lit);
-            single[0] += fr0 * s0; single[1] += fr1 * s1; single[2] += fr2 * s2;
-            single[3] += fm0 * s0; single[4] += fm1 * s1; single[5] += fm2 * s2;
+            single[0] += ray.f[0] * s0; single[1] += ray.f[1] * s1; single[2] += ray.f[2] * s2;
+            single[3] += ray.f[3] * s0; single[4] += ray.f[4] * s1; single[5] += ray.f[5] * s2;
 #ifdef GROUND
             if (ground && i == N_VIEW)
                 ground_direct(atm, sun, lit, ground);
 #endif
         }
-        const realv fx = MAPPING_U(h, mapping, ha) * (real)(width - 1);
-        const realv fy = MAPPING_V(mu_view_here, mapping) * (real)(height - 1);
+        const realv fx = MAPPING_U(ray.h, mapping, ha) * (real)(width - 1);
+        const realv fy = MAPPING_V(ray.mu_view_here, mapping) * (real)(height - 1);
         const realv fz = MAPPING_SUN_T(mu_sun_here, mapping, sun_range) * (real)(depth - 1);
-        for (int k = 0; k < VECTOR_WIDTH; ++k) {
-            const real8 factor = (real8)(LANE(fr0, k), LANE(fr1, k), LANE(fr2, k), LANE(fm0, k), LANE(fm1, k),
-                                         LANE(fm2, k), R(0.0), R(0.0));
-            sum[k] += factor * lookup8(gathered, width, height, depth, LANE(fx, k), LANE(fy, k), LANE(fz, k));
-        }
-        last_density = density;
-        node_previous = node;
+        node_lookup_t node;
+        prepare_lookups(width, height, ray.f, fx, fy, &node);
+        add_lookups(gathered, width, height, depth, &node, fz, sum);
     }
 }

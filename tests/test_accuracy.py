@@ -4,6 +4,7 @@ import csv
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from anim import accuracy
@@ -47,12 +48,26 @@ def test_measure_on_tiny_frames(stand_in_reference):
 
 
 @pytest.mark.parametrize("args,named", [(["--size", "8"], "--size"), (["-o", "x.txt"], "--output"),
-                                        (["--plot", "x.jpg"], "--plot")])
+                                        (["--plot", "x.jpg"], "--plot"),
+                                        (["--elevation-plot", "x.jpg"], "--elevation-plot"),
+                                        (["--elevation-plot", "accuracy.png"], "--elevation-plot")])
 def test_bench_accuracy_bad_arguments(tmp_path, args, named):
     result = subprocess.run([sys.executable, "-m", "anim", "bench", "accuracy", *args], cwd=tmp_path,
                             capture_output=True, text=True)
     assert result.returncode == 2
     assert result.stderr.count("\n") == 1 and named in result.stderr
+
+
+def test_bench_accuracy_checks_the_derived_elevation_plot_before_work(tmp_path):
+    """--elevation-plot defaults to <--plot stem>_elevation.png; an existing one stops the run at once
+    (before the minutes of the sweep), naming the option, and nothing else is written."""
+    (tmp_path / "sky_elevation.png").write_bytes(b"kept")
+    result = subprocess.run([sys.executable, "-m", "anim", "bench", "accuracy", "--plot", "sky.png"], cwd=tmp_path,
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    assert result.stderr.startswith("clsky: error: --elevation-plot") and "sky_elevation.png exists" in result.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["sky_elevation.png"]
+    assert (tmp_path / "sky_elevation.png").read_bytes() == b"kept"
 
 
 @pytest.mark.slow
@@ -65,4 +80,194 @@ def test_bench_accuracy_quick_run_writes_csv_and_plot(tmp_path):
     with open(tmp_path / "accuracy.csv") as stream:
         rows = list(csv.DictReader(stream))
     assert [r["candidate"] for r in rows] == ["default", "ray march 16 samples", "ray march 48 samples"]
-    assert (tmp_path / "accuracy.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    for name in ("accuracy.png", "accuracy_elevation.png"):
+        assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+# --- the plots (anim/accuracy_plot.py), on hand-made rows: no OpenCL, no sweep ---------------------------
+
+def synthetic_rows():
+    """Seven candidates with a known front (worst error against render time): 'fast' (1 ms, 50 %),
+    'middle' (2 ms, 10 %) and 'slow' (8 ms, 1 %); 'cluster a/b/c' sit right of 'fast' at the same
+    error as each other (dominated by 'fast' or 'middle'), 'march 2' is dominated by 'middle'. Per
+    elevation, the errors fall with the sun's height by the row's own factor, worst at -4 deg."""
+    spec = (("fast", "table size", "lut", 1.0, 0.5), ("cluster a", "table size", "lut", 1.05, 0.6),
+            ("cluster b", "mapping", "lut", 1.06, 0.6), ("cluster c", "sampling", "lut", 1.07, 0.6),
+            ("middle", "ray march samples", "raymarch", 2.0, 0.1),
+            ("march 2", "ray march samples", "raymarch", 3.0, 0.2),
+            ("slow", "ray march samples", "raymarch", 8.0, 0.01))
+    rows = []
+    for index, (name, knob, method, ms, worst) in enumerate(spec):
+        row = {"candidate": name, "knob": knob, "method": method, "build_s": 1.0, "render_s": ms / 1e3,
+               "p95_rel": worst, "mean_delta_e": 1.0}
+        for name_e, elevation in accuracy.SUN_ELEVATIONS.items():
+            # -4 deg: worst; higher suns smaller by (2 + index / 10) per 10 deg above -4
+            row[f"p95_rel {name_e}"] = worst / (2 + index / 10) ** ((elevation + 4) / 10)
+        rows.append(row)
+    return rows
+
+
+SYNTHETIC_FRONT = ["fast", "middle", "slow"]
+
+
+def test_front_of_the_synthetic_rows():
+    assert [r["candidate"] for r in accuracy.pareto_front(synthetic_rows())] == SYNTHETIC_FRONT
+
+
+def test_stack_labels_least_squares_with_gaps():
+    from anim.accuracy_plot import stack_labels
+
+    # two at 0.5, gap 0.1: 0.45 and 0.55 (centred, least squares); apart already: unchanged
+    np.testing.assert_allclose(stack_labels([0.5, 0.5], 0.1), [0.45, 0.55], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(stack_labels([0.9, 0.1], 0.1), [0.9, 0.1], rtol=0, atol=1e-12)
+    # three at 0.5 and one at 0.52 (unsorted input): pooled mean 0.505, spread by 0.1 around it
+    np.testing.assert_allclose(stack_labels([0.52, 0.5, 0.5, 0.5], 0.1), [0.655, 0.355, 0.455, 0.555],
+                               rtol=0, atol=1e-12)
+    # at the top edge: pushed down into [0, 1]
+    np.testing.assert_allclose(stack_labels([1.0, 1.0], 0.1), [0.9, 1.0], rtol=0, atol=1e-12)
+
+
+def test_pareto_figure_labels_only_the_front():
+    pytest.importorskip("matplotlib")
+    import matplotlib.pyplot as plt
+
+    from matplotlib.text import Text
+
+    from anim.accuracy_plot import draw_pareto
+
+    rows = synthetic_rows()
+    figure = draw_pareto(rows, size=32)
+    try:
+        panels = figure.axes
+        assert len(panels) == 1 + len(accuracy.SUN_ELEVATIONS)
+        for axes, error in zip(panels, ["p95_rel"] + [f"p95_rel {n}" for n in accuracy.SUN_ELEVATIONS]):
+            front = [r["candidate"] for r in accuracy.pareto_front(rows, error=error)]
+            assert [t.get_text() for t in axes.texts] == front
+            # each label points at its own candidate's (render time [ms], error [%])
+            for text, name in zip(axes.texts, front):
+                row = next(r for r in rows if r["candidate"] == name)
+                np.testing.assert_allclose(text.xy, (1e3 * row["render_s"], 100 * row[error]), rtol=1e-12)
+            # no two labels overlap on the canvas (the text's box, without its leader line)
+            figure.canvas.draw()
+            boxes = [Text.get_window_extent(t) for t in axes.texts]
+            for i, first in enumerate(boxes):
+                assert not any(first.overlaps(second) for second in boxes[i + 1:]), axes.get_title()
+        # every candidate is drawn: the markers of each knob, together, are all the rows
+        offsets = np.concatenate([c.get_offsets() for c in panels[0].collections])
+        assert len(offsets) == len(rows)
+        legend = [t.get_text() for t in figure.legends[0].get_texts()]
+        assert legend == ["table size", "mapping", "sampling", "ray march samples", "Pareto front (labelled)"]
+    finally:
+        plt.close(figure)
+
+
+def test_worst_frame_front_labels_do_not_overlap_in_a_tie():
+    """Two front points at nearly the same place (as 'sun steps 60' and 'sun rays re-marched' in the
+    published sweep, 0.01 % apart): their labels are stacked one line apart, not on top of each other."""
+    pytest.importorskip("matplotlib")
+    import matplotlib.pyplot as plt
+
+    from matplotlib.text import Text
+
+    from anim.accuracy_plot import draw_pareto
+
+    rows = synthetic_rows()
+    rows[1].update(render_s=1.001e-3, p95_rel=0.4999)            # 'cluster a' joins the front beside 'fast'
+    figure = draw_pareto(rows)
+    try:
+        axes = figure.axes[0]
+        assert [t.get_text() for t in axes.texts] == ["fast", "cluster a", "middle", "slow"]
+        figure.canvas.draw()
+        first, second = (Text.get_window_extent(t) for t in axes.texts[:2])
+        assert not first.overlaps(second)
+    finally:
+        plt.close(figure)
+
+
+def test_elevation_figure_has_one_line_per_front_candidate():
+    pytest.importorskip("matplotlib")
+    import matplotlib.pyplot as plt
+
+    from anim.accuracy_plot import draw_elevation
+
+    rows = synthetic_rows()
+    figure = draw_elevation(rows)
+    try:
+        axes = figure.axes[0]
+        lines = [line for line in axes.get_lines() if str(line.get_gid()).startswith("front:")]
+        assert [line.get_gid() for line in lines] == [f"front:{n}" for n in SYNTHETIC_FRONT]
+        order = sorted(accuracy.SUN_ELEVATIONS, key=accuracy.SUN_ELEVATIONS.get)
+        for line, name in zip(lines, SYNTHETIC_FRONT):
+            row = next(r for r in rows if r["candidate"] == name)
+            np.testing.assert_array_equal(line.get_xdata(), [accuracy.SUN_ELEVATIONS[n] for n in order])
+            np.testing.assert_allclose(line.get_ydata(), [100 * row[f"p95_rel {n}"] for n in order], rtol=1e-12)
+        # the horizon (a vertical line at 0) and civil twilight (a span from -6 to 0 deg)
+        horizon = [line for line in axes.get_lines() if line.get_label() == "horizon"]
+        assert len(horizon) == 1 and list(horizon[0].get_xdata()) == [0, 0]
+        labels = axes.get_legend_handles_labels()[1]
+        assert "table lookup: all 4 candidates (range)" in labels and "ray march: all 3 candidates (range)" in labels
+        assert axes.get_yscale() == "log"
+    finally:
+        plt.close(figure)
+
+
+def test_plots_from_a_csv_are_written_atomically(tmp_path):
+    pytest.importorskip("matplotlib")
+    from anim import writers
+    from anim.accuracy_plot import plot_csv, read_csv
+
+    rows = synthetic_rows()
+    writers.write_csv(tmp_path / "sweep.csv", rows)
+    assert read_csv(tmp_path / "sweep.csv") == rows                # floats round-trip exactly through the CSV
+    plot, elevation = plot_csv(tmp_path / "sweep.csv", tmp_path / "a.png", size=32)
+    assert elevation == tmp_path / "a_elevation.png"
+    for path in (plot, elevation):
+        assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    before = {path: path.read_bytes() for path in (plot, elevation)}
+    # existing files without force: refused before drawing, both left as they were, no temporary left over
+    with pytest.raises(FileExistsError):
+        plot_csv(tmp_path / "sweep.csv", tmp_path / "new.png", elevation, size=32)
+    assert not (tmp_path / "new.png").exists()
+    assert {path: path.read_bytes() for path in (plot, elevation)} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.png", "a_elevation.png", "sweep.csv"]
+
+
+def test_read_csv_names_a_bad_cell(tmp_path):
+    from anim.accuracy_plot import read_csv
+
+    path = tmp_path / "sweep.csv"
+    path.write_text("candidate,knob,method,render_s,p95_rel,p95_rel day\nx,k,lut,1e-3,0.1,0.01\n")
+    with pytest.raises(ValueError, match="missing columns"):
+        read_csv(path)
+    columns = ["candidate", "knob", "method", "render_s", "p95_rel"] + [f"p95_rel {n}" for n in accuracy.SUN_ELEVATIONS]
+    path.write_text(",".join(columns) + "\n" + "x,k,lut,fast,0.1,0.1,0.1,0.1,0.1\n")
+    with pytest.raises(ValueError, match="line 2: column 'render_s'"):
+        read_csv(path)
+
+
+def test_a_zero_error_is_named_not_drawn_on_the_log_axes():
+    """An exact match (error 0) has no place on a log axis: the panel leaves it out and names it; the
+    front of the rest is labelled as before, and both figures draw without error."""
+    pytest.importorskip("matplotlib")
+    import matplotlib.pyplot as plt
+
+    from anim.accuracy_plot import draw_elevation, draw_pareto
+
+    rows = synthetic_rows()
+    rows[6]["p95_rel day"] = 0.0                                   # 'slow' matches the reference by day
+    day = f"sun {accuracy.SUN_ELEVATIONS['day']:g} deg"
+    figure = draw_pareto(rows)
+    try:
+        axes = next(a for a in figure.axes if day in a.get_title())
+        hidden = [t for t in axes.texts if t.get_gid() == "hidden"]
+        assert len(hidden) == 1 and hidden[0].get_text().endswith(": slow")
+        labels = [t.get_text() for t in axes.texts if t.get_gid() != "hidden"]
+        assert labels == [r["candidate"] for r in accuracy.pareto_front(rows[:6], error="p95_rel day")]
+        figure.canvas.draw()
+    finally:
+        plt.close(figure)
+    figure = draw_elevation(rows)
+    try:
+        figure.canvas.draw()
+    finally:
+        plt.close(figure)

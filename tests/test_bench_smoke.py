@@ -23,7 +23,8 @@ BENCH = ROOT / "bench"
 #: script: the start of the header line of each Markdown table it prints
 HEADERS = {
     "bench_single": ["| settings | OpenCL [s] | NumPy twin [s] | NumPy / OpenCL |"],
-    "bench_orders": ["| mode | orders | OpenCL [s] | NumPy twins [s] | NumPy / OpenCL |",
+    "bench_orders": ["| table | W x H x D | orders | first build: wall | CPU | repeated: wall | CPU | load |",
+                     "| mode | orders | OpenCL wall | CPU | NumPy twins wall | CPU | NumPy / OpenCL: wall | CPU | load |",
                      "| mode | sun zenith [deg] | order 1 | order 2 | order 3 | order 4 | orders 5+ |"],
     "bench_montecarlo": ["| mode (preset) | quadrature | altitude [m] | cos view | sun zenith [deg] | deviation [%] | "
                          "deviation [SE] |"],
@@ -129,7 +130,20 @@ def test_accuracy_smoke_writes_its_files_where_asked(tmp_path):
     pytest.importorskip("matplotlib")
     run_smoke("bench_accuracy", "--docs", str(tmp_path))
     assert (tmp_path / "accuracy.csv").read_text().startswith("candidate,")
-    assert (tmp_path / "accuracy.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    for name in ("accuracy.png", "accuracy_elevation.png"):
+        assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_accuracy_replot_draws_the_published_csv_where_asked(tmp_path):
+    """bench_accuracy.py --replot: the two plots of docs/accuracy.csv, without measuring, into --docs; with
+    --smoke and no --docs into a temporary directory (run_smoke: docs/ and README.md unchanged)."""
+    pytest.importorskip("matplotlib")
+    out = run_smoke("bench_accuracy", "--replot", "docs/accuracy.csv", "--size", "64", "--docs", str(tmp_path))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["accuracy.png", "accuracy_elevation.png"]
+    for name in ("accuracy.png", "accuracy_elevation.png"):
+        assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert out.startswith("wrote ")
+    assert run_smoke("bench_accuracy", "--replot", "docs/accuracy.csv", "--size", "64").startswith("wrote ")
 
 
 def test_memory_bench_honours_the_atmosphere_options():

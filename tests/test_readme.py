@@ -11,6 +11,11 @@ What is reduced, and why it keeps the example's meaning:
   is the README's main job, ``tests/test_main_job.py``, slow). Real sun positions keep their location
   and date, over two hours around a Munich sunrise.
 - ``clsky table``: an 8 x 32 x 8 grid (every other option as written).
+- ``--scene FILE``: the scene's keys count as options typed (its location keeps its time range, in two
+  steps: 3 frames), except its quality level: the draft level is typed over it (the command line wins;
+  the scene at its own level is ``tests/test_scene.py``'s slow test). ``--print-scene`` writes nothing.
+- Paths of the repository's files (``examples/dusk.toml``, ``docs/scene_dusk.png``) are given from its
+  root, as a user in the repository types them.
 - ``clsky bench accuracy``: its ``--quick`` smoke run at 16 pixels against the default level (slow: the
   four reference tables take minutes even so).
 - ``python bench/X.py``: run with ``--smoke`` (the same code path at a tiny size; writes no README or
@@ -31,6 +36,11 @@ import sys
 
 import numpy as np
 import pytest
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:
+    import tomli as tomllib
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 README = ROOT / "README.md"
@@ -66,9 +76,16 @@ def readme_commands():
     return list(dict.fromkeys(lines + inline_commands()))
 
 
+def scene_of(argv):
+    """The scene a command line reads (``--scene FILE``, a repository path): {section: {key: value}}."""
+    path = option_value(argv, "--scene")
+    return {} if path is None else tomllib.loads((ROOT / path).read_text(encoding="utf-8"))
+
+
 def reduced(argv):
     """``argv`` (the README's words) with the options that make it small."""
     command = argv[1] if len(argv) > 1 else ""
+    sun = scene_of(argv).get("sun", {})
     extra = []
     if command in ("animate", "render"):
         extra = ["--size", "32", "--progress", "none"] if command == "animate" else ["--size", "32"]
@@ -76,13 +93,16 @@ def reduced(argv):
             extra += ["--frames", "3"]
             if "--location" in argv:                # sunrise in Munich on 21 June: about 03:15 UTC
                 extra += ["--hours", "2.5", "4.5", "--step-minutes", "60"]
+            elif "location" in sun:                 # the scene's time range, in two steps
+                extra += ["--step-minutes", str((sun["end_hour"] - sun["start_hour"]) * 60.0 / 2)]
         if not {"--quality", "--error-budget", "--table-size"} & set(argv):
             extra += ["--quality", "draft"]
     elif command == "table":
         extra = ["--size", "8", "32", "8", "--progress", "none"]
     elif argv[1:3] == ["bench", "accuracy"]:
         extra = ["--quick", "--size", "16", "--reference-quality", "default", "--progress", "none"]
-    return [str(pathlib.Path(sys.executable).parent / "clsky"), *argv[1:], *extra]
+    words = [str(ROOT / word) if "/" in word and (ROOT / word).is_file() else word for word in argv[1:]]
+    return [str(pathlib.Path(sys.executable).parent / "clsky"), *words, *extra]
 
 
 def option_value(argv, *names):
@@ -95,8 +115,10 @@ def option_value(argv, *names):
 def check_outputs(argv, directory):
     """The files the command line names exist and hold what they should."""
     command = argv[1] if len(argv) > 1 else ""
-    output = option_value(argv, "-o", "--output")
-    if command == "table":
+    output = option_value(argv, "-o", "--output") or scene_of(argv).get("output", {}).get("output")
+    if "--print-scene" in argv:                     # the scene on stdout, no file
+        assert list(directory.iterdir()) == []
+    elif command == "table":
         from clsky import ScatteringTable
 
         table = ScatteringTable.load(directory / (output or "table.npz"))

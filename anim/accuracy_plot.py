@@ -1,0 +1,312 @@
+"""The plots of the speed/accuracy sweep (:mod:`anim.accuracy`): the Pareto plot and error versus sun elevation.
+
+Both read the sweep's rows (:func:`anim.accuracy.measure`, or its CSV through :func:`read_csv`):
+
+- :func:`pareto_plot`: error against render time (log-log), one panel for the worst of the frames and one
+  per sun elevation (:data:`anim.accuracy.SUN_ELEVATIONS`). Only the candidates on each panel's Pareto
+  front carry a text label, stacked so that no two labels overlap (:func:`stack_labels`) and tied to
+  their points by a leader line; every other candidate is an unlabelled marker whose colour and shape
+  name its knob in the legend (the numbers of each: the README's table, or the CSV).
+- :func:`elevation_plot`: the 95th-percentile error against sun elevation, one line per candidate on the
+  worst-frame Pareto front, over a band per renderer (table lookup, ray march) spanning all of its
+  candidates; the horizon and civil twilight (sun 0 to 6 deg below the horizon) are marked.
+
+matplotlib draws them (Agg backend), the ``bench`` extra: ``pip install 'clsky[bench]'``. The files are
+written atomically (:func:`clsky._files.atomic_write`), checked before the drawing.
+"""
+
+from __future__ import annotations
+
+import csv
+import pathlib
+
+import numpy as np
+
+from .accuracy import SUN_ELEVATIONS, pareto_front
+
+__all__ = ["read_csv", "stack_labels", "knob_styles", "draw_pareto", "draw_elevation", "pareto_plot",
+           "elevation_plot", "elevation_plot_path", "plot_csv"]
+
+#: Civil twilight: the sun between 0 and 6 deg below the horizon [deg] (the usual definition).
+CIVIL_TWILIGHT = (-6.0, 0.0)
+#: Text columns of the sweep's CSV; every other column is a number.
+TEXT_COLUMNS = ("candidate", "knob", "method")
+RENDERERS = {"lut": "table lookup", "raymarch": "ray march"}
+#: Colour maps of the lines of each renderer in the elevation plot.
+RENDERER_COLOURS = {"lut": "Blues", "raymarch": "Oranges"}
+#: Sun elevations within this many degrees of the horizon get a linear axis in the elevation plot; beyond
+#: it the axis is logarithmic (symlog), so that twilight, sunset and golden hour are not squeezed by day.
+ELEVATION_LINEAR = 10.0
+#: How far along its row [axes fraction] a front label moves to clear the markers beside its point.
+CLEARANCE = 0.3
+
+
+def _pyplot():
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError as error:
+        raise ImportError("the accuracy plots need matplotlib: pip install 'clsky[bench]'") from error
+    return plt
+
+
+def read_csv(path):
+    """The rows of a sweep's CSV (:func:`anim.writers.write_csv` of :func:`anim.accuracy.measure`): a list
+    of dicts, numbers as float. Raises ValueError naming the file and column when a number does not parse
+    or a column the plots need (render time, worst and per-elevation errors) is missing."""
+    with open(path, newline="", encoding="utf-8") as stream:
+        rows = list(csv.DictReader(stream))
+    needed = {"candidate", "knob", "method", "render_s", "p95_rel"} | {f"p95_rel {n}" for n in SUN_ELEVATIONS}
+    missing = sorted(needed - set(rows[0] if rows else ()))
+    if missing:
+        raise ValueError(f"{path}: no rows, or missing columns {missing}")
+    parsed = []
+    for line, row in enumerate(rows, start=2):
+        entry = {}
+        for key, value in row.items():
+            if key in TEXT_COLUMNS:
+                entry[key] = value
+                continue
+            try:
+                entry[key] = float(value)
+            except (TypeError, ValueError):
+                raise ValueError(f"{path}, line {line}: column {key!r} is not a number: {value!r}") from None
+        parsed.append(entry)
+    return parsed
+
+
+def stack_labels(positions, spacing, low=0.0, high=1.0):
+    """Label positions along one axis, as close as possible to ``positions`` (least squares) with at
+    least ``spacing`` between any two, then moved inside [``low``, ``high``] where they fit.
+
+    The order is kept: sorted, the labels must satisfy p[i+1] - p[i] >= spacing; with q[i] = p[i] -
+    i * spacing that is q non-decreasing, so the least-squares fit is the isotonic regression of
+    y[i] - i * spacing (pool-adjacent-violators). Returns an array in the order of ``positions``."""
+    positions = np.asarray(positions, dtype=float)
+    order = np.argsort(positions, kind="stable")
+    target = positions[order] - spacing * np.arange(len(positions))
+    blocks = []                                     # [mean, count] of pooled runs
+    for value in target:
+        blocks.append([value, 1])
+        while len(blocks) > 1 and blocks[-2][0] > blocks[-1][0]:
+            mean, count = blocks.pop()
+            blocks[-1] = [(blocks[-1][0] * blocks[-1][1] + mean * count) / (blocks[-1][1] + count),
+                          blocks[-1][1] + count]
+    fitted = np.concatenate([np.full(count, mean) for mean, count in blocks]) if blocks else np.empty(0)
+    stacked = fitted + spacing * np.arange(len(positions))
+    for index in range(len(stacked)):               # inside [low, high]: push up from low, then down from high
+        stacked[index] = max(stacked[index], low if index == 0 else stacked[index - 1] + spacing)
+    for index in reversed(range(len(stacked))):
+        stacked[index] = min(stacked[index], high if index == len(stacked) - 1 else stacked[index + 1] - spacing)
+    result = np.empty_like(stacked)
+    result[order] = stacked
+    return result
+
+
+def knob_styles(rows):
+    """{knob: (colour, marker)}: the table-lookup knobs as circles in ten colours (other shapes beyond
+    ten), the ray-march knobs as squares in dark colours of their own."""
+    import matplotlib
+
+    colours = matplotlib.colormaps["tab10"].colors
+    dark = ("black", "0.45", "saddlebrown", "darkslategray")
+    shapes = "o^vD<>"
+    styles = {}
+    for method in RENDERERS:
+        knobs = list(dict.fromkeys(r["knob"] for r in rows if r["method"] == method))
+        for i, knob in enumerate(knobs):
+            styles[knob] = ((colours[i % 10], shapes[(i // 10) % len(shapes)]) if method == "lut"
+                            else (dark[i % len(dark)], "s"))
+    return styles
+
+
+def _limits(values, margin):
+    """Log-axis limits around ``values``, ``margin`` decades beyond them."""
+    low, high = np.log10(min(values)), np.log10(max(values))
+    return 10 ** (low - margin), 10 ** (high + margin)
+
+
+def _pareto_panel(axes, rows, error, styles, fontsize):
+    """One panel: every candidate by knob, its Pareto front joined and labelled (labels stacked). A log
+    axis cannot show a zero error or time: such rows (an exact match, a timer too coarse) are left out
+    of the panel and named in its corner."""
+    hidden = [r["candidate"] for r in rows if not (r[error] > 0 and r["render_s"] > 0)]
+    rows = [r for r in rows if r["candidate"] not in hidden]
+    if hidden:
+        axes.text(0.99, 0.01, "not shown (0 on a log axis): " + ", ".join(hidden), transform=axes.transAxes,
+                  ha="right", va="bottom", fontsize=fontsize, color="0.3", gid="hidden")
+    if not rows:
+        return
+    times = [1e3 * r["render_s"] for r in rows]
+    errors = [100 * r[error] for r in rows]
+    front = pareto_front(rows, error=error)
+    front_names = {r["candidate"] for r in front}
+    for knob, (colour, marker) in styles.items():
+        chosen = [r for r in rows if r["knob"] == knob]
+        axes.scatter([1e3 * r["render_s"] for r in chosen], [100 * r[error] for r in chosen], s=22, color=colour,
+                     marker=marker, edgecolors=["k" if r["candidate"] in front_names else "none" for r in chosen],
+                     linewidths=0.8, label=knob, zorder=3)
+    axes.plot([1e3 * r["render_s"] for r in front], [100 * r[error] for r in front], "k--", lw=0.7, zorder=2,
+              label="Pareto front (labelled)")
+    axes.set_xscale("log")
+    axes.set_yscale("log")
+    axes.set_xlim(*_limits(times, 0.08))
+    axes.set_ylim(*_limits(errors, 0.25))
+    axes.grid(True, which="both", lw=0.3, alpha=0.6)
+    axes.tick_params(labelsize=fontsize + 1)
+    # labels: stacked in axes coordinates, at least one text line apart, right of their point (left of it
+    # in the right part of the panel) and clear of the markers in their row nearby, each on a white box
+    # with a leader line
+    box = axes.get_window_extent()
+    line = 1.4 * fontsize * axes.figure.dpi / 72.0 / box.height      # text line height [axes fraction]
+    to_axes = axes.transAxes.inverted()
+    markers = to_axes.transform(axes.transData.transform(np.column_stack([times, errors])))
+    points = to_axes.transform(axes.transData.transform([(1e3 * r["render_s"], 100 * r[error]) for r in front]))
+    heights = stack_labels(points[:, 1], line, low=0.02, high=0.98)
+    offset = 10.0 / box.width
+    for r, (x, _), height in zip(front, points, heights):
+        side = 1.0 if x < 0.6 else -1.0
+        row = markers[(np.abs(markers[:, 1] - height) < 0.6 * line) & (side * (markers[:, 0] - x) >= 0)
+                      & (side * (markers[:, 0] - x) < CLEARANCE)]
+        edge = x if len(row) == 0 else (row[:, 0].max() if side > 0 else row[:, 0].min())
+        axes.annotate(r["candidate"], (1e3 * r["render_s"], 100 * r[error]), xytext=(edge + side * offset, height),
+                      textcoords="axes fraction", ha="left" if side > 0 else "right", va="center",
+                      fontsize=fontsize, bbox=dict(boxstyle="square,pad=0.1", fc="white", ec="none", alpha=0.85),
+                      arrowprops=dict(arrowstyle="-", lw=0.5, color="0.45", shrinkA=0, shrinkB=3), zorder=4)
+
+
+def draw_pareto(rows, size=128, title="clsky: speed versus accuracy"):
+    """The Pareto figure of ``rows`` (see the module): a large panel for the worst frame, four small
+    ones for the sun elevations, one legend of the knobs. ``size``: the frames' side [px], for the axis
+    label. Returns the matplotlib Figure (the caller closes it)."""
+    plt = _pyplot()
+    styles = knob_styles(rows)
+    figure = plt.figure(figsize=(14, 7.2), dpi=100)
+    grid = figure.add_gridspec(2, 4, left=0.055, right=0.99, top=0.9, bottom=0.2, wspace=0.28, hspace=0.38,
+                               width_ratios=(1.3, 1.3, 1, 1))
+    worst = figure.add_subplot(grid[:, :2])
+    _pareto_panel(worst, rows, "p95_rel", styles, fontsize=8)
+    worst.set_title(f"worst of the {len(SUN_ELEVATIONS)} frames", fontsize=10)
+    worst.set_xlabel(f"render time per {size} x {size} frame [ms]")
+    worst.set_ylabel("95th-percentile relative error [%]")
+    for index, (name, elevation) in enumerate(SUN_ELEVATIONS.items()):
+        axes = figure.add_subplot(grid[index // 2, 2 + index % 2])
+        _pareto_panel(axes, rows, f"p95_rel {name}", styles, fontsize=6.5)
+        axes.set_title(f"{name} (sun {elevation:g} deg)", fontsize=9)
+        if index >= 2:
+            axes.set_xlabel("render time [ms]", fontsize=8)
+        if index % 2 == 0:
+            axes.set_ylabel("p95 error [%]", fontsize=8)
+    from matplotlib.lines import Line2D
+
+    handles = [Line2D([], [], ls="", marker=marker, color=colour, ms=5, label=knob)
+               for knob, (colour, marker) in styles.items()]
+    handles.append(Line2D([], [], ls="--", color="k", lw=0.7, label="Pareto front (labelled)"))
+    figure.legend(handles=handles, loc="lower center", ncol=6, fontsize=8, frameon=False,
+                  title="knob moved from the defaults (black edge: on that panel's Pareto front)",
+                  title_fontsize=8)
+    figure.suptitle(title, fontsize=11)
+    return figure
+
+
+def draw_elevation(rows, title="clsky: where each renderer fails"):
+    """Error against sun elevation (see the module): one line per candidate on the worst-frame Pareto
+    front, over one band per renderer spanning all its candidates. Returns the Figure."""
+    plt = _pyplot()
+    import matplotlib
+
+    names = sorted(SUN_ELEVATIONS, key=SUN_ELEVATIONS.get)
+    elevations = [SUN_ELEVATIONS[n] for n in names]
+    figure, axes = plt.subplots(figsize=(9, 5.6), dpi=100)
+    figure.subplots_adjust(left=0.09, right=0.66, top=0.9, bottom=0.16)
+    axes.axvspan(*CIVIL_TWILIGHT, color="0.88", zorder=0, label="civil twilight (sun 0 to 6 deg down)")
+    axes.axvline(0.0, color="0.3", lw=0.9, zorder=1, label="horizon")
+    front = pareto_front(rows)
+    for method, renderer in RENDERERS.items():
+        mine = [r for r in rows if r["method"] == method]
+        if not mine:
+            continue
+        errors = 100 * np.array([[r[f"p95_rel {n}"] for n in names] for r in mine])
+        colours = matplotlib.colormaps[RENDERER_COLOURS[method]]
+        axes.fill_between(elevations, errors.min(axis=0), errors.max(axis=0), color=colours(0.5), alpha=0.18,
+                          lw=0, zorder=1, label=f"{renderer}: all {len(mine)} candidates (range)")
+        on_front = [r for r in front if r["method"] == method]
+        for index, r in enumerate(on_front):
+            shade = 0.45 + 0.5 * index / max(1, len(on_front) - 1)
+            axes.plot(elevations, [100 * r[f"p95_rel {n}"] for n in names], marker="os^vD<>"[index % 7], ms=4,
+                      lw=1.2, color=colours(shade), label=_line_label(renderer, r["candidate"]), zorder=3,
+                      gid=f"front:{r['candidate']}")
+    axes.set_yscale("log")
+    axes.set_xscale("symlog", linthresh=ELEVATION_LINEAR, linscale=2.0)
+    axes.set_xlim(min(CIVIL_TWILIGHT[0], min(elevations)) - 2, max(elevations) + 5)
+    axes.set_xticks(elevations, [f"{e:g}\n{n}" for n, e in zip(names, elevations)], fontsize=8)
+    axes.xaxis.set_minor_locator(matplotlib.ticker.NullLocator())
+    axes.set_xlabel(f"sun elevation [deg] (linear within {ELEVATION_LINEAR:g} deg of the horizon, logarithmic "
+                    "beyond)")
+    axes.set_ylabel("95th-percentile relative error [%]")
+    axes.grid(True, which="both", lw=0.3, alpha=0.6)
+    axes.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, frameon=False,
+                title="lines: on the Pareto front\n(render time vs worst error)", title_fontsize=8)
+    axes.set_title(title, fontsize=11)
+    return figure
+
+
+def _line_label(renderer, candidate):
+    """'ray march 16 samples' as it is; 'linear mapping' as 'table lookup: linear mapping'."""
+    return candidate if candidate.startswith(renderer) else f"{renderer}: {candidate}"
+
+
+def _save(figure, path, force, staging):
+    from clsky.table import atomic_write
+
+    plt = _pyplot()
+    try:
+        with atomic_write(path, overwrite=force, staging=staging) as temporary:
+            figure.savefig(temporary, format="png")
+    finally:
+        plt.close(figure)
+    return path
+
+
+def pareto_plot(rows, path, title="clsky: speed versus accuracy", force=False, size=128, staging=None):
+    """Write :func:`draw_pareto` of ``rows`` as a PNG at ``path``, atomically; an existing file only
+    with ``force``. ``staging`` (a :class:`clsky._files.StagedWrites`): the file lands when that set
+    commits. Returns ``path``."""
+    from clsky._files import check_output
+
+    check_output(path, force)
+    return _save(draw_pareto(rows, size, title), path, force, staging)
+
+
+def elevation_plot(rows, path, title="clsky: where each renderer fails", force=False, staging=None):
+    """Write :func:`draw_elevation` of ``rows`` as a PNG at ``path``, as :func:`pareto_plot` does."""
+    from clsky._files import check_output
+
+    check_output(path, force)
+    return _save(draw_elevation(rows, title), path, force, staging)
+
+
+def elevation_plot_path(plot):
+    """The elevation plot's default path beside the Pareto plot ``plot``: 'accuracy.png' ->
+    'accuracy_elevation.png'."""
+    plot = pathlib.Path(plot)
+    return plot.with_name(f"{plot.stem}_elevation{plot.suffix}")
+
+
+def plot_csv(csv_path, plot, elevation=None, size=128, force=False):
+    """Both plots from a sweep's CSV, without measuring again: the Pareto plot at ``plot`` and the
+    elevation plot at ``elevation`` (default :func:`elevation_plot_path`). ``size``: the frames' side
+    [px] of that sweep (the CSV does not record it). Both paths are checked before either is drawn, and
+    both land together (:class:`clsky._files.StagedWrites`). Returns the two paths."""
+    from clsky._files import StagedWrites, check_output
+
+    elevation = elevation_plot_path(plot) if elevation is None else elevation
+    rows = read_csv(csv_path)
+    for path in (plot, elevation):
+        check_output(path, force)
+    with StagedWrites() as staging:
+        pareto_plot(rows, plot, force=force, size=size, staging=staging)
+        elevation_plot(rows, elevation, force=force, staging=staging)
+    return plot, elevation

@@ -1,0 +1,149 @@
+"""``clsky info FILE``: one readable block describing a table file or an output of clsky.
+
+- A table (``.npz``, :mod:`clsky.table`): read with :meth:`clsky.ScatteringTable.load`, which checks
+  every member's checksum, the parameters hash, shapes, dtypes and values first; then its grid, dtype,
+  size in memory and on disk, units, atmosphere, settings, orders record and provenance.
+- A PNG frame: its size and the text chunks clsky writes (clsky_version, the TOML scene;
+  :mod:`anim.scene`), read with Pillow.
+- A metrics JSON (``<stem>_metrics.json``): the version, the scene, the frames and the table's units.
+- An EXR frame (``clsky animate --hdr exr``): its size, channels and header (units, orientation of an
+  environment map, the scene and clsky's version), read with the OpenEXR bindings.
+
+A damaged or foreign file is a :class:`clsky.table.TableFormatError` (a ValueError) naming the file:
+one line and exit status 2 on the command line.
+"""
+
+from __future__ import annotations
+
+import json
+import pathlib
+
+import numpy as np
+
+from .table import TableFormatError
+
+__all__ = ["describe"]
+
+
+def _block(title, items):
+    width = max(len(name) for name, _ in items)
+    return "\n".join([title] + [f"  {name:<{width}}  {value}" for name, value in items])
+
+
+def _scene_lines(scene):
+    return [("scene", "")] + [("", line) for line in scene.rstrip("\n").splitlines() if line.strip()]
+
+
+def _table(path):
+    from .table import ScatteringTable
+
+    table = ScatteringTable.load(path)                  # checks checksums, hash, shapes, values
+    width, height, depth = table.settings.size
+    record, metadata = table.orders_record, table.metadata
+    stored = sum(array.nbytes for array in (table.data, table.gathered, table.ground_irradiance, *table.orders)
+                 if array is not None)
+    settings = table.settings.to_dict()
+    items = [("kind", "scattering table (clsky .npz, checksums valid)"),
+             ("grid", f"{width} x {height} x {depth} (altitude x view zenith x sun zenith), "
+                      f"{table.settings.channels} channels, {table.data.dtype}"),
+             ("size", f"{path.stat().st_size / 2**20:.1f} MiB on disk, {stored / 2**20:.1f} MiB of arrays"),
+             ("units", metadata.get("units", "relative (incident light I_I per sr)")),
+             ("orders", f"{record.get('orders')} ({record.get('reason') or ('converged' if record.get('converged') else 'not converged')})"),
+             ("mode", settings.get("mode")),
+             ("ground albedo", f"{table.atmosphere.ground_albedo:g}"),
+             ("ozone column", f"{table.atmosphere.ozone_column_du:g} DU"),
+             ("wavelengths", " ".join(f"{w:g}" for w in table.atmosphere.wavelengths) + " nm"),
+             ("clsky version", metadata.get("clsky_version")),
+             ("built", f"{metadata.get('backend')} on {metadata.get('device')} in "
+                       f"{float(metadata.get('build_seconds', 0.0)):.2f} s")]
+    items += [(f"settings.{name}", value) for name, value in settings.items()]
+    return _block(f"{path}:", items)
+
+
+def _png(path):
+    try:
+        from PIL import Image, UnidentifiedImageError
+    except ImportError as error:
+        raise ImportError("describing a PNG needs Pillow: pip install 'clsky[anim]'") from error
+    try:
+        with Image.open(path) as image:
+            image.load()
+            size, mode, text = image.size, image.mode, dict(getattr(image, "text", {}))
+    except (UnidentifiedImageError, OSError, SyntaxError) as error:
+        raise TableFormatError(f"{path}: not a readable PNG ({error})") from None
+    items = [("kind", "PNG image"), ("size", f"{size[0]} x {size[1]} pixels, {mode}"),
+             ("clsky version", text.get("clsky_version", "- (not written by clsky)"))]
+    if "scene" in text:
+        items += _scene_lines(text["scene"])
+    return _block(f"{path}:", items)
+
+
+def _metrics(path):
+    try:
+        document = json.loads(path.read_text(encoding="utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise TableFormatError(f"{path}: not a readable JSON file ({error})") from None
+    if not isinstance(document, dict) or "frames" not in document:
+        raise TableFormatError(f"{path}: not an animation's metrics JSON (no 'frames')")
+    table = document.get("table", {}) or {}
+    settings = table.get("settings", {}) or {}
+    items = [("kind", "animation metrics (JSON)"), ("frames", len(document["frames"])),
+             ("clsky version", document.get("clsky_version", "- (older clsky)")),
+             ("table", f"{' x '.join(map(str, settings.get('size', [])))} ({settings.get('mode')}, "
+                       f"{(table.get('orders') or {}).get('orders')} orders)"),
+             ("frame units", table.get("frame_units", "-"))]
+    if "scene" in document:
+        items += _scene_lines(document["scene"])
+    return _block(f"{path}:", items)
+
+
+def _exr(path):
+    try:
+        import OpenEXR
+    except ImportError as error:
+        raise ImportError("describing an EXR file needs the OpenEXR bindings: pip install 'clsky[anim]'") from error
+    try:
+        with OpenEXR.File(str(path)) as exr:
+            header, channels = dict(exr.header()), sorted(exr.channels())
+    except Exception as error:  # noqa: BLE001  (the bindings raise RuntimeError and others for a bad file)
+        raise TableFormatError(f"{path}: not a readable EXR file ({str(error).splitlines()[0] if str(error) else error})") \
+            from None
+    window = header.get("dataWindow")
+    items = [("kind", "OpenEXR image"),
+             ("size", "-" if window is None else f"{window[1][0] - window[0][0] + 1} x {window[1][1] - window[0][1] + 1}"
+                                                  f" pixels, channels {', '.join(channels)}"),
+             ("clsky version", header.get("clskyVersion", "- (not written by clsky)"))]
+    for name in sorted(header):
+        if name in ("clskyVersion", "scene", "dataWindow", "displayWindow", "channels"):
+            continue
+        value = header[name]
+        if not isinstance(value, str) and np.ndim(value) == 1 and np.issubdtype(np.asarray(value).dtype, np.number):
+            value = " ".join(f"{v:g}" for v in np.asarray(value).tolist())
+        items.append((name, value))
+    if "scene" in header:
+        items += _scene_lines(header["scene"])
+    return _block(f"{path}:", items)
+
+
+READERS = {".npz": _table, ".png": _png, ".json": _metrics, ".exr": _exr}
+
+
+def describe(path) -> str:
+    """A readable block of text describing ``path``: a table (.npz), a PNG, a metrics JSON or an EXR frame.
+
+    Raises
+    ------
+    FileNotFoundError
+        ``path`` does not exist.
+    ValueError
+        Its suffix is none of :data:`READERS`' (``.npz``, ``.png``, ``.json``, ``.exr``).
+    TableFormatError
+        A damaged or foreign file (message names the file).
+    """
+    path = pathlib.Path(path)
+    reader = READERS.get(path.suffix.lower())
+    if reader is None:
+        raise ValueError(f"{path}: clsky info reads {', '.join(READERS)} files, got {path.suffix or 'no suffix'!r}")
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file")
+    return reader(path)

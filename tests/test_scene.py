@@ -1,0 +1,332 @@
+"""Scene files (issue 13, item 2): ``--scene FILE``, ``--print-scene``, the metadata every output carries,
+and ``clsky info``.
+
+Frames are rendered at 16 pixels from an 8 x 32 x 8 table (``--table-size``: no scene plan, a build of a
+few seconds), so the comparisons are exact (bytes) and cheap; the README's dusk scene at full size is
+slow (its table is the default level's, minutes on two cores).
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import pathlib
+import re
+import sys
+
+import numpy as np
+import pytest
+
+import clsky
+from anim import cli
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:
+    import tomli as tomllib
+
+Image = pytest.importorskip("PIL.Image")
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+
+#: A small animation: 2 frames of 16 px from a small full table, lookup only.
+SMALL = ["--size", "16", "--frames", "2", "--table-size", "8", "32", "8", "--method", "lut", "--quality", "draft",
+         "--progress", "none"]
+
+
+def run(capsys, *args):
+    """``clsky ARGS`` in this process: (exit status, stdout, stderr)."""
+    status = cli.main([str(arg) for arg in args])
+    captured = capsys.readouterr()
+    return status, captured.out, captured.err
+
+
+def one_line_error(status, err):
+    assert status == 2, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("clsky: error: "), err
+    return lines[0]
+
+
+EVERY_OPTION = ["--camera", "perspective", "--size", "20", "--fov", "60", "--heading", "200", "--pitch", "5",
+                "--altitude", "100", "--method", "raymarch", "--preset", "physical", "--mode", "physical",
+                "--ground-albedo", "0.3", "--ozone-column", "250", "--error-budget", "0.05", "--quality", "draft",
+                "--table-size", "8", "32", "8", "--samples", "20", "--sampling", "ground_end", "--wavelengths", "6",
+                "--location", "48.1", "11.6", "--date", "2026-06-21", "--hours", "2.5", "4.5",
+                "--step-minutes", "30", "--frames", "7", "--start-elevation", "-4", "--max-elevation", "50",
+                "--tone-map", "atmosphere-plus", "--exposure", "1.5", "--auto-exposure", "--white-balance", "sun",
+                "--no-dither", "--fps", "12", "-o", "x.mp4", "--hdr", "exr", "--hdr-precision", "half"]
+
+
+#: Options of a run that are no part of its scene.
+RUN_OPTIONS = {"help", "force", "progress", "scene", "print_scene"}
+
+
+@pytest.mark.parametrize("command", ["animate", "render"])
+def test_every_option_and_config_field_has_a_scene_key(command):
+    """SCENE_KEYS is the one table from options to AnimationConfig fields (the command line's config is
+    built through it): an option or field added without its key would be dropped silently, so this
+    fails instead."""
+    import dataclasses
+
+    from anim import scene
+    from anim.animate import AnimationConfig
+
+    parser = scene.command_parser(command)
+    options = {action.dest for action in parser._actions if action.option_strings} - RUN_OPTIONS
+    assert options == {key.dest for key, _ in scene.command_keys(parser).values()}
+    fields = {field.name for field in dataclasses.fields(AnimationConfig)} - {"force"}
+    assert fields <= {key.key for key in scene.SCENE_KEYS}
+
+
+def test_print_scene_round_trip(tmp_path, capsys, monkeypatch):
+    """Every option of a command line lands in its scene with its value, and the scene of that scene is
+    the same text: ``--scene`` of ``--print-scene``'s output is the same run. Nothing is written."""
+    monkeypatch.chdir(tmp_path)
+    status, text, err = run(capsys, "animate", *EVERY_OPTION, "--print-scene")
+    assert status == 0 and err == ""
+    scene = tomllib.loads(text)
+    assert scene["camera"] == {"camera": "perspective", "size": 20, "fov_deg": 60.0, "heading_deg": 200.0,
+                               "pitch_deg": 5.0, "altitude": 100.0, "method": "raymarch"}
+    assert scene["sky"] == {"preset": "physical", "mode": "physical", "ground_albedo": 0.3, "ozone_column_du": 250.0,
+                            "error_budget": 0.05, "quality": "draft", "table_size": [8, 32, 8], "samples": 20,
+                            "sampling": "ground_end", "wavelengths": 6}
+    assert scene["sun"] == {"frames": 7, "start_elevation_deg": -4.0, "max_elevation_deg": 50.0,
+                            "location": [48.1, 11.6], "date": datetime.date(2026, 6, 21), "start_hour": 2.5,
+                            "end_hour": 4.5, "step_minutes": 30.0}
+    assert scene["display"] == {"tone_map": "atmosphere-plus", "exposure": 1.5, "auto_exposure": True,
+                                "white_balance": "sun", "dither": False}
+    assert scene["output"] == {"output": "x.mp4", "fps": 12.0, "hdr": "exr", "hdr_precision": "half"}
+    (tmp_path / "x.toml").write_text(text)
+    status, again, err = run(capsys, "animate", "--scene", "x.toml", "--print-scene")
+    assert status == 0 and err == "" and again == text
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.toml"]
+
+
+def test_render_scene_round_trip(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    status, text, _ = run(capsys, "render", "--sun-elevation", "-2.5", "--sun-azimuth", "250", "--size", "24",
+                          "-o", "one.png", "--print-scene")
+    assert status == 0
+    scene = tomllib.loads(text)
+    assert scene["sun"] == {"sun_elevation_deg": -2.5, "sun_azimuth_deg": 250.0}
+    assert scene["output"] == {"output": "one.png"} and scene["camera"]["size"] == 24
+    (tmp_path / "one.toml").write_text(text)
+    assert run(capsys, "render", "--scene", "one.toml", "--print-scene")[1] == text
+
+
+def test_the_command_line_wins_and_says_so(tmp_path, capsys, monkeypatch):
+    """An option typed wins over the scene, even typed with its default value (--pitch 10), and one
+    line on stderr per option names it, its value and the scene's value it replaces."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "s.toml").write_text('[camera]\nsize = 16\npitch_deg = 5.0\n[display]\nexposure = 1.0\ndither = true\n'
+                                     'auto_exposure = true\n')
+    status, text, err = run(capsys, "animate", "--scene", "s.toml", "--size", "24", "--no-dither", "--pitch", "10",
+                            "--no-auto-exposure", "--print-scene")
+    assert status == 0
+    assert err.splitlines() == ["clsky: --size 24 overrides s.toml's camera.size = 16",
+                                "clsky: --pitch 10 overrides s.toml's camera.pitch_deg = 5.0",
+                                "clsky: --no-dither overrides s.toml's display.dither = true (now false)",
+                                "clsky: --no-auto-exposure overrides s.toml's display.auto_exposure = true (now false)"]
+    scene = tomllib.loads(text)
+    assert (scene["camera"]["size"], scene["camera"]["pitch_deg"]) == (24, 10.0)
+    assert (scene["display"]["exposure"], scene["display"]["dither"], scene["display"]["auto_exposure"]) == \
+        (1.0, False, False)
+
+
+@pytest.mark.parametrize("command,text,message", [
+    ("animate", "[camera]\nsize = 5\n", "s.toml: camera.size must be an integer in [16, 8192], got 5"),
+    ("animate", '[camera]\nsize = "big"\n', "s.toml: camera.size must be an integer, got \"big\""),
+    ("animate", "[camera]\nsize = 16.5\n", "s.toml: camera.size must be an integer, got 16.5"),
+    ("animate", "[camera]\nzoom = 2\n", "s.toml: unknown key camera.zoom; valid keys of [camera] for clsky animate: "
+                                        "camera, size, fov_deg, heading_deg, pitch_deg, altitude, method"),
+    ("animate", "[lens]\nzoom = 2\n", "s.toml: unknown section [lens]"),
+    ("animate", "size = 16\n", "s.toml: size = 16 is outside a section (keys go under [camera], [sky], [sun], [display], [output])"),
+    ("animate", "[sky]\nground_albedo = 1.5\n", "s.toml: sky.ground_albedo must be None or a number in [0, 1], got 1.5"),
+    ("animate", '[sky]\npreset = "venus"\n', "s.toml: sky.preset must be one of"),
+    ("animate", "[sky]\ntable_size = [8, 1, 8]\n", "s.toml: sky.table_size[1] must be"),
+    ("animate", "[sky]\ntable_size = [8, 32]\n", "s.toml: sky.table_size must be a list of 3 integers"),
+    ("animate", '[sun]\ndate = "tomorrow"\n', "s.toml: sun.date must be a TOML date (YYYY-MM-DD, unquoted)"),
+    ("animate", "[sun]\nlocation = [48.0, 11.0]\nstart_hour = 5.0\nend_hour = 4.0\n",
+     "s.toml: sun.end_hour must be after the start hour (5)"),
+    ("animate", "[sun]\nsun_elevation_deg = 3.0\n", "s.toml: unknown key sun.sun_elevation_deg (a key of clsky render only)"),
+    ("animate", "[display]\ndither = 1\n", "s.toml: display.dither must be true or false, got 1"),
+    ("animate", '[output]\noutput = "sky.avi"\n', "s.toml: output.output must be a path ending in .mp4"),
+    ("animate", "[camera\n", "--scene s.toml: not a valid TOML file"),
+    ("render", "[sun]\nsun_elevation_deg = 100.0\n", "s.toml: sun.sun_elevation_deg must be in [-90, 90] degrees, got 100"),
+    ("render", "[sun]\nframes = 3\n", "s.toml: unknown key sun.frames (a key of clsky animate only)"),
+    ("render", '[output]\noutput = "sky.jpg"\n', "s.toml: output.output must end in .png"),
+])
+def test_scene_errors_name_the_file_the_key_and_the_range(tmp_path, capsys, monkeypatch, command, text, message):
+    """Checked before any work: exit 2, one line, nothing written."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "s.toml").write_text(text)
+    extra = ["--progress", "none"] if command == "animate" else []
+    line = one_line_error(*run(capsys, command, "--scene", "s.toml", *extra)[::2])
+    assert message in line, line
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.toml"]
+
+
+def test_a_missing_scene_is_one_line(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    status, _, err = run(capsys, "animate", "--scene", "nowhere.toml")
+    assert "--scene: cannot read nowhere.toml: No such file or directory" in one_line_error(status, err)
+    assert list(tmp_path.iterdir()) == []
+    status, _, err = run(capsys, "animate", "--scene", tmp_path)
+    assert f"--scene: cannot read {tmp_path}: Is a directory" in one_line_error(status, err)
+    (tmp_path / "binary.toml").write_bytes(b"\xff\xfe[camera]")
+    status, _, err = run(capsys, "render", "--scene", "binary.toml")
+    assert "--scene binary.toml: not a TOML file (not UTF-8 text)" in one_line_error(status, err)
+
+
+@pytest.fixture(scope="module")
+def small_runs(tmp_path_factory):
+    """The same small animation from a command line (directory a) and from its scene (directory b)."""
+    import contextlib
+    import io
+    import os
+
+    a, b = tmp_path_factory.mktemp("line"), tmp_path_factory.mktemp("scene")
+    here = os.getcwd()
+    try:
+        os.chdir(a)
+        assert cli.main(["animate", *SMALL, "-o", "sky.mp4"]) == 0
+        printed = io.StringIO()
+        with contextlib.redirect_stdout(printed):
+            assert cli.main(["animate", *SMALL, "-o", "sky.mp4", "--print-scene"]) == 0
+        (b / "scene.toml").write_text(printed.getvalue())
+        os.chdir(b)
+        assert cli.main(["animate", "--scene", "scene.toml"]) == 0
+    finally:
+        os.chdir(here)
+    return a, b
+
+
+def test_a_scene_reproduces_its_command_line_bit_for_bit(small_runs):
+    """The frames of the command line and of its scene are the same files, byte for byte (pixels and
+    text chunks), and the metrics agree row for row."""
+    a, b = small_runs
+    frames = sorted((a / "sky_frames").glob("frame_*.png"))
+    assert len(frames) == 2
+    for frame in frames:
+        assert frame.read_bytes() == (b / "sky_frames" / frame.name).read_bytes()
+    assert (a / "sky_metrics.csv").read_text() == (b / "sky_metrics.csv").read_text()
+
+
+def test_every_output_carries_the_scene_and_the_version(small_runs):
+    """The metrics JSON and each PNG frame hold clsky's version and the scene of the run, which reads
+    back as the scene file that made it."""
+    _, b = small_runs
+    scene = tomllib.loads((b / "scene.toml").read_text())
+    metrics = json.loads((b / "sky_metrics.json").read_text())
+    assert metrics["clsky_version"] == clsky.__version__
+    assert tomllib.loads(metrics["scene"]) == scene
+    for frame in sorted((b / "sky_frames").glob("frame_*.png")):
+        with Image.open(frame) as image:
+            assert image.text["clsky_version"] == clsky.__version__
+            assert image.text["scene"] == metrics["scene"]
+    assert scene["camera"]["size"] == 16 and scene["sky"]["table_size"] == [8, 32, 8]
+
+
+def test_render_writes_its_scene_into_the_png(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    args = ["render", "--size", "16", "--table-size", "8", "32", "8", "--method", "lut", "--quality", "draft",
+            "--sun-elevation", "4", "-o", "one.png"]
+    assert run(capsys, *args)[0] == 0
+    with Image.open(tmp_path / "one.png") as image:
+        pixels, text = np.asarray(image), dict(image.text)
+    assert text["clsky_version"] == clsky.__version__
+    (tmp_path / "one.toml").write_text(text["scene"])
+    assert run(capsys, "render", "--scene", "one.toml", "-o", "two.png")[0] == 0
+    with Image.open(tmp_path / "two.png") as image:
+        np.testing.assert_array_equal(np.asarray(image), pixels)   # the same frame, exactly
+        assert tomllib.loads(image.text["scene"])["output"]["output"] == "two.png"
+
+
+def test_info_describes_outputs(small_runs, capsys):
+    _, b = small_runs
+    status, out, _ = run(capsys, "info", b / "sky_frames" / "frame_00001.png")
+    assert status == 0
+    assert "PNG image" in out and "16 x 16 pixels" in out and f"clsky version  {clsky.__version__}" in out
+    assert "size = 16" in out and 'output = "sky.mp4"' in out
+    status, out, _ = run(capsys, "info", b / "sky_metrics.json")
+    assert status == 0 and "animation metrics" in out and "frames         2" in out
+    assert "8 x 32 x 8" in out and "table_size = [8, 32, 8]" in out
+
+
+@pytest.fixture(scope="module")
+def small_table(tmp_path_factory):
+    path = tmp_path_factory.mktemp("table") / "t.npz"
+    settings = clsky.TableSettings(size=(8, 32, 8), orders=2)
+    clsky.ScatteringTable.build(clsky.preset("atmosphere-plus"), settings).save(path)
+    return path
+
+
+def test_info_describes_a_table(small_table, capsys):
+    status, out, _ = run(capsys, "info", small_table)
+    assert status == 0
+    assert out.startswith(f"{small_table}:\n")
+    for expected in ("checksums valid", "8 x 32 x 8 (altitude x view zenith x sun zenith), 6 channels, float64",
+                     "units ", "orders ", "mode                          atmosphere-plus",
+                     f"clsky version                 {clsky.__version__}", "settings.orders               2"):
+        assert expected in out, (expected, out)
+
+
+@pytest.mark.parametrize("damage", ["flip", "truncate"])
+def test_info_of_a_damaged_table_is_one_line(small_table, tmp_path, capsys, damage):
+    data = bytearray(small_table.read_bytes())
+    if damage == "flip":
+        data[len(data) // 2] ^= 0xFF
+    else:
+        data = data[: len(data) // 2]
+    broken = tmp_path / "broken.npz"
+    broken.write_bytes(bytes(data))
+    assert f"clsky: error: {broken}" in one_line_error(*run(capsys, "info", broken)[::2])
+
+
+def test_exr_frames_carry_the_scene_and_info_reads_them(tmp_path, capsys, monkeypatch):
+    """--hdr exr: each EXR frame's header holds the scene and clsky's version beside its units;
+    clsky info prints them; a damaged EXR is one line."""
+    pytest.importorskip("OpenEXR")
+    monkeypatch.chdir(tmp_path)
+    assert run(capsys, "animate", *SMALL, "--hdr", "exr", "-o", "sky.mp4")[0] == 0
+    exr = tmp_path / "sky_frames" / "frame_00001.exr"
+    status, out, _ = run(capsys, "info", exr)
+    assert status == 0, out
+    assert "OpenEXR image" in out and "16 x 16 pixels, channels RGB" in out
+    assert re.search(rf"\n  clsky version +{re.escape(clsky.__version__)}\n", out), out
+    assert "size = 16" in out and 'hdr = "exr"' in out and "radianceUnits" in out
+    with Image.open(tmp_path / "sky_frames" / "frame_00001.png") as image:
+        assert image.text["scene"].splitlines()[-1] in out
+    broken = tmp_path / "broken.exr"
+    broken.write_bytes(exr.read_bytes()[:100])
+    assert f"clsky: error: {broken}: not a readable EXR file" in one_line_error(*run(capsys, "info", broken)[::2])
+
+
+def test_info_refuses_other_files(tmp_path, capsys):
+    assert "clsky info reads .npz, .png, .json, .exr files" in one_line_error(*run(capsys, "info", tmp_path / "x.toml")[::2])
+    assert "no such file" in one_line_error(*run(capsys, "info", tmp_path / "x.npz")[::2])
+    (tmp_path / "x.png").write_bytes(b"not a png")
+    assert "not a readable PNG" in one_line_error(*run(capsys, "info", tmp_path / "x.png")[::2])
+    (tmp_path / "x.json").write_text("{}")
+    assert "not an animation's metrics JSON" in one_line_error(*run(capsys, "info", tmp_path / "x.json")[::2])
+
+
+@pytest.mark.slow
+def test_the_dusk_scene_reproduces_the_readme_picture(tmp_path, capsys, monkeypatch):
+    """``clsky animate --scene examples/dusk.toml`` (README 'Scene files') writes docs/scene_dusk.png
+    as its third frame, byte for byte, text chunks included; its scene is the example's. Slow: the
+    scene's own size and quality (a default-level table; 111 s wall on the 2-core machine at load
+    average 7.3)."""
+    monkeypatch.chdir(tmp_path)
+    example = ROOT / "examples" / "dusk.toml"
+    assert run(capsys, "animate", "--scene", example, "--progress", "none")[0] == 0
+    frames = sorted((tmp_path / "dusk_frames").glob("frame_*.png"))
+    assert len(frames) == 4
+    assert frames[2].read_bytes() == (ROOT / "docs" / "scene_dusk.png").read_bytes()
+    with Image.open(frames[2]) as image:
+        written = tomllib.loads(image.text["scene"])
+        assert image.text["clsky_version"] == clsky.__version__
+    for section, values in tomllib.loads(example.read_text()).items():
+        for key, value in values.items():
+            assert written[section][key] == value, (section, key)
