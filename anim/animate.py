@@ -26,6 +26,7 @@ from typing import Callable
 import numpy as np
 
 import clsky
+from clsky._cl import host_blas_single_threaded
 from clsky._files import StagedWrites, check_output
 from clsky.errors import ParameterError, check_choice, check_integer, check_real, is_real_number
 from clsky.ground import check_ground_mode
@@ -38,7 +39,7 @@ from clsky.settings import SAMPLINGS
 from clsky.resources import MemoryEstimate, check_memory, device_of, estimate_animation_memory
 
 from . import display as display_pipeline
-from . import metrics, sunpath, writers
+from . import metrics, sunpath, tonemap, writers
 from .cameras import camera_from_name
 from .exr import PRECISIONS
 
@@ -578,9 +579,16 @@ def display(config: AnimationConfig, table) -> display_pipeline.Display:
 
 def display_frames(pipeline: display_pipeline.Display, hdr, valid, config: AnimationConfig, seed=0):
     """(EV, {name: 8-bit frame}, Delta E display) of one sun position's HDR frames: the exposure is
-    metered on the reference (the ray march when there is one) and shows every frame at that EV."""
+    metered on the reference (the ray march when there is one) and shows every frame at that EV. The
+    Delta E display is the ``display`` of :func:`clsky.anim.metrics.compare_frames`: with both frames, their
+    display-linear values (ray march, table lookup), computed once with the 8-bit frames
+    (:meth:`clsky.anim.display.Display.encode_and_linear`; the tone curve and gamut mapping were half the
+    frame loop's host time when Delta E evaluated them again); else the pipeline at that EV."""
     ev = pipeline.exposure(hdr.get("raymarch", hdr.get("lut")), valid)
-    images = {name: pipeline.to_uint8(frame, ev, dither=config.dither, seed=seed) for name, frame in hdr.items()}
+    shown = {name: pipeline.encode_and_linear(frame, ev) for name, frame in hdr.items()}
+    images = {name: tonemap.to_uint8(encoded, dither=config.dither, seed=seed) for name, (encoded, _) in shown.items()}
+    if "raymarch" in shown and "lut" in shown:
+        return ev, images, (shown["raymarch"][1], shown["lut"][1])
     return ev, images, (lambda pixels: pipeline.linear(pixels, ev))
 
 
@@ -680,7 +688,9 @@ def _write_animation(config, positions, renderer, prepared, valid, table, plan, 
     metric rows, the temporal jumps, the target paths and the stale frames to be deleted."""
     rows, means = [], {"lut": [], "raymarch": []}
     pipeline = display(config, table)
-    with _frame_writer(config, len(positions), staging) as writer:
+    # the frames' host products (sRGB and white-balance matrices, Oklab, XYZ for Delta E) on one BLAS
+    # thread: beside PoCL's workers OpenBLAS's threads cost ~100x the CPU of one (README, "Speed")
+    with _frame_writer(config, len(positions), staging) as writer, host_blas_single_threaded():
         for index, sun in enumerate(positions):
             hdr = render_frame(renderer, prepared, sun.direction, config)
             ev, images, shown = display_frames(pipeline, hdr, valid, config, seed=index)

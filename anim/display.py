@@ -453,6 +453,15 @@ class Display:
             exposed = rgb * 2.0 ** ev
         return TONE_CURVES[self.tone_map].function(exposed)
 
+    def encode_and_linear(self, frame, ev):
+        """(:meth:`encode`, :meth:`linear`) of ``frame`` at ``ev`` from one evaluation of the tone curve
+        (and gamut mapping): the same values as the two calls, at half the cost."""
+        if self.tone_map == "atmosphere-plus":
+            encoded = self.encode(frame, ev)
+            return encoded, np.clip(encoded, 0.0, 1.0) ** tonemap.GAMMA
+        linear = self.linear(frame, ev)
+        return srgb_encode(linear), linear
+
     def to_uint8(self, frame, ev, dither=False, seed=0):
         """8-bit display values (:func:`clsky.anim.tonemap.to_uint8` of :meth:`encode`)."""
         return tonemap.to_uint8(self.encode(frame, ev), dither=dither, seed=seed)

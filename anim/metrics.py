@@ -264,10 +264,12 @@ def compare_frames(reference, test, valid=None, exposure=1.0, display=None):
         Pixels that count (default: all), e.g. the inside of a fisheye circle.
     exposure : float
         Exposure of the tone map applied to both frames for Delta E [-] (without ``display``).
-    display : callable, optional
+    display : callable or (array_like, array_like), optional
         HDR pixels (N, 3) -> display-linear sRGB in [0, 1] (N, 3): the display pipeline the frames are
         shown with, e.g. ``lambda pixels: clsky.anim.display.Display(...).linear(pixels, ev)`` at one EV for
-        both frames. Default: the notes' tone map at ``exposure``, decoded with its gamma 2.2.
+        both frames; or that pipeline's values already computed for the whole frames, (reference,
+        test), each (H, W, 3) (:func:`clsky.anim.animate.display_frames`): the same numbers without a second
+        evaluation. Default: the notes' tone map at ``exposure``, decoded with its gamma 2.2.
 
     Returns
     -------
@@ -316,8 +318,16 @@ def compare_frames(reference, test, valid=None, exposure=1.0, display=None):
         delta_e = delta_e_cie76(display_to_lab(tone_map(reference[valid], exposure)),
                                 display_to_lab(tone_map(test[valid], exposure)))
     else:
-        delta_e = delta_e_cie76(xyz_to_lab(linear_srgb_to_xyz(np.clip(display(reference[valid]), 0.0, 1.0))),
-                                xyz_to_lab(linear_srgb_to_xyz(np.clip(display(test[valid]), 0.0, 1.0))))
+        if callable(display):
+            shown = display(reference[valid]), display(test[valid])
+        else:
+            shown = [np.asarray(frame, dtype=np.float64) for frame in display]
+            if len(shown) != 2 or any(frame.shape != reference.shape for frame in shown):
+                raise ValueError(f"display must be a callable or two display-linear frames of shape "
+                                 f"{reference.shape}, got {[np.shape(frame) for frame in display]}")
+            shown = [frame[valid] for frame in shown]
+        delta_e = delta_e_cie76(xyz_to_lab(linear_srgb_to_xyz(np.clip(shown[0], 0.0, 1.0))),
+                                xyz_to_lab(linear_srgb_to_xyz(np.clip(shown[1], 0.0, 1.0))))
     return {
         "rmse": rmse,
         "rmse_relative": rmse / max(mean_luminance, floor),

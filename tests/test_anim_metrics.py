@@ -324,3 +324,22 @@ def test_display_floor_is_half_a_code_value():
     # Tone mapping the floor gives 0.5 / 255 up to the rounding of log1p and the power.
     assert_allclose(tone_map(np.full(3, floor))[0] * 255, 0.5, rtol=1e-12)
     assert_allclose(display_floor(4.0), floor / 4.0, rtol=1e-15)
+
+
+def test_compare_frames_takes_the_display_values_of_whole_frames():
+    """display=(reference, test) display-linear frames (computed once with the 8-bit frames) gives the
+    same numbers, bit for bit, as the display callable applied to the valid pixels; a pair of the wrong
+    shape is refused."""
+    rng = np.random.default_rng(5)
+    reference = rng.random((6, 7, 3)) * 3.0
+    test = reference * (1.0 + 0.1 * rng.standard_normal((6, 7, 1)))
+    valid = rng.random((6, 7)) > 0.3
+
+    def display(pixels):
+        return np.clip(pixels, 0.0, 1.0) ** 1.3
+
+    by_callable = compare_frames(reference, np.abs(test), valid, display=display)
+    by_frames = compare_frames(reference, np.abs(test), valid, display=(display(reference), display(np.abs(test))))
+    assert by_frames == by_callable and by_frames["mean_delta_e"] > 0
+    with pytest.raises(ValueError, match="display must be"):
+        compare_frames(reference, np.abs(test), valid, display=(display(reference)[:3], display(np.abs(test))))

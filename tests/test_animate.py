@@ -234,3 +234,65 @@ def test_default_configuration_sizes():
     assert config.frames == 120
     assert config.camera == "fisheye"
     assert config.image_shape() == (512, 512)
+
+
+# 4. Who owns the cores --------------------------------------------------------------------------------
+
+def _record_blas_threads(monkeypatch):
+    """A list that receives, at each frame's comparison, the thread counts of the BLAS libraries."""
+    from threadpoolctl import threadpool_info
+
+    seen, compare_frames = [], metrics.compare_frames
+
+    def recording(*args, **kwargs):
+        seen.append({info["num_threads"] for info in threadpool_info() if info["user_api"] == "blas"})
+        return compare_frames(*args, **kwargs)
+
+    monkeypatch.setattr(metrics, "compare_frames", recording)
+    return seen
+
+
+def test_frame_loop_runs_host_blas_on_one_thread(tmp_path, cl_context, monkeypatch):
+    """The frame loop's host matrix products run on one BLAS thread: PoCL's workers own the cores
+    (README, "Speed"); the limit is lifted after the animation."""
+    from threadpoolctl import threadpool_info
+
+    def threads():       # by library: the animation may load another BLAS (SciPy's) on the way
+        return {info["filepath"]: info["num_threads"] for info in threadpool_info() if info["user_api"] == "blas"}
+
+    before = threads()
+    seen = _record_blas_threads(monkeypatch)
+    render_animation(AnimationConfig(frames=2, output=str(tmp_path / "sky.mp4"), **TINY), ctx=cl_context)
+    assert seen == [{1}, {1}], seen
+    after = threads()
+    assert {path: after[path] for path in before} == before
+
+
+@pytest.mark.slow
+def test_one_blas_thread_gives_the_same_bytes_as_two(tmp_path, cl_context, monkeypatch):
+    """The frames and metrics of the frame loop on one BLAS thread are byte for byte those of the same
+    animation with BLAS on two threads (BLAS splits rows among threads, not the three-term sums).
+    256 x 256 frames: the products' (N, 3) @ (3, 3) sizes (N ~ 51 000 valid pixels for Delta E,
+    65 536 for the display) are above OpenBLAS's threshold for threading them (m n k > 262 144), so
+    the two-thread run really splits them; 48-pixel frames would not. Slow: 7 s of CPU, 11-47 s wall on
+    the loaded 2-core machine."""
+    from threadpoolctl import threadpool_limits
+
+    import clsky.anim.animate
+
+    seen = _record_blas_threads(monkeypatch)
+    outputs = {}
+    for name in ("one thread", "two threads"):
+        if name == "two threads":
+            monkeypatch.setattr(clsky.anim.animate, "host_blas_single_threaded",
+                                lambda: threadpool_limits(limits=2, user_api="blas"))
+        directory = tmp_path          # one output path for both: the PNGs carry the scene, output included
+        config = AnimationConfig(frames=2, size=256, samples=8, table_size=TINY["table_size"],
+                                 output=str(directory / "sky.mp4"), force=name == "two threads")
+        render_animation(config, ctx=cl_context)
+        record = json.loads((directory / "sky_metrics.json").read_text(encoding="utf-8"))
+        outputs[name] = ([path.read_bytes() for path in sorted((directory / "sky_frames").iterdir())],
+                         (directory / "sky_metrics.csv").read_bytes(), record["frames"], record["temporal"])
+    assert seen[:2] == [{1}, {1}] and len(seen) == 4, seen
+    frames, csv_bytes, rows, temporal = outputs["one thread"]
+    assert len(frames) == 2 and outputs["two threads"] == (frames, csv_bytes, rows, temporal)

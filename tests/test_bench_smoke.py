@@ -29,6 +29,8 @@ HEADERS = {
     "bench_montecarlo": ["| mode (preset) | quadrature | altitude [m] | cos view | sun zenith [deg] | deviation [%] | "
                          "deviation [SE] |"],
     "bench_render": ["| render | best | median | frames/s (best) |"],
+    "bench_animate": ["| run | wall [s] | CPU [s] | CPU / wall | load before | load after |",
+                      "| stage | CPU [s], BLAS 1 thread | per frame [ms] | CPU [s], BLAS unlimited | per frame [ms] |"],
     "bench_memory": ["| run | table (W x H x D) | measured peak | estimate | estimate / measured |"],
     "bench_accuracy": ["| candidate | knob | build [s] | render [ms] | p95 day [%] |"],
     "bench_quality": ["| level | promise | table | samples | build [s] | render [ms] | day [%] |",

@@ -498,3 +498,19 @@ def test_dusk_zenith_is_still_blue(cl_context):
     _, images, _ = display_frames(display(config, table), hdr, valid, config)
     r8, g8, b8 = images["raymarch"][zenith].astype(float).mean(axis=0)
     assert b8 > g8 > r8, (r8, g8, b8)
+
+
+@pytest.mark.parametrize("curve", sorted(TONE_CURVES))       # atmosphere-plus among them
+@pytest.mark.parametrize("white_balance", ["d65", "sun"])
+def test_encode_and_linear_are_the_two_calls_bit_for_bit(curve, white_balance):
+    """Display.encode_and_linear (one tone-curve evaluation for the 8-bit frame and Delta E) returns
+    exactly encode() and linear(): the animation's frames and metrics must not change by a bit. The
+    frame spans dark, bright and saturated (out-of-gamut after white balance) pixels."""
+    rng = np.random.default_rng(12)
+    frame = np.concatenate([rng.random((64, 3)) * 10.0 ** rng.uniform(-3, 3, (64, 1)),
+                            [[5.0, 0.0, 0.0], [0.0, 0.0, 9.0], [0.0, 0.0, 0.0], [1e4, 1e4, 1e4]]]).reshape(17, 4, 3)
+    pipeline = Display(curve, 1.5, white_balance=white_balance, sun_white=np.array([1.0, 0.9, 0.7]))
+    for ev in (-3.0, 0.0, 2.5):
+        encoded, linear = pipeline.encode_and_linear(frame, ev)
+        assert encoded.tobytes() == pipeline.encode(frame, ev).tobytes()
+        assert linear.tobytes() == pipeline.linear(frame, ev).tobytes()

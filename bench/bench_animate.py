@@ -1,0 +1,153 @@
+"""Benchmark: the default `clsky animate` end to end, and where its CPU time goes, stage by stage.
+
+- End to end: ``python -m clsky.anim animate`` (120 frames, 512 x 512 fisheye, physical preset, table lookup
+  and ray march compared, PNG + MP4 + metrics) in a fresh process: wall time, CPU time of the process
+  and its children (ffmpeg) from ``getrusage(RUSAGE_CHILDREN)``, the load average before and after.
+- Stage split: :func:`clsky.anim.animate.render_animation` in this process at ``--stage-frames`` frames of
+  the same size (after a warm-up), under cProfile with the process CPU clock as its timer, so that each stage's figure
+  counts PoCL's worker threads while the host waits for them (the stages do not overlap). Run twice,
+  side by side: with the frame loop's BLAS on one thread (the default, ``clsky._cl.host_blas_single_threaded``)
+  and with OpenBLAS's own thread count, to show what the two thread pools cost when they meet.
+Prints the tables and writes them into README.md (section "Speed", ``bench:animate``).
+
+Usage: python bench/bench_animate.py [--frames N] [--size PX] [--stage-frames N] [--no-readme] [--smoke]
+
+``--smoke``: a 2-frame 16 x 16 animation over an 8 x 32 x 8 table for both parts; print only
+(bench/_report.py).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import cProfile
+import datetime
+import os
+import pathlib
+import pstats
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+
+from _report import SMOKE, add_output_arguments, load_average, load_note, machine, parse_arguments, \
+    write_readme_section
+
+import clsky.anim.animate
+from clsky.anim.animate import AnimationConfig, render_animation
+
+#: stage label: the functions (module file suffix, function name) whose cumulative CPU time it is; the
+#: functions of different stages never call one another, so the stages add up
+STAGES = {
+    "scene plan and table build": [("anim/animate.py", "plan_animation"), ("anim/animate.py", "make_renderer")],
+    "table lookup (device)": [("clsky/render.py", "render_table")],
+    "ray march (device)": [("clsky/render.py", "render_raymarch")],
+    "conversion to cd/m^2 (colorimetry)": [("anim/animate.py", "three_wavelength_frame_to_linear_srgb"),
+                                           ("anim/animate.py", "spectral_frame_to_linear_srgb")],
+    "display (exposure, tone curve, 8 bits)": [("anim/animate.py", "display_frames")],
+    "comparison (metrics, Delta E, error image, composite)": [
+        ("anim/metrics.py", "compare_frames"), ("anim/metrics.py", "error_image"),
+        ("anim/metrics.py", "relative_error_map"), ("anim/metrics.py", "composite"),
+        ("anim/metrics.py", "mean_luminance")],
+    "files (PNG, frames to ffmpeg, metrics)": [("anim/writers.py", "write"), ("anim/writers.py", "__exit__"),
+                                               ("anim/writers.py", "write_csv"), ("anim/writers.py", "write_json")],
+}
+
+
+def children_cpu() -> float:
+    """User + system CPU time [s] of the waited-for children (and their waited-for children)."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def end_to_end(arguments):
+    """(wall [s], CPU [s], load before, load after) of ``python -m clsky.anim animate <arguments>``."""
+    with tempfile.TemporaryDirectory() as directory:
+        load_before, cpu, wall = load_average(), children_cpu(), time.perf_counter()
+        subprocess.run([sys.executable, "-m", "clsky.anim", "animate", "--progress", "none", *arguments], cwd=directory,
+                       check=True, stdout=subprocess.DEVNULL)
+        return time.perf_counter() - wall, children_cpu() - cpu, load_before, load_average()
+
+
+def stage_split(config_options, blas_limited=True):
+    """({stage: CPU [s]}, total CPU [s] of the process and ffmpeg, wall [s], load after) of one
+    in-process animation under cProfile (process CPU clock)."""
+    limit = clsky.anim.animate.host_blas_single_threaded
+    with tempfile.TemporaryDirectory() as directory:
+        config = AnimationConfig(output=str(pathlib.Path(directory) / "sky.mp4"), **config_options)
+        profile = cProfile.Profile(time.process_time)
+        if not blas_limited:
+            clsky.anim.animate.host_blas_single_threaded = contextlib.nullcontext
+        children, cpu, wall = children_cpu(), time.process_time(), time.perf_counter()
+        try:
+            profile.runcall(render_animation, config)
+        finally:
+            clsky.anim.animate.host_blas_single_threaded = limit
+        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+        ffmpeg = children_cpu() - children
+    stats = pstats.Stats(profile).stats
+    stages = {}
+    for label, functions in STAGES.items():
+        stages[label] = sum(entry[3] for (file, _, name), entry in stats.items()
+                            if any(file.endswith(suffix) and name == function for suffix, function in functions))
+    stages["ffmpeg (child process)"] = ffmpeg
+    stages["other (Python, cProfile's own overhead)"] = cpu - sum(stages.values()) + ffmpeg
+    return stages, cpu + ffmpeg, wall, load_average()
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=120, help="frames of the end-to-end run (default 120)")
+    parser.add_argument("--size", type=int, default=512, help="frame size [px] (default 512)")
+    parser.add_argument("--stage-frames", type=int, default=12, help="frames of the stage split (default 12)")
+    add_output_arguments(parser)
+    args = parse_arguments(parser)
+    extra, options = [], {}
+    if args.smoke:
+        args.frames, args.stage_frames, args.size = SMOKE.animation_frames, SMOKE.animation_frames, SMOKE.frame
+        extra, options = ["--table-size", *map(str, SMOKE.table)], {"table_size": SMOKE.table}
+    command = ["--frames", str(args.frames), "--size", str(args.size), *extra]
+    wall, cpu, load_before, load_after = end_to_end(command)
+    print(f"end to end: wall {wall:.1f} s, CPU {cpu:.1f} s, load {load_before:.1f} -> {load_after:.1f}", flush=True)
+    highest = max(load_before, load_after)
+    # a discarded warm-up at the smoke size: kernel compilation and the colour conversion's tables
+    # (built once per process) would otherwise land in the first variant only
+    stage_split({"frames": SMOKE.animation_frames, "size": SMOKE.frame, **options})
+    options.update(frames=args.stage_frames, size=args.size)
+    splits = []
+    for limited in (True, False):
+        splits.append(stage_split(options, blas_limited=limited))
+        highest = max(highest, splits[-1][3])
+        print(f"stage split (BLAS {'one thread' if limited else 'unlimited'}): CPU {splits[-1][1]:.1f} s, "
+              f"wall {splits[-1][2]:.1f} s", flush=True)
+    shown = "clsky animate " + " ".join(command)
+    lines = [f"Measured {datetime.date.today()} on {machine()}. End to end: `{shown}` "
+             f"in a fresh process (table build, both renderers, comparison, PNG + MP4 + metrics); CPU time of the "
+             f"process and its children (ffmpeg), load average before and after.{load_note(highest)}", "",
+             "| run | wall [s] | CPU [s] | CPU / wall | load before | load after |",
+             "|---|---:|---:|---:|---:|---:|",
+             f"| `{shown}` | {wall:.1f} | {cpu:.1f} | {cpu / wall:.2f} | {load_before:.1f} | {load_after:.1f} |", "",
+             f"Where the CPU time goes: the same animation at {args.stage_frames} frames in one process after a "
+             f"warm-up (kernels compiled, the colour conversion's tables built), cProfile "
+             f"on the process CPU clock (PoCL's worker threads count towards the stage that waits for them); "
+             f"the frame loop's host BLAS on one thread (default) and with OpenBLAS's own threads, side by side.",
+             "", "| stage | CPU [s], BLAS 1 thread | per frame [ms] | CPU [s], BLAS unlimited | per frame [ms] |",
+             "|---|---:|---:|---:|---:|"]
+    for label in splits[0][0]:
+        cells = []
+        for stages, _, _, _ in splits:
+            cells += [f"{stages[label]:.2f}", f"{1000 * stages[label] / args.stage_frames:.0f}"]
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    cells = []
+    for _, total, split_wall, _ in splits:
+        cells += [f"**{total:.2f}** (wall {split_wall:.1f})", f"{1000 * total / args.stage_frames:.0f}"]
+    lines.append("| total | " + " | ".join(cells) + " |")
+    markdown = "\n".join(lines)
+    print(markdown)
+    if not args.no_readme:
+        write_readme_section("animate", markdown)
+
+
+if __name__ == "__main__":
+    main()
