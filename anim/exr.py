@@ -68,8 +68,13 @@ import numpy as np
 import clsky
 from clsky._files import atomic_write
 
-__all__ = ["PRECISIONS", "HALF_MAX", "ENVMAP_ORIENTATION", "write_exr", "read_exr", "exr_pixels", "save_exr",
+__all__ = ["HDR_FORMATS", "PRECISIONS", "HALF_MAX", "ENVMAP_ORIENTATION", "write_exr", "read_exr", "exr_pixels", "save_exr",
            "frame_attributes", "enu_to_envmap", "envmap_pixel", "require_openexr"]
+
+#: HDR frame formats of ``--hdr`` and FrameWriter's ``hdr`` (None: none) -> file suffix. Kept here, in a
+#: module importing no optional dependency (OpenEXR is imported only when a file is read or written),
+#: so that clsky's command line builds its options without the ``anim`` extra.
+HDR_FORMATS = {None: None, "exr": ".exr", "hdr": ".hdr", "npy": ".npy"}
 
 #: EXR pixel types by option value: 16-bit half floats or 32-bit floats.
 PRECISIONS = {"half": np.float16, "float": np.float32}
