@@ -8,9 +8,10 @@ the numbers are and where they point (:func:`frame_attributes`):
 
 - ``software`` ("clsky X.Y.Z") and ``clskyVersion``;
 - ``radianceUnits``: the frames' units (see :func:`clsky.anim.animate.frame_units`); where they are cd/m^2
-  (spectral frames converted to linear sRGB) also the standard ``whiteLuminance`` = 1 (the luminance
-  of RGB (1, 1, 1) [cd/m^2]) and ``chromaticities`` (Rec. 709 primaries, D65 white); for the table's
-  three wavelengths, ``channelWavelengthsNm`` (R, G, B);
+  (absolute frames converted to linear sRGB: every preset but atmosphere-plus, or ``--wavelengths``) also
+  the standard ``whiteLuminance`` = 1 (the luminance of RGB (1, 1, 1) [cd/m^2]) and ``chromaticities``
+  (Rec. 709 primaries, D65 white); for relative frames (atmosphere-plus), r, g, b at the table's three
+  wavelengths, ``channelWavelengthsNm`` (R, G, B) instead;
 - ``camera``, ``observerAltitude`` [m], the sun as ``sunAzimuthDeg`` (from north, clockwise seen from
   above), ``sunElevationDeg`` and the unit vector ``sunDirectionENU`` (east, north, up);
 - for an equirectangular panorama: the standard ``envmap`` attribute = latitude-longitude, the sun in
