@@ -69,8 +69,8 @@ import numpy as np
 import clsky
 from clsky._files import atomic_write
 
-__all__ = ["HDR_FORMATS", "PRECISIONS", "HALF_MAX", "ENVMAP_ORIENTATION", "write_exr", "read_exr", "exr_pixels", "save_exr",
-           "frame_attributes", "enu_to_envmap", "envmap_pixel", "require_openexr"]
+__all__ = ["HDR_FORMATS", "PRECISIONS", "HALF_MAX", "ENVMAP_ORIENTATION", "write_exr", "read_exr", "exr_pixels",
+           "save_exr", "frame_attributes", "enu_to_envmap", "envmap_pixel", "require_openexr"]
 
 #: HDR frame formats of ``--hdr`` and FrameWriter's ``hdr`` (None: none) -> file suffix. Kept here, in a
 #: module importing no optional dependency (OpenEXR is imported only when a file is read or written),
