@@ -259,7 +259,7 @@ def _line_label(renderer, candidate):
 
 
 def _save(figure, path, force, staging):
-    from clsky.table import atomic_write
+    from clsky._files import atomic_write
 
     plt = _pyplot()
     try:

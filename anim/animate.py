@@ -506,7 +506,9 @@ def _hdr_attributes(config: AnimationConfig, table, sun) -> dict:
     from .exr import frame_attributes
 
     width, height = config.image_shape()
-    wavelengths = None if config.wavelengths is not None else table.atmosphere.wavelengths
+    # channel wavelengths only for relative frames (atmosphere-plus), which are r, g, b at the table's three
+    # wavelengths; absolute frames are linear sRGB, whose channels are no wavelengths
+    wavelengths = None if config.absolute else table.atmosphere.wavelengths
     return frame_attributes(frame_units(config, table), config.camera, width, height, sun.zenith_deg,
                             sun.azimuth_deg, config.altitude, wavelengths_nm=wavelengths)
 

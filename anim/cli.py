@@ -110,8 +110,7 @@ def _add_scene_file_arguments(parser):
 
 def register(commands):
     """Adds ``animate`` and ``render`` to clsky's sub-command parsers; returns their handlers."""
-    from .exr import PRECISIONS
-    from .writers import FrameWriter
+    from .exr import HDR_FORMATS, PRECISIONS
 
     animate = commands.add_parser("animate", help="render a sunrise-to-sunset animation (MP4 + PNG frames)")
     _add_scene_arguments(animate)
@@ -120,7 +119,7 @@ def register(commands):
                         help="MP4 file; frames go to <stem>_frames/, metrics to <stem>_metrics.csv/.json")
     output.add_argument("--fps", type=float, default=30.0)
     output.add_argument("--no-dither", action="store_true", help="do not dither the 8-bit frames")
-    formats = [name for name in FrameWriter.HDR_FORMATS if name is not None]
+    formats = [name for name in HDR_FORMATS if name is not None]
     output.add_argument("--hdr", nargs="?", const="npy", choices=formats, metavar="{" + ",".join(formats) + "}",
                         help="also write HDR frames: the ray march's (with --method compare) or the lookup's; exr: "
                              "OpenEXR with units, version and sun in the header, a latitude-longitude environment "

@@ -8,9 +8,10 @@ the numbers are and where they point (:func:`frame_attributes`):
 
 - ``software`` ("clsky X.Y.Z") and ``clskyVersion``;
 - ``radianceUnits``: the frames' units (see :func:`clsky.anim.animate.frame_units`); where they are cd/m^2
-  (spectral frames converted to linear sRGB) also the standard ``whiteLuminance`` = 1 (the luminance
-  of RGB (1, 1, 1) [cd/m^2]) and ``chromaticities`` (Rec. 709 primaries, D65 white); for the table's
-  three wavelengths, ``channelWavelengthsNm`` (R, G, B);
+  (absolute frames converted to linear sRGB: every preset but atmosphere-plus, or ``--wavelengths``) also
+  the standard ``whiteLuminance`` = 1 (the luminance of RGB (1, 1, 1) [cd/m^2]) and ``chromaticities``
+  (Rec. 709 primaries, D65 white); for relative frames (atmosphere-plus), r, g, b at the table's three
+  wavelengths, ``channelWavelengthsNm`` (R, G, B) instead;
 - ``camera``, ``observerAltitude`` [m], the sun as ``sunAzimuthDeg`` (from north, clockwise seen from
   above), ``sunElevationDeg`` and the unit vector ``sunDirectionENU`` (east, north, up);
 - for an equirectangular panorama: the standard ``envmap`` attribute = latitude-longitude, the sun in
@@ -68,8 +69,13 @@ import numpy as np
 import clsky
 from clsky._files import atomic_write
 
-__all__ = ["PRECISIONS", "HALF_MAX", "ENVMAP_ORIENTATION", "write_exr", "read_exr", "exr_pixels", "save_exr",
-           "frame_attributes", "enu_to_envmap", "envmap_pixel", "require_openexr"]
+__all__ = ["HDR_FORMATS", "PRECISIONS", "HALF_MAX", "ENVMAP_ORIENTATION", "write_exr", "read_exr", "exr_pixels",
+           "save_exr", "frame_attributes", "enu_to_envmap", "envmap_pixel", "require_openexr"]
+
+#: HDR frame formats of ``--hdr`` and FrameWriter's ``hdr`` (None: none) -> file suffix. Kept here, in a
+#: module importing no optional dependency (OpenEXR is imported only when a file is read or written),
+#: so that clsky's command line builds its options without the ``anim`` extra.
+HDR_FORMATS = {None: None, "exr": ".exr", "hdr": ".hdr", "npy": ".npy"}
 
 #: EXR pixel types by option value: 16-bit half floats or 32-bit floats.
 PRECISIONS = {"half": np.float16, "float": np.float32}

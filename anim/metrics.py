@@ -23,7 +23,6 @@ Examples
 from __future__ import annotations
 
 import numpy as np
-from PIL import Image, ImageDraw, ImageFont
 
 from clsky import colorimetry
 from clsky.errors import short
@@ -555,6 +554,8 @@ def colormap_viridis(values):
 
 def _font():
     """PIL's built-in bitmap font: no FreeType needed, the same pixels everywhere."""
+    from PIL import ImageFont      # the anim extra's Pillow: imported where drawn, so that clsky's CLI runs without it
+
     if hasattr(ImageFont, "load_default_imagefont"):        # Pillow >= 10.1 (load_default: FreeType)
         return ImageFont.load_default_imagefont()
     return ImageFont.load_default()
@@ -587,6 +588,8 @@ def _draw_legend(height, vmax):
             row = int(round(bottom - fraction * (bottom - top)))
             panel[row, margin + bar_width:margin + bar_width + tick] = _TEXT_COLOUR
             ticks.append((row, text))
+    from PIL import Image, ImageDraw
+
     image = Image.fromarray(panel)
     draw = ImageDraw.Draw(image)
     draw.text((margin, margin), "rel. error", fill=_TEXT_COLOUR, font=font)
@@ -693,6 +696,8 @@ def composite(panels, labels=None):
     heights = [panel.shape[0] for panel in panels]
     if len(set(heights)) != 1:
         raise ValueError(f"panels must have the same height, got heights {heights}")
+    from PIL import Image, ImageDraw
+
     font = _font()
     pieces = []
     for index, (panel, label) in enumerate(zip(panels, labels)):

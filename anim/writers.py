@@ -35,10 +35,11 @@ import re
 import warnings
 
 import numpy as np
-from PIL import Image
 
 from clsky._files import StagedWrites, atomic_write, check_output, check_output_directory
 from clsky.errors import short
+
+from .exr import HDR_FORMATS
 
 __all__ = ["FrameWriter", "frame_files", "png_text", "write_png", "write_json", "write_csv", "MP4_OUTPUT_PARAMS"]
 
@@ -119,6 +120,8 @@ def write_png(path, image_u8, force=False, staging=None, text=None):
         raise TypeError(f"image_u8 must be uint8, got {image.dtype}")
     if not (image.ndim == 2 or (image.ndim == 3 and image.shape[2] in (3, 4))):
         raise ValueError(f"image_u8 must have shape (H, W), (H, W, 3) or (H, W, 4), got {image.shape}")
+    from PIL import Image      # the anim extra's Pillow: imported where used, so that clsky's CLI runs without it
+
     path = pathlib.Path(path)
     with atomic_write(path, overwrite=force, suffix=".png", staging=staging) as temporary:
         # zlib level 1: 4.6x faster than PIL's default 6 on a 1614 x 512 composite frame, 27 % larger
@@ -307,8 +310,8 @@ class FrameWriter:
     ['sky.mp4']
     """
 
-    #: HDR frame formats (None: none) -> file suffix.
-    HDR_FORMATS = {None: None, "exr": ".exr", "hdr": ".hdr", "npy": ".npy"}
+    #: HDR frame formats (None: none) -> file suffix: :data:`clsky.anim.exr.HDR_FORMATS`.
+    HDR_FORMATS = HDR_FORMATS
 
     def __init__(self, directory=None, mp4_path=None, fps=30, total_frames=None, hdr=None, force=False,
                  prefix="frame", staging=None, hdr_precision="float", text=None):
@@ -471,6 +474,8 @@ class FrameWriter:
 
     def _write_files(self, index, image, hdr, hdr_attributes):
         """Stage frame ``index``'s PNG (and HDR file); returns their targets."""
+        from PIL import Image
+
         written = []
         with atomic_write(self.frame_path(index), self.force, suffix=".png", staging=self._staging) as temporary:
             self._temporaries.append(temporary)

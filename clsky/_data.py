@@ -17,7 +17,7 @@ import pathlib
 
 import numpy as np
 
-__all__ = ["DataFileError", "read_binned_table", "BIN_COLUMNS"]
+__all__ = ["DataFileError", "read_binned_table", "interpolate_bin_centres", "BIN_COLUMNS"]
 
 #: The first two columns of every binned file: the bin's edges [nm].
 BIN_COLUMNS = ("wavelength_min_nm", "wavelength_max_nm")
@@ -108,3 +108,41 @@ def read_binned_table(source, value_column: str):
     for column in columns:
         column.setflags(write=False)
     return columns
+
+
+def interpolate_bin_centres(table, wavelengths_nm, what: str):
+    """Values of a binned table at given wavelengths: each bin's mean read as the value at the bin's
+    centre, linear interpolation in wavelength between centres.
+
+    Parameters
+    ----------
+    table : (numpy.ndarray, numpy.ndarray, numpy.ndarray)
+        Lower edges [nm], upper edges [nm] and values, as :func:`read_binned_table` returns them.
+    wavelengths_nm : array_like
+        Wavelengths [nm], between the first and the last bin centre.
+    what : str
+        What the values are, for the message (e.g. "the solar spectrum").
+
+    Returns
+    -------
+    numpy.ndarray
+        The interpolated values, float64, one per wavelength.
+
+    Raises
+    ------
+    ValueError
+        For a wavelength that is not finite or lies outside [first centre, last centre].
+
+    Examples
+    --------
+    >>> table = (np.array([360.0, 370.0]), np.array([370.0, 380.0]), np.array([1.0, 3.0]))
+    >>> interpolate_bin_centres(table, [365.0, 370.0], "x").tolist()
+    [1.0, 2.0]
+    """
+    low, high, values = table
+    centres = 0.5 * (low + high)
+    wavelengths = np.asarray(wavelengths_nm, dtype=np.float64)
+    if not np.all(np.isfinite(wavelengths) & (wavelengths >= centres[0]) & (wavelengths <= centres[-1])):
+        raise ValueError(f"wavelengths must be in [{centres[0]:g}, {centres[-1]:g}] nm for {what}, "
+                         f"got {wavelengths_nm!r}")
+    return np.interp(wavelengths, centres, values)

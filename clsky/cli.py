@@ -312,8 +312,8 @@ def build_parser(extensions=()):
     commands.add_parser("devices", help="list OpenCL platforms and devices, and the one clsky uses")
     table = commands.add_parser("table", help="compute a scattering table and save it")
     _add_table_arguments(table)
-    info = commands.add_parser("info", help="describe a table file (.npz) or an output (PNG, metrics JSON)")
-    info.add_argument("file", help="a .npz table, a PNG frame or a <stem>_metrics.json")
+    info = commands.add_parser("info", help="describe a table file (.npz) or an output (PNG, EXR, metrics JSON)")
+    info.add_argument("file", help="a .npz table, a PNG or EXR frame, or a <stem>_metrics.json")
     handlers = dict(COMMANDS)
     for register in extensions:
         handlers.update(register(commands))
@@ -390,7 +390,7 @@ def run_info(args):
 
     try:
         print(describe(args.file))
-    except FileNotFoundError as error:
+    except (FileNotFoundError, ImportError) as error:   # ImportError: the PNG/EXR readers without [anim]
         raise UsageError(str(error)) from None
     return 0
 

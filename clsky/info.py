@@ -78,6 +78,17 @@ def _png(path):
     return _block(f"{path}:", items)
 
 
+def _json_member(path, document, key, kind):
+    """``document[key]`` checked to be of ``kind`` (list, dict, str); absent: None. TableFormatError
+    naming the file and the key otherwise."""
+    value = document.get(key)
+    if value is not None and not isinstance(value, kind):
+        names = {list: "a list", dict: "an object", str: "a string"}
+        raise TableFormatError(f"{path}: not an animation's metrics JSON ('{key}' must be {names[kind]}, "
+                               f"got {type(value).__name__})")
+    return value
+
+
 def _metrics(path):
     try:
         document = json.loads(path.read_text(encoding="utf-8"))
@@ -85,15 +96,20 @@ def _metrics(path):
         raise TableFormatError(f"{path}: not a readable JSON file ({error})") from None
     if not isinstance(document, dict) or "frames" not in document:
         raise TableFormatError(f"{path}: not an animation's metrics JSON (no 'frames')")
-    table = document.get("table", {}) or {}
-    settings = table.get("settings", {}) or {}
-    items = [("kind", "animation metrics (JSON)"), ("frames", len(document["frames"])),
+    frames = _json_member(path, document, "frames", list)
+    if frames is None:
+        raise TableFormatError(f"{path}: not an animation's metrics JSON ('frames' must be a list, got null)")
+    table = _json_member(path, document, "table", dict) or {}
+    settings = _json_member(path, table, "settings", dict) or {}
+    orders = _json_member(path, table, "orders", dict) or {}
+    size = _json_member(path, settings, "size", list) or []
+    scene = _json_member(path, document, "scene", str)
+    items = [("kind", "animation metrics (JSON)"), ("frames", len(frames)),
              ("clsky version", document.get("clsky_version", "- (older clsky)")),
-             ("table", f"{' x '.join(map(str, settings.get('size', [])))} ({settings.get('mode')}, "
-                       f"{(table.get('orders') or {}).get('orders')} orders)"),
+             ("table", f"{' x '.join(map(str, size))} ({settings.get('mode')}, {orders.get('orders')} orders)"),
              ("frame units", table.get("frame_units", "-"))]
-    if "scene" in document:
-        items += _scene_lines(document["scene"])
+    if scene is not None:
+        items += _scene_lines(scene)
     return _block(f"{path}:", items)
 
 
@@ -139,6 +155,8 @@ def describe(path) -> str:
         Its suffix is none of :data:`READERS`' (``.npz``, ``.png``, ``.json``, ``.exr``).
     TableFormatError
         A damaged or foreign file (message names the file).
+    ImportError
+        A PNG without Pillow, an EXR file without the OpenEXR bindings (the ``anim`` extra), saying so.
     """
     path = pathlib.Path(path)
     reader = READERS.get(path.suffix.lower())

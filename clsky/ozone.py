@@ -31,7 +31,7 @@ import functools
 
 import numpy as np
 
-from ._data import read_binned_table
+from ._data import interpolate_bin_centres, read_binned_table
 
 __all__ = ["DOBSON_UNIT", "CROSS_SECTION_FILE", "cross_section_table", "cross_section_serdyuchenko2014",
            "tent_profile", "tent_number_density_max"]
@@ -86,13 +86,7 @@ def cross_section_serdyuchenko2014(wavelengths_nm):
     >>> (cross_section_serdyuchenko2014([650, 510, 475]) * 1e25).round(4).tolist()    # [1e-25 m^2]
     [2.45, 1.541, 0.4924]
     """
-    low, high, sigma = cross_section_table()
-    centres = 0.5 * (low + high)
-    wavelengths = np.asarray(wavelengths_nm, dtype=np.float64)
-    if not np.all(np.isfinite(wavelengths) & (wavelengths >= centres[0]) & (wavelengths <= centres[-1])):
-        raise ValueError(f"wavelengths must be in [{centres[0]:g}, {centres[-1]:g}] nm for the ozone "
-                         f"cross-sections, got {wavelengths_nm!r}")
-    return np.interp(wavelengths, centres, sigma)
+    return interpolate_bin_centres(cross_section_table(), wavelengths_nm, "the ozone cross-sections")
 
 
 def tent_profile(altitude, peak_altitude=25_000.0, half_width=15_000.0):

@@ -27,7 +27,7 @@ import functools
 
 import numpy as np
 
-from ._data import read_binned_table
+from ._data import interpolate_bin_centres, read_binned_table
 
 __all__ = ["SOLAR_SPECTRUM_FILE", "ABSOLUTE_UNITS", "RELATIVE_UNITS", "solar_spectrum_table",
            "solar_irradiance_astm_g173", "with_solar_spectrum", "radiance_units"]
@@ -79,13 +79,7 @@ def solar_irradiance_astm_g173(wavelengths_nm):
     >>> solar_irradiance_astm_g173([365.0, 550.0, 650.0]).round(5).tolist()
     [1.11776, 1.85094, 1.56312]
     """
-    low, high, irradiance = solar_spectrum_table()
-    centres = 0.5 * (low + high)
-    wavelengths = np.asarray(wavelengths_nm, dtype=np.float64)
-    if not np.all(np.isfinite(wavelengths) & (wavelengths >= centres[0]) & (wavelengths <= centres[-1])):
-        raise ValueError(f"wavelengths must be in [{centres[0]:g}, {centres[-1]:g}] nm for the solar spectrum, "
-                         f"got {wavelengths_nm!r}")
-    return np.interp(wavelengths, centres, irradiance)
+    return interpolate_bin_centres(solar_spectrum_table(), wavelengths_nm, "the solar spectrum")
 
 
 def with_solar_spectrum(atmosphere):

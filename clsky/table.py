@@ -1,22 +1,24 @@
 """The scattering table as a product: build, look up, save, load, export for GPU engines.
 
 File format (``.npz``, uncompressed: compression saves little on these values and costs seconds;
-:data:`FORMAT_VERSION` 4). Members:
+:data:`FORMAT_VERSION` 5). Members:
 
 ``format_version``
-    int64 scalar, 4.
+    int64 scalar, 5 (4 until the settings gained ``azimuth_harmonics``, which enters the parameters hash
+    and the shape of ``gathered``: a version-4 file is refused, "rebuild the table").
 ``data``
     (D, H, W, C) table values at full precision (float64 as built, or the settings' dtype), finite, >= 0.
 ``order_1``, ``order_2``, ..., ``order_K``
     Every scattering order, stored as float32 for inspection: order 1 (D, H, W, 6) factored, higher
     orders (D, H, W, 6) factored (atmosphere-plus) or (D, H, W, 3) phased (physical); finite, >= 0.
 ``gathered``
-    (D, H, W, 6), the sum of the gathered in-scatter tables for the ray march, finite, >= 0; absent
+    (D, H, W, 6), the sum of the gathered in-scatter tables for the ray march, finite, >= 0; with
+    ``azimuth_harmonics`` = M > 0, (M + 1, D, H, W, 6), its cosine harmonics (harmonic 0 >= 0); absent
     for single scattering.
 ``ground_irradiance``
     (D, 3) float64, the sky's irradiance on a reflecting ground per sun node (clsky/ground.py), finite,
     >= 0; present exactly when the atmosphere's ground_albedo is > 0 (files of a black ground, and so
-    every file written before the ground existed, have none: the format version stays 4).
+    every file written before the ground existed, have none: it came without a version change).
 ``atmosphere``, ``settings``, ``metadata``, ``orders_record``
     JSON objects (0-d unicode strings): the parameters, the provenance, how the iteration stopped.
 ``parameters_hash``
@@ -65,7 +67,7 @@ __all__ = ["ScatteringTable", "TableFormatError", "FORMAT_VERSION", "BACKENDS", 
            "CHANNEL_NAMES", "array_checksum", "check_table_array"]
 
 # 3: settings carry sun_cos_range (the sun axis' sub-range); 4: a checksum of every member
-FORMAT_VERSION = 4
+FORMAT_VERSION = 5
 BACKENDS = ("opencl", "numpy")
 _MULTIPLE_NAMES = ("multiple_r", "multiple_g", "multiple_b")
 CHANNEL_NAMES = {6: ("rayleigh_r", "rayleigh_g", "rayleigh_b", "mie_r", "mie_g", "mie_b"),

@@ -28,7 +28,7 @@
  * Register blocking: a work-item computes GATHER_ROWS rows i for GATHER_CELLS cells x; per j it forms
  * each row's per-channel coefficient vector once (select of the two species' entries) and applies it
  * to every cell's real8. Global size (ceil(W / GATHER_CELLS), ceil(H / GATHER_ROWS), D). */
-#ifndef GATHER_ROWS
+#if !defined(GATHER_ROWS) || !defined(GATHER_CELLS)
 #error "GATHER_ROWS and GATHER_CELLS (the register block of a gather work-item) must be defined"
 #endif
 __kernel void gather(__global const real *matrices, const int species_stride, const int matrix_z_stride,

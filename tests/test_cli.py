@@ -83,3 +83,28 @@ def test_bad_arguments_one_line_exit_2(tmp_path, args, named):
     assert len(lines) == 1, result.stderr
     assert lines[0].startswith("clsky: error:") and named in lines[0]
     assert list(tmp_path.iterdir()) == []
+
+
+# The `clsky` script (clsky.anim.cli:main) with the anim extra's packages made unimportable, as in an
+# install without `[anim]`: None in sys.modules makes `import PIL` raise ImportError.
+_WITHOUT_ANIM_EXTRA = ("import sys\n"
+                       "for name in ('PIL', 'imageio', 'imageio_ffmpeg', 'pvlib', 'OpenEXR'):\n"
+                       "    sys.modules[name] = None\n"
+                       "from clsky.anim.cli import main\n"
+                       "sys.exit(main(sys.argv[1:]))\n")
+
+
+@pytest.mark.parametrize("args, expected", [
+    (("table", "--help"), "usage: clsky table"),
+    (("info", "--help"), "usage: clsky info"),
+    (("animate", "--help"), "--hdr [{exr,hdr,npy}]"),
+    (("devices",), "fp64 yes"),
+])
+def test_clsky_script_runs_without_the_anim_extra(tmp_path, args, expected):
+    """Every command builds the animation commands' options: they must not import Pillow, imageio,
+    pvlib or OpenEXR (the `anim` extra), or every `clsky` command fails without it."""
+    result = subprocess.run([sys.executable, "-c", _WITHOUT_ANIM_EXTRA, *args], cwd=tmp_path,
+                            capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert expected in result.stdout
+    assert result.stderr == ""

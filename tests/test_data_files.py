@@ -91,3 +91,20 @@ def test_a_good_file_with_spaces_and_blank_lines_reads():
                         encoding="utf-8")
         low, high, values = read_binned_table(path, "value")
     assert low.tolist() == [360.0, 370.0] and high.tolist() == [370.0, 380.0] and values.tolist() == [1.5, 0.0]
+
+
+def test_interpolate_bin_centres_reads_each_bin_at_its_centre():
+    """The shipped tables' one interpolation (ozone cross-sections, solar spectrum): at a bin centre the
+    bin's value exactly; halfway between two centres their mean (one rounding: 1 ulp); outside the
+    centres' range, or NaN, a ValueError naming the range and what was asked for."""
+    from clsky._data import interpolate_bin_centres
+
+    table = read_binned_table("data/solar_irradiance_astm_g173_etr_10nm.csv", "irradiance_w_m2_nm")
+    low, high, values = table
+    centres = 0.5 * (low + high)
+    assert interpolate_bin_centres(table, centres, "the solar spectrum").tolist() == values.tolist()
+    halfway = interpolate_bin_centres(table, high[:-1], "the solar spectrum")
+    np.testing.assert_allclose(halfway, 0.5 * (values[:-1] + values[1:]), rtol=2.0 ** -52, atol=0.0)
+    for outside in (centres[0] - 0.5, centres[-1] + 0.5, float("nan")):
+        with pytest.raises(ValueError, match=r"wavelengths must be in \[365, 835\] nm for the solar spectrum"):
+            interpolate_bin_centres(table, [outside], "the solar spectrum")

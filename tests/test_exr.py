@@ -348,7 +348,8 @@ def test_three_js_exr_loader_reads_the_frames(tmp_path):
 
 @pytest.fixture(scope="module")
 def panoramas(tmp_path_factory, cl_context):
-    """The same small panorama animation with EXR, RGBE and .npy frames."""
+    """The same small panorama animation with EXR, RGBE and .npy frames (the default physical preset:
+    absolute frames), and with EXR frames of the atmosphere-plus preset (relative frames)."""
     from clsky.anim.animate import AnimationConfig, render_animation
 
     directory = tmp_path_factory.mktemp("panorama")
@@ -356,26 +357,44 @@ def panoramas(tmp_path_factory, cl_context):
     for hdr in ("exr", "hdr", "npy"):
         config = AnimationConfig(hdr=hdr, output=str(directory / f"{hdr}.mp4"), **TINY)
         runs[hdr] = (config, render_animation(config, ctx=cl_context))
+    config = AnimationConfig(hdr="exr", output=str(directory / "plus.mp4"), preset="atmosphere-plus", **TINY)
+    runs["exr atmosphere-plus"] = (config, render_animation(config, ctx=cl_context))
     return runs
 
 
-def test_panorama_exr_holds_the_frames_values_and_says_what_they_are(panoramas):
-    from clsky import preset
+# The header's sun angles are float32 (EXR float attributes): below 360 degrees their rounding is at most
+# half a unit in the last place, 256 * 2^-24 = 1.5e-5 degrees; 360 * 2^-24 = 2.2e-5 bounds it.
+FLOAT32_DEGREES = 360.0 * 2.0 ** -24
 
-    config, result = panoramas["exr"]
-    npy_config, _ = panoramas["npy"]
+
+@pytest.mark.parametrize("run", ["exr", "exr atmosphere-plus"])
+def test_panorama_exr_holds_the_frames_values_and_says_what_they_are(panoramas, cl_context, run):
+    from clsky import preset
+    from clsky.anim.animate import build_table, frame_units
+
+    config, result = panoramas[run]
+    units = frame_units(config, build_table(config, ctx=cl_context))
     for row in result.rows:
         index = row["frame"]
         pixels, header = read_exr(config.frames_directory / f"frame_{index:05d}.exr")
-        frame = np.load(npy_config.frames_directory / f"frame_{index:05d}.npy")
         assert pixels.dtype == np.float32 and pixels.shape == (16, 32, 3)
-        assert_array_equal(pixels, frame)                # the same render, stored exactly
+        if run == "exr":
+            npy_config, _ = panoramas["npy"]
+            frame = np.load(npy_config.frames_directory / f"frame_{index:05d}.npy")
+            assert_array_equal(pixels, frame)                # the same render, stored exactly
         assert header["envmap"] == OpenEXR.ENVMAP_LATLONG
         assert header["clskyVersion"] == clsky.__version__
-        assert header["sunAzimuthDeg"] == pytest.approx(row["sun_azimuth_deg"] % 360.0, abs=1e-4)
-        assert header["sunElevationDeg"] == pytest.approx(90.0 - row["sun_zenith_deg"], abs=1e-4)
-        assert "relative" in header["radianceUnits"] or "W m^-2 sr^-1 nm^-1" in header["radianceUnits"]
-        assert_array_equal(header["channelWavelengthsNm"], np.float32(preset(config.preset).wavelengths))
+        assert header["sunAzimuthDeg"] == pytest.approx(row["sun_azimuth_deg"] % 360.0, abs=FLOAT32_DEGREES)
+        assert header["sunElevationDeg"] == pytest.approx(90.0 - row["sun_zenith_deg"], abs=FLOAT32_DEGREES)
+        assert header["radianceUnits"] == units
+        if config.absolute:
+            # linear sRGB in cd/m^2: its channels are primaries, not wavelengths
+            assert units.startswith("linear sRGB [cd/m^2]") and header["whiteLuminance"] == 1.0
+            assert "channelWavelengthsNm" not in header
+        else:
+            # atmosphere-plus: r, g, b radiance at the table's three wavelengths
+            assert "relative" in units and "whiteLuminance" not in header
+            assert_array_equal(header["channelWavelengthsNm"], np.float32(preset(config.preset).wavelengths))
     table_units = result.paths[-1].read_text(encoding="utf-8")          # the metrics JSON
     assert header["radianceUnits"] in table_units
 

@@ -312,6 +312,29 @@ def test_info_refuses_other_files(tmp_path, capsys):
     assert "not an animation's metrics JSON" in one_line_error(*run(capsys, "info", tmp_path / "x.json")[::2])
 
 
+@pytest.mark.parametrize("document, message", [
+    ('{"frames": 3}', "'frames' must be a list, got int"),
+    ('{"frames": [], "table": "x"}', "'table' must be an object, got str"),
+    ('{"frames": [], "table": {"settings": 5}}', "'settings' must be an object, got int"),
+])
+def test_info_of_a_malformed_metrics_json_is_one_line(tmp_path, capsys, document, message):
+    path = tmp_path / "sky_metrics.json"
+    path.write_text(document)
+    line = one_line_error(*run(capsys, "info", path)[::2])
+    assert line == f"clsky: error: {path}: not an animation's metrics JSON ({message})"
+
+
+def test_info_without_the_anim_extra_is_one_line(tmp_path, capsys, monkeypatch):
+    """Describing a PNG or EXR needs Pillow or OpenEXR: without them (None in sys.modules makes their
+    import fail) one line saying how to install them, exit status 2."""
+    monkeypatch.setitem(sys.modules, "PIL", None)
+    monkeypatch.setitem(sys.modules, "OpenEXR", None)
+    for name, needs in (("x.png", "describing a PNG needs Pillow"), ("x.exr", "describing an EXR file needs")):
+        (tmp_path / name).write_bytes(b"not an image")
+        line = one_line_error(*run(capsys, "info", tmp_path / name)[::2])
+        assert line.startswith(f"clsky: error: {needs}") and "pip install 'clsky[anim]'" in line
+
+
 @pytest.mark.slow
 def test_the_dusk_scene_reproduces_the_readme_picture(tmp_path, capsys, monkeypatch):
     """``clsky animate --scene examples/dusk.toml`` (README 'Scene files') writes docs/scene_dusk.png

@@ -80,6 +80,17 @@ def test_wrong_version_is_refused(table, tmp_path):
         ScatteringTable.load(path)
 
 
+def test_format_4_file_asks_for_a_rebuild(table, tmp_path):
+    """A file saved before azimuth_harmonics (format 4, settings without it) is refused as an older
+    format to rebuild, not as a corrupted file (its parameters hash is of the old settings)."""
+    path = table.save(tmp_path / "sky.npz")
+    settings = {key: value for key, value in table.settings.to_dict().items() if key != "azimuth_harmonics"}
+    rewrite(path, format_version=np.int64(4), settings=json.dumps(settings))
+    with pytest.raises(TableFormatError, match=r"table format version 4; this clsky reads version 5 "
+                                               r"\(rebuild the table with `clsky table`\)"):
+        ScatteringTable.load(path)
+
+
 def test_wrong_shape_is_refused(table, tmp_path):
     path = table.save(tmp_path / "sky.npz")
     rewrite(path, data=table.data[:, :, :-1])

@@ -129,7 +129,7 @@ def test_round_trip_is_bit_for_bit(tables, mode, tmp_path):
 
 def test_file_holds_format_version_and_a_checksum_per_member(saved):
     contents = members_of(saved)
-    assert contents["format_version"].dtype == np.int64 and int(contents["format_version"]) == FORMAT_VERSION == 4
+    assert contents["format_version"].dtype == np.int64 and int(contents["format_version"]) == FORMAT_VERSION == 5
     checksums = json.loads(str(contents["checksums"]))
     assert set(checksums) == set(contents) - {"checksums"}
     assert all(checksums[name] == array_checksum(contents[name]) for name in checksums)
