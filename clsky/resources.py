@@ -51,10 +51,12 @@ BASE_PROCESS_BYTES = 130 * 2**20
 #: default table (tolerance 1e-4) converges at order 10, the high level (1e-5) at 12, draft (1e-2) at 5.
 ORDER_RATIO = 0.4
 #: Host bytes per pixel of one frame's processing beyond the directions, buffers and HDR frames, per
-#: method: tone map, 8-bit frames, metrics, error image, composite, PNG and MP4 encoding. Measured as
-#: the growth of peak RSS between 2-frame 256^2 and 1024^2 fisheye animations: 390 bytes per pixel in
-#: all (compare), 195 (lut), 203 (raymarch), of which the listed arrays are 147 and 123.
-FRAME_BYTES_PER_PIXEL = {"compare": 240, "lut": 80, "raymarch": 80}
+#: method: conversion to cd/m^2, exposure metering, tone map, 8-bit frames, metrics, error image,
+#: composite, PNG and MP4 encoding. Measured as the growth of peak RSS between 2-frame 256^2 and 1024^2
+#: fisheye animations of the default (physical) preset: 488 bytes per pixel in all (compare), 334 (lut),
+#: 336 (raymarch), of which the listed arrays are 147 and 123 (2026-12-02, after the physical frames
+#: became cd/m^2 through the power-law conversion; before it, 390 / 195 / 203).
+FRAME_BYTES_PER_PIXEL = {"compare": 340, "lut": 210, "raymarch": 210}
 
 _GIB = 2**30
 
