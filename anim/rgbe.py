@@ -96,10 +96,10 @@ def _header_value(value):
     return text.replace("\n", " ")
 
 
-def save_rgbe(file, rgb, attributes=None):
-    """Write ``rgb`` (H, W, 3) and ``attributes`` to ``file`` as it is, not atomically (the step inside
-    :func:`write_rgbe`'s and :class:`clsky.anim.writers.FrameWriter`'s temporary files)."""
-    rgbe = encode_rgbe(rgb)
+def save_rgbe(file, rgbe, attributes=None):
+    """Write ``rgbe`` (H, W, 4) uint8, from :func:`encode_rgbe`, and ``attributes`` to ``file`` as it
+    is, not atomically (the step inside :func:`write_rgbe`'s and :class:`clsky.anim.writers.FrameWriter`'s
+    temporary files, which encode first, so that bad values are refused before a file exists)."""
     height, width = rgbe.shape[:2]
     lines = ["#?RADIANCE", "FORMAT=32-bit_rle_rgbe", f"SOFTWARE=clsky {clsky.__version__}"]
     for name, value in (attributes or {}).items():
@@ -143,10 +143,10 @@ def write_rgbe(path, rgb, attributes=None, force=False, staging=None):
     FileExistsError, IsADirectoryError, FileNotFoundError, NotADirectoryError, PermissionError
         As :func:`clsky.anim.writers.write_png`.
     """
-    encode_rgbe(rgb)                                     # refuse bad values before the temporary exists
+    rgbe = encode_rgbe(rgb)                              # refuse bad values before the temporary exists
     path = pathlib.Path(path)
     with atomic_write(path, overwrite=force, suffix=".hdr", staging=staging) as temporary:
-        save_rgbe(temporary, rgb, attributes)
+        save_rgbe(temporary, rgbe, attributes)
     return path
 
 

@@ -212,7 +212,8 @@ def frame_files(directory, prefix="frame"):
 
 def _hdr_saver(hdr_format):
     """The function ``(file, values, attributes)`` that writes one HDR frame of ``hdr_format`` to a file
-    as it is (the frame writer calls it inside its temporary files)."""
+    as it is (the frame writer calls it inside its temporary files), with the values as
+    :meth:`FrameWriter.write` prepared them: EXR pixels, RGBE bytes or float32."""
     if hdr_format == "exr":
         from .exr import save_exr
         return save_exr
@@ -543,7 +544,7 @@ class FrameWriter:
                     hdr_attributes = {**(hdr_attributes or {}), "halfClippedPixels": clipped}
             elif self.hdr == "hdr":
                 from .rgbe import encode_rgbe
-                encode_rgbe(hdr)                       # refuse what RGBE cannot hold before writing the frame
+                hdr = encode_rgbe(hdr)                 # refuse what RGBE cannot hold before writing the frame
             if self._hdr_shape is not None and hdr.shape != self._hdr_shape:
                 raise ValueError(f"frame {index}: hdr has shape {hdr.shape}, the first frame's had {self._hdr_shape}")
         if self._size is None and self.mp4_path is not None:
