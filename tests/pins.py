@@ -66,12 +66,12 @@ def _unit(vectors):
     return vectors / np.linalg.norm(vectors, axis=-1, keepdims=True)
 
 
-#: Directions and sun of the table pins (pixels from the ground: 2 up, 1 just below the horizon).
+#: Directions and sun of the table pins (pixels from the ground: 2 up, 1 5.7 deg below the horizon).
 DIRECTIONS = _unit([[0, 0, 1.0], [0.6, 0, 0.8], [0, 0.995, -0.0998749]])
 SUN = _unit([0.0, 0.99, 0.141067])
 #: ... plus a view down steeply, for the ground pin.
 GROUND_DIRECTIONS = _unit([[0, 0, 1.0], [0.6, 0, 0.8], [0, 0.995, -0.0998749], [0.3, 0.0, -0.95]])
-#: The view-node pin's directions (two of them look down from altitude) and sun (not normalised: it was
+#: The view-node pin's directions (three of them look down) and sun (not normalised: it was
 #: recorded as given, and 0.6^2 + 0.8^2 rounds to 1 anyway).
 VIEW_NODE_DIRECTIONS = _unit([[0, 0, 1.0], [0.6, 0, 0.8], [0.99, 0, -0.125], [0.3, 0.2, -0.9], [0, 0.995, -0.0998749]])
 VIEW_NODE_SUN = np.array([0.0, 0.6, 0.8])
