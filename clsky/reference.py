@@ -408,9 +408,11 @@ def lookup4d(atmosphere: AtmosphereParameters, data, altitude, cos_view, cos_sun
     altitude, cos_view, cos_sun, cos_scatter = np.broadcast_arrays(
         *(np.asarray(a, dtype=np.float64) for a in (altitude, cos_view, cos_sun, cos_scatter)))
     nu = np.clip(cos_scatter, -1.0, 1.0)
-    h, mu_v, mu_s, inside = enter_atmosphere(atmosphere, altitude, cos_view, cos_sun, nu)
+    with np.errstate(invalid="ignore"):      # rays that miss the atmosphere from above: discarded
+        h, mu_v, mu_s, inside = enter_atmosphere(atmosphere, altitude, cos_view, cos_sun, nu)
+    h, mu_v, mu_s = np.where(inside, h, 0.0), np.where(inside, mu_v, 1.0), np.where(inside, mu_s, 1.0)
     ibar = interpolate4d(data, *_coordinates4d(atmosphere, data.shape[:4], h, mu_v, mu_s, nu, mapping, sun_cos_range))
-    return _radiance_of_channels(atmosphere, ibar * inside[..., None], nu)
+    return _radiance_of_channels(atmosphere, np.where(inside[..., None], ibar, 0.0), nu)
 
 
 def table4d_cells(atmosphere: AtmosphereParameters, settings: TableSettings, gathered, h0, mu_v, mu_s, nu):
