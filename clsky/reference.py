@@ -415,11 +415,13 @@ def lookup4d(atmosphere: AtmosphereParameters, data, altitude, cos_view, cos_sun
     return _radiance_of_channels(atmosphere, np.where(inside[..., None], ibar, 0.0), nu)
 
 
-def table4d_cells(atmosphere: AtmosphereParameters, settings: TableSettings, gathered, h0, mu_v, mu_s, nu):
+def table4d_cells(atmosphere: AtmosphereParameters, settings: TableSettings, gathered, h0, mu_v, mu_s, nu,
+                  ground_irradiance=None):
     """The 4D table's channels (n, 9) (or (n, 6) without ``gathered``) along the rays (h0, mu_v, mu_s, nu);
     twin of the ``table4d_cells`` kernel: Ibar_R, Ibar_M of single scattering (no phase; the
     quadrature of ``settings``) and the higher orders sum_s beta_s / (4 pi) Integral rho_s T G_s ds
-    of the gathered cosine series (M + 1, D, H, W, 6) on the 3D grid of ``settings`` (clsky/azimuth.py)."""
+    of the gathered cosine series (M + 1, D, H, W, 6) on the 3D grid of ``settings`` (clsky/azimuth.py),
+    plus, with a reflecting ground, what the ray sees of it (``ground_irradiance`` (D, 3) E_sky)."""
     from .azimuth import gathered_along
 
     sun_table = None
@@ -432,7 +434,11 @@ def table4d_cells(atmosphere: AtmosphereParameters, settings: TableSettings, gat
     gathered = np.asarray(gathered)
     more = gathered_along(atmosphere, settings, gathered if gathered.ndim == 5 else gathered[None], settings,
                           h0, mu_v, mu_s, nu)
-    return np.concatenate([single, more[:, :3] + more[:, 3:]], axis=1)
+    multiple = more[:, :3] + more[:, 3:]
+    if atmosphere.has_ground:
+        multiple = multiple + _ground_reflection(atmosphere, settings, settings, ground_irradiance, sun_table, h0, mu_v,
+                                                 mu_s, nu)
+    return np.concatenate([single, multiple], axis=1)
 
 
 # Multiple scattering (kernels/multiple.cl) ---------------------------------------------------------
@@ -553,6 +559,20 @@ def render_table4d(atmosphere, data, mapping, directions, sun_direction, altitud
     return (sky + _sun_disc(atmosphere, mu_v, nu, altitude, sun_radiance, cos_sun_radius)).reshape(shape + (3,))
 
 
+def _ground_reflection(atmosphere, ray_settings, grid_settings, ground_irradiance, sun_table, h0, mu_v, mu_s, nu):
+    """What rays (n,) see of a Lambertian ground [units of I_I] (n, 3): T(Pa, Pb) a / pi (mu_sun T_sun +
+    E_sky(mu_sun)) at the ground point, 0 for rays that do not end on it (``ground_reflection`` of
+    kernels/view_ray.cl); E_sky ``ground_irradiance`` (D, 3) on the sun axis of ``grid_settings``."""
+    from .ground import interpolate_sun_axis
+
+    rays = _ViewRays(atmosphere, ray_settings, h0, mu_v, mu_s, nu)
+    transmittance, mu_ground = _ground_seen(atmosphere, rays)
+    columns, lit = _sun_columns(atmosphere, ray_settings, np.zeros_like(mu_ground), mu_ground, sun_table)
+    direct = (lit * np.maximum(mu_ground, 0.0))[:, None] * np.exp(-_optical_depth_of(atmosphere, *columns))
+    irradiance = direct + interpolate_sun_axis(np.asarray(ground_irradiance), mu_ground, grid_settings)
+    return transmittance * (atmosphere.ground_albedo / math.pi) * irradiance
+
+
 def render_raymarch(atmosphere, ray_settings, directions, sun_direction, altitude, sun_radiance, cos_sun_radius,
                     gathered=None, grid_settings=None, physical=True, ground_irradiance=None):
     """Twin of ``SkyRenderer.render_raymarch``; (..., 3).
@@ -564,7 +584,6 @@ def render_raymarch(atmosphere, ray_settings, directions, sun_direction, altitud
     ``grid_settings``), rays that end on the ground add T(Pa, Pb) a / pi (mu_sun T_sun + E_sky(mu_sun))
     at the ground point (:mod:`clsky.ground`).
     """
-    from .ground import interpolate_sun_axis
     from .phase import mie_phase, rayleigh_phase
 
     shape = np.shape(directions)[:-1]
@@ -588,12 +607,8 @@ def render_raymarch(atmosphere, ray_settings, directions, sun_direction, altitud
                                    mu_s_in[part], nu[part])
             value += (more[:, :3] + more[:, 3:]) if physical else (f_r[part] * more[:, :3] + f_m[part] * more[:, 3:])
         if atmosphere.has_ground:
-            rays = _ViewRays(atmosphere, ray_settings, h[part], mu_v_in[part], mu_s_in[part], nu[part])
-            transmittance, mu_ground = _ground_seen(atmosphere, rays)
-            columns, lit = _sun_columns(atmosphere, ray_settings, np.zeros_like(mu_ground), mu_ground, sun_table)
-            direct = (lit * np.maximum(mu_ground, 0.0))[:, None] * np.exp(-_optical_depth_of(atmosphere, *columns))
-            irradiance = direct + interpolate_sun_axis(np.asarray(ground_irradiance), mu_ground, grid_settings)
-            value += transmittance * (atmosphere.ground_albedo / math.pi) * irradiance
+            value += _ground_reflection(atmosphere, ray_settings, grid_settings, ground_irradiance, sun_table, h[part],
+                                        mu_v_in[part], mu_s_in[part], nu[part])
         sky[part] = value
     sky *= np.asarray(atmosphere.incident_light) * inside[:, None]
     return (sky + _sun_disc(atmosphere, mu_v, nu, altitude, sun_radiance, cos_sun_radius)).reshape(shape + (3,))

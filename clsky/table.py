@@ -305,7 +305,7 @@ class ScatteringTable:
         if settings.is_4d:
             from .table4d import check_atmosphere
 
-            check_atmosphere(atmosphere)
+            check_atmosphere(atmosphere, settings)
         from .orders import compute_orders
         from .resources import check_memory, device_of, estimate_table_memory
 
@@ -317,7 +317,8 @@ class ScatteringTable:
         if settings.is_4d:     # the same orders, then the view-ray integrals at the 4D nodes
             from .table4d import compute_data
 
-            data = compute_data(atmosphere, settings, result.gathered, backend, ctx, fast_math)
+            data = compute_data(atmosphere, settings, result.gathered, backend, ctx, fast_math,
+                                result.ground_irradiance)
         else:
             data = to_layout(result.combined(settings.mode), settings.mie_layout)
         seconds = time.perf_counter() - start

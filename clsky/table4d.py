@@ -28,7 +28,9 @@ Bruneton 2017); azimuth phi uniform in [0, pi] (``azimuth_size`` nodes).
 
 Layout: ``data`` (A, D, H, W, C), C = 9 (6 with single scattering only).
 
-A reflecting ground (``ground_albedo`` > 0) is not supported yet: :func:`check_atmosphere` refuses it.
+A reflecting ground (``ground_albedo`` > 0): channels 6-8 also hold what the ray sees of the ground,
+T a / pi (mu_sun T_sun + E_sky(mu_sun)), as the ray march adds it (the orders' ``ground_irradiance``
+E_sky); such a table needs the higher orders (``orders`` != 1).
 """
 
 from __future__ import annotations
@@ -49,11 +51,12 @@ VECTOR_WIDTH = 8
 WORK_GROUP = 64
 
 
-def check_atmosphere(atmosphere: AtmosphereParameters):
-    """ParameterError naming ``ground_albedo`` for a reflecting ground (not in the 4D table yet)."""
-    if atmosphere.has_ground:
-        raise ParameterError("ground_albedo", "0 with the '4d' parameterization (a black ground)",
-                             atmosphere.ground_albedo)
+def check_atmosphere(atmosphere: AtmosphereParameters, settings: TableSettings):
+    """ParameterError naming ``orders`` for a reflecting ground with single scattering only (the
+    ground's light goes in the higher orders' channels, which such a table lacks)."""
+    if atmosphere.has_ground and not settings.has_multiple_block:
+        raise ParameterError("orders", "more than 1 for a reflecting ground (ground_albedo > 0) with the '4d' "
+                             "parameterization", settings.orders)
 
 
 def data_shape(settings: TableSettings) -> tuple:
@@ -88,16 +91,19 @@ class Table4DEngine(_cl.Engine):
     def build_options(self):
         return super().build_options() + quadrature_defines(self.settings, VECTOR_WIDTH)
 
-    def compute(self, atmosphere: AtmosphereParameters, gathered=None):
+    def compute(self, atmosphere: AtmosphereParameters, gathered=None, ground_irradiance=None):
         """``data`` (A, D, H, W, C) of the 4D table (float64), ``gathered`` the orders' gathered source
-        ((D, H, W, 6), or (M + 1, D, H, W, 6)) on the 3D grid of the settings, None for single scattering."""
+        ((D, H, W, 6), or (M + 1, D, H, W, 6)) on the 3D grid of the settings, None for single scattering;
+        ``ground_irradiance`` (D, 3) E_sky with a reflecting ground."""
         import pyopencl.array as cla
 
         from .lookup import check_kernel_buffer
         from .transmittance import TransmittanceEngine
 
-        check_atmosphere(atmosphere)
+        from .ground import padded4
+
         settings = self.settings
+        check_atmosphere(atmosphere, settings)
         width, height, depth = settings.size
         has_multiple = gathered is not None
         channels = 9 if has_multiple else 6
@@ -113,6 +119,10 @@ class Table4DEngine(_cl.Engine):
         else:
             tw = th = 2
             sun_table_d = cla.zeros(self.queue, 2 * 2 * column_channels(atmosphere), self.dtype)
+        ground_d = cla.to_device(self.queue, padded4(ground_irradiance, self.dtype) if atmosphere.has_ground
+                                 else np.zeros((2, 4), self.dtype))     # not read without -DGROUND
+        if atmosphere.has_ground:
+            check_kernel_buffer("table4d_cells", "ground_irradiance", ground_d, 4 * depth, self.dtype)
         defines = _atmosphere_cl.feature_defines(atmosphere) + (azimuth_defines(settings) if has_multiple else [])
         kernel = self.kernels_with(defines)["table4d_cells"]
         atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
@@ -133,21 +143,21 @@ class Table4DEngine(_cl.Engine):
             event = kernel(self.queue, (-(-items // local) * local,), (local,), atmosphere_d, gathered_d.data,
                            np.int32(width), np.int32(height), np.int32(depth), np.int32(MAPPINGS[settings.mapping]),
                            self.real2(settings.sun_w_range), np.int32(has_multiple), sun_table_d.data, np.int32(tw),
-                           np.int32(th), np.int32(n), cells_d.data, np.int32(channels), out_d.data)
+                           np.int32(th), ground_d.data, np.int32(n), cells_d.data, np.int32(channels), out_d.data)
             self._record("table4d_cells", event)
             out[a] = out_d.get()
         return out.reshape((settings.azimuth_size, depth, height, width, channels))
 
 
 def compute_data(atmosphere: AtmosphereParameters, settings: TableSettings, gathered=None, backend="opencl",
-                 ctx=None, fast_math=False):
+                 ctx=None, fast_math=False, ground_irradiance=None):
     """``data`` (A, D, H, W, C) of the 4D table of ``settings`` from the orders' ``gathered`` source
-    (None: single scattering only), on OpenCL (:class:`Table4DEngine`) or with the NumPy twin
-    (:func:`clsky.reference.table4d_cells`)."""
-    check_atmosphere(atmosphere)
+    (None: single scattering only) and, with a reflecting ground, their ``ground_irradiance`` (D, 3), on
+    OpenCL (:class:`Table4DEngine`) or with the NumPy twin (:func:`clsky.reference.table4d_cells`)."""
+    check_atmosphere(atmosphere, settings)
     if backend == "opencl":
         with Table4DEngine(settings, ctx=ctx, fast_math=fast_math) as engine:
-            return engine.compute(atmosphere, gathered)
+            return engine.compute(atmosphere, gathered, ground_irradiance)
     if backend != "numpy":
         raise ParameterError("backend", "one of ['opencl', 'numpy']", backend)
     from .reference import CHUNK_ELEMENTS, table4d_cells
@@ -159,5 +169,6 @@ def compute_data(atmosphere: AtmosphereParameters, settings: TableSettings, gath
         rays = node_rays(atmosphere, settings, a)
         for start in range(0, rays[0].size, chunk):
             part = slice(start, start + chunk)
-            out[a, part] = table4d_cells(atmosphere, settings, gathered, *(r[part] for r in rays))
+            out[a, part] = table4d_cells(atmosphere, settings, gathered, *(r[part] for r in rays),
+                                         ground_irradiance=ground_irradiance)
     return out.reshape(shape)

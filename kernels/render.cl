@@ -167,10 +167,7 @@ __kernel void render_raymarch(__constant const atmosphere_t *atm, __global const
                 sky += physical ? g_r + g_m : f_r * g_r + f_m * g_m;
             }
 #ifdef GROUND
-            const real3 irradiance = (real3)(LANE(ground[4], k), LANE(ground[5], k), LANE(ground[6], k))
-                + sun_axis_lookup(ground_irradiance, ground_depth, mapping, sun_range, LANE(ground[3], k)).xyz;
-            sky += (real3)(LANE(ground[0], k), LANE(ground[1], k), LANE(ground[2], k))
-                   * (atm->ground_albedo / PI_REAL) * irradiance;
+            add_ground_reflection(atm, ground, k, ground_irradiance, ground_depth, mapping, sun_range, &sky);
 #endif
             value += light * sky;
         }

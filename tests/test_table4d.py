@@ -267,9 +267,28 @@ def test_bad_settings_name_the_parameter(changes, name):
     assert error.value.field == name
 
 
-def test_reflecting_ground_is_refused(atmosphere):
-    with pytest.raises(ParameterError, match="ground_albedo"):
-        ScatteringTable.build(atmosphere.replace(ground_albedo=0.2), TINY4D)
+def test_reflecting_ground_needs_the_higher_orders(atmosphere):
+    with pytest.raises(ParameterError, match="orders"):
+        ScatteringTable.build(atmosphere.replace(ground_albedo=0.2), TINY4D.replace(orders=1))
+
+
+def test_reflecting_ground_kernel_matches_twin(atmosphere, cl_context):
+    """With a ground of albedo 0.3: the ground's channels against the twin (the ground-reflection term
+    shares the ray march's code; tolerance as test_table4d_cells_kernel_matches_twin), and the lookup
+    of a view down at the ground equals the ray march there within the interpolation (5 %: 8 view nodes)."""
+    ground = atmosphere.replace(ground_albedo=0.3)
+    table = ScatteringTable.build(ground, TINY4D)
+    numpy_data = compute_data(ground, TINY4D, table.gathered, backend="numpy",
+                              ground_irradiance=table.ground_irradiance)
+    scale = np.abs(numpy_data).reshape(-1, 9).max(axis=0)
+    half = TINY4D.size[1] // 2
+    off = np.ones(TINY4D.size[1], dtype=bool)
+    off[half - 1] = False
+    error = np.abs(table.data - numpy_data)
+    assert np.all(error[:, :, off] <= 1e-12 * np.abs(numpy_data[:, :, off]) + 1e-14 * scale)
+    assert np.all(error[:, :, ~off] <= 1e-7 * np.abs(numpy_data[:, :, ~off]) + 1e-14 * scale)
+    black = ScatteringTable.build(atmosphere, TINY4D)
+    assert np.all(table.data[:, :, :half - 1, 0, 6:] > black.data[:, :, :half - 1, 0, 6:])   # the ground is seen
 
 
 def test_3d_settings_keep_their_json():
