@@ -55,6 +55,10 @@ METHODS = ("compare", "lut", "raymarch", "lut4d", "compare4d")
 #: Azimuth harmonics of the 4D methods' higher orders when the quality level has none (M = 2 brings
 #: the ray march within the Monte Carlo's noise down to -6 deg: README, "Twilight against Monte Carlo").
 LUT4D_HARMONICS = 2
+#: Most altitude and view nodes of the 4D methods' table (its sun axis is the plan's): 16 x 128 x 128 sun
+#: nodes x 16 azimuths is 151 MB as float32 and within 0.6 % (day to sunset) and 2.1 % (-4 deg) of the
+#: ray march of the same orders (README, "The 4D table"); the level's 32 x 256 would be 4 times that.
+LUT4D_MAX_SIZE = (16, 128)
 
 #: The conversion of absolute three-wavelength frames to XYZ (:func:`clsky.colorimetry.three_wavelength_to_xyz`):
 #: the default ``solar_power_law`` reconstruction, tabulated. Measured per 512 x 512 frame (process CPU,
@@ -475,11 +479,14 @@ def _base(config: AnimationConfig, plan: Plan | None):
 
 def _with_lookup(settings: clsky.TableSettings, config: AnimationConfig) -> clsky.TableSettings:
     """``settings`` as the 4D table for the 4D methods (:data:`LUT4D_HARMONICS` azimuth harmonics when
-    the level has none; an even number of view nodes), else unchanged."""
+    the level has none; at most :data:`LUT4D_MAX_SIZE` altitude and view nodes, an even number of the
+    latter), else unchanged. The table's higher orders are computed on that grid too."""
     if not config.lookup4d:
         return settings
-    height = settings.size[1] + settings.size[1] % 2
-    return settings.replace(parameterization="4d", size=(settings.size[0], height, settings.size[2]),
+    width = min(settings.size[0], LUT4D_MAX_SIZE[0])
+    height = max(4, min(settings.size[1], LUT4D_MAX_SIZE[1]))
+    height += height % 2
+    return settings.replace(parameterization="4d", size=(width, height, settings.size[2]),
                             azimuth_harmonics=settings.azimuth_harmonics or LUT4D_HARMONICS)
 
 

@@ -5,7 +5,7 @@ elevations measured (+30, +5, 0 and -4 deg, plus the planner's margins), its hig
 azimuth harmonics, and for each sun elevation renders an all-sky fisheye from the ground by 4D
 lookup (render_lut4d) and by the 3D lookup of the same orders (the 3D physical table those orders
 make: its higher orders are their azimuth average), against a ray march of the same orders at the
-'reference' quality level's quadrature (256 samples per ray, 240 sun steps). The 95th percentile of
+'reference' quality level's ray march (256 samples per ray, 256 sun steps). The 95th percentile of
 the relative luminance error is :func:`clsky.anim.metrics.compare_frames`' ``p95_rel``. Then times the
 4D lookup of a 1024^2 fisheye (best of N, after a warm-up) beside the 3D lookup. Reports the table's
 float32 size (``export_raw``'s), its build time (wall and process CPU) and the load average.
@@ -50,8 +50,8 @@ def three_d(table):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--size", type=int, nargs=3, default=(32, 256, 48), metavar=("W", "H", "D"),
-                        help="nodes along altitude, view (even), sun (default: 32 256 48)")
+    parser.add_argument("--size", type=int, nargs=3, default=(16, 128, 128), metavar=("W", "H", "D"),
+                        help="nodes along altitude, view (even), sun (default: 16 128 128)")
     parser.add_argument("--azimuth-size", type=int, default=16, help="azimuth nodes (default 16)")
     parser.add_argument("--frame", type=int, default=256, help="side of the error frames [px] (default 256)")
     parser.add_argument("--repeat", type=int, default=5, help="timing repetitions of the 1024^2 frame")

@@ -304,3 +304,20 @@ def test_save_load_round_trip(table4d, tmp_path):
     loaded = ScatteringTable.load(path)
     assert loaded.settings == TINY4D
     assert np.array_equal(loaded.data, table4d.data)
+
+
+def test_animation_4d_methods():
+    """--method lut4d / compare4d: the table is the 4D one (physical, >= 2 harmonics, at most 16 x 128
+    altitude and view nodes, an even view count); refused, naming 'method', with the atmosphere-plus
+    mode or with wavelengths."""
+    from clsky.anim.animate import LUT4D_HARMONICS, AnimationConfig, _base
+
+    config = AnimationConfig(method="compare4d", quality="default", table_size=(32, 255, 20))
+    assert config.compares and config.lookup4d
+    _, settings = _base(config, None)
+    assert settings.is_4d and settings.size == (16, 128, 20) and settings.azimuth_harmonics == LUT4D_HARMONICS
+    assert not AnimationConfig(method="lut").lookup4d and not AnimationConfig(method="lut4d").compares
+    for bad in (dict(mode="atmosphere-plus", preset="atmosphere-plus"), dict(wavelengths=6)):
+        with pytest.raises(ParameterError) as error:
+            AnimationConfig(method="lut4d", **bad)
+        assert error.value.field == "method"
