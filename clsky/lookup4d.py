@@ -6,14 +6,10 @@ NumPy twin: :func:`clsky.reference.lookup4d`.
 from __future__ import annotations
 
 import numpy as np
-import pyopencl.array as cla
 
-from . import _atmosphere_cl, _cl
 from .atmosphere import AtmosphereParameters
-from .errors import check_choice
-from .lookup import check_kernel_buffer, check_queries
-from .mapping import FULL_SUN_RANGE, sun_w_range
-from .settings import MAPPINGS
+from .lookup import TableLookupEngine
+from .mapping import FULL_SUN_RANGE
 
 __all__ = ["TableLookup4DEngine", "check_table4d_data"]
 
@@ -33,13 +29,10 @@ def check_table4d_data(data):
     return data
 
 
-class TableLookup4DEngine(_cl.Engine):
+class TableLookup4DEngine(TableLookupEngine):
     """Quadrilinear lookups in a 4D scattering table, phase functions at the true scattering angle."""
 
     sources = ("geometry.cl", "mapping.cl", "mapping4d.cl", "phase.cl", "lookup.cl", "lookup4d.cl")
-
-    def program_sources(self):
-        return ("real.cl", _atmosphere_cl.declaration(self.ctx.devices[0], self.dtype)) + self.sources
 
     def radiance(self, atmosphere: AtmosphereParameters, data, altitude, cos_view, cos_sun, cos_scatter,
                  mapping="nonlinear", sun_cos_range=FULL_SUN_RANGE):
@@ -66,23 +59,6 @@ class TableLookup4DEngine(_cl.Engine):
             Radiance r, g, b (HDR).
         """
         data = check_table4d_data(data)
-        check_choice("mapping", mapping, MAPPINGS)
-        queries = check_queries(altitude, cos_view, cos_sun, cos_scatter)
-        shape, n = queries[0].shape, queries[0].size
         azimuths, depth, height, width, channels = data.shape
-        table_d = cla.to_device(self.queue, np.ascontiguousarray(data, dtype=self.dtype))
-        queries_d = [cla.to_device(self.queue, np.ascontiguousarray(q.ravel(), dtype=self.dtype)) for q in queries]
-        radiance_d = cla.empty(self.queue, (max(n, 1), 3), self.dtype)
-        atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
-        check_kernel_buffer("lookup4d", "table", table_d, data.size, self.dtype)
-        for name, query_d in zip(("altitude", "cos_view", "cos_sun", "cos_scatter"), queries_d):
-            check_kernel_buffer("lookup4d", name, query_d, n, self.dtype)
-        check_kernel_buffer("lookup4d", "radiance", radiance_d, 3 * max(n, 1), self.dtype)
-        if n:
-            event = self.kernels["lookup4d"](
-                self.queue, (n,), None, atmosphere_d, table_d.data, np.int32(width), np.int32(height),
-                np.int32(depth), np.int32(azimuths), np.int32(channels), np.int32(MAPPINGS[mapping]),
-                self.real2(sun_w_range(mapping, sun_cos_range)), np.int32(n),
-                *(q.data for q in queries_d), radiance_d.data)
-            self._record("lookup4d", event)
-        return radiance_d.get()[:n].reshape(shape + (3,)).astype(np.float64)
+        return self._lookup("lookup4d", atmosphere, data, (width, height, depth, azimuths, channels),
+                            (altitude, cos_view, cos_sun, cos_scatter), mapping, sun_cos_range)

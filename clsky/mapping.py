@@ -25,7 +25,8 @@ from .settings import MAPPINGS
 
 __all__ = ["altitude_to_u", "u_to_altitude", "cos_to_v", "v_to_cos", "grid_coordinates", "FULL_SUN_RANGE",
            "sun_w_range", "cos_to_sun_t", "view4d_to_y", "y_to_view4d", "azimuth4d_nodes", "azimuth4d_to_a",
-           "cos_azimuth", "scatter_cos", "grid4d_coordinates", "HORIZON_MARGIN"]
+           "cos_azimuth", "scatter_cos", "grid4d_coordinates", "HORIZON_MARGIN",
+           "HORIZON_MARGIN_FLOAT32"]
 
 _TINY = np.finfo(np.float64).tiny
 
@@ -108,6 +109,9 @@ def grid_coordinates(size, atmosphere_height, mapping="nonlinear", sun_cos_range
 #: Margin [in mu] that keeps a 4D node on its side of the horizon whatever the rounding of
 #: horizon_cos (kernels/view_ray.cl decides a ground hit by mu < horizon_cos(h)).
 HORIZON_MARGIN = 1e-14
+#: The same for a float32 table, whose kernels see the node cosines rounded to float32 (ulp 1.5e-8 at the
+#: horizon cosine of 100 km, -0.175) and compute horizon_cos in float32: 1e-5 is several hundred ulps.
+HORIZON_MARGIN_FLOAT32 = 1e-5
 
 
 def _view4d_geometry(altitude, planet_radius, top_radius):
@@ -135,9 +139,9 @@ def view4d_to_y(altitude, cos_view, height, planet_radius, top_radius):
     return np.where(ground, (half - 1) * x_ground, half + (half - 1) * (1.0 - x_sky))
 
 
-def y_to_view4d(altitude, y, height, planet_radius, top_radius):
+def y_to_view4d(altitude, y, height, planet_radius, top_radius, margin=HORIZON_MARGIN):
     """View cosines of node coordinates y in [0, H - 1] at altitudes [m], each on its side of the
-    horizon by :data:`HORIZON_MARGIN` (inverse of :func:`view4d_to_y`)."""
+    horizon by ``margin`` (:data:`HORIZON_MARGIN`; inverse of :func:`view4d_to_y`)."""
     from .reference import horizon_cos
 
     h = np.clip(np.asarray(altitude, dtype=np.float64), 0.0, top_radius - planet_radius)
@@ -153,8 +157,8 @@ def y_to_view4d(altitude, y, height, planet_radius, top_radius):
     with np.errstate(divide="ignore", invalid="ignore"):
         mu_ground = np.where(d_ground > 0.0, -(rho * rho + d_ground * d_ground) / (2.0 * r * d_ground), -1.0)
         mu_sky = np.where(d_sky > 0.0, (to_top * (top_radius + r) - d_sky * d_sky) / (2.0 * r * d_sky), 1.0)
-    mu_ground = np.minimum(np.clip(mu_ground, -1.0, 1.0), horizon - HORIZON_MARGIN)
-    mu_sky = np.maximum(np.clip(mu_sky, -1.0, 1.0), horizon + HORIZON_MARGIN)
+    mu_ground = np.minimum(np.clip(mu_ground, -1.0, 1.0), horizon - margin)
+    mu_sky = np.maximum(np.clip(mu_sky, -1.0, 1.0), horizon + margin)
     return np.where(ground, np.maximum(mu_ground, -1.0), np.minimum(mu_sky, 1.0))
 
 
@@ -190,11 +194,13 @@ def grid4d_coordinates(settings, planet_radius, top_radius):
 
     Returns
     -------
-    altitude [m] (W,), cos view zenith (W, H) (the view nodes depend on the altitude), cos sun zenith
+    altitude [m] (W,), cos view zenith (W, H) (the view nodes depend on the altitude; the horizon nodes
+    :data:`HORIZON_MARGIN` off it, :data:`HORIZON_MARGIN_FLOAT32` for a float32 table), cos sun zenith
     (D,), azimuth [rad] (A,)
     """
     width, height, _ = settings.size
     altitudes, _, cos_sun = grid_coordinates(settings.size, top_radius - planet_radius, settings.mapping,
                                              settings.sun_cos_range)
-    cos_view = y_to_view4d(altitudes[:, None], np.arange(height)[None, :], height, planet_radius, top_radius)
+    margin = HORIZON_MARGIN if settings.dtype == "float64" else HORIZON_MARGIN_FLOAT32
+    cos_view = y_to_view4d(altitudes[:, None], np.arange(height)[None, :], height, planet_radius, top_radius, margin)
     return altitudes, cos_view, cos_sun, azimuth4d_nodes(settings.azimuth_size)

@@ -541,22 +541,27 @@ def _sun_disc(atmosphere, mu_v, nu, altitude, sun_radiance, cos_sun_radius):
     return visible[:, None] * np.asarray(sun_radiance, dtype=np.float64)
 
 
+def _render_lookup(table_lookup, atmosphere, data, mapping, directions, sun_direction, altitude, sun_radiance,
+                   cos_sun_radius, sun_cos_range):
+    """``table_lookup`` (:func:`lookup` or :func:`lookup4d`) radiance per direction plus the sun disc; (..., 3)."""
+    shape = np.shape(directions)[:-1]
+    mu_v, nu, h, mu_v_in, mu_s_in, inside = _pixel_geometry(atmosphere, directions, sun_direction, altitude)
+    sky = table_lookup(atmosphere, data, h, mu_v_in, mu_s_in, nu, mapping, sun_cos_range) * inside[:, None]
+    return (sky + _sun_disc(atmosphere, mu_v, nu, altitude, sun_radiance, cos_sun_radius)).reshape(shape + (3,))
+
+
 def render_table(atmosphere, data, mapping, directions, sun_direction, altitude, sun_radiance, cos_sun_radius,
                  sun_cos_range=FULL_SUN_RANGE):
     """Twin of ``SkyRenderer.render_table``: lookup radiance per direction plus the sun disc; (..., 3)."""
-    shape = np.shape(directions)[:-1]
-    mu_v, nu, h, mu_v_in, mu_s_in, inside = _pixel_geometry(atmosphere, directions, sun_direction, altitude)
-    sky = lookup(atmosphere, data, h, mu_v_in, mu_s_in, nu, mapping, sun_cos_range) * inside[:, None]
-    return (sky + _sun_disc(atmosphere, mu_v, nu, altitude, sun_radiance, cos_sun_radius)).reshape(shape + (3,))
+    return _render_lookup(lookup, atmosphere, data, mapping, directions, sun_direction, altitude, sun_radiance,
+                          cos_sun_radius, sun_cos_range)
 
 
 def render_table4d(atmosphere, data, mapping, directions, sun_direction, altitude, sun_radiance, cos_sun_radius,
                    sun_cos_range=FULL_SUN_RANGE):
     """Twin of ``SkyRenderer.render_lut4d``: 4D lookup radiance per direction plus the sun disc; (..., 3)."""
-    shape = np.shape(directions)[:-1]
-    mu_v, nu, h, mu_v_in, mu_s_in, inside = _pixel_geometry(atmosphere, directions, sun_direction, altitude)
-    sky = lookup4d(atmosphere, data, h, mu_v_in, mu_s_in, nu, mapping, sun_cos_range) * inside[:, None]
-    return (sky + _sun_disc(atmosphere, mu_v, nu, altitude, sun_radiance, cos_sun_radius)).reshape(shape + (3,))
+    return _render_lookup(lookup4d, atmosphere, data, mapping, directions, sun_direction, altitude, sun_radiance,
+                          cos_sun_radius, sun_cos_range)
 
 
 def _ground_reflection(atmosphere, ray_settings, grid_settings, ground_irradiance, sun_table, h0, mu_v, mu_s, nu):

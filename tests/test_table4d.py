@@ -321,3 +321,28 @@ def test_animation_4d_methods():
         with pytest.raises(ParameterError) as error:
             AnimationConfig(method="lut4d", **bad)
         assert error.value.field == "method"
+
+
+def test_float32_table_keeps_its_horizon_nodes_on_their_side(atmosphere, cl_context):
+    """A float32 build (single scattering) against the float64 twin at its nodes: every view row off the
+    horizon within conftest's float32 'scatter' tolerance (2e-5 relative, atol 1e-7 of the channel max),
+    the ground-side horizon row within 1e-3: its nodes sit HORIZON_MARGIN_FLOAT32 = 1e-5 off the
+    horizon, so that float32 rounding cannot move them across (at 1e-14 that row became rays to space:
+    27 times the float64 value)."""
+    from clsky.mapping import HORIZON_MARGIN_FLOAT32
+
+    settings = TINY4D.replace(dtype="float32", orders=1)
+    single = ScatteringTable.build(atmosphere, settings)
+    # the float64 twin at the float32 table's nodes (backend 'numpy' computes in float64 at the nodes of
+    # the settings, whose dtype sets the horizon margin)
+    expected = compute_data(atmosphere, settings, backend="numpy")
+    assert HORIZON_MARGIN_FLOAT32 == 1e-5
+    scale = np.abs(expected).reshape(-1, 6).max(axis=0)
+    error = np.abs(single.data - expected) / (2e-5 * np.abs(expected) + 1e-7 * scale)
+    half = settings.size[1] // 2
+    off = np.arange(settings.size[1]) != half - 1
+    assert error[:, :, off].max() <= 1.0
+    # the ground-side horizon row is a ray 1e-5 from the tangent, whose length comes from a square root
+    # of a difference that cancels to ~1e-5 of its terms: float32 rounding of mu (6e-8) becomes ~1e-4 of
+    # it (measured 5.8e-5 relative); rays that reach space instead would be 27 times off
+    assert np.all(np.abs(single.data - expected)[:, :, ~off] <= 1e-3 * np.abs(expected[:, :, ~off]) + 1e-7 * scale)
