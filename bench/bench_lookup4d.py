@@ -8,10 +8,13 @@ make: its higher orders are their azimuth average), against a ray march of the s
 'reference' quality level's ray march (256 samples per ray, 256 sun steps). The 95th percentile of
 the relative luminance error is :func:`clsky.anim.metrics.compare_frames`' ``p95_rel``. Then times the
 4D lookup of a 1024^2 fisheye (best of N, after a warm-up) beside the 3D lookup. Reports the table's
-float32 size (``export_raw``'s), its build time (wall and process CPU) and the load average.
+float32 size (``export_raw``'s), its build time (wall and process CPU) and the load average. Last,
+the p95 errors with other azimuth node counts (``--azimuth-sweep``; the same orders, only the 4D
+nodes recomputed) and with other sun node counts (``--sun-sweep``; tables built anew, each against
+the ray march of its own orders).
 
-Usage: python bench/bench_lookup4d.py [--size W H D] [--azimuth-size A] [--frame N] [--repeat N]
-       [--no-readme] [--smoke]
+Usage: python bench/bench_lookup4d.py [--size W H D] [--azimuth-size A] [--azimuth-sweep A ...] [--sun-sweep D ...]
+       [--frame N] [--repeat N] [--no-readme] [--smoke]
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ from clsky.anim import metrics
 from clsky.anim.cameras import FisheyeCamera, sun_direction
 from clsky.quality import quality_level
 from clsky.render import SkyRenderer
+from clsky.table4d import compute_data
 
 #: Sun elevations [deg] measured and the issue's targets for the p95 error.
 ELEVATIONS = {"day": (30.0, 0.01), "golden hour": (5.0, 0.01), "sunset": (0.0, 0.01), "civil twilight": (-4.0, 0.03)}
@@ -53,6 +57,10 @@ def main():
     parser.add_argument("--size", type=int, nargs=3, default=(16, 128, 128), metavar=("W", "H", "D"),
                         help="nodes along altitude, view (even), sun (default: 16 128 128)")
     parser.add_argument("--azimuth-size", type=int, default=16, help="azimuth nodes (default 16)")
+    parser.add_argument("--azimuth-sweep", type=int, nargs="*", default=(4, 8, 32),
+                        help="other azimuth node counts to measure (default: 4 8 32)")
+    parser.add_argument("--sun-sweep", type=int, nargs="*", default=(32, 64),
+                        help="other sun node counts to measure (default: 32 64)")
     parser.add_argument("--frame", type=int, default=256, help="side of the error frames [px] (default 256)")
     parser.add_argument("--repeat", type=int, default=5, help="timing repetitions of the 1024^2 frame")
     add_output_arguments(parser)
@@ -60,6 +68,7 @@ def main():
     speed_side, level = 1024, "reference"
     if args.smoke:
         args.size, args.azimuth_size, args.frame, args.repeat = (8, 32, 8), 5, SMOKE.frame, SMOKE.repeat
+        args.azimuth_sweep, args.sun_sweep = (3,), (4,)
         speed_side, level = 64, SMOKE.reference_level
     ray = quality_level(level).ray
     low, high = (math.sin(math.radians(e)) for e in SUN_RANGE_DEG)
@@ -73,12 +82,12 @@ def main():
     flat = three_d(table)
 
     directions, valid = FisheyeCamera(args.frame).directions()
-    rows, misses = [], []
+    rows, misses, references = [], [], {}
     with SkyRenderer(table, ray) as renderer, SkyRenderer(flat, ray) as renderer3d:
         prepared, prepared3d = renderer.prepare(directions, valid), renderer3d.prepare(directions, valid)
         for name, (elevation, target) in ELEVATIONS.items():
             sun = sun_direction(90.0 - elevation, SUN_AZIMUTH)
-            reference = renderer.render_raymarch(prepared, sun, 0.0)
+            reference = references[name] = renderer.render_raymarch(prepared, sun, 0.0)
             four = metrics.compare_frames(reference, renderer.render_lut4d(prepared, sun, 0.0), valid)
             three = metrics.compare_frames(reference, renderer3d.render_table(prepared3d, sun, 0.0), valid)
             met = four["p95_rel"] <= target
@@ -96,6 +105,30 @@ def main():
         _, _, cpu4d = timed_with_cpu(lambda: renderer.render_lut4d(fast, sun, 0.0))
     load_end = os.getloadavg()
     width, height, depth = settings.size
+    sweep = []
+    for count in args.azimuth_sweep:
+        other = settings.replace(azimuth_size=count)
+        data = compute_data(atmosphere, other, table.gathered, ground_irradiance=table.ground_irradiance)
+        with SkyRenderer(dataclasses.replace(table, settings=other, data=data), ray) as renderer:
+            prepared = renderer.prepare(directions, valid)
+            errors = [metrics.compare_frames(references[name], renderer.render_lut4d(
+                prepared, sun_direction(90.0 - elevation, SUN_AZIMUTH), 0.0), valid)["p95_rel"]
+                for name, (elevation, _) in ELEVATIONS.items()]
+        sweep.append(f"| {count} x {depth} | {data.size * 4 / 1e6:.0f} | "
+                     + " | ".join(f"{100 * e:.2f} %" for e in errors) + " |")
+        print(sweep[-1], flush=True)
+    for count in args.sun_sweep:
+        other = clsky.ScatteringTable.build(atmosphere, settings.replace(size=(width, height, count)))
+        with SkyRenderer(other, ray) as renderer:
+            prepared = renderer.prepare(directions, valid)
+            errors = []
+            for elevation, _ in ELEVATIONS.values():
+                sun = sun_direction(90.0 - elevation, SUN_AZIMUTH)
+                errors.append(metrics.compare_frames(renderer.render_raymarch(prepared, sun, 0.0),
+                                                     renderer.render_lut4d(prepared, sun, 0.0), valid)["p95_rel"])
+        sweep.append(f"| {args.azimuth_size} x {count} | {other.data.size * 4 / 1e6:.0f} | "
+                     + " | ".join(f"{100 * e:.2f} %" for e in errors) + " |")
+        print(sweep[-1], flush=True)
     lines = [
         f"Table: 4D, {width} x {height} x {depth} x {args.azimuth_size} (altitude x view x sun x azimuth), "
         f"sun elevations {SUN_RANGE_DEG[0]:g} to {SUN_RANGE_DEG[1]:g} deg, physical preset (ozone 300 DU, "
@@ -114,7 +147,11 @@ def main():
         f"{1000 * best4d:.0f} ms ({1 / best4d:.1f} fps; median {1000 * median4d:.0f} ms, one frame "
         f"{1000 * cpu4d:.0f} ms process CPU), 3D lookup {1000 * best3d:.0f} ms ({1 / best3d:.1f} fps; median "
         f"{1000 * median3d:.0f} ms), side by side; load average {load_end[0]:.1f} / {load_end[1]:.1f} / "
-        f"{load_end[2]:.1f} (1 / 5 / 15 min) at the end."]
+        f"{load_end[2]:.1f} (1 / 5 / 15 min) at the end.", "",
+        f"Other node counts, p95 error of the 4D lookup: azimuth nodes of the same table (the same orders); "
+        f"sun nodes of tables built anew (the ray march of each one's own orders as reference):", "",
+        "| azimuth x sun nodes | float32 [MB] | " + " | ".join(f"{n} ({e:+g} deg)" for n, (e, _) in ELEVATIONS.items())
+        + " |", "|---:|---:|" + "---:|" * len(ELEVATIONS), *sweep]
     markdown = "\n".join(lines)
     print(markdown)
     if not args.no_readme:
