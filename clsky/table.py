@@ -165,6 +165,10 @@ class ScatteringTable:
         Per cell [1/sr], without I_I: channels :data:`CHANNEL_NAMES` [C]. The factored channels
         (Ibar summed over orders in the atmosphere-plus mode, single scattering in the physical mode)
         carry no phase; the physical mode's 3 last channels hold the higher orders, phase applied.
+        With ``settings.parameterization`` '4d': (A, D, H, W, C), a fourth axis of A =
+        ``settings.azimuth_size`` view-sun azimuths and the view axis split at the horizon
+        (:mod:`clsky.table4d`); ``orders``, ``gathered`` and ``ground_irradiance`` are then those of
+        the 3D grid the orders were computed on.
     metadata : dict
         Provenance: clsky version, backend, device, build seconds, and ``units`` of the rendered radiance
         (:func:`clsky.solar.radiance_units`: W m^-2 sr^-1 nm^-1 with the solar spectrum, else relative).

@@ -346,3 +346,27 @@ def test_float32_table_keeps_its_horizon_nodes_on_their_side(atmosphere, cl_cont
     # of a difference that cancels to ~1e-5 of its terms: float32 rounding of mu (6e-8) becomes ~1e-4 of
     # it (measured 5.8e-5 relative); rays that reach space instead would be 27 times off
     assert np.all(np.abs(single.data - expected)[:, :, ~off] <= 1e-3 * np.abs(expected[:, :, ~off]) + 1e-7 * scale)
+
+
+def test_cli_builds_and_describes_a_4d_table(tmp_path):
+    """clsky table --parameterization 4d writes a 4D table (and its raw export with the 4D layout);
+    clsky info names its four axes; a bad combination exits 2 naming the option typed."""
+    import json
+    import subprocess
+    import sys
+
+    run = [sys.executable, "-m", "clsky"]
+    output = tmp_path / "t.npz"
+    done = subprocess.run(run + ["table", "--preset", "physical", "--mode", "physical", "--parameterization", "4d",
+                                 "--size", "6", "8", "6", "--azimuth-size", "5", "--orders", "2", "--view-steps", "8",
+                                 "--sun-steps", "8", "--gather-steps", "16", "16", "--progress", "none",
+                                 "-o", str(output), "--raw", str(tmp_path / "raw")], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert ScatteringTable.load(output).data.shape == (5, 6, 8, 6, 9)
+    header = json.loads((tmp_path / "raw.json").read_text())
+    assert header["size"]["A"] == 5 and (tmp_path / "raw.bin").stat().st_size == 5 * 6 * 8 * 6 * 9 * 4
+    info = subprocess.run(run + ["info", str(output)], capture_output=True, text=True)
+    assert "6 x 8 x 6 x 5 (altitude x view zenith x sun zenith x azimuth, 4D)" in info.stdout
+    bad = subprocess.run(run + ["table", "--parameterization", "4d", "--size", "6", "8", "6", "-o",
+                                str(tmp_path / "u.npz")], capture_output=True, text=True)
+    assert bad.returncode == 2 and "--parameterization" in bad.stderr and "Traceback" not in bad.stderr
