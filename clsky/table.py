@@ -491,6 +491,14 @@ class ScatteringTable:
         return cls(atmosphere, settings, contents["data"], _json_member(contents, "metadata"), orders,
                    _json_member(contents, "orders_record"), contents.get("gathered"), contents.get("ground_irradiance"))
 
+    def export_texture(self, path, overwrite=False, staging=None):
+        """A 4D table for engines: ``<path>.bin`` (three RGBA float32 3D textures, sun and azimuth packed
+        in the depth) and ``<path>.json``, read by ``docs/lookup4d.glsl`` (:mod:`clsky.export4d`).
+        Returns the two paths; ValueError for a 3D table."""
+        from .export4d import export_texture
+
+        return export_texture(self, path, overwrite, staging)
+
     def export_raw(self, path, overwrite=False, staging=None):
         """Write ``<path>.bin`` (float32 values) and ``<path>.json`` (layout header) for GPU engines.
 
