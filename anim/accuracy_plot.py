@@ -33,9 +33,9 @@ __all__ = ["read_csv", "stack_labels", "knob_styles", "draw_pareto", "draw_eleva
 CIVIL_TWILIGHT = (-6.0, 0.0)
 #: Text columns of the sweep's CSV; every other column is a number.
 TEXT_COLUMNS = ("candidate", "knob", "method")
-RENDERERS = {"lut": "table lookup", "raymarch": "ray march"}
+RENDERERS = {"lut": "table lookup", "raymarch": "ray march", "lut4d": "4D table lookup"}
 #: Colour maps of the lines of each renderer in the elevation plot.
-RENDERER_COLOURS = {"lut": "Blues", "raymarch": "Oranges"}
+RENDERER_COLOURS = {"lut": "Blues", "raymarch": "Oranges", "lut4d": "Greens"}
 #: Sun elevations within this many degrees of the horizon get a linear axis in the elevation plot; beyond
 #: it the axis is logarithmic (symlog), so that twilight, sunset and golden hour are not squeezed by day.
 ELEVATION_LINEAR = 10.0
