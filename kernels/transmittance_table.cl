@@ -31,9 +31,8 @@ inline realv bilinear_channel(const realv t00, const realv t10, const realv t01,
 /* Bilinear lookup of the column densities (COLUMN_CHANNELS per node) from altitude h along mu to the top.
  * Only the reads of the 4 corner nodes are per lane (GATHER_REALV, built in registers); the indices,
  * weights and interpolation are computed in realv arithmetic: the same operations as lane by lane, so the
- * same values (checked bit for bit on frames and tables), and in a perf profile of the ray march this
- * function's share fell from 17 % to 11 % (the per-lane loop stored each lane's result to the stack and
- * read the vector back). */
+ * same values (checked bit for bit on frames and tables); the per-lane loop stored each lane's result to
+ * the stack and read the vector back. The ray march's CPU time fell by about 2 % (A/B, README "Speed"). */
 inline column_t column_density_from_table(__constant const atmosphere_t *atm, __global const real *table,
                                           const int tw, const int th, const realv h, const realv mu)
 {
