@@ -515,7 +515,9 @@ def orders_result(atmosphere: AtmosphereParameters, settings: TableSettings, bac
     start = time.perf_counter()
     result = compute_orders(atmosphere, settings, backend=backend, ctx=ctx, fast_math=fast_math,
                             progress=None if progress is None else (lambda k, _: progress("orders", k, 0)))
-    orders = [result.single] + [azimuth_average(order) for order in result.orders]
+    orders = [result.single]
+    while result.orders:     # each order's nodes go as soon as their average is taken (peak memory)
+        orders.append(azimuth_average(result.orders.pop(0)))
     additions = result.record["relative_additions"]
     if settings.orders == "auto":
         reason = (f"converged: order {len(orders)} added at most {additions[-1]:.2e} of the running sum (tolerance "
