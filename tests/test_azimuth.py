@@ -314,3 +314,28 @@ def test_table_file_round_trip_keeps_the_harmonics(cl_context, atmosphere, tmp_p
     with pytest.raises(TableFormatError, match="gathered"):
         ScatteringTable(table.atmosphere, table.settings, table.data, table.metadata, table.orders,
                         table.orders_record, table.gathered[0], None)
+
+
+def test_raw_export_carries_the_harmonics(cl_context, atmosphere, tmp_path):
+    """``export_raw`` of a table with harmonics: the table's values, then its gathered harmonics, in one
+    float32 .bin, at the offset and in the layout its header states (float32: the export's precision)."""
+    import json
+
+    from clsky import ScatteringTable
+
+    require_dtype(cl_context, "float64")
+    table = ScatteringTable.build(atmosphere, KERNEL_GRID, ctx=cl_context)
+    binary, header = table.export_raw(tmp_path / "sky")
+    description = json.loads(header.read_text())
+    block = description["azimuth_harmonics"]
+    values = np.fromfile(binary, dtype="<f4")
+    assert block["M"] == 2 and block["offset_values"] == table.data.size
+    shape = block["shape"]
+    assert (shape["harmonics"], shape["D"], shape["H"], shape["W"], shape["channels"]) == table.gathered.shape
+    assert values.size == table.data.size + table.gathered.size
+    assert np.array_equal(values[:table.data.size], table.data.astype("<f4").ravel())
+    assert np.array_equal(values[block["offset_values"]:].reshape(table.gathered.shape), table.gathered.astype("<f4"))
+    plain = ScatteringTable.build(atmosphere, KERNEL_GRID.replace(azimuth_harmonics=0), ctx=cl_context)
+    binary, header = plain.export_raw(tmp_path / "plain")
+    assert "azimuth_harmonics" not in json.loads(header.read_text())
+    assert np.fromfile(binary, dtype="<f4").size == plain.data.size
