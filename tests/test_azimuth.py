@@ -339,3 +339,21 @@ def test_raw_export_carries_the_harmonics(cl_context, atmosphere, tmp_path):
     binary, header = plain.export_raw(tmp_path / "plain")
     assert "azimuth_harmonics" not in json.loads(header.read_text())
     assert np.fromfile(binary, dtype="<f4").size == plain.data.size
+
+
+def test_later_orders_read_the_azimuth_average_of_their_source(atmosphere):
+    """``source_harmonics=0`` (the scatter of the orders k > HARMONIC_SOURCE_ORDERS) is the scatter of a
+    source whose harmonics m >= 1 are zero, at every azimuth node (rounding only: the series of the
+    zeroed harmonics is summed, the other path reads one table); and only order 2 reads them."""
+    assert azimuth.HARMONIC_SOURCE_ORDERS == 2
+    settings = TINY.replace(azimuth_harmonics=2)
+    rng = np.random.default_rng(3)
+    gathered = rng.random((3,) + settings.size[::-1] + (6,)) * 1e-3
+    zeroed = gathered.copy()
+    zeroed[1:] = 0.0
+    got = azimuth.scatter_nodes(atmosphere, settings, gathered, source_harmonics=0)
+    expected = azimuth.scatter_nodes(atmosphere, settings, zeroed)
+    assert got.shape == expected.shape == (3,) + settings.size[::-1] + (3,)
+    assert_allclose(got, expected, rtol=1e-12, atol=1e-15 * expected.max())
+    full = azimuth.scatter_nodes(atmosphere, settings, gathered)
+    assert np.abs(full - got).max() > 1e-3 * np.abs(full).max()      # the harmonics do matter to order 2
