@@ -51,6 +51,18 @@ def test_table_with_quality_and_sun_elevations(tmp_path):
     assert low == pytest.approx(np.sin(np.radians(10.0 - gamma)), abs=1e-12)
     assert high == pytest.approx(np.sin(np.radians(30.0 + 3 * gamma)), abs=1e-12)
     assert settings.size[2] == 37          # w from 0.443 to 0.977 at 0.015 spacing; the whole axis takes 68
+    assert settings.azimuth_harmonics == 0       # the planner's choice for a sun at or above +10 deg
+
+
+def test_table_with_twilight_sun_elevations_gets_the_planners_harmonics(tmp_path):
+    """--sun-elevations reaching below +10 deg: the scene planner's M = 2 (clsky.planner.azimuth_harmonics);
+    a typed --azimuth-harmonics wins."""
+    for extra, expected in (([], 2), (["--azimuth-harmonics", "0"], 0)):
+        result = clsky("table", "--preset", "physical", "--quality", "draft", "--sun-elevations", "-6", "5",
+                       "--size", "6", "16", "6", "--orders", "2", "-o", "dusk.npz", "--force", "--progress", "none",
+                       *extra, cwd=tmp_path)
+        assert result.returncode == 0, result.stderr
+        assert ScatteringTable.load(tmp_path / "dusk.npz").settings.azimuth_harmonics == expected
 
 
 def test_table_refuses_to_overwrite_without_force(tmp_path):
