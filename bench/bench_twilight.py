@@ -63,7 +63,7 @@ def main():
     parser.add_argument("--quality", default="default", help="quality level of the ray march (clsky/quality.py)")
     parser.add_argument("--azimuth-harmonics", type=int, metavar="M",
                         help="the tables' azimuth_harmonics (clsky/azimuth.py) instead of the scene planner's "
-                             "(2 below +10 deg since 2026-12-02; 0 reproduces the azimuth average of issue 11)")
+                             "(2 below +30 deg since 2026-12-02; 0 reproduces the azimuth average of issue 11)")
     parser.add_argument("--target", type=float, default=0.01, help="relative standard error per channel to reach")
     parser.add_argument("--max-photons", type=int, default=40_000_000, help="most paths per channel and case")
     add_output_arguments(parser)

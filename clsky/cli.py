@@ -165,7 +165,7 @@ def _add_table_arguments(parser):
                         help="the physical mode's orders k >= 2 carry M cosine harmonics of the view-sun "
                              "azimuth (clsky/azimuth.py; 2 fixes twilight, README 'Twilight against Monte "
                              "Carlo'; default: the --quality level's, 2 for reference, else 0, the azimuth "
-                             "average; with --sun-elevations the scene planner's, 2 when LOW is below 10 deg)")
+                             "average; with --sun-elevations the scene planner's, 2 when LOW is below 30 deg)")
     orders.add_argument("--order-tolerance", type=float, help="auto stops when an order adds less than this "
                                                               "(default: 1e-4)")
     orders.add_argument("--max-orders", type=int, help="most orders auto computes (default: 100)")

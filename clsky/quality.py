@@ -19,7 +19,7 @@ What sets a level apart (measured, README):
   rather than the node count: the planner (:mod:`clsky.planner`) spreads as many nodes as it needs
   over the sun angles a scene reaches.
 * The higher orders carry the view-sun azimuth (:attr:`QualityLevel.twilight_harmonics`, M = 2) where
-  the sun goes below +10 deg (the scene planner decides, :func:`clsky.planner.azimuth_harmonics`), and
+  the sun goes below +30 deg (the scene planner decides, :func:`clsky.planner.azimuth_harmonics`), and
   the 'reference' level carries them at every sun: the azimuth average (M = 0) is +6 % too bright at
   sunset and +134 % at -6 deg against the Monte Carlo, M = 2 within its noise (README, "Twilight
   against Monte Carlo"), so a reference without them measured convergence, not truth.

@@ -86,7 +86,7 @@ class TableSettings:
         2 brings the ray march within the Monte Carlo's noise (p95 of the deviation <= 2.2 %) from +5
         down to -6 deg sun elevation, where 0 is +0.9 to +133 % too bright on average (README,
         "Twilight against Monte Carlo"). Needs mode 'physical'. The scene planner sets 2 when a
-        scene's sun goes below +10 deg (:func:`clsky.planner.azimuth_harmonics`), the 'reference'
+        scene's sun goes below +30 deg (:func:`clsky.planner.azimuth_harmonics`), the 'reference'
         quality level at every sun. Each order is scattered at M + 1 azimuths (order 2 with M + 1
         lookups per sample) and gathered per harmonic.
     multiple_view_steps : int or None

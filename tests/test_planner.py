@@ -161,13 +161,13 @@ def test_unwanted_components_are_dropped(cl_context):
 
 
 @pytest.mark.parametrize("low, mode, level, expected", [
-    (-6.0, "physical", "default", 2), (5.0, "physical", "draft", 2), (9.9, "physical", "high", 2),
-    (10.0, "physical", "default", 0), (45.0, "physical", "draft", 0), (45.0, "physical", "reference", 2),
+    (-6.0, "physical", "default", 2), (5.0, "physical", "draft", 2), (29.9, "physical", "high", 2),
+    (30.0, "physical", "default", 0), (45.0, "physical", "draft", 0), (45.0, "physical", "reference", 2),
     (-6.0, "atmosphere-plus", "default", 0), (-6.0, "atmosphere-plus", "reference", 0)])
 def test_azimuth_harmonics_where_the_sun_goes_below_10_deg(low, mode, level, expected):
     """M = 2 (every level's twilight_harmonics) for a sun path reaching below HARMONICS_BELOW_DEG, in the
     physical scheme; the reference level at every sun; never in the atmosphere-plus scheme."""
-    assert HARMONICS_BELOW_DEG == 10.0
+    assert HARMONICS_BELOW_DEG == 30.0
     harmonics, reason = azimuth_harmonics(quality_level(level), (low, 60.0), mode)
     assert harmonics == expected and reason
 
@@ -178,7 +178,7 @@ def test_planned_tables_carry_the_harmonics(cl_context):
     twilight = plan_scene(Scene((-6.0, 60.0)), ctx=cl_context)
     assert twilight.table.azimuth_harmonics == twilight.full_table.azimuth_harmonics == 2
     assert "  azimuth harmonics  M = 2  (the sun goes down to -6 deg" in twilight.describe()
-    day = plan_scene(Scene((10.0, 60.0)), ctx=cl_context)
+    day = plan_scene(Scene((30.0, 60.0)), ctx=cl_context)
     assert day.table.azimuth_harmonics == 0
     single = plan_scene(Scene((-6.0, 60.0), components=SINGLE, error_budget=0.1), ctx=cl_context)
     assert single.table.orders == 1 and single.table.azimuth_harmonics == 0
