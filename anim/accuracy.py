@@ -24,7 +24,7 @@ import time
 import numpy as np
 
 import clsky
-from clsky.planner import Scene, sun_axis
+from clsky.planner import Scene, azimuth_harmonics, sun_axis
 from clsky.quality import QualityLevel, quality_level
 from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
 
@@ -127,11 +127,15 @@ def reference_level(doubled=(), level="reference") -> QualityLevel:
 def reference_renderer(elevation_deg, doubled=(), atmosphere="physical", level="reference"):
     """A SkyRenderer of the reference for one sun elevation: the reference level's table on the sun
     range that frame needs (its sun, plus the planner's margins for a fisheye from the ground, at the
-    level's node spacing), and its ray march."""
+    level's node spacing) with the planner's azimuth harmonics for that sun (the 'reference' level's at
+    every sun; a stand-in level's below +30 deg, :func:`clsky.planner.azimuth_harmonics`), and its ray
+    march."""
     level = reference_level(doubled, level)
     atmosphere = clsky.preset(atmosphere) if isinstance(atmosphere, str) else atmosphere
     cos_range, nodes, _, _ = sun_axis(atmosphere, Scene((elevation_deg, elevation_deg)), level)
-    settings = level.table.replace(size=level.table.size[:2] + (nodes,), sun_cos_range=cos_range)
+    harmonics, _ = azimuth_harmonics(level, (elevation_deg, elevation_deg), level.table.mode)
+    settings = level.table.replace(size=level.table.size[:2] + (nodes,), sun_cos_range=cos_range,
+                                   azimuth_harmonics=harmonics)
     return SkyRenderer(clsky.ScatteringTable.build(atmosphere, settings), level.ray)
 
 
