@@ -490,14 +490,15 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
     wanted = settings.max_orders if settings.orders == "auto" else settings.orders
     record = {"harmonics": harmonics, "converged": False, "relative_additions": [],
               "device": run.device}
+    single_harmonics = _to_harmonics(single_nodes)
+    ground_sky = pending_ground = None      # as in clsky.orders: E_1 + ... + E_k, and a / pi of what is pending
+    if atmosphere.has_ground:               # E_1 even for single scattering alone: the table's ground term needs it
+        ground_sky = operators.single_ground_irradiance(single_harmonics)
     if wanted == 1:
         record["orders"] = 1
-        return HarmonicOrders(single_nodes[0], None, [], record)
-    single_harmonics = _to_harmonics(single_nodes)
+        return HarmonicOrders(single_nodes[0], None, [], record, ground_sky)
     gathered = run.upload(operators.first_gather(single_harmonics))
-    ground_sky = pending_ground = None      # as in clsky.orders: E_1 + ... + E_k, and a / pi of what is pending
     if atmosphere.has_ground:
-        ground_sky = operators.single_ground_irradiance(single_harmonics)
         pending_ground = ground.reflected_radiance(atmosphere, ground.direct_irradiance(atmosphere, settings)
                                                    + ground_sky)
     running = single_nodes[..., :3] + single_nodes[..., 3:]
