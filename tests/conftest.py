@@ -171,6 +171,17 @@ def stand_in_reference(cl_context):
 
 
 @pytest.fixture(scope="session")
+def draft_stand_in_reference(cl_context):
+    """The same four frames at the 'draft' level: 8 s to build against the 'default' stand-in's ~170 s
+    (its four tables carry the azimuth harmonics, M = 2, since the reference does: measured 2026-12-02
+    at load 3). For tests of the sweep's plumbing (which renderer, which columns), not of its numbers;
+    those use :func:`stand_in_reference` and are marked slow."""
+    from clsky.anim import accuracy
+
+    return accuracy.render_reference(size=24, level="draft")
+
+
+@pytest.fixture(scope="session")
 def fp64_available(cl_context):
     """Whether the session's device supports double precision."""
     return has_fp64(cl_context.devices[0])
