@@ -39,7 +39,9 @@ def _add_scene_arguments(parser, frames=True):
     scene.add_argument("--pitch", type=float, default=10.0, help="perspective: elevation of the view [deg]")
     scene.add_argument("--altitude", type=float, default=0.0, help="observer altitude [m] (default: 0)")
     scene.add_argument("--method", default="compare", choices=list(METHODS),
-                       help="table lookup, ray march, or both compared (default)")
+                       help="table lookup, ray march, both compared (default), or the per-frame sky-view map")
+    scene.add_argument("--skyview-size", nargs=2, type=int, metavar=("W", "H"),
+                       help="--method skyview: the map's azimuth columns and rows (default: 64 128)")
     sky = parser.add_argument_group("sky")
     sky.add_argument("--preset", help="atmosphere preset (default: physical)")
     sky.add_argument("--mode", choices=["atmosphere-plus", "physical"],

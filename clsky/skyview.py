@@ -44,7 +44,7 @@ import numpy as np
 from .errors import ParameterError, check_choice, check_integer
 
 __all__ = ["SkyViewSettings", "AZIMUTH_MAPPINGS", "horizon", "row_angles", "column_azimuths",
-           "node_directions", "canonical_sun", "DEFAULT_SIZE", "HORIZON_EDGE_RAD"]
+           "node_directions", "canonical_sun", "check_size", "DEFAULT_SIZE", "HORIZON_EDGE_RAD"]
 
 #: Azimuth mappings and their kernel codes.
 AZIMUTH_MAPPINGS = {"linear": 0, "sun": 1}
@@ -70,7 +70,10 @@ class SkyViewSettings:
         W azimuth columns over [0, pi] in [2, 4096]; H rows in [4, 4096]: ceil(H / 2) sky rows
         (zenith to horizon), floor(H / 2) ground rows (horizon to nadir).
     azimuth_mapping : {'linear', 'sun'}
-        Column placement (module docstring).
+        Column placement (module docstring); 'sun' (default), Hillaire's: within 10 deg of the sun
+        (the Mie aureole) it halves the error of 'linear' at 32 to 64 columns (p95 0.56 % against 1.01 %
+        with the sun at +30 deg, 0.59 % against 1.52 % at +5 deg, 64 x 128 map, 256^2 fisheye against
+        the per-pixel ray march), for 0.08 % against 0.07 % over the whole sky (README "Sky-view table").
 
     Raises
     ------
@@ -79,7 +82,7 @@ class SkyViewSettings:
     """
 
     size: tuple = DEFAULT_SIZE
-    azimuth_mapping: str = "linear"
+    azimuth_mapping: str = "sun"
 
     def __post_init__(self):
         object.__setattr__(self, "size", check_size("size", self.size))

@@ -206,3 +206,47 @@ def test_bad_sizes_are_refused_naming_the_item(size, field):
 def test_bad_azimuth_mapping_is_refused():
     with pytest.raises(ParameterError, match="^azimuth_mapping must be"):
         skyview.SkyViewSettings((8, 8), "cubic")
+
+
+def test_animation_config_refuses_a_bad_map_size_naming_the_field():
+    from clsky.anim.animate import AnimationConfig
+
+    with pytest.raises(ParameterError, match=r"^skyview_size\[1\] must be an integer in \[4, 4096\]"):
+        AnimationConfig(method="skyview", skyview_size=(64, 2))
+    assert AnimationConfig(method="skyview").skyview_size is None      # the default map, DEFAULT_SIZE
+    assert AnimationConfig(method="skyview", skyview_size=[8, np.int64(6)]).skyview_size == (8, 6)
+
+
+@pytest.mark.parametrize("args, named", [(["--skyview-size", "1", "64"], "--skyview-size W"),
+                                         (["--skyview-size", "64", "4097"], "--skyview-size H")])
+def test_cli_refuses_a_bad_map_size_one_line_exit_2(tmp_path, args, named):
+    import subprocess
+    import sys
+
+    result = subprocess.run([sys.executable, "-m", "clsky.anim", "animate", "--method", "skyview", *args],
+                            cwd=tmp_path, capture_output=True, text=True)
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("clsky: error:") and named in lines[0], result.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_render_frame_of_method_skyview_is_the_renderers_skyview(cl_context):
+    """``clsky animate --method skyview``'s frame is render_skyview's with the config's map size (the
+    atmosphere-plus preset: relative frames, no colour conversion), and nothing else is rendered."""
+    from clsky.anim.animate import AnimationConfig, render_frame
+
+    table = ScatteringTable.build("atmosphere-plus", TableSettings(size=(9, 33, 7), gather_theta_steps=64,
+                                                                    gather_phi_steps=32), ctx=cl_context)
+    with SkyRenderer(table, RAY, ctx=cl_context) as sky_renderer:
+        directions, valid = FisheyeCamera(24).directions()
+        prepared = sky_renderer.prepare(directions, valid)
+        sun = sun_direction(80.0, 120.0)
+        config = AnimationConfig(method="skyview", skyview_size=(16, 24), preset="atmosphere-plus",
+                                 mode="atmosphere-plus")
+        frames = render_frame(sky_renderer, prepared, sun, config)
+        expected = sky_renderer.render_skyview(prepared, sun, 0.0, settings=skyview.SkyViewSettings((16, 24)))
+        assert list(frames) == ["skyview"]
+        assert_array_equal(frames["skyview"], expected)
+        other = sky_renderer.render_skyview(prepared, sun, 0.0, settings=skyview.SkyViewSettings((8, 24)))
+        assert np.abs(other - expected).max() > 0.0      # the size reaches the map
