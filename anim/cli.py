@@ -315,7 +315,8 @@ def run_bench(args):
     clsky_cli.check_outputs(targets.items(), args.force)
     candidates = accuracy.default_candidates()
     if args.quick:
-        candidates = [c for c in candidates if c.label in ("default", "ray march 16 samples", "ray march 48 samples")]
+        candidates = [c for c in candidates if c.label in ("default", "ray march 16 samples", "ray march 48 samples",
+                                                           "sky-view 32 x 64")]
     progress, close = clsky_cli.progress_bar(args.progress)
     try:
         reference, valid = accuracy.render_reference(args.size, level=args.reference_quality)
