@@ -521,8 +521,16 @@ def render_skyview(sky_map, sky_rows, azimuth_mapping, directions, sun_direction
     mu_v = np.clip(v[:, 2], -1.0, 1.0)
     nu = np.clip(v @ sun, -1.0, 1.0)
     theta = np.arctan2(np.sqrt(v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1]), v[:, 2])
-    phi = np.arctan2(np.abs(v[:, 0] * sun[1] - v[:, 1] * sun[0]), v[:, 0] * sun[0] + v[:, 1] * sun[1])
-    u = np.sin(0.5 * phi) if azimuth_mapping == "sun" else phi / math.pi
+    sun_horizontal = math.sqrt(sun[0] * sun[0] + sun[1] * sun[1])
+    sun_unit = sun[:2] / sun_horizontal if sun_horizontal > 0.0 else np.array([1.0, 0.0])
+    horizontal = np.sqrt(v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1])[:, None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        view = np.where(horizontal > 0.0, v[:, :2] / horizontal, sun_unit)
+    chord = np.linalg.norm(view - sun_unit, axis=-1)          # 2 sin(phi / 2)
+    if azimuth_mapping == "sun":
+        u = np.minimum(0.5 * chord, 1.0)
+    else:
+        u = 2.0 * np.arctan2(chord, np.linalg.norm(view + sun_unit, axis=-1)) / math.pi
 
     def node(f, n):
         g = np.clip(f, 0.0, n - 1.0)

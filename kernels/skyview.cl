@@ -6,10 +6,13 @@
  * for absolute tables), row-major, 3 reals per node, without the sun's disc. Per pixel of unit view
  * direction V (observer's local frame, z = zenith) and sun direction S:
  *   theta = atan2(|V_xy|, V_z) (view zenith angle [rad]),
- *   phi = atan2(|V_x S_y - V_y S_x|, V_x S_x + V_y S_y) in [0, pi] (azimuth from the sun's vertical plane),
+ *   phi in [0, pi], the azimuth from the sun's vertical plane, from the chord between the unit horizontal
+ *   directions V_h = V_xy / |V_xy| and S_h = S_xy / |S_xy| (S_h = x where the sun is at the zenith or
+ *   nadir, V_h = S_h where V is): c = |V_h - S_h| = 2 sin(phi / 2), well conditioned at phi = 0 and pi,
  *   sky half (mu_v = V_z >= mu_H): row = (1 - sqrt(1 - theta / theta_H)) (sky_rows - 1),
  *   ground half (mu_v < mu_H):     row = sky_rows + sqrt((theta - theta_H) / (pi - theta_H)) (ground_rows - 1),
- *   column = u (width - 1), u = phi / pi ('linear', azimuth_mapping 0) or sin(phi / 2) ('sun', 1).
+ *   column = u (width - 1), u = sin(phi / 2) = c / 2 ('sun', azimuth_mapping 1: Hillaire's
+ *   sqrt((1 - cos phi) / 2), no trigonometry per pixel) or phi / pi = 2 atan2(c, |V_h + S_h|) / pi ('linear', 0).
  * Bilinear in (row, column) within the pixel's half only: nothing is interpolated across the horizon.
  * Then the sun's disc is added as render.cl does (sun_disc). Invalid pixels are written as 0.
  * Arguments: horizon_cos = mu_H and horizon_angle = theta_H [rad] of the observer's altitude (host).
@@ -36,6 +39,8 @@ __kernel void render_skyview(__constant const atmosphere_t *atm, __global const 
     if (first >= n || all_invalid(valid, first, n, out))
         return;
     const real below = PI_REAL - horizon_angle;
+    const real sun_horizontal = sqrt(sun.x * sun.x + sun.y * sun.y);
+    const real2 sun_unit = sun_horizontal > R(0.0) ? (real2)(sun.x, sun.y) / sun_horizontal : (real2)(R(1.0), R(0.0));
     for (int k = 0; k < VECTOR_WIDTH && first + k < n; ++k) {
         const int i = first + k;
         if (!valid[i]) {
@@ -46,8 +51,11 @@ __kernel void render_skyview(__constant const atmosphere_t *atm, __global const 
         const real mu_v = clamp(v.z, R(-1.0), R(1.0));
         const real nu = clamp(dot(v, sun.xyz), R(-1.0), R(1.0));
         const real theta = atan2(sqrt(v.x * v.x + v.y * v.y), v.z);
-        const real phi = atan2(fabs(v.x * sun.y - v.y * sun.x), v.x * sun.x + v.y * sun.y);
-        const real u = azimuth_mapping == 1 ? sin(R(0.5) * phi) : phi / PI_REAL;
+        const real horizontal = sqrt(v.x * v.x + v.y * v.y);
+        const real2 view = horizontal > R(0.0) ? (real2)(v.x, v.y) / horizontal : sun_unit;
+        const real chord = length(view - sun_unit);           /* |V_h - S_h| = 2 sin(phi / 2) */
+        const real u = azimuth_mapping == 1 ? fmin(R(0.5) * chord, R(1.0))
+                                            : R(2.0) * atan2(chord, length(view + sun_unit)) / PI_REAL;
         real ax, ay;
         const int x0 = skyview_node(u * (real)(width - 1), width, &ax);
         int y0;

@@ -178,7 +178,7 @@ RAYMARCH_P95_TOLERANCE = 0.004
 def test_skyview_frame_is_close_to_the_ray_march(renderer, altitude):
     """The default map against render_raymarch per pixel, sun at +30, +5, 0 and -4 deg: p95 within
     RAYMARCH_P95_TOLERANCE. Measured (p95 %, ground / 10 km looking 46 deg down, so through both
-    halves of the map): +30: 0.069 / 0.135, +5: 0.074 / 0.138, 0: 0.107 / 0.150, -4: 0.081 / 0.164."""
+    halves of the map): +30: 0.080 / 0.139, +5: 0.077 / 0.141, 0: 0.094 / 0.145, -4: 0.092 / 0.164."""
     sky_renderer = renderer()
     directions, valid = FisheyeCamera(64).directions()
     if altitude > 0:                                          # looking down at 45 deg: both halves of the map
