@@ -250,3 +250,20 @@ def test_render_frame_of_method_skyview_is_the_renderers_skyview(cl_context):
         assert_array_equal(frames["skyview"], expected)
         other = sky_renderer.render_skyview(prepared, sun, 0.0, settings=skyview.SkyViewSettings((8, 24)))
         assert np.abs(other - expected).max() > 0.0      # the size reaches the map
+
+
+def test_spectral_renderer_reads_one_map_per_batch(cl_context):
+    """SpectralRenderer.render_skyview: each batch's SkyRenderer.render_skyview with the same settings,
+    assembled (6 wavelengths: two batches of three)."""
+    from clsky.spectrum import SpectralRenderer, SpectralTable
+
+    table = SpectralTable.build("physical", 6, SMALL.replace(size=(8, 32, 8)), ctx=cl_context, keep_orders=False)
+    with SpectralRenderer(table, RAY, ctx=cl_context) as spectral:
+        directions, valid = FisheyeCamera(16).directions()
+        sun = sun_direction(70.0, 40.0)
+        settings = skyview.SkyViewSettings((8, 12))
+        actual = spectral.render_skyview(spectral.prepare(directions, valid), sun, 0.0, settings=settings)
+        batches = [r.render_skyview(directions, sun, 0.0, valid, settings=settings) for r in spectral.renderers]
+        assert actual.shape == (16, 16, 6)
+        assert_array_equal(actual, np.concatenate(batches, axis=-1))
+        assert actual[valid].min() > 0.0
