@@ -71,17 +71,17 @@ class RendererRow:
 
 #: The renderers, with their measured costs and errors. Costs: process CPU of one 1024 x 1024 fisheye
 #: frame from the ground (HDR frame on the host), bench/bench_skyview.py (README "Sky-view table"),
-#: 2026-12-02, default table, 2-core machine at load average 12 to 13 (CPU times: the wall times were
-#: 3 to 4 times longer). The sky-view map's errors: p95 against the per-pixel ray march, the worst of the
+#: 2026-12-02, default table, 2-core machine at load average 11 to 15 (CPU times: the wall times were
+#: up to 4 times longer). The sky-view map's errors: p95 against the per-pixel ray march, the worst of the
 #: ground and 10 km (tests/test_skyview.py: 0.080 / 0.139 % at +30 deg, 0.077 / 0.141 % at +5,
 #: 0.094 / 0.145 % at 0, 0.092 / 0.164 % at -4).
 RENDERERS = (
-    RendererRow("lut", "table lookup", 57.4, LOOKUP_ERROR, False,
+    RendererRow("lut", "table lookup", 71.6, LOOKUP_ERROR, False,
                 "README 'Speed versus accuracy' (error) and 'Sky-view table' (cost)"),
-    RendererRow("skyview", "sky-view map 64 x 128", 168.5,
+    RendererRow("skyview", "sky-view map 64 x 128", 86.9,
                 ((-4.0, 0.00164), (0.0, 0.00145), (5.0, 0.00141), (30.0, 0.00139)), True,
                 "tests/test_skyview.py (error against the ray march); README 'Sky-view table' (cost)"),
-    RendererRow("raymarch", "ray march", 1933.0, ((0.0, 0.0),), True,
+    RendererRow("raymarch", "ray march", 1959.2, ((0.0, 0.0),), True,
                 "README 'Sky-view table' (cost); the plan's reference: its error is the quality level's "
                 "(RAY_MARCH_ERROR)"),
 )
