@@ -278,3 +278,27 @@ def test_a_zero_error_is_named_not_drawn_on_the_log_axes():
         figure.canvas.draw()
     finally:
         plt.close(figure)
+
+
+def test_skyview_candidates_get_their_own_markers_and_band():
+    """Sky-view rows (method 'skyview'): green diamonds in the Pareto plot, and their own band and front
+    line in the elevation plot, beside the lookups' and the ray marches'."""
+    pytest.importorskip("matplotlib")
+    import matplotlib.pyplot as plt
+
+    from clsky.anim.accuracy_plot import draw_elevation, knob_styles
+
+    rows = synthetic_rows()
+    errors = {f"p95_rel {n}": 0.001 for n in accuracy.SUN_ELEVATIONS}
+    rows.append({"candidate": "sky-view 64 x 128", "knob": "sky-view map size", "method": "skyview",
+                 "build_s": 1.0, "render_s": 0.5e-3, "p95_rel": 0.001, "mean_delta_e": 0.1, **errors})
+    styles = knob_styles(rows)
+    assert styles["sky-view map size"] == ("forestgreen", "D")
+    assert all(marker != "D" for knob, (_, marker) in styles.items() if knob != "sky-view map size")
+    figure = draw_elevation(rows)
+    try:
+        labels = figure.axes[0].get_legend_handles_labels()[1]
+        assert "sky-view map: all 1 candidates (range)" in labels
+        assert "sky-view map: sky-view 64 x 128" in labels          # fastest and best: on the front
+    finally:
+        plt.close(figure)
