@@ -53,7 +53,7 @@ AZIMUTH_MAPPINGS = {"linear": 0, "sun": 1}
 DEFAULT_SIZE = (64, 128)
 #: How far from the horizon [rad] its two rows are marched, each on its own side: the limits from above
 #: and below. A ray that hits the ground there is shorter than the grazing one by about
-#: r sqrt(2 |mu_H| eps) (0.2 m of 357 km from 10 km), and |mu - mu_H| = eps sin(theta_H) is some 1e7
+#: r sqrt(2 |mu_H| eps) (70 m of 357 km from 10 km), and |mu - mu_H| = eps sin(theta_H) is some 1e7
 #: times the rounding of mu_H.
 HORIZON_EDGE_RAD = 1e-9
 #: Largest map side (nodes).
