@@ -65,7 +65,6 @@ __all__ = ["Scene", "Plan", "plan_scene", "sun_margins", "sun_axis", "view_sampl
 COMPONENTS = ("rayleigh", "mie", "multiple")
 
 
-
 def _check_range(name, value, low, high):
     """(low, high) floats from two real numbers (NumPy's too; a list or array) in order in [low, high]."""
     valid = f"two numbers low <= high in [{low:g}, {high:g}]"
