@@ -22,6 +22,8 @@ import pathlib
 
 import numpy as np
 
+from clsky.errors import require_extra
+
 from .accuracy import SUN_ELEVATIONS, pareto_front
 
 __all__ = ["read_csv", "stack_labels", "knob_styles", "draw_pareto", "draw_elevation", "pareto_plot",
@@ -42,14 +44,18 @@ CLEARANCE = 0.3
 
 
 def _pyplot():
-    try:
-        import matplotlib
+    require_plotting()
+    import matplotlib
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError as error:
-        raise ImportError("the accuracy plots need matplotlib: pip install 'clsky[bench]'") from error
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
     return plt
+
+
+def require_plotting():
+    """ImportError saying how to install matplotlib (the ``bench`` extra) when it is missing: called
+    by ``clsky bench accuracy`` before it measures anything."""
+    require_extra("matplotlib", "the accuracy plots", "pip install 'clsky[bench]'")
 
 
 def read_csv(path):

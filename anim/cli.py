@@ -270,6 +270,10 @@ def run_render(args):
     if _printed_scene(args, config, **extra):
         return 0
     clsky_cli.check_outputs([(name("output", "--output"), output)], args.force)
+    try:
+        writers.require_pillow()
+    except ImportError as error:
+        raise clsky_cli.UsageError(str(error)) from None
     position = SunPosition(90.0 - args.sun_elevation, args.sun_azimuth)
     _check_memory(args, config, [position])
     camera = _camera(config)
@@ -313,6 +317,11 @@ def run_bench(args):
     if targets["--elevation-plot"].resolve() == targets["--plot"].resolve():
         raise clsky_cli.UsageError(f"--elevation-plot must differ from --plot, got {str(targets['--plot'])!r} twice")
     clsky_cli.check_outputs(targets.items(), args.force)
+    try:                                           # the plots need both: refuse before measuring
+        accuracy_plot.require_plotting()
+        writers.require_pillow()
+    except ImportError as error:
+        raise clsky_cli.UsageError(str(error)) from None
     candidates = accuracy.default_candidates()
     if args.quick:
         candidates = [c for c in candidates if c.label in ("default", "ray march 16 samples", "ray march 48 samples",
