@@ -158,7 +158,7 @@ def register(commands):
                           help="quality level of the reference frames (default: reference, ~5 min to build; "
                                "a cheaper one for smoke runs)")
     accuracy.add_argument("--quick", action="store_true",
-                          help="default settings and two ray marches only (a smoke run)")
+                          help="default settings, two ray marches and a 32 x 64 sky-view map only (a smoke run)")
     accuracy.add_argument("--force", action="store_true", help="overwrite existing outputs")
     accuracy.add_argument("--progress", default="leave", choices=["display", "leave", "none"])
     return {"animate": run_animate, "render": run_render, "bench": run_bench}

@@ -86,7 +86,9 @@ def test_bench_accuracy_quick_run_writes_csv_and_plot(tmp_path):
     assert result.returncode == 0, result.stderr
     with open(tmp_path / "accuracy.csv") as stream:
         rows = list(csv.DictReader(stream))
-    assert [r["candidate"] for r in rows] == ["default", "ray march 16 samples", "ray march 48 samples"]
+    assert [r["candidate"] for r in rows] == ["default", "ray march 16 samples", "ray march 48 samples",
+                                              "sky-view 32 x 64"]
+    assert rows[-1]["method"] == "skyview"
     for name in ("accuracy.png", "accuracy_elevation.png"):
         assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
