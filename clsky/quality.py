@@ -19,7 +19,7 @@ What sets a level apart (measured, README):
   rather than the node count: the planner (:mod:`clsky.planner`) spreads as many nodes as it needs
   over the sun angles a scene reaches.
 * A table lookup cannot meet these budgets below golden hour whatever its size (the 3D table has no
-  azimuth: 32 % at sunset, hundreds of % in twilight): the levels are for the ray march, and the
+  azimuth: 38 % at sunset, hundreds of % in twilight): the levels are for the ray march, and the
   planner allows the lookup alone only where its measured error fits the budget.
 """
 
