@@ -20,6 +20,7 @@ there (README).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 
 import numpy as np
@@ -56,9 +57,13 @@ class Candidate:
 
     @property
     def method(self):
+        """'skyview' with ``skyview``, 'raymarch' with ``samples``, else 'lut4d' for a 4D table
+        (clsky/table4d.py), else 'lut'."""
         if self.skyview is not None:
             return "skyview"
-        return "lut" if self.samples is None else "raymarch"
+        if self.samples is not None:
+            return "raymarch"
+        return "lut4d" if self.table.is_4d else "lut"
 
 
 def default_candidates(base: clsky.TableSettings | None = None):
@@ -86,6 +91,9 @@ def default_candidates(base: clsky.TableSettings | None = None):
         ("order tolerance 1e-3", "order tolerance", base.replace(order_tolerance=1e-3)),
         ("single scattering only", "order tolerance", base.replace(orders=1)),
         ("float32", "precision", base.replace(dtype="float32")),
+        # the 4D table (altitude x view x sun x azimuth, clsky/table4d.py), its orders with 2 harmonics
+        ("4D table", "parameterization", base.replace(parameterization="4d",
+                                                      azimuth_harmonics=base.azimuth_harmonics or 2)),
     ]
     candidates = [Candidate(label, knob, settings) for label, knob, settings in table]
     candidates.append(Candidate("fast math", "fast-math", base, fast_math=True))
@@ -147,19 +155,18 @@ def reference_renderer(elevation_deg, doubled=(), atmosphere="physical", level="
 
 
 def render_frames(renderer, method, prepared, skyview=None):
-    """The four frames {name: HDR} of :data:`SUN_ELEVATIONS` by table lookup ('lut'), ray march
-    ('raymarch') or sky-view map ('skyview', of ``skyview`` = (W, H) nodes, default its default size),
-    with ``prepared`` directions (:meth:`clsky.render.SkyRenderer.prepare`)."""
+    """The four frames {name: HDR} of :data:`SUN_ELEVATIONS` by table lookup ('lut', or 'lut4d' in a 4D
+    table), ray march ('raymarch') or sky-view map ('skyview', of ``skyview`` = (W, H) nodes, default its
+    default size), with ``prepared`` directions (:meth:`clsky.render.SkyRenderer.prepare`)."""
     from clsky.skyview import DEFAULT_SIZE, SkyViewSettings
 
     frames = {}
+    render = {"lut": renderer.render_table, "lut4d": renderer.render_lut4d}.get(method, renderer.render_raymarch)
+    if method == "skyview":
+        render = functools.partial(renderer.render_skyview, settings=SkyViewSettings(skyview or DEFAULT_SIZE))
     for name, elevation in SUN_ELEVATIONS.items():
         sun = sun_direction(90.0 - elevation, SUN_AZIMUTH)
-        if method == "skyview":
-            frames[name] = renderer.render_skyview(prepared, sun, 0.0, settings=SkyViewSettings(skyview or DEFAULT_SIZE))
-        else:
-            render = renderer.render_table if method == "lut" else renderer.render_raymarch
-            frames[name] = render(prepared, sun, 0.0)
+        frames[name] = render(prepared, sun, 0.0)
     return frames
 
 

@@ -39,7 +39,9 @@ def _add_scene_arguments(parser, frames=True):
     scene.add_argument("--pitch", type=float, default=10.0, help="perspective: elevation of the view [deg]")
     scene.add_argument("--altitude", type=float, default=0.0, help="observer altitude [m] (default: 0)")
     scene.add_argument("--method", default="compare", choices=list(METHODS),
-                       help="table lookup, ray march, both compared (default), or the per-frame sky-view map")
+                       help="table lookup, ray march, or both compared (default); lut4d and compare4d look "
+                            "up the 4D table (altitude, view, sun, azimuth) instead of the 3D one; skyview reads "
+                            "a small map ray-marched per frame")
     scene.add_argument("--skyview-size", nargs=2, type=int, metavar=("W", "H"),
                        help="--method skyview: the map's azimuth columns and rows (default: 64 128)")
     sky = parser.add_argument_group("sky")
@@ -285,14 +287,14 @@ def run_render(args):
     sun = sun_direction(90.0 - args.sun_elevation, args.sun_azimuth)
     hdr = render_frame(renderer, renderer.prepare(directions, valid), sun, config)
     ev, images, shown = display_frames(display(config, table), hdr, valid, config)
-    if config.method == "compare":
+    if config.compares:
         error = metrics.error_image(metrics.relative_error_map(hdr["raymarch"], hdr["lut"], valid), valid)
         image = metrics.composite([images["lut"], images["raymarch"], error],
                                   ["table lookup", "ray march", "relative error"])
         numbers = metrics.compare_frames(hdr["raymarch"], hdr["lut"], valid, display=shown)
         detail = f"; table vs ray march: 95th-percentile error {100 * numbers['p95_rel']:.1f} %"
     else:
-        image, detail = images[config.method], ""
+        image, detail = images[config.method if config.method in ("raymarch", "skyview") else "lut"], ""
     text = scene.output_metadata(scene.scene_text(scene.scene_values(config, args.scene_parser, extra), "render"))
     writers.write_png(output, image, force=args.force, text=text)
     print(f"frame {camera.width}x{camera.height} ({config.method}, sun elevation {args.sun_elevation:g} deg, "

@@ -28,6 +28,16 @@ def test_candidates_move_one_knob_each():
         assert knob in knobs
 
 
+def test_4d_candidate_is_measured_with_the_4d_lookup(stand_in_reference):
+    """The sweep's 4D table candidate renders with render_lut4d ('lut4d') and gets finite errors."""
+    reference, valid = stand_in_reference
+    four = [c for c in accuracy.default_candidates() if c.knob == "parameterization"]
+    assert len(four) == 1 and four[0].table.is_4d and four[0].method == "lut4d"
+    tiny = accuracy.Candidate("4D", "parameterization", four[0].table.replace(size=(9, 34, 9), azimuth_size=5))
+    row, = accuracy.measure([tiny], reference, valid)
+    assert row["method"] == "lut4d" and np.isfinite(row["p95_rel"]) and row["p95_rel"] >= 0
+
+
 def test_measure_on_tiny_frames(stand_in_reference):
     reference, valid = stand_in_reference
     default = accuracy.default_candidates()[0].table
@@ -283,7 +293,7 @@ def test_a_zero_error_is_named_not_drawn_on_the_log_axes():
 
 
 def test_skyview_candidates_get_their_own_markers_and_band():
-    """Sky-view rows (method 'skyview'): green diamonds in the Pareto plot, and their own band and front
+    """Sky-view rows (method 'skyview'): purple diamonds in the Pareto plot, and their own band and front
     line in the elevation plot, beside the lookups' and the ray marches'."""
     pytest.importorskip("matplotlib")
     import matplotlib.pyplot as plt
@@ -295,7 +305,7 @@ def test_skyview_candidates_get_their_own_markers_and_band():
     rows.append({"candidate": "sky-view 64 x 128", "knob": "sky-view map size", "method": "skyview",
                  "build_s": 1.0, "render_s": 0.5e-3, "p95_rel": 0.001, "mean_delta_e": 0.1, **errors})
     styles = knob_styles(rows)
-    assert styles["sky-view map size"] == ("forestgreen", "D")
+    assert styles["sky-view map size"] == ("purple", "D")
     assert all(marker != "D" for knob, (_, marker) in styles.items() if knob != "sky-view map size")
     figure = draw_elevation(rows)
     try:

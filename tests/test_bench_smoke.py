@@ -43,6 +43,7 @@ HEADERS = {
     "bench_spectral": ["| build | batches | wall [s] | CPU [s] | wall / three | load |",
                        "| mode against N = 6 | sun zenith [deg] | PSNR [dB] | mean Delta E 2000 | Bruneton's anchor |"],
     "bench_azimuth": ["| | -6 deg |", "| sun [deg] | view | paths | SE [%] | M = 0 [%] | M = 1 [%] |"],
+    "bench_lookup4d": ["| frame | sun [deg] | 4D lookup p95 | target | 4D mean Delta E | 3D lookup p95 |"],
     "bench_twilight": ["| | +5 deg | -6 deg |",
                        "| sun [deg] | view | paths | SE [%] | all orders [%] | all orders [SE] | single: paths |"],
 }
