@@ -39,6 +39,7 @@ from clsky.settings import SAMPLINGS
 from clsky.resources import MemoryEstimate, check_memory, device_of, estimate_animation_memory
 
 from . import display as display_pipeline
+from . import pipeline as pipeline_module
 from . import metrics, sunpath, tonemap, writers
 from .cameras import camera_from_name
 from .exr import PRECISIONS
@@ -60,6 +61,10 @@ LUT4D_HARMONICS = 2
 #: nodes x 16 azimuths is 151 MB as float32 and within 0.6 % (day to sunset) and 2.1 % (-4 deg) of the
 #: ray march of the same orders (README, "The 4D table"); the level's 32 x 256 would be 4 times that.
 LUT4D_MAX_SIZE = (16, 128)
+
+#: Render frame i + 1 on a worker thread while frame i is displayed, compared and written
+#: (:func:`clsky.anim.pipeline.prefetched`); False: one after the other, on the calling thread.
+OVERLAP_FRAMES = True
 
 #: The conversion of absolute three-wavelength frames to XYZ (:func:`clsky.colorimetry.three_wavelength_to_xyz`):
 #: the default ``solar_power_law`` reconstruction, tabulated. Measured per 512 x 512 frame (process CPU,
@@ -743,9 +748,13 @@ def _write_animation(config, positions, renderer, prepared, valid, table, plan, 
     pipeline = display(config, table)
     # the frames' host products (sRGB and white-balance matrices, Oklab, XYZ for Delta E) on one BLAS
     # thread: beside PoCL's workers OpenBLAS's threads cost ~100x the CPU of one (README, "Speed")
-    with _frame_writer(config, len(positions), staging) as writer, host_blas_single_threaded():
-        for index, sun in enumerate(positions):
-            hdr = render_frame(renderer, prepared, sun.direction, config)
+    # frame i + 1 renders on a worker thread while this thread displays, compares and writes frame i
+    # (clsky.anim.pipeline: the same frames, in order; OVERLAP_FRAMES = False renders them here, one by one)
+    frames = pipeline_module.prefetched(lambda sun: render_frame(renderer, prepared, sun.direction, config),
+                                        positions, overlap=OVERLAP_FRAMES)
+    with _frame_writer(config, len(positions), staging) as writer, host_blas_single_threaded(), \
+            contextlib.closing(frames):
+        for index, (sun, hdr) in enumerate(frames):
             ev, images, shown = display_frames(pipeline, hdr, valid, config, seed=index)
             row = {"frame": index, "sun_zenith_deg": sun.zenith_deg, "sun_azimuth_deg": sun.azimuth_deg,
                    "time": sun.time.isoformat() if sun.time is not None else "", "exposure_ev": ev}
