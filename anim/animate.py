@@ -32,7 +32,7 @@ from clsky.errors import ParameterError, check_choice, check_integer, check_real
 from clsky.ground import check_ground_mode
 from clsky.planner import Plan, Scene, azimuth_harmonics, plan_scene, sun_axis, view_sampling
 from clsky.quality import QUALITY_LEVELS, QualityLevel, level_for_budget, quality_level
-from clsky import colorimetry, spectrum
+from clsky import colorimetry, skyview, spectrum
 from clsky.solar import ABSOLUTE_UNITS, RELATIVE_UNITS, solar_irradiance_astm_g173, with_solar_spectrum
 from clsky.render import SkyRenderer
 from clsky.settings import SAMPLINGS
@@ -51,8 +51,9 @@ __all__ = ["AnimationConfig", "AnimationResult", "METHODS", "quality", "plan_ani
            "memory_estimate", "display", "display_frames"]
 
 #: What is rendered: table lookup only, ray march only, or both with the comparison.
-#: 'lut4d' and 'compare4d' are 'lut' and 'compare' with the 4D table (clsky/table4d.py) for the lookup.
-METHODS = ("compare", "lut", "raymarch", "lut4d", "compare4d")
+#: 'lut4d' and 'compare4d' are 'lut' and 'compare' with the 4D table (clsky/table4d.py) for the lookup;
+#: 'skyview' the per-frame sky-view map (:mod:`clsky.skyview`: a small map ray-marched per frame, read per pixel).
+METHODS = ("compare", "lut", "raymarch", "lut4d", "compare4d", "skyview")
 #: Azimuth harmonics of the 4D methods' higher orders when the quality level has none (M = 2 brings
 #: the ray march within the Monte Carlo's noise down to -6 deg: README, "Twilight against Monte Carlo").
 LUT4D_HARMONICS = 2
@@ -92,10 +93,14 @@ class AnimationConfig:
         image (default 0, north up, east on the left as in all-sky photographs).
     altitude : float
         Observer altitude [m], >= 0 (above 100 km: seen from space).
-    method : {'compare', 'lut', 'raymarch', 'lut4d', 'compare4d'}
+    method : {'compare', 'lut', 'raymarch', 'lut4d', 'compare4d', 'skyview'}
         The frames: table lookup against the ray march, either alone; the 4D methods look up the 4D
         table (parameterization '4d', clsky/table4d.py: mode 'physical', at least
-        :data:`LUT4D_HARMONICS` azimuth harmonics) instead of the 3D one.
+        :data:`LUT4D_HARMONICS` azimuth harmonics) instead of the 3D one; 'skyview' reads a per-frame
+        sky-view map (:mod:`clsky.skyview`).
+    skyview_size : (W, H) or None
+        Size of the per-frame sky-view map of ``method='skyview'`` (:class:`clsky.skyview.SkyViewSettings`):
+        W azimuth columns in [2, 4096], H rows in [4, 4096]; None (default): :data:`clsky.skyview.DEFAULT_SIZE`.
     preset : str
         Atmosphere preset (:data:`clsky.PRESETS`).
     ground_albedo : float or None
@@ -195,6 +200,7 @@ class AnimationConfig:
     pitch_deg: float = 10.0
     altitude: float = 0.0
     method: str = "compare"
+    skyview_size: tuple | None = None
     preset: str = "physical"
     mode: str = "physical"
     ground_albedo: float | None = None
@@ -383,6 +389,7 @@ _FIELD_CHECKS = {
     "camera": _choice(("fisheye", "perspective", "equirectangular")),
     "fov_deg": _real(0.0, 179.0, " degrees", low_open=True), "heading_deg": _real(-360.0, 720.0, " degrees", optional=True),
     "pitch_deg": _real(-90.0, 90.0, " degrees"), "altitude": _real(0.0, 1e8, " m"), "method": _choice(METHODS),
+    "skyview_size": lambda name, value: None if value is None else skyview.check_size(name, value),
     "preset": _choice(tuple(sorted(clsky.PRESETS))), "mode": _choice(("atmosphere-plus", "physical")),
     "ground_albedo": _real(0.0, 1.0, optional=True), "ozone_column_du": _real(0.0, 1e5, " DU", optional=True),
     "samples": _integer(2, 4096, optional=True), "sampling": _choice(SAMPLINGS, optional=True),
@@ -599,6 +606,9 @@ def render_frame(renderer: SkyRenderer, prepared, sun_direction, config: Animati
         frames["lut"] = renderer.render_lut4d(prepared, sun_direction, config.altitude)
     if config.method in ("compare", "raymarch", "compare4d"):
         frames["raymarch"] = renderer.render_raymarch(prepared, sun_direction, config.altitude)
+    if config.method == "skyview":
+        frames["skyview"] = renderer.render_skyview(prepared, sun_direction, config.altitude,
+                                                    settings=skyview.SkyViewSettings(config.skyview_size or skyview.DEFAULT_SIZE))
     if config.wavelengths is not None:
         frames = {name: spectral_frame_to_linear_srgb(frame, renderer.wavelengths) for name, frame in frames.items()}
     elif config.absolute:
@@ -633,7 +643,7 @@ def display_frames(pipeline: display_pipeline.Display, hdr, valid, config: Anima
     display-linear values (ray march, table lookup), computed once with the 8-bit frames
     (:meth:`clsky.anim.display.Display.encode_and_linear`; the tone curve and gamut mapping were half the
     frame loop's host time when Delta E evaluated them again); else the pipeline at that EV."""
-    ev = pipeline.exposure(hdr.get("raymarch", hdr.get("lut")), valid)
+    ev = pipeline.exposure(hdr["raymarch"] if "raymarch" in hdr else next(iter(hdr.values())), valid)
     shown = {name: pipeline.encode_and_linear(frame, ev) for name, frame in hdr.items()}
     images = {name: tonemap.to_uint8(encoded, dither=config.dither, seed=seed) for name, (encoded, _) in shown.items()}
     if "raymarch" in shown and "lut" in shown:
@@ -735,7 +745,7 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
 def _write_animation(config, positions, renderer, prepared, valid, table, plan, staging, progress):
     """Render every frame and stage the frames, the MP4 and the metrics in ``staging``; returns the
     metric rows, the temporal jumps, the target paths and the stale frames to be deleted."""
-    rows, means = [], {"lut": [], "raymarch": []}
+    rows, means = [], {name: [] for name in ("lut", "raymarch", "skyview")}
     pipeline = display(config, table)
     # the frames' host products (sRGB and white-balance matrices, Oklab, XYZ for Delta E) on one BLAS
     # thread: beside PoCL's workers OpenBLAS's threads cost ~100x the CPU of one (README, "Speed")
@@ -758,7 +768,7 @@ def _write_animation(config, positions, renderer, prepared, valid, table, plan, 
                                           ["table lookup", "ray march", "relative error"])
                 frame_hdr = hdr["raymarch"]
             else:
-                name = "raymarch" if config.method == "raymarch" else "lut"
+                name = config.method if config.method in ("raymarch", "skyview") else "lut"
                 image, frame_hdr = images[name], hdr[name]
             writer.write(index, _even(image), hdr=frame_hdr if config.hdr else None,
                          hdr_attributes=_hdr_attributes(config, table, sun) if config.hdr in ("exr", "hdr") else None)

@@ -40,7 +40,10 @@ def _add_scene_arguments(parser, frames=True):
     scene.add_argument("--altitude", type=float, default=0.0, help="observer altitude [m] (default: 0)")
     scene.add_argument("--method", default="compare", choices=list(METHODS),
                        help="table lookup, ray march, or both compared (default); lut4d and compare4d look "
-                            "up the 4D table (altitude, view, sun, azimuth) instead of the 3D one")
+                            "up the 4D table (altitude, view, sun, azimuth) instead of the 3D one; skyview reads "
+                            "a small map ray-marched per frame")
+    scene.add_argument("--skyview-size", nargs=2, type=int, metavar=("W", "H"),
+                       help="--method skyview: the map's azimuth columns and rows (default: 64 128)")
     sky = parser.add_argument_group("sky")
     sky.add_argument("--preset", help="atmosphere preset (default: physical)")
     sky.add_argument("--mode", choices=["atmosphere-plus", "physical"],
@@ -157,7 +160,7 @@ def register(commands):
                           help="quality level of the reference frames (default: reference, ~5 min to build; "
                                "a cheaper one for smoke runs)")
     accuracy.add_argument("--quick", action="store_true",
-                          help="default settings and two ray marches only (a smoke run)")
+                          help="default settings, two ray marches and a 32 x 64 sky-view map only (a smoke run)")
     accuracy.add_argument("--force", action="store_true", help="overwrite existing outputs")
     accuracy.add_argument("--progress", default="leave", choices=["display", "leave", "none"])
     return {"animate": run_animate, "render": run_render, "bench": run_bench}
@@ -291,7 +294,7 @@ def run_render(args):
         numbers = metrics.compare_frames(hdr["raymarch"], hdr["lut"], valid, display=shown)
         detail = f"; table vs ray march: 95th-percentile error {100 * numbers['p95_rel']:.1f} %"
     else:
-        image, detail = images["raymarch" if config.method == "raymarch" else "lut"], ""
+        image, detail = images[config.method if config.method in ("raymarch", "skyview") else "lut"], ""
     text = scene.output_metadata(scene.scene_text(scene.scene_values(config, args.scene_parser, extra), "render"))
     writers.write_png(output, image, force=args.force, text=text)
     print(f"frame {camera.width}x{camera.height} ({config.method}, sun elevation {args.sun_elevation:g} deg, "
@@ -323,7 +326,8 @@ def run_bench(args):
         raise clsky_cli.UsageError(str(error)) from None
     candidates = accuracy.default_candidates()
     if args.quick:
-        candidates = [c for c in candidates if c.label in ("default", "ray march 16 samples", "ray march 48 samples")]
+        candidates = [c for c in candidates if c.label in ("default", "ray march 16 samples", "ray march 48 samples",
+                                                           "sky-view 32 x 64")]
     progress, close = clsky_cli.progress_bar(args.progress)
     try:
         reference, valid = accuracy.render_reference(args.size, level=args.reference_quality)

@@ -91,7 +91,7 @@ def test_result_paths_include_the_mp4(tmp_path, cl_context):
     assert tmp_path / "sky.mp4" in result.paths
 
 
-@pytest.mark.parametrize("method", ["lut", "raymarch"])
+@pytest.mark.parametrize("method", ["lut", "raymarch", "skyview"])
 def test_single_method_writes_single_panel_frames(tmp_path, cl_context, method):
     config = AnimationConfig(frames=5, method=method, output=str(tmp_path / "sky.mp4"), **TINY)
     render_animation(config, ctx=cl_context)

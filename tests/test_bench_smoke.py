@@ -29,6 +29,7 @@ HEADERS = {
     "bench_montecarlo": ["| mode (preset) | quadrature | altitude [m] | cos view | sun zenith [deg] | deviation [%] | "
                          "deviation [SE] |"],
     "bench_render": ["| render | best | median | CPU per frame | frames/s (best) |"],
+    "bench_skyview": ["| frame | renderer | wall [ms] | CPU [ms] | frames/s (wall) | p95 +30 deg [%] |"],
     "bench_animate": ["| run | frames | wall [s] | CPU [s] | CPU / wall | load before | load after |",
                       "| stage | CPU [s], BLAS 1 thread | per frame [ms] | CPU [s], BLAS unlimited | per frame [ms] |"],
     "bench_memory": ["| run | table (W x H x D) | measured peak | estimate | estimate / measured |"],
@@ -51,7 +52,7 @@ LINES = {
     "bench_render": [r"Ray march against the exp\(\) bound: .* \*\*(\S+)x the bound\*\*"],
 }
 #: Measured wall time of each case (pytest, 2 shared cores): single 3-5 s, orders 5-7 s, montecarlo 10-12 s,
-#: render 9-10 s; spectral 5-7 s; twilight 11 s; dusk 10 s (four skies, two of 15 wavelengths); accuracy 41 s
+#: render 9-10 s; skyview 18 s (load 9); spectral 5-7 s; twilight 11 s; dusk 10 s (four skies, two of 15 wavelengths); accuracy 41 s
 #: (the four 'draft' reference tables: 21 s), quality 109 s (the reference and one doubled group). Slow (run
 #: by .ci/run): accuracy, quality and dusk, so that the default suite stays within its 10 minutes.
 SLOW = {"bench_accuracy", "bench_quality", "bench_dusk"}
