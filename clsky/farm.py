@@ -132,8 +132,9 @@ class Farm:
         self._stack.enter_context(dask.config.set({"distributed.worker.multiprocessing-method": "spawn"}))
         try:
             if self.scheduler is None:
+                # the scheduler's HTTP server on a free port: another cluster on Dask's 8787 is no collision
                 self._cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
-                                             dashboard_address=None, silence_logs=logging.ERROR)
+                                             dashboard_address=":0", silence_logs=logging.ERROR)
                 self.client = Client(self._cluster)
             else:
                 try:
@@ -163,10 +164,14 @@ class Farm:
         return max(1, sum(self._require_client().nthreads().values()))
 
     def describe(self) -> str:
-        """One line: where the farm runs and its workers."""
-        where = f"a LocalCluster of {self.workers} worker processes" if self.scheduler is None \
-            else f"the Dask scheduler at {self.scheduler}"
-        return f"farm: {where} ({len(self._require_client().nthreads())} workers, {self.threads} threads)"
+        """One line: where the farm runs and its workers now (a cluster without workers: its tasks wait
+        for one to join)."""
+        workers = self._require_client().nthreads()
+        where = "an embedded Dask LocalCluster" if self.scheduler is None else f"the Dask cluster at {self.scheduler}"
+        wait = "; the tasks wait for one to join" if not workers else ""
+        count, threads = len(workers), sum(workers.values())
+        return (f"farm: {where}, {count} worker{'s' * (count != 1)}, {threads} thread{'s' * (threads != 1)}"
+                f"{wait}")
 
     def _require_client(self):
         if self.client is None:

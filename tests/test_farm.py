@@ -106,6 +106,18 @@ def test_two_workers_write_the_single_process_files_bit_for_bit(farm, single_run
     assert len({row["exposure_ev"] for row in result.rows}) > 1
 
 
+def test_spectral_frames_on_the_farm_are_bit_for_bit(farm, tmp_path):
+    """With --wavelengths the payload is one table file per batch of three (anim/farm.py), reassembled
+    into the SpectralTable on each worker: the frames are still the single-process run's."""
+    options = dict(TINY, frames=2, size=16, hdr=None, wavelengths=6)
+    for name, where in (("single", None), ("farm", farm)):
+        (tmp_path / name).mkdir()
+        with inside(tmp_path / name):
+            render_animation(AnimationConfig(**options), farm=where)
+    for name in ("sky_frames/frame_00000.png", "sky_frames/frame_00001.png", "sky_metrics.csv", "sky.mp4"):
+        assert (tmp_path / "farm" / name).read_bytes() == (tmp_path / "single" / name).read_bytes(), name
+
+
 def test_a_worker_killed_mid_run_costs_only_its_frames(farm, single_run, tmp_path):
     """One of the two workers kills its own process (SIGKILL) when it finishes frame 1's display task:
     the frames it held are computed again elsewhere, the nanny restarts it, and the outputs are the
@@ -143,7 +155,7 @@ def test_a_sweep_on_an_existing_cluster_writes_the_tables_of_single_builds(farm,
     address = farm.client.scheduler.address
     with inside(tmp_path):
         assert main(["table", "--sweep", "weather.txt", *SWEEP_OPTIONS, "--scheduler", address]) == 0
-    assert f"the Dask scheduler at {address}" in capsys.readouterr().out
+    assert f"farm: the Dask cluster at {address}, 2 workers, 2 threads\n" in capsys.readouterr().out
     for name, albedo in (("clear.npz", 0.1), ("snow.npz", 0.8)):
         table = ScatteringTable.load(tmp_path / name)
         single = ScatteringTable.build(preset("physical").replace(ground_albedo=albedo),

@@ -196,7 +196,12 @@ BENCH_COMMANDS = [line for line in COMMANDS if line.startswith("python bench/")]
 #: other three build full-size tables that the reduction cannot shrink (a 32 x 256 x 32 --table-size, the
 #: level an --error-budget picks, a table planned for a view from 32.7 km): 12-29 s each (measured on
 #: the 2-core machine), which the default suite's 10-minute budget cannot hold.
+#: The farm lines start Dask clusters of spawned workers, each of which imports clsky and builds its
+#: renderer: 13-43 s each at load average 10 (tests/test_farm.py runs a two-worker farm in the default suite).
 SLOW_COMMANDS = {"clsky bench accuracy", "clsky animate --error-budget 0.05",
+                 "clsky animate --workers 2 --quality draft --size 256 -o farm.mp4",
+                 "clsky animate --scheduler tcp://127.0.0.1:8786 --frames 1000 -o long.mp4",
+                 "clsky table --sweep examples/weather.txt --workers 2 --quality draft",
                  "clsky animate --table-size 32 256 32 --samples 48 -o full.mp4",
                  "clsky render --altitude 32700 --sampling ground_end -o altitude.png"}
 
