@@ -81,6 +81,8 @@ def sweep_jobs(args) -> list[SweepJob]:
             refused = [word.split("=")[0] for word in words if word.split("=")[0] in RUN_OPTIONS]
             if refused:
                 raise UsageError(f"{source}: {refused[0]} belongs to the command line, not to a sweep line")
+            if not any(word in ("-o", "--output") or word.startswith(("-o", "--output=")) for word in words):
+                raise UsageError(f"{source}: -o FILE is missing (each line names its table's file)")
             try:
                 lines.append((source, args.table_parser.parse_args(words, namespace=copy.copy(args))))
             except UsageError as error:

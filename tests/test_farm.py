@@ -173,6 +173,7 @@ def test_a_sweep_on_an_existing_cluster_writes_the_tables_of_single_builds(farm,
     ("--preset physical -o a.txt", "weather.txt line 3: --output must end in .npz, got 'a.txt'"),
     ("--preset physical --workers 2 -o a.npz", "weather.txt line 3: --workers belongs to the command line"),
     ("--preset physical -o 'a.npz", "weather.txt line 3: No closing quotation"),
+    ("--preset physical --ground-albedo 0.3", "weather.txt line 3: -o FILE is missing"),
 ])
 def test_a_bad_sweep_line_is_one_line_before_any_work(line, message, tmp_path, capsys):
     (tmp_path / "weather.txt").write_text("# states\n--preset physical -o clear.npz\n" + line + "\n")
