@@ -36,7 +36,7 @@ import threading
 
 import numpy as np
 
-from clsky.farm import Farm, translate_errors
+from clsky.farm import Farm, result_of, translate_errors
 
 try:                                                      # the plugin needs Dask; the module imports without it
     from distributed import WorkerPlugin as _WorkerPlugin
@@ -207,13 +207,13 @@ def animation_frames(farm: Farm, config, table, positions, window=None):
                             metered[submitted] = client.submit(_meter, job.token, rendered[submitted],
                                                                key=key("meter", submitted), pure=False)
                         submitted += 1
-                    ev = pipeline.next_ev(metered.pop(index).result() if index in metered else None)
+                    ev = pipeline.next_ev(result_of(metered.pop(index)) if index in metered else None)
                     finishing.append(client.submit(_finish, job.token, rendered.pop(index), positions[index], index,
                                                    ev, key=key("finish", index), pure=False))
                     while finishing and (finishing[0].done() or len(finishing) >= size):
-                        yield finishing.popleft().result()
+                        yield result_of(finishing.popleft())
                 while finishing:
-                    yield finishing.popleft().result()
+                    yield result_of(finishing.popleft())
         finally:
             left = list(rendered.values()) + list(metered.values()) + list(finishing)
             with contextlib.suppress(Exception):
