@@ -106,6 +106,7 @@ def test_two_workers_write_the_single_process_files_bit_for_bit(farm, single_run
     assert len({row["exposure_ev"] for row in result.rows}) > 1
 
 
+@pytest.mark.slow        # 15 s at load average 13: two spectral tables of two batches, and their frames
 def test_spectral_frames_on_the_farm_are_bit_for_bit(farm, tmp_path):
     """With --wavelengths the payload is one table file per batch of three (anim/farm.py), reassembled
     into the SpectralTable on each worker: the frames are still the single-process run's."""
@@ -139,6 +140,25 @@ def test_a_worker_killed_mid_run_costs_only_its_frames(farm, single_run, tmp_pat
     farm.client.wait_for_workers(2, timeout=120)
     after = set(farm.client.scheduler_info()["workers"])
     assert len(before - after) == 1, (before, after)      # one worker lost, replaced by a new one
+
+
+def test_the_shipped_table_is_checked_as_a_table_file():
+    """What workers receive (anim/farm.py: the table file's bytes) is read back the same, and a damaged
+    payload is refused by the table file's own checks (here: the archive's CRC of the data member), not
+    rendered."""
+    from clsky.anim.farm import load_table_payload, table_payload
+    from clsky.table import TableFormatError
+
+    table = ScatteringTable.build("atmosphere-plus", TableSettings(size=(8, 32, 8), orders=2))
+    payload = table_payload(table)
+    same = load_table_payload(payload)
+    np.testing.assert_array_equal(same.data, table.data)
+    assert same.settings == table.settings and same.atmosphere == table.atmosphere
+    data = bytearray(payload["files"][0])
+    offset = data.index(np.ascontiguousarray(table.data).tobytes()[:64])   # the data member, stored uncompressed
+    data[offset + 7] ^= 0x40                                              # one bit of one value
+    with pytest.raises(TableFormatError, match=r"is damaged .*Bad CRC-32 for file 'data.npy'"):
+        load_table_payload({"files": [bytes(data)]})
 
 
 # 2. Table sweeps -----------------------------------------------------------------------------------
