@@ -8,9 +8,11 @@
 3. ``--workers`` / ``--scheduler``: bad values and a missing Dask are one line, exit status 2, naming the
    option, before any work.
 
-One LocalCluster of two spawned workers serves the module (~2 s to start on the 2-core machine); the
-animation is tiny (4 frames of 24 x 24 pixels from a 9 x 33 x 7 table), so the module runs in ~30-60 s on
-the shared 2-core machine, most of it the kill test's worker restart and the runs' table builds.
+One LocalCluster of two spawned workers serves the module; the animation is tiny (4 frames of 24 x 24
+pixels from a 9 x 33 x 7 table). Measured at load average 12-13 on the shared 2-core machine: the cluster's
+start and the single-process reference 23 s, the two-worker run 24 s (mostly each worker's first frame:
+importing clsky, reading the table, building its renderer), the kill 10 s, the sweep 4 s; the spectral
+case (15 s) is marked slow.
 """
 
 from __future__ import annotations
