@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import os
 import re
 import signal
 import threading
@@ -138,6 +139,9 @@ class Farm:
         import dask
         from distributed import Client, LocalCluster
 
+        # Dask's nanny writes its workers' variables (OMP_NUM_THREADS=1, ...) into this process's environment
+        # before it spawns them: they are undone when the farm closes
+        self._stack.callback(_restore_environment, dict(os.environ))
         # spawn, never fork, for the farm's lifetime: the nanny restarts a lost worker with it too
         self._stack.enter_context(dask.config.set({"distributed.worker.multiprocessing-method": "spawn",
                                                    MALLOC_TRIM_KEY: None}))
@@ -221,6 +225,15 @@ class Farm:
             if pending:
                 with contextlib.suppress(Exception):
                     client.cancel(pending)
+
+
+def _restore_environment(saved):
+    """Make ``os.environ`` ``saved`` again (only the variables that differ are touched)."""
+    for name in set(os.environ) - set(saved):
+        del os.environ[name]
+    for name, value in saved.items():
+        if os.environ.get(name) != value:
+            os.environ[name] = value
 
 
 def result_of(future):

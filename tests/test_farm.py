@@ -83,9 +83,12 @@ def assert_same_outputs(expected: pathlib.Path, actual: pathlib.Path):
 
 @pytest.fixture(scope="module")
 def farm():
+    environment = dict(os.environ)
     with Farm(workers=2) as started:
         started.client.wait_for_workers(2, timeout=120)
         yield started
+    # Dask's nanny set its workers' variables (OMP_NUM_THREADS=1, ...) in this process: undone on close
+    assert dict(os.environ) == environment
 
 
 @pytest.fixture(scope="module")
