@@ -159,10 +159,27 @@ class Farm:
                 except (OSError, TimeoutError) as error:
                     raise ConnectionError(f"no Dask scheduler answered at {self.scheduler} within "
                                           f"{CONNECT_TIMEOUT_S} s ({type(error).__name__})") from None
+            self._check_versions()
         except BaseException:
             self.close()
             raise
         return self
+
+    def _check_versions(self):
+        """FarmError unless every worker has this clsky: a worker without it cannot even read its tasks
+        (Dask logs the failed message and the task waits forever), so this is checked first, through a
+        function every Python has (``importlib.metadata.version``)."""
+        import importlib.metadata
+
+        wanted = installed_version()
+        try:
+            found = self.client.run(importlib.metadata.version, "clsky")
+        except importlib.metadata.PackageNotFoundError:
+            raise FarmError(f"a worker has no clsky installed: every worker needs clsky {wanted}") from None
+        other = sorted({version for version in found.values() if version != wanted})
+        if other:
+            raise FarmError(f"workers run clsky {', '.join(other)}, this is clsky {wanted}: every worker needs "
+                            f"the same clsky") from None
 
     def close(self):
         """Close the client and, for an embedded cluster, its workers (idempotent)."""
@@ -227,6 +244,13 @@ class Farm:
                     client.cancel(pending)
 
 
+def installed_version() -> str:
+    """The installed clsky's version (its distribution's metadata, as the workers report theirs)."""
+    import importlib.metadata
+
+    return importlib.metadata.version("clsky")
+
+
 def _restore_environment(saved):
     """Make ``os.environ`` ``saved`` again (only the variables that differ are touched)."""
     for name in set(os.environ) - set(saved):
@@ -248,8 +272,8 @@ def result_of(future):
 
 @contextlib.contextmanager
 def translate_errors():
-    """Within the block, Dask's giving up on a task (KilledWorker) or losing its scheduler (CommClosedError,
-    a closed client) is raised as :class:`FarmError`, in one line."""
+    """Within the block, Dask's giving up on a task (KilledWorker) or losing its scheduler (CommClosedError)
+    is raised as :class:`FarmError`, in one line."""
     from distributed import KilledWorker
     from distributed.comm.core import CommClosedError
 
@@ -260,6 +284,7 @@ def translate_errors():
                         f"({str(error).splitlines()[0]})") from None
     except CommClosedError as error:
         raise FarmError(f"the Dask cluster went away ({str(error).splitlines()[0]})") from None
+
 
 
 def dask_setup(worker):

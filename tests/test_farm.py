@@ -147,6 +147,19 @@ def test_a_worker_killed_mid_run_costs_only_its_frames(farm, single_run, tmp_pat
     assert len(before - after) == 1, (before, after)      # one worker lost, replaced by a new one
 
 
+def test_workers_of_another_clsky_are_refused_at_the_start(farm, monkeypatch):
+    """Every worker must have this clsky (a worker without it cannot even read its tasks: they would wait
+    forever): checked when the farm starts, one line (here this process claims another version)."""
+    import clsky.farm
+    from clsky.farm import FarmError, installed_version
+
+    actual = installed_version()
+    monkeypatch.setattr(clsky.farm, "installed_version", lambda: "0.0.1")
+    with pytest.raises(FarmError, match=f"workers run clsky {actual}, this is clsky 0.0.1: every worker needs "
+                                        f"the same clsky"):
+        Farm(scheduler=farm.client.scheduler.address).start()
+
+
 def test_the_shipped_table_is_checked_as_a_table_file():
     """What workers receive (anim/farm.py: the table file's bytes) is read back the same, and a damaged
     payload is refused by the table file's own checks (here: the archive's CRC of the data member), not
