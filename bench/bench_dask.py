@@ -4,16 +4,21 @@ Each run is :func:`clsky.anim.animate.render_animation` in this process (the cli
 writer), without or with a started :class:`clsky.farm.Farm` (an embedded LocalCluster of spawned
 workers; its start is timed apart). Per run:
 
-- wall time of the whole run and of its frame phase: from the end of the table build (the build's last
-  progress call) to the last frame written, which includes building the renderer (here) or shipping the
-  table and building each worker's renderer (farm);
-- process CPU time: the client (``time.process_time``, PoCL's threads included), its finished children
-  (ffmpeg, ``RUSAGE_CHILDREN``) and every worker process over the run (psutil, through ``Client.run``);
+- wall time of the whole run, of the table build (plan included), and up to the first frame written
+  after it (building the renderer here; on a farm, shipping the table and each worker's first frame:
+  importing clsky, reading the table, building its renderer);
+- the frames after the first (the steady state): wall time and process CPU time per frame, the
+  client's (``time.process_time``, PoCL's threads included) and every worker process's (psutil, through
+  ``Client.run``); the MP4 encoder (ffmpeg, a child process that ends with the run) is left out of all
+  runs alike. A farm's workers run ahead of the writer (up to 4 frames here): what they spent on later
+  frames before the first was written counts with the first frame (at most 3 of 47 frames, ~6 %; the
+  2-frame ``--smoke`` run's CPU per frame means nothing);
 - the 1-minute load average before and after.
 
-The speedup is the frame phase's wall time here over the farm's, in the same repetition (the runs of a
-repetition follow each other; repetitions show the noise). The per-frame overhead is the 1-worker farm
-against here, per frame: what shipping the frames and scheduling their tasks costs in wall and CPU time.
+The speedup is the steady per-frame wall time here over the farm's, in the same repetition (the runs of
+a repetition follow each other; repetitions show the noise). The overhead is the 1-worker farm against
+here: its first frame's extra wait, and per steady frame the wall and CPU time that shipping the frames
+and scheduling their tasks cost.
 Prints the tables and writes them into README.md (section "Frame farms (Dask)", ``bench:bench_dask``).
 
 Usage: python bench/bench_dask.py [--frames N] [--size PX] [--quality LEVEL] [--repeat N] [--no-readme] [--smoke]
@@ -27,7 +32,6 @@ from __future__ import annotations
 import argparse
 import datetime
 import os
-import resource
 import tempfile
 import time
 
@@ -38,12 +42,6 @@ from clsky.farm import Farm
 
 #: The runs of a repetition: (label, workers or None for this process).
 RUNS = (("here (no farm)", None), ("farm, 1 worker", 1), ("farm, 2 workers", 2))
-
-
-def children_cpu() -> float:
-    """User + system CPU time [s] of this process's finished, waited-for children (ffmpeg)."""
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
 
 
 def worker_cpu_seconds() -> float:
@@ -59,24 +57,28 @@ def workers_cpu(farm) -> float:
 
 
 def one_run(options, farm):
-    """The figures of one animation with ``options`` (AnimationConfig fields), on ``farm`` or here."""
-    marks = []
+    """The figures of one animation with ``options`` (AnimationConfig fields), on ``farm`` or here: the
+    times [s] since the start at the end of the table build, at the first frame written and at the last,
+    and the CPU [s] (client, workers) at those two frames."""
+    marks = {}
 
     def progress(stage, done, total):
-        marks.append((stage, time.perf_counter()))
+        now = time.perf_counter()
+        if stage != "frames":
+            marks["table"] = now
+        elif done in (1, total):
+            marks["first" if done == 1 else "last"] = (now, time.process_time(), workers_cpu(farm))
 
     with tempfile.TemporaryDirectory() as directory:
         config = AnimationConfig(output=os.path.join(directory, "sky.mp4"), **options)
         load_before = load_average()
-        workers_before, children_before = workers_cpu(farm), children_cpu()
-        wall, cpu = time.perf_counter(), time.process_time()
+        start = time.perf_counter()
         render_animation(config, progress=progress, farm=farm)
-        wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
-        children, workers = children_cpu() - children_before, workers_cpu(farm) - workers_before
-    table_end = max(t for stage, t in marks if stage != "frames")
-    frames_wall = max(t for stage, t in marks if stage == "frames") - table_end
-    return {"wall": wall, "frames_wall": frames_wall, "client_cpu": cpu + children, "workers_cpu": workers,
-            "load_before": load_before, "load_after": load_average()}
+        wall = time.perf_counter() - start
+    (first, client_first, workers_first), (last, client_last, workers_last) = marks["first"], marks["last"]
+    return {"wall": wall, "table": marks["table"] - start, "warm_up": first - marks["table"],
+            "steady_wall": last - first, "steady_client": client_last - client_first,
+            "steady_workers": workers_last - workers_first, "load_before": load_before, "load_after": load_average()}
 
 
 def measure(options, repeat):
@@ -97,23 +99,27 @@ def measure(options, repeat):
 
 
 def tables(results, frames):
+    """The Markdown tables: every run, then the 1-worker farm's overhead against here."""
+    steady = frames - 1                      # the frames after the first
     here = {rep: figures for rep, label, workers, figures, _ in results if workers is None}
-    lines = ["| run | repetition | farm start [s] | wall [s] | frames: wall [s] | per frame [ms] | "
-             "frames speedup | CPU: client [s] | workers [s] | total [s] | load before | load after |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| run | repetition | farm start [s] | wall [s] | table [s] | first frame [s] | frames after it: "
+             "wall per frame [ms] | CPU per frame [ms], client + workers | frames speedup | load before | load after |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for rep, label, workers, f, started in results:
-        total = f["client_cpu"] + f["workers_cpu"]
+        cpu = f["steady_client"] + f["steady_workers"]
         lines.append(f"| {label} | {rep} | {'-' if started is None else f'{started:.1f}'} | {f['wall']:.1f} | "
-                     f"{f['frames_wall']:.1f} | {1e3 * f['frames_wall'] / frames:.0f} | "
-                     f"{here[rep]['frames_wall'] / f['frames_wall']:.2f} | {f['client_cpu']:.1f} | "
-                     f"{f['workers_cpu']:.1f} | {total:.1f} | {f['load_before']:.1f} | {f['load_after']:.1f} |")
-    overhead = ["", "| repetition | 1 worker against here: wall per frame [ms] | CPU per frame [ms] |", "|---|---|---|"]
+                     f"{f['table']:.1f} | {f['warm_up']:.1f} | {1e3 * f['steady_wall'] / steady:.0f} | "
+                     f"{1e3 * cpu / steady:.0f} ({1e3 * f['steady_client'] / steady:.0f} + "
+                     f"{1e3 * f['steady_workers'] / steady:.0f}) | {here[rep]['steady_wall'] / f['steady_wall']:.2f} | "
+                     f"{f['load_before']:.1f} | {f['load_after']:.1f} |")
+    overhead = ["", "| repetition | 1 worker against here: first frame [s] | wall per frame [ms] | CPU per frame [ms] |",
+                "|---|---|---|---|"]
     for rep, label, workers, f, _ in results:
         if workers == 1:
             base = here[rep]
-            cpu = (f["client_cpu"] + f["workers_cpu"]) - base["client_cpu"]
-            overhead.append(f"| {rep} | {1e3 * (f['frames_wall'] - base['frames_wall']) / frames:+.0f} | "
-                            f"{1e3 * cpu / frames:+.0f} |")
+            cpu = f["steady_client"] + f["steady_workers"] - base["steady_client"]
+            overhead.append(f"| {rep} | {f['warm_up'] - base['warm_up']:+.1f} | "
+                            f"{1e3 * (f['steady_wall'] - base['steady_wall']) / steady:+.0f} | {1e3 * cpu / steady:+.0f} |")
     return "\n".join(lines + overhead)
 
 

@@ -42,8 +42,8 @@ HEADERS = {
     "bench_spectral": ["| build | batches | wall [s] | CPU [s] | wall / three | load |",
                        "| mode against N = 6 | sun zenith [deg] | PSNR [dB] | mean Delta E 2000 | Bruneton's anchor |"],
     "bench_azimuth": ["| | -6 deg |", "| sun [deg] | view | paths | SE [%] | M = 0 [%] | M = 1 [%] |"],
-    "bench_dask": ["| run | repetition | farm start [s] | wall [s] | frames: wall [s] | per frame [ms] | frames speedup |",
-                   "| repetition | 1 worker against here: wall per frame [ms] | CPU per frame [ms] |"],
+    "bench_dask": ["| run | repetition | farm start [s] | wall [s] | table [s] | first frame [s] |",
+                   "| repetition | 1 worker against here: first frame [s] | wall per frame [ms] | CPU per frame [ms] |"],
     "bench_twilight": ["| | +5 deg | -6 deg |",
                        "| sun [deg] | view | paths | SE [%] | all orders [%] | all orders [SE] | single: paths |"],
 }
