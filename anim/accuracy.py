@@ -53,7 +53,10 @@ class Candidate:
 
     @property
     def method(self):
-        return "lut" if self.samples is None else "raymarch"
+        """'raymarch' with ``samples``, else 'lut4d' for a 4D table (clsky/table4d.py), else 'lut'."""
+        if self.samples is not None:
+            return "raymarch"
+        return "lut4d" if self.table.is_4d else "lut"
 
 
 def default_candidates(base: clsky.TableSettings | None = None):
@@ -81,6 +84,9 @@ def default_candidates(base: clsky.TableSettings | None = None):
         ("order tolerance 1e-3", "order tolerance", base.replace(order_tolerance=1e-3)),
         ("single scattering only", "order tolerance", base.replace(orders=1)),
         ("float32", "precision", base.replace(dtype="float32")),
+        # the 4D table (altitude x view x sun x azimuth, clsky/table4d.py), its orders with 2 harmonics
+        ("4D table", "parameterization", base.replace(parameterization="4d",
+                                                      azimuth_harmonics=base.azimuth_harmonics or 2)),
     ]
     candidates = [Candidate(label, knob, settings) for label, knob, settings in table]
     candidates.append(Candidate("fast math", "fast-math", base, fast_math=True))
@@ -136,12 +142,12 @@ def reference_renderer(elevation_deg, doubled=(), atmosphere="physical", level="
 
 
 def render_frames(renderer, method, prepared):
-    """The four frames {name: HDR} of :data:`SUN_ELEVATIONS` by table lookup ('lut') or ray march, with
-    ``prepared`` directions (:meth:`clsky.render.SkyRenderer.prepare`)."""
+    """The four frames {name: HDR} of :data:`SUN_ELEVATIONS` by table lookup ('lut', or 'lut4d' in a 4D
+    table) or ray march, with ``prepared`` directions (:meth:`clsky.render.SkyRenderer.prepare`)."""
     frames = {}
+    render = {"lut": renderer.render_table, "lut4d": renderer.render_lut4d}.get(method, renderer.render_raymarch)
     for name, elevation in SUN_ELEVATIONS.items():
         sun = sun_direction(90.0 - elevation, SUN_AZIMUTH)
-        render = renderer.render_table if method == "lut" else renderer.render_raymarch
         frames[name] = render(prepared, sun, 0.0)
     return frames
 

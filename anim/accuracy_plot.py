@@ -22,6 +22,8 @@ import pathlib
 
 import numpy as np
 
+from clsky.errors import require_extra
+
 from .accuracy import SUN_ELEVATIONS, pareto_front
 
 __all__ = ["read_csv", "stack_labels", "knob_styles", "draw_pareto", "draw_elevation", "pareto_plot",
@@ -31,9 +33,9 @@ __all__ = ["read_csv", "stack_labels", "knob_styles", "draw_pareto", "draw_eleva
 CIVIL_TWILIGHT = (-6.0, 0.0)
 #: Text columns of the sweep's CSV; every other column is a number.
 TEXT_COLUMNS = ("candidate", "knob", "method")
-RENDERERS = {"lut": "table lookup", "raymarch": "ray march"}
+RENDERERS = {"lut": "table lookup", "raymarch": "ray march", "lut4d": "4D table lookup"}
 #: Colour maps of the lines of each renderer in the elevation plot.
-RENDERER_COLOURS = {"lut": "Blues", "raymarch": "Oranges"}
+RENDERER_COLOURS = {"lut": "Blues", "raymarch": "Oranges", "lut4d": "Greens"}
 #: Sun elevations within this many degrees of the horizon get a linear axis in the elevation plot; beyond
 #: it the axis is logarithmic (symlog), so that twilight, sunset and golden hour are not squeezed by day.
 ELEVATION_LINEAR = 10.0
@@ -42,14 +44,18 @@ CLEARANCE = 0.3
 
 
 def _pyplot():
-    try:
-        import matplotlib
+    require_plotting()
+    import matplotlib
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError as error:
-        raise ImportError("the accuracy plots need matplotlib: pip install 'clsky[bench]'") from error
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
     return plt
+
+
+def require_plotting():
+    """ImportError saying how to install matplotlib (the ``bench`` extra) when it is missing: called
+    by ``clsky bench accuracy`` before it measures anything."""
+    require_extra("matplotlib", "the accuracy plots", "pip install 'clsky[bench]'")
 
 
 def read_csv(path):

@@ -51,7 +51,15 @@ __all__ = ["AnimationConfig", "AnimationResult", "METHODS", "quality", "plan_ani
            "memory_estimate", "display", "display_frames"]
 
 #: What is rendered: table lookup only, ray march only, or both with the comparison.
-METHODS = ("compare", "lut", "raymarch")
+#: 'lut4d' and 'compare4d' are 'lut' and 'compare' with the 4D table (clsky/table4d.py) for the lookup.
+METHODS = ("compare", "lut", "raymarch", "lut4d", "compare4d")
+#: Azimuth harmonics of the 4D methods' higher orders when the quality level has none (M = 2 brings
+#: the ray march within the Monte Carlo's noise down to -6 deg: README, "Twilight against Monte Carlo").
+LUT4D_HARMONICS = 2
+#: Most altitude and view nodes of the 4D methods' table (its sun axis is the plan's): 16 x 128 x 128 sun
+#: nodes x 16 azimuths is 151 MB as float32 and within 0.6 % (day to sunset) and 2.1 % (-4 deg) of the
+#: ray march of the same orders (README, "The 4D table"); the level's 32 x 256 would be 4 times that.
+LUT4D_MAX_SIZE = (16, 128)
 
 #: The conversion of absolute three-wavelength frames to XYZ (:func:`clsky.colorimetry.three_wavelength_to_xyz`):
 #: the default ``solar_power_law`` reconstruction, tabulated. Measured per 512 x 512 frame (process CPU,
@@ -80,7 +88,10 @@ class AnimationConfig:
         image (default 0, north up, east on the left as in all-sky photographs).
     altitude : float
         Observer altitude [m], >= 0 (above 100 km: seen from space).
-    method : {'compare', 'lut', 'raymarch'}
+    method : {'compare', 'lut', 'raymarch', 'lut4d', 'compare4d'}
+        The frames: table lookup against the ray march, either alone; the 4D methods look up the 4D
+        table (parameterization '4d', clsky/table4d.py: mode 'physical', at least
+        :data:`LUT4D_HARMONICS` azimuth harmonics) instead of the 3D one.
     preset : str
         Atmosphere preset (:data:`clsky.PRESETS`).
     ground_albedo : float or None
@@ -228,6 +239,9 @@ class AnimationConfig:
                                                      f"{self.end_hour:g} h (at most {sunpath.MAX_POSITIONS} positions)",
                                      self.step_minutes)
         object.__setattr__(self, "table_size", _check_table_size(self.table_size))
+        if self.lookup4d and (self.mode != "physical" or self.wavelengths is not None):
+            raise ParameterError("method", "'compare', 'lut' or 'raymarch' with mode 'atmosphere-plus' or "
+                                 "wavelengths (the 4D table needs mode 'physical' and three wavelengths)", self.method)
         if self.tone_map is None:
             object.__setattr__(self, "tone_map", "atmosphere-plus" if self.preset == "atmosphere-plus"
                                else display_pipeline.DEFAULT_TONE_MAP)
@@ -235,6 +249,16 @@ class AnimationConfig:
             object.__setattr__(self, "auto_exposure", self.absolute)
         if self.white_balance is None:
             object.__setattr__(self, "white_balance", "sun" if self.absolute else "d65")
+
+    @property
+    def lookup4d(self) -> bool:
+        """Whether the lookup frames come from the 4D table (methods 'lut4d', 'compare4d')."""
+        return self.method in ("lut4d", "compare4d")
+
+    @property
+    def compares(self) -> bool:
+        """Whether the animation renders both the lookup and the ray march and compares them."""
+        return self.method in ("compare", "compare4d")
 
     @property
     def absolute(self) -> bool:
@@ -395,7 +419,7 @@ def plan_animation(config: AnimationConfig, positions, directions, valid, ctx=No
     if config.table_size is not None:
         return None
     return plan_scene(_scene(config, positions, directions, valid), config.atmosphere, config.mode, ctx=ctx,
-                      ray_march=config.method != "lut")
+                      ray_march=config.method not in ("lut", "lut4d"))
 
 
 def _scene(config: AnimationConfig, positions, directions, valid) -> Scene:
@@ -427,7 +451,8 @@ def memory_estimate(config: AnimationConfig, positions) -> MemoryEstimate:
         settings = level.table.replace(mode=config.mode, size=level.table.size[:2] + (nodes,),
                                        sun_cos_range=cos_range)
     batches = None if config.wavelengths is None else len(spectrum.wavelength_batches(config.wavelengths))
-    return estimate_animation_memory(_with_sampling(settings, config), config.image_shape(), config.method,
+    return estimate_animation_memory(_with_lookup(_with_sampling(settings, config), config), config.image_shape(),
+                                     config.method,
                                      ray_settings(config), hdr_output=config.hdr is not None, batches=batches)
 
 
@@ -447,9 +472,23 @@ def _base(config: AnimationConfig, plan: Plan | None):
     and a full table of ``config.table_size`` (default: the quality level's size) at the level's
     other settings; with ``config.sampling`` if given."""
     if plan is not None:
-        return plan.atmosphere, _with_sampling(plan.table, config)
+        return plan.atmosphere, _with_lookup(_with_sampling(plan.table, config), config)
     size = tuple(config.table_size) if config.table_size is not None else quality(config).table.size
-    return config.atmosphere, _with_sampling(quality(config).table.replace(size=size, mode=config.mode), config)
+    return config.atmosphere, _with_lookup(_with_sampling(quality(config).table.replace(size=size, mode=config.mode),
+                                                          config), config)
+
+
+def _with_lookup(settings: clsky.TableSettings, config: AnimationConfig) -> clsky.TableSettings:
+    """``settings`` as the 4D table for the 4D methods (:data:`LUT4D_HARMONICS` azimuth harmonics when
+    the level has none; at most :data:`LUT4D_MAX_SIZE` altitude and view nodes, an even number of the
+    latter), else unchanged. The table's higher orders are computed on that grid too."""
+    if not config.lookup4d:
+        return settings
+    width = min(settings.size[0], LUT4D_MAX_SIZE[0])
+    height = max(4, min(settings.size[1], LUT4D_MAX_SIZE[1]))
+    height += height % 2
+    return settings.replace(parameterization="4d", size=(width, height, settings.size[2]),
+                            azimuth_harmonics=settings.azimuth_harmonics or LUT4D_HARMONICS)
 
 
 def _with_sampling(settings: clsky.TableSettings, config: AnimationConfig) -> clsky.TableSettings:
@@ -563,7 +602,9 @@ def render_frame(renderer: SkyRenderer, prepared, sun_direction, config: Animati
     frames = {}
     if config.method in ("compare", "lut"):
         frames["lut"] = renderer.render_table(prepared, sun_direction, config.altitude)
-    if config.method in ("compare", "raymarch"):
+    if config.lookup4d:
+        frames["lut"] = renderer.render_lut4d(prepared, sun_direction, config.altitude)
+    if config.method in ("compare", "raymarch", "compare4d"):
         frames["raymarch"] = renderer.render_raymarch(prepared, sun_direction, config.altitude)
     if config.wavelengths is not None:
         frames = {name: spectral_frame_to_linear_srgb(frame, renderer.wavelengths) for name, frame in frames.items()}
@@ -637,15 +678,15 @@ def frame_outputs(pipeline: display_pipeline.Display, hdr, valid, config: Animat
     row = {"frame": index, "sun_zenith_deg": sun.zenith_deg, "sun_azimuth_deg": sun.azimuth_deg,
            "time": sun.time.isoformat() if sun.time is not None else "", "exposure_ev": ev}
     means = {name: metrics.mean_luminance(frame[None], valid)[0] for name, frame in hdr.items()}
-    if config.method == "compare":
+    if config.compares:
         row.update(metrics.compare_frames(hdr["raymarch"], hdr["lut"], valid, display=shown))
         error = metrics.error_image(metrics.relative_error_map(hdr["raymarch"], hdr["lut"], valid), valid)
         image = metrics.composite([images["lut"], images["raymarch"], error],
                                   ["table lookup", "ray march", "relative error"])
         frame_hdr = hdr["raymarch"]
     else:
-        image = images[config.method]
-        frame_hdr = hdr[config.method]
+        name = "raymarch" if config.method == "raymarch" else "lut"
+        image, frame_hdr = images[name], hdr[name]
     return FrameOutputs(index, _even(image), row, means, frame_hdr if config.hdr else None)
 
 
@@ -739,7 +780,7 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
         raise
     seconds = time.perf_counter() - start
     summary = f"{len(positions)} frames {camera.width}x{camera.height} ({config.method}) in {seconds:.1f} s"
-    if config.method == "compare":
+    if config.compares:
         worst = max(rows, key=lambda r: r["p95_rel"])
         summary += (f"; worst frame {worst['frame']} (sun zenith {worst['sun_zenith_deg']:.1f} deg): "
                     f"95th-percentile error {100 * worst['p95_rel']:.1f} %, mean Delta E {worst['mean_delta_e']:.2f}; "
@@ -781,7 +822,7 @@ def _write_animation(config, positions, frames, table, plan, staging, progress):
                 progress("frames", out.index + 1, len(positions))
     paths = list(writer.paths)          # the frames and the MP4: they land when ``staging`` commits
     temporal = {}
-    if config.method == "compare":
+    if config.compares:
         # the floor: what is invisible at the most sensitive exposure shown (with a fixed EV, that EV)
         jumps = metrics.temporal_jumps(np.array(means["lut"]), np.array(means["raymarch"]),
                                        exposure=2.0 ** max(row["exposure_ev"] for row in rows))

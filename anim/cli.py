@@ -39,7 +39,8 @@ def _add_scene_arguments(parser, frames=True):
     scene.add_argument("--pitch", type=float, default=10.0, help="perspective: elevation of the view [deg]")
     scene.add_argument("--altitude", type=float, default=0.0, help="observer altitude [m] (default: 0)")
     scene.add_argument("--method", default="compare", choices=list(METHODS),
-                       help="table lookup, ray march, or both compared (default)")
+                       help="table lookup, ray march, or both compared (default); lut4d and compare4d look "
+                            "up the 4D table (altitude, view, sun, azimuth) instead of the 3D one")
     sky = parser.add_argument_group("sky")
     sky.add_argument("--preset", help="atmosphere preset (default: physical)")
     sky.add_argument("--mode", choices=["atmosphere-plus", "physical"],
@@ -271,6 +272,10 @@ def run_render(args):
     if _printed_scene(args, config, **extra):
         return 0
     clsky_cli.check_outputs([(name("output", "--output"), output)], args.force)
+    try:
+        writers.require_pillow()
+    except ImportError as error:
+        raise clsky_cli.UsageError(str(error)) from None
     position = SunPosition(90.0 - args.sun_elevation, args.sun_azimuth)
     _check_memory(args, config, [position])
     camera = _camera(config)
@@ -282,14 +287,14 @@ def run_render(args):
     sun = sun_direction(90.0 - args.sun_elevation, args.sun_azimuth)
     hdr = render_frame(renderer, renderer.prepare(directions, valid), sun, config)
     ev, images, shown = display_frames(display(config, table), hdr, valid, config)
-    if config.method == "compare":
+    if config.compares:
         error = metrics.error_image(metrics.relative_error_map(hdr["raymarch"], hdr["lut"], valid), valid)
         image = metrics.composite([images["lut"], images["raymarch"], error],
                                   ["table lookup", "ray march", "relative error"])
         numbers = metrics.compare_frames(hdr["raymarch"], hdr["lut"], valid, display=shown)
         detail = f"; table vs ray march: 95th-percentile error {100 * numbers['p95_rel']:.1f} %"
     else:
-        image, detail = images[config.method], ""
+        image, detail = images["raymarch" if config.method == "raymarch" else "lut"], ""
     text = scene.output_metadata(scene.scene_text(scene.scene_values(config, args.scene_parser, extra), "render"))
     writers.write_png(output, image, force=args.force, text=text)
     print(f"frame {camera.width}x{camera.height} ({config.method}, sun elevation {args.sun_elevation:g} deg, "
@@ -314,6 +319,11 @@ def run_bench(args):
     if targets["--elevation-plot"].resolve() == targets["--plot"].resolve():
         raise clsky_cli.UsageError(f"--elevation-plot must differ from --plot, got {str(targets['--plot'])!r} twice")
     clsky_cli.check_outputs(targets.items(), args.force)
+    try:                                           # the plots need both: refuse before measuring
+        accuracy_plot.require_plotting()
+        writers.require_pillow()
+    except ImportError as error:
+        raise clsky_cli.UsageError(str(error)) from None
     candidates = accuracy.default_candidates()
     if args.quick:
         candidates = [c for c in candidates if c.label in ("default", "ray march 16 samples", "ray march 48 samples")]

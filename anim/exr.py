@@ -68,6 +68,7 @@ import numpy as np
 
 import clsky
 from clsky._files import atomic_write
+from clsky.errors import require_extra
 
 __all__ = ["HDR_FORMATS", "PRECISIONS", "HALF_MAX", "ENVMAP_ORIENTATION", "write_exr", "read_exr", "exr_pixels",
            "save_exr", "frame_attributes", "enu_to_envmap", "envmap_pixel", "require_openexr"]
@@ -97,12 +98,7 @@ LUMINANCE_UNITS = "cd/m^2"
 
 def require_openexr():
     """The ``OpenEXR`` module; ImportError saying how to install it when it is missing."""
-    try:
-        import OpenEXR
-    except ImportError as error:
-        raise ImportError("writing EXR files needs the OpenEXR bindings: pip install 'clsky[anim]' "
-                          "(or pip install OpenEXR)") from error
-    return OpenEXR
+    return require_extra("OpenEXR", "EXR files", "pip install 'clsky[anim]' (or pip install OpenEXR)")
 
 
 def enu_to_envmap(direction_enu):

@@ -27,6 +27,7 @@ Examples
 from __future__ import annotations
 
 import csv
+import importlib
 import io
 import json
 import os
@@ -37,7 +38,7 @@ import warnings
 import numpy as np
 
 from clsky._files import StagedWrites, atomic_write, check_output, check_output_directory
-from clsky.errors import short
+from clsky.errors import require_extra, short
 
 from .exr import HDR_FORMATS
 
@@ -84,6 +85,15 @@ def png_text(text):
     return info
 
 
+def require_pillow():
+    """The ``PIL`` package with its Image module (the ``anim`` extra's Pillow), or ImportError saying how to
+    install it: PNG frames and the composite's labels need it. Imported where used, so that clsky's
+    table CLI runs without it."""
+    pil = require_extra("PIL", "PNG images", "pip install 'clsky[anim]' (or pip install Pillow)")
+    importlib.import_module("PIL.Image")
+    return pil
+
+
 def write_png(path, image_u8, force=False, staging=None, text=None):
     """Write a uint8 image to a PNG file atomically.
 
@@ -120,7 +130,7 @@ def write_png(path, image_u8, force=False, staging=None, text=None):
         raise TypeError(f"image_u8 must be uint8, got {image.dtype}")
     if not (image.ndim == 2 or (image.ndim == 3 and image.shape[2] in (3, 4))):
         raise ValueError(f"image_u8 must have shape (H, W), (H, W, 3) or (H, W, 4), got {image.shape}")
-    from PIL import Image      # the anim extra's Pillow: imported where used, so that clsky's CLI runs without it
+    Image = require_pillow().Image
 
     path = pathlib.Path(path)
     with atomic_write(path, overwrite=force, suffix=".png", staging=staging) as temporary:
@@ -389,12 +399,8 @@ class FrameWriter:
         """
         if self.mp4_path is not None:
             check_output(self.mp4_path, self.force, option, suffix=self._mp4_suffix)
-            try:
-                import imageio.v2 as imageio  # noqa: F401  (fail before writing anything)
-                import imageio_ffmpeg  # noqa: F401
-            except ImportError as error:
-                raise ImportError("writing an MP4 needs imageio and imageio-ffmpeg: "
-                                  "pip install 'clsky[anim]'") from error
+            for module in ("imageio", "imageio_ffmpeg"):   # fail before writing anything
+                require_extra(module, "MP4 videos", "pip install 'clsky[anim]'")
         if self.directory is not None:
             last = (self.total_frames or 1) - 1
             check_output_directory(self.directory, option, names=[self.frame_path(last, suffix).name
@@ -402,6 +408,7 @@ class FrameWriter:
             existing = frame_files(self.directory, self.prefix)
             if existing and not self.force:
                 raise _exists_error(existing[0], option)
+            require_pillow()
         if self.hdr == "exr":
             from .exr import require_openexr
             require_openexr()                      # fail before writing anything

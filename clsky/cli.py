@@ -137,7 +137,8 @@ def _add_table_arguments(parser):
     value of the --quality level (or of TableSettings)."""
     from .atmosphere import PRESETS
     from .quality import QUALITY_LEVELS
-    from .settings import MAPPINGS, MIE_LAYOUTS, SAMPLINGS, SCATTERING_MODES, SUN_TRANSMITTANCE_METHODS
+    from .settings import (MAPPINGS, MIE_LAYOUTS, PARAMETERIZATIONS, SAMPLINGS, SCATTERING_MODES,
+                           SUN_TRANSMITTANCE_METHODS)
 
     physics = parser.add_argument_group("atmosphere")
     physics.add_argument("--preset", default="atmosphere-plus", choices=sorted(PRESETS),
@@ -154,6 +155,11 @@ def _add_table_arguments(parser):
                            "that curvature and higher orders need (clsky/planner.py); D keeps the quality "
                            "level's node spacing unless --size sets it")
     grid.add_argument("--mapping", choices=sorted(MAPPINGS))
+    grid.add_argument("--parameterization", choices=list(PARAMETERIZATIONS),
+                      help="elek3d (default): altitude x view x sun; 4d: an azimuth axis too, the view axis "
+                           "split at the horizon (clsky/table4d.py; needs --mode physical)")
+    grid.add_argument("--azimuth-size", type=int, metavar="A",
+                      help="azimuth nodes of a 4d table (default: 16)")
     grid.add_argument("--mie-layout", choices=sorted(MIE_LAYOUTS))
     orders = parser.add_argument_group("scattering orders")
     orders.add_argument("--orders", type=_orders, help="K: compute orders 1..K (1 = single scattering); "
@@ -248,7 +254,8 @@ SETTING_OPTIONS = {"size": "size", "mapping": "mapping", "view_steps": "view_ste
                    "transmittance_size": "transmittance_size", "mie_layout": "mie_layout", "dtype": "dtype",
                    "mode": "mode", "orders": "orders", "order_tolerance": "order_tolerance",
                    "max_orders": "max_orders", "multiple_view_steps": "multiple_view_steps",
-                   "azimuth_harmonics": "azimuth_harmonics"}
+                   "azimuth_harmonics": "azimuth_harmonics", "parameterization": "parameterization",
+                   "azimuth_size": "azimuth_size"}
 
 #: TableSettings field -> the option a user types, or one per item of a tuple field; for messages.
 TABLE_OPTION_NAMES = {
@@ -257,7 +264,8 @@ TABLE_OPTION_NAMES = {
     "transmittance_size": ("--transmittance-size TW", "--transmittance-size TH"), "mie_layout": "--mie-layout",
     "dtype": "--dtype", "mode": "--mode", "orders": "--orders", "order_tolerance": "--order-tolerance",
     "max_orders": "--max-orders", "multiple_view_steps": "--multiple-view-steps",
-    "azimuth_harmonics": "--azimuth-harmonics", "gather_theta_steps": "--gather-steps THETA", "gather_phi_steps": "--gather-steps PHI",
+    "azimuth_harmonics": "--azimuth-harmonics", "parameterization": "--parameterization",
+    "azimuth_size": "--azimuth-size", "gather_theta_steps": "--gather-steps THETA", "gather_phi_steps": "--gather-steps PHI",
     "sun_cos_range": "--sun-elevations", "quality": "--quality", "preset": "--preset",
     "ground_albedo": "--ground-albedo", "ozone_column_du": "--ozone-column",
 }

@@ -8,13 +8,15 @@ to name the option the user typed (``--size W must be ...``).
 
 from __future__ import annotations
 
+import importlib
 import math
 import numbers
 
 import numpy as np
 
 __all__ = ["ParameterError", "NumericalError", "short", "is_real_number", "is_integer", "as_real_array",
-           "check_integer", "check_real", "check_choice"]
+           "check_integer", "check_real", "check_choice",
+           "require_extra"]
 
 #: Longest text of a value echoed in a message.
 _MAX_ECHO = 60
@@ -167,6 +169,26 @@ def check_choice(name, value, choices, optional=False):
     if not isinstance(value, str) or value not in choices:
         raise ParameterError(name, ("None or " if optional else "") + f"one of {list(choices)}", value)
     return value
+
+
+def require_extra(module: str, purpose: str, install: str):
+    """The module ``module`` imported, or ImportError saying what needs it and how to install it.
+
+    Optional dependencies (Pillow, matplotlib, OpenEXR, imageio-ffmpeg) are imported where used, so that
+    clsky's core runs without them; callers check them here *before* any work, so that a missing extra
+    costs the user a one-line message, not a computation.
+
+    >>> require_extra("math", "nothing", "pip install nothing").pi > 3
+    True
+    >>> require_extra("no_such_module_xyz", "the plots", "pip install 'clsky[bench]'")
+    Traceback (most recent call last):
+    ...
+    ImportError: the plots need no_such_module_xyz: pip install 'clsky[bench]'
+    """
+    try:
+        return importlib.import_module(module)
+    except ImportError as error:
+        raise ImportError(f"{purpose} need {module}: {install}") from error
 
 
 class ParameterError(ValueError):

@@ -44,8 +44,10 @@ def _table(path):
                  if array is not None)
     settings = table.settings.to_dict()
     items = [("kind", "scattering table (clsky .npz, checksums valid)"),
-             ("grid", f"{width} x {height} x {depth} (altitude x view zenith x sun zenith), "
-                      f"{table.settings.channels} channels, {table.data.dtype}"),
+             ("grid", (f"{width} x {height} x {depth} x {table.settings.azimuth_size} (altitude x view zenith x "
+                       f"sun zenith x azimuth, 4D)" if table.settings.is_4d else
+                       f"{width} x {height} x {depth} (altitude x view zenith x sun zenith)")
+              + f", {table.settings.channels} channels, {table.data.dtype}"),
              ("size", f"{path.stat().st_size / 2**20:.1f} MiB on disk, {stored / 2**20:.1f} MiB of arrays"),
              ("units", metadata.get("units", "relative (incident light I_I per sr)")),
              ("orders", f"{record.get('orders')} ({record.get('reason') or ('converged' if record.get('converged') else 'not converged')})"),

@@ -129,23 +129,28 @@ class TableLookupEngine(_cl.Engine):
             Radiance r, g, b (HDR, before exposure tone mapping).
         """
         data = check_table_data(data)
-        check_choice("mapping", mapping, MAPPINGS)
-        queries = check_queries(altitude, cos_view, cos_sun, cos_scatter)
-        shape, n = queries[0].shape, queries[0].size
         depth, height, width, channels = data.shape
+        return self._lookup("lookup", atmosphere, data, (width, height, depth, channels),
+                            (altitude, cos_view, cos_sun, cos_scatter), mapping, sun_cos_range)
+
+    def _lookup(self, kernel, atmosphere, data, sizes, queries, mapping, sun_cos_range):
+        """Launch ``kernel`` (``lookup`` or ``lookup4d``) on checked ``data`` whose node counts ``sizes``
+        come first in the kernel's arguments, for the queries (altitude, cos_view, cos_sun, cos_scatter)."""
+        check_choice("mapping", mapping, MAPPINGS)
+        queries = check_queries(*queries)
+        shape, n = queries[0].shape, queries[0].size
         table_d = cla.to_device(self.queue, np.ascontiguousarray(data, dtype=self.dtype))
         queries_d = [cla.to_device(self.queue, np.ascontiguousarray(q.ravel(), dtype=self.dtype)) for q in queries]
         radiance_d = cla.empty(self.queue, (max(n, 1), 3), self.dtype)
         atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
-        check_kernel_buffer("lookup", "table", table_d, depth * height * width * channels, self.dtype)
+        check_kernel_buffer(kernel, "table", table_d, int(np.prod(sizes)), self.dtype)
         for name, query_d in zip(("altitude", "cos_view", "cos_sun", "cos_scatter"), queries_d):
-            check_kernel_buffer("lookup", name, query_d, n, self.dtype)
-        check_kernel_buffer("lookup", "radiance", radiance_d, 3 * max(n, 1), self.dtype)
+            check_kernel_buffer(kernel, name, query_d, n, self.dtype)
+        check_kernel_buffer(kernel, "radiance", radiance_d, 3 * max(n, 1), self.dtype)
         if n:
-            event = self.kernels["lookup"](
-                self.queue, (n,), None, atmosphere_d, table_d.data, np.int32(width), np.int32(height),
-                np.int32(depth), np.int32(channels), np.int32(MAPPINGS[mapping]),
-                self.real2(sun_w_range(mapping, sun_cos_range)), np.int32(n),
+            event = self.kernels[kernel](
+                self.queue, (n,), None, atmosphere_d, table_d.data, *(np.int32(size) for size in sizes),
+                np.int32(MAPPINGS[mapping]), self.real2(sun_w_range(mapping, sun_cos_range)), np.int32(n),
                 *(q.data for q in queries_d), radiance_d.data)
-            self._record("lookup", event)
+            self._record(kernel, event)
         return radiance_d.get()[:n].reshape(shape + (3,)).astype(np.float64)

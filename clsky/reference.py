@@ -26,6 +26,7 @@ __all__ = [
     "quadrature_nodes", "view_nodes", "densities", "column_density", "optical_depth", "transmittance",
     "transmittance_table", "column_density_from_table", "single_scattering", "enter_atmosphere",
     "lookup", "gather", "trilinear", "scatter", "render_table", "render_raymarch",
+    "interpolate4d", "lookup4d", "table4d_cells", "render_table4d",
 ]
 
 _TINY = np.finfo(np.float64).tiny
@@ -351,6 +352,95 @@ def lookup(atmosphere: AtmosphereParameters, data, altitude, cos_view, cos_sun, 
                                                     + mie_phase(atmosphere, nu)[..., None] * mie + multiple)
 
 
+# 4D table lookup (kernels/lookup4d.cl) -------------------------------------------------------------
+
+def _node4d(f, n):
+    """Lower node and weight along an axis of n nodes (``node4d``; one node: 0 and 0)."""
+    if n < 2:
+        return np.zeros(np.shape(f), dtype=np.int64), np.zeros(np.shape(f))
+    lower = np.clip(np.asarray(f).astype(np.int64), 0, n - 2)
+    return lower, f - lower
+
+
+def interpolate4d(data, fx, fy, fz, fa):
+    """Quadrilinear interpolation of data (A, D, H, W, C) at node coordinates (..., C), the view axis'
+    lower node kept on the query's side of the horizon (``interpolate4d`` of lookup4d.cl)."""
+    azimuths, depth, height, width, channels = data.shape
+    half = height // 2
+    (x0, ax), (z0, az), (a0, aa) = _node4d(fx, width), _node4d(fz, depth), _node4d(fa, azimuths)
+    fy = np.asarray(fy, dtype=np.float64)
+    lower = fy.astype(np.int64)
+    y0 = np.where(fy < half, np.clip(lower, 0, half - 2), np.clip(lower, half, height - 2))
+    ay = fy - y0
+    ibar = np.zeros(np.shape(fy) + (channels,))
+    for da in range(1 + (azimuths > 1)):
+        for dz in range(1 + (depth > 1)):
+            for dy in (0, 1):
+                for dx in range(1 + (width > 1)):
+                    weight = ((aa if da else 1 - aa) * (az if dz else 1 - az) * (ay if dy else 1 - ay)
+                              * (ax if dx else 1 - ax))
+                    ibar += weight[..., None] * data[a0 + da, z0 + dz, y0 + dy, x0 + dx]
+    return ibar
+
+
+def _radiance_of_channels(atmosphere, ibar, nu):
+    """I_I (F_R Ibar_R + F_M Ibar_M [+ Lbar]) of 6 or 9 per-wavelength channels (``radiance_of_channels``)."""
+    from .phase import mie_phase, rayleigh_phase
+
+    multiple = ibar[..., 6:9] if ibar.shape[-1] == 9 else 0.0
+    return np.asarray(atmosphere.incident_light) * (rayleigh_phase(atmosphere, nu)[..., None] * ibar[..., 0:3]
+                                                    + mie_phase(atmosphere, nu)[..., None] * ibar[..., 3:6] + multiple)
+
+
+def _coordinates4d(atmosphere, shape, h, mu_v, mu_s, nu, mapping, sun_cos_range):
+    from .mapping import altitude_to_u, azimuth4d_to_a, cos_to_sun_t, view4d_to_y
+
+    azimuths, depth, height, width = shape
+    fx = altitude_to_u(h, atmosphere.atmosphere_height, mapping) * (width - 1) if width > 1 else np.zeros(np.shape(h))
+    fz = cos_to_sun_t(mu_s, mapping, sun_cos_range) * (depth - 1) if depth > 1 else np.zeros(np.shape(h))
+    return (fx, view4d_to_y(h, mu_v, height, atmosphere.planet_radius, atmosphere.top_radius), fz,
+            azimuth4d_to_a(mu_v, mu_s, nu, azimuths))
+
+
+def lookup4d(atmosphere: AtmosphereParameters, data, altitude, cos_view, cos_sun, cos_scatter,
+             mapping="nonlinear", sun_cos_range=FULL_SUN_RANGE):
+    """Radiance (..., 3) from a 4D table (A, D, H, W, C); twin of ``TableLookup4DEngine.radiance``."""
+    altitude, cos_view, cos_sun, cos_scatter = np.broadcast_arrays(
+        *(np.asarray(a, dtype=np.float64) for a in (altitude, cos_view, cos_sun, cos_scatter)))
+    nu = np.clip(cos_scatter, -1.0, 1.0)
+    with np.errstate(invalid="ignore"):      # rays that miss the atmosphere from above: discarded
+        h, mu_v, mu_s, inside = enter_atmosphere(atmosphere, altitude, cos_view, cos_sun, nu)
+    h, mu_v, mu_s = np.where(inside, h, 0.0), np.where(inside, mu_v, 1.0), np.where(inside, mu_s, 1.0)
+    ibar = interpolate4d(data, *_coordinates4d(atmosphere, data.shape[:4], h, mu_v, mu_s, nu, mapping, sun_cos_range))
+    return _radiance_of_channels(atmosphere, np.where(inside[..., None], ibar, 0.0), nu)
+
+
+def table4d_cells(atmosphere: AtmosphereParameters, settings: TableSettings, gathered, h0, mu_v, mu_s, nu,
+                  ground_irradiance=None):
+    """The 4D table's channels (n, 9) (or (n, 6) without ``gathered``) along the rays (h0, mu_v, mu_s, nu);
+    twin of the ``table4d_cells`` kernel: Ibar_R, Ibar_M of single scattering (no phase; the
+    quadrature of ``settings``) and the higher orders sum_s beta_s / (4 pi) Integral rho_s T G_s ds
+    of the gathered cosine series (M + 1, D, H, W, 6) on the 3D grid of ``settings`` (clsky/azimuth.py),
+    plus, with a reflecting ground, what the ray sees of it (``ground_irradiance`` (D, 3) E_sky)."""
+    from .azimuth import gathered_along
+
+    sun_table = None
+    if settings.sun_transmittance == "table":
+        sun_table = transmittance_table(atmosphere, settings.transmittance_size, settings.sun_steps,
+                                        settings.sampling)
+    single = _single_scattering_cells(atmosphere, settings, h0, mu_v, mu_s, sun_table, nu)
+    if gathered is None:
+        return single
+    gathered = np.asarray(gathered)
+    more = gathered_along(atmosphere, settings, gathered if gathered.ndim == 5 else gathered[None], settings,
+                          h0, mu_v, mu_s, nu)
+    multiple = more[:, :3] + more[:, 3:]
+    if atmosphere.has_ground:
+        multiple = multiple + _ground_reflection(atmosphere, settings, settings, ground_irradiance, sun_table, h0, mu_v,
+                                                 mu_s, nu)
+    return np.concatenate([single, multiple], axis=1)
+
+
 # Multiple scattering (kernels/multiple.cl) ---------------------------------------------------------
 
 def gather(matrices, table_in):
@@ -451,13 +541,41 @@ def _sun_disc(atmosphere, mu_v, nu, altitude, sun_radiance, cos_sun_radius):
     return visible[:, None] * np.asarray(sun_radiance, dtype=np.float64)
 
 
+def _render_lookup(table_lookup, atmosphere, data, mapping, directions, sun_direction, altitude, sun_radiance,
+                   cos_sun_radius, sun_cos_range):
+    """``table_lookup`` (:func:`lookup` or :func:`lookup4d`) radiance per direction plus the sun disc; (..., 3)."""
+    shape = np.shape(directions)[:-1]
+    mu_v, nu, h, mu_v_in, mu_s_in, inside = _pixel_geometry(atmosphere, directions, sun_direction, altitude)
+    sky = table_lookup(atmosphere, data, h, mu_v_in, mu_s_in, nu, mapping, sun_cos_range) * inside[:, None]
+    return (sky + _sun_disc(atmosphere, mu_v, nu, altitude, sun_radiance, cos_sun_radius)).reshape(shape + (3,))
+
+
 def render_table(atmosphere, data, mapping, directions, sun_direction, altitude, sun_radiance, cos_sun_radius,
                  sun_cos_range=FULL_SUN_RANGE):
     """Twin of ``SkyRenderer.render_table``: lookup radiance per direction plus the sun disc; (..., 3)."""
-    shape = np.shape(directions)[:-1]
-    mu_v, nu, h, mu_v_in, mu_s_in, inside = _pixel_geometry(atmosphere, directions, sun_direction, altitude)
-    sky = lookup(atmosphere, data, h, mu_v_in, mu_s_in, nu, mapping, sun_cos_range) * inside[:, None]
-    return (sky + _sun_disc(atmosphere, mu_v, nu, altitude, sun_radiance, cos_sun_radius)).reshape(shape + (3,))
+    return _render_lookup(lookup, atmosphere, data, mapping, directions, sun_direction, altitude, sun_radiance,
+                          cos_sun_radius, sun_cos_range)
+
+
+def render_table4d(atmosphere, data, mapping, directions, sun_direction, altitude, sun_radiance, cos_sun_radius,
+                   sun_cos_range=FULL_SUN_RANGE):
+    """Twin of ``SkyRenderer.render_lut4d``: 4D lookup radiance per direction plus the sun disc; (..., 3)."""
+    return _render_lookup(lookup4d, atmosphere, data, mapping, directions, sun_direction, altitude, sun_radiance,
+                          cos_sun_radius, sun_cos_range)
+
+
+def _ground_reflection(atmosphere, ray_settings, grid_settings, ground_irradiance, sun_table, h0, mu_v, mu_s, nu):
+    """What rays (n,) see of a Lambertian ground [units of I_I] (n, 3): T(Pa, Pb) a / pi (mu_sun T_sun +
+    E_sky(mu_sun)) at the ground point, 0 for rays that do not end on it (``ground_reflection`` of
+    kernels/view_ray.cl); E_sky ``ground_irradiance`` (D, 3) on the sun axis of ``grid_settings``."""
+    from .ground import interpolate_sun_axis
+
+    rays = _ViewRays(atmosphere, ray_settings, h0, mu_v, mu_s, nu)
+    transmittance, mu_ground = _ground_seen(atmosphere, rays)
+    columns, lit = _sun_columns(atmosphere, ray_settings, np.zeros_like(mu_ground), mu_ground, sun_table)
+    direct = (lit * np.maximum(mu_ground, 0.0))[:, None] * np.exp(-_optical_depth_of(atmosphere, *columns))
+    irradiance = direct + interpolate_sun_axis(np.asarray(ground_irradiance), mu_ground, grid_settings)
+    return transmittance * (atmosphere.ground_albedo / math.pi) * irradiance
 
 
 def render_raymarch(atmosphere, ray_settings, directions, sun_direction, altitude, sun_radiance, cos_sun_radius,
@@ -471,7 +589,6 @@ def render_raymarch(atmosphere, ray_settings, directions, sun_direction, altitud
     ``grid_settings``), rays that end on the ground add T(Pa, Pb) a / pi (mu_sun T_sun + E_sky(mu_sun))
     at the ground point (:mod:`clsky.ground`).
     """
-    from .ground import interpolate_sun_axis
     from .phase import mie_phase, rayleigh_phase
 
     shape = np.shape(directions)[:-1]
@@ -495,12 +612,8 @@ def render_raymarch(atmosphere, ray_settings, directions, sun_direction, altitud
                                    mu_s_in[part], nu[part])
             value += (more[:, :3] + more[:, 3:]) if physical else (f_r[part] * more[:, :3] + f_m[part] * more[:, 3:])
         if atmosphere.has_ground:
-            rays = _ViewRays(atmosphere, ray_settings, h[part], mu_v_in[part], mu_s_in[part], nu[part])
-            transmittance, mu_ground = _ground_seen(atmosphere, rays)
-            columns, lit = _sun_columns(atmosphere, ray_settings, np.zeros_like(mu_ground), mu_ground, sun_table)
-            direct = (lit * np.maximum(mu_ground, 0.0))[:, None] * np.exp(-_optical_depth_of(atmosphere, *columns))
-            irradiance = direct + interpolate_sun_axis(np.asarray(ground_irradiance), mu_ground, grid_settings)
-            value += transmittance * (atmosphere.ground_albedo / math.pi) * irradiance
+            value += _ground_reflection(atmosphere, ray_settings, grid_settings, ground_irradiance, sun_table, h[part],
+                                        mu_v_in[part], mu_s_in[part], nu[part])
         sky[part] = value
     sky *= np.asarray(atmosphere.incident_light) * inside[:, None]
     return (sky + _sun_disc(atmosphere, mu_v, nu, altitude, sun_radiance, cos_sun_radius)).reshape(shape + (3,))

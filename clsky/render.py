@@ -65,7 +65,12 @@ def check_render_table(table):
         (:class:`~clsky.table.TableFormatError`) naming the array and what is wrong.
     """
     table.validate()
-    check_table_data(table.data)
+    if table.settings.is_4d:
+        from .lookup4d import check_table4d_data
+
+        check_table4d_data(table.data)
+    else:
+        check_table_data(table.data)
 
 
 def sun_disc_radiance(atmosphere, sun_direction, altitude, steps=512):
@@ -120,7 +125,7 @@ class RenderEngine(_cl.Engine):
     def program_sources(self):
         declaration = _atmosphere_cl.declaration(self.ctx.devices[0], self.dtype)
         return (("real.cl", declaration) + COMMON_SOURCES[1:]
-                + ("mapping.cl", "phase.cl", "view_ray.cl", "lookup.cl", "render.cl"))
+                + ("mapping.cl", "mapping4d.cl", "phase.cl", "view_ray.cl", "lookup.cl", "lookup4d.cl", "render.cl"))
 
     def build_options(self):
         return super().build_options() + quadrature_defines(self.ray_settings, VECTOR_WIDTH)
@@ -205,7 +210,7 @@ class SkyRenderer:
         elif valid is not None:
             raise ValueError("valid must be given to prepare(), not with prepared directions")
         _, sun, altitude = check_directions(np.zeros((0, 3)), sun_direction, altitude)
-        if name == "render_table" or self._has_gathered:
+        if name in ("render_table", "render_table4d") or self._has_gathered:
             self._check_sun_covered(sun)
         shape, directions_d = directions.shape, directions.array
         n = directions_d.shape[0]
@@ -241,6 +246,8 @@ class SkyRenderer:
         """HDR radiance (..., 3) by table lookup; ``directions`` (..., 3) unit vectors (or
         :meth:`prepare`'s result), ``valid`` an optional mask (invalid pixels are 0)."""
         t = self._check_table_unchanged()
+        if t.settings.is_4d:
+            raise ValueError("render_table: the table is 4D (parameterization '4d'): render it with render_lut4d")
         depth, height, width, channels = self._table_shape
         _, sun_direction, altitude = check_directions(np.zeros((0, 3)), sun_direction, altitude)
         inside = 0.0 <= altitude <= t.atmosphere.atmosphere_height
@@ -258,9 +265,8 @@ class SkyRenderer:
         checked to be those of the upload (a frozen dataclass can still be changed with
         object.__setattr__): ValueError otherwise."""
         t = self.table
-        width, height, depth = t.settings.size
         uploaded = (self._table_shape, self._table_shape, self._gathered_shape)
-        now = (np.shape(t.data), (depth, height, width, t.settings.channels),
+        now = (np.shape(t.data), t.data_shape,
                None if t.gathered is None else np.shape(t.gathered))
         if now != uploaded:
             raise ValueError(f"the table changed since the renderer uploaded it (data, settings and gathered "
@@ -284,12 +290,42 @@ class SkyRenderer:
         return ((1 - az) * ((1 - ax) * data[z0, :, x0] + ax * data[z0, :, x0 + 1])
                 + az * ((1 - ax) * data[z0 + 1, :, x0] + ax * data[z0 + 1, :, x0 + 1]))
 
+    def render_lut4d(self, directions, sun_direction, altitude=0.0, valid=None):
+        """HDR radiance (..., 3) by lookup in a 4D table (``parameterization='4d'``, :mod:`clsky.table4d`):
+        quadrilinear in altitude, view zenith (never across the horizon), sun zenith and azimuth, the
+        phase functions at the exact scattering angle; ``directions`` and ``valid`` as :meth:`render_table`.
+        Twin: :func:`clsky.reference.render_table4d`."""
+        t = self._check_table_unchanged()
+        if not t.settings.is_4d:
+            raise ValueError("render_lut4d: the table is 3D (parameterization 'elek3d'): build it with "
+                             "parameterization '4d', or render it with render_table")
+        azimuths, depth, height, width, channels = self._table_shape
+        _, sun_direction, altitude = check_directions(np.zeros((0, 3)), sun_direction, altitude)
+        table_d, shape = self._table_d, self._table_shape
+        if 0.0 <= altitude <= t.atmosphere.atmosphere_height:   # one (h, mu_s) per frame: a slice
+            from .mapping import altitude_to_u, cos_to_sun_t
+            from .reference import _node4d
+
+            x0, ax = _node4d(altitude_to_u(altitude, t.atmosphere.atmosphere_height, t.settings.mapping)
+                             * (width - 1), width)
+            z0, az = _node4d(cos_to_sun_t(float(sun_direction[2]), t.settings.mapping, t.settings.sun_cos_range)
+                             * (depth - 1), depth)
+            data = t.data
+            view_slice = ((1 - az) * ((1 - ax) * data[:, z0, :, x0] + ax * data[:, z0, :, x0 + 1])
+                          + az * ((1 - ax) * data[:, z0 + 1, :, x0] + ax * data[:, z0 + 1, :, x0 + 1]))
+            shape = (azimuths, 1, height, 1, channels)
+            table_d = cla.to_device(self.queue, np.ascontiguousarray(view_slice.reshape(shape), dtype=self.engine.dtype))
+        args = (table_d.data, np.int32(shape[3]), np.int32(height), np.int32(shape[1]), np.int32(azimuths),
+                np.int32(channels), np.int32(MAPPINGS[t.settings.mapping]), self.engine.real2(t.settings.sun_w_range))
+        buffers = [("table", table_d, math.prod(shape))]
+        return self._launch("render_table4d", directions, sun_direction, altitude, valid, args, buffers)
+
     def render_raymarch(self, directions, sun_direction, altitude=0.0, valid=None):
         """HDR radiance (..., 3) by per-pixel ray marching (single scattering along the true ray, higher
         orders from the table's gathered in-scatter, and a reflecting ground lit by the sun at the ground
         point's true sun cosine and by the table's ground_irradiance)."""
         t = self._check_table_unchanged()
-        depth, height, width = self._table_shape[:3] if self._has_gathered else (2, 2, 2)
+        depth, height, width = self._gathered_shape[-4:-1] if self._has_gathered else (2, 2, 2)
         tw, th = self._sun_table_size
         args = (self._gathered_d.data, np.int32(width), np.int32(height), np.int32(depth),
                 np.int32(MAPPINGS[t.settings.mapping]), self.engine.real2(t.settings.sun_w_range),

@@ -338,10 +338,16 @@ def _save_phase(settings, table, orders):
     return Phase("save", table + tuple(copies))
 
 
+def _data_cells(settings, cells):
+    """Cells of a table's ``data``: W H D, times ``azimuth_size`` for the 4D parameterization."""
+    return cells * (settings.azimuth_size if settings.is_4d else 1)
+
+
 def _table_held(settings, cells, orders, keep_orders=True):
     """The host arrays of a built table: data, single scattering, gathered sum, higher orders."""
     kept = _kept_channels(settings)
-    held = [Allocation(f"table data (D, H, W, {settings.channels}) float64", cells * settings.channels * 8),
+    held = [Allocation(f"table data (D, H, W, {settings.channels}) float64", _data_cells(settings, cells)
+                       * settings.channels * 8),
             Allocation("single scattering (D, H, W, 6) float64", cells * 6 * 8)]
     if orders > 1:
         # with azimuth harmonics (clsky/azimuth.py) the gathered sum is M + 1 such tables
@@ -364,7 +370,7 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
         The table's (its host arrays are counted as held: :func:`estimate_table_memory`'s last phase).
     image_shape : (width, height)
         Pixels of a frame (0 x 0: the renderer's table upload only).
-    method : {'compare', 'lut', 'raymarch'}
+    method : {'compare', 'lut', 'raymarch', 'lut4d', 'compare4d'} (the 4D methods count as lut and compare)
         What each frame renders (:mod:`clsky.anim.animate`).
     ray_settings : TableSettings, optional
         The ray march's quadrature (its transmittance table); default :data:`clsky.render.RAYMARCH_DEFAULTS`.
@@ -393,6 +399,7 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
     from .render import RAYMARCH_DEFAULTS
 
     ray_settings = ray_settings or RAYMARCH_DEFAULTS
+    method = {"lut4d": "lut", "compare4d": "compare"}.get(method, method)   # the 4D lookup's frames are the lut's
     cells, _, _, s = _table_sizes(settings)
     orders = expected_orders(settings)
     width, height = image_shape
@@ -400,7 +407,8 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
     held = _table_held(settings, cells, orders, keep_orders) if count_table else ()
     held = tuple(dataclasses.replace(a, count=a.count * batches) for a in held)
     gathered = cells * 8 * s * (settings.azimuth_harmonics + 1) if orders > 1 else 2 * 2 * 2 * 8 * s
-    upload = (Allocation(f"table data on the device (D, H, W, {settings.channels})", cells * settings.channels * s,
+    upload = (Allocation(f"table data on the device (D, H, W, {settings.channels})",
+                         _data_cells(settings, cells) * settings.channels * s,
                          count=batches, on_device=True),
               Allocation("padded gathered sum on the device (D, H, W, 8)", gathered, count=batches, on_device=True),
               # 2 columns per node, 3 with ozone (transmittance.column_channels): counted as 3

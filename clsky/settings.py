@@ -9,7 +9,7 @@ import numpy as np
 from .errors import ParameterError, check_choice, check_integer, is_real_number
 
 __all__ = ["TableSettings", "MAPPINGS", "SAMPLINGS", "SUN_TRANSMITTANCE_METHODS", "MIE_LAYOUTS",
-           "SCATTERING_MODES"]
+           "SCATTERING_MODES", "PARAMETERIZATIONS"]
 
 #: Texture mappings of the 3D table, name -> index passed to OpenCL (mapping.cl).
 MAPPINGS = {"linear": 0, "nonlinear": 1}
@@ -23,6 +23,13 @@ SUN_TRANSMITTANCE_METHODS = ("march", "table")
 SCATTERING_MODES = ("atmosphere-plus", "physical")
 #: Channels stored per cell: Rayleigh r, g, b + Mie r, g, b, or the notes' Rayleigh r, g, b + one Mie.
 MIE_LAYOUTS = {"per-wavelength": 6, "notes": 4}
+
+#: Table parameterizations: Elek's 3D (altitude, view zenith, sun zenith; the azimuth dropped), or
+#: 4D with the view-sun azimuth as a fourth axis and Bruneton's horizon-split view mapping (clsky/table4d.py).
+PARAMETERIZATIONS = ("elek3d", "4d")
+#: Settings that enter :meth:`TableSettings.to_dict` (and so the parameters hash) only away from their
+#: defaults: they came after tables were saved, whose hashes must not change.
+_LATE_FIELDS = {"parameterization": "elek3d", "azimuth_size": 16}
 
 #: Most azimuthal harmonics of the higher orders (``azimuth_harmonics``; clsky/azimuth.py).
 MAX_AZIMUTH_HARMONICS = 64
@@ -87,6 +94,16 @@ class TableSettings:
         down to -6 deg sun elevation, where 0 is +0.9 to +133 % too bright on average (README,
         "Twilight against Monte Carlo"). Needs mode 'physical'; costs about (M + 1)^2 times the
         scatter of each order.
+    parameterization : {'elek3d', '4d'}
+        'elek3d' (default): the 3D table above. '4d': a fourth axis of ``azimuth_size`` nodes in the
+        view-sun azimuth [0, pi], and the view axis split at the horizon (Bruneton 2017): single
+        scattering (factored, phase applied at lookup) and the higher orders (phase applied) along the
+        true ray of every node (clsky/table4d.py). Needs mode 'physical' and the per-wavelength Mie
+        layout; ``size`` then gives the nodes along altitude, view zenith (an even H >= 4: H / 2 for the
+        rays that hit the ground, H / 2 for those that reach space) and sun zenith; the higher orders
+        are computed on the 3D grid of ``size`` and ``mapping`` as in the 3D physical table.
+    azimuth_size : int
+        Nodes of the 4D table's azimuth axis, in [2, 1024] (default 16), spread evenly in [0, pi].
     multiple_view_steps : int or None
         Trapezoid steps along the view ray when scattering the orders k >= 2, in [1, 4096]; None
         uses ``view_steps``. The higher orders are smooth and dim: 20 (default) instead of 30 makes
@@ -111,6 +128,8 @@ class TableSettings:
     multiple_view_steps: object = 20
     sun_cos_range: tuple = (-1.0, 1.0)
     azimuth_harmonics: int = 0
+    parameterization: str = "elek3d"
+    azimuth_size: int = 16
 
     def __post_init__(self):
         object.__setattr__(self, "size", self._check_size("size", self.size, 3))
@@ -138,6 +157,7 @@ class TableSettings:
                            check_integer("azimuth_harmonics", self.azimuth_harmonics, 0, MAX_AZIMUTH_HARMONICS))
         if self.azimuth_harmonics and self.mode != "physical":
             raise ParameterError("azimuth_harmonics", "0 unless mode is 'physical'", self.azimuth_harmonics)
+        self._check_parameterization()
         tolerance = self.order_tolerance
         if not is_real_number(tolerance) or not 0.0 < tolerance < 1.0:
             raise ParameterError("order_tolerance", "a number in (0, 1)", tolerance)
@@ -149,6 +169,28 @@ class TableSettings:
         if dtype not in (np.float32, np.float64):
             raise ParameterError("dtype", "'float64' or 'float32'", self.dtype)
         object.__setattr__(self, "dtype", dtype.name)
+
+    def _check_parameterization(self):
+        """The 4D parameterization's own constraints (clsky/table4d.py)."""
+        check_choice("parameterization", self.parameterization, PARAMETERIZATIONS)
+        object.__setattr__(self, "azimuth_size", check_integer("azimuth_size", self.azimuth_size, 2, 1024))
+        if self.parameterization != "4d":
+            return
+        if self.mode != "physical":
+            raise ParameterError("parameterization", "'elek3d' unless mode is 'physical'", self.parameterization)
+        if self.mie_layout != "per-wavelength":
+            raise ParameterError("mie_layout", "'per-wavelength' with the '4d' parameterization", self.mie_layout)
+        if self.size[1] % 2 or self.size[1] < 4:
+            raise ParameterError("size", "an even number of view nodes H >= 4 with the '4d' parameterization "
+                                 "(H / 2 on each side of the horizon)", self.size)
+        if int(np.prod(self.size)) * self.azimuth_size > _MAX_CELLS:
+            raise ParameterError("azimuth_size", f"at most {_MAX_CELLS} cells (W x H x D x azimuth_size)",
+                                 self.azimuth_size)
+
+    @property
+    def is_4d(self) -> bool:
+        """True for the 4D parameterization (clsky/table4d.py)."""
+        return self.parameterization == "4d"
 
     @staticmethod
     def _check_size(name, value, count):
@@ -207,7 +249,10 @@ class TableSettings:
         return dataclasses.replace(self, **changes)
 
     def to_dict(self) -> dict:
-        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(self).items()}
+        """The settings as JSON-ready values; the late fields (``parameterization``, ``azimuth_size``) only
+        where they differ from their defaults, so that a 3D table's parameters hash is what it was."""
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(self).items()
+                if not (k in _LATE_FIELDS and v == _LATE_FIELDS[k] and self.parameterization == "elek3d")}
 
     @classmethod
     def from_dict(cls, data: dict) -> "TableSettings":

@@ -7,7 +7,10 @@ File format (``.npz``, uncompressed: compression saves little on these values an
     int64 scalar, 5 (4 until the settings gained ``azimuth_harmonics``, which enters the parameters hash
     and the shape of ``gathered``: a version-4 file is refused, "rebuild the table").
 ``data``
-    (D, H, W, C) table values at full precision (float64 as built, or the settings' dtype), finite, >= 0.
+    (D, H, W, C) table values at full precision (float64 as built, or the settings' dtype), finite, >= 0;
+    (A, D, H, W, C) with the settings' ``parameterization`` '4d' (clsky/table4d.py). That setting enters
+    the settings' JSON only away from its default, so 3D files and their hashes are as before and the
+    format version did not change (a clsky without it refuses a 4D file: "unknown table settings").
 ``order_1``, ``order_2``, ..., ``order_K``
     Every scattering order, stored as float32 for inspection: order 1 (D, H, W, 6) factored, higher
     orders (D, H, W, 6) factored (atmosphere-plus) or (D, H, W, 3) phased (physical); finite, >= 0.
@@ -162,6 +165,10 @@ class ScatteringTable:
         Per cell [1/sr], without I_I: channels :data:`CHANNEL_NAMES` [C]. The factored channels
         (Ibar summed over orders in the atmosphere-plus mode, single scattering in the physical mode)
         carry no phase; the physical mode's 3 last channels hold the higher orders, phase applied.
+        With ``settings.parameterization`` '4d': (A, D, H, W, C), a fourth axis of A =
+        ``settings.azimuth_size`` view-sun azimuths and the view axis split at the horizon
+        (:mod:`clsky.table4d`); ``orders``, ``gathered`` and ``ground_irradiance`` are then those of
+        the 3D grid the orders were computed on.
     metadata : dict
         Provenance: clsky version, backend, device, build seconds, and ``units`` of the rendered radiance
         (:func:`clsky.solar.radiance_units`: W m^-2 sr^-1 nm^-1 with the solar spectrum, else relative).
@@ -227,7 +234,7 @@ class ScatteringTable:
         width, height, depth = self.settings.size
         grid = (depth, height, width)
         full_precision = sorted({"float64", self.settings.dtype}, reverse=True)
-        check_table_array("data", self.data, grid + (self.settings.channels,), full_precision, check_values)
+        check_table_array("data", self.data, self.data_shape, full_precision, check_values)
         if self.gathered is not None:
             harmonics = self.settings.azimuth_harmonics
             if harmonics:   # M + 1 cosine harmonics: m >= 1 may be negative (clsky/azimuth.py)
@@ -299,6 +306,10 @@ class ScatteringTable:
             settings = default_settings(atmosphere)
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
+        if settings.is_4d:
+            from .table4d import check_atmosphere
+
+            check_atmosphere(atmosphere, settings)
         from .orders import compute_orders
         from .resources import check_memory, device_of, estimate_table_memory
 
@@ -307,18 +318,34 @@ class ScatteringTable:
         start = time.perf_counter()
         result = compute_orders(atmosphere, settings, backend=backend, ctx=ctx, fast_math=fast_math,
                                 progress=progress)
+        if settings.is_4d:     # the same orders, then the view-ray integrals at the 4D nodes
+            from .table4d import compute_data
+
+            data = compute_data(atmosphere, settings, result.gathered, backend, ctx, fast_math,
+                                result.ground_irradiance)
+        else:
+            data = to_layout(result.combined(settings.mode), settings.mie_layout)
         seconds = time.perf_counter() - start
         metadata = {"clsky_version": __version__, "backend": backend, "device": result.record.pop("device"),
                     "build_seconds": seconds, "fast_math": bool(fast_math), "units": radiance_units(atmosphere)}
         try:
-            return cls(atmosphere, settings, to_layout(result.combined(settings.mode), settings.mie_layout),
-                       metadata, tuple(result.orders), result.record, result.gathered, result.ground_irradiance)
+            return cls(atmosphere, settings, data, metadata, tuple(result.orders), result.record, result.gathered, result.ground_irradiance)
         except TableFormatError as error:
             cause = " (or fast_math removed a guard)" if fast_math else ""
             raise TableFormatError(f"the computed table is unusable: {error}; the atmosphere or settings are "
                                    f"beyond what the numerics support{cause}") from error
 
     # Using ----------------------------------------------------------------------------------------
+    @property
+    def data_shape(self) -> tuple:
+        """The shape ``data`` must have: (D, H, W, C), or (A, D, H, W, C) for the 4D parameterization."""
+        width, height, depth = self.settings.size
+        if self.settings.is_4d:
+            from .table4d import data_shape
+
+            return data_shape(self.settings)
+        return (depth, height, width, self.settings.channels)
+
     @property
     def parameters_hash(self) -> str:
         return parameters_hash(self.atmosphere, self.settings)
@@ -338,10 +365,14 @@ class ScatteringTable:
             Cosines of the view zenith, sun zenith and scattering angle.
         backend : {'opencl', 'numpy'}
         engine : TableLookupEngine, optional
-            Reused across calls to avoid rebuilding (OpenCL backend).
+            Reused across calls to avoid rebuilding (OpenCL backend); a
+            :class:`~clsky.lookup4d.TableLookup4DEngine` for a 4D table, whose lookup is quadrilinear
+            in (altitude, view, sun, azimuth) (:mod:`clsky.table4d`).
         """
         self.validate(check_values=False)    # the kernel indexes data by the settings' size
         check_queries(altitude, cos_view, cos_sun, cos_scatter)
+        if self.settings.is_4d:
+            return self._radiance4d(altitude, cos_view, cos_sun, cos_scatter, backend, engine)
         if backend == "numpy":
             from . import reference
 
@@ -354,6 +385,21 @@ class ScatteringTable:
         engine = engine or TableLookupEngine(dtype=self.settings.dtype)
         return engine.radiance(self.atmosphere, self.data, altitude, cos_view, cos_sun, cos_scatter,
                                self.settings.mapping, self.settings.sun_cos_range)
+
+    def _radiance4d(self, altitude, cos_view, cos_sun, cos_scatter, backend, engine):
+        """:meth:`radiance` of a 4D table (:class:`clsky.lookup4d.TableLookup4DEngine` or its twin)."""
+        arguments = (self.atmosphere, self.data, altitude, cos_view, cos_sun, cos_scatter, self.settings.mapping,
+                     self.settings.sun_cos_range)
+        if backend == "numpy":
+            from . import reference
+
+            return reference.lookup4d(*arguments)
+        if backend != "opencl":
+            raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
+        from .lookup4d import TableLookup4DEngine
+
+        engine = engine or TableLookup4DEngine(dtype=self.settings.dtype)
+        return engine.radiance(*arguments)
 
     # Files ----------------------------------------------------------------------------------------
     def save(self, path, overwrite=False, staging=None):
@@ -445,6 +491,14 @@ class ScatteringTable:
         return cls(atmosphere, settings, contents["data"], _json_member(contents, "metadata"), orders,
                    _json_member(contents, "orders_record"), contents.get("gathered"), contents.get("ground_irradiance"))
 
+    def export_texture(self, path, overwrite=False, staging=None):
+        """A 4D table for engines: ``<path>.bin`` (three RGBA float32 3D textures, sun and azimuth packed
+        in the depth) and ``<path>.json``, read by ``docs/lookup4d.glsl`` (:mod:`clsky.export4d`).
+        Returns the two paths; ValueError for a 3D table."""
+        from .export4d import export_texture
+
+        return export_texture(self, path, overwrite, staging)
+
     def export_raw(self, path, overwrite=False, staging=None):
         """Write ``<path>.bin`` (float32 values) and ``<path>.json`` (layout header) for GPU engines.
 
@@ -489,6 +543,17 @@ class ScatteringTable:
             "parameters_hash": self.parameters_hash,
             "metadata": self.metadata,
         }
+        if self.settings.is_4d:     # clsky/table4d.py, clsky/mapping.py
+            description["size"]["A"] = self.settings.azimuth_size
+            description["layout"] = ("values[(x + y*W + z*W*H + a*W*H*D) * channels + c]; x: altitude node, y: view "
+                                     "node (0..H/2-1 rays that hit the ground, H/2..H-1 rays that reach space), z: "
+                                     "sun-zenith node, a: azimuth node, c: channel")
+            description["mapping_formulas"]["view_4d"] = (
+                "rho = sqrt(h(2Rp+h)), K = sqrt(Ha(2Rp+Ha)); ground (mu < -rho/(Rp+h)): y = (H/2-1)(d_ground-h)/(rho-h); "
+                "space: y = H/2 + (H/2-1)(1 - (d_top-(Ha-h))/(rho+K-(Ha-h)))")
+            description["mapping_formulas"]["azimuth_4d"] = "a = (A-1) phi / pi, phi in [0, pi] the view-sun azimuth"
+            description["radiance"] = ("I = I_I * (F_R(nu) * Ibar_R + F_M(nu) * Ibar_M + multiple), channels "
+                                       "interpolated quadrilinearly, never across the horizon (y = H/2-1 to H/2)")
         with contextlib.ExitStack() as stack:
             if staging is None:
                 staging = stack.enter_context(StagedWrites())

@@ -167,12 +167,43 @@ __kernel void render_raymarch(__constant const atmosphere_t *atm, __global const
                 sky += physical ? g_r + g_m : f_r * g_r + f_m * g_m;
             }
 #ifdef GROUND
-            const real3 irradiance = (real3)(LANE(ground[4], k), LANE(ground[5], k), LANE(ground[6], k))
-                + sun_axis_lookup(ground_irradiance, ground_depth, mapping, sun_range, LANE(ground[3], k)).xyz;
-            sky += (real3)(LANE(ground[0], k), LANE(ground[1], k), LANE(ground[2], k))
-                   * (atm->ground_albedo / PI_REAL) * irradiance;
+            add_ground_reflection(atm, ground, k, ground_irradiance, ground_depth, mapping, sun_range, &sky);
 #endif
             value += light * sky;
+        }
+        store_radiance(out, first + k, valid[first + k] ? value : (real3)(R(0.0)));
+    }
+}
+
+/* render_table4d: I = I_I (F_R(nu) Ibar_R + F_M(nu) Ibar_M + Lbar) from the 4D table (lookup4d.cl:
+ * quadrilinear in altitude, view (split at the horizon), sun and azimuth; the phase at the exact nu).
+ * For an observer inside the atmosphere the host interpolates the table at (h, mu_s) into a slice
+ * (A, 1, H, 1, C), passed as `table` with width = depth = 1: each pixel then interpolates bilinearly
+ * in (view, azimuth), the quadrilinear result up to the association of its weights. Above the
+ * atmosphere (h and mu_s change at each ray's entry point) `table` is the whole table. */
+__kernel void render_table4d(__constant const atmosphere_t *atm, __global const real *table, const int width,
+                             const int height, const int depth, const int azimuths, const int channels,
+                             const int mapping, const real2 sun_range, const int n,
+                             __global const real *directions, __global const uchar *valid, const real4 sun,
+                             const real altitude, const real4 sun_radiance, const real cos_sun_radius,
+                             __global real *out)
+{
+    const int first = get_global_id(0) * VECTOR_WIDTH;
+    if (first >= n || all_invalid(valid, first, n, out))
+        return;
+    realv mu_v_observer, horizon, h, mu_v, mu_s, nu;
+    const maskv inside = pixel_rays(atm, directions, first, n, sun, altitude, &mu_v_observer, &horizon, &h, &mu_v,
+                                    &mu_s, &nu);
+    const realv fy = view4d_coordinate(h, mu_v, height, atm->planet_radius, atm->top_radius);
+    const realv fa = azimuth4d_coordinate(mu_v, mu_s, nu, azimuths);
+    for (int k = 0; k < VECTOR_WIDTH && first + k < n; ++k) {
+        real3 value = sun_disc(LANE(nu, k), LANE(mu_v_observer, k), LANE(horizon, 0), sun_radiance, cos_sun_radius);
+        if (valid[first + k] && MASK_LANE(inside, k)) {
+            real ibar[9];
+            interpolate4d(table, width, height, depth, azimuths, channels,
+                          altitude4d_coordinate(atm, width, mapping, LANE(h, k)), LANE(fy, k),
+                          sun4d_coordinate(depth, mapping, sun_range, LANE(mu_s, k)), LANE(fa, k), ibar);
+            value += radiance_of_channels(atm, ibar, channels, LANE(nu, k));
         }
         store_radiance(out, first + k, valid[first + k] ? value : (real3)(R(0.0)));
     }

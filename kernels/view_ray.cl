@@ -141,6 +141,21 @@ inline real4 sun_axis_lookup(__global const real *values, const int depth, const
     const real az = fz - (real)z0;
     return (R(1.0) - az) * vload4(z0, values) + az * vload4(z0 + 1, values);
 }
+
+/* Adds to *sky what lane k of a ray sees of a Lambertian ground, in units of I_I: T(Pa, Pb) a / pi (mu_sun
+ * T_sun + E_sky(mu_sun)) at its last node (0 where it does not hit the ground), from ground[] of
+ * integrate_single or integrate_gathered (with single) and E_sky the table's per-sun-node
+ * ground_irradiance (sun_axis_lookup). One statement, so that its rounding (FMA contraction) is the
+ * ray march's as it was written inline in render.cl. */
+inline void add_ground_reflection(__constant const atmosphere_t *atm, const realv *ground, const int k,
+                                  __global const real *ground_irradiance, const int ground_depth, const int mapping,
+                                  const real2 sun_range, real3 *sky)
+{
+    const real3 irradiance = (real3)(LANE(ground[4], k), LANE(ground[5], k), LANE(ground[6], k))
+        + sun_axis_lookup(ground_irradiance, ground_depth, mapping, sun_range, LANE(ground[3], k)).xyz;
+    *sky += (real3)(LANE(ground[0], k), LANE(ground[1], k), LANE(ground[2], k))
+            * (atm->ground_albedo / PI_REAL) * irradiance;
+}
 #endif
 
 /* Single scattering along the ray: sum[0..2] = Integral rho_R T dt (r, g, b), sum[3..5] the same with

@@ -28,6 +28,16 @@ def test_candidates_move_one_knob_each():
         assert knob in knobs
 
 
+def test_4d_candidate_is_measured_with_the_4d_lookup(stand_in_reference):
+    """The sweep's 4D table candidate renders with render_lut4d ('lut4d') and gets finite errors."""
+    reference, valid = stand_in_reference
+    four = [c for c in accuracy.default_candidates() if c.knob == "parameterization"]
+    assert len(four) == 1 and four[0].table.is_4d and four[0].method == "lut4d"
+    tiny = accuracy.Candidate("4D", "parameterization", four[0].table.replace(size=(9, 34, 9), azimuth_size=5))
+    row, = accuracy.measure([tiny], reference, valid)
+    assert row["method"] == "lut4d" and np.isfinite(row["p95_rel"]) and row["p95_rel"] >= 0
+
+
 def test_measure_on_tiny_frames(stand_in_reference):
     reference, valid = stand_in_reference
     default = accuracy.default_candidates()[0].table

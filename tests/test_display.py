@@ -14,7 +14,6 @@
 
 from __future__ import annotations
 
-import hashlib
 import math
 import subprocess
 import sys
@@ -28,8 +27,10 @@ from clsky.anim import metrics, tonemap
 from clsky.anim.animate import AnimationConfig, _camera, render_animation
 from clsky.anim.display import (DEFAULT_TONE_MAP, TONE_CURVES, AutoExposure, Display, linear_srgb_to_oklab, meter_ev,
                           smoothed_ev, srgb_encode, white_balance_matrix)
-from clsky import _cl
 from clsky.errors import ParameterError
+
+import pins
+from pins import pinned_for_device
 
 RNG = np.random.default_rng(10)
 
@@ -73,37 +74,45 @@ def test_atmosphere_plus_preset_defaults_to_the_notes_curve():
     assert (fixed.auto_exposure, fixed.white_balance, fixed.exposure) == (False, "d65", -13.0)
 
 
-#: Recorded by the code before anim/display.py (commit bfa2a93) on BASE_DEVICE: SHA-256 of the decoded
-#: pixels of the three frames of the animation below, and its per-frame metrics.
-BASE_DEVICE = "pthread-haswell-AMD EPYC (PoCL 3.1+debian)"
-BASE_FRAME_HASHES = ["7e33492ea62ea4620cb17b1b1bda46137702f83768c7340a06375ff10044d668",
-                     "7fedfa4a382857dd099d48b8f49456b552bd1abfc27ca0c45c4dc020fd821e23",
-                     "c4e67006dbc6a893718bd874166240f69bae9ae88dd867a8784551232a7146c4"]
-BASE_METRICS = [[0.041682234294391864, 1.204402884526378, 2.8225618475681173, 3.093521136350119,
-                 10.694550350315776, 7.799808030993745e-05],
-                [0.01933054608030158, 0.012738483010173144, 0.02163172660126402, 0.025572303141927044,
-                 0.32280611128999215, 0.0018568964761201772],
-                [0.041682234294391864, 1.204402884526378, 2.8225618475681173, 3.093521136350119,
-                 10.694550350315776, 7.799808030993745e-05]]
-METRIC_KEYS = ["rmse", "median_rel", "p95_rel", "max_rel", "mean_delta_e", "floor"]
+#: Recorded by the code before anim/display.py (commit bfa2a93), per OpenCL device (PoCL's code
+#: generation changes the last bits between CPUs; tests/pins.py): SHA-256 of the decoded pixels of the
+#: three frames of the animation of tests/pins.py (display_frames), and its per-frame metrics
+#: (pins.METRIC_KEYS). The skylake entry was recorded by bfa2a93's own code (scripts/record_pins.py
+#: --source <bfa2a93 checkout> display): the same 8-bit frames as on haswell, metrics that differ from
+#: haswell's in the last one or two bits.
+BASE_FRAMES = {
+    "pthread-haswell-AMD EPYC (PoCL 3.1+debian)": (
+        ["7e33492ea62ea4620cb17b1b1bda46137702f83768c7340a06375ff10044d668",
+         "7fedfa4a382857dd099d48b8f49456b552bd1abfc27ca0c45c4dc020fd821e23",
+         "c4e67006dbc6a893718bd874166240f69bae9ae88dd867a8784551232a7146c4"],
+        [[0.041682234294391864, 1.204402884526378, 2.8225618475681173, 3.093521136350119,
+          10.694550350315776, 7.799808030993745e-05],
+         [0.01933054608030158, 0.012738483010173144, 0.02163172660126402, 0.025572303141927044,
+          0.32280611128999215, 0.0018568964761201772],
+         [0.041682234294391864, 1.204402884526378, 2.8225618475681173, 3.093521136350119,
+          10.694550350315776, 7.799808030993745e-05]]),
+    "pthread-skylake-avx512-AMD EPYC (PoCL 3.1+debian)": (
+        ["7e33492ea62ea4620cb17b1b1bda46137702f83768c7340a06375ff10044d668",
+         "7fedfa4a382857dd099d48b8f49456b552bd1abfc27ca0c45c4dc020fd821e23",
+         "c4e67006dbc6a893718bd874166240f69bae9ae88dd867a8784551232a7146c4"],
+        [[0.04168223429439187, 1.2044028845263783, 2.822561847568119, 3.0935211363501183,
+          10.69455035031578, 7.799808030993743e-05],
+         [0.019330546080301537, 0.012738483010173211, 0.02163172660126386, 0.025572303141926926,
+          0.3228061112899884, 0.001856896476120177],
+         [0.04168223429439187, 1.2044028845263783, 2.822561847568119, 3.0935211363501183,
+          10.69455035031578, 7.799808030993743e-05]]),
+}
 
 
 @pytest.mark.parametrize("tone_map", [None, "atmosphere-plus"])
 def test_atmosphere_plus_frames_are_those_before_the_display(tmp_path, cl_context, tone_map):
     """The atmosphere-plus preset's compare animation (table | ray march | error panels, dithered),
     by default and with tone_map='atmosphere-plus', writes the frames and metrics the code before
-    this module wrote (hashes recorded on BASE_DEVICE; PoCL's code generation may differ elsewhere)."""
-    device = _cl.describe_device(cl_context.devices[0])
-    if device != BASE_DEVICE:
-        pytest.skip(f"hashes recorded on {BASE_DEVICE}, not {device}")
-    config = AnimationConfig(frames=3, size=24, table_size=(9, 33, 7), preset="atmosphere-plus",
-                             mode="atmosphere-plus", start_elevation_deg=-4.0, max_elevation_deg=30.0,
-                             tone_map=tone_map, output=str(tmp_path / "sky.mp4"))
-    result = render_animation(config, ctx=cl_context)
-    frames = sorted((tmp_path / "sky_frames").glob("*.png"))
-    hashes = [hashlib.sha256(np.asarray(Image.open(f)).tobytes()).hexdigest() for f in frames]
-    assert hashes == BASE_FRAME_HASHES
-    assert [[row[key] for key in METRIC_KEYS] for row in result.rows] == BASE_METRICS
+    this module wrote on this device (skipped on a device without a recording)."""
+    frame_hashes, frame_metrics = pinned_for_device(BASE_FRAMES, cl_context)
+    hashes, rows = pins.display_frames(cl_context, tmp_path, tone_map)
+    assert hashes == frame_hashes
+    assert rows == frame_metrics
 
 
 # 2. Hue and saturation -------------------------------------------------------------------------------

@@ -143,3 +143,34 @@ def test_pocl_cache_problem_in_process(monkeypatch, tmp_path):
     assert "POCL_CACHE_DIR" in problem and UNWRITABLE in problem
     monkeypatch.setenv("POCL_CACHE_DIR", str(tmp_path))
     assert _cl.pocl_cache_problem.__wrapped__() is None
+
+
+# Missing optional dependencies: one line, before any work -------------------------------------------
+
+def _without(tmp_path, *packages):
+    """An environment in which importing each of ``packages`` fails as if it were not installed: a
+    package of that name that raises ImportError, first on PYTHONPATH."""
+    import os
+
+    blocked = tmp_path / "blocked"
+    for package in packages:
+        (blocked / package).mkdir(parents=True)
+        (blocked / package / "__init__.py").write_text(f"raise ImportError('{package} blocked by the test')\n")
+    return {**os.environ, "PYTHONPATH": str(blocked)}
+
+
+@pytest.mark.parametrize("args,missing,named", [
+    (["render", "--size", "16"], "PIL", "PNG images need PIL: pip install 'clsky[anim]'"),
+    (["animate", "--frames", "2", "--size", "16", "--progress", "none"], "PIL",
+     "PNG images need PIL: pip install 'clsky[anim]'"),
+    (["bench", "accuracy", "--size", "16", "--quick", "--progress", "none"], "matplotlib",
+     "the accuracy plots need matplotlib: pip install 'clsky[bench]'"),
+])
+def test_missing_extra_is_one_line_before_any_work(tmp_path, args, missing, named):
+    """Without Pillow (PNG) or matplotlib (the accuracy plots) the command stops before it computes
+    anything, with exit status 2 and a line saying what to install; nothing is written."""
+    work = tmp_path / "work"
+    work.mkdir()
+    line = one_line_error(clsky(*args, cwd=work, env=_without(tmp_path, missing)))
+    assert named in line, line
+    assert list(work.iterdir()) == []

@@ -9,7 +9,6 @@ the NumPy twins; and the Monte Carlo tracer, which computes the Angstrom law on 
 
 from __future__ import annotations
 
-import hashlib
 import math
 
 import numpy as np
@@ -24,6 +23,8 @@ from clsky.multiple import MultipleScatteringEngine
 from clsky.render import SkyRenderer, sun_disc_radiance
 
 from conftest import black_preset, TOLERANCES, compute_single, max_error_report
+import pins
+from pins import pinned_for_device
 
 PHYSICAL = black_preset("physical")
 PLUS = black_preset("atmosphere-plus")
@@ -400,54 +401,56 @@ def test_spectral_sky_is_blue_and_absolute(cl_context):
 
 # atmosphere-plus (and physical) bit-for-bit ----------------------------------------------------------
 
-#: SHA-256 of float64 results of the code before this change (commit bfa2a93) on OLD_DEVICE:
-#: TableSettings(size=(8, 32, 8), orders=3, mode=MODE, sun_transmittance=SUN) -> (data, gathered,
-#: ray-marched and table-rendered pixels of the directions and sun below, from the ground).
-OLD_DEVICE = "pthread-haswell-AMD EPYC (PoCL 3.1+debian)"
+#: SHA-256 of float64 results of the code before this change (commit bfa2a93), per OpenCL device (PoCL's
+#: code generation changes the last bits between CPUs; tests/pins.py): TableSettings(size=(8, 32, 8),
+#: orders=3, mode=MODE, sun_transmittance=SUN) -> (data, gathered, ray-marched and table-rendered pixels
+#: of the directions and sun of tests/pins.py, from the ground). The skylake entry was recorded by
+#: bfa2a93's own code (scripts/record_pins.py --source <bfa2a93 checkout> spectral).
 OLD_HASHES = {
-    ("atmosphere-plus", "atmosphere-plus", "march"): (
-        "2a2486e06c4269d4e6f89aa3f68ffecb525d2f1323e4e30ed33334fc6714a531",
-        "42061d76c83fb80bc3e07d45f04261d128883443cf5243e09a9cb1768498d351",
-        "682a2e10b1573300b808f9f7a3a7dceaafecae445f2c30ae378e9042d846e07d",
-        "c32f473ff8590a9ae6b06d92958bfb682fd0a7f9cf8f95755e20de7c2d266943"),
-    ("atmosphere-plus", "physical", "table"): (
-        "6ce81928b82728f277a8bc91e43f1b039fb9579a449b00e1fee3b3ee7882ea90",
-        "8a97c2f3e5609b839cb9f6ccc02038ae1e33a44715fabc39532dff377aebd85d",
-        "eb768a9c4e46ca0cba4b671653b453b1e64fede0f2450f2788a31af7c44dbbcd",
-        "2c5d3a87043fe82b048daf07d6b3baa1e3c229831d044b25de16534fc76ba4cf"),
-    ("physical", "physical", "table"): (
-        "c1df1394ce93cd5c44ba655c7d8f642ca19d0d7b419fce62fd847630f719e1ff",
-        "7e552646e6a5fad7e02975c21b38bae0c00f472dcf4692695bb5f19f63aced53",
-        "463da05338847edc16e3a7d01cce510a3cb50d3effa9d7eb9503121316a2087c",
-        "2c3d0af8ead35b4ee51c7acb6df4072500af663790f398a36a6823ab133a2375"),
+    "pthread-haswell-AMD EPYC (PoCL 3.1+debian)": {
+        ("atmosphere-plus", "atmosphere-plus", "march"): (
+            "2a2486e06c4269d4e6f89aa3f68ffecb525d2f1323e4e30ed33334fc6714a531",
+            "42061d76c83fb80bc3e07d45f04261d128883443cf5243e09a9cb1768498d351",
+            "682a2e10b1573300b808f9f7a3a7dceaafecae445f2c30ae378e9042d846e07d",
+            "c32f473ff8590a9ae6b06d92958bfb682fd0a7f9cf8f95755e20de7c2d266943"),
+        ("atmosphere-plus", "physical", "table"): (
+            "6ce81928b82728f277a8bc91e43f1b039fb9579a449b00e1fee3b3ee7882ea90",
+            "8a97c2f3e5609b839cb9f6ccc02038ae1e33a44715fabc39532dff377aebd85d",
+            "eb768a9c4e46ca0cba4b671653b453b1e64fede0f2450f2788a31af7c44dbbcd",
+            "2c5d3a87043fe82b048daf07d6b3baa1e3c229831d044b25de16534fc76ba4cf"),
+        ("physical", "physical", "table"): (
+            "c1df1394ce93cd5c44ba655c7d8f642ca19d0d7b419fce62fd847630f719e1ff",
+            "7e552646e6a5fad7e02975c21b38bae0c00f472dcf4692695bb5f19f63aced53",
+            "463da05338847edc16e3a7d01cce510a3cb50d3effa9d7eb9503121316a2087c",
+            "2c3d0af8ead35b4ee51c7acb6df4072500af663790f398a36a6823ab133a2375"),
+    },
+    "pthread-skylake-avx512-AMD EPYC (PoCL 3.1+debian)": {
+        ("atmosphere-plus", "atmosphere-plus", "march"): (
+            "3c0f1d234f1979c6dd5406aaa46a13beefe747b653193f78332ffa7716c7500f",
+            "d487db257fa8166b7a50bca64a545f76e5cbe7f4518c7fe59cc5b5a4a634cea1",
+            "08be0712a0087c01cb8afc561c9d1611758fdf4de01b0421d41cc94d3b032ce5",
+            "c32f473ff8590a9ae6b06d92958bfb682fd0a7f9cf8f95755e20de7c2d266943"),
+        ("atmosphere-plus", "physical", "table"): (
+            "cdd52712228090728ce57e23c7c3d64a65afe0c496e9b4923888fe5bb43572c6",
+            "ff7eda10db424150ea2cb8e1fefa10a941b8bbb0811f6ae97c72293f956375c3",
+            "a70d4d351c77d0632d8fd93450d52bb95219b8b01d7d9371a36f5a2ff9a5e286",
+            "0b254b79d5eee21b942ec86596d14944395c4e26f6b6f7932e264a37b3928f87"),
+        ("physical", "physical", "table"): (
+            "7e530287d68abcb08d5c2787cb1993046fe27616d8bfffe2f99af3c032dfcf85",
+            "b5191133c3e8200bec1fc050cb16253ac1c336cbf318e19e0e9773c779d0d6af",
+            "87ed05b96fcc464a63272ffb2f93e35aa02f9adee9abb45bc12a404668d3c537",
+            "6adab13e32b5a8afd94090b768d2898d173594f92149949d3aec3d72f49e4d7f"),
+    },
 }
 
 
-def _sha256(array):
-    return hashlib.sha256(np.ascontiguousarray(array, dtype=np.float64).tobytes()).hexdigest()
-
-
-@pytest.mark.parametrize("name, mode, sun", sorted(OLD_HASHES))
+@pytest.mark.parametrize("name, mode, sun", sorted(pins.PINS["spectral"].cases))
 def test_presets_are_bit_for_bit_the_code_before_per_channel_mie(cl_context, name, mode, sun):
     """With the Angstrom exponent 0, the per-channel Mie coefficient (real4 in the kernels, arrays in the
-    twins) gives the preset's tables, gathered tables and pixels of the code before, bit for bit
-    (recorded on OLD_DEVICE; PoCL's code generation differs between devices: skipped elsewhere)."""
-    from clsky import _cl
-
-    device = _cl.describe_device(cl_context.devices[0])
-    if device != OLD_DEVICE:
-        pytest.skip(f"hashes recorded on {OLD_DEVICE}, not {device}")
-    table = ScatteringTable.build(black_preset(name), TableSettings(size=(8, 32, 8), orders=3, mode=mode,
-                                                              sun_transmittance=sun), ctx=cl_context)
-    directions = np.array([[0, 0, 1.0], [0.6, 0, 0.8], [0, 0.995, -0.0998749]])
-    directions /= np.linalg.norm(directions, axis=1)[:, None]
-    sun_direction = np.array([0.0, 0.99, 0.141067])
-    sun_direction /= np.linalg.norm(sun_direction)
-    with SkyRenderer(table, ctx=cl_context) as renderer:
-        marched = renderer.render_raymarch(directions, sun_direction, 0.0)
-        looked_up = renderer.render_table(directions, sun_direction, 0.0)
-    assert (_sha256(table.data), _sha256(table.gathered), _sha256(marched), _sha256(looked_up)) == \
-        OLD_HASHES[(name, mode, sun)]
+    twins) gives the preset's tables, gathered tables and pixels of the code before, bit for bit, on this
+    device (skipped on a device without a recording)."""
+    expected = pinned_for_device(OLD_HASHES, cl_context)[(name, mode, sun)]
+    assert pins.preset_from_the_ground(cl_context, name, mode, sun) == expected
 
 
 #: montecarlo.sky_radiance(physical, 0, 0.5, 0.6, 0, photons=2000, seed=4): radiance, then standard

@@ -12,14 +12,13 @@ budget as views from the ground.
 
 from __future__ import annotations
 
-import hashlib
 import math
 
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from clsky import ScatteringTable, TableSettings, _cl, montecarlo, preset, reference
+from clsky import ScatteringTable, TableSettings, montecarlo, preset, reference
 from clsky.mapping import grid_coordinates
 from clsky.phase import mie_phase, rayleigh_phase
 from clsky.ray_quadrature import single_scattering_ray
@@ -27,6 +26,8 @@ from clsky.render import RAYMARCH_DEFAULTS, SUN_ANGULAR_RADIUS_DEG, SkyRenderer,
 from clsky.single import SingleScatteringEngine
 
 from conftest import black_preset, TOLERANCES, max_error_report
+import pins
+from pins import pinned_for_device
 
 PLUS = black_preset("atmosphere-plus")
 PHYSICAL = black_preset("physical")
@@ -146,38 +147,35 @@ def test_only_ground_hitting_cells_change(cl_context):
 
 # atmosphere-plus bit for bit -----------------------------------------------------------------------------
 
-#: SHA-256 of float64 results of the code before this change (commit bfa2a93) on the device where they
-#: were recorded, atmosphere-plus preset, TableSettings(size=(8, 32, 8), orders=3) (Keller & Bohn, the
-#: default): data, gathered, then the default ray march (48 samples) of BIT_DIRECTIONS, sun BIT_SUN,
-#: from 0, 32.7, 100 and 150 km.
-BIT_DEVICE = "pthread-haswell-AMD EPYC (PoCL 3.1+debian)"
-BIT_HASHES = ("8f8112dd3254a062c18079be1dbb1184f641da54593c3b40dbfbfef93a694421",
-              "99a5f488b526fd9b9508a619c1979d93f93edb5526a424eb1942c7a53421eede",
-              "5fc53c10efa634b7b101a91860c417e44bbfc3491e13c8a640cceb8d35dc20a0",
-              "09fafcdaf20627d17e8c59a73974d60d96c0b80047389afa11d80bd47aff6080",
-              "fa27137c2544416f038ba9d7da00ab0ced38906e56edbdb2616e42e0288081be",
-              "cfb3a8fbc2bbd8e3bd10ac32a7a64b1784bdeeb76343c4b1681b2214857bed89")
-BIT_DIRECTIONS = np.array([[0, 0, 1.0], [0.6, 0, 0.8], [0.99, 0, -0.125], [0.3, 0.2, -0.9], [0, 0.995, -0.0998749]])
-BIT_SUN = np.array([0.0, 0.6, 0.8])
-
-
-def _sha256(array):
-    return hashlib.sha256(np.ascontiguousarray(array, dtype=np.float64).tobytes()).hexdigest()
+#: SHA-256 of float64 results of the code before this change (commit bfa2a93), per OpenCL device (PoCL's
+#: code generation changes the last bits between CPUs; tests/pins.py), atmosphere-plus preset,
+#: TableSettings(size=(8, 32, 8), orders=3) (Keller & Bohn, the default): data, gathered, then the
+#: default ray march (48 samples) of the directions and sun of tests/pins.py (view_nodes), from 0, 32.7,
+#: 100 and 150 km. The skylake entry was recorded by bfa2a93's own code (scripts/record_pins.py
+#: --source <bfa2a93 checkout> view_nodes).
+BIT_HASHES = {
+    "pthread-haswell-AMD EPYC (PoCL 3.1+debian)": (
+        "8f8112dd3254a062c18079be1dbb1184f641da54593c3b40dbfbfef93a694421",
+        "99a5f488b526fd9b9508a619c1979d93f93edb5526a424eb1942c7a53421eede",
+        "5fc53c10efa634b7b101a91860c417e44bbfc3491e13c8a640cceb8d35dc20a0",
+        "09fafcdaf20627d17e8c59a73974d60d96c0b80047389afa11d80bd47aff6080",
+        "fa27137c2544416f038ba9d7da00ab0ced38906e56edbdb2616e42e0288081be",
+        "cfb3a8fbc2bbd8e3bd10ac32a7a64b1784bdeeb76343c4b1681b2214857bed89"),
+    "pthread-skylake-avx512-AMD EPYC (PoCL 3.1+debian)": (
+        "3450e5ec5716aebe6b4bcc2d5dc8a26b433970787e846a053e7f08b6072b2699",
+        "c1c6f8a90dc3cedcffc46fd60f92d254ebe195b58d71af382f28ed332b8e19a8",
+        "5fc53c10efa634b7b101a91860c417e44bbfc3491e13c8a640cceb8d35dc20a0",
+        "eba0087ca29c29def77e70c12fe903c567aaee81c2a12d25dd900358049c549a",
+        "fa27137c2544416f038ba9d7da00ab0ced38906e56edbdb2616e42e0288081be",
+        "4dd3f6d57b0f2838772e58fa21387313bb4db0f8dfe6476ee83ef64e5b687eb3"),
+}
 
 
 def test_atmosphere_plus_is_bit_for_bit_the_code_before_ground_end(cl_context):
     """Keller & Bohn's tables and frames, from the ground and from altitude, hash to what the code
-    before 'ground_end' produced (recorded on BIT_DEVICE; PoCL's code generation differs between
-    devices, so elsewhere the test is skipped)."""
-    device = _cl.describe_device(cl_context.devices[0])
-    if device != BIT_DEVICE:
-        pytest.skip(f"hashes recorded on {BIT_DEVICE}, not {device}")
-    table = ScatteringTable.build(PLUS, TableSettings(size=(8, 32, 8), orders=3), ctx=cl_context)
-    directions = BIT_DIRECTIONS / np.linalg.norm(BIT_DIRECTIONS, axis=1)[:, None]
-    hashes = [_sha256(table.data), _sha256(table.gathered)]
-    with SkyRenderer(table, ctx=cl_context) as renderer:
-        hashes += [_sha256(renderer.render_raymarch(directions, BIT_SUN, h)) for h in (0.0, 32.7e3, 100e3, 150e3)]
-    assert tuple(hashes) == BIT_HASHES
+    before 'ground_end' produced on this device (skipped on a device without a recording)."""
+    expected = pinned_for_device(BIT_HASHES, cl_context)
+    assert pins.view_nodes(cl_context) == expected
 
 
 # The ray march (render.cl) against its twin, from altitude ----------------------------------------------

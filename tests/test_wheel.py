@@ -39,6 +39,7 @@ BUILD_EVERY_PROGRAM = textwrap.dedent("""
     import pathlib, sys
     import clsky, clsky._cl as cl_
     from clsky.lookup import TableLookupEngine
+    from clsky.lookup4d import TableLookup4DEngine
     from clsky.settings import TableSettings
     from clsky.single import SingleScatteringEngine
     from clsky.transmittance import TransmittanceEngine
@@ -50,11 +51,15 @@ BUILD_EVERY_PROGRAM = textwrap.dedent("""
         TransmittanceEngine(dtype=dtype)
         TransmittanceEngine(dtype=dtype, sampling="keller_bohn")
         TableLookupEngine(dtype=dtype)
+        TableLookup4DEngine(dtype=dtype)
         for sun in ("march", "table"):
             SingleScatteringEngine(TableSettings(dtype=dtype, sun_transmittance=sun, sampling="keller_bohn"))
             SingleScatteringEngine(TableSettings(dtype=dtype, sun_transmittance=sun))
     table = clsky.ScatteringTable.build("physical", TableSettings(size=(8, 8, 4), mode="physical"))   # -DOZONE -DGROUND
     assert (table.data >= 0).all()
+    table4d = clsky.ScatteringTable.build("physical", TableSettings(size=(8, 8, 4), mode="physical",
+                                                                    parameterization="4d", azimuth_size=3))
+    assert (table4d.data >= 0).all()
     print("built every program from", cl_.kernel_directory())
 """)
 

@@ -1,0 +1,180 @@
+"""Bit-for-bit pins: results of an older commit, recorded per OpenCL device.
+
+Five tests check that today's code gives, bit for bit, what the code before a change gave (SHA-256 of
+float64 arrays, or of the decoded pixels of PNG frames). PoCL compiles each kernel for the CPU it runs
+on (``pthread-haswell``, ``pthread-skylake-avx512``, ...), and its code generation (FMA contraction,
+vector width) changes the last bits, so each pin is a mapping {device description: recorded values}
+(:func:`clsky._cl.describe_device`), and a test checks only on a device with a recording
+(:func:`pinned_for_device`; it skips elsewhere, naming the devices recorded).
+
+The computations live here, in one place, written against the API that the old commits and today's
+code share, so that the values of a new device are recorded by running *the old commit's code* on the
+same inputs as the test (the pin means "bit for bit the code before X", not "the code of today"):
+
+    git worktree add --detach /tmp/old-bfa2a93 bfa2a93
+    .venv/bin/python scripts/record_pins.py --source /tmp/old-bfa2a93 ground spectral view_nodes display
+    git worktree add --detach /tmp/old-275bfcf 275bfcf
+    .venv/bin/python scripts/record_pins.py --source /tmp/old-275bfcf ozone
+
+and pasting the printed entries into the tests' mappings. :data:`PINS` names, for each pin, the commit
+it belongs to; scripts/record_pins.py refuses a source tree at another commit.
+
+Where the old and today's APIs differ, the functions below take the path both accept (noted there):
+the field ``ground_albedo`` (absent before the ground, whose atmospheres are all black), the package
+``anim`` (``clsky.anim`` today) and ``AnimationConfig.tone_map`` (absent before anim/display.py).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+
+import numpy as np
+import pytest
+
+
+def sha256(array) -> str:
+    """SHA-256 of an array's bytes as contiguous float64."""
+    return hashlib.sha256(np.ascontiguousarray(array, dtype=np.float64).tobytes()).hexdigest()
+
+
+def pinned_for_device(pins: dict, ctx):
+    """The values ``pins`` recorded for the device of ``ctx``; skips the test on a device without any
+    (PoCL's code generation differs between devices, so another device's bits prove nothing)."""
+    from clsky import _cl
+
+    device = _cl.describe_device(ctx.devices[0])
+    if device not in pins:
+        pytest.skip(f"bit-for-bit values recorded on {', '.join(sorted(pins))}, not on {device} "
+                    f"(scripts/record_pins.py records a device)")
+    return pins[device]
+
+
+def black_preset(name):
+    """The preset ``name`` with a black ground (as tests/conftest.py's), also under the code before the
+    ground (e.g. commit bfa2a93), whose atmospheres were all black and had no ``ground_albedo`` field."""
+    from clsky import preset
+
+    atmosphere = preset(name)
+    if any(field.name == "ground_albedo" for field in dataclasses.fields(atmosphere)):
+        atmosphere = atmosphere.replace(ground_albedo=0.0)
+    return atmosphere
+
+
+def _unit(vectors):
+    vectors = np.asarray(vectors, dtype=np.float64)
+    return vectors / np.linalg.norm(vectors, axis=-1, keepdims=True)
+
+
+#: Directions and sun of the table pins (pixels from the ground: 2 up, 1 5.7 deg below the horizon).
+DIRECTIONS = _unit([[0, 0, 1.0], [0.6, 0, 0.8], [0, 0.995, -0.0998749]])
+SUN = _unit([0.0, 0.99, 0.141067])
+#: ... plus a view down steeply, for the ground pin.
+GROUND_DIRECTIONS = _unit([[0, 0, 1.0], [0.6, 0, 0.8], [0, 0.995, -0.0998749], [0.3, 0.0, -0.95]])
+#: The view-node pin's directions (three of them look down) and sun (not normalised: it was
+#: recorded as given, and 0.6^2 + 0.8^2 rounds to 1 anyway).
+VIEW_NODE_DIRECTIONS = _unit([[0, 0, 1.0], [0.6, 0, 0.8], [0.99, 0, -0.125], [0.3, 0.2, -0.9], [0, 0.995, -0.0998749]])
+VIEW_NODE_SUN = np.array([0.0, 0.6, 0.8])
+
+
+def table_hashes(atmosphere, settings, directions, sun, renders, ctx) -> tuple:
+    """Hashes of a table's ``data`` and ``gathered``, then of the pixels of each ``(method, altitude)``
+    in ``renders`` (method 'raymarch' or 'table', altitude [m])."""
+    from clsky import ScatteringTable
+    from clsky.render import SkyRenderer
+
+    table = ScatteringTable.build(atmosphere, settings, ctx=ctx)
+    hashes = [sha256(table.data), sha256(table.gathered)]
+    with SkyRenderer(table, ctx=ctx) as renderer:
+        for method, altitude in renders:
+            hashes.append(sha256(getattr(renderer, f"render_{method}")(directions, sun, altitude)))
+    return tuple(hashes)
+
+
+def preset_from_the_ground(ctx, name, mode, sun_transmittance) -> tuple:
+    """Preset ``name`` (black ground), TableSettings(size=(8, 32, 8), orders=3, mode, sun_transmittance):
+    data, gathered, ray-marched and table-rendered pixels of DIRECTIONS, sun SUN, from the ground."""
+    from clsky import TableSettings
+
+    settings = TableSettings(size=(8, 32, 8), orders=3, mode=mode, sun_transmittance=sun_transmittance)
+    return table_hashes(black_preset(name), settings, DIRECTIONS, SUN, [("raymarch", 0.0), ("table", 0.0)], ctx)
+
+
+def black_ground(ctx) -> tuple:
+    """The physical preset (ozone, black ground), TableSettings(size=(8, 32, 8), orders=3,
+    mode='physical'): data, gathered, ray-marched and table-rendered pixels of GROUND_DIRECTIONS from
+    the ground, ray-marched pixels from 30 km (sun SUN)."""
+    from clsky import TableSettings
+
+    settings = TableSettings(size=(8, 32, 8), orders=3, mode="physical")
+    return table_hashes(black_preset("physical"), settings, GROUND_DIRECTIONS, SUN,
+                        [("raymarch", 0.0), ("table", 0.0), ("raymarch", 30000.0)], ctx)
+
+
+def view_nodes(ctx) -> tuple:
+    """atmosphere-plus, TableSettings(size=(8, 32, 8), orders=3) (Keller & Bohn's nodes, the default):
+    data, gathered, then the default ray march of VIEW_NODE_DIRECTIONS, sun VIEW_NODE_SUN, from 0,
+    32.7, 100 and 150 km."""
+    from clsky import TableSettings
+
+    renders = [("raymarch", altitude) for altitude in (0.0, 32.7e3, 100e3, 150e3)]
+    return table_hashes(black_preset("atmosphere-plus"), TableSettings(size=(8, 32, 8), orders=3),
+                        VIEW_NODE_DIRECTIONS, VIEW_NODE_SUN, renders, ctx)
+
+
+#: The metrics of a compare animation that the display pin records, per frame.
+METRIC_KEYS = ("rmse", "median_rel", "p95_rel", "max_rel", "mean_delta_e", "floor")
+
+
+def display_frames(ctx, directory, tone_map=None) -> tuple:
+    """The atmosphere-plus preset's compare animation (table | ray march | error panels, dithered, 3
+    frames of 24 px), written under ``directory``: SHA-256 of each PNG frame's decoded pixels, and each
+    frame's METRIC_KEYS. ``tone_map`` None leaves the config's default (the only choice before
+    anim/display.py)."""
+    import pathlib
+
+    from PIL import Image
+
+    try:
+        from clsky.anim.animate import AnimationConfig, render_animation
+    except ModuleNotFoundError:                    # before the package moved: top-level anim/
+        from anim.animate import AnimationConfig, render_animation
+    options = {} if tone_map is None else {"tone_map": tone_map}
+    directory = pathlib.Path(directory)
+    config = AnimationConfig(frames=3, size=24, table_size=(9, 33, 7), preset="atmosphere-plus",
+                             mode="atmosphere-plus", start_elevation_deg=-4.0, max_elevation_deg=30.0,
+                             output=str(directory / "sky.mp4"), **options)
+    result = render_animation(config, ctx=ctx)
+    frames = sorted((directory / "sky_frames").glob("*.png"))
+    hashes = [hashlib.sha256(np.asarray(Image.open(f)).tobytes()).hexdigest() for f in frames]
+    return hashes, [[row[key] for key in METRIC_KEYS] for row in result.rows]
+
+
+@dataclasses.dataclass(frozen=True)
+class Pin:
+    """One pinned computation: the test that holds its values, the commit they are the results of, and
+    its cases {key in the test's mapping: function of (ctx, scratch directory)}."""
+
+    test: str
+    commit: str
+    cases: dict
+
+
+PINS = {
+    "ground": Pin("tests/test_ground.py::OLD_HASHES", "bfa2a93",
+                  {None: lambda ctx, tmp: black_ground(ctx)}),
+    "ozone": Pin("tests/test_ozone.py::OLD_HASHES", "275bfcf",
+                 {(mode, sun): (lambda ctx, tmp, mode=mode, sun=sun:
+                                preset_from_the_ground(ctx, "atmosphere-plus", mode, sun))
+                  for mode, sun in (("atmosphere-plus", "march"), ("physical", "table"))}),
+    "spectral": Pin("tests/test_spectral.py::OLD_HASHES", "bfa2a93",
+                    {(name, mode, sun): (lambda ctx, tmp, name=name, mode=mode, sun=sun:
+                                         preset_from_the_ground(ctx, name, mode, sun))
+                     for name, mode, sun in (("atmosphere-plus", "atmosphere-plus", "march"),
+                                             ("atmosphere-plus", "physical", "table"),
+                                             ("physical", "physical", "table"))}),
+    "view_nodes": Pin("tests/test_view_nodes.py::BIT_HASHES", "bfa2a93",
+                      {None: lambda ctx, tmp: view_nodes(ctx)}),
+    "display": Pin("tests/test_display.py::BASE_FRAMES", "bfa2a93",
+                   {None: lambda ctx, tmp: display_frames(ctx, tmp)}),
+}
