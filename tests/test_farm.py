@@ -82,6 +82,16 @@ def assert_same_outputs(expected: pathlib.Path, actual: pathlib.Path):
             assert (actual / name).read_bytes() == (expected / name).read_bytes(), name
 
 
+def assert_two_frames_match(options, farm, tmp_path):
+    """A two-frame animation of ``options`` here and on ``farm``: the same frames, metrics CSV and MP4."""
+    for name, where in (("single", None), ("farm", farm)):
+        (tmp_path / name).mkdir()
+        with inside(tmp_path / name):
+            render_animation(AnimationConfig(**options), farm=where)
+    for name in ("sky_frames/frame_00000.png", "sky_frames/frame_00001.png", "sky_metrics.csv", "sky.mp4"):
+        assert (tmp_path / "farm" / name).read_bytes() == (tmp_path / "single" / name).read_bytes(), name
+
+
 @pytest.fixture(scope="module")
 def farm():
     environment = dict(os.environ)
@@ -117,26 +127,14 @@ def test_two_workers_write_the_single_process_files_bit_for_bit(farm, single_run
 def test_other_methods_on_the_farm_are_bit_for_bit(farm, method, tmp_path):
     """The lookup alone, and the 4D table (main's 'compare4d': another table layout in the shipped file and
     another kernel on the workers): the farm's files are the single-process run's."""
-    options = dict(TINY, frames=2, size=16, hdr=None, method=method)
-    for name, where in (("single", None), ("farm", farm)):
-        (tmp_path / name).mkdir()
-        with inside(tmp_path / name):
-            render_animation(AnimationConfig(**options), farm=where)
-    for name in ("sky_frames/frame_00000.png", "sky_frames/frame_00001.png", "sky_metrics.csv", "sky.mp4"):
-        assert (tmp_path / "farm" / name).read_bytes() == (tmp_path / "single" / name).read_bytes(), name
+    assert_two_frames_match(dict(TINY, frames=2, size=16, hdr=None, method=method), farm, tmp_path)
 
 
 @pytest.mark.slow        # 15 s at load average 13: two spectral tables of two batches, and their frames
 def test_spectral_frames_on_the_farm_are_bit_for_bit(farm, tmp_path):
     """With --wavelengths the payload is one table file per batch of three (anim/farm.py), reassembled
     into the SpectralTable on each worker: the frames are still the single-process run's."""
-    options = dict(TINY, frames=2, size=16, hdr=None, wavelengths=6)
-    for name, where in (("single", None), ("farm", farm)):
-        (tmp_path / name).mkdir()
-        with inside(tmp_path / name):
-            render_animation(AnimationConfig(**options), farm=where)
-    for name in ("sky_frames/frame_00000.png", "sky_frames/frame_00001.png", "sky_metrics.csv", "sky.mp4"):
-        assert (tmp_path / "farm" / name).read_bytes() == (tmp_path / "single" / name).read_bytes(), name
+    assert_two_frames_match(dict(TINY, frames=2, size=16, hdr=None, wavelengths=6), farm, tmp_path)
 
 
 def test_a_worker_killed_mid_run_costs_only_its_frames(farm, single_run, tmp_path):
