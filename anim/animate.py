@@ -39,6 +39,7 @@ from clsky.settings import SAMPLINGS
 from clsky.resources import MemoryEstimate, check_memory, device_of, estimate_animation_memory
 
 from . import display as display_pipeline
+from . import pipeline as pipeline_module
 from . import metrics, sunpath, tonemap, writers
 from .cameras import camera_from_name
 from .exr import PRECISIONS
@@ -60,6 +61,10 @@ LUT4D_HARMONICS = 2
 #: nodes x 16 azimuths is 151 MB as float32 and within 0.6 % (day to sunset) and 2.1 % (-4 deg) of the
 #: ray march of the same orders (README, "The 4D table"); the level's 32 x 256 would be 4 times that.
 LUT4D_MAX_SIZE = (16, 128)
+
+#: Render frame i + 1 on a worker thread while frame i is displayed, compared and written
+#: (:func:`clsky.anim.pipeline.prefetched`); False: one after the other, on the calling thread.
+OVERLAP_FRAMES = True
 
 #: The conversion of absolute three-wavelength frames to XYZ (:func:`clsky.colorimetry.three_wavelength_to_xyz`):
 #: the default ``solar_power_law`` reconstruction, tabulated. Measured per 512 x 512 frame (process CPU,
@@ -793,11 +798,15 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
 
 def _local_frames(config, positions, renderer, prepared, valid):
     """The frame source of a single-process run: ``frames(pipeline)`` yields each frame's
-    :class:`FrameOutputs` in order, rendered and shown here."""
+    :class:`FrameOutputs` in order, rendered and shown here: frame i + 1 renders on a worker thread while
+    this thread displays and compares frame i and the writer writes it (clsky.anim.pipeline: the same
+    frames, in order; OVERLAP_FRAMES = False renders them here, one by one)."""
     def frames(pipeline):
-        for index, sun in enumerate(positions):
-            hdr = render_frame(renderer, prepared, sun.direction, config)
-            yield frame_outputs(pipeline, hdr, valid, config, sun, index)
+        rendered = pipeline_module.prefetched(lambda sun: render_frame(renderer, prepared, sun.direction, config),
+                                              positions, overlap=OVERLAP_FRAMES)
+        with contextlib.closing(rendered):
+            for index, (sun, hdr) in enumerate(rendered):
+                yield frame_outputs(pipeline, hdr, valid, config, sun, index)
     return frames
 
 

@@ -2,8 +2,11 @@
 
 - End to end: ``python -m clsky.anim animate`` (120 frames, 512 x 512 fisheye, physical preset, table lookup
   and ray march compared, PNG + MP4 + metrics) in a fresh process: wall time, CPU time of the process
-  and its children (ffmpeg) from ``getrusage(RUSAGE_CHILDREN)``, the load average before and after.
-- Stage split: :func:`clsky.anim.animate.render_animation` in this process at ``--stage-frames`` frames of
+  and its children (ffmpeg) from ``getrusage(RUSAGE_CHILDREN)``, the load average before and after; run
+  twice, side by side: with the overlapped frame pipeline (the default: frame i + 1 rendered on a worker
+  thread while frame i is displayed, compared and written, ``clsky.anim.pipeline``) and without it
+  (``clsky.anim.animate.OVERLAP_FRAMES = False``: one frame after the other).
+- Stage split (without the overlap, so that each stage is timed alone): :func:`clsky.anim.animate.render_animation` in this process at ``--stage-frames`` frames of
   the same size (after a warm-up), under cProfile with the process CPU clock as its timer, so that each stage's figure
   counts PoCL's worker threads while the host waits for them (the stages do not overlap). Run twice,
   side by side: with the frame loop's BLAS on one thread (the default, ``clsky._cl.host_blas_single_threaded``)
@@ -61,11 +64,18 @@ def children_cpu() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-def end_to_end(arguments):
-    """(wall [s], CPU [s], load before, load after) of ``python -m clsky.anim animate <arguments>``."""
+#: ``python -m clsky.anim`` with the frames rendered one after the other (no overlapped pipeline)
+SERIAL = ("import sys, clsky.anim.animate, clsky.anim.cli; clsky.anim.animate.OVERLAP_FRAMES = False; "
+          "sys.argv[0] = 'clsky'; sys.exit(clsky.anim.cli.main())")
+
+
+def end_to_end(arguments, overlap=True):
+    """(wall [s], CPU [s], load before, load after) of ``python -m clsky.anim animate <arguments>`` (with
+    ``overlap`` False: the frames one after the other)."""
+    program = ["-m", "clsky.anim"] if overlap else ["-c", SERIAL]
     with tempfile.TemporaryDirectory() as directory:
         load_before, cpu, wall = load_average(), children_cpu(), time.perf_counter()
-        subprocess.run([sys.executable, "-m", "clsky.anim", "animate", "--progress", "none", *arguments], cwd=directory,
+        subprocess.run([sys.executable, *program, "animate", "--progress", "none", *arguments], cwd=directory,
                        check=True, stdout=subprocess.DEVNULL)
         return time.perf_counter() - wall, children_cpu() - cpu, load_before, load_average()
 
@@ -74,6 +84,8 @@ def stage_split(config_options, blas_limited=True):
     """({stage: CPU [s]}, total CPU [s] of the process and ffmpeg, wall [s], load after) of one
     in-process animation under cProfile (process CPU clock)."""
     limit = clsky.anim.animate.host_blas_single_threaded
+    # cProfile sees the calling thread only: the frames are rendered there, one after the other
+    clsky.anim.animate.OVERLAP_FRAMES = False
     with tempfile.TemporaryDirectory() as directory:
         config = AnimationConfig(output=str(pathlib.Path(directory) / "sky.mp4"), **config_options)
         profile = cProfile.Profile(time.process_time)
@@ -84,6 +96,7 @@ def stage_split(config_options, blas_limited=True):
             profile.runcall(render_animation, config)
         finally:
             clsky.anim.animate.host_blas_single_threaded = limit
+            clsky.anim.animate.OVERLAP_FRAMES = True
         wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
         ffmpeg = children_cpu() - children
     stats = pstats.Stats(profile).stats
@@ -108,9 +121,13 @@ def main():
         args.frames, args.stage_frames, args.size = SMOKE.animation_frames, SMOKE.animation_frames, SMOKE.frame
         extra, options = ["--table-size", *map(str, SMOKE.table)], {"table_size": SMOKE.table}
     command = ["--frames", str(args.frames), "--size", str(args.size), *extra]
-    wall, cpu, load_before, load_after = end_to_end(command)
-    print(f"end to end: wall {wall:.1f} s, CPU {cpu:.1f} s, load {load_before:.1f} -> {load_after:.1f}", flush=True)
-    highest = max(load_before, load_after)
+    runs = {}
+    for overlap in (True, False):
+        runs[overlap] = end_to_end(command, overlap)
+        wall, cpu, load_before, load_after = runs[overlap]
+        print(f"end to end ({'overlapped' if overlap else 'serial'}): wall {wall:.1f} s, CPU {cpu:.1f} s, load "
+              f"{load_before:.1f} -> {load_after:.1f}", flush=True)
+    highest = max(max(run[2:]) for run in runs.values())
     # a discarded warm-up at the smoke size: kernel compilation and the colour conversion's tables
     # (built once per process) would otherwise land in the first variant only
     stage_split({"frames": SMOKE.animation_frames, "size": SMOKE.frame, **options})
@@ -124,12 +141,16 @@ def main():
     shown = "clsky animate " + " ".join(command)
     lines = [f"Measured {datetime.date.today()} on {machine()}. End to end: `{shown}` "
              f"in a fresh process (table build, both renderers, comparison, PNG + MP4 + metrics); CPU time of the "
-             f"process and its children (ffmpeg), load average before and after.{load_note(highest)}", "",
-             "| run | wall [s] | CPU [s] | CPU / wall | load before | load after |",
-             "|---|---:|---:|---:|---:|---:|",
-             f"| `{shown}` | {wall:.1f} | {cpu:.1f} | {cpu / wall:.2f} | {load_before:.1f} | {load_after:.1f} |", "",
-             f"Where the CPU time goes: the same animation at {args.stage_frames} frames in one process after a "
-             f"warm-up (kernels compiled, the colour conversion's tables built), cProfile "
+             f"process and its children (ffmpeg), load average before and after; with the overlapped frame "
+             f"pipeline (default) and with the frames one after the other, run one after the other."
+             f"{load_note(highest)}", "",
+             "| run | frames | wall [s] | CPU [s] | CPU / wall | load before | load after |",
+             "|---|---|---:|---:|---:|---:|---:|",
+             *(f"| `{shown}` | {'overlapped' if overlap else 'one after the other'} | {wall:.1f} | {cpu:.1f} | "
+               f"{cpu / wall:.2f} | {load_before:.1f} | {load_after:.1f} |"
+               for overlap, (wall, cpu, load_before, load_after) in runs.items()), "",
+             f"Where the CPU time goes: the same animation at {args.stage_frames} frames, one after the other, in "
+             f"one process after a warm-up (kernels compiled, the colour conversion's tables built), cProfile "
              f"on the process CPU clock (PoCL's worker threads count towards the stage that waits for them); "
              f"the frame loop's host BLAS on one thread (default) and with OpenBLAS's own threads, side by side.",
              "", "| stage | CPU [s], BLAS 1 thread | per frame [ms] | CPU [s], BLAS unlimited | per frame [ms] |",

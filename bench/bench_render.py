@@ -1,7 +1,8 @@
 """Benchmark: per-frame rendering speed and the default animation's wall time, in one run.
 
 - table-lookup render of a 1024 x 1024 fisheye (frames per second, HDR frame on the host);
-- per-pixel ray march of a 512 x 512 fisheye at the default samples;
+- per-pixel ray march of a 512 x 512 fisheye at the default samples, and its process CPU time per frame
+  beside the exp() bound measured on this machine (bench/_bound.py) and their ratio (issue 12's goal: 2x);
 - the default `clsky animate` (120 frames, 512 x 512, both renderers, comparison, files), wall time.
 Prints the table and writes it into README.md.
 
@@ -20,7 +21,11 @@ import sys
 import tempfile
 import time
 
-from _report import SMOKE, add_output_arguments, best_of, machine, parse_arguments, write_readme_section
+import numpy as np
+
+from _bound import EXPS_PER_NODE, exp_rate, march_exps
+from _report import SMOKE, add_output_arguments, best_of, load_average, machine, parse_arguments, \
+    write_readme_section
 
 import clsky
 from clsky.anim.cameras import FisheyeCamera, sun_direction
@@ -52,9 +57,23 @@ def main():
         directions, valid = FisheyeCamera(size).directions()
         prepared = renderer.prepare(directions, valid)
         method(prepared, sun, 0.0)                                     # warm-up
+        cpu = time.process_time()
         best, median = best_of(lambda: method(prepared, sun, 0.0), args.repeat)
-        rows.append(f"| {label} | {1000 * best:.0f} ms | {1000 * median:.0f} ms | {1 / best:.1f} |")
+        cpu = (time.process_time() - cpu) / args.repeat
+        rows.append(f"| {label} | {1000 * best:.0f} ms | {1000 * median:.0f} ms | {1000 * cpu:.0f} ms | "
+                    f"{1 / best:.1f} |")
         print(rows[-1], flush=True)
+    # the march's CPU time per frame against its exponentials at the device's measured exp() rate
+    rate = exp_rate(renderer.engine.ctx)
+    exps = march_exps(int(np.count_nonzero(valid)), RAYMARCH_DEFAULTS.view_steps)
+    bound = exps / rate
+    load = load_average()
+    bound_line = (f"Ray march against the exp() bound: {1000 * cpu:.0f} CPU-ms per frame; its {exps / 1e6:.1f} M "
+                  f"exponentials ({EXPS_PER_NODE} per ray node, {RAYMARCH_DEFAULTS.view_steps + 1} nodes, "
+                  f"{np.count_nonzero(valid)} pixels) take {1000 * bound:.0f} CPU-ms at the {rate / 1e6:.0f} M "
+                  f"double8 exp() per CPU-second measured here: **{cpu / bound:.1f}x the bound** (goal: 2x; "
+                  f"load average {load:.1f}).")
+    print(bound_line, flush=True)
     animation = "not measured (--skip-animation)"
     if not args.skip_animation:
         with tempfile.TemporaryDirectory() as directory:
@@ -63,9 +82,11 @@ def main():
             animation = f"{time.perf_counter() - start:.0f} s"
         print("default animate:", animation, flush=True)
     lines = [f"Rendering, measured {datetime.date.today()} on {machine()}, OpenCL device "
-             f"{describe_device(renderer.engine.device)}; best and median of {args.repeat} frames after a warm-up "
-             f"(HDR float64 frame copied to the host).", "",
-             "| render | best | median | frames/s (best) |", "|---|---:|---:|---:|", *rows, "",
+             f"{describe_device(renderer.engine.device)}; best and median wall time of {args.repeat} frames after a "
+             f"warm-up (HDR float64 frame copied to the host), and their mean process CPU time (PoCL's workers "
+             f"included).", "",
+             "| render | best | median | CPU per frame | frames/s (best) |", "|---|---:|---:|---:|---:|", *rows, "",
+             bound_line, "",
              ("Smoke run: `" + " ".join(["clsky", *animate[3:]]) + "`" if args.smoke else
               "Default `clsky animate` (120 frames, 512 x 512 fisheye, table build, both renderers, comparison, "
              f"PNG + MP4 + metrics)")

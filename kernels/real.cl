@@ -58,11 +58,16 @@ typedef int8 intv;
 #define CONVERT_INTV(v) convert_int8(v)
 #define CONVERT_REALV(v) CONVERT_REAL8(v)
 #define INT_LANE(v, k) (((int *)&(v))[k])
+/* GATHER_REALV(p, i): the realv of p[i.s0], ..., p[i.s7] (i an intv), built in registers rather than
+ * lane by lane through a stack array */
+#define GATHER_REALV(p, i) ((realv)((p)[(i).s0], (p)[(i).s1], (p)[(i).s2], (p)[(i).s3], (p)[(i).s4], \
+                                    (p)[(i).s5], (p)[(i).s6], (p)[(i).s7]))
 #else
 typedef int intv;
 #define CONVERT_INTV(v) ((int)(v))
 #define CONVERT_REALV(v) ((real)(v))
 #define INT_LANE(v, k) (v)
+#define GATHER_REALV(p, i) ((p)[i])
 #endif
 /* mask type of real8 comparisons */
 #ifdef REAL_IS_DOUBLE

@@ -296,3 +296,24 @@ def test_one_blas_thread_gives_the_same_bytes_as_two(tmp_path, cl_context, monke
     assert seen[:2] == [{1}, {1}] and len(seen) == 4, seen
     frames, csv_bytes, rows, temporal = outputs["one thread"]
     assert len(frames) == 2 and outputs["two threads"] == (frames, csv_bytes, rows, temporal)
+
+
+def test_overlapped_frames_are_the_bytes_of_serial_ones(tmp_path, cl_context, monkeypatch):
+    """The overlapped frame pipeline (clsky.anim.pipeline: frame i + 1 rendered on a worker thread while
+    frame i is displayed, compared and written) writes byte for byte the PNG frames, MP4, metrics CSV and
+    the JSON's frame rows and temporal jumps of the same animation rendered frame after frame on one
+    thread: the same calls on the same inputs, consumed in order. 3 frames, so that one frame renders
+    while another is written and the last has no successor."""
+    import clsky.anim.animate
+
+    outputs = {}
+    for overlap in (False, True):
+        monkeypatch.setattr(clsky.anim.animate, "OVERLAP_FRAMES", overlap)
+        config = AnimationConfig(frames=3, output=str(tmp_path / "sky.mp4"), force=overlap, **TINY)
+        render_animation(config, ctx=cl_context)
+        record = json.loads((tmp_path / "sky_metrics.json").read_text(encoding="utf-8"))
+        outputs[overlap] = ([path.read_bytes() for path in sorted((tmp_path / "sky_frames").iterdir())],
+                            (tmp_path / "sky.mp4").read_bytes(), (tmp_path / "sky_metrics.csv").read_bytes(),
+                            record["frames"], record["temporal"])
+    assert len(outputs[False][0]) == 3
+    assert outputs[True] == outputs[False]

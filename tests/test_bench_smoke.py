@@ -28,8 +28,8 @@ HEADERS = {
                      "| mode | sun zenith [deg] | order 1 | order 2 | order 3 | order 4 | orders 5+ |"],
     "bench_montecarlo": ["| mode (preset) | quadrature | altitude [m] | cos view | sun zenith [deg] | deviation [%] | "
                          "deviation [SE] |"],
-    "bench_render": ["| render | best | median | frames/s (best) |"],
-    "bench_animate": ["| run | wall [s] | CPU [s] | CPU / wall | load before | load after |",
+    "bench_render": ["| render | best | median | CPU per frame | frames/s (best) |"],
+    "bench_animate": ["| run | frames | wall [s] | CPU [s] | CPU / wall | load before | load after |",
                       "| stage | CPU [s], BLAS 1 thread | per frame [ms] | CPU [s], BLAS unlimited | per frame [ms] |"],
     "bench_memory": ["| run | table (W x H x D) | measured peak | estimate | estimate / measured |"],
     "bench_accuracy": ["| candidate | knob | build [s] | render [ms] | p95 day [%] |"],
@@ -47,6 +47,10 @@ HEADERS = {
     "bench_lookup4d": ["| frame | sun [deg] | 4D lookup p95 | target | 4D mean Delta E | 3D lookup p95 |"],
     "bench_twilight": ["| | +5 deg | -6 deg |",
                        "| sun [deg] | view | paths | SE [%] | all orders [%] | all orders [SE] | single: paths |"],
+}
+#: script: patterns of lines it must print besides its tables, each with one finite number
+LINES = {
+    "bench_render": [r"Ray march against the exp\(\) bound: .* \*\*(\S+)x the bound\*\*"],
 }
 #: Measured wall time of each case (pytest, 2 shared cores): single 3-5 s, orders 5-7 s, montecarlo 10-12 s,
 #: render 9-10 s; spectral 5-7 s; twilight 11 s; dusk 10 s (four skies, two of 15 wavelengths); accuracy 41 s
@@ -109,6 +113,9 @@ def test_smoke_run_prints_its_table_and_writes_nothing(name):
     output = run_smoke(name)
     for header in HEADERS[name]:
         assert_finite_row(table_rows(output, header))
+    for pattern in LINES.get(name, []):
+        found = re.search(pattern, output)
+        assert found and math.isfinite(float(found.group(1))) and float(found.group(1)) > 0, (pattern, output)
 
 
 def test_every_bench_script_is_covered():
