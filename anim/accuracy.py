@@ -24,7 +24,7 @@ import time
 import numpy as np
 
 import clsky
-from clsky.planner import Scene, sun_axis
+from clsky.planner import Scene, azimuth_harmonics, sun_axis
 from clsky.quality import QualityLevel, quality_level
 from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
 
@@ -60,8 +60,13 @@ class Candidate:
 
 
 def default_candidates(base: clsky.TableSettings | None = None):
-    """The sweep: each knob moved away from ``base`` (default settings), plus ray marches."""
-    base = base or clsky.TableSettings(mode="physical")
+    """The sweep: each knob moved away from ``base`` (default settings, with the azimuth harmonics the
+    scene planner gives the four frames' sun path, :func:`clsky.planner.azimuth_harmonics`), plus ray
+    marches."""
+    if base is None:
+        path = (min(SUN_ELEVATIONS.values()), max(SUN_ELEVATIONS.values()))
+        base = clsky.TableSettings(mode="physical",
+                                   azimuth_harmonics=azimuth_harmonics(quality_level("default"), path)[0])
     width, height, depth = base.size
     table = [
         ("default", "default", base),
@@ -82,7 +87,7 @@ def default_candidates(base: clsky.TableSettings | None = None):
         ("gather 64 x 32", "gather quadrature", base.replace(gather_theta_steps=64, gather_phi_steps=32)),
         ("order tolerance 1e-2", "order tolerance", base.replace(order_tolerance=1e-2)),
         ("order tolerance 1e-3", "order tolerance", base.replace(order_tolerance=1e-3)),
-        ("single scattering only", "order tolerance", base.replace(orders=1)),
+        ("single scattering only", "order tolerance", base.replace(orders=1, azimuth_harmonics=0)),
         ("float32", "precision", base.replace(dtype="float32")),
         # the 4D table (altitude x view x sun x azimuth, clsky/table4d.py), its orders with 2 harmonics
         ("4D table", "parameterization", base.replace(parameterization="4d",
@@ -133,11 +138,16 @@ def reference_level(doubled=(), level="reference") -> QualityLevel:
 def reference_renderer(elevation_deg, doubled=(), atmosphere="physical", level="reference"):
     """A SkyRenderer of the reference for one sun elevation: the reference level's table on the sun
     range that frame needs (its sun, plus the planner's margins for a fisheye from the ground, at the
-    level's node spacing), and its ray march."""
+    level's node spacing) with azimuth harmonics at every sun (the 'reference' level's M = 2; a
+    stand-in level's ``twilight_harmonics``: the reference must not share the azimuth average's
+    excess, 0.6 % in the day frame against M = 2), and its ray march."""
     level = reference_level(doubled, level)
     atmosphere = clsky.preset(atmosphere) if isinstance(atmosphere, str) else atmosphere
     cos_range, nodes, _, _ = sun_axis(atmosphere, Scene((elevation_deg, elevation_deg)), level)
-    settings = level.table.replace(size=level.table.size[:2] + (nodes,), sun_cos_range=cos_range)
+    # a reference carries the harmonics at every sun, as the 'reference' level does (a stand-in level too)
+    harmonics = level.table.azimuth_harmonics or level.twilight_harmonics
+    settings = level.table.replace(size=level.table.size[:2] + (nodes,), sun_cos_range=cos_range,
+                                   azimuth_harmonics=harmonics)
     return SkyRenderer(clsky.ScatteringTable.build(atmosphere, settings), level.ray)
 
 

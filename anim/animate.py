@@ -30,7 +30,7 @@ from clsky._cl import host_blas_single_threaded
 from clsky._files import StagedWrites, check_output
 from clsky.errors import ParameterError, check_choice, check_integer, check_real, is_real_number
 from clsky.ground import check_ground_mode
-from clsky.planner import Plan, Scene, plan_scene, sun_axis, view_sampling
+from clsky.planner import Plan, Scene, azimuth_harmonics, plan_scene, sun_axis, view_sampling
 from clsky.quality import QUALITY_LEVELS, QualityLevel, level_for_budget, quality_level
 from clsky import colorimetry, spectrum
 from clsky.solar import ABSOLUTE_UNITS, RELATIVE_UNITS, solar_irradiance_astm_g173, with_solar_spectrum
@@ -453,8 +453,9 @@ def memory_estimate(config: AnimationConfig, positions) -> MemoryEstimate:
         directions, valid = _camera(dataclasses.replace(config, size=64)).directions()
         scene = _scene(config, positions, directions, valid)
         cos_range, nodes, _, _ = sun_axis(config.atmosphere, scene, level, level.table.mapping)
+        harmonics, _ = azimuth_harmonics(level, scene.sun_elevations_deg, config.mode)
         settings = level.table.replace(mode=config.mode, size=level.table.size[:2] + (nodes,),
-                                       sun_cos_range=cos_range)
+                                       sun_cos_range=cos_range, azimuth_harmonics=harmonics)
     batches = None if config.wavelengths is None else len(spectrum.wavelength_batches(config.wavelengths))
     return estimate_animation_memory(_with_lookup(_with_sampling(settings, config), config), config.image_shape(),
                                      config.method,

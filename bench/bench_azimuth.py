@@ -10,6 +10,14 @@ build times into README.md.
 
 Usage: python bench/bench_azimuth.py [--harmonics 0,2] [--quality LEVEL] [--target SE]
        [--elevations 5,2,0,-2,-4,-6] [--no-readme] [--smoke]
+       python bench/bench_azimuth.py --cost [--no-readme] [--smoke]
+
+``--cost``: what the harmonics cost in the default ``clsky animate`` (sun from -6 to 60 deg, 512^2
+fisheye, default quality): its planned table built with the planner's M and with M = 0, side by side
+in one process (one warm-up build of each first: the kernels compiled, the gather matrices cached),
+and one ray-marched frame over each (sun 4 deg below the horizon). Wall and process CPU time, load
+average; writes the README section "twilight-cost". With ``--smoke``: the smoke run's table and frame
+sizes.
 """
 
 from __future__ import annotations
@@ -21,7 +29,8 @@ import time
 
 import numpy as np
 
-from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
+from _report import (SMOKE, add_output_arguments, load_average, load_note, machine, parse_arguments,
+                     timed_with_cpu, write_readme_section)
 from bench_twilight import BATCH, cells, summary
 
 from clsky import twilight
@@ -33,8 +42,53 @@ def p95(deviations):
     return f"{100 * np.percentile(values, 95):.1f} %" if values.size else "n/a"
 
 
+def cost(args):
+    """The ``--cost`` measurement (module docstring): markdown of the table builds and frames."""
+    import dataclasses
+
+    from clsky.anim import animate
+    from clsky.anim.cameras import sun_direction
+    from clsky.render import SkyRenderer
+
+    config = animate.AnimationConfig(size=SMOKE.frame) if args.smoke else animate.AnimationConfig()
+    directions, valid = animate._camera(config).directions()
+    plan = animate.plan_animation(config, animate.sun_positions(config), directions, valid)
+    rows, highest, start_load = [], load_average(), load_average()
+    for harmonics in (plan.table.azimuth_harmonics, 0):
+        settings = plan.table.replace(azimuth_harmonics=harmonics)
+        if args.smoke:
+            settings = settings.replace(size=SMOKE.table)
+        case = dataclasses.replace(plan, table=settings)
+        animate.build_table(config, case)                                          # warm-up
+        table, wall, cpu = timed_with_cpu(lambda: animate.build_table(config, case))
+        build_load = load_average()
+        with SkyRenderer(dataclasses.replace(table, orders=()), animate.ray_settings(config)) as renderer:
+            prepared = renderer.prepare(directions, valid)
+            sun = sun_direction(94.0, 180.0)
+            renderer.render_raymarch(prepared, sun, 0.0)                            # warm-up
+            _, frame_wall, frame_cpu = timed_with_cpu(lambda: renderer.render_raymarch(prepared, sun, 0.0))
+        frame_load = load_average()
+        highest = max(highest, build_load, frame_load)
+        rows.append(f"| {harmonics} | {' x '.join(map(str, settings.size))} | {table.orders_record['orders']} | "
+                    f"{wall:.1f} | {cpu:.1f} | {build_load:.1f} | {frame_wall:.2f} | {frame_cpu:.2f} | {frame_load:.1f} |")
+        print(rows[-1], flush=True)
+    width, height = config.image_shape()
+    lines = [f"The default `clsky animate` (sun from {config.start_elevation_deg:g} to {config.max_elevation_deg:g} "
+             f"deg, {plan.level.name} quality): its planned table with the planner's azimuth harmonics and with "
+             f"M = 0 (the azimuth average, the planner's choice before 2026-12-02), each built once after a "
+             f"warm-up build in the same process, and one {width} x {height} fisheye frame ray-marched over it "
+             f"with the sun 4 deg below the horizon. Measured {datetime.date.today()} on {machine()} (load "
+             f"average {start_load:.2f} at the start); wall and process CPU time (all threads) [s], load: the "
+             f"1-minute load average after each." + load_note(highest), "",
+             "| M | table | orders | build: wall | CPU | load | frame: wall | CPU | load |",
+             "|---:|---|---:|---:|---:|---:|---:|---:|---:|", *rows]
+    return "\n".join(lines)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cost", action="store_true",
+                        help="measure the cost of the harmonics in the default clsky animate instead")
     parser.add_argument("--harmonics", default="0,2", help="comma-separated azimuth_harmonics to compare")
     parser.add_argument("--quality", default="default", help="quality level of the ray march (clsky/quality.py)")
     parser.add_argument("--target", type=float, default=0.02, help="relative standard error per channel to reach")
@@ -43,6 +97,12 @@ def main():
                         help="comma-separated sun elevations [deg]")
     add_output_arguments(parser)
     args = parse_arguments(parser)
+    if args.cost:
+        markdown = cost(args)
+        print(markdown)
+        if not args.no_readme:
+            write_readme_section("twilight-cost", markdown)
+        return
     harmonics = [int(m) for m in args.harmonics.split(",")]
     elevations = [float(e) for e in args.elevations.split(",")]
     batch = BATCH

@@ -9,8 +9,8 @@ clsky/montecarlo.py, run until every channel's standard error is below ``--targe
 higher orders). Writes the per-view table and
 the summary (signed mean over views and channels, worst view in brackets) into README.md.
 
-Usage: python bench/bench_twilight.py [--atmosphere {black,physical}] [--quality LEVEL] [--target SE]
-       [--max-photons N] [--no-readme] [--smoke]
+Usage: python bench/bench_twilight.py [--atmosphere {black,physical}] [--quality LEVEL]
+       [--azimuth-harmonics M] [--target SE] [--max-photons N] [--no-readme] [--smoke]
 
 ``--atmosphere black`` (default): the physical preset without ozone and with a black ground, as issue
 11 measured; ``physical``: the preset itself (ozone, ground albedo 0.1). ``--smoke``: the 'draft'
@@ -61,6 +61,9 @@ def main():
     parser.add_argument("--atmosphere", choices=("black", "physical"), default="black",
                         help="black: physical preset, no ozone, black ground (issue 11's case); physical: the preset")
     parser.add_argument("--quality", default="default", help="quality level of the ray march (clsky/quality.py)")
+    parser.add_argument("--azimuth-harmonics", type=int, metavar="M",
+                        help="the tables' azimuth_harmonics (clsky/azimuth.py) instead of the scene planner's "
+                             "(2 below +30 deg since 2026-12-02; 0 reproduces the azimuth average of issue 11)")
     parser.add_argument("--target", type=float, default=0.01, help="relative standard error per channel to reach")
     parser.add_argument("--max-photons", type=int, default=40_000_000, help="most paths per channel and case")
     add_output_arguments(parser)
@@ -75,7 +78,8 @@ def main():
     wall, cpu = time.perf_counter(), time.process_time()
     rows, full, single, exact, settings = [], {}, {}, {}, {}
     for elevation in elevations:
-        marched, settings[elevation] = twilight.ray_march(atmosphere, elevation, quality=args.quality)
+        marched, settings[elevation] = twilight.ray_march(atmosphere, elevation, quality=args.quality,
+                                                          azimuth_harmonics=args.azimuth_harmonics)
         marched_single, _ = twilight.ray_march(atmosphere, elevation, quality=args.quality, single=True)
         full[elevation], single[elevation], exact[elevation] = [], [], []
         for i, view in enumerate(twilight.VIEWS):
@@ -102,8 +106,11 @@ def main():
     described = ("the physical preset without ozone and with a black ground (issue 11's case)"
                  if args.atmosphere == "black" else "the physical preset (ozone 300 DU, ground albedo 0.1)")
     sizes = sorted({settings[e].size for e in elevations})
+    harmonics = sorted({settings[e].azimuth_harmonics for e in elevations})
     lines = [f"Atmosphere: {described}. Ray march: the '{args.quality}' quality level as the scene planner sets "
-             f"it for each sun (tables {', '.join(' x '.join(map(str, s)) for s in sizes)}). Monte Carlo "
+             f"it for each sun (tables {', '.join(' x '.join(map(str, s)) for s in sizes)}; azimuth harmonics "
+             f"M = {', '.join(map(str, harmonics))}"
+             f"{'' if args.azimuth_harmonics is None else ', set by --azimuth-harmonics'}). Monte Carlo "
              f"(clsky/montecarlo.py): batches of {batch} paths per channel until every channel's standard "
              f"error is below {100 * args.target:g} % or {args.max_photons / 1e6:g} M paths are spent "
              f"(single scattering: {single_max / 1e6:g} M at most). Measured {datetime.date.today()} on "

@@ -45,8 +45,11 @@ altitude, view cosine, sun cosine and azimuth change:
 
 T_m the Chebyshev polynomials (cos(m phi) = T_m(cos phi)), and the clamp at 0 keeping a truncated
 series that rings negative from adding negative light (Fejer factors were not needed: with the clamp,
-M = 2, 4 and 8 agree within 3 %, README "Twilight against Monte Carlo"). The ray march (:func:`raymarch_higher_orders`) integrates the same sum of the
-gathered tables of all orders along each pixel's ray.
+M = 2, 4 and 8 agree within 3 %, README "Twilight against Monte Carlo"). The scatter of the orders
+k > 2 reads only the azimuth average G_0 of their source (:data:`HARMONIC_SOURCE_ORDERS`: within
+0.085 % of reading every harmonic, at a third less cost). The ray march
+(:func:`raymarch_higher_orders`) integrates the whole series of the gathered tables of all orders
+along each pixel's ray.
 
 Ground. A Lambertian ground (``ground_albedo`` > 0) works as in :mod:`clsky.ground`: the rays of every
 azimuth node that end on the ground see its radiance at their true ground point's sun cosine; the
@@ -64,7 +67,7 @@ import math
 
 import numpy as np
 
-from . import ground, reference
+from . import _cl, ground, reference
 from .atmosphere import AtmosphereParameters
 from .errors import ParameterError, is_integer
 from .mapping import altitude_to_u, cos_to_sun_t, cos_to_v, grid_coordinates
@@ -76,6 +79,18 @@ __all__ = ["azimuth_nodes", "harmonic_transform", "harmonic_phase_integrals",
            "HarmonicGather", "single_scattering_nodes", "scatter_nodes", "HarmonicOrders", "compute_orders",
            "orders_result", "azimuth_average", "gathered_along",
            "raymarch_higher_orders", "local_cos_azimuth"]
+
+#: Orders k whose scatter reads the harmonics m >= 1 of their gathered source; later orders read its
+#: azimuth average G_0 (still along the true rays of every azimuth node, and still gathered per
+#: harmonic for the ray march). None: every order. Only order 2's source, gathered from single
+#: scattering with its sharp phase to the sun, has azimuth structure that matters: reading G_0 alone
+#: from order 3 on changed the ray march's twilight views by at most 0.085 % at -6 deg, 0.013 % at
+#: -2 deg and 0.005 % at 0 and +5 deg (draft level, every view and channel; from order 2 on it
+#: would be 0.86 % at -6 deg), and an order's scatter at each node then costs the azimuth average's
+#: one lookup per sample instead of M + 1 (0.68 instead of 1.12 CPU-s per node on the default
+#: animation's 32 x 256 x 139 table).
+HARMONIC_SOURCE_ORDERS = 2
+
 
 def _check_harmonics(harmonics):
     if not is_integer(harmonics) or not 0 <= harmonics <= MAX_AZIMUTH_HARMONICS:
@@ -218,16 +233,25 @@ class HarmonicGather:
         """G_{s,m} (M + 1, D, H, W, 6) of single scattering's harmonics Ibar_{s',n} (M + 1, D, H, W, 6),
         factored (Rayleigh r, g, b, Mie r, g, b without phase)."""
         count, depth, height, width, _ = single_harmonics.shape
-        out = np.zeros((count, depth, height, width, 6))
+        out = np.empty((count, depth, height, width, 6))
+        harmonic = 0.0
         for other_index, other in enumerate(SPECIES):
             table = single_harmonics[..., 3 * other_index:3 * other_index + 3]
             seen = np.matmul(self.p, table.reshape(count, depth, height, width * 3))   # (n, D, Theta + 1, W*3)
-            # p_m(z, a) = sum_n C_{m,n}(z, a) seen_n(z, a)
-            harmonic = np.einsum("mnza,nzac->mzac", self.sun[other], seen)
-            for index, species in enumerate(SPECIES):
-                gathered = np.matmul(self.view[species][:, None], harmonic)          # (m, D, H, W * 3)
-                out[..., 3 * index:3 * index + 3] += gathered.reshape(count, depth, height, width, 3)
+            # p_m(z, a) = sum_n C_{m,n}(z, a) seen_n(z, a), summed over the species s' seen (both gathering
+            # species apply the same K_{s,m} to it: one matrix product per gathering species, not two)
+            harmonic = harmonic + np.einsum("mnza,nzac->mzac", self.sun[other], seen)
+        for index, species in enumerate(SPECIES):
+            gathered = np.matmul(self.view[species][:, None], harmonic)              # (m, D, H, W * 3)
+            out[..., 3 * index:3 * index + 3] = gathered.reshape(count, depth, height, width, 3)
         return out
+
+    def gather_matrices(self, harmonic):
+        """(2, H, H) Rayleigh and Mie matrices A_{s,m} = (wT sin K_{s,m}) P of harmonic m, as
+        :meth:`clsky.multiple.MultipleScatteringEngine.gather` takes them (m = 0:
+        :func:`clsky.multiple.gather_matrix`, the same product)."""
+        with _cl.host_blas_single_threaded():
+            return np.stack([self.view[species][harmonic] @ self.p for species in SPECIES])
 
 
 def _cos_scatter(cos_view, cos_sun, azimuth):
@@ -279,15 +303,19 @@ def gathered_along(atmosphere, ray_settings, gathered, grid_settings, h0, mu_v, 
     return rays.integrate(atmosphere, transmittance, g[..., 0:3], g[..., 3:6])
 
 
-def scatter_nodes(atmosphere: AtmosphereParameters, settings: TableSettings, gathered, ground_radiance=None):
+def scatter_nodes(atmosphere: AtmosphereParameters, settings: TableSettings, gathered, ground_radiance=None,
+                  source_harmonics=None):
     """The next order L^(k+1) (M + 1, D, H, W, 3) at the azimuth nodes from the gathered harmonics
     ``gathered`` (M + 1, D, H, W, 6), phase applied and both species combined; twin of
     ``MultipleScatteringEngine.scatter(combine_species=True)`` at each node's cos_azimuth. With a
     reflecting ground, rays that end on it add T L_g(mu_sun there), ``ground_radiance`` L_g (D, 3) per
-    sun node (:mod:`clsky.ground`), as :func:`clsky.reference.scatter` does along the true ray."""
+    sun node (:mod:`clsky.ground`), as :func:`clsky.reference.scatter` does along the true ray.
+    ``source_harmonics`` (0 .. M): the rays read only that many harmonics of the source (0: its
+    azimuth average, the M = 0 kernel at each node's cos_azimuth); None: all."""
     from .ground import interpolate_sun_axis
 
     count = gathered.shape[0]
+    source = gathered if source_harmonics is None else gathered[:source_harmonics + 1]
     altitudes, cos_view, cos_sun = grid_coordinates(settings.size, atmosphere.atmosphere_height,
                                                     settings.mapping, settings.sun_cos_range)
     scatter_settings = settings.scatter_settings
@@ -295,7 +323,7 @@ def scatter_nodes(atmosphere: AtmosphereParameters, settings: TableSettings, gat
     for azimuth in azimuth_nodes(count - 1):
         def cells(x, y, z, azimuth=azimuth):
             nu = None if azimuth == 0.0 else _cos_scatter(cos_view[y], cos_sun[z], azimuth)
-            value = gathered_along(atmosphere, scatter_settings, gathered, settings, altitudes[x], cos_view[y],
+            value = gathered_along(atmosphere, scatter_settings, source, settings, altitudes[x], cos_view[y],
                                    cos_sun[z], nu)
             value = value[:, :3] + value[:, 3:]
             if atmosphere.has_ground:
@@ -339,22 +367,49 @@ class HarmonicOrders:
     ground_irradiance: np.ndarray | None = None
 
 
-def _numpy_backend(atmosphere, settings):
-    """(single at node n, scatter of gathered harmonics at node n) of the NumPy twins."""
+@dataclasses.dataclass
+class _Backend:
+    """Where an order's ray integrals and gathers run.
+
+    single: Ibar^(1) at the azimuth nodes (M + 1, D, H, W, 6) on the host; upload(gathered): the
+    host's gathered harmonics (M + 1, D, H, W, 6) in the backend's form; scatter(gathered,
+    ground_radiance): (the order's nodes (M + 1, D, H, W, 3) on the host, the same in the backend's
+    form); gather(that form): the next order's gathered harmonics (backend's form); to_host(gathered):
+    (M + 1, D, H, W, 6) float64; device: its description."""
+
+    single: np.ndarray
+    upload: object
+    scatter: object
+    gather: object
+    to_host: object
+    device: str
+
+
+def _numpy_backend(atmosphere, settings, operators):
+    """The NumPy twins: the ray integrals of :func:`single_scattering_nodes` and :func:`scatter_nodes`,
+    the gathers of :meth:`HarmonicGather.gather`."""
     single = single_scattering_nodes(atmosphere, settings)
 
-    def scatter(gathered, ground_radiance):
-        return scatter_nodes(atmosphere, settings, gathered, ground_radiance)
+    def scatter(gathered, ground_radiance, source_harmonics=None):
+        nodes = scatter_nodes(atmosphere, settings, gathered, ground_radiance, source_harmonics)
+        return nodes, nodes
 
-    return single, scatter, "numpy"
+    def gather(nodes):
+        return operators.gather(_to_harmonics(nodes))
+
+    return _Backend(single, lambda gathered: gathered, scatter, gather, lambda gathered: gathered, "numpy")
 
 
-def _opencl_backend(atmosphere, settings, ctx, fast_math):
+def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     """The same on OpenCL: ``SingleScatteringEngine.compute`` and ``MultipleScatteringEngine.scatter`` at
-    each azimuth node's cos_azimuth (kernels/view_ray.cl: table_cell, add_lookups)."""
+    each azimuth node's cos_azimuth (kernels/view_ray.cl: table_cell, add_lookups), and the gathers of
+    every harmonic with the gather kernel (``MultipleScatteringEngine.gather``, the azimuth average's
+    kernel, with :meth:`HarmonicGather.gather_matrices`): an order's nodes, their harmonics and the
+    gathered harmonics stay on the device; only the nodes are copied to the host (the stopping test,
+    the table's azimuth average)."""
+    import pyopencl as cl
     import pyopencl.array as cla
 
-    from . import _cl
     from .multiple import MultipleScatteringEngine
     from .single import SingleScatteringEngine
 
@@ -362,15 +417,45 @@ def _opencl_backend(atmosphere, settings, ctx, fast_math):
     engine = MultipleScatteringEngine(settings, ctx=single_engine.ctx, fast_math=fast_math)
     cosines = np.cos(azimuth_nodes(settings.azimuth_harmonics))
     single = np.stack([single_engine.compute(atmosphere, cos_azimuth=c) for c in cosines])
+    transform = harmonic_transform(settings.azimuth_harmonics)
+    matrices = [engine.upload_matrices(operators.gather_matrices(m)) for m in range(cosines.size)]
 
-    def scatter(gathered, ground_radiance):
+    def upload(gathered):
         padded = np.zeros(gathered.shape[:-1] + (8,), dtype=engine.dtype)
         padded[..., :6] = gathered
-        gathered_d = cla.to_device(engine.queue, padded)
-        return np.stack([engine.scatter(atmosphere, gathered_d, combine_species=True, ground_radiance=ground_radiance,
-                                        cos_azimuth=c).get()[..., :3].astype(np.float64) for c in cosines])
+        return cla.to_device(engine.queue, padded)
 
-    return single, scatter, _cl.describe_device(single_engine.device)
+    engines = {settings.azimuth_harmonics: engine}
+
+    def scatter(gathered_d, ground_radiance, source_harmonics=None):
+        """The nodes; the rays read ``source_harmonics`` harmonics of the source (the first ones of the
+        padded (M + 1, D, H, W, 8) buffer: a kernel built for fewer harmonics reads only those)."""
+        read = settings.azimuth_harmonics if source_harmonics is None else source_harmonics
+        if read not in engines:
+            engines[read] = MultipleScatteringEngine(settings.replace(azimuth_harmonics=read), ctx=engine.ctx,
+                                                     fast_math=fast_math)
+        if read != settings.azimuth_harmonics:
+            engine.queue.finish()      # another engine's queue: the gathered harmonics must be written first
+        nodes_d = [engines[read].scatter(atmosphere, gathered_d, combine_species=True,
+                                         ground_radiance=ground_radiance, cos_azimuth=c) for c in cosines]
+        host = np.stack([node.get()[..., :3].astype(np.float64) for node in nodes_d])    # waits for them
+        return host, [node.with_queue(engine.queue) for node in nodes_d]    # the harmonics and gathers' queue
+
+    def gather(nodes_d):
+        """G_m = A_m L_m, L_m = sum_n H[m, n] L(phi_n) (padded: channels 0-2 and 3-5 both hold L)."""
+        out = cla.empty(engine.queue, (len(nodes_d),) + nodes_d[0].shape, engine.dtype)
+        for m, row in enumerate(transform):
+            harmonic = nodes_d[0] * engine.dtype.type(row[0])
+            for weight, node in zip(row[1:], nodes_d[1:]):
+                harmonic = harmonic.mul_add(1.0, node, engine.dtype.type(weight))
+            part = engine.gather(matrices[m], harmonic)
+            cl.enqueue_copy(engine.queue, out.data, part.data, byte_count=part.nbytes, dst_offset=m * part.nbytes)
+        return out
+
+    def to_host(gathered_d):
+        return gathered_d.get()[..., :6].astype(np.float64)
+
+    return _Backend(single, upload, scatter, gather, to_host, _cl.describe_device(single_engine.device))
 
 
 def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, backend="numpy", ctx=None,
@@ -394,31 +479,35 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
     harmonics = settings.azimuth_harmonics
     if settings.mode != "physical":
         raise ParameterError("mode", "'physical' with azimuth harmonics", settings.mode)
-    if backend == "numpy":
-        single_nodes, scatter, device = _numpy_backend(atmosphere, settings)
-    elif backend == "opencl":
-        single_nodes, scatter, device = _opencl_backend(atmosphere, settings, ctx, fast_math)
-    else:
+    if backend not in ("numpy", "opencl"):
         raise ParameterError("backend", "one of ['numpy', 'opencl']", backend)
     operators = HarmonicGather(atmosphere, settings, harmonics)
+    if backend == "numpy":
+        run = _numpy_backend(atmosphere, settings, operators)
+    else:
+        run = _opencl_backend(atmosphere, settings, operators, ctx, fast_math)
+    single_nodes = run.single
     wanted = settings.max_orders if settings.orders == "auto" else settings.orders
     record = {"harmonics": harmonics, "converged": False, "relative_additions": [],
-              "device": device}
+              "device": run.device}
+    single_harmonics = _to_harmonics(single_nodes)
+    ground_sky = pending_ground = None      # as in clsky.orders: E_1 + ... + E_k, and a / pi of what is pending
+    if atmosphere.has_ground:               # E_1 even for single scattering alone: the table's ground term needs it
+        ground_sky = operators.single_ground_irradiance(single_harmonics)
     if wanted == 1:
         record["orders"] = 1
-        return HarmonicOrders(single_nodes[0], None, [], record)
-    single_harmonics = _to_harmonics(single_nodes)
-    gathered = operators.first_gather(single_harmonics)
-    ground_sky = pending_ground = None      # as in clsky.orders: E_1 + ... + E_k, and a / pi of what is pending
+        return HarmonicOrders(single_nodes[0], None, [], record, ground_sky)
+    gathered = run.upload(operators.first_gather(single_harmonics))
     if atmosphere.has_ground:
-        ground_sky = operators.single_ground_irradiance(single_harmonics)
         pending_ground = ground.reflected_radiance(atmosphere, ground.direct_irradiance(atmosphere, settings)
                                                    + ground_sky)
     running = single_nodes[..., :3] + single_nodes[..., 3:]
     gathered_sum, orders = None, []
     for k in range(2, wanted + 1):
         gathered_sum = gathered.copy() if gathered_sum is None else gathered_sum + gathered
-        new = scatter(gathered, pending_ground)
+        new, state = run.scatter(gathered, pending_ground,
+                                 None if HARMONIC_SOURCE_ORDERS is None or k <= HARMONIC_SOURCE_ORDERS else 0)
+        del gathered
         orders.append(check_finite(new, k, atmosphere, settings))
         if ground_sky is not None:     # the horizontal ground sees the azimuth average (m = 0)
             sky = ground.sky_irradiance(atmosphere, settings, azimuth_average(new), factored=False)
@@ -433,9 +522,10 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
             record["converged"] = True
             break
         if k < wanted:
-            gathered = operators.gather(_to_harmonics(new))
+            gathered = run.gather(state)
+        del state
     record["orders"] = len(orders) + 1
-    return HarmonicOrders(single_nodes[0], gathered_sum, orders, record, ground_sky)
+    return HarmonicOrders(single_nodes[0], run.to_host(gathered_sum), orders, record, ground_sky)
 
 
 def azimuth_average(order_nodes):
@@ -457,7 +547,9 @@ def orders_result(atmosphere: AtmosphereParameters, settings: TableSettings, bac
     start = time.perf_counter()
     result = compute_orders(atmosphere, settings, backend=backend, ctx=ctx, fast_math=fast_math,
                             progress=None if progress is None else (lambda k, _: progress("orders", k, 0)))
-    orders = [result.single] + [azimuth_average(order) for order in result.orders]
+    orders = [result.single]
+    while result.orders:     # each order's nodes go as soon as their average is taken (peak memory)
+        orders.append(azimuth_average(result.orders.pop(0)))
     additions = result.record["relative_additions"]
     if settings.orders == "auto":
         reason = (f"converged: order {len(orders)} added at most {additions[-1]:.2e} of the running sum (tolerance "

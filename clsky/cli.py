@@ -170,7 +170,8 @@ def _add_table_arguments(parser):
     orders.add_argument("--azimuth-harmonics", type=int, metavar="M",
                         help="the physical mode's orders k >= 2 carry M cosine harmonics of the view-sun "
                              "azimuth (clsky/azimuth.py; 2 fixes twilight, README 'Twilight against Monte "
-                             "Carlo'; default: 0, the azimuth average)")
+                             "Carlo'; default: the --quality level's, 2 for reference, else 0, the azimuth "
+                             "average; with --sun-elevations the scene planner's, 2 when LOW is below 30 deg)")
     orders.add_argument("--order-tolerance", type=float, help="auto stops when an order adds less than this "
                                                               "(default: 1e-4)")
     orders.add_argument("--max-orders", type=int, help="most orders auto computes (default: 100)")
@@ -332,7 +333,7 @@ def table_settings(args, atmosphere):
 
 
 def _table_settings(args, atmosphere):
-    from .planner import Scene, sun_axis
+    from .planner import Scene, azimuth_harmonics, sun_axis
     from .quality import QUALITY_LEVELS, quality_level
     from .settings import TableSettings
 
@@ -357,6 +358,10 @@ def _table_settings(args, atmosphere):
                                           settings.mapping, orders=settings.orders != 1)
         depth = settings.size[2] if args.size is not None else nodes
         settings = settings.replace(size=settings.size[:2] + (depth,), sun_cos_range=cos_range)
+        if args.azimuth_harmonics is None and settings.orders != 1:     # the scene planner's choice
+            harmonics, _ = azimuth_harmonics(level or QUALITY_LEVELS["default"], scene.sun_elevations_deg,
+                                             settings.mode)
+            settings = settings.replace(azimuth_harmonics=harmonics)
     return settings
 
 

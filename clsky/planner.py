@@ -29,6 +29,18 @@ What the plan decides, and why:
 * **Ray march**: the table lookup alone serves the scene only where its measured error
   (:data:`LOOKUP_ERROR`) fits the budget at the path's lowest sun; otherwise frames need the ray march
   (and so does an animation that renders both: ``plan_scene(..., ray_march=True)``).
+* **Azimuth harmonics** (:func:`azimuth_harmonics`): the orders k >= 2 carry the view-sun azimuth
+  (:mod:`clsky.azimuth`, M = :attr:`clsky.quality.QualityLevel.twilight_harmonics`, 2) when the
+  scene's sun goes below :data:`HARMONICS_BELOW_DEG` (+30 deg), the azimuth average (M = 0) otherwise.
+  Against the Monte Carlo (README, "Twilight against Monte Carlo") the azimuth average is too bright
+  by +6 % on average at 0 deg and +134 % at -6 deg, while M = 2 stays within the tracer's noise (p95
+  0.7-2.2 % from +10 to -6 deg). By day its worst view (4 deg up, across the sun) stays over issue
+  11's 2 % bar up to +20 deg: p95 of the deviation (four views, three channels) 2.7 % at +10 deg,
+  2.1 % at +20 deg, 1.8 % at +30 deg (tracer's standard errors 0.1-0.7 %).
+  It costs about 5 times the table build (each order scattered and gathered at 3 azimuths; measured
+  81 against 16 CPU-s for the default animation's table) and 1.4 times the ray-marched frame (3
+  lookups per sample), so scenes whose sun stays at or above +30 deg, where the azimuth average
+  meets the bar, keep it (README, "Twilight against Monte Carlo").
 * **View nodes** (:func:`view_sampling`, for the table and the ray march alike): 'ground_end' when an
   observer is above the ground, Keller & Bohn's otherwise. Keller & Bohn's nodes bunch at the
   observer while, looking down, the haze lies at the ground end: on rays that hit the ground their
@@ -52,8 +64,8 @@ from .mapping import cos_to_v
 from .quality import QualityLevel, level_for_budget, quality_level
 from .settings import TableSettings
 
-__all__ = ["Scene", "Plan", "plan_scene", "sun_margins", "sun_axis", "view_sampling", "LOOKUP_ERROR",
-           "COMPONENTS"]
+__all__ = ["Scene", "Plan", "plan_scene", "sun_margins", "sun_axis", "view_sampling", "azimuth_harmonics",
+           "LOOKUP_ERROR", "COMPONENTS", "HARMONICS_BELOW_DEG"]
 
 #: Light components a scene may want.
 COMPONENTS = ("rayleigh", "mie", "multiple")
@@ -159,7 +171,8 @@ class Plan:
     @property
     def full_table(self) -> TableSettings:
         """The table of the same quality over the whole sun axis (what the plan is measured against)."""
-        return self.level.table.replace(mode=self.table.mode, sampling=self.table.sampling)
+        return self.level.table.replace(mode=self.table.mode, sampling=self.table.sampling,
+                                        azimuth_harmonics=self.table.azimuth_harmonics)
 
     @property
     def work_fraction(self) -> float:
@@ -207,6 +220,35 @@ def view_sampling(altitudes_m) -> tuple:
         return "ground_end", (f"an observer at {high:g} m: rays that hit the ground get nodes at their ground "
                               "end, where the haze is (Keller & Bohn's are 4.6 % off from 10 km, 291 % from 100 km)")
     return "keller_bohn", "observers on the ground: no view ray hits the ground"
+
+
+#: A scene whose sun goes below this elevation [deg] gets the higher orders with azimuth harmonics
+#: (:func:`azimuth_harmonics`). Issue 11 asks for 2 % (95th percentile) at 0 deg and above; the azimuth
+#: average misses it up to +20 deg (p95 of four views' deviation from the tracer: 3.6 % at +5, 2.7 % at
+#: +10, 2.1 % at +20 deg; across the sun, 4 deg up) and meets it at +30 deg (1.8 %).
+HARMONICS_BELOW_DEG = 30.0
+
+
+def azimuth_harmonics(level: QualityLevel, sun_elevations_deg, mode="physical") -> tuple:
+    """(M, reason): the ``TableSettings.azimuth_harmonics`` of a table for a sun path
+    ``sun_elevations_deg`` = (low, high) [deg] at quality ``level`` (module docstring).
+
+    The level's own table setting when it has one (the 'reference' level carries harmonics at every
+    sun); else ``level.twilight_harmonics`` when the lowest sun is below :data:`HARMONICS_BELOW_DEG`
+    and the scheme is 'physical' (the harmonics need it); else 0, the azimuth average.
+    """
+    low, _ = _check_range("sun_elevations_deg", sun_elevations_deg, -90.0, 90.0)
+    if mode != "physical":
+        return 0, f"the {mode} scheme has no azimuth harmonics"
+    if level.table.azimuth_harmonics:
+        return level.table.azimuth_harmonics, f"the {level.name} level carries them at every sun"
+    if low < HARMONICS_BELOW_DEG and level.twilight_harmonics:
+        return level.twilight_harmonics, (
+            f"the sun goes down to {low:g} deg, below {HARMONICS_BELOW_DEG:g}: the azimuth average is "
+            f"2.1 % off at +20 deg, +6 % at 0 deg and +134 % at -6 deg against the Monte Carlo, M = 2 "
+            f"within 2.2 %")
+    return 0, (f"the sun stays at or above {HARMONICS_BELOW_DEG:g} deg, where the azimuth average is "
+               f"within 2 % of the Monte Carlo (1.8 % at +30 deg)")
 
 
 def _ray_angle(planet_radius, top_radius, radius, mu):
@@ -339,7 +381,8 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         decisions.append(("Mie", "dropped", "not wanted by the scene"))
 
     sampling, because = view_sampling(scene.altitudes_m)
-    table = level.table.replace(mode=mode, sampling=sampling)
+    harmonics, harmonics_because = azimuth_harmonics(level, scene.sun_elevations_deg, mode)
+    table = level.table.replace(mode=mode, sampling=sampling, azimuth_harmonics=harmonics)
     lookup_error = _lookup_error(scene.sun_elevations_deg[0])
     if lookup_error <= budget and ray_march:
         ray = level.ray
@@ -366,17 +409,18 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
 
     table, elevations, margins = on_sun_axis(table, orders=True)
     if "multiple" not in scene.components:
-        table, elevations, margins = on_sun_axis(table.replace(orders=1), orders=False)
+        table, elevations, margins = on_sun_axis(table.replace(orders=1, azimuth_harmonics=0), orders=False)
         decisions.append(("higher orders", "dropped", "not wanted by the scene"))
     else:
         share = _higher_orders_share(atmosphere, table, scene, ctx=ctx)
         if share < 0.5 * budget:
-            table, elevations, margins = on_sun_axis(table.replace(orders=1), orders=False)
+            table, elevations, margins = on_sun_axis(table.replace(orders=1, azimuth_harmonics=0), orders=False)
             decisions.append(("higher orders", "dropped", f"they add at most {100 * share:.3g} % (pilot), "
                               f"under half the budget"))
         else:
             decisions.append(("higher orders", f"until an order adds < {table.order_tolerance:g}",
                               f"they add up to {100 * share:.3g} % of the light (pilot)"))
+            decisions.append(("azimuth harmonics", f"M = {harmonics}", harmonics_because))
 
     w_low, w_high = table.sun_w_range
     decisions.append(("sun axis", f"elevations {elevations[0]:.1f} to {elevations[1]:.1f} deg, "

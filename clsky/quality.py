@@ -18,6 +18,11 @@ What sets a level apart (measured, README):
   about as the spacing to the power 2.2. So a level fixes that spacing (:attr:`QualityLevel.sun_node_spacing`)
   rather than the node count: the planner (:mod:`clsky.planner`) spreads as many nodes as it needs
   over the sun angles a scene reaches.
+* The higher orders carry the view-sun azimuth (:attr:`QualityLevel.twilight_harmonics`, M = 2) where
+  the sun goes below +30 deg (the scene planner decides, :func:`clsky.planner.azimuth_harmonics`), and
+  the 'reference' level carries them at every sun: the azimuth average (M = 0) is +6 % too bright at
+  sunset and +134 % at -6 deg against the Monte Carlo, M = 2 within its noise (README, "Twilight
+  against Monte Carlo"), so a reference without them measured convergence, not truth.
 * A table lookup cannot meet these budgets below golden hour whatever its size (the 3D table has no
   azimuth: 32 % at sunset, hundreds of % in twilight): the levels are for the ray march, and the
   planner allows the lookup alone only where its measured error fits the budget.
@@ -51,6 +56,11 @@ class QualityLevel:
         Largest spacing of the sun axis' nodes in texture coordinate w.
     ray : TableSettings
         The ray march's quadrature (samples per ray = ``ray.view_steps``).
+    twilight_harmonics : int
+        The azimuth harmonics M of the higher orders (``TableSettings.azimuth_harmonics``,
+        :mod:`clsky.azimuth`) that the scene planner gives a table whose sun goes below
+        :data:`clsky.planner.HARMONICS_BELOW_DEG`; ``table.azimuth_harmonics`` is the level's choice at
+        every sun (the 'reference' level's 2; the others' 0, the azimuth average, right by day).
     """
 
     name: str
@@ -58,6 +68,7 @@ class QualityLevel:
     table: TableSettings
     sun_node_spacing: float
     ray: TableSettings
+    twilight_harmonics: int = 2
 
     def sun_nodes(self, w_low=0.0, w_high=1.0) -> int:
         """Sun-axis nodes that keep the spacing over [w_low, w_high] (at least 4)."""
@@ -79,7 +90,7 @@ QUALITY_LEVELS = {
         _level("high", 1e-3, (32, 256), 0.002, 128, view_steps=60, multiple_view_steps=40, sun_steps=60,
                order_tolerance=1e-5),
         _level("reference", 5e-4, (32, 256), 0.0015, 256, view_steps=120, multiple_view_steps=None,
-               sun_steps=240, transmittance_size=(128, 512), order_tolerance=1e-5),
+               sun_steps=240, transmittance_size=(128, 512), order_tolerance=1e-5, azimuth_harmonics=2),
     )
 }
 

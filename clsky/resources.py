@@ -233,7 +233,9 @@ def estimate_table_memory(settings: TableSettings, backend="opencl", saving=Fals
     cells, _, _, s = _table_sizes(settings)
     orders = expected_orders(settings)
     phases = [_single_phase(settings)]
-    if orders > 1:
+    if orders > 1 and settings.azimuth_harmonics:
+        phases.extend(_harmonic_phases(settings, orders))
+    elif orders > 1:
         if settings.mode == "physical":
             phases.append(_first_gather_phase(settings))
         phases.extend(_orders_phases(settings, orders))
@@ -312,6 +314,35 @@ def _orders_phases(settings, orders):
             Allocation("padded tables (D, H, W, 8)", padded, count=2, on_device=True),
             Allocation("gathered sum download (D, H, W, 8)", padded),
             Allocation("gathered sum (D, H, W, 6) float64", cells * 6 * _F64)))]
+
+
+def _harmonic_phases(settings, orders):
+    """The orders of a table with azimuth harmonics (:mod:`clsky.azimuth`, n = M + 1 azimuth nodes): the
+    first gather on the host (single scattering at the n nodes and its harmonics, each seen species'
+    (n, D, Theta + 1, W 3) interpolation and their harmonic sum, the n gathered harmonics, the padded
+    upload), then the orders loop (every order's n nodes kept on the host and the running sum at the
+    nodes; on the device the gathered sum, the gathered harmonics and the order's n nodes, padded, a
+    harmonic and its gather; each node's padded download)."""
+    cells, height, depth, s = _table_sizes(settings)
+    n = settings.azimuth_harmonics + 1
+    padded = cells * 8 * s
+    seen = n * depth * (settings.gather_theta_steps + 1) * settings.size[0] * 3 * _F64
+    single = Allocation("single scattering at the azimuth nodes (n, D, H, W, 6) float64", cells * 6 * _F64, count=n)
+    first = Phase("first gather", (
+        single, Allocation("single scattering's harmonics (n, D, H, W, 6) float64", cells * 6 * _F64, count=n),
+        Allocation("interpolated single scattering and its harmonic sum (n, D, Theta + 1, W 3)", seen, count=3),
+        Allocation("gathered harmonics (n, D, H, W, 6) float64", cells * 6 * _F64, count=n),
+        Allocation("padded upload (n, D, H, W, 8)", cells * 8 * _F64, count=n),
+        Allocation("gathered harmonics on the device (n, D, H, W, 8)", padded, count=n, on_device=True)))
+    loop = Phase("orders", (
+        single,
+        Allocation("gather matrices (n, 2, H, H)", 2 * height * height * s, count=n, on_device=True),
+        Allocation("higher orders kept at the nodes (n, D, H, W, 3) float64", cells * 3 * _F64, count=n * (orders - 1)),
+        Allocation("running sum at the nodes (n, D, H, W, 3) float64", cells * 3 * _F64, count=n),
+        Allocation("padded tables: gathered sum, gathered, nodes, harmonic, its gather", padded, count=3 * n + 2,
+                   on_device=True),
+        Allocation("node downloads (D, H, W, 8)", padded, count=n)))
+    return [first, loop]
 
 
 def _combine_phase(settings, table, orders):

@@ -92,8 +92,10 @@ class TableSettings:
         (clsky/azimuth.py); 0 is the azimuth-averaged canonical-frame scheme. At the 'default' level,
         2 brings the ray march within the Monte Carlo's noise (p95 of the deviation <= 2.2 %) from +5
         down to -6 deg sun elevation, where 0 is +0.9 to +133 % too bright on average (README,
-        "Twilight against Monte Carlo"). Needs mode 'physical'; costs about (M + 1)^2 times the
-        scatter of each order.
+        "Twilight against Monte Carlo"). Needs mode 'physical'. The scene planner sets 2 when a
+        scene's sun goes below +30 deg (:func:`clsky.planner.azimuth_harmonics`), the 'reference'
+        quality level at every sun. Each order is scattered at M + 1 azimuths (order 2 with M + 1
+        lookups per sample) and gathered per harmonic.
     parameterization : {'elek3d', '4d'}
         'elek3d' (default): the 3D table above. '4d': a fourth axis of ``azimuth_size`` nodes in the
         view-sun azimuth [0, pi], and the view axis split at the horizon (Bruneton 2017): single

@@ -502,6 +502,12 @@ class ScatteringTable:
     def export_raw(self, path, overwrite=False, staging=None):
         """Write ``<path>.bin`` (float32 values) and ``<path>.json`` (layout header) for GPU engines.
 
+        A table whose higher orders carry azimuth harmonics (``settings.azimuth_harmonics`` = M > 0,
+        :mod:`clsky.azimuth`) also exports them: its ``multiple_*`` channels hold their azimuth average
+        (harmonic 0), and the gathered harmonics G_m (M + 1, D, H, W, 6), the source the ray march
+        integrates, follow the table's values in the same ``.bin``; the header's ``azimuth_harmonics``
+        entry gives their offset, layout and formula. Without harmonics the export is as before.
+
         Returns the two paths. Both paths are checked before either is written (as in :meth:`save`),
         and they land together (renamed one after the other once both are written; with
         ``staging``, when that set commits); existing files are kept unless ``overwrite``.
@@ -554,11 +560,31 @@ class ScatteringTable:
             description["mapping_formulas"]["azimuth_4d"] = "a = (A-1) phi / pi, phi in [0, pi] the view-sun azimuth"
             description["radiance"] = ("I = I_I * (F_R(nu) * Ibar_R + F_M(nu) * Ibar_M + multiple), channels "
                                        "interpolated quadrilinearly, never across the horizon (y = H/2-1 to H/2)")
+        harmonics = self.settings.azimuth_harmonics if self.gathered is not None else 0
+        if harmonics:
+            description["azimuth_harmonics"] = {
+                "M": harmonics,
+                "offset_values": int(self.data.size),
+                "shape": {"harmonics": harmonics + 1, "D": depth, "H": height, "W": width, "channels": 6},
+                "layout": ("values[offset_values + (((m*D + z)*H + y)*W + x) * 6 + c]; m: harmonic 0..M, "
+                           "x, y, z: the table's nodes, c: Rayleigh r, g, b, Mie r, g, b"),
+                "quantity": ("G_m: cosine harmonics of the gathered in-scatter source of the orders k >= 2 "
+                             "(phase applied, in units of I_I), summed over the orders"),
+                "radiance": ("along a view ray: I_I * sum_s beta_s / (4 pi) * Integral rho_s T "
+                             "max(0, sum_m G_m,s cos(m phi)) ds, phi the local view-sun azimuth "
+                             "(clsky/azimuth.py); the multiple_* channels above are the azimuth "
+                             "average of the orders k >= 2 (harmonic 0 of their radiance)"),
+            }
         with contextlib.ExitStack() as stack:
             if staging is None:
                 staging = stack.enter_context(StagedWrites())
             with atomic_write(binary, overwrite, staging=staging) as temporary:
-                self.data.astype("<f4").tofile(temporary)
+                if harmonics:
+                    with open(temporary, "wb") as stream:
+                        self.data.astype("<f4").tofile(stream)
+                        self.gathered.astype("<f4").tofile(stream)
+                else:
+                    self.data.astype("<f4").tofile(temporary)
             with atomic_write(header, overwrite, staging=staging) as temporary:
                 temporary.write_text(json.dumps(description, indent=2) + "\n")
         return binary, header

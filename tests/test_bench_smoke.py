@@ -118,6 +118,14 @@ def test_smoke_run_prints_its_table_and_writes_nothing(name):
         assert found and math.isfinite(float(found.group(1))) and float(found.group(1)) > 0, (pattern, output)
 
 
+def test_azimuth_cost_smoke_prints_its_table_and_writes_nothing():
+    """``bench_azimuth.py --cost`` (the harmonics' cost in the default animation) at the smoke sizes:
+    one row per M, the planner's (2) first; ~10 s."""
+    rows = table_rows(run_smoke("bench_azimuth", "--cost"), "| M | table | orders | build: wall |")
+    assert [row[0] for row in rows] == ["2", "0"]
+    assert_finite_row(rows)
+
+
 def test_every_bench_script_is_covered():
     """A new bench script (bench_memory.py, ...) must get --smoke and a case here."""
     assert {p.stem for p in BENCH.glob("bench_*.py")} <= set(HEADERS)

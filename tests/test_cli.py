@@ -42,7 +42,8 @@ def test_table_with_quality_and_sun_elevations(tmp_path):
     acos(Rp / Ra) = 10.09 deg below, 3 gamma above) at the level's node spacing; an explicit option
     still wins."""
     result = clsky("table", "--preset", "physical", "--mode", "physical", "--quality", "draft", "--sun-elevations",
-                   "10", "30", "--sun-steps", "12", "-o", "day.npz", "--progress", "none", cwd=tmp_path)
+                   "10", "30", "--sun-steps", "12", "--orders", "2", "-o", "day.npz", "--progress", "none",
+                   cwd=tmp_path)       # two orders: the planner's M = 2 costs 3 scatters and gathers per order
     assert result.returncode == 0, result.stderr
     settings = ScatteringTable.load(tmp_path / "day.npz").settings
     assert settings.size[:2] == (16, 128) and settings.view_steps == 15 and settings.sun_steps == 12
@@ -51,6 +52,18 @@ def test_table_with_quality_and_sun_elevations(tmp_path):
     assert low == pytest.approx(np.sin(np.radians(10.0 - gamma)), abs=1e-12)
     assert high == pytest.approx(np.sin(np.radians(30.0 + 3 * gamma)), abs=1e-12)
     assert settings.size[2] == 37          # w from 0.443 to 0.977 at 0.015 spacing; the whole axis takes 68
+    assert settings.azimuth_harmonics == 2       # the planner's choice for a sun going below +30 deg
+
+
+def test_table_with_twilight_sun_elevations_gets_the_planners_harmonics(tmp_path):
+    """--sun-elevations reaching below +30 deg: the scene planner's M = 2 (clsky.planner.azimuth_harmonics);
+    a typed --azimuth-harmonics wins."""
+    for extra, expected in (([], 2), (["--azimuth-harmonics", "0"], 0)):
+        result = clsky("table", "--preset", "physical", "--quality", "draft", "--sun-elevations", "-6", "5",
+                       "--size", "6", "16", "6", "--orders", "2", "-o", "dusk.npz", "--force", "--progress", "none",
+                       *extra, cwd=tmp_path)
+        assert result.returncode == 0, result.stderr
+        assert ScatteringTable.load(tmp_path / "dusk.npz").settings.azimuth_harmonics == expected
 
 
 def test_table_refuses_to_overwrite_without_force(tmp_path):

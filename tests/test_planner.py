@@ -10,8 +10,8 @@ import pytest
 
 import clsky
 from clsky.mapping import grid_coordinates, sun_w_range
-from clsky.planner import LOOKUP_ERROR, Scene, plan_scene, sun_axis, sun_margins
-from clsky.quality import QUALITY_LEVELS
+from clsky.planner import HARMONICS_BELOW_DEG, LOOKUP_ERROR, Scene, azimuth_harmonics, plan_scene, sun_axis, sun_margins
+from clsky.quality import QUALITY_LEVELS, quality_level
 from clsky.render import SkyRenderer
 
 from conftest import black_preset
@@ -160,6 +160,30 @@ def test_unwanted_components_are_dropped(cl_context):
     assert decisions["Mie"] == "dropped" and decisions["higher orders"] == "dropped"
 
 
+@pytest.mark.parametrize("low, mode, level, expected", [
+    (-6.0, "physical", "default", 2), (5.0, "physical", "draft", 2), (29.9, "physical", "high", 2),
+    (30.0, "physical", "default", 0), (45.0, "physical", "draft", 0), (45.0, "physical", "reference", 2),
+    (-6.0, "atmosphere-plus", "default", 0), (-6.0, "atmosphere-plus", "reference", 0)])
+def test_azimuth_harmonics_where_the_sun_goes_below_10_deg(low, mode, level, expected):
+    """M = 2 (every level's twilight_harmonics) for a sun path reaching below HARMONICS_BELOW_DEG, in the
+    physical scheme; the reference level at every sun; never in the atmosphere-plus scheme."""
+    assert HARMONICS_BELOW_DEG == 30.0
+    harmonics, reason = azimuth_harmonics(quality_level(level), (low, 60.0), mode)
+    assert harmonics == expected and reason
+
+
+def test_planned_tables_carry_the_harmonics(cl_context):
+    """The plan's table, and the full table it is measured against, carry the chosen M; a plan without
+    higher orders has none; the decision is printed."""
+    twilight = plan_scene(Scene((-6.0, 60.0)), ctx=cl_context)
+    assert twilight.table.azimuth_harmonics == twilight.full_table.azimuth_harmonics == 2
+    assert "  azimuth harmonics  M = 2  (the sun goes down to -6 deg" in twilight.describe()
+    day = plan_scene(Scene((30.0, 60.0)), ctx=cl_context)
+    assert day.table.azimuth_harmonics == 0
+    single = plan_scene(Scene((-6.0, 60.0), components=SINGLE, error_budget=0.1), ctx=cl_context)
+    assert single.table.orders == 1 and single.table.azimuth_harmonics == 0
+
+
 def test_higher_orders_are_dropped_when_the_pilot_finds_them_negligible(cl_context):
     """A thin atmosphere (1 % of the Rayleigh and Mie scattering): the higher orders add ~1 % of the
     light, under half of a 10 % budget: single scattering suffices."""
@@ -215,7 +239,8 @@ def test_ground_scenes_keep_keller_bohn_bit_for_bit(preset_name, mode):
         assert plan.table.sampling == plan.ray.sampling == plan.full_table.sampling == "keller_bohn"
         assert plan.ray == plan.level.ray
         assert plan.table == plan.level.table.replace(mode=mode, size=plan.table.size, orders=plan.table.orders,
-                                                      sun_cos_range=plan.table.sun_cos_range)
+                                                      sun_cos_range=plan.table.sun_cos_range,
+                                                      azimuth_harmonics=plan.table.azimuth_harmonics)
         decisions = {topic: decision for topic, decision, _ in plan.decisions}
         assert decisions["view nodes"] == "keller_bohn"
 

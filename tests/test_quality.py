@@ -54,6 +54,9 @@ def test_levels_get_finer_in_every_setting():
         assert level.table.size[2] == level.sun_nodes(0.0, 1.0)
         assert (level.table.size[2] - 1) * level.sun_node_spacing >= 1.0
         assert level.table.mode == "physical" and level.ray.orders == 1
+        # the azimuth harmonics of twilight (clsky/planner.py), and the reference's at every sun
+        assert level.twilight_harmonics == 2
+        assert level.table.azimuth_harmonics == (2 if level.name == "reference" else 0)
 
 
 def planned_frames(name, ctx=None):

@@ -342,6 +342,24 @@ def test_spectral_batches_match_the_twin(small_spectral):
         assert_twin(kernel_table.gathered, twin_table.gathered, "single_scattering", "spectral gathered")
 
 
+def test_spectral_batches_with_azimuth_harmonics_match_the_twin(cl_context):
+    """A spectral build whose higher orders carry 2 azimuth harmonics (clsky/azimuth.py): every batch's
+    data and (3, D, H, W, 6) gathered harmonics against the NumPy twins, at the tolerance of the other
+    whole-table kernel-twin comparisons (single scattering, 1e-12); each batch is the table of its own
+    three wavelengths (a ScatteringTable of that batch's atmosphere, bit for bit)."""
+    settings = TableSettings(size=(6, 16, 6), mode="physical", orders=3, gather_theta_steps=32, gather_phi_steps=16,
+                             sun_cos_range=(-0.2, 0.5), azimuth_harmonics=2)
+    kernel = spectrum.SpectralTable.build(PHYSICAL, 4, settings, ctx=cl_context)
+    twin = spectrum.SpectralTable.build(PHYSICAL, 4, settings, backend="numpy")
+    atmospheres = spectrum.batch_atmospheres(PHYSICAL, spectrum.check_wavelengths(4))
+    for kernel_table, twin_table, batch in zip(kernel.tables, twin.tables, atmospheres):
+        assert kernel_table.gathered.shape == (3, 6, 16, 6, 6)
+        assert_twin(kernel_table.data, twin_table.data, "single_scattering", "spectral data, M = 2")
+        assert_twin(kernel_table.gathered, twin_table.gathered, "single_scattering", "spectral gathered, M = 2")
+        alone = ScatteringTable.build(batch, settings, ctx=cl_context)
+        assert np.array_equal(alone.data, kernel_table.data) and np.array_equal(alone.gathered, kernel_table.gathered)
+
+
 def test_dropping_orders_keeps_data_and_gathered(small_spectral, cl_context):
     lean = spectrum.SpectralTable.build(PHYSICAL, 4, small_spectral.settings, ctx=cl_context, keep_orders=False)
     assert all(len(t.orders) == 3 for t in small_spectral.tables) and all(t.orders == () for t in lean.tables)
