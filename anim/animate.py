@@ -45,6 +45,7 @@ from .cameras import camera_from_name
 from .exr import PRECISIONS
 
 __all__ = ["AnimationConfig", "AnimationResult", "METHODS", "quality", "plan_animation", "build_table", "make_renderer",
+           "make_table", "renderer_of", "FrameOutputs", "frame_outputs", "exposure_reference",
            "spectral_frame_to_linear_srgb", "three_wavelength_frame_to_linear_srgb", "frame_units",
            "THREE_WAVELENGTH_CONVERSION",
            "ray_settings", "sun_positions", "check_outputs", "render_animation", "render_frame",
@@ -511,17 +512,29 @@ def _with_sampling(settings: clsky.TableSettings, config: AnimationConfig) -> cl
 
 
 def make_renderer(config: AnimationConfig, plan: Plan | None = None, ctx=None, progress=None):
-    """(renderer, table) of the animation: a :class:`~clsky.render.SkyRenderer` of :func:`build_table`'s
-    table, or with ``config.wavelengths`` a :class:`clsky.spectrum.SpectralRenderer` of N wavelengths
-    over the same base atmosphere and settings (the plan's, or the config's); the frames keep only the
-    data and gathered sum of each table (the higher orders are dropped)."""
+    """(renderer, table) of the animation: :func:`renderer_of` :func:`make_table`'s table."""
+    table = make_table(config, plan, ctx=ctx, progress=progress)
+    return renderer_of(config, table, ctx=ctx), table
+
+
+def make_table(config: AnimationConfig, plan: Plan | None = None, ctx=None, progress=None):
+    """The table the frames read: :func:`build_table`'s, or with ``config.wavelengths`` a
+    :class:`clsky.spectrum.SpectralTable` of N wavelengths over the same base atmosphere and settings
+    (the plan's, or the config's); only the data and gathered sum of each table are kept (the higher
+    orders are dropped)."""
     if config.wavelengths is None:
-        table = dataclasses.replace(build_table(config, plan, ctx=ctx, progress=progress), orders=())
-        return SkyRenderer(table, ray_settings(config), ctx=ctx), table
+        return dataclasses.replace(build_table(config, plan, ctx=ctx, progress=progress), orders=())
     base, settings = _base(config, plan)
-    table = spectrum.SpectralTable.build(base, config.wavelengths, settings, ctx=ctx, progress=progress,
-                                         keep_orders=False)
-    return spectrum.SpectralRenderer(table, ray_settings(config), ctx=ctx), table
+    return spectrum.SpectralTable.build(base, config.wavelengths, settings, ctx=ctx, progress=progress,
+                                        keep_orders=False)
+
+
+def renderer_of(config: AnimationConfig, table, ctx=None):
+    """The renderer of :func:`make_table`'s ``table``: a :class:`~clsky.render.SkyRenderer`, or with
+    ``config.wavelengths`` a :class:`clsky.spectrum.SpectralRenderer`, with :func:`ray_settings`."""
+    if config.wavelengths is None:
+        return SkyRenderer(table, ray_settings(config), ctx=ctx)
+    return spectrum.SpectralRenderer(table, ray_settings(config), ctx=ctx)
 
 
 def spectral_frame_to_linear_srgb(frame, wavelengths):
@@ -636,19 +649,61 @@ def display(config: AnimationConfig, table) -> display_pipeline.Display:
                                     sun_white=sun_white, source="rec709")
 
 
-def display_frames(pipeline: display_pipeline.Display, hdr, valid, config: AnimationConfig, seed=0):
+def display_frames(pipeline: display_pipeline.Display, hdr, valid, config: AnimationConfig, seed=0, ev=None):
     """(EV, {name: 8-bit frame}, Delta E display) of one sun position's HDR frames: the exposure is
-    metered on the reference (the ray march when there is one) and shows every frame at that EV. The
+    metered on the reference (:func:`exposure_reference`, the ray march when there is one) and shows
+    every frame at that EV (or at ``ev`` [EV] if given: a frame farm's, smoothed in order). The
     Delta E display is the ``display`` of :func:`clsky.anim.metrics.compare_frames`: with both frames, their
     display-linear values (ray march, table lookup), computed once with the 8-bit frames
     (:meth:`clsky.anim.display.Display.encode_and_linear`; the tone curve and gamut mapping were half the
     frame loop's host time when Delta E evaluated them again); else the pipeline at that EV."""
-    ev = pipeline.exposure(hdr["raymarch"] if "raymarch" in hdr else next(iter(hdr.values())), valid)
+    if ev is None:
+        ev = pipeline.exposure(exposure_reference(hdr), valid)
     shown = {name: pipeline.encode_and_linear(frame, ev) for name, frame in hdr.items()}
     images = {name: tonemap.to_uint8(encoded, dither=config.dither, seed=seed) for name, (encoded, _) in shown.items()}
     if "raymarch" in shown and "lut" in shown:
         return ev, images, (shown["raymarch"][1], shown["lut"][1])
     return ev, images, (lambda pixels: pipeline.linear(pixels, ev))
+
+
+def exposure_reference(hdr):
+    """The frame of one sun position's HDR frames that the exposure is metered on: the ray march when
+    there is one, else the lookup (table or sky-view map)."""
+    return hdr["raymarch"] if "raymarch" in hdr else next(iter(hdr.values()))
+
+
+@dataclasses.dataclass
+class FrameOutputs:
+    """What the writer needs of one frame (:func:`frame_outputs`): its index, the 8-bit image (even
+    sizes), its metrics row, the mean luminance of each HDR frame (for the temporal jumps), and the HDR
+    frame to write (None without ``config.hdr``)."""
+
+    index: int
+    image: np.ndarray
+    row: dict
+    means: dict
+    hdr: np.ndarray | None
+
+
+def frame_outputs(pipeline: display_pipeline.Display, hdr, valid, config: AnimationConfig, sun, index: int,
+                  ev=None) -> FrameOutputs:
+    """Display values, metrics and composite of frame ``index`` (sun position ``sun``) from its HDR
+    frames (:func:`render_frame`): everything a frame costs after the render, the same wherever it runs
+    (this process, or a frame farm's worker, :mod:`clsky.anim.farm`, with ``ev`` given)."""
+    ev, images, shown = display_frames(pipeline, hdr, valid, config, seed=index, ev=ev)
+    row = {"frame": index, "sun_zenith_deg": sun.zenith_deg, "sun_azimuth_deg": sun.azimuth_deg,
+           "time": sun.time.isoformat() if sun.time is not None else "", "exposure_ev": ev}
+    means = {name: metrics.mean_luminance(frame[None], valid)[0] for name, frame in hdr.items()}
+    if config.compares:
+        row.update(metrics.compare_frames(hdr["raymarch"], hdr["lut"], valid, display=shown))
+        error = metrics.error_image(metrics.relative_error_map(hdr["raymarch"], hdr["lut"], valid), valid)
+        image = metrics.composite([images["lut"], images["raymarch"], error],
+                                  ["table lookup", "ray march", "relative error"])
+        frame_hdr = hdr["raymarch"]
+    else:
+        name = config.method if config.method in ("raymarch", "skyview") else "lut"
+        image, frame_hdr = images[name], hdr[name]
+    return FrameOutputs(index, _even(image), row, means, frame_hdr if config.hdr else None)
 
 
 def _frame_writer(config: AnimationConfig, total_frames: int, staging=None) -> writers.FrameWriter:
@@ -694,8 +749,12 @@ def _even(image):
 
 
 def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str, int, int], None] | None = None,
-                     report: Callable[[str], None] | None = None) -> AnimationResult:
+                     report: Callable[[str], None] | None = None, farm=None) -> AnimationResult:
     """Render, compare and write a whole animation (see the module docstring).
+
+    With ``farm`` (a started :class:`clsky.farm.Farm`), the table is built here once and the frames are
+    rendered by the farm's Dask workers (:func:`clsky.anim.farm.animation_frames`); they come back in
+    order to this process's writer: the same outputs, bit for bit, written the same way.
 
     ``progress(stage, done, total)`` is called for the table build ('single', 'orders') and for each
     frame ('frames'); ``report(text)`` receives the scene plan before the table is built.
@@ -717,13 +776,19 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
     if plan is not None and report is not None:
         report(plan.describe())
     # the frames need the data and the gathered sum only: the higher orders (K - 1 tables) go
-    renderer, table = make_renderer(config, plan, ctx=ctx, progress=progress)
-    prepared = renderer.prepare(directions, valid)
+    if farm is None:
+        renderer, table = make_renderer(config, plan, ctx=ctx, progress=progress)
+        frames = _local_frames(config, positions, renderer, renderer.prepare(directions, valid), valid)
+    else:
+        from .farm import animation_frames
+
+        table = make_table(config, plan, ctx=ctx, progress=progress)
+        frames = animation_frames(farm, config, table, positions)
     had_frames_directory = config.frames_directory.is_dir()
     try:
         with StagedWrites() as staging:
-            rows, temporal, paths, removed = _write_animation(config, positions, renderer, prepared, valid, table,
-                                                              plan, staging, progress)
+            rows, temporal, paths, removed = _write_animation(config, positions, frames, table, plan, staging,
+                                                              progress)
     except BaseException:
         if not had_frames_directory:             # created for the temporaries of the frames
             with contextlib.suppress(OSError):
@@ -742,39 +807,39 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
     return AnimationResult(rows, temporal, paths, seconds, summary, removed)
 
 
-def _write_animation(config, positions, renderer, prepared, valid, table, plan, staging, progress):
-    """Render every frame and stage the frames, the MP4 and the metrics in ``staging``; returns the
-    metric rows, the temporal jumps, the target paths and the stale frames to be deleted."""
+def _local_frames(config, positions, renderer, prepared, valid):
+    """The frame source of a single-process run: ``frames(pipeline)`` yields each frame's
+    :class:`FrameOutputs` in order, rendered and shown here: frame i + 1 renders on a worker thread while
+    this thread displays and compares frame i and the writer writes it (clsky.anim.pipeline: the same
+    frames, in order; OVERLAP_FRAMES = False renders them here, one by one)."""
+    def frames(pipeline):
+        rendered = pipeline_module.prefetched(lambda sun: render_frame(renderer, prepared, sun.direction, config),
+                                              positions, overlap=OVERLAP_FRAMES)
+        with contextlib.closing(rendered):
+            for index, (sun, hdr) in enumerate(rendered):
+                yield frame_outputs(pipeline, hdr, valid, config, sun, index)
+    return frames
+
+
+def _write_animation(config, positions, frames, table, plan, staging, progress):
+    """Stage the frames of ``frames(pipeline)`` (:class:`FrameOutputs` in order: :func:`_local_frames`,
+    or a farm's), the MP4 and the metrics in ``staging``; returns the metric rows, the temporal jumps,
+    the target paths and the stale frames to be deleted."""
     rows, means = [], {name: [] for name in ("lut", "raymarch", "skyview")}
     pipeline = display(config, table)
     # the frames' host products (sRGB and white-balance matrices, Oklab, XYZ for Delta E) on one BLAS
     # thread: beside PoCL's workers OpenBLAS's threads cost ~100x the CPU of one (README, "Speed")
-    # frame i + 1 renders on a worker thread while this thread displays, compares and writes frame i
-    # (clsky.anim.pipeline: the same frames, in order; OVERLAP_FRAMES = False renders them here, one by one)
-    frames = pipeline_module.prefetched(lambda sun: render_frame(renderer, prepared, sun.direction, config),
-                                        positions, overlap=OVERLAP_FRAMES)
     with _frame_writer(config, len(positions), staging) as writer, host_blas_single_threaded(), \
-            contextlib.closing(frames):
-        for index, (sun, hdr) in enumerate(frames):
-            ev, images, shown = display_frames(pipeline, hdr, valid, config, seed=index)
-            row = {"frame": index, "sun_zenith_deg": sun.zenith_deg, "sun_azimuth_deg": sun.azimuth_deg,
-                   "time": sun.time.isoformat() if sun.time is not None else "", "exposure_ev": ev}
-            for name, frame in hdr.items():
-                means[name].append(metrics.mean_luminance(frame[None], valid)[0])
-            if config.compares:
-                row.update(metrics.compare_frames(hdr["raymarch"], hdr["lut"], valid, display=shown))
-                error = metrics.error_image(metrics.relative_error_map(hdr["raymarch"], hdr["lut"], valid), valid)
-                image = metrics.composite([images["lut"], images["raymarch"], error],
-                                          ["table lookup", "ray march", "relative error"])
-                frame_hdr = hdr["raymarch"]
-            else:
-                name = config.method if config.method in ("raymarch", "skyview") else "lut"
-                image, frame_hdr = images[name], hdr[name]
-            writer.write(index, _even(image), hdr=frame_hdr if config.hdr else None,
+            contextlib.closing(frames(pipeline)) as produced:
+        for out in produced:
+            sun = positions[out.index]
+            for name, value in out.means.items():
+                means[name].append(value)
+            writer.write(out.index, out.image, hdr=out.hdr,
                          hdr_attributes=_hdr_attributes(config, table, sun) if config.hdr in ("exr", "hdr") else None)
-            rows.append(row)
+            rows.append(out.row)
             if progress is not None:
-                progress("frames", index + 1, len(positions))
+                progress("frames", out.index + 1, len(positions))
     paths = list(writer.paths)          # the frames and the MP4: they land when ``staging`` commits
     temporal = {}
     if config.compares:

@@ -134,6 +134,7 @@ def register(commands):
                              "65504, the sun's disc, are clipped to it and counted in the header)")
     output.add_argument("--force", action="store_true", help="overwrite existing outputs")
     output.add_argument("--progress", default="leave", choices=["display", "leave", "none"])
+    clsky_cli.add_farm_arguments(animate)
 
     render = commands.add_parser("render", help="render one frame (PNG)")
     _add_scene_arguments(render, frames=False)
@@ -229,6 +230,7 @@ def run_animate(args):
 
     scene.apply_scene(args, args.scene_parser)
     config = _config(args)
+    farm = clsky_cli.farm_of(args)               # --workers / --scheduler: checked, started after the checks
     if _printed_scene(args, config):
         return 0
     try:                                         # the MP4, <stem>_frames/, <stem>_metrics.csv/.json
@@ -238,7 +240,8 @@ def run_animate(args):
     _check_memory(args, config, sun_positions(config))
     progress, close = clsky_cli.progress_bar(args.progress)
     try:
-        result = render_animation(config, progress=progress, report=print)
+        with clsky_cli.running_farm(farm):
+            result = render_animation(config, progress=progress, report=print, farm=farm)
     finally:
         close()
     print(result.summary)
