@@ -33,7 +33,10 @@ What the plan decides, and why:
   nodes) where the level's ray-march error plus the map's own fits; otherwise the ray march. The
   sky-view map and the ray march need the ray march's quadrature and margins, and so does an animation
   that renders the ray march whatever the plan picks (``plan_scene(..., ray_march=True)``; the plan then
-  says which lookup would do).
+  says which lookup would do; ``clsky animate --method compare`` compares the ray march with the sky-view
+  map when the plan picks it or the ray march). The 4D table lookup is not a choice of the plan: its
+  table is a build of its own, which pays only over a frame count the plan does not know
+  (:mod:`clsky.renderer_choice`).
 * **Azimuth harmonics** (:func:`azimuth_harmonics`): the orders k >= 2 carry the view-sun azimuth
   (:mod:`clsky.azimuth`, M = :attr:`clsky.quality.QualityLevel.twilight_harmonics`, 2) when the
   scene's sun goes below :data:`HARMONICS_BELOW_DEG` (+30 deg), the azimuth average (M = 0) otherwise.

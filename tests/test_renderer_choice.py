@@ -31,9 +31,12 @@ def test_error_over_takes_the_worst_of_the_path_interpolated_in_log_error():
 
 def test_rows_are_measured_and_ordered_by_cost():
     methods = [r.method for r in RENDERERS]
-    assert methods == ["lut", "skyview", "raymarch"]
-    costs = [r.frame_cpu_ms for r in RENDERERS]
-    assert costs == sorted(costs) and all(c > 0 for c in costs)
+    assert methods == ["lut", "skyview", "lut4d", "raymarch"]
+    # the rows that read the plan's table or none: ordered by their cost per frame
+    costs = [r.frame_cpu_ms for r in RENDERERS if r.build_cpu_s == 0.0]
+    assert costs == sorted(costs) and all(r.frame_cpu_ms > 0 for r in RENDERERS)
+    # the 4D lookup: cheaper per frame than either lookup, but its own table costs 47 CPU-s (README "The 4D table")
+    assert row("lut4d").frame_cpu_ms < row("lut").frame_cpu_ms and row("lut4d").build_cpu_s == 47.0
     assert all(r.source for r in RENDERERS)
     assert set(RAY_MARCH_ERROR) == {"draft", "default", "high", "reference"}
 
@@ -48,21 +51,37 @@ def test_choice_is_the_cheapest_that_fits(path, budget, level, expected):
     chosen, estimate, estimates = choose_renderer(path, budget, level)
     assert chosen.method == expected
     assert estimate == estimates[expected]
-    cheaper = [r for r in RENDERERS if r.frame_cpu_ms < chosen.frame_cpu_ms]
+    cheaper = [r for r in RENDERERS if r.frame_cpu_ms < chosen.frame_cpu_ms and r.build_cpu_s == 0.0]
     assert all(estimates[r.method] > budget for r in cheaper)
     if expected != "raymarch":
         assert estimate <= budget
 
 
 def test_a_new_renderer_is_one_row():
-    """A 4D lookup (as issue 11's 'lut4d' will be measured) enters as one row and wins where it is the
-    cheapest that fits: here, cheaper than the sky-view map and within the budget in twilight."""
-    lut4d = RendererRow("lut4d", "4D table lookup", 0.5 * (row("lut").frame_cpu_ms + row("skyview").frame_cpu_ms),
+    """A renderer without a table of its own enters as one row and wins where it is the cheapest that
+    fits: here, cheaper than the sky-view map and within the budget in twilight."""
+    other = RendererRow("other", "another lookup", 0.5 * (row("lut").frame_cpu_ms + row("skyview").frame_cpu_ms),
                         ((-4.0, 0.02), (45.0, 0.005)), False, "a test row")
-    rows = RENDERERS + (lut4d,)
-    assert choose_renderer((-6.0, 60.0), 0.03, "default", rows)[0].method == "lut4d"
+    rows = RENDERERS + (other,)
+    assert choose_renderer((-6.0, 60.0), 0.03, "default", rows)[0].method == "other"
     assert choose_renderer((-6.0, 60.0), 0.01, "default", rows)[0].method == "skyview"
     assert choose_renderer((20.0, 60.0), 0.1, "draft", rows)[0].method == "lut"
+
+
+def test_the_4d_lookup_counts_its_table_build():
+    """Down to -6 deg the 4D lookup's 3.9 % plus the default ray march's 0.64 % fits a 5 % budget, and its
+    43 ms per frame beat the sky-view map's 86.9 ms; but its table costs 47 CPU-s, so it wins only from
+    47 / (0.0869 - 0.043) = 1071 frames on. Without a frame count (the scene plan) it is left out."""
+    path, budget = (-6.0, 60.0), 0.05
+    chosen, _, estimates = choose_renderer(path, budget, "default")
+    assert estimates["lut4d"] == pytest.approx(0.039 + 0.0064, rel=1e-12) and estimates["lut4d"] <= budget
+    assert chosen.method == "skyview"                                    # frames unknown: no build counted
+    assert choose_renderer(path, budget, "default", frames=120)[0].method == "skyview"     # 52 s against 10 s
+    assert choose_renderer(path, budget, "default", frames=1060)[0].method == "skyview"
+    assert choose_renderer(path, budget, "default", frames=1080)[0].method == "lut4d"
+    assert row("lut4d").cost_cpu_s(1080) == pytest.approx(47.0 + 1080 * 0.043, rel=1e-12)
+    # where it does not fit (1 %: its own 3.9 % at -6 deg), no frame count makes it win
+    assert choose_renderer(path, 0.01, "default", frames=100000)[0].method == "skyview"
 
 
 def test_nothing_fits_falls_back_to_the_ray_march():
