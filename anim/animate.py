@@ -1,4 +1,8 @@
-"""Sunrise-to-sunset animations: render every frame by table lookup and by ray march, compare, write.
+"""Sunrise-to-sunset animations: render every frame by a lookup and by ray march, compare, write.
+
+The lookup (:func:`lookup_of`) is the method's; the default, 'compare', compares the ray march with the
+best lookup for the budget, the scene plan's choice (:mod:`clsky.renderer_choice`): the per-frame sky-view
+map for the default scene, the 3D table lookup with an explicit ``table_size``.
 
 The pipeline, one frame at a time: sun position (:mod:`clsky.anim.sunpath`) -> HDR frames
 (:class:`clsky.render.SkyRenderer`, for the camera of :mod:`clsky.anim.cameras`; for every preset but
@@ -44,7 +48,8 @@ from . import metrics, sunpath, tonemap, writers
 from .cameras import camera_from_name
 from .exr import PRECISIONS
 
-__all__ = ["AnimationConfig", "AnimationResult", "METHODS", "quality", "plan_animation", "build_table", "make_renderer",
+__all__ = ["AnimationConfig", "AnimationResult", "METHODS", "LOOKUP_NAMES", "lookup_of", "comparison", "quality",
+           "plan_animation", "build_table", "make_renderer",
            "make_table", "renderer_of", "FrameOutputs", "frame_outputs", "exposure_reference",
            "spectral_frame_to_linear_srgb", "three_wavelength_frame_to_linear_srgb", "frame_units",
            "THREE_WAVELENGTH_CONVERSION",
@@ -55,6 +60,9 @@ __all__ = ["AnimationConfig", "AnimationResult", "METHODS", "quality", "plan_ani
 #: 'lut4d' and 'compare4d' are 'lut' and 'compare' with the 4D table (clsky/table4d.py) for the lookup;
 #: 'skyview' the per-frame sky-view map (:mod:`clsky.skyview`: a small map ray-marched per frame, read per pixel).
 METHODS = ("compare", "lut", "raymarch", "lut4d", "compare4d", "skyview")
+#: The lookups (:func:`lookup_of`), as the composites, metrics and summaries name them: the 3D table, the
+#: 4D table, the per-frame sky-view map. Each is also the key of its HDR frame (:func:`render_frame`).
+LOOKUP_NAMES = {"lut": "table lookup", "lut4d": "4D table", "skyview": "sky-view map"}
 #: Azimuth harmonics of the 4D methods' higher orders when the quality level has none (M = 2 brings
 #: the ray march within the Monte Carlo's noise down to -6 deg: README, "Twilight against Monte Carlo").
 LUT4D_HARMONICS = 2
@@ -95,8 +103,9 @@ class AnimationConfig:
     altitude : float
         Observer altitude [m], >= 0 (above 100 km: seen from space).
     method : {'compare', 'lut', 'raymarch', 'lut4d', 'compare4d', 'skyview'}
-        The frames: table lookup against the ray march, either alone; the 4D methods look up the 4D
-        table (parameterization '4d', clsky/table4d.py: mode 'physical', at least
+        The frames: a lookup against the ray march ('compare': the best lookup for the budget, the
+        scene plan's, :func:`lookup_of`; the 3D table lookup without a plan), either alone; the 4D
+        methods look up the 4D table (parameterization '4d', clsky/table4d.py: mode 'physical', at least
         :data:`LUT4D_HARMONICS` azimuth harmonics) instead of the 3D one; 'skyview' reads a per-frame
         sky-view map (:mod:`clsky.skyview`).
     skyview_size : (W, H) or None
@@ -608,20 +617,39 @@ def _camera(config):
     return camera_from_name(config.camera, width, height, **options)
 
 
-def render_frame(renderer: SkyRenderer, prepared, sun_direction, config: AnimationConfig):
-    """HDR frames {'lut': ..., 'raymarch': ...} of one sun position, as ``config.method`` asks; absolute
-    frames converted to linear sRGB [cd/m^2] (:func:`spectral_frame_to_linear_srgb` with
-    ``config.wavelengths``, else :func:`three_wavelength_frame_to_linear_srgb`)."""
-    frames = {}
-    if config.method in ("compare", "lut"):
-        frames["lut"] = renderer.render_table(prepared, sun_direction, config.altitude)
+def lookup_of(config: AnimationConfig, plan: Plan | None = None) -> str | None:
+    """The lookup the animation renders, a key of :data:`LOOKUP_NAMES` (None for 'raymarch'), chosen once
+    per animation: the method's own ('lut'; 'lut4d' for 'lut4d' and 'compare4d'; 'skyview'), and for
+    'compare' the best lookup for the budget, the scene plan's renderer
+    (:attr:`clsky.planner.Plan.renderer`, :mod:`clsky.renderer_choice`): the sky-view map when the plan
+    picks it, or when it picks the ray march (no lookup fits the budget; the sky-view map, the ray march
+    read at its nodes, is then the closest lookup), else the 3D table lookup; without a plan (an explicit
+    ``table_size``) the 3D table lookup."""
+    if config.method == "raymarch":
+        return None
     if config.lookup4d:
-        frames["lut"] = renderer.render_lut4d(prepared, sun_direction, config.altitude)
-    if config.method in ("compare", "raymarch", "compare4d"):
-        frames["raymarch"] = renderer.render_raymarch(prepared, sun_direction, config.altitude)
-    if config.method == "skyview":
+        return "lut4d"
+    if config.method == "compare" and plan is not None and plan.renderer in ("skyview", "raymarch"):
+        return "skyview"
+    return "skyview" if config.method == "skyview" else "lut"
+
+
+def render_frame(renderer: SkyRenderer, prepared, sun_direction, config: AnimationConfig, lookup=None):
+    """HDR frames {lookup: ..., 'raymarch': ...} of one sun position, as ``config.method`` asks: the lookup
+    ``lookup`` (a key of :data:`LOOKUP_NAMES`; default :func:`lookup_of` without a plan) and the ray
+    march; absolute frames converted to linear sRGB [cd/m^2] (:func:`spectral_frame_to_linear_srgb` with
+    ``config.wavelengths``, else :func:`three_wavelength_frame_to_linear_srgb`)."""
+    lookup = lookup_of(config) if lookup is None else lookup
+    frames = {}
+    if lookup == "lut":
+        frames["lut"] = renderer.render_table(prepared, sun_direction, config.altitude)
+    elif lookup == "lut4d":
+        frames["lut4d"] = renderer.render_lut4d(prepared, sun_direction, config.altitude)
+    elif lookup == "skyview":
         frames["skyview"] = renderer.render_skyview(prepared, sun_direction, config.altitude,
                                                     settings=skyview.SkyViewSettings(config.skyview_size or skyview.DEFAULT_SIZE))
+    if config.method == "raymarch" or config.compares:
+        frames["raymarch"] = renderer.render_raymarch(prepared, sun_direction, config.altitude)
     if config.wavelengths is not None:
         frames = {name: spectral_frame_to_linear_srgb(frame, renderer.wavelengths) for name, frame in frames.items()}
     elif config.absolute:
@@ -661,8 +689,9 @@ def display_frames(pipeline: display_pipeline.Display, hdr, valid, config: Anima
         ev = pipeline.exposure(exposure_reference(hdr), valid)
     shown = {name: pipeline.encode_and_linear(frame, ev) for name, frame in hdr.items()}
     images = {name: tonemap.to_uint8(encoded, dither=config.dither, seed=seed) for name, (encoded, _) in shown.items()}
-    if "raymarch" in shown and "lut" in shown:
-        return ev, images, (shown["raymarch"][1], shown["lut"][1])
+    if "raymarch" in shown and len(shown) == 2:
+        lookup = next(name for name in shown if name != "raymarch")
+        return ev, images, (shown["raymarch"][1], shown[lookup][1])
     return ev, images, (lambda pixels: pipeline.linear(pixels, ev))
 
 
@@ -695,15 +724,28 @@ def frame_outputs(pipeline: display_pipeline.Display, hdr, valid, config: Animat
            "time": sun.time.isoformat() if sun.time is not None else "", "exposure_ev": ev}
     means = {name: metrics.mean_luminance(frame[None], valid)[0] for name, frame in hdr.items()}
     if config.compares:
-        row.update(metrics.compare_frames(hdr["raymarch"], hdr["lut"], valid, display=shown))
-        error = metrics.error_image(metrics.relative_error_map(hdr["raymarch"], hdr["lut"], valid), valid)
-        image = metrics.composite([images["lut"], images["raymarch"], error],
-                                  ["table lookup", "ray march", "relative error"])
+        image, numbers = comparison(hdr, images, shown, valid)
+        row.update(numbers)
         frame_hdr = hdr["raymarch"]
     else:
-        name = config.method if config.method in ("raymarch", "skyview") else "lut"
+        name = next(iter(hdr))                   # the one frame rendered
         image, frame_hdr = images[name], hdr[name]
     return FrameOutputs(index, _even(image), row, means, frame_hdr if config.hdr else None)
+
+
+def comparison(hdr, images, shown, valid):
+    """(composite, numbers) of one sun position's compared HDR frames ``hdr`` ({lookup: ..., 'raymarch': ...},
+    :func:`render_frame`) and their :func:`display_frames` ``images`` and ``shown``: the composite of the
+    lookup (labelled with :data:`LOOKUP_NAMES`), the ray march and their relative error
+    (:func:`clsky.anim.metrics.composite`), and the metrics of :func:`clsky.anim.metrics.compare_frames`
+    with ``'lookup'``, the lookup's name."""
+    lookup = next(name for name in hdr if name != "raymarch")
+    error = metrics.error_image(metrics.relative_error_map(hdr["raymarch"], hdr[lookup], valid), valid)
+    image = metrics.composite([images[lookup], images["raymarch"], error],
+                              [LOOKUP_NAMES[lookup], "ray march", "relative error"])
+    numbers = {"lookup": LOOKUP_NAMES[lookup], **metrics.compare_frames(hdr["raymarch"], hdr[lookup], valid,
+                                                                          display=shown)}
+    return image, numbers
 
 
 def _frame_writer(config: AnimationConfig, total_frames: int, staging=None) -> writers.FrameWriter:
@@ -775,20 +817,21 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
     plan = plan_animation(config, positions, directions, valid, ctx=ctx)
     if plan is not None and report is not None:
         report(plan.describe())
+    lookup = lookup_of(config, plan)
     # the frames need the data and the gathered sum only: the higher orders (K - 1 tables) go
     if farm is None:
         renderer, table = make_renderer(config, plan, ctx=ctx, progress=progress)
-        frames = _local_frames(config, positions, renderer, renderer.prepare(directions, valid), valid)
+        frames = _local_frames(config, positions, renderer, renderer.prepare(directions, valid), valid, lookup)
     else:
         from .farm import animation_frames
 
         table = make_table(config, plan, ctx=ctx, progress=progress)
-        frames = animation_frames(farm, config, table, positions)
+        frames = animation_frames(farm, config, table, positions, lookup)
     had_frames_directory = config.frames_directory.is_dir()
     try:
         with StagedWrites() as staging:
-            rows, temporal, paths, removed = _write_animation(config, positions, frames, table, plan, staging,
-                                                              progress)
+            rows, temporal, paths, removed = _write_animation(config, positions, frames, table, plan, lookup,
+                                                              staging, progress)
     except BaseException:
         if not had_frames_directory:             # created for the temporaries of the frames
             with contextlib.suppress(OSError):
@@ -798,7 +841,8 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
     summary = f"{len(positions)} frames {camera.width}x{camera.height} ({config.method}) in {seconds:.1f} s"
     if config.compares:
         worst = max(rows, key=lambda r: r["p95_rel"])
-        summary += (f"; worst frame {worst['frame']} (sun zenith {worst['sun_zenith_deg']:.1f} deg): "
+        summary += (f"; {LOOKUP_NAMES[lookup]} against the ray march, worst frame {worst['frame']} "
+                    f"(sun zenith {worst['sun_zenith_deg']:.1f} deg): "
                     f"95th-percentile error {100 * worst['p95_rel']:.1f} %, mean Delta E {worst['mean_delta_e']:.2f}; "
                     f"worst temporal jumps at frames {temporal['worst_frames'][:3]}")
     if removed:
@@ -807,13 +851,14 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
     return AnimationResult(rows, temporal, paths, seconds, summary, removed)
 
 
-def _local_frames(config, positions, renderer, prepared, valid):
+def _local_frames(config, positions, renderer, prepared, valid, lookup):
     """The frame source of a single-process run: ``frames(pipeline)`` yields each frame's
     :class:`FrameOutputs` in order, rendered and shown here: frame i + 1 renders on a worker thread while
     this thread displays and compares frame i and the writer writes it (clsky.anim.pipeline: the same
     frames, in order; OVERLAP_FRAMES = False renders them here, one by one)."""
     def frames(pipeline):
-        rendered = pipeline_module.prefetched(lambda sun: render_frame(renderer, prepared, sun.direction, config),
+        rendered = pipeline_module.prefetched(lambda sun: render_frame(renderer, prepared, sun.direction, config,
+                                                                       lookup),
                                               positions, overlap=OVERLAP_FRAMES)
         with contextlib.closing(rendered):
             for index, (sun, hdr) in enumerate(rendered):
@@ -821,11 +866,11 @@ def _local_frames(config, positions, renderer, prepared, valid):
     return frames
 
 
-def _write_animation(config, positions, frames, table, plan, staging, progress):
+def _write_animation(config, positions, frames, table, plan, lookup, staging, progress):
     """Stage the frames of ``frames(pipeline)`` (:class:`FrameOutputs` in order: :func:`_local_frames`,
     or a farm's), the MP4 and the metrics in ``staging``; returns the metric rows, the temporal jumps,
     the target paths and the stale frames to be deleted."""
-    rows, means = [], {name: [] for name in ("lut", "raymarch", "skyview")}
+    rows, means = [], {name: [] for name in (*LOOKUP_NAMES, "raymarch")}
     pipeline = display(config, table)
     # the frames' host products (sRGB and white-balance matrices, Oklab, XYZ for Delta E) on one BLAS
     # thread: beside PoCL's workers OpenBLAS's threads cost ~100x the CPU of one (README, "Speed")
@@ -844,9 +889,9 @@ def _write_animation(config, positions, frames, table, plan, staging, progress):
     temporal = {}
     if config.compares:
         # the floor: what is invisible at the most sensitive exposure shown (with a fixed EV, that EV)
-        jumps = metrics.temporal_jumps(np.array(means["lut"]), np.array(means["raymarch"]),
+        jumps = metrics.temporal_jumps(np.array(means[lookup]), np.array(means["raymarch"]),
                                        exposure=2.0 ** max(row["exposure_ev"] for row in rows))
-        temporal = {"table_jumps": np.asarray(jumps["table_jumps"]).tolist(),
+        temporal = {"lookup": LOOKUP_NAMES[lookup], "table_jumps": np.asarray(jumps["table_jumps"]).tolist(),
                     "raymarch_jumps": np.asarray(jumps["raymarch_jumps"]).tolist(),
                     "excess": np.asarray(jumps["excess"]).tolist(),
                     "worst_frames": [int(i) for i in jumps["worst_frames"]]}
@@ -860,7 +905,9 @@ def _write_animation(config, positions, frames, table, plan, staging, progress):
         "table": {"settings": table.settings.to_dict(), "orders": table.orders_record,
                   "metadata": table.metadata, "frame_units": frame_units(config, table)},
         "display": pipeline.describe(),
+        "lookup": None if lookup is None else LOOKUP_NAMES[lookup],
         "plan": None if plan is None else {"quality": plan.level.name, "work_fraction": plan.work_fraction,
+                                           "renderer": plan.renderer,
                                            "decisions": [list(d) for d in plan.decisions]},
         "frames": rows, "temporal": temporal}, force=config.force, staging=staging))
     return rows, temporal, paths, list(writer.stale_paths)

@@ -251,8 +251,9 @@ def run_animate(args):
 def run_render(args):
     import pathlib
 
-    from . import metrics, scene, writers
-    from .animate import _camera, display, display_frames, make_renderer, plan_animation, render_frame
+    from . import scene, writers
+    from .animate import (LOOKUP_NAMES, _camera, comparison, display, display_frames, lookup_of, make_renderer,
+                          plan_animation, render_frame)
     from .cameras import sun_direction
     from .sunpath import SunPosition
 
@@ -288,16 +289,14 @@ def run_render(args):
         print(plan.describe())
     renderer, table = make_renderer(config, plan)          # the frame reads data and gathered only
     sun = sun_direction(90.0 - args.sun_elevation, args.sun_azimuth)
-    hdr = render_frame(renderer, renderer.prepare(directions, valid), sun, config)
+    lookup = lookup_of(config, plan)
+    hdr = render_frame(renderer, renderer.prepare(directions, valid), sun, config, lookup)
     ev, images, shown = display_frames(display(config, table), hdr, valid, config)
     if config.compares:
-        error = metrics.error_image(metrics.relative_error_map(hdr["raymarch"], hdr["lut"], valid), valid)
-        image = metrics.composite([images["lut"], images["raymarch"], error],
-                                  ["table lookup", "ray march", "relative error"])
-        numbers = metrics.compare_frames(hdr["raymarch"], hdr["lut"], valid, display=shown)
-        detail = f"; table vs ray march: 95th-percentile error {100 * numbers['p95_rel']:.1f} %"
+        image, numbers = comparison(hdr, images, shown, valid)
+        detail = f"; {LOOKUP_NAMES[lookup]} vs ray march: 95th-percentile error {100 * numbers['p95_rel']:.1f} %"
     else:
-        image, detail = images[config.method if config.method in ("raymarch", "skyview") else "lut"], ""
+        image, detail = images[next(iter(hdr))], ""
     text = scene.output_metadata(scene.scene_text(scene.scene_values(config, args.scene_parser, extra), "render"))
     writers.write_png(output, image, force=args.force, text=text)
     print(f"frame {camera.width}x{camera.height} ({config.method}, sun elevation {args.sun_elevation:g} deg, "

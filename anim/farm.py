@@ -82,11 +82,13 @@ def load_table_payload(payload):
 
 @dataclasses.dataclass(frozen=True)
 class _Job:
-    """One animation on the farm: its token (in task keys and the plugin's name), config and table payload."""
+    """One animation on the farm: its token (in task keys and the plugin's name), config, table payload
+    and lookup (:func:`clsky.anim.animate.lookup_of`, chosen by the client)."""
 
     token: str
     config: object
     payload: dict
+    lookup: str | None
 
 
 #: On a worker: the jobs its plugins delivered ({token: _Job}) and their states, built on first use.
@@ -120,7 +122,7 @@ class _WorkerState:
     def __init__(self, job: _Job):
         from .animate import _camera, display, renderer_of
 
-        self.config = job.config
+        self.config, self.lookup = job.config, job.lookup
         self.table = load_table_payload(job.payload)
         self.renderer = renderer_of(self.config, self.table)
         try:
@@ -154,7 +156,7 @@ def _render(token, sun):
 
     state = _state(token)
     with state.lock, host_blas_single_threaded():
-        return render_frame(state.renderer, state.prepared, sun.direction, state.config)
+        return render_frame(state.renderer, state.prepared, sun.direction, state.config, state.lookup)
 
 
 def _meter(token, hdr):
@@ -179,16 +181,17 @@ def _finish(token, hdr, sun, index, ev):
         return frame_outputs(state.pipeline, hdr, state.valid, state.config, sun, index, ev=ev)
 
 
-def animation_frames(farm: Farm, config, table, positions, window=None):
+def animation_frames(farm: Farm, config, table, positions, lookup, window=None):
     """The frame source of an animation on ``farm`` (:func:`clsky.anim.animate.render_animation`'s
     ``farm=``): ``frames(pipeline)`` yields each frame's :class:`~clsky.anim.animate.FrameOutputs` in
-    order, rendered by the workers (module docstring); ``pipeline`` (the client's display pipeline)
+    order, rendered by the workers (module docstring), with the lookup ``lookup`` (the client's
+    :func:`clsky.anim.animate.lookup_of`); ``pipeline`` (the client's display pipeline)
     smooths the auto-exposure. At most ``window`` frames are in flight (default: twice the workers'
     threads, at least 4), so that a long or large animation holds a bounded number of HDR frames."""
     def frames(pipeline):
         client = farm.client
         size = window or max(4, 2 * farm.threads)
-        job = _Job(farm.new_token(), config, table_payload(table))
+        job = _Job(farm.new_token(), config, table_payload(table), lookup)
         plugin = _JobPlugin(job)
         rendered, metered, finishing = {}, {}, collections.deque()
         submitted = 0

@@ -130,6 +130,18 @@ def test_other_methods_on_the_farm_are_bit_for_bit(farm, method, tmp_path):
     assert_two_frames_match(dict(TINY, frames=2, size=16, hdr=None, method=method), farm, tmp_path)
 
 
+@pytest.mark.slow        # a planned table (draft) and two animations
+def test_the_plans_sky_view_lookup_on_the_farm_is_bit_for_bit(farm, tmp_path):
+    """'compare' with a plan whose renderer is the sky-view map (draft, sun down to -4 deg: the 3D
+    lookup's error exceeds the budget): the client's lookup goes to the workers with the job, and the
+    farm's files are the single-process run's."""
+    options = dict(TINY, frames=2, size=16, hdr=None, table_size=None, quality="draft", start_elevation_deg=-4.0,
+                   max_elevation_deg=5.0)
+    assert_two_frames_match(options, farm, tmp_path)
+    rows = (tmp_path / "farm" / "sky_metrics.csv").read_text(encoding="utf-8")
+    assert rows.count("sky-view map") == 2
+
+
 @pytest.mark.slow        # 15 s at load average 13: two spectral tables of two batches, and their frames
 def test_spectral_frames_on_the_farm_are_bit_for_bit(farm, tmp_path):
     """With --wavelengths the payload is one table file per batch of three (anim/farm.py), reassembled
