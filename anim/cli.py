@@ -39,7 +39,9 @@ def _add_scene_arguments(parser, frames=True):
     scene.add_argument("--pitch", type=float, default=10.0, help="perspective: elevation of the view [deg]")
     scene.add_argument("--altitude", type=float, default=0.0, help="observer altitude [m] (default: 0)")
     scene.add_argument("--method", default="compare", choices=list(METHODS),
-                       help="table lookup, ray march, or both compared (default); lut4d and compare4d look "
+                       help="table lookup, ray march, or a lookup and the ray march compared (default: "
+                            "the plan's lookup for the budget, the sky-view map or the table; with "
+                            "--table-size the table); lut4d and compare4d look "
                             "up the 4D table (altitude, view, sun, azimuth) instead of the 3D one; skyview reads "
                             "a small map ray-marched per frame")
     scene.add_argument("--skyview-size", nargs=2, type=int, metavar=("W", "H"),
