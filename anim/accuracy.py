@@ -1,7 +1,8 @@
 """Speed versus accuracy: what each numerical knob costs and buys, measured on rendered frames.
 
 A *candidate* is a way to make a frame: a table (its :class:`clsky.TableSettings`, looked up per
-pixel) or a per-pixel ray march (its samples per ray). Each candidate is timed (table build, frame
+pixel), a per-pixel ray march (its samples per ray), or a per-frame sky-view map (:mod:`clsky.skyview`:
+its size; the map's nodes ray-marched with the default ray march). Each candidate is timed (table build, frame
 render) and compared, frame by frame, with a *reference*: the 'reference' quality level
 (:mod:`clsky.quality`): a 256-sample ray march whose higher orders come from a fine table, one per frame,
 whose sun axis covers only the sun angles that frame needs (:func:`clsky.planner.sun_axis`) with nodes
@@ -19,6 +20,7 @@ there (README).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 
 import numpy as np
@@ -31,7 +33,7 @@ from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
 from . import metrics
 from .cameras import FisheyeCamera, sun_direction
 
-__all__ = ["SUN_ELEVATIONS", "REFERENCE_GROUPS", "Candidate", "default_candidates", "reference_level",
+__all__ = ["SUN_ELEVATIONS", "REFERENCE_GROUPS", "SKYVIEW_SIZES", "Candidate", "default_candidates", "reference_level",
            "reference_renderer", "render_frames",
            "render_reference",
            "reference_convergence", "measure", "pareto_front"]
@@ -43,17 +45,22 @@ SUN_AZIMUTH = 200.0
 
 @dataclasses.dataclass(frozen=True)
 class Candidate:
-    """One way to make a frame: table lookup with ``table`` settings, or a ray march of ``samples``."""
+    """One way to make a frame: table lookup with ``table`` settings, a ray march of ``samples``, or a
+    sky-view map of ``skyview`` = (W, H) nodes (:class:`clsky.skyview.SkyViewSettings`)."""
 
     label: str
     knob: str
     table: clsky.TableSettings | None = None
     samples: int | None = None
     fast_math: bool = False
+    skyview: tuple | None = None
 
     @property
     def method(self):
-        """'raymarch' with ``samples``, else 'lut4d' for a 4D table (clsky/table4d.py), else 'lut'."""
+        """'skyview' with ``skyview``, 'raymarch' with ``samples``, else 'lut4d' for a 4D table
+        (clsky/table4d.py), else 'lut'."""
+        if self.skyview is not None:
+            return "skyview"
         if self.samples is not None:
             return "raymarch"
         return "lut4d" if self.table.is_4d else "lut"
@@ -97,7 +104,13 @@ def default_candidates(base: clsky.TableSettings | None = None):
     candidates.append(Candidate("fast math", "fast-math", base, fast_math=True))
     candidates += [Candidate(f"ray march {n} samples", "ray march samples", base, samples=n)
                    for n in (16, 32, 48, 96)]
+    candidates += [Candidate(f"sky-view {w} x {h}", "sky-view map size", base, skyview=(w, h))
+                   for w, h in SKYVIEW_SIZES]
     return candidates
+
+
+#: Map sizes (W, H) of the sweep's sky-view candidates (:mod:`clsky.skyview`).
+SKYVIEW_SIZES = ((16, 32), (32, 64), (64, 128))
 
 
 #: The reference's counts, in groups that its convergence check doubles one at a time (doubling all
@@ -151,11 +164,16 @@ def reference_renderer(elevation_deg, doubled=(), atmosphere="physical", level="
     return SkyRenderer(clsky.ScatteringTable.build(atmosphere, settings), level.ray)
 
 
-def render_frames(renderer, method, prepared):
+def render_frames(renderer, method, prepared, skyview=None):
     """The four frames {name: HDR} of :data:`SUN_ELEVATIONS` by table lookup ('lut', or 'lut4d' in a 4D
-    table) or ray march, with ``prepared`` directions (:meth:`clsky.render.SkyRenderer.prepare`)."""
+    table), ray march ('raymarch') or sky-view map ('skyview', of ``skyview`` = (W, H) nodes, default its
+    default size), with ``prepared`` directions (:meth:`clsky.render.SkyRenderer.prepare`)."""
+    from clsky.skyview import DEFAULT_SIZE, SkyViewSettings
+
     frames = {}
     render = {"lut": renderer.render_table, "lut4d": renderer.render_lut4d}.get(method, renderer.render_raymarch)
+    if method == "skyview":
+        render = functools.partial(renderer.render_skyview, settings=SkyViewSettings(skyview or DEFAULT_SIZE))
     for name, elevation in SUN_ELEVATIONS.items():
         sun = sun_direction(90.0 - elevation, SUN_AZIMUTH)
         frames[name] = render(prepared, sun, 0.0)
@@ -212,9 +230,9 @@ def measure(candidates, reference, valid, atmosphere="physical", progress=None):
         ray = None if candidate.samples is None else RAYMARCH_DEFAULTS.replace(view_steps=candidate.samples)
         renderer = SkyRenderer(table, ray, fast_math=candidate.fast_math)
         prepared = renderer.prepare(directions, valid)
-        render_frames(renderer, candidate.method, prepared)                 # warm-up (compilation)
+        render_frames(renderer, candidate.method, prepared, candidate.skyview)      # warm-up (compilation)
         start = time.perf_counter()
-        frames = render_frames(renderer, candidate.method, prepared)
+        frames = render_frames(renderer, candidate.method, prepared, candidate.skyview)
         render = (time.perf_counter() - start) / len(frames)
         p95, delta_e, per_frame = _errors(reference, frames, valid)
         row = {"candidate": candidate.label, "knob": candidate.knob, "method": candidate.method,

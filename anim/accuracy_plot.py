@@ -33,9 +33,9 @@ __all__ = ["read_csv", "stack_labels", "knob_styles", "draw_pareto", "draw_eleva
 CIVIL_TWILIGHT = (-6.0, 0.0)
 #: Text columns of the sweep's CSV; every other column is a number.
 TEXT_COLUMNS = ("candidate", "knob", "method")
-RENDERERS = {"lut": "table lookup", "raymarch": "ray march", "lut4d": "4D table lookup"}
+RENDERERS = {"lut": "table lookup", "raymarch": "ray march", "lut4d": "4D table lookup", "skyview": "sky-view map"}
 #: Colour maps of the lines of each renderer in the elevation plot.
-RENDERER_COLOURS = {"lut": "Blues", "raymarch": "Oranges", "lut4d": "Greens"}
+RENDERER_COLOURS = {"lut": "Blues", "raymarch": "Oranges", "lut4d": "Greens", "skyview": "Purples"}
 #: Sun elevations within this many degrees of the horizon get a linear axis in the elevation plot; beyond
 #: it the axis is logarithmic (symlog), so that twilight, sunset and golden hour are not squeezed by day.
 ELEVATION_LINEAR = 10.0
@@ -113,7 +113,8 @@ def stack_labels(positions, spacing, low=0.0, high=1.0):
 
 def knob_styles(rows):
     """{knob: (colour, marker)}: the table-lookup knobs as circles in ten colours (other shapes beyond
-    ten), the ray-march knobs as squares in dark colours of their own."""
+    ten), the ray-march knobs as squares in dark colours of their own, the 4D-lookup knobs as green
+    filled pluses, the sky-view knobs as purple diamonds."""
     import matplotlib
 
     colours = matplotlib.colormaps["tab10"].colors
@@ -123,8 +124,14 @@ def knob_styles(rows):
     for method in RENDERERS:
         knobs = list(dict.fromkeys(r["knob"] for r in rows if r["method"] == method))
         for i, knob in enumerate(knobs):
-            styles[knob] = ((colours[i % 10], shapes[(i // 10) % len(shapes)]) if method == "lut"
-                            else (dark[i % len(dark)], "s"))
+            if method == "lut":
+                styles[knob] = (colours[i % 10], shapes[(i // 10) % len(shapes)])
+            elif method == "lut4d":
+                styles[knob] = (("forestgreen", "darkolivegreen")[i % 2], "P")
+            elif method == "skyview":
+                styles[knob] = (("purple", "indigo")[i % 2], "D")
+            else:
+                styles[knob] = (dark[i % len(dark)], "s")
     return styles
 
 

@@ -1,4 +1,8 @@
-"""Sunrise-to-sunset animations: render every frame by table lookup and by ray march, compare, write.
+"""Sunrise-to-sunset animations: render every frame by a lookup and by ray march, compare, write.
+
+The lookup (:func:`lookup_of`) is the method's; the default, 'compare', compares the ray march with the
+best lookup for the budget, the scene plan's choice (:mod:`clsky.renderer_choice`): the per-frame sky-view
+map for the default scene, the 3D table lookup with an explicit ``table_size``.
 
 The pipeline, one frame at a time: sun position (:mod:`clsky.anim.sunpath`) -> HDR frames
 (:class:`clsky.render.SkyRenderer`, for the camera of :mod:`clsky.anim.cameras`; for every preset but
@@ -32,7 +36,7 @@ from clsky.errors import ParameterError, check_choice, check_integer, check_real
 from clsky.ground import check_ground_mode
 from clsky.planner import Plan, Scene, azimuth_harmonics, plan_scene, sun_axis, view_sampling
 from clsky.quality import QUALITY_LEVELS, QualityLevel, level_for_budget, quality_level
-from clsky import colorimetry, spectrum
+from clsky import colorimetry, skyview, spectrum
 from clsky.solar import ABSOLUTE_UNITS, RELATIVE_UNITS, solar_irradiance_astm_g173, with_solar_spectrum
 from clsky.render import SkyRenderer
 from clsky.settings import SAMPLINGS
@@ -44,15 +48,21 @@ from . import metrics, sunpath, tonemap, writers
 from .cameras import camera_from_name
 from .exr import PRECISIONS
 
-__all__ = ["AnimationConfig", "AnimationResult", "METHODS", "quality", "plan_animation", "build_table", "make_renderer",
+__all__ = ["AnimationConfig", "AnimationResult", "METHODS", "LOOKUP_NAMES", "lookup_of", "comparison", "quality",
+           "plan_animation", "build_table", "make_renderer",
+           "make_table", "renderer_of", "FrameOutputs", "frame_outputs", "exposure_reference",
            "spectral_frame_to_linear_srgb", "three_wavelength_frame_to_linear_srgb", "frame_units",
            "THREE_WAVELENGTH_CONVERSION",
            "ray_settings", "sun_positions", "check_outputs", "render_animation", "render_frame",
            "memory_estimate", "display", "display_frames"]
 
 #: What is rendered: table lookup only, ray march only, or both with the comparison.
-#: 'lut4d' and 'compare4d' are 'lut' and 'compare' with the 4D table (clsky/table4d.py) for the lookup.
-METHODS = ("compare", "lut", "raymarch", "lut4d", "compare4d")
+#: 'lut4d' and 'compare4d' are 'lut' and 'compare' with the 4D table (clsky/table4d.py) for the lookup;
+#: 'skyview' the per-frame sky-view map (:mod:`clsky.skyview`: a small map ray-marched per frame, read per pixel).
+METHODS = ("compare", "lut", "raymarch", "lut4d", "compare4d", "skyview")
+#: The lookups (:func:`lookup_of`), as the composites, metrics and summaries name them: the 3D table, the
+#: 4D table, the per-frame sky-view map. Each is also the key of its HDR frame (:func:`render_frame`).
+LOOKUP_NAMES = {"lut": "table lookup", "lut4d": "4D table", "skyview": "sky-view map"}
 #: Azimuth harmonics of the 4D methods' higher orders when the quality level has none (M = 2 brings
 #: the ray march within the Monte Carlo's noise down to -6 deg: README, "Twilight against Monte Carlo").
 LUT4D_HARMONICS = 2
@@ -92,10 +102,15 @@ class AnimationConfig:
         image (default 0, north up, east on the left as in all-sky photographs).
     altitude : float
         Observer altitude [m], >= 0 (above 100 km: seen from space).
-    method : {'compare', 'lut', 'raymarch', 'lut4d', 'compare4d'}
-        The frames: table lookup against the ray march, either alone; the 4D methods look up the 4D
-        table (parameterization '4d', clsky/table4d.py: mode 'physical', at least
-        :data:`LUT4D_HARMONICS` azimuth harmonics) instead of the 3D one.
+    method : {'compare', 'lut', 'raymarch', 'lut4d', 'compare4d', 'skyview'}
+        The frames: a lookup against the ray march ('compare': the best lookup for the budget, the
+        scene plan's, :func:`lookup_of`; the 3D table lookup without a plan), either alone; the 4D
+        methods look up the 4D table (parameterization '4d', clsky/table4d.py: mode 'physical', at least
+        :data:`LUT4D_HARMONICS` azimuth harmonics) instead of the 3D one; 'skyview' reads a per-frame
+        sky-view map (:mod:`clsky.skyview`).
+    skyview_size : (W, H) or None
+        Size of the per-frame sky-view map of ``method='skyview'`` (:class:`clsky.skyview.SkyViewSettings`):
+        W azimuth columns in [2, 4096], H rows in [4, 4096]; None (default): :data:`clsky.skyview.DEFAULT_SIZE`.
     preset : str
         Atmosphere preset (:data:`clsky.PRESETS`).
     ground_albedo : float or None
@@ -195,6 +210,7 @@ class AnimationConfig:
     pitch_deg: float = 10.0
     altitude: float = 0.0
     method: str = "compare"
+    skyview_size: tuple | None = None
     preset: str = "physical"
     mode: str = "physical"
     ground_albedo: float | None = None
@@ -383,6 +399,7 @@ _FIELD_CHECKS = {
     "camera": _choice(("fisheye", "perspective", "equirectangular")),
     "fov_deg": _real(0.0, 179.0, " degrees", low_open=True), "heading_deg": _real(-360.0, 720.0, " degrees", optional=True),
     "pitch_deg": _real(-90.0, 90.0, " degrees"), "altitude": _real(0.0, 1e8, " m"), "method": _choice(METHODS),
+    "skyview_size": lambda name, value: None if value is None else skyview.check_size(name, value),
     "preset": _choice(tuple(sorted(clsky.PRESETS))), "mode": _choice(("atmosphere-plus", "physical")),
     "ground_albedo": _real(0.0, 1.0, optional=True), "ozone_column_du": _real(0.0, 1e5, " DU", optional=True),
     "samples": _integer(2, 4096, optional=True), "sampling": _choice(SAMPLINGS, optional=True),
@@ -504,17 +521,29 @@ def _with_sampling(settings: clsky.TableSettings, config: AnimationConfig) -> cl
 
 
 def make_renderer(config: AnimationConfig, plan: Plan | None = None, ctx=None, progress=None):
-    """(renderer, table) of the animation: a :class:`~clsky.render.SkyRenderer` of :func:`build_table`'s
-    table, or with ``config.wavelengths`` a :class:`clsky.spectrum.SpectralRenderer` of N wavelengths
-    over the same base atmosphere and settings (the plan's, or the config's); the frames keep only the
-    data and gathered sum of each table (the higher orders are dropped)."""
+    """(renderer, table) of the animation: :func:`renderer_of` :func:`make_table`'s table."""
+    table = make_table(config, plan, ctx=ctx, progress=progress)
+    return renderer_of(config, table, ctx=ctx), table
+
+
+def make_table(config: AnimationConfig, plan: Plan | None = None, ctx=None, progress=None):
+    """The table the frames read: :func:`build_table`'s, or with ``config.wavelengths`` a
+    :class:`clsky.spectrum.SpectralTable` of N wavelengths over the same base atmosphere and settings
+    (the plan's, or the config's); only the data and gathered sum of each table are kept (the higher
+    orders are dropped)."""
     if config.wavelengths is None:
-        table = dataclasses.replace(build_table(config, plan, ctx=ctx, progress=progress), orders=())
-        return SkyRenderer(table, ray_settings(config), ctx=ctx), table
+        return dataclasses.replace(build_table(config, plan, ctx=ctx, progress=progress), orders=())
     base, settings = _base(config, plan)
-    table = spectrum.SpectralTable.build(base, config.wavelengths, settings, ctx=ctx, progress=progress,
-                                         keep_orders=False)
-    return spectrum.SpectralRenderer(table, ray_settings(config), ctx=ctx), table
+    return spectrum.SpectralTable.build(base, config.wavelengths, settings, ctx=ctx, progress=progress,
+                                        keep_orders=False)
+
+
+def renderer_of(config: AnimationConfig, table, ctx=None):
+    """The renderer of :func:`make_table`'s ``table``: a :class:`~clsky.render.SkyRenderer`, or with
+    ``config.wavelengths`` a :class:`clsky.spectrum.SpectralRenderer`, with :func:`ray_settings`."""
+    if config.wavelengths is None:
+        return SkyRenderer(table, ray_settings(config), ctx=ctx)
+    return spectrum.SpectralRenderer(table, ray_settings(config), ctx=ctx)
 
 
 def spectral_frame_to_linear_srgb(frame, wavelengths):
@@ -588,16 +617,38 @@ def _camera(config):
     return camera_from_name(config.camera, width, height, **options)
 
 
-def render_frame(renderer: SkyRenderer, prepared, sun_direction, config: AnimationConfig):
-    """HDR frames {'lut': ..., 'raymarch': ...} of one sun position, as ``config.method`` asks; absolute
-    frames converted to linear sRGB [cd/m^2] (:func:`spectral_frame_to_linear_srgb` with
-    ``config.wavelengths``, else :func:`three_wavelength_frame_to_linear_srgb`)."""
-    frames = {}
-    if config.method in ("compare", "lut"):
-        frames["lut"] = renderer.render_table(prepared, sun_direction, config.altitude)
+def lookup_of(config: AnimationConfig, plan: Plan | None = None) -> str | None:
+    """The lookup the animation renders, a key of :data:`LOOKUP_NAMES` (None for 'raymarch'), chosen once
+    per animation: the method's own ('lut'; 'lut4d' for 'lut4d' and 'compare4d'; 'skyview'), and for
+    'compare' the best lookup for the budget, the scene plan's renderer
+    (:attr:`clsky.planner.Plan.renderer`, :mod:`clsky.renderer_choice`): the sky-view map when the plan
+    picks it, or when it picks the ray march (no lookup fits the budget; the sky-view map, the ray march
+    read at its nodes, is then the closest lookup), else the 3D table lookup; without a plan (an explicit
+    ``table_size``) the 3D table lookup."""
+    if config.method == "raymarch":
+        return None
     if config.lookup4d:
-        frames["lut"] = renderer.render_lut4d(prepared, sun_direction, config.altitude)
-    if config.method in ("compare", "raymarch", "compare4d"):
+        return "lut4d"
+    if config.method == "compare" and plan is not None and plan.renderer in ("skyview", "raymarch"):
+        return "skyview"
+    return "skyview" if config.method == "skyview" else "lut"
+
+
+def render_frame(renderer: SkyRenderer, prepared, sun_direction, config: AnimationConfig, lookup=None):
+    """HDR frames {lookup: ..., 'raymarch': ...} of one sun position, as ``config.method`` asks: the lookup
+    ``lookup`` (a key of :data:`LOOKUP_NAMES`; default :func:`lookup_of` without a plan) and the ray
+    march; absolute frames converted to linear sRGB [cd/m^2] (:func:`spectral_frame_to_linear_srgb` with
+    ``config.wavelengths``, else :func:`three_wavelength_frame_to_linear_srgb`)."""
+    lookup = lookup_of(config) if lookup is None else lookup
+    frames = {}
+    if lookup == "lut":
+        frames["lut"] = renderer.render_table(prepared, sun_direction, config.altitude)
+    elif lookup == "lut4d":
+        frames["lut4d"] = renderer.render_lut4d(prepared, sun_direction, config.altitude)
+    elif lookup == "skyview":
+        frames["skyview"] = renderer.render_skyview(prepared, sun_direction, config.altitude,
+                                                    settings=skyview.SkyViewSettings(config.skyview_size or skyview.DEFAULT_SIZE))
+    if config.method == "raymarch" or config.compares:
         frames["raymarch"] = renderer.render_raymarch(prepared, sun_direction, config.altitude)
     if config.wavelengths is not None:
         frames = {name: spectral_frame_to_linear_srgb(frame, renderer.wavelengths) for name, frame in frames.items()}
@@ -626,19 +677,75 @@ def display(config: AnimationConfig, table) -> display_pipeline.Display:
                                     sun_white=sun_white, source="rec709")
 
 
-def display_frames(pipeline: display_pipeline.Display, hdr, valid, config: AnimationConfig, seed=0):
+def display_frames(pipeline: display_pipeline.Display, hdr, valid, config: AnimationConfig, seed=0, ev=None):
     """(EV, {name: 8-bit frame}, Delta E display) of one sun position's HDR frames: the exposure is
-    metered on the reference (the ray march when there is one) and shows every frame at that EV. The
+    metered on the reference (:func:`exposure_reference`, the ray march when there is one) and shows
+    every frame at that EV (or at ``ev`` [EV] if given: a frame farm's, smoothed in order). The
     Delta E display is the ``display`` of :func:`clsky.anim.metrics.compare_frames`: with both frames, their
     display-linear values (ray march, table lookup), computed once with the 8-bit frames
     (:meth:`clsky.anim.display.Display.encode_and_linear`; the tone curve and gamut mapping were half the
     frame loop's host time when Delta E evaluated them again); else the pipeline at that EV."""
-    ev = pipeline.exposure(hdr.get("raymarch", hdr.get("lut")), valid)
+    if ev is None:
+        ev = pipeline.exposure(exposure_reference(hdr), valid)
     shown = {name: pipeline.encode_and_linear(frame, ev) for name, frame in hdr.items()}
     images = {name: tonemap.to_uint8(encoded, dither=config.dither, seed=seed) for name, (encoded, _) in shown.items()}
-    if "raymarch" in shown and "lut" in shown:
-        return ev, images, (shown["raymarch"][1], shown["lut"][1])
+    if "raymarch" in shown and len(shown) == 2:
+        lookup = next(name for name in shown if name != "raymarch")
+        return ev, images, (shown["raymarch"][1], shown[lookup][1])
     return ev, images, (lambda pixels: pipeline.linear(pixels, ev))
+
+
+def exposure_reference(hdr):
+    """The frame of one sun position's HDR frames that the exposure is metered on: the ray march when
+    there is one, else the lookup (table or sky-view map)."""
+    return hdr["raymarch"] if "raymarch" in hdr else next(iter(hdr.values()))
+
+
+@dataclasses.dataclass
+class FrameOutputs:
+    """What the writer needs of one frame (:func:`frame_outputs`): its index, the 8-bit image (even
+    sizes), its metrics row, the mean luminance of each HDR frame (for the temporal jumps), and the HDR
+    frame to write (None without ``config.hdr``)."""
+
+    index: int
+    image: np.ndarray
+    row: dict
+    means: dict
+    hdr: np.ndarray | None
+
+
+def frame_outputs(pipeline: display_pipeline.Display, hdr, valid, config: AnimationConfig, sun, index: int,
+                  ev=None) -> FrameOutputs:
+    """Display values, metrics and composite of frame ``index`` (sun position ``sun``) from its HDR
+    frames (:func:`render_frame`): everything a frame costs after the render, the same wherever it runs
+    (this process, or a frame farm's worker, :mod:`clsky.anim.farm`, with ``ev`` given)."""
+    ev, images, shown = display_frames(pipeline, hdr, valid, config, seed=index, ev=ev)
+    row = {"frame": index, "sun_zenith_deg": sun.zenith_deg, "sun_azimuth_deg": sun.azimuth_deg,
+           "time": sun.time.isoformat() if sun.time is not None else "", "exposure_ev": ev}
+    means = {name: metrics.mean_luminance(frame[None], valid)[0] for name, frame in hdr.items()}
+    if config.compares:
+        image, numbers = comparison(hdr, images, shown, valid)
+        row.update(numbers)
+        frame_hdr = hdr["raymarch"]
+    else:
+        name = next(iter(hdr))                   # the one frame rendered
+        image, frame_hdr = images[name], hdr[name]
+    return FrameOutputs(index, _even(image), row, means, frame_hdr if config.hdr else None)
+
+
+def comparison(hdr, images, shown, valid):
+    """(composite, numbers) of one sun position's compared HDR frames ``hdr`` ({lookup: ..., 'raymarch': ...},
+    :func:`render_frame`) and their :func:`display_frames` ``images`` and ``shown``: the composite of the
+    lookup (labelled with :data:`LOOKUP_NAMES`), the ray march and their relative error
+    (:func:`clsky.anim.metrics.composite`), and the metrics of :func:`clsky.anim.metrics.compare_frames`
+    with ``'lookup'``, the lookup's name."""
+    lookup = next(name for name in hdr if name != "raymarch")
+    error = metrics.error_image(metrics.relative_error_map(hdr["raymarch"], hdr[lookup], valid), valid)
+    image = metrics.composite([images[lookup], images["raymarch"], error],
+                              [LOOKUP_NAMES[lookup], "ray march", "relative error"])
+    numbers = {"lookup": LOOKUP_NAMES[lookup], **metrics.compare_frames(hdr["raymarch"], hdr[lookup], valid,
+                                                                          display=shown)}
+    return image, numbers
 
 
 def _frame_writer(config: AnimationConfig, total_frames: int, staging=None) -> writers.FrameWriter:
@@ -684,8 +791,12 @@ def _even(image):
 
 
 def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str, int, int], None] | None = None,
-                     report: Callable[[str], None] | None = None) -> AnimationResult:
+                     report: Callable[[str], None] | None = None, farm=None) -> AnimationResult:
     """Render, compare and write a whole animation (see the module docstring).
+
+    With ``farm`` (a started :class:`clsky.farm.Farm`), the table is built here once and the frames are
+    rendered by the farm's Dask workers (:func:`clsky.anim.farm.animation_frames`); they come back in
+    order to this process's writer: the same outputs, bit for bit, written the same way.
 
     ``progress(stage, done, total)`` is called for the table build ('single', 'orders') and for each
     frame ('frames'); ``report(text)`` receives the scene plan before the table is built.
@@ -706,14 +817,21 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
     plan = plan_animation(config, positions, directions, valid, ctx=ctx)
     if plan is not None and report is not None:
         report(plan.describe())
+    lookup = lookup_of(config, plan)
     # the frames need the data and the gathered sum only: the higher orders (K - 1 tables) go
-    renderer, table = make_renderer(config, plan, ctx=ctx, progress=progress)
-    prepared = renderer.prepare(directions, valid)
+    if farm is None:
+        renderer, table = make_renderer(config, plan, ctx=ctx, progress=progress)
+        frames = _local_frames(config, positions, renderer, renderer.prepare(directions, valid), valid, lookup)
+    else:
+        from .farm import animation_frames
+
+        table = make_table(config, plan, ctx=ctx, progress=progress)
+        frames = animation_frames(farm, config, table, positions, lookup)
     had_frames_directory = config.frames_directory.is_dir()
     try:
         with StagedWrites() as staging:
-            rows, temporal, paths, removed = _write_animation(config, positions, renderer, prepared, valid, table,
-                                                              plan, staging, progress)
+            rows, temporal, paths, removed = _write_animation(config, positions, frames, table, plan, lookup,
+                                                              staging, progress)
     except BaseException:
         if not had_frames_directory:             # created for the temporaries of the frames
             with contextlib.suppress(OSError):
@@ -723,7 +841,8 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
     summary = f"{len(positions)} frames {camera.width}x{camera.height} ({config.method}) in {seconds:.1f} s"
     if config.compares:
         worst = max(rows, key=lambda r: r["p95_rel"])
-        summary += (f"; worst frame {worst['frame']} (sun zenith {worst['sun_zenith_deg']:.1f} deg): "
+        summary += (f"; {LOOKUP_NAMES[lookup]} against the ray march, worst frame {worst['frame']} "
+                    f"(sun zenith {worst['sun_zenith_deg']:.1f} deg): "
                     f"95th-percentile error {100 * worst['p95_rel']:.1f} %, mean Delta E {worst['mean_delta_e']:.2f}; "
                     f"worst temporal jumps at frames {temporal['worst_frames'][:3]}")
     if removed:
@@ -732,46 +851,47 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
     return AnimationResult(rows, temporal, paths, seconds, summary, removed)
 
 
-def _write_animation(config, positions, renderer, prepared, valid, table, plan, staging, progress):
-    """Render every frame and stage the frames, the MP4 and the metrics in ``staging``; returns the
-    metric rows, the temporal jumps, the target paths and the stale frames to be deleted."""
-    rows, means = [], {"lut": [], "raymarch": []}
+def _local_frames(config, positions, renderer, prepared, valid, lookup):
+    """The frame source of a single-process run: ``frames(pipeline)`` yields each frame's
+    :class:`FrameOutputs` in order, rendered and shown here: frame i + 1 renders on a worker thread while
+    this thread displays and compares frame i and the writer writes it (clsky.anim.pipeline: the same
+    frames, in order; OVERLAP_FRAMES = False renders them here, one by one)."""
+    def frames(pipeline):
+        rendered = pipeline_module.prefetched(lambda sun: render_frame(renderer, prepared, sun.direction, config,
+                                                                       lookup),
+                                              positions, overlap=OVERLAP_FRAMES)
+        with contextlib.closing(rendered):
+            for index, (sun, hdr) in enumerate(rendered):
+                yield frame_outputs(pipeline, hdr, valid, config, sun, index)
+    return frames
+
+
+def _write_animation(config, positions, frames, table, plan, lookup, staging, progress):
+    """Stage the frames of ``frames(pipeline)`` (:class:`FrameOutputs` in order: :func:`_local_frames`,
+    or a farm's), the MP4 and the metrics in ``staging``; returns the metric rows, the temporal jumps,
+    the target paths and the stale frames to be deleted."""
+    rows, means = [], {name: [] for name in (*LOOKUP_NAMES, "raymarch")}
     pipeline = display(config, table)
     # the frames' host products (sRGB and white-balance matrices, Oklab, XYZ for Delta E) on one BLAS
     # thread: beside PoCL's workers OpenBLAS's threads cost ~100x the CPU of one (README, "Speed")
-    # frame i + 1 renders on a worker thread while this thread displays, compares and writes frame i
-    # (clsky.anim.pipeline: the same frames, in order; OVERLAP_FRAMES = False renders them here, one by one)
-    frames = pipeline_module.prefetched(lambda sun: render_frame(renderer, prepared, sun.direction, config),
-                                        positions, overlap=OVERLAP_FRAMES)
     with _frame_writer(config, len(positions), staging) as writer, host_blas_single_threaded(), \
-            contextlib.closing(frames):
-        for index, (sun, hdr) in enumerate(frames):
-            ev, images, shown = display_frames(pipeline, hdr, valid, config, seed=index)
-            row = {"frame": index, "sun_zenith_deg": sun.zenith_deg, "sun_azimuth_deg": sun.azimuth_deg,
-                   "time": sun.time.isoformat() if sun.time is not None else "", "exposure_ev": ev}
-            for name, frame in hdr.items():
-                means[name].append(metrics.mean_luminance(frame[None], valid)[0])
-            if config.compares:
-                row.update(metrics.compare_frames(hdr["raymarch"], hdr["lut"], valid, display=shown))
-                error = metrics.error_image(metrics.relative_error_map(hdr["raymarch"], hdr["lut"], valid), valid)
-                image = metrics.composite([images["lut"], images["raymarch"], error],
-                                          ["table lookup", "ray march", "relative error"])
-                frame_hdr = hdr["raymarch"]
-            else:
-                name = "raymarch" if config.method == "raymarch" else "lut"
-                image, frame_hdr = images[name], hdr[name]
-            writer.write(index, _even(image), hdr=frame_hdr if config.hdr else None,
+            contextlib.closing(frames(pipeline)) as produced:
+        for out in produced:
+            sun = positions[out.index]
+            for name, value in out.means.items():
+                means[name].append(value)
+            writer.write(out.index, out.image, hdr=out.hdr,
                          hdr_attributes=_hdr_attributes(config, table, sun) if config.hdr in ("exr", "hdr") else None)
-            rows.append(row)
+            rows.append(out.row)
             if progress is not None:
-                progress("frames", index + 1, len(positions))
+                progress("frames", out.index + 1, len(positions))
     paths = list(writer.paths)          # the frames and the MP4: they land when ``staging`` commits
     temporal = {}
     if config.compares:
         # the floor: what is invisible at the most sensitive exposure shown (with a fixed EV, that EV)
-        jumps = metrics.temporal_jumps(np.array(means["lut"]), np.array(means["raymarch"]),
+        jumps = metrics.temporal_jumps(np.array(means[lookup]), np.array(means["raymarch"]),
                                        exposure=2.0 ** max(row["exposure_ev"] for row in rows))
-        temporal = {"table_jumps": np.asarray(jumps["table_jumps"]).tolist(),
+        temporal = {"lookup": LOOKUP_NAMES[lookup], "table_jumps": np.asarray(jumps["table_jumps"]).tolist(),
                     "raymarch_jumps": np.asarray(jumps["raymarch_jumps"]).tolist(),
                     "excess": np.asarray(jumps["excess"]).tolist(),
                     "worst_frames": [int(i) for i in jumps["worst_frames"]]}
@@ -785,7 +905,9 @@ def _write_animation(config, positions, renderer, prepared, valid, table, plan, 
         "table": {"settings": table.settings.to_dict(), "orders": table.orders_record,
                   "metadata": table.metadata, "frame_units": frame_units(config, table)},
         "display": pipeline.describe(),
+        "lookup": None if lookup is None else LOOKUP_NAMES[lookup],
         "plan": None if plan is None else {"quality": plan.level.name, "work_fraction": plan.work_fraction,
+                                           "renderer": plan.renderer,
                                            "decisions": [list(d) for d in plan.decisions]},
         "frames": rows, "temporal": temporal}, force=config.force, staging=staging))
     return rows, temporal, paths, list(writer.stale_paths)

@@ -39,8 +39,13 @@ def _add_scene_arguments(parser, frames=True):
     scene.add_argument("--pitch", type=float, default=10.0, help="perspective: elevation of the view [deg]")
     scene.add_argument("--altitude", type=float, default=0.0, help="observer altitude [m] (default: 0)")
     scene.add_argument("--method", default="compare", choices=list(METHODS),
-                       help="table lookup, ray march, or both compared (default); lut4d and compare4d look "
-                            "up the 4D table (altitude, view, sun, azimuth) instead of the 3D one")
+                       help="table lookup, ray march, or a lookup and the ray march compared (default: "
+                            "the plan's lookup for the budget, the sky-view map or the table; with "
+                            "--table-size the table); lut4d and compare4d look "
+                            "up the 4D table (altitude, view, sun, azimuth) instead of the 3D one; skyview reads "
+                            "a small map ray-marched per frame")
+    scene.add_argument("--skyview-size", nargs=2, type=int, metavar=("W", "H"),
+                       help="--method skyview: the map's azimuth columns and rows (default: 64 128)")
     sky = parser.add_argument_group("sky")
     sky.add_argument("--preset", help="atmosphere preset (default: physical)")
     sky.add_argument("--mode", choices=["atmosphere-plus", "physical"],
@@ -131,6 +136,7 @@ def register(commands):
                              "65504, the sun's disc, are clipped to it and counted in the header)")
     output.add_argument("--force", action="store_true", help="overwrite existing outputs")
     output.add_argument("--progress", default="leave", choices=["display", "leave", "none"])
+    clsky_cli.add_farm_arguments(animate)
 
     render = commands.add_parser("render", help="render one frame (PNG)")
     _add_scene_arguments(render, frames=False)
@@ -157,7 +163,7 @@ def register(commands):
                           help="quality level of the reference frames (default: reference, ~5 min to build; "
                                "a cheaper one for smoke runs)")
     accuracy.add_argument("--quick", action="store_true",
-                          help="default settings and two ray marches only (a smoke run)")
+                          help="default settings, two ray marches and a 32 x 64 sky-view map only (a smoke run)")
     accuracy.add_argument("--force", action="store_true", help="overwrite existing outputs")
     accuracy.add_argument("--progress", default="leave", choices=["display", "leave", "none"])
     return {"animate": run_animate, "render": run_render, "bench": run_bench}
@@ -226,6 +232,7 @@ def run_animate(args):
 
     scene.apply_scene(args, args.scene_parser)
     config = _config(args)
+    farm = clsky_cli.farm_of(args)               # --workers / --scheduler: checked, started after the checks
     if _printed_scene(args, config):
         return 0
     try:                                         # the MP4, <stem>_frames/, <stem>_metrics.csv/.json
@@ -235,7 +242,8 @@ def run_animate(args):
     _check_memory(args, config, sun_positions(config))
     progress, close = clsky_cli.progress_bar(args.progress)
     try:
-        result = render_animation(config, progress=progress, report=print)
+        with clsky_cli.running_farm(farm):
+            result = render_animation(config, progress=progress, report=print, farm=farm)
     finally:
         close()
     print(result.summary)
@@ -245,8 +253,9 @@ def run_animate(args):
 def run_render(args):
     import pathlib
 
-    from . import metrics, scene, writers
-    from .animate import _camera, display, display_frames, make_renderer, plan_animation, render_frame
+    from . import scene, writers
+    from .animate import (LOOKUP_NAMES, _camera, comparison, display, display_frames, lookup_of, make_renderer,
+                          plan_animation, render_frame)
     from .cameras import sun_direction
     from .sunpath import SunPosition
 
@@ -282,16 +291,14 @@ def run_render(args):
         print(plan.describe())
     renderer, table = make_renderer(config, plan)          # the frame reads data and gathered only
     sun = sun_direction(90.0 - args.sun_elevation, args.sun_azimuth)
-    hdr = render_frame(renderer, renderer.prepare(directions, valid), sun, config)
+    lookup = lookup_of(config, plan)
+    hdr = render_frame(renderer, renderer.prepare(directions, valid), sun, config, lookup)
     ev, images, shown = display_frames(display(config, table), hdr, valid, config)
     if config.compares:
-        error = metrics.error_image(metrics.relative_error_map(hdr["raymarch"], hdr["lut"], valid), valid)
-        image = metrics.composite([images["lut"], images["raymarch"], error],
-                                  ["table lookup", "ray march", "relative error"])
-        numbers = metrics.compare_frames(hdr["raymarch"], hdr["lut"], valid, display=shown)
-        detail = f"; table vs ray march: 95th-percentile error {100 * numbers['p95_rel']:.1f} %"
+        image, numbers = comparison(hdr, images, shown, valid)
+        detail = f"; {LOOKUP_NAMES[lookup]} vs ray march: 95th-percentile error {100 * numbers['p95_rel']:.1f} %"
     else:
-        image, detail = images["raymarch" if config.method == "raymarch" else "lut"], ""
+        image, detail = images[next(iter(hdr))], ""
     text = scene.output_metadata(scene.scene_text(scene.scene_values(config, args.scene_parser, extra), "render"))
     writers.write_png(output, image, force=args.force, text=text)
     print(f"frame {camera.width}x{camera.height} ({config.method}, sun elevation {args.sun_elevation:g} deg, "
@@ -323,7 +330,8 @@ def run_bench(args):
         raise clsky_cli.UsageError(str(error)) from None
     candidates = accuracy.default_candidates()
     if args.quick:
-        candidates = [c for c in candidates if c.label in ("default", "ray march 16 samples", "ray march 48 samples")]
+        candidates = [c for c in candidates if c.label in ("default", "ray march 16 samples", "ray march 48 samples",
+                                                           "sky-view 32 x 64")]
     progress, close = clsky_cli.progress_bar(args.progress)
     try:
         reference, valid = accuracy.render_reference(args.size, level=args.reference_quality)

@@ -417,13 +417,29 @@ class Display:
 
     def exposure(self, frame, valid=None):
         """The EV of the next frame of the sequence: the fixed EV, or (auto-exposure) the metered EV
-        of ``frame`` over the ``valid`` pixels plus the compensation, smoothed (:func:`smoothed_ev`)."""
+        of ``frame`` over the ``valid`` pixels plus the compensation, smoothed (:func:`smoothed_ev`):
+        :meth:`next_ev` of :meth:`metered_ev`."""
         if self.auto_exposure is None:
             return self.exposure_ev
+        return self.next_ev(self.metered_ev(frame, valid))
+
+    def metered_ev(self, frame, valid=None):
+        """Auto-exposure's metered EV of ``frame`` over the ``valid`` pixels plus the compensation [EV],
+        before smoothing; stateless, so that frames may be metered anywhere (a frame farm's workers,
+        :mod:`clsky.anim.farm`) and smoothed in order by :meth:`next_ev`. None without auto-exposure."""
+        if self.auto_exposure is None:
+            return None
         rgb = self.linear_srgb(frame)
         pixels = rgb[valid] if valid is not None else rgb.reshape(-1, 3)
         a = self.auto_exposure
-        metered = meter_ev(np.maximum(_luminance(pixels), 0.0), a.key, a.min_ev, a.max_ev) + self.exposure_ev
+        return meter_ev(np.maximum(_luminance(pixels), 0.0), a.key, a.min_ev, a.max_ev) + self.exposure_ev
+
+    def next_ev(self, metered):
+        """The EV of the next frame of the sequence from its :meth:`metered_ev`: the fixed EV, or the
+        metered EV smoothed against the last frame's (:func:`smoothed_ev`; the state this keeps)."""
+        if self.auto_exposure is None:
+            return self.exposure_ev
+        a = self.auto_exposure
         self._last_ev = smoothed_ev(self._last_ev, metered, a.smoothing, a.max_step_ev)
         return self._last_ev
 

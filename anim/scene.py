@@ -2,7 +2,7 @@
 
 A scene holds what a command line of ``clsky animate`` or ``clsky render`` sets, in five sections::
 
-    [camera]  camera, size, fov_deg, heading_deg, pitch_deg, altitude, method
+    [camera]  camera, size, fov_deg, heading_deg, pitch_deg, altitude, method, skyview_size
     [sky]     preset, mode, ground_albedo, ozone_column_du, error_budget, quality, table_size, samples,
               sampling, wavelengths
     [sun]     animate: frames, start_elevation_deg, max_elevation_deg, location, date, start_hour,
@@ -73,7 +73,7 @@ def _keys(section, *items):
 #: has its ``dest``. The key is the AnimationConfig field (render's sun: its own two).
 SCENE_KEYS = (
     _keys("camera", "camera", "size", ("fov_deg", "fov"), ("heading_deg", "heading"), ("pitch_deg", "pitch"),
-          "altitude", "method")
+          "altitude", "method", "skyview_size")
     + _keys("sky", "preset", "mode", "ground_albedo", "ozone_column_du", "error_budget", "quality", "table_size",
             "samples", "sampling", "wavelengths")
     + _keys("sun", "frames", ("start_elevation_deg", "start_elevation"), ("max_elevation_deg", "max_elevation"),

@@ -15,9 +15,9 @@ rendering them again (minutes). How far the reference converged: bench/bench_qua
 (they belong together); with ``--no-readme``, nowhere (print only), so that a trial run never
 overwrites the published data unless asked.
 
-``--smoke``: 16 x 16 frames, the 'draft' quality level as the reference, three candidates (the default
-table, a halved view axis, a 16-sample ray march) over an 8 x 32 x 8 table; the CSV and the plots go to
-a temporary directory (or ``--docs DIR``); print only (bench/_report.py).
+``--smoke``: 16 x 16 frames, the 'draft' quality level as the reference, four candidates (the default
+table, a halved view axis, a 16-sample ray march, a 16 x 32 sky-view map) over an 8 x 32 x 8 table; the
+CSV and the plots go to a temporary directory (or ``--docs DIR``); print only (bench/_report.py).
 
 ``--replot CSV``: measure nothing; draw the two plots again from a sweep's CSV into ``--docs DIR``
 (default docs/; a temporary directory with --smoke), replacing them; ``--size`` must be that sweep's
@@ -41,8 +41,9 @@ from clsky.anim import accuracy, accuracy_plot, writers
 from clsky._cl import default_device, describe_device
 
 DOCS = pathlib.Path(__file__).resolve().parent.parent / "docs"
-#: The candidates of a --smoke run (over an SMOKE.table base): one table, one table knob, one ray march.
-SMOKE_CANDIDATES = ("default", "H / 2", "ray march 16 samples")
+#: The candidates of a --smoke run (over an SMOKE.table base): one table, one table knob, one ray march,
+#: one sky-view map.
+SMOKE_CANDIDATES = ("default", "H / 2", "ray march 16 samples", "sky-view 16 x 32")
 
 
 def main():

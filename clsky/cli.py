@@ -93,7 +93,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 STAGE_LABELS = {"single": ("single scattering", "slab"), "orders": ("scattering orders", "order"),
-                "frames": ("frames", "frame")}
+                "frames": ("frames", "frame"), "tables": ("tables", "table")}
 
 
 def progress_bar(mode):
@@ -196,6 +196,57 @@ def _add_table_arguments(parser):
     output.add_argument("--raw", metavar="NAME", help="also export NAME.bin (float32) + NAME.json for GPU engines")
     output.add_argument("--force", action="store_true", help="overwrite existing output files")
     output.add_argument("--progress", default="leave", choices=["display", "leave", "none"])
+    output.add_argument("--sweep", metavar="FILE",
+                        help="one table per line of FILE: each line holds table options (at least -o), which "
+                             "win over the command line's (README 'Frame farms (Dask)'); the files land together")
+    add_farm_arguments(parser)
+
+
+def add_farm_arguments(parser):
+    """--workers and --scheduler (clsky/farm.py), for ``clsky table`` and ``clsky animate`` alike."""
+    farm = parser.add_argument_group("farm (Dask, pip install 'clsky[dask]')")
+    where = farm.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, metavar="N",
+                       help="run on an embedded Dask LocalCluster of N worker processes (the table is built "
+                            "here, the frames or sweep's tables on the workers)")
+    where.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                       help="run on the existing Dask cluster of this scheduler (its workers need clsky)")
+
+
+def farm_of(args):
+    """The :class:`clsky.farm.Farm` of --workers or --scheduler, checked but not started (None without
+    either). UsageError (exit 2) names the option: a bad value, or Dask not installed."""
+    if getattr(args, "workers", None) is None and getattr(args, "scheduler", None) is None:
+        return None
+    from .errors import ParameterError
+    from .farm import Farm, require_dask
+
+    option = "--workers" if args.workers is not None else "--scheduler"
+    try:
+        require_dask(option)
+        return Farm(workers=args.workers, scheduler=args.scheduler)
+    except ImportError as error:
+        raise UsageError(str(error)) from None
+    except ParameterError as error:
+        raise UsageError(error.reworded(option)) from None
+
+
+@contextlib.contextmanager
+def running_farm(farm):
+    """Start ``farm`` (None: nothing) for the block and close it after; a scheduler that does not answer
+    is a UsageError naming --scheduler."""
+    if farm is None:
+        yield None
+        return
+    try:
+        farm.start()
+    except ConnectionError as error:
+        raise UsageError(f"--scheduler: {error}") from None
+    try:
+        print(farm.describe())
+        yield farm
+    finally:
+        farm.close()
 
 
 #: TableSettings field -> the attribute of the parsed arguments that sets it (None: not given).
@@ -325,6 +376,7 @@ def build_parser(extensions=()):
     commands.add_parser("devices", help="list OpenCL platforms and devices, and the one clsky uses")
     table = commands.add_parser("table", help="compute a scattering table and save it")
     _add_table_arguments(table)
+    table.set_defaults(table_parser=table)          # clsky/sweep.py parses the --sweep lines with it
     info = commands.add_parser("info", help="describe a table file (.npz) or an output (PNG, EXR, metrics JSON)")
     info.add_argument("file", help="a .npz table, a PNG or EXR frame, or a <stem>_metrics.json")
     handlers = dict(COMMANDS)
@@ -368,6 +420,10 @@ def run_table(args):
     from ._files import StagedWrites
     from .table import ScatteringTable
 
+    if args.sweep is not None or farm_of(args) is not None:     # several tables, or on a farm
+        from .sweep import run_sweep
+
+        return run_sweep(args)
     atmosphere = table_atmosphere(args)
     settings = table_settings(args, atmosphere)
     output = pathlib.Path(args.output)
@@ -387,15 +443,20 @@ def run_table(args):
         table.save(output, overwrite=args.force, staging=staging)
         if args.raw:
             table.export_raw(args.raw, overwrite=args.force, staging=staging)
+    report_table(args, table, output, time.perf_counter() - start)
+    return 0
+
+
+def report_table(args, table, output, seconds):
+    """The summary line of a table written to ``output`` (and a warning if its orders did not converge)."""
+    settings, record = table.settings, table.orders_record
     width, height, depth = settings.size
-    record = table.orders_record
     print(f"table {width}x{height}x{depth} {settings.dtype} ({args.preset}, mode {settings.mode}, "
           f"{record['orders']} orders, {'converged' if record['converged'] else 'not converged'}; "
           f"{table.metadata['device']}): built in {table.metadata['build_seconds']:.2f} s, "
-          f"total {time.perf_counter() - start:.2f} s -> {output}")
+          f"total {seconds:.2f} s -> {output}")
     if settings.orders == "auto" and not record["converged"]:
         print(f"clsky: warning: {record['reason']}", file=sys.stderr)
-    return 0
 
 
 def run_info(args):
@@ -426,6 +487,7 @@ def main(argv=None, extensions=()):
 def _main(argv, extensions):
     from ._cl import KernelBuildError, NoDeviceError
     from .errors import NumericalError
+    from .farm import FarmError
 
     verbose = "--verbose" in (sys.argv[1:] if argv is None else argv)
     try:
@@ -440,7 +502,7 @@ def _main(argv, extensions):
             raise
         print(f"clsky: error: {error}", file=sys.stderr)
         return EXIT_USAGE
-    except (NoDeviceError, KernelBuildError, NumericalError, OSError) as error:
+    except (NoDeviceError, KernelBuildError, NumericalError, OSError, FarmError) as error:
         if verbose:
             raise
         print(f"clsky: error: {str(error).splitlines()[0]}", file=sys.stderr)

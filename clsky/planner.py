@@ -26,9 +26,17 @@ What the plan decides, and why:
   budget, or when the scene does not want them.
 * **Mie** is dropped (its scattering set to 0: the Mie channels hold zeros) only when the scene does
   not want it; an atmosphere without Mie has nothing to drop.
-* **Ray march**: the table lookup alone serves the scene only where its measured error
-  (:data:`LOOKUP_ERROR`) fits the budget at the path's lowest sun; otherwise frames need the ray march
-  (and so does an animation that renders both: ``plan_scene(..., ray_march=True)``).
+* **Renderer** (:mod:`clsky.renderer_choice`): the cheapest of the table lookup, the per-frame sky-view
+  map and the ray march whose measured error over the sun path fits the budget
+  (:attr:`Plan.renderer`). The table lookup alone serves the scene only where its measured error
+  (:data:`LOOKUP_ERROR`) fits at the path's lowest sun; the sky-view map (the ray march read at a map's
+  nodes) where the level's ray-march error plus the map's own fits; otherwise the ray march. The
+  sky-view map and the ray march need the ray march's quadrature and margins, and so does an animation
+  that renders the ray march whatever the plan picks (``plan_scene(..., ray_march=True)``; the plan then
+  says which lookup would do; ``clsky animate --method compare`` compares the ray march with the sky-view
+  map when the plan picks it or the ray march). The 4D table lookup is not a choice of the plan: its
+  table is a build of its own, which pays only over a frame count the plan does not know
+  (:mod:`clsky.renderer_choice`).
 * **Azimuth harmonics** (:func:`azimuth_harmonics`): the orders k >= 2 carry the view-sun azimuth
   (:mod:`clsky.azimuth`, M = :attr:`clsky.quality.QualityLevel.twilight_harmonics`, 2) when the
   scene's sun goes below :data:`HARMONICS_BELOW_DEG` (+30 deg), the azimuth average (M = 0) otherwise.
@@ -62,6 +70,7 @@ from .atmosphere import AtmosphereParameters, preset
 from .errors import ParameterError, is_real_number
 from .mapping import cos_to_v
 from .quality import QualityLevel, level_for_budget, quality_level
+from .renderer_choice import LOOKUP_ERROR, choose_renderer
 from .settings import TableSettings
 
 __all__ = ["Scene", "Plan", "plan_scene", "sun_margins", "sun_axis", "view_sampling", "azimuth_harmonics",
@@ -69,17 +78,6 @@ __all__ = ["Scene", "Plan", "plan_scene", "sun_margins", "sun_axis", "view_sampl
 
 #: Light components a scene may want.
 COMPONENTS = ("rayleigh", "mie", "multiple")
-
-#: Measured error of the table lookup (95th percentile, relative, default table, all-sky fisheye from
-#: the ground; README "Speed versus accuracy") by sun elevation [deg]: it grows toward the horizon,
-#: where the missing azimuth of the 3D table dominates, whatever the table's size.
-LOOKUP_ERROR = ((-4.0, 4.99), (1.0, 0.320), (8.0, 0.0314), (45.0, 0.0078))
-
-
-def _lookup_error(elevation_deg):
-    """LOOKUP_ERROR interpolated in log error; below its first elevation, its first value."""
-    elevations, errors = zip(*LOOKUP_ERROR)
-    return float(np.exp(np.interp(elevation_deg, elevations, np.log(errors))))
 
 
 def _check_range(name, value, low, high):
@@ -152,8 +150,12 @@ class Plan:
     table : TableSettings
         The table to build: the level's, on the planned sun range.
     ray : TableSettings or None
-        The ray march's quadrature, or None when the table lookup alone meets the budget.
+        The ray march's quadrature (of the ray march, or of the sky-view map's nodes), or None when the
+        table lookup alone meets the budget.
     decisions : tuple of (topic, decision, reason)
+    renderer : str
+        The cheapest renderer that meets the budget (:func:`clsky.renderer_choice.choose_renderer`), a
+        ``clsky animate --method``: 'lut', 'skyview' or 'raymarch'.
     """
 
     scene: Scene
@@ -162,6 +164,7 @@ class Plan:
     table: TableSettings
     ray: TableSettings | None
     decisions: tuple
+    renderer: str = "raymarch"
 
     @property
     def budget(self) -> float:
@@ -383,20 +386,27 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     sampling, because = view_sampling(scene.altitudes_m)
     harmonics, harmonics_because = azimuth_harmonics(level, scene.sun_elevations_deg, mode)
     table = level.table.replace(mode=mode, sampling=sampling, azimuth_harmonics=harmonics)
-    lookup_error = _lookup_error(scene.sun_elevations_deg[0])
-    if lookup_error <= budget and ray_march:
-        ray = level.ray
-        decisions.append(("renderer", f"ray march, {ray.view_steps} samples per ray",
+    chosen, estimate, estimates = choose_renderer(scene.sun_elevations_deg, budget, level.name)
+    lookup_error, low = estimates["lut"], scene.sun_elevations_deg[0]
+    march = f"ray march, {level.ray.view_steps} samples per ray"
+    ray = level.ray
+    if chosen.method == "lut" and ray_march:
+        decisions.append(("renderer", march,
                           f"asked for; the table lookup alone would do: {100 * lookup_error:.3g} % at the lowest sun"))
-    elif lookup_error <= budget:
+    elif chosen.method == "lut":
         ray = None
         decisions.append(("renderer", "table lookup", f"its error at the lowest sun, "
-                          f"{scene.sun_elevations_deg[0]:g} deg, is {100 * lookup_error:.3g} % (measured)"))
+                          f"{low:g} deg, is {100 * lookup_error:.3g} % (measured)"))
+    elif chosen.method == "raymarch":
+        decisions.append(("renderer", march, f"the table lookup's {100 * lookup_error:.3g} % at the lowest sun, "
+                          f"{low:g} deg, exceeds the budget"))
     else:
-        ray = level.ray
-        decisions.append(("renderer", f"ray march, {ray.view_steps} samples per ray",
-                          f"the table lookup's {100 * lookup_error:.3g} % at the lowest sun, "
-                          f"{scene.sun_elevations_deg[0]:g} deg, exceeds the budget"))
+        would = (f"the {chosen.description}'s {100 * estimate:.2g} % (estimated: the ray march's + its own, "
+                 f"measured) fits; the table lookup's {100 * lookup_error:.3g} % at the lowest sun, {low:g} deg, "
+                 f"exceeds the budget")
+        decisions.append(("renderer", march, f"asked for; {would}") if ray_march
+                         else ("renderer", f"{chosen.description} (--method {chosen.method}), {march} at its nodes",
+                               would))
 
     if ray is not None:
         ray = ray.replace(sampling=sampling)
@@ -437,4 +447,4 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     decisions.append(("view axis", f"whole, {table.size[1]} nodes",
                       f"the cameras see {scene.view_elevations_deg[0]:.1f} to {scene.view_elevations_deg[1]:.1f} "
                       "deg; " + whole_because["view"]))
-    return Plan(scene, level, atmosphere, table, ray, tuple(decisions))
+    return Plan(scene, level, atmosphere, table, ray, tuple(decisions), chosen.method)

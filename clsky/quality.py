@@ -24,7 +24,7 @@ What sets a level apart (measured, README):
   sunset and +134 % at -6 deg against the Monte Carlo, M = 2 within its noise (README, "Twilight
   against Monte Carlo"), so a reference without them measured convergence, not truth.
 * A table lookup cannot meet these budgets below golden hour whatever its size (the 3D table has no
-  azimuth: 32 % at sunset, hundreds of % in twilight): the levels are for the ray march, and the
+  azimuth: 38 % at sunset, hundreds of % in twilight): the levels are for the ray march, and the
   planner allows the lookup alone only where its measured error fits the budget.
 """
 

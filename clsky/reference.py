@@ -25,7 +25,7 @@ __all__ = [
     "horizon_cos", "distance_to_top", "distance_to_ground", "altitude_along",
     "quadrature_nodes", "view_nodes", "densities", "column_density", "optical_depth", "transmittance",
     "transmittance_table", "column_density_from_table", "single_scattering", "enter_atmosphere",
-    "lookup", "gather", "trilinear", "scatter", "render_table", "render_raymarch",
+    "lookup", "gather", "trilinear", "scatter", "render_table", "render_raymarch", "render_skyview",
     "interpolate4d", "lookup4d", "table4d_cells", "render_table4d",
 ]
 
@@ -617,3 +617,49 @@ def render_raymarch(atmosphere, ray_settings, directions, sun_direction, altitud
         sky[part] = value
     sky *= np.asarray(atmosphere.incident_light) * inside[:, None]
     return (sky + _sun_disc(atmosphere, mu_v, nu, altitude, sun_radiance, cos_sun_radius)).reshape(shape + (3,))
+
+
+def render_skyview(sky_map, sky_rows, azimuth_mapping, directions, sun_direction, altitude, horizon_cos_value,
+                   horizon_angle, sun_radiance, cos_sun_radius):
+    """Twin of ``SkyRenderer.render_skyview``'s kernel (``kernels/skyview.cl``): the sky-view map
+    ``sky_map`` (H, W, 3) (``sky_rows`` sky rows, then ground rows; :mod:`clsky.skyview`) read bilinearly
+    per direction within the direction's half (mu_v >= ``horizon_cos_value`` or below), plus the sun disc;
+    (..., 3). ``azimuth_mapping``: 'linear' or 'sun'; ``horizon_angle`` = acos(horizon_cos_value) [rad]."""
+    shape = np.shape(directions)[:-1]
+    v = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    sun = np.asarray(sun_direction, dtype=np.float64)
+    sky_map = np.asarray(sky_map, dtype=np.float64)
+    height, width = sky_map.shape[:2]
+    ground_rows = height - sky_rows
+    mu_v = np.clip(v[:, 2], -1.0, 1.0)
+    nu = np.clip(v @ sun, -1.0, 1.0)
+    theta = np.arctan2(np.sqrt(v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1]), v[:, 2])
+    sun_horizontal = math.sqrt(sun[0] * sun[0] + sun[1] * sun[1])
+    sun_unit = sun[:2] / sun_horizontal if sun_horizontal > 0.0 else np.array([1.0, 0.0])
+    horizontal = np.sqrt(v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1])[:, None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        view = np.where(horizontal > 0.0, v[:, :2] / horizontal, sun_unit)
+    chord = np.linalg.norm(view - sun_unit, axis=-1)          # 2 sin(phi / 2)
+    if azimuth_mapping == "sun":
+        u = np.minimum(0.5 * chord, 1.0)
+    else:
+        u = 2.0 * np.arctan2(chord, np.linalg.norm(view + sun_unit, axis=-1)) / math.pi
+
+    def node(f, n):
+        g = np.clip(f, 0.0, n - 1.0)
+        i = np.clip(g.astype(np.int64), 0, n - 2)
+        return i, g - i
+
+    x0, ax = node(u * (width - 1), width)
+    sky = mu_v >= horizon_cos_value
+    t_sky = 1.0 - np.sqrt(np.maximum(1.0 - theta / horizon_angle, 0.0))
+    t_ground = np.sqrt(np.maximum((theta - horizon_angle) / (math.pi - horizon_angle), 0.0))
+    y_sky, a_sky = node(t_sky * (sky_rows - 1), sky_rows)
+    y_ground, a_ground = node(t_ground * (ground_rows - 1), ground_rows)
+    y0 = np.where(sky, y_sky, sky_rows + y_ground)
+    ay = np.where(sky, a_sky, a_ground)[:, None]
+    ax = ax[:, None]
+    value = ((1.0 - ay) * ((1.0 - ax) * sky_map[y0, x0] + ax * sky_map[y0, x0 + 1])
+             + ay * ((1.0 - ax) * sky_map[y0 + 1, x0] + ax * sky_map[y0 + 1, x0 + 1]))
+    disc = ((nu >= cos_sun_radius) & (mu_v >= horizon_cos_value))[:, None] * np.asarray(sun_radiance, np.float64)
+    return (value + disc).reshape(shape + (3,))

@@ -2,8 +2,9 @@
 
 :class:`SkyRenderer` owns one :class:`RenderEngine` and a table uploaded once; each call renders
 one frame for one sun direction and observer altitude. Directions are unit vectors in the observer's
-local frame (x east, y north, z zenith). NumPy twins: :func:`clsky.reference.render_table` and
-:func:`clsky.reference.render_raymarch`.
+local frame (x east, y north, z zenith). NumPy twins: :func:`clsky.reference.render_table`,
+:func:`clsky.reference.render_raymarch` and :func:`clsky.reference.render_skyview` (the per-frame sky-view
+map's sampling, :mod:`clsky.skyview`).
 """
 
 from __future__ import annotations
@@ -125,7 +126,8 @@ class RenderEngine(_cl.Engine):
     def program_sources(self):
         declaration = _atmosphere_cl.declaration(self.ctx.devices[0], self.dtype)
         return (("real.cl", declaration) + COMMON_SOURCES[1:]
-                + ("mapping.cl", "mapping4d.cl", "phase.cl", "view_ray.cl", "lookup.cl", "lookup4d.cl", "render.cl"))
+                + ("mapping.cl", "mapping4d.cl", "phase.cl", "view_ray.cl", "lookup.cl", "lookup4d.cl", "render.cl",
+                   "skyview.cl"))
 
     def build_options(self):
         return super().build_options() + quadrature_defines(self.ray_settings, VECTOR_WIDTH)
@@ -189,6 +191,7 @@ class SkyRenderer:
         else:
             self._sun_table_d = cla.zeros(self.queue, 2 * 2 * column_channels(table.atmosphere), dtype)
         self._cos_sun_radius = math.cos(math.radians(SUN_ANGULAR_RADIUS_DEG))
+        self._skyview_nodes = {}      # (settings, altitude) -> the sky-view map's prepared node directions
 
     def prepare(self, directions, valid=None):
         """Upload a camera's directions (..., 3) once, for many frames: pass the result as ``directions``."""
@@ -202,9 +205,10 @@ class SkyRenderer:
         return PreparedDirections(cla.to_device(self.queue, flat), shape,
                                   cla.to_device(self.queue, np.ascontiguousarray(mask.ravel(), dtype=np.uint8)))
 
-    def _launch(self, name, directions, sun_direction, altitude, valid, extra_args, buffers):
+    def _launch(self, name, directions, sun_direction, altitude, valid, extra_args, buffers, sun_disc=True):
         """Launch kernel ``name`` once ``buffers`` ((argument, array_d, values indexed) for ``extra_args``)
-        and the directions, mask and output have passed :func:`~clsky.lookup.check_kernel_buffer`."""
+        and the directions, mask and output have passed :func:`~clsky.lookup.check_kernel_buffer`;
+        ``sun_disc`` False: without the sun's disc (its radiance passed as 0)."""
         if not isinstance(directions, PreparedDirections):
             directions = self.prepare(directions, valid)
         elif valid is not None:
@@ -218,7 +222,7 @@ class SkyRenderer:
             raise ValueError(f"{name}: prepared directions of shape {shape} hold {n} directions")
         real4 = _cl.real_vector_dtype(self.engine.dtype, 4)
         sun4 = _real4(real4, sun)
-        disc = _real4(real4, sun_disc_radiance(self.table.atmosphere, sun, altitude))
+        disc = _real4(real4, sun_disc_radiance(self.table.atmosphere, sun, altitude) if sun_disc else np.zeros(3))
         out_d = cla.empty(self.queue, (max(n, 1), 3), self.engine.dtype)
         for argument, array_d, count in buffers + [("directions", directions_d, 3 * n), ("out", out_d, 3 * max(n, 1))]:
             check_kernel_buffer(name, argument, array_d, count, self.engine.dtype)
@@ -320,10 +324,11 @@ class SkyRenderer:
         buffers = [("table", table_d, math.prod(shape))]
         return self._launch("render_table4d", directions, sun_direction, altitude, valid, args, buffers)
 
-    def render_raymarch(self, directions, sun_direction, altitude=0.0, valid=None):
+    def render_raymarch(self, directions, sun_direction, altitude=0.0, valid=None, sun_disc=True):
         """HDR radiance (..., 3) by per-pixel ray marching (single scattering along the true ray, higher
         orders from the table's gathered in-scatter, and a reflecting ground lit by the sun at the ground
-        point's true sun cosine and by the table's ground_irradiance)."""
+        point's true sun cosine and by the table's ground_irradiance); ``sun_disc`` False: the sky
+        without the sun's disc (the sky-view map's nodes, :meth:`skyview_map`)."""
         t = self._check_table_unchanged()
         depth, height, width = self._gathered_shape[-4:-1] if self._has_gathered else (2, 2, 2)
         tw, th = self._sun_table_size
@@ -336,7 +341,41 @@ class SkyRenderer:
         buffers = [("gathered", self._gathered_d, (harmonics + 1) * depth * height * width * 8),
                    ("sun_table", self._sun_table_d, th * tw * column_channels(t.atmosphere)),
                    ("ground_irradiance", self._ground_d, 4 * self._ground_depth)]
-        return self._launch("render_raymarch", directions, sun_direction, altitude, valid, args, buffers)
+        return self._launch("render_raymarch", directions, sun_direction, altitude, valid, args, buffers, sun_disc)
+
+    def skyview_map(self, sun_direction, altitude=0.0, settings=None):
+        """The per-frame sky-view map (H, W, 3) of :mod:`clsky.skyview` (``settings``: a
+        :class:`~clsky.skyview.SkyViewSettings`, default its defaults): :meth:`render_raymarch` without
+        the sun's disc at the map's node directions, in the frame turned about the zenith that puts the
+        sun's azimuth along +x. The nodes of the last (settings, altitude) stay uploaded."""
+        from . import skyview
+
+        settings = settings or skyview.SkyViewSettings()
+        _, sun, altitude = check_directions(np.zeros((0, 3)), sun_direction, altitude)
+        key = (settings, altitude)
+        if key not in self._skyview_nodes:
+            nodes = skyview.node_directions(settings, altitude, self.table.atmosphere.planet_radius)
+            self._skyview_nodes = {key: self.prepare(nodes)}
+        return self.render_raymarch(self._skyview_nodes[key], skyview.canonical_sun(sun), altitude, sun_disc=False)
+
+    def render_skyview(self, directions, sun_direction, altitude=0.0, valid=None, settings=None):
+        """HDR radiance (..., 3) from a per-frame sky-view map (Hillaire 2020; :mod:`clsky.skyview`):
+        :meth:`skyview_map` for this sun and altitude, read bilinearly per pixel (never across the
+        horizon), plus the sun's disc. Arguments as :meth:`render_raymarch`; ``settings`` a
+        :class:`~clsky.skyview.SkyViewSettings` (map size, azimuth mapping)."""
+        from . import skyview
+
+        settings = settings or skyview.SkyViewSettings()
+        _, sun, altitude = check_directions(np.zeros((0, 3)), sun_direction, altitude)
+        sky_map = self.skyview_map(sun, altitude, settings)
+        map_d = cla.to_device(self.queue, np.ascontiguousarray(sky_map, dtype=self.engine.dtype))
+        mu_h, angle = skyview.horizon(altitude, self.table.atmosphere.planet_radius)
+        width, height = settings.size
+        args = (map_d.data, np.int32(width), np.int32(settings.sky_rows), np.int32(settings.ground_rows),
+                np.int32(skyview.AZIMUTH_MAPPINGS[settings.azimuth_mapping]), self.engine.real(mu_h),
+                self.engine.real(angle))
+        return self._launch("render_skyview", directions, sun, altitude, valid, args,
+                            [("sky_map", map_d, 3 * width * height)])
 
     def close(self):
         self.engine.close()

@@ -56,7 +56,8 @@ ORDER_RATIO = 0.4
 #: fisheye animations of the default (physical) preset: 488 bytes per pixel in all (compare), 334 (lut),
 #: 336 (raymarch), of which the listed arrays are 147 and 123 (2026-12-02, after the physical frames
 #: became cd/m^2 through the power-law conversion; before it, 390 / 195 / 203).
-FRAME_BYTES_PER_PIXEL = {"compare": 340, "lut": 210, "raymarch": 210}
+#: skyview: one frame, processed as lut's (not measured on its own; its map of W x H nodes is negligible).
+FRAME_BYTES_PER_PIXEL = {"compare": 340, "lut": 210, "raymarch": 210, "skyview": 210}
 
 _GIB = 2**30
 

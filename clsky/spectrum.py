@@ -252,12 +252,12 @@ class SpectralRenderer:
         """The directions uploaded once for every batch's renderer (pass the result as ``directions``)."""
         return _Prepared(tuple(r.prepare(directions, valid) for r in self.renderers))
 
-    def _render(self, name, directions, sun_direction, altitude, valid):
+    def _render(self, name, directions, sun_direction, altitude, valid, **options):
         if not isinstance(directions, _Prepared):
             directions = self.prepare(directions, valid)
         elif valid is not None:
             raise ValueError("valid must be given to prepare(), not with prepared directions")
-        return self.table.assemble(getattr(renderer, name)(prepared, sun_direction, altitude)
+        return self.table.assemble(getattr(renderer, name)(prepared, sun_direction, altitude, **options)
                                    for renderer, prepared in zip(self.renderers, directions.per_renderer))
 
     def render_table(self, directions, sun_direction, altitude=0.0, valid=None):
@@ -267,6 +267,11 @@ class SpectralRenderer:
     def render_raymarch(self, directions, sun_direction, altitude=0.0, valid=None):
         """Spectral radiance (..., N) by ray march (:meth:`clsky.render.SkyRenderer.render_raymarch`)."""
         return self._render("render_raymarch", directions, sun_direction, altitude, valid)
+
+    def render_skyview(self, directions, sun_direction, altitude=0.0, valid=None, settings=None):
+        """Spectral radiance (..., N) from per-frame sky-view maps, one per batch
+        (:meth:`clsky.render.SkyRenderer.render_skyview`)."""
+        return self._render("render_skyview", directions, sun_direction, altitude, valid, settings=settings)
 
     def close(self):
         for renderer in self.renderers:

@@ -21,11 +21,11 @@ fi
 
 python3 -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip
-.venv/bin/python -m pip install -q -e ".[anim,test,bench]"
+.venv/bin/python -m pip install -q -e ".[anim,test,bench,dask]"
 
 if ! .venv/bin/python -c "import pyopencl as cl, sys; sys.exit(0 if any(p.get_devices() for p in cl.get_platforms()) else 1)" 2>/dev/null; then
     log "no OpenCL device found: installing the PoCL pip build (pyopencl[pocl])"
-    .venv/bin/python -m pip install -q -e ".[anim,test,bench,pocl]"
+    .venv/bin/python -m pip install -q -e ".[anim,test,bench,dask,pocl]"
 fi
 # three.js's EXRLoader (tests/js, pinned by its package-lock.json) for tests/test_exr.py; optional
 if command -v npm >/dev/null 2>&1; then

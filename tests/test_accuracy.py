@@ -24,7 +24,7 @@ def test_candidates_move_one_knob_each():
     knobs = {c.knob for c in candidates}
     # the knobs the speed/accuracy issue names
     for knob in ("table size", "mapping", "view/sun steps", "sampling", "transmittance", "gather quadrature",
-                 "order tolerance", "precision", "fast-math", "ray march samples"):
+                 "order tolerance", "precision", "fast-math", "ray march samples", "sky-view map size"):
         assert knob in knobs
 
 
@@ -42,8 +42,9 @@ def _tiny_rows(reference, valid):
     default = accuracy.default_candidates()[0].table
     small = accuracy.Candidate("small table", "table size", default.replace(size=(9, 33, 9)))
     march = accuracy.Candidate("ray march 48", "ray march samples", default, samples=48)
-    rows = accuracy.measure([small, march], reference, valid)
-    assert [r["method"] for r in rows] == ["lut", "raymarch"]
+    view = accuracy.Candidate("sky-view 64 x 128", "sky-view map size", default, skyview=(64, 128))
+    rows = accuracy.measure([small, march, view], reference, valid)
+    assert [r["method"] for r in rows] == ["lut", "raymarch", "skyview"]
     for row in rows:
         assert row["build_s"] > 0 and row["render_s"] > 0 and row["mean_delta_e"] >= 0
         assert row["p95_rel"] == max(row[f"p95_rel {name}"] for name in accuracy.SUN_ELEVATIONS)
@@ -66,6 +67,12 @@ def test_measure_on_tiny_frames(stand_in_reference):
     assert rows[1]["p95_rel day"] < 0.005
     assert rows[1]["p95_rel"] < 0.1
     assert rows[0]["p95_rel civil twilight"] > 10 * rows[1]["p95_rel civil twilight"]
+    # The sky-view map is the same 48-sample ray march at its nodes, read bilinearly: each frame's error
+    # stays within 0.5 % (absolute, of p95) of the ray march's (its own difference from the ray march
+    # is 0.07 to 0.16 %, tests/test_skyview.py). Measured (sky-view / ray march p95): day 0.059 / 0.011 %,
+    # golden hour 0.069 / 0.026 %, sunset 0.497 / 0.473 %, civil twilight 5.361 / 5.267 %.
+    for name in accuracy.SUN_ELEVATIONS:
+        assert abs(rows[2][f"p95_rel {name}"] - rows[1][f"p95_rel {name}"]) < 0.005, name
 
 
 @pytest.mark.parametrize("args,named", [(["--size", "8"], "--size"), (["-o", "x.txt"], "--output"),
@@ -100,7 +107,9 @@ def test_bench_accuracy_quick_run_writes_csv_and_plot(tmp_path):
     assert result.returncode == 0, result.stderr
     with open(tmp_path / "accuracy.csv") as stream:
         rows = list(csv.DictReader(stream))
-    assert [r["candidate"] for r in rows] == ["default", "ray march 16 samples", "ray march 48 samples"]
+    assert [r["candidate"] for r in rows] == ["default", "ray march 16 samples", "ray march 48 samples",
+                                              "sky-view 32 x 64"]
+    assert rows[-1]["method"] == "skyview"
     for name in ("accuracy.png", "accuracy_elevation.png"):
         assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -290,5 +299,29 @@ def test_a_zero_error_is_named_not_drawn_on_the_log_axes():
     figure = draw_elevation(rows)
     try:
         figure.canvas.draw()
+    finally:
+        plt.close(figure)
+
+
+def test_skyview_candidates_get_their_own_markers_and_band():
+    """Sky-view rows (method 'skyview'): purple diamonds in the Pareto plot, and their own band and front
+    line in the elevation plot, beside the lookups' and the ray marches'."""
+    pytest.importorskip("matplotlib")
+    import matplotlib.pyplot as plt
+
+    from clsky.anim.accuracy_plot import draw_elevation, knob_styles
+
+    rows = synthetic_rows()
+    errors = {f"p95_rel {n}": 0.001 for n in accuracy.SUN_ELEVATIONS}
+    rows.append({"candidate": "sky-view 64 x 128", "knob": "sky-view map size", "method": "skyview",
+                 "build_s": 1.0, "render_s": 0.5e-3, "p95_rel": 0.001, "mean_delta_e": 0.1, **errors})
+    styles = knob_styles(rows)
+    assert styles["sky-view map size"] == ("purple", "D")
+    assert all(marker != "D" for knob, (_, marker) in styles.items() if knob != "sky-view map size")
+    figure = draw_elevation(rows)
+    try:
+        labels = figure.axes[0].get_legend_handles_labels()[1]
+        assert "sky-view map: all 1 candidates (range)" in labels
+        assert "sky-view map: sky-view 64 x 128" in labels          # fastest and best: on the front
     finally:
         plt.close(figure)

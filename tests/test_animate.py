@@ -78,6 +78,9 @@ def test_compare_animation_writes_video_frames_and_metrics(tmp_path, cl_context)
     for key in ("table_jumps", "raymarch_jumps", "excess"):
         assert len(temporal[key]) == 5
     assert temporal["worst_frames"] and all(0 <= index < 5 for index in temporal["worst_frames"])
+    # an explicit table size: no plan, the 3D table lookup is the lookup compared, named in every output
+    assert all(row["lookup"] == "table lookup" for row in rows)
+    assert record["lookup"] == temporal["lookup"] == "table lookup" and record["plan"] is None
 
     assert len(result.rows) == 5
     assert {path.name for path in result.paths} >= {"sky_metrics.csv", "sky_metrics.json", *names}
@@ -91,7 +94,7 @@ def test_result_paths_include_the_mp4(tmp_path, cl_context):
     assert tmp_path / "sky.mp4" in result.paths
 
 
-@pytest.mark.parametrize("method", ["lut", "raymarch"])
+@pytest.mark.parametrize("method", ["lut", "raymarch", "skyview"])
 def test_single_method_writes_single_panel_frames(tmp_path, cl_context, method):
     config = AnimationConfig(frames=5, method=method, output=str(tmp_path / "sky.mp4"), **TINY)
     render_animation(config, ctx=cl_context)
@@ -155,6 +158,54 @@ def test_cli_animate_planned_run_prints_the_plan(tmp_path):
     assert record["plan"]["quality"] == "draft" and 0.0 < record["plan"]["work_fraction"] < 0.5
     low, high = record["table"]["settings"]["sun_cos_range"]
     assert low <= np.sin(np.radians(10.0)) and high >= np.sin(np.radians(30.0)) and high - low < 1.0
+
+
+def test_planned_compare_uses_the_plans_lookup_the_sky_view_map(tmp_path, cl_context):
+    """'compare' with a plan compares the ray march with the plan's renderer: down to -4 deg the 3D
+    lookup's measured 498 % exceeds the draft budget (10 %), the sky-view map's 4.8 % (draft ray march
+    4.6 % + map 0.16 %) fits. Its frame is the first panel, labelled, and its metrics are the sky-view
+    map's against the ray march, rendered here independently of the animation."""
+    from clsky.anim.animate import (_camera, lookup_of, make_renderer, plan_animation, sun_positions,
+                                    three_wavelength_frame_to_linear_srgb)
+    from clsky import skyview
+
+    config = AnimationConfig(frames=2, size=24, quality="draft", start_elevation_deg=-4.0, max_elevation_deg=5.0,
+                             output=str(tmp_path / "sky.mp4"))
+    result = render_animation(config, ctx=cl_context)
+    record = json.loads((tmp_path / "sky_metrics.json").read_text(encoding="utf-8"))
+    assert record["plan"]["renderer"] == "skyview"
+    assert record["lookup"] == record["temporal"]["lookup"] == "sky-view map"
+    assert all(row["lookup"] == "sky-view map" for row in record["frames"])
+    assert len(record["temporal"]["table_jumps"]) == 2 and "sky-view map against the ray march" in result.summary
+
+    # the same frame rendered directly: the sky-view map of the plan's table against its ray march
+    positions = sun_positions(config)
+    directions, valid = _camera(config).directions()
+    plan = plan_animation(config, positions, directions, valid, ctx=cl_context)
+    assert lookup_of(config, plan) == "skyview"
+    renderer, _ = make_renderer(config, plan, ctx=cl_context)
+    prepared = renderer.prepare(directions, valid)
+    sun = positions[0].direction
+    wavelengths = renderer.table.atmosphere.wavelengths        # absolute frames: linear sRGB in cd/m^2
+    lookup = three_wavelength_frame_to_linear_srgb(renderer.render_skyview(
+        prepared, sun, config.altitude, settings=skyview.SkyViewSettings(skyview.DEFAULT_SIZE)), wavelengths)
+    march = three_wavelength_frame_to_linear_srgb(renderer.render_raymarch(prepared, sun, config.altitude), wavelengths)
+    expected = metrics.compare_frames(march, lookup, valid)
+    # the same kernels on the same inputs: float64 sums in the same order; 1e-9 allows for nothing but
+    # the metrics' float64 reductions
+    assert record["frames"][0]["p95_rel"] == pytest.approx(expected["p95_rel"], rel=1e-9, abs=1e-15)
+    renderer.close()
+
+    # the composite's first panel is labelled "sky-view map": inside the label's opaque box (the pixels a
+    # black and a white panel share once labelled) the frame is that label, not "table lookup"
+    def labelled(label, fill):
+        return metrics.composite([np.full((24, 24, 3), fill, np.uint8)], [label])
+
+    box = np.all(labelled("sky-view map", 0) == labelled("sky-view map", 255), axis=-1)
+    first = imageio_v3.imread(tmp_path / "sky_frames" / "frame_00000.png")[:, :24]
+    assert box.sum() > 50
+    assert np.array_equal(first[box], labelled("sky-view map", 0)[box])
+    assert not np.array_equal(first[box], labelled("table lookup", 0)[box])
 
 
 def test_cli_render_writes_one_png(tmp_path):

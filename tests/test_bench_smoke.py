@@ -29,6 +29,7 @@ HEADERS = {
     "bench_montecarlo": ["| mode (preset) | quadrature | altitude [m] | cos view | sun zenith [deg] | deviation [%] | "
                          "deviation [SE] |"],
     "bench_render": ["| render | best | median | CPU per frame | frames/s (best) |"],
+    "bench_skyview": ["| frame | renderer | wall [ms] | CPU [ms] | frames/s (wall) | p95 +30 deg [%] |"],
     "bench_animate": ["| run | frames | wall [s] | CPU [s] | CPU / wall | load before | load after |",
                       "| stage | CPU [s], BLAS 1 thread | per frame [ms] | CPU [s], BLAS unlimited | per frame [ms] |"],
     "bench_memory": ["| run | table (W x H x D) | measured peak | estimate | estimate / measured |"],
@@ -42,6 +43,8 @@ HEADERS = {
     "bench_spectral": ["| build | batches | wall [s] | CPU [s] | wall / three | load |",
                        "| mode against N = 6 | sun zenith [deg] | PSNR [dB] | mean Delta E 2000 | Bruneton's anchor |"],
     "bench_azimuth": ["| | -6 deg |", "| sun [deg] | view | paths | SE [%] | M = 0 [%] | M = 1 [%] |"],
+    "bench_dask": ["| run | repetition | farm start [s] | wall [s] | table [s] | first frame [s] |",
+                   "| repetition | 1 worker against here: first frame [s] | wall per frame [ms] | CPU per frame [ms] |"],
     "bench_lookup4d": ["| frame | sun [deg] | 4D lookup p95 | target | 4D mean Delta E | 3D lookup p95 |"],
     "bench_twilight": ["| | +5 deg | -6 deg |",
                        "| sun [deg] | view | paths | SE [%] | all orders [%] | all orders [SE] | single: paths |"],
@@ -51,10 +54,11 @@ LINES = {
     "bench_render": [r"Ray march against the exp\(\) bound: .* \*\*(\S+)x the bound\*\*"],
 }
 #: Measured wall time of each case (pytest, 2 shared cores): single 3-5 s, orders 5-7 s, montecarlo 10-12 s,
-#: render 9-10 s; spectral 5-7 s; twilight 11 s; dusk 10 s (four skies, two of 15 wavelengths); accuracy 41 s
-#: (the four 'draft' reference tables: 21 s), quality 109 s (the reference and one doubled group). Slow (run
-#: by .ci/run): accuracy, quality and dusk, so that the default suite stays within its 10 minutes.
-SLOW = {"bench_accuracy", "bench_quality", "bench_dusk"}
+#: render 9-10 s; skyview 18 s (load 9); spectral 5-7 s; twilight 11 s; dusk 10 s (four skies, two of 15 wavelengths); accuracy 41 s
+#: (the four 'draft' reference tables: 21 s), quality 109 s (the reference and one doubled group); dask 66 s (two
+#: LocalClusters started, at load average 10). Slow (run by .ci/run): accuracy, quality, dusk and dask, so that
+#: the default suite stays within its 10 minutes.
+SLOW = {"bench_accuracy", "bench_quality", "bench_dusk", "bench_dask"}
 
 NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 

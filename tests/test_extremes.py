@@ -236,7 +236,7 @@ def test_lookup_finite_for_extreme_suns(table_of, mode, elevation):
 
 
 @pytest.mark.parametrize("elevation", SUN_ELEVATIONS)
-@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("method", METHODS + ("render_skyview",))
 @pytest.mark.parametrize("mode", MODES)
 def test_renders_finite_for_extreme_suns(renderer_of, mode, method, elevation):
     renderer = renderer_of(BASE[mode], SMALL.replace(mode=mode))

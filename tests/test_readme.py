@@ -82,9 +82,12 @@ def scene_of(argv):
     return {} if path is None else tomllib.loads((ROOT / path).read_text(encoding="utf-8"))
 
 
-def reduced(argv):
-    """``argv`` (the README's words) with the options that make it small."""
+def reduced(argv, scheduler=None):
+    """``argv`` (the README's words) with the options that make it small; a ``--scheduler`` address
+    replaced by ``scheduler`` (a cluster this test started: the README's address is an example)."""
     command = argv[1] if len(argv) > 1 else ""
+    if "--scheduler" in argv:
+        argv = [scheduler if index and argv[index - 1] == "--scheduler" else word for index, word in enumerate(argv)]
     sun = scene_of(argv).get("sun", {})
     extra = []
     if command in ("animate", "render"):
@@ -118,6 +121,16 @@ def check_outputs(argv, directory):
     output = option_value(argv, "-o", "--output") or scene_of(argv).get("output", {}).get("output")
     if "--print-scene" in argv:                     # the scene on stdout, no file
         assert list(directory.iterdir()) == []
+    elif command == "table" and "--sweep" in argv:  # one table per line of the sweep file, named by its -o
+        from clsky import ScatteringTable
+
+        lines = [shlex.split(line, comments=True) for line in
+                 (ROOT / option_value(argv, "--sweep")).read_text(encoding="utf-8").splitlines()]
+        outputs = [option_value(words, "-o", "--output") for words in lines if words]
+        assert outputs and sorted(p.name for p in directory.iterdir()) == sorted(outputs)
+        for name in outputs:
+            table = ScatteringTable.load(directory / name)
+            assert table.settings.size == (8, 32, 8) and np.isfinite(table.data).all() and (table.data >= 0).all()
     elif command == "table":
         from clsky import ScatteringTable
 
@@ -157,6 +170,16 @@ def check_outputs(argv, directory):
 COMMANDS = readme_commands()
 
 
+@pytest.fixture(scope="module")
+def dask_scheduler():
+    """The address of a Dask cluster (one spawned worker) for the README's ``--scheduler`` examples."""
+    pytest.importorskip("distributed")
+    from clsky.farm import Farm
+
+    with Farm(workers=1) as farm:
+        yield farm.client.scheduler.address
+
+
 def test_the_readme_shows_command_lines():
     """The parser finds the README's examples (guards this module against a README it cannot read)."""
     assert len(COMMANDS) >= 10
@@ -173,17 +196,23 @@ BENCH_COMMANDS = [line for line in COMMANDS if line.startswith("python bench/")]
 #: other three build full-size tables that the reduction cannot shrink (a 32 x 256 x 32 --table-size, the
 #: level an --error-budget picks, a table planned for a view from 32.7 km): 12-29 s each (measured on
 #: the 2-core machine), which the default suite's 10-minute budget cannot hold.
+#: The farm lines start Dask clusters of spawned workers, each of which imports clsky and builds its
+#: renderer: 13-43 s each at load average 10 (tests/test_farm.py runs a two-worker farm in the default suite).
 SLOW_COMMANDS = {"clsky bench accuracy", "clsky animate --error-budget 0.05",
+                 "clsky animate --workers 2 --quality draft --size 256 -o farm.mp4",
+                 "clsky animate --scheduler tcp://127.0.0.1:8786 --frames 1000 -o long.mp4",
+                 "clsky table --sweep examples/weather.txt --workers 2 --quality draft",
                  "clsky animate --table-size 32 256 32 --samples 48 -o full.mp4",
                  "clsky render --altitude 32700 --sampling ground_end -o altitude.png"}
 
 
 @pytest.mark.parametrize("line", [pytest.param(line, marks=pytest.mark.slow) if line in SLOW_COMMANDS else line
                                   for line in CLSKY_COMMANDS], ids=[line[:60] for line in CLSKY_COMMANDS])
-def test_readme_command_line_runs(line, tmp_path):
+def test_readme_command_line_runs(line, tmp_path, request):
     argv = shlex.split(line)
     assert argv[0] == "clsky", f"the README shows a command this test cannot run: {line}"
-    result = subprocess.run(reduced(argv), cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    scheduler = request.getfixturevalue("dask_scheduler") if "--scheduler" in argv else None
+    result = subprocess.run(reduced(argv, scheduler), cwd=tmp_path, capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, f"{line!r} exited {result.returncode}:\n{result.stderr[-2000:]}"
     assert "Traceback" not in result.stderr
     check_outputs(argv, tmp_path)

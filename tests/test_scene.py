@@ -58,8 +58,9 @@ EVERY_OPTION = ["--camera", "perspective", "--size", "20", "--fov", "60", "--hea
                 "--no-dither", "--fps", "12", "-o", "x.mp4", "--hdr", "exr", "--hdr-precision", "half"]
 
 
-#: Options of a run that are no part of its scene.
-RUN_OPTIONS = {"help", "force", "progress", "scene", "print_scene"}
+#: Options of a run that are no part of its scene (where it runs, --workers / --scheduler, included: the
+#: same frames either way).
+RUN_OPTIONS = {"help", "force", "progress", "scene", "print_scene", "workers", "scheduler"}
 
 
 @pytest.mark.parametrize("command", ["animate", "render"])

@@ -1,0 +1,143 @@
+"""Which renderer a scene's frames need: the cheapest whose measured error fits the error budget.
+
+One row per renderer (:data:`RENDERERS`): its ``--method`` name, its measured cost per frame and its
+measured error against sun elevation, with where each figure comes from. :func:`choose_renderer` takes
+the cheapest row whose estimated error over the scene's sun path fits the budget; the ray march, the
+plan's reference, when none does. A new renderer is one more row: its cost, its errors and whether they
+add to the ray march's.
+
+A row's cost is its own table's build (``build_cpu_s``: 0 for the rows that read the plan's 3D table or
+none) plus ``frames`` times its cost per frame. The 4D table lookup (``'lut4d'``) needs a table of its
+own: 47 CPU-s to build (README "The 4D table"), the CPU time of 540 sky-view frames, and it saves
+43.9 ms per frame against the sky-view map, so it pays from about 1070 frames on. The scene plan does
+not know how many frames it serves (:class:`clsky.planner.Scene` has no frame count), so it calls
+:func:`choose_renderer` with ``frames=None``, which leaves out every row with a build of its own: the
+plan never picks 'lut4d' (``clsky animate --method lut4d`` / ``compare4d`` asks for it). A caller that
+knows the frame count passes it and the build is counted.
+
+A row's error is either its own error against the reference frames (``on_ray_march=False``: the 3D
+lookup replaces the ray march; README "Speed versus accuracy") or what it adds to the ray march its
+frames are made from (``on_ray_march=True``: the sky-view map is the ray march read at its nodes,
+README "Sky-view table"). The latter is estimated as the quality level's measured ray-march error
+(:data:`RAY_MARCH_ERROR`) plus the row's: errors of one sign in the worst case, so a bound.
+Between the measured elevations the error is interpolated in log error; beyond them, the nearest
+value; over a sun path, the worst of the path's ends and of the measured elevations inside it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+__all__ = ["RendererRow", "RENDERERS", "LOOKUP4D_ERROR", "RAY_MARCH_ERROR", "LOOKUP_ERROR", "choose_renderer", "error_over"]
+
+#: Measured error of the 3D table lookup (95th percentile, relative, default table, 64 x 64 all-sky fisheye
+#: from the ground, physical preset with ozone and ground; README "Speed versus accuracy", 2026-12-02) by
+#: sun elevation [deg]: it grows toward the horizon, where the missing azimuth of the 3D table dominates,
+#: whatever the table's size (the sweep of 2026-11-22, without ozone and ground: 4.99, 0.320, 0.0314, 0.0078).
+LOOKUP_ERROR = ((-4.0, 4.985), (1.0, 0.381), (8.0, 0.0417), (45.0, 0.0105))
+
+#: Measured error of each quality level's ray march against the reference (p95, 64 x 64 fisheye from the
+#: ground, the level planned for the sun path -4 to 45 deg; README "Quality levels", bench/bench_quality.py,
+#: 2026-11-22) by sun elevation [deg]; the reference level's: how far the reference converged (the sum of
+#: its doubled groups, same table).
+RAY_MARCH_ERROR = {
+    "draft": ((-4.0, 0.0462), (1.0, 0.0179), (8.0, 0.0260), (45.0, 0.0292)),
+    "default": ((-4.0, 0.0064), (1.0, 0.0021), (8.0, 0.0030), (45.0, 0.0035)),
+    "high": ((-4.0, 0.0005), (1.0, 0.0003), (8.0, 0.0004), (45.0, 0.0005)),
+    "reference": ((-4.0, 0.00035), (1.0, 0.00006), (8.0, 0.00007), (45.0, 0.00007)),
+}
+
+
+#: Measured error of the 4D table lookup (p95 against the ray march of the table's own orders, 1024^2 fisheye
+#: from the ground, 16 x 128 x 128 x 16 table, physical preset; README "The 4D table", bench/bench_lookup4d.py,
+#: 2026-12-02) by sun elevation [deg]: 0.58 % at +30, 0.34 % at +5, 0.32 % at 0, 2.13 % at -4, 3.9 % at -6.
+LOOKUP4D_ERROR = ((-6.0, 0.039), (-4.0, 0.0213), (0.0, 0.0032), (5.0, 0.0034), (30.0, 0.0058))
+
+
+@dataclasses.dataclass(frozen=True)
+class RendererRow:
+    """One renderer the plan may pick.
+
+    Attributes
+    ----------
+    method : str
+        Its ``clsky animate --method`` name.
+    description : str
+        As the plan prints it.
+    frame_cpu_ms : float
+        Process CPU time of one 1024 x 1024 fisheye frame [ms] (measured; the order of the rows is all
+        that the choice uses).
+    error : tuple of (sun elevation [deg], p95 relative error)
+        Its measured error (see the module docstring), ascending in elevation.
+    on_ray_march : bool
+        True when ``error`` adds to the ray march's (its frames are made from the ray march).
+    source : str
+        Where the figures come from.
+    build_cpu_s : float
+        Process CPU time of the table of its own that it needs [s] (0: none, or the plan's 3D table,
+        which every renderer's plan builds).
+    """
+
+    method: str
+    description: str
+    frame_cpu_ms: float
+    error: tuple
+    on_ray_march: bool
+    source: str
+    build_cpu_s: float = 0.0
+
+    def cost_cpu_s(self, frames):
+        """Process CPU time [s] of ``frames`` frames: the build plus ``frames`` frames."""
+        return self.build_cpu_s + frames * self.frame_cpu_ms / 1000.0
+
+
+#: The renderers, with their measured costs and errors. Costs: process CPU of one 1024 x 1024 fisheye
+#: frame from the ground (HDR frame on the host), bench/bench_skyview.py (README "Sky-view table"),
+#: 2026-12-02, default table, 2-core machine at load average 11 to 15 (CPU times: the wall times were
+#: up to 4 times longer). The sky-view map's errors: p95 against the per-pixel ray march, the worst of the
+#: ground and 10 km (tests/test_skyview.py: 0.080 / 0.139 % at +30 deg, 0.077 / 0.141 % at +5,
+#: 0.094 / 0.145 % at 0, 0.092 / 0.164 % at -4).
+RENDERERS = (
+    RendererRow("lut", "table lookup", 71.6, LOOKUP_ERROR, False,
+                "README 'Speed versus accuracy' (error) and 'Sky-view table' (cost)"),
+    RendererRow("skyview", "sky-view map 64 x 128", 86.9,
+                ((-4.0, 0.00164), (0.0, 0.00145), (5.0, 0.00141), (30.0, 0.00139)), True,
+                "tests/test_skyview.py (error against the ray march); README 'Sky-view table' (cost)"),
+    RendererRow("lut4d", "4D table lookup", 43.0, LOOKUP4D_ERROR, True,
+                "README 'The 4D table' (error against the ray march of its orders; cost, 1024^2 fisheye at load "
+                "~15; build of 16 x 128 x 128 x 16, 47 CPU-s)", build_cpu_s=47.0),
+    RendererRow("raymarch", "ray march", 1959.2, ((0.0, 0.0),), True,
+                "README 'Sky-view table' (cost); the plan's reference: its error is the quality level's "
+                "(RAY_MARCH_ERROR)"),
+)
+
+
+def error_over(error, low, high):
+    """The worst of ``error`` ((elevation, p95), ...) over sun elevations [low, high] [deg]: at both ends
+    and at the measured elevations between them, interpolated in log error (nearest value beyond)."""
+    elevations, values = (np.asarray(v, dtype=float) for v in zip(*error))
+    at = np.concatenate([[low, high], elevations[(elevations > low) & (elevations < high)]])
+    if np.all(values > 0.0):
+        return float(np.exp(np.interp(at, elevations, np.log(values))).max())
+    return float(np.interp(at, elevations, values).max())
+
+
+def choose_renderer(sun_elevations_deg, budget, level="default", rows=RENDERERS, frames=None):
+    """(row, estimated error, {method: estimated error}): the cheapest row of ``rows`` whose estimated
+    error over the sun path ``sun_elevations_deg`` = (low, high) [deg] fits ``budget`` (relative), for
+    the ray march of quality level ``level`` (a name of :data:`RAY_MARCH_ERROR`); the 'raymarch' row
+    when none fits. The cost of ``frames`` frames (:meth:`RendererRow.cost_cpu_s`) decides; with
+    ``frames=None`` (the frame count unknown) the rows with a build of their own are left out (module
+    docstring) and the cost per frame decides."""
+    low, high = sun_elevations_deg
+    march = error_over(RAY_MARCH_ERROR[level], low, high)
+    estimates = {row.method: error_over(row.error, low, high) + (march if row.on_ray_march else 0.0)
+                 for row in rows}
+    candidates = [row for row in rows if frames is not None or row.build_cpu_s == 0.0]
+    for row in sorted(candidates, key=lambda r: r.cost_cpu_s(1 if frames is None else frames)):
+        if estimates[row.method] <= budget:
+            return row, estimates[row.method], estimates
+    fallback = next(row for row in rows if row.method == "raymarch")
+    return fallback, estimates[fallback.method], estimates

@@ -1,0 +1,150 @@
+"""``clsky table --sweep FILE``: one table per line of a list of atmospheres, here or on a Dask farm.
+
+A sweep file (``examples/weather.txt`` is one) holds one table per line: the options of ``clsky table``
+(``--preset``, ``--ground-albedo``, ``--ozone-column``, ``--quality``, ... and ``-o``), parsed after
+the command line's, so that a line's options win over the command line's and the rest are shared.
+Blank lines and ``#`` comments are skipped; the run options ``--sweep``, ``--workers``, ``--scheduler``
+and ``--progress`` belong to the command line only. Every line is checked (values, outputs, memory)
+before any table is built, and a bad one is one line naming the file, the line and the option
+(``weather.txt line 3: --ground-albedo must be in [0, 1], got 2``), exit status 2.
+
+The tables are built one after the other in this process, or with ``--workers N`` / ``--scheduler``
+on a Dask farm (:class:`clsky.farm.Farm`, one table per task: :func:`clsky.farm.build_table_task`),
+and come back in order. Each is saved to a hidden temporary as it arrives, and the files land
+together when the last one is in (:class:`clsky._files.StagedWrites`): an interrupted or failed
+sweep leaves the earlier files as they were and no temporary. Without ``--sweep``, ``--workers``
+builds the command line's one table on the farm the same way.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import dataclasses
+import pathlib
+import shlex
+import time
+
+from .cli import (UsageError, check_outputs, farm_of, progress_bar, report_table, running_farm, table_atmosphere,
+                  table_settings, _check_table_memory)
+
+__all__ = ["SweepJob", "read_sweep", "sweep_jobs", "run_sweep"]
+
+#: Options of the command line only: a sweep line may not hold them.
+RUN_OPTIONS = ("--sweep", "--workers", "--scheduler", "--progress")
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepJob:
+    """One table of a sweep: where it comes from ('FILE line N', or the command line), its parsed
+    options, atmosphere, settings and outputs."""
+
+    source: str
+    args: argparse.Namespace
+    atmosphere: object
+    settings: object
+    output: pathlib.Path
+    raw: str | None
+
+
+def read_sweep(path) -> list[tuple[int, list[str]]]:
+    """(line number, words) of each table line of the sweep file at ``path``; UsageError for a file
+    that cannot be read, a line shlex cannot split, or a file without a table line."""
+    path = pathlib.Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as error:
+        raise UsageError(f"--sweep: cannot read {path} ({error.__class__.__name__}: "
+                         f"{getattr(error, 'strerror', None) or error})") from None
+    lines = []
+    for number, line in enumerate(text.splitlines(), start=1):
+        try:
+            words = shlex.split(line, comments=True)
+        except ValueError as error:
+            raise UsageError(f"{path} line {number}: {error}") from None
+        if words:
+            lines.append((number, words))
+    if not lines:
+        raise UsageError(f"--sweep: {path} holds no table line (one line of `clsky table` options per table)")
+    return lines
+
+
+def sweep_jobs(args) -> list[SweepJob]:
+    """The tables of the command line: one per line of ``--sweep`` (the line's options over the command
+    line's), or the command line's own. Every value and output is checked here, before any work."""
+    if args.sweep is None:
+        lines = [("the command line", args)]
+    else:
+        lines = []
+        for number, words in read_sweep(args.sweep):
+            source = f"{args.sweep} line {number}"
+            refused = [word.split("=")[0] for word in words if word.split("=")[0] in RUN_OPTIONS]
+            if refused:
+                raise UsageError(f"{source}: {refused[0]} belongs to the command line, not to a sweep line")
+            if not any(word in ("-o", "--output") or word.startswith(("-o", "--output=")) for word in words):
+                raise UsageError(f"{source}: -o FILE is missing (each line names its table's file)")
+            try:
+                lines.append((source, args.table_parser.parse_args(words, namespace=copy.copy(args))))
+            except UsageError as error:
+                raise UsageError(f"{source}: {error}") from None
+    jobs = []
+    for source, line in lines:
+        try:
+            atmosphere = table_atmosphere(line)
+            settings = table_settings(line, atmosphere)
+            output = pathlib.Path(line.output)
+            if output.suffix != ".npz":
+                raise UsageError(f"--output must end in .npz, got {line.output!r}")
+        except UsageError as error:
+            raise UsageError(error if args.sweep is None else f"{source}: {error}") from None
+        jobs.append(SweepJob(source, line, atmosphere, settings, output, line.raw))
+    _check_jobs(args, jobs)
+    return jobs
+
+
+def _check_jobs(args, jobs):
+    """Outputs (distinct, writable) and memory of every job, before any work."""
+    seen = {}
+    for job in jobs:
+        targets = [("--output", job.output)]
+        if job.raw:
+            targets += [("--raw", pathlib.Path(job.raw).with_suffix(s)) for s in (".bin", ".json")]
+        for option, path in targets:
+            where = option if args.sweep is None else f"{job.source}: {option}"
+            other = seen.setdefault(path.resolve(), job.source)
+            if other != job.source:
+                raise UsageError(f"{where} {path} is written by {other} too")
+            check_outputs([(where, path)], job.args.force)
+        try:
+            _check_table_memory(job.args, job.settings)
+        except UsageError as error:
+            raise UsageError(error if args.sweep is None else f"{job.source}: {error}") from None
+
+
+def run_sweep(args):
+    """``clsky table --sweep`` (or ``--workers`` / ``--scheduler``): module docstring."""
+    from ._files import StagedWrites
+    from .farm import build_table_task
+
+    jobs = sweep_jobs(args)
+    farm = farm_of(args)
+    start = time.perf_counter()
+    progress, close = progress_bar(args.progress)
+    try:
+        with running_farm(farm), StagedWrites() as staging:
+            tasks = [(job.atmosphere, job.settings, job.args.backend, job.args.fast_math) for job in jobs]
+            tables = farm.map_ordered(build_table_task, tasks, label="clsky-table") if farm is not None \
+                else (build_table_task(*task) for task in tasks)
+            for done, (job, table) in enumerate(zip(jobs, tables), start=1):
+                table.save(job.output, overwrite=job.args.force, staging=staging)
+                if job.raw:
+                    table.export_raw(job.raw, overwrite=job.args.force, staging=staging)
+                report_table(job.args, table, job.output, time.perf_counter() - start)
+                del table
+                if progress is not None:
+                    progress("tables", done, len(jobs))
+    finally:
+        close()
+    if len(jobs) > 1:
+        print(f"{len(jobs)} tables in {time.perf_counter() - start:.2f} s")
+    return 0
