@@ -38,10 +38,10 @@ def test_4d_candidate_is_measured_with_the_4d_lookup(draft_stand_in_reference):
     assert row["method"] == "lut4d" and np.isfinite(row["p95_rel"]) and row["p95_rel"] >= 0
 
 
-def _tiny_rows(reference, valid):
+def _tiny_rows(reference, valid, march_table=None):
     default = accuracy.default_candidates()[0].table
     small = accuracy.Candidate("small table", "table size", default.replace(size=(9, 33, 9)))
-    march = accuracy.Candidate("ray march 48", "ray march samples", default, samples=48)
+    march = accuracy.Candidate("ray march 48", "ray march samples", march_table or default, samples=48)
     view = accuracy.Candidate("sky-view 64 x 128", "sky-view map size", default, skyview=(64, 128))
     rows = accuracy.measure([small, march, view], reference, valid)
     assert [r["method"] for r in rows] == ["lut", "raymarch", "skyview"]
@@ -53,8 +53,9 @@ def _tiny_rows(reference, valid):
 
 def test_measure_gives_every_column(draft_stand_in_reference):
     """The sweep's rows: the renderer, times, and the worst p95 as the maximum over the elevations
-    (the draft stand-in: plumbing, not numbers)."""
-    _tiny_rows(*draft_stand_in_reference)
+    (the draft stand-in and a small table under the ray march: plumbing, not numbers)."""
+    small = accuracy.default_candidates()[0].table.replace(size=(9, 33, 9))
+    _tiny_rows(*draft_stand_in_reference, march_table=small)
 
 
 @pytest.mark.slow      # the 'default' stand-in reference carries M = 2: ~170 s to build at load 3
