@@ -40,12 +40,17 @@ from _report import SMOKE, add_output_arguments, load_average, load_note, machin
 import clsky.anim.animate
 from clsky.anim.animate import AnimationConfig, render_animation
 
-#: stage label: the functions (module file suffix, function name) whose cumulative CPU time it is; the
+#: stage label: the functions (module file suffix, function name[, sign]) whose cumulative CPU time it is,
+#: a sign of -1 taking a callee's time out: the sky-view map (``skyview_map``) is ray-marched by
+#: ``render_raymarch`` inside ``render_skyview``, so it is a stage of its own, out of both; otherwise the
 #: functions of different stages never call one another, so the stages add up
 STAGES = {
     "scene plan and table build": [("anim/animate.py", "plan_animation"), ("anim/animate.py", "make_renderer")],
-    "table lookup (device)": [("clsky/render.py", "render_table")],
-    "ray march (device)": [("clsky/render.py", "render_raymarch")],
+    "lookup (device: the 3D or 4D table, or the sky-view map's per-pixel read)": [
+        ("clsky/render.py", "render_table"), ("clsky/render.py", "render_lut4d"),
+        ("clsky/render.py", "render_skyview"), ("clsky/render.py", "skyview_map", -1)],
+    "sky-view map (the ray march at its nodes)": [("clsky/render.py", "skyview_map")],
+    "ray march (device)": [("clsky/render.py", "render_raymarch"), ("clsky/render.py", "skyview_map", -1)],
     "conversion to cd/m^2 (colorimetry)": [("anim/animate.py", "three_wavelength_frame_to_linear_srgb"),
                                            ("anim/animate.py", "spectral_frame_to_linear_srgb")],
     "display (exposure, tone curve, 8 bits)": [("anim/animate.py", "display_frames")],
@@ -102,8 +107,8 @@ def stage_split(config_options, blas_limited=True):
     stats = pstats.Stats(profile).stats
     stages = {}
     for label, functions in STAGES.items():
-        stages[label] = sum(entry[3] for (file, _, name), entry in stats.items()
-                            if any(file.endswith(suffix) and name == function for suffix, function in functions))
+        stages[label] = sum((sign[0] if sign else 1) * entry[3] for (file, _, name), entry in stats.items()
+                            for suffix, function, *sign in functions if file.endswith(suffix) and name == function)
     stages["ffmpeg (child process)"] = ffmpeg
     stages["other (Python, cProfile's own overhead)"] = cpu - sum(stages.values()) + ffmpeg
     return stages, cpu + ffmpeg, wall, load_average()
