@@ -1,9 +1,9 @@
 """Output files: checks before the work, unique temporaries, and sets of files that land together.
 
 Every file clsky writes goes through :func:`atomic_write` or a :class:`StagedWrites` set: it is written
-to a hidden temporary file with a unique name (``tempfile.mkstemp``) beside its target, then renamed
-onto the target (``os.replace``, atomic on POSIX). Two writers of one target never share a temporary,
-so the last rename wins and the target is always one writer's complete file. :func:`check_output`
+to a hidden temporary file with a unique name (created exclusively, as ``tempfile.mkstemp`` does) beside
+its target, then renamed onto the target (``os.replace``, atomic on POSIX). Two writers of one target
+never share a temporary, so the last rename wins and the target is always one writer's complete file. :func:`check_output`
 finds, before any work, what would make a write fail: a target that exists (without ``force``) or is
 a directory, a missing or non-directory parent, a parent where no file can be created, a name too
 long for the file system.
@@ -27,14 +27,18 @@ import contextlib
 import errno
 import os
 import pathlib
+import secrets
 import signal
 import tempfile
 import threading
 
 __all__ = ["check_output", "check_output_directory", "atomic_write", "StagedWrites", "temporary_prefix"]
 
-#: Characters that tempfile.mkstemp adds between its prefix and suffix.
+#: Random characters of a temporary's name between its prefix and suffix (as tempfile.mkstemp's).
 _RANDOM_CHARACTERS = 8
+_NAME_CHARACTERS = "abcdefghijklmnopqrstuvwxyz0123456789_"
+#: Names tried before giving up (as tempfile: a clash needs another writer's same draw of 37^8).
+_NAME_ATTEMPTS = tempfile.TMP_MAX
 _DEFAULT_NAME_MAX = 255
 _DEFAULT_PATH_MAX = 4096
 
@@ -44,6 +48,11 @@ def _limit(directory, name, default):
         return os.pathconf(directory, name)
     except (OSError, ValueError):
         return default
+
+
+def _random_name():
+    """:data:`_RANDOM_CHARACTERS` characters drawn by the OS's random source (unique temporary names)."""
+    return "".join(secrets.choice(_NAME_CHARACTERS) for _ in range(_RANDOM_CHARACTERS))
 
 
 def _nearest_existing(path):
@@ -64,7 +73,7 @@ def _force_hint(option):
 
 
 def temporary_prefix(path, suffix):
-    """The mkstemp prefix of a temporary for ``path``: ``.<name>.``, the name shortened (never the
+    """The prefix of a temporary for ``path``: ``.<name>.``, the name shortened (never the
     suffix) so that prefix + 8 random characters + ``suffix`` fit in the directory's NAME_MAX."""
     path = pathlib.Path(path)
     name_max = _limit(_nearest_existing(path.parent), "PC_NAME_MAX", _DEFAULT_NAME_MAX)
@@ -303,18 +312,27 @@ class StagedWrites:
         path = pathlib.Path(path)
         suffix = path.suffix if suffix is None else suffix
         check_output(path, force=overwrite, suffix=suffix, probe=False)
-        try:
-            fd, temporary = tempfile.mkstemp(prefix=temporary_prefix(path, suffix), suffix=suffix,
-                                             dir=path.parent)
-        except OSError as error:
-            raise PermissionError(f"cannot create a file beside {path} ({error.strerror.lower()})") from None
-        os.close(fd)
-        temporary = pathlib.Path(temporary)
-        umask = os.umask(0)
-        os.umask(umask)
-        temporary.chmod(0o666 & ~umask)        # mkstemp's 0600 would leak into the final file
-        self._staged.append((temporary, path, bool(overwrite), bool(last)))
-        return temporary
+        prefix = temporary_prefix(path, suffix)
+        for _ in range(_NAME_ATTEMPTS):
+            temporary = path.parent / f"{prefix}{_random_name()}{suffix}"
+            entry = (temporary, path, bool(overwrite), bool(last))
+            # registered before the file exists: an interruption (a signal's exception) from here on
+            # finds it in the set, whose discard deletes it (an unregistered empty temporary was left
+            # behind once by a SIGTERM between mkstemp and the registration)
+            self._staged.append(entry)
+            try:
+                # like mkstemp (O_EXCL: never someone else's file), with the mode a plain open gives
+                # (0o666 less the umask): mkstemp's 0600 would leak into the final file
+                os.close(os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0),
+                                 0o666))
+            except FileExistsError:
+                self._staged.remove(entry)
+                continue
+            except OSError as error:
+                self._staged.remove(entry)
+                raise PermissionError(f"cannot create a file beside {path} ({error.strerror.lower()})") from None
+            return temporary
+        raise FileExistsError(errno.EEXIST, f"no unused temporary name beside {path} after {_NAME_ATTEMPTS} tries")
 
     def remove_on_commit(self, path):
         """Delete ``path`` (if it still exists) once the staged files are in place."""
@@ -389,16 +407,28 @@ def atomic_write(path, overwrite=False, suffix=None, staging=None):
     the temporary and leaves ``path`` as it was.
     """
     own = StagedWrites() if staging is None else None
-    temporary = (staging or own).stage(path, overwrite, suffix)
+    writes = staging or own
+    temporary = None
     try:
+        temporary = writes.stage(path, overwrite, suffix)
         yield temporary
     except OSError as error:                     # e.g. a full disk: name the target, not the temporary
-        (staging or own).discard(temporary)
-        if error.errno is None or error.filename not in (str(temporary), temporary):
+        _discard_staged(writes, own, temporary)
+        if temporary is None or error.errno is None or error.filename not in (str(temporary), temporary):
             raise
         raise type(error)(f"cannot write {path}: {error.strerror.lower()}") from error
     except BaseException:
-        (staging or own).discard(temporary)
+        _discard_staged(writes, own, temporary)
         raise
     if own is not None:
         own.commit()
+
+
+def _discard_staged(writes, own, temporary):
+    """Delete what :func:`atomic_write` staged: all of its own set (an interruption inside ``stage`` may
+    come before ``temporary`` is known), or ``temporary`` in the caller's set (whose own discard deletes
+    the rest)."""
+    if own is not None:
+        own.discard()
+    elif temporary is not None:
+        writes.discard(temporary)

@@ -109,6 +109,41 @@ def test_a_signal_during_the_renames_arrives_after_them(tmp_path, monkeypatch):
     assert signal.getsignal(signal.SIGTERM) == handler                  # restored
 
 
+@pytest.mark.parametrize("own_set", [False, True], ids=["a shared set", "atomic_write's own set"])
+def test_an_interruption_as_the_temporary_is_created_leaves_none(tmp_path, monkeypatch, own_set):
+    """A signal's exception that arrives just after the temporary's file is created, before ``stage``
+    returns (SIGTERM once left an empty frame temporary this way): the set still knows the file and
+    deletes it. Simulated by an os.open that creates the file, then raises KeyboardInterrupt."""
+    real_open = os.open
+
+    def open_then_interrupt(path, flags, mode=0o777):
+        os.close(real_open(path, flags, mode))
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        with StagedWrites() as staging:
+            monkeypatch.setattr(_files.os, "open", open_then_interrupt)
+            try:
+                with atomic_write(tmp_path / "a.txt", staging=None if own_set else staging) as temporary:
+                    temporary.write_text("never")
+            finally:
+                monkeypatch.undo()
+    assert os.listdir(tmp_path) == []
+
+
+def test_temporaries_have_the_mode_of_a_plain_file(tmp_path):
+    """A staged file lands with the mode open() would give (0o666 less the umask), not mkstemp's 0600."""
+    umask = os.umask(0o022)
+    try:
+        with atomic_write(tmp_path / "a.txt") as temporary:
+            temporary.write_text("x")
+        with open(tmp_path / "b.txt", "w") as plain:
+            plain.write("x")
+    finally:
+        os.umask(umask)
+    assert (tmp_path / "a.txt").stat().st_mode & 0o777 == (tmp_path / "b.txt").stat().st_mode & 0o777 == 0o644
+
+
 def _frame(value, size=16):
     return np.full((size, size, 3), value, np.uint8)
 
