@@ -475,7 +475,8 @@ def memory_estimate(config: AnimationConfig, positions) -> MemoryEstimate:
     batches = None if config.wavelengths is None else len(spectrum.wavelength_batches(config.wavelengths))
     return estimate_animation_memory(_with_lookup(_with_sampling(settings, config), config), config.image_shape(),
                                      config.method,
-                                     ray_settings(config), hdr_output=config.hdr is not None, batches=batches)
+                                     ray_settings(config), hdr_output=config.hdr is not None, batches=batches,
+                                     overlapped=OVERLAP_FRAMES)
 
 
 def build_table(config: AnimationConfig, plan: Plan | None = None, ctx=None, progress=None) -> clsky.ScatteringTable:

@@ -42,7 +42,7 @@ __all__ = ["InsufficientMemoryError", "Allocation", "Phase", "MemoryEstimate", "
            "estimate_table_memory", "estimate_spectral_table_memory", "estimate_render_memory",
            "estimate_animation_memory", "expected_orders",
            "estimate_directions_memory", "machine_limits", "device_of", "check_memory", "host_available_bytes",
-           "format_bytes", "BASE_PROCESS_BYTES", "FRAME_BYTES_PER_PIXEL"]
+           "format_bytes", "BASE_PROCESS_BYTES", "FRAME_BYTES_PER_PIXEL", "NEXT_FRAME_BYTES_PER_PIXEL"]
 
 #: Resident memory of a process that imported clsky and built a small table with cached programs [bytes]
 #: (127 MiB measured, PoCL 3.1 on the 2-core development machine).
@@ -58,6 +58,12 @@ ORDER_RATIO = 0.4
 #: became cd/m^2 through the power-law conversion; before it, 390 / 195 / 203).
 #: skyview: one frame, processed as lut's (not measured on its own; its map of W x H nodes is negligible).
 FRAME_BYTES_PER_PIXEL = {"compare": 340, "lut": 210, "raymarch": 210, "skyview": 210}
+#: Host bytes per pixel that an animation's overlapped pipeline (clsky/anim/pipeline.py) adds: the next
+#: frame, rendered on the worker thread while this one is processed (its downloads, HDR frames and
+#: conversion beside this frame's processing). Measured as FRAME_BYTES_PER_PIXEL, with and without the
+#: overlap, the largest of 2-3 runs each (the peak depends on how the two threads' peaks meet): 270-310
+#: (compare), 130-195 (lut), 210 (raymarch), 145-195 (skyview); 2026-12-02, draft level, table 16 x 64 x 16.
+NEXT_FRAME_BYTES_PER_PIXEL = {"compare": 310, "lut": 200, "raymarch": 215, "skyview": 200}
 
 _GIB = 2**30
 
@@ -517,11 +523,14 @@ def estimate_spectral_table_memory(settings: TableSettings, batches: int) -> Mem
 
 def estimate_animation_memory(settings: TableSettings, image_shape, method="compare",
                               ray_settings: TableSettings | None = None, hdr_output=False,
-                              batches=None) -> MemoryEstimate:
+                              batches=None, overlapped=True) -> MemoryEstimate:
     """The table build, then the frames (:func:`estimate_table_memory`, :func:`estimate_render_memory`
     without the higher orders, which an animation drops once the table is built). ``batches``: None
     for the three-wavelength animation, else the spectral one's ceil(N / 3) batches
-    (:func:`estimate_spectral_table_memory`, ``estimate_render_memory(..., batches=B)``)."""
+    (:func:`estimate_spectral_table_memory`, ``estimate_render_memory(..., batches=B)``).
+    ``overlapped``: the frames go through the overlapped pipeline (``clsky.anim.animate.OVERLAP_FRAMES``),
+    which holds the next frame as this one is processed (:data:`NEXT_FRAME_BYTES_PER_PIXEL`, times the
+    spectral batches' frames)."""
     if batches is None:
         build = estimate_table_memory(settings)
     else:
@@ -529,9 +538,18 @@ def estimate_animation_memory(settings: TableSettings, image_shape, method="comp
     render = estimate_render_memory(settings, image_shape, method, ray_settings, keep_orders=False,
                                     hdr_output=hdr_output, batches=batches or 1)
     width, height = image_shape
+    phases = render.phases
+    if overlapped and width * height:
+        frames = phases[-1]
+        method = {"lut4d": "lut", "compare4d": "compare"}.get(method, method)
+        spectral = sum(a.total for a in frames.allocations if a.label.startswith("spectral frame"))
+        following = Allocation("the next frame, rendered meanwhile (overlapped pipeline)",
+                               int(width) * int(height) * NEXT_FRAME_BYTES_PER_PIXEL[method] + spectral,
+                               source="frames")
+        phases = phases[:-1] + (dataclasses.replace(frames, allocations=frames.allocations + (following,)),)
     w, h, d = settings.size
     tables = f"table {w} x {h} x {d}" if batches is None else f"{batches} tables {w} x {h} x {d}"
-    return MemoryEstimate(f"the animation ({width} x {height} frames, {tables})", build.phases + render.phases)
+    return MemoryEstimate(f"the animation ({width} x {height} frames, {tables})", build.phases + phases)
 
 
 def host_available_bytes() -> int | None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import time
 
 import numpy as np
 import pyopencl as cl
@@ -19,6 +20,35 @@ from clsky import TableSettings, preset
 from clsky._cl import NoDeviceError, has_fp64, make_context
 from clsky.single import SingleScatteringEngine
 from clsky.transmittance import TransmittanceEngine
+
+
+# The CI's time budget --------------------------------------------------------------------------------
+
+#: Environment variable: a Unix time after which no test starts. .ci/run sets it for the slow tests so
+#: that CI ends within its limit whatever the machine's speed: a test not started is reported as
+#: skipped, its reason naming this variable (``pytest -rs`` lists them). Unset: every test runs.
+DEADLINE_VARIABLE = "CLSKY_TEST_DEADLINE"
+
+
+def _deadline():
+    value = os.environ.get(DEADLINE_VARIABLE, "").strip()
+    if not value:
+        return None
+    try:
+        return float(value)
+    except ValueError:
+        raise pytest.UsageError(f"{DEADLINE_VARIABLE} must be a Unix time in seconds, got {value!r}") from None
+
+
+def pytest_configure(config):
+    _deadline()                                  # a malformed value stops the run before any test
+
+
+def pytest_runtest_setup(item):
+    deadline = _deadline()
+    if deadline is not None and time.time() > deadline:
+        pytest.skip(f"not started: the time budget ran out ({DEADLINE_VARIABLE}="
+                    f"{time.strftime('%H:%M:%S', time.localtime(deadline))})")
 
 
 # Tolerances ---------------------------------------------------------------------------------------

@@ -339,15 +339,21 @@ def test_info_without_the_anim_extra_is_one_line(tmp_path, capsys, monkeypatch):
 @pytest.mark.slow
 def test_the_dusk_scene_reproduces_the_readme_picture(tmp_path, capsys, monkeypatch):
     """``clsky animate --scene examples/dusk.toml`` (README 'Scene files') writes docs/scene_dusk.png
-    as its third frame, byte for byte, text chunks included; its scene is the example's. Slow: the
-    scene's own size and quality (a default-level table; 111 s wall on the 2-core machine at load
-    average 7.3)."""
+    as its third frame: the same text chunks, and the same pixels to within one 8-bit level at no
+    more than 0.1 % of them (PoCL compiles for the CPU it runs on, and another CPU's code generation
+    moves the last bits of a radiance, which can tip a rounding to 8 bits; on the machine that made
+    the picture the files are byte for byte the same). Its scene is the example's. Slow: the scene's
+    own size and quality (a default-level table with azimuth harmonics)."""
     monkeypatch.chdir(tmp_path)
     example = ROOT / "examples" / "dusk.toml"
     assert run(capsys, "animate", "--scene", example, "--progress", "none")[0] == 0
     frames = sorted((tmp_path / "dusk_frames").glob("frame_*.png"))
     assert len(frames) == 4
-    assert frames[2].read_bytes() == (ROOT / "docs" / "scene_dusk.png").read_bytes()
+    with Image.open(frames[2]) as image, Image.open(ROOT / "docs" / "scene_dusk.png") as picture:
+        assert image.text == picture.text
+        difference = np.abs(np.asarray(image, np.int16) - np.asarray(picture, np.int16))
+    assert difference.max() <= 1 and np.mean(difference > 0) <= 0.001, \
+        f"docs/scene_dusk.png differs: {np.mean(difference > 0):.2%} of the pixels, by up to {difference.max()} levels"
     with Image.open(frames[2]) as image:
         written = tomllib.loads(image.text["scene"])
         assert image.text["clsky_version"] == clsky.__version__
