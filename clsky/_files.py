@@ -3,10 +3,10 @@
 Every file clsky writes goes through :func:`atomic_write` or a :class:`StagedWrites` set: it is written
 to a hidden temporary file with a unique name (created exclusively, as ``tempfile.mkstemp`` does) beside
 its target, then renamed onto the target (``os.replace``, atomic on POSIX). Two writers of one target
-never share a temporary, so the last rename wins and the target is always one writer's complete file. :func:`check_output`
-finds, before any work, what would make a write fail: a target that exists (without ``force``) or is
-a directory, a missing or non-directory parent, a parent where no file can be created, a name too
-long for the file system.
+never share a temporary, so the last rename wins and the target is always one writer's complete file.
+:func:`check_output` finds, before any work, what would make a write fail: a target that exists
+(without ``force``) or is a directory, a missing or non-directory parent, a parent where no file can be
+created, a name too long for the file system.
 
 Examples
 --------

@@ -529,8 +529,8 @@ def estimate_animation_memory(settings: TableSettings, image_shape, method="comp
     for the three-wavelength animation, else the spectral one's ceil(N / 3) batches
     (:func:`estimate_spectral_table_memory`, ``estimate_render_memory(..., batches=B)``).
     ``overlapped``: the frames go through the overlapped pipeline (``clsky.anim.animate.OVERLAP_FRAMES``),
-    which holds the next frame as this one is processed (:data:`NEXT_FRAME_BYTES_PER_PIXEL`, times the
-    spectral batches' frames)."""
+    which holds the next frame as this one is processed (:data:`NEXT_FRAME_BYTES_PER_PIXEL`, and a
+    spectral animation's next spectral frames)."""
     if batches is None:
         build = estimate_table_memory(settings)
     else:
