@@ -29,10 +29,14 @@ def test_candidates_move_one_knob_each():
 
 
 def test_4d_candidate_is_measured_with_the_4d_lookup(draft_stand_in_reference):
-    """The sweep's 4D table candidate renders with render_lut4d ('lut4d') and gets finite errors."""
+    """The sweep's 4D table candidates render with render_lut4d ('lut4d') and get finite errors; the
+    second is at issue 11's size, a float32 export of at most 256 MB (9 channels of 4 bytes a node)."""
     reference, valid = draft_stand_in_reference
     four = [c for c in accuracy.default_candidates() if c.knob == "parameterization"]
-    assert len(four) == 1 and four[0].table.is_4d and four[0].method == "lut4d"
+    assert len(four) == 2 and all(c.table.is_4d and c.method == "lut4d" for c in four)
+    sized = four[1].table
+    assert sized.size == accuracy.LOOKUP4D_SIZE and sized.azimuth_size == accuracy.LOOKUP4D_AZIMUTHS
+    assert 150e6 < np.prod(sized.size) * sized.azimuth_size * 9 * 4 <= 256e6
     tiny = accuracy.Candidate("4D", "parameterization", four[0].table.replace(size=(9, 34, 9), azimuth_size=5))
     row, = accuracy.measure([tiny], reference, valid)
     assert row["method"] == "lut4d" and np.isfinite(row["p95_rel"]) and row["p95_rel"] >= 0
