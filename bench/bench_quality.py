@@ -124,6 +124,8 @@ def run(args, reference_name):
         start = time.perf_counter()
         reference, valid = accuracy.render_reference(args.size, level=reference_name)
         reference_seconds = time.perf_counter() - start
+        if args.reference_cache:    # kept even if the convergence fails (a doubled group may not fit in memory)
+            np.savez(args.reference_cache, valid=valid, seconds=reference_seconds, convergence="{}", **reference)
         change = accuracy.reference_convergence(reference, valid, groups=args.groups, level=reference_name)
         if args.reference_cache:
             np.savez(args.reference_cache, valid=valid, seconds=reference_seconds, convergence=json.dumps(change),

@@ -352,6 +352,12 @@ def _higher_orders_share(atmosphere, table, scene, ctx=None):
     return share
 
 
+def _percent(fraction) -> str:
+    """``fraction`` in per cent for a plan's reasons: 3 significant digits, whole numbers from 1000 % on
+    (a 3D lookup in twilight: '1026 %', not '1.03e+03 %')."""
+    return f"{100 * fraction:.0f}" if fraction >= 10.0 else f"{100 * fraction:.3g}"
+
+
 def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, ray_march=None) -> Plan:
     """The least table (and ray march) that renders ``scene`` within its error budget.
 
@@ -392,17 +398,17 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     ray = level.ray
     if chosen.method == "lut" and ray_march:
         decisions.append(("renderer", march,
-                          f"asked for; the table lookup alone would do: {100 * lookup_error:.3g} % at the lowest sun"))
+                          f"asked for; the table lookup alone would do: {_percent(lookup_error)} % at the lowest sun"))
     elif chosen.method == "lut":
         ray = None
         decisions.append(("renderer", "table lookup", f"its error at the lowest sun, "
-                          f"{low:g} deg, is {100 * lookup_error:.3g} % (measured)"))
+                          f"{low:g} deg, is {_percent(lookup_error)} % (measured)"))
     elif chosen.method == "raymarch":
-        decisions.append(("renderer", march, f"the table lookup's {100 * lookup_error:.3g} % at the lowest sun, "
+        decisions.append(("renderer", march, f"the table lookup's {_percent(lookup_error)} % at the lowest sun, "
                           f"{low:g} deg, exceeds the budget"))
     else:
         would = (f"the {chosen.description}'s {100 * estimate:.2g} % (estimated: the ray march's + its own, "
-                 f"measured) fits; the table lookup's {100 * lookup_error:.3g} % at the lowest sun, {low:g} deg, "
+                 f"measured) fits; the table lookup's {_percent(lookup_error)} % at the lowest sun, {low:g} deg, "
                  f"exceeds the budget")
         decisions.append(("renderer", march, f"asked for; {would}") if ray_march
                          else ("renderer", f"{chosen.description} (--method {chosen.method}), {march} at its nodes",
