@@ -20,8 +20,8 @@ What sets a level apart (measured, README):
   over the sun angles a scene reaches. Against the reference with azimuth harmonics (2026-12-02, 64 x 64
   frames) the default level's former 0.006 gave 1.07 % in civil twilight, over its promise; the other
   counts barely move it (96 samples 0.91 %, table steps 60 / 60 1.14 %, order tolerance 1e-5 1.07 %,
-  transmittance 128 x 512 1.10 %), 1.5 times the sun nodes 0.62 %: hence 0.004, for about 40 % more
-  table build.
+  transmittance 128 x 512 1.10 %), 1.5 times the sun nodes 0.62 %: hence 0.004, for about 1.5 times
+  the table build (the default animation's plan: 42.9 against 28.8 s wall).
 * The higher orders carry the view-sun azimuth (:attr:`QualityLevel.twilight_harmonics`, M = 2) where
   the sun goes below +30 deg (the scene planner decides, :func:`clsky.planner.azimuth_harmonics`), and
   the 'reference' level carries them at every sun: the azimuth average (M = 0) is +6 % too bright at
