@@ -44,6 +44,23 @@ def pytest_configure(config):
     _deadline()                                  # a malformed value stops the run before any test
 
 
+#: Under a deadline these run first (in this order, the rest after them in their usual order): the
+#: independent twilight check against the Monte Carlo tracer and the README's main job, so that a short
+#: budget leaves out smoke runs and repeats rather than them.
+FIRST_UNDER_A_DEADLINE = ("tests/test_twilight_montecarlo.py", "tests/test_main_job.py")
+
+
+def pytest_collection_modifyitems(config, items):
+    if _deadline() is None:
+        return
+
+    def rank(item):
+        path = item.nodeid.split("::")[0]
+        return FIRST_UNDER_A_DEADLINE.index(path) if path in FIRST_UNDER_A_DEADLINE else len(FIRST_UNDER_A_DEADLINE)
+
+    items.sort(key=rank)                         # stable: the usual order within each rank
+
+
 def pytest_runtest_setup(item):
     deadline = _deadline()
     if deadline is not None and time.time() > deadline:
