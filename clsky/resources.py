@@ -399,7 +399,7 @@ def _table_held(settings, cells, orders, keep_orders=True):
 
 def estimate_render_memory(settings: TableSettings, image_shape, method="compare",
                            ray_settings: TableSettings | None = None, keep_orders=False,
-                           hdr_output=False, count_table=True, batches=1) -> MemoryEstimate:
+                           hdr_output=False, count_table=True, batches=1, overlapped=False) -> MemoryEstimate:
     """Peak memory of rendering frames of ``image_shape`` from a table of ``settings``.
 
     Parameters
@@ -422,6 +422,10 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
     batches : int
         Tables rendered side by side (:class:`clsky.spectrum.SpectralRenderer`: one per batch of three
         wavelengths, ceil(N / 3)); 1: a :class:`~clsky.render.SkyRenderer`.
+    overlapped : bool
+        The frames go through an animation's overlapped pipeline (``clsky.anim.animate.OVERLAP_FRAMES``),
+        which holds the next frame as this one is processed: :data:`NEXT_FRAME_BYTES_PER_PIXEL`, plus a
+        spectral animation's next spectral frames.
 
     Returns
     -------
@@ -472,6 +476,10 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
             Allocation("HDR frames (pixels, 3) float64", pixels * 24, count=frames, source="frames"),
             Allocation("frame processing (tone map, metrics, composite, encoding)",
                        pixels * (FRAME_BYTES_PER_PIXEL[method] + (12 if hdr_output else 0)), source="frames"))
+        if overlapped:
+            per_pixel += (Allocation("the next frame, rendered meanwhile (overlapped pipeline)",
+                                     pixels * NEXT_FRAME_BYTES_PER_PIXEL[method] + sum(a.total for a in spectral),
+                                     source="frames"),)
         phases.append(Phase("frames", held + upload + per_pixel))
     w, h, d = settings.size
     return MemoryEstimate(f"rendering {width} x {height} frames from the table {w} x {h} x {d}", tuple(phases))
@@ -528,28 +536,17 @@ def estimate_animation_memory(settings: TableSettings, image_shape, method="comp
     without the higher orders, which an animation drops once the table is built). ``batches``: None
     for the three-wavelength animation, else the spectral one's ceil(N / 3) batches
     (:func:`estimate_spectral_table_memory`, ``estimate_render_memory(..., batches=B)``).
-    ``overlapped``: the frames go through the overlapped pipeline (``clsky.anim.animate.OVERLAP_FRAMES``),
-    which holds the next frame as this one is processed (:data:`NEXT_FRAME_BYTES_PER_PIXEL`, and a
-    spectral animation's next spectral frames)."""
+    ``overlapped``: the frames go through the overlapped pipeline (``estimate_render_memory``'s)."""
     if batches is None:
         build = estimate_table_memory(settings)
     else:
         build = estimate_spectral_table_memory(settings, batches)
     render = estimate_render_memory(settings, image_shape, method, ray_settings, keep_orders=False,
-                                    hdr_output=hdr_output, batches=batches or 1)
+                                    hdr_output=hdr_output, batches=batches or 1, overlapped=overlapped)
     width, height = image_shape
-    phases = render.phases
-    if overlapped and width * height:
-        frames = phases[-1]
-        method = {"lut4d": "lut", "compare4d": "compare"}.get(method, method)
-        spectral = sum(a.total for a in frames.allocations if a.label.startswith("spectral frame"))
-        following = Allocation("the next frame, rendered meanwhile (overlapped pipeline)",
-                               int(width) * int(height) * NEXT_FRAME_BYTES_PER_PIXEL[method] + spectral,
-                               source="frames")
-        phases = phases[:-1] + (dataclasses.replace(frames, allocations=frames.allocations + (following,)),)
     w, h, d = settings.size
     tables = f"table {w} x {h} x {d}" if batches is None else f"{batches} tables {w} x {h} x {d}"
-    return MemoryEstimate(f"the animation ({width} x {height} frames, {tables})", build.phases + phases)
+    return MemoryEstimate(f"the animation ({width} x {height} frames, {tables})", build.phases + render.phases)
 
 
 def host_available_bytes() -> int | None:
