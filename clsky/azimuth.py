@@ -374,13 +374,15 @@ class _Backend:
     single: Ibar^(1) at the azimuth nodes (M + 1, D, H, W, 6) on the host; upload(gathered): the
     host's gathered harmonics (M + 1, D, H, W, 6) in the backend's form; scatter(gathered,
     ground_radiance): (the order's nodes (M + 1, D, H, W, 3) on the host, the same in the backend's
-    form); gather(that form): the next order's gathered harmonics (backend's form); to_host(gathered):
+    form); gather(that form): the next order's gathered harmonics (backend's form); accumulate(total,
+    gathered): total + gathered (a copy of gathered for total None; may add in place); to_host(gathered):
     (M + 1, D, H, W, 6) float64; device: its description."""
 
     single: np.ndarray
     upload: object
     scatter: object
     gather: object
+    accumulate: object
     to_host: object
     device: str
 
@@ -397,7 +399,11 @@ def _numpy_backend(atmosphere, settings, operators):
     def gather(nodes):
         return operators.gather(_to_harmonics(nodes))
 
-    return _Backend(single, lambda gathered: gathered, scatter, gather, lambda gathered: gathered, "numpy")
+    def accumulate(total, gathered):
+        return gathered.copy() if total is None else total + gathered
+
+    return _Backend(single, lambda gathered: gathered, scatter, gather, accumulate, lambda gathered: gathered,
+                    "numpy")
 
 
 def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
@@ -406,7 +412,12 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     every harmonic with the gather kernel (``MultipleScatteringEngine.gather``, the azimuth average's
     kernel, with :meth:`HarmonicGather.gather_matrices`): an order's nodes, their harmonics and the
     gathered harmonics stay on the device; only the nodes are copied to the host (the stopping test,
-    the table's azimuth average)."""
+    the table's azimuth average).
+
+    Every engine runs on one queue and takes its device arrays from one pool
+    (:func:`clsky._cl.memory_pool`): an order reuses the buffers of the one before (they are the same
+    sizes) instead of faulting in fresh memory, and the nodes come to the host through one reused
+    staging array. The pool goes with the backend."""
     import pyopencl as cl
     import pyopencl.array as cla
 
@@ -414,48 +425,55 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     from .single import SingleScatteringEngine
 
     single_engine = SingleScatteringEngine(settings, ctx=ctx, fast_math=fast_math)
-    engine = MultipleScatteringEngine(settings, ctx=single_engine.ctx, fast_math=fast_math)
+    queue = cl.CommandQueue(single_engine.ctx)
+    pool = _cl.memory_pool(queue)
+    engine = MultipleScatteringEngine(settings, fast_math=fast_math, queue=queue, allocator=pool)
     cosines = np.cos(azimuth_nodes(settings.azimuth_harmonics))
     single = np.stack([single_engine.compute(atmosphere, cos_azimuth=c) for c in cosines])
     transform = harmonic_transform(settings.azimuth_harmonics)
     matrices = [engine.upload_matrices(operators.gather_matrices(m)) for m in range(cosines.size)]
+    staging = []            # the host array each node is read into (allocated once, on first use)
 
     def upload(gathered):
         padded = np.zeros(gathered.shape[:-1] + (8,), dtype=engine.dtype)
         padded[..., :6] = gathered
-        return cla.to_device(engine.queue, padded)
+        return cla.to_device(queue, padded, allocator=pool)
 
     engines = {settings.azimuth_harmonics: engine}
 
     def scatter(gathered_d, ground_radiance, source_harmonics=None):
-        """The nodes; the rays read ``source_harmonics`` harmonics of the source (the first ones of the
-        padded (M + 1, D, H, W, 8) buffer: a kernel built for fewer harmonics reads only those)."""
+        """The nodes, (M + 1, D, H, W, 3) on the host and padded (M + 1, D, H, W, 8) on the device; the
+        rays read ``source_harmonics`` harmonics of the source (the first ones of the padded
+        (M + 1, D, H, W, 8) buffer: a kernel built for fewer harmonics reads only those)."""
         read = settings.azimuth_harmonics if source_harmonics is None else source_harmonics
         if read not in engines:
-            engines[read] = MultipleScatteringEngine(settings.replace(azimuth_harmonics=read), ctx=engine.ctx,
-                                                     fast_math=fast_math)
-        if read != settings.azimuth_harmonics:
-            engine.queue.finish()      # another engine's queue: the gathered harmonics must be written first
-        nodes_d = [engines[read].scatter(atmosphere, gathered_d, combine_species=True,
-                                         ground_radiance=ground_radiance, cos_azimuth=c) for c in cosines]
-        host = np.stack([node.get()[..., :3].astype(np.float64) for node in nodes_d])    # waits for them
-        return host, [node.with_queue(engine.queue) for node in nodes_d]    # the harmonics and gathers' queue
+            engines[read] = MultipleScatteringEngine(settings.replace(azimuth_harmonics=read), fast_math=fast_math,
+                                                     queue=queue, allocator=pool)
+        nodes_d = cla.empty(queue, (cosines.size,) + gathered_d.shape[1:], engine.dtype, allocator=pool)
+        for node, c in enumerate(cosines):
+            engines[read].scatter(atmosphere, gathered_d, combine_species=True, ground_radiance=ground_radiance,
+                                  cos_azimuth=c, out=nodes_d, node=node)
+        if not staging:
+            staging.append(np.empty(nodes_d.shape, engine.dtype))
+        return nodes_d.get(ary=staging[0])[..., :3].astype(np.float64), nodes_d     # get() waits for them
 
     def gather(nodes_d):
         """G_m = A_m L_m, L_m = sum_n H[m, n] L(phi_n) (padded: channels 0-2 and 3-5 both hold L)."""
-        out = cla.empty(engine.queue, (len(nodes_d),) + nodes_d[0].shape, engine.dtype)
+        out = cla.empty(queue, nodes_d.shape, engine.dtype, allocator=pool)
+        harmonic = cla.empty(queue, nodes_d.shape[1:], engine.dtype, allocator=pool)
         for m, row in enumerate(transform):
-            harmonic = nodes_d[0] * engine.dtype.type(row[0])
-            for weight, node in zip(row[1:], nodes_d[1:]):
-                harmonic = harmonic.mul_add(1.0, node, engine.dtype.type(weight))
-            part = engine.gather(matrices[m], harmonic)
-            cl.enqueue_copy(engine.queue, out.data, part.data, byte_count=part.nbytes, dst_offset=m * part.nbytes)
+            part = engine.gather(matrices[m], engine.combine_nodes(nodes_d, row, harmonic))
+            cl.enqueue_copy(queue, out.data, part.data, byte_count=part.nbytes, dst_offset=m * part.nbytes)
         return out
+
+    def accumulate(total, gathered_d):
+        return gathered_d.copy() if total is None else engine.add_into(total, gathered_d)
 
     def to_host(gathered_d):
         return gathered_d.get()[..., :6].astype(np.float64)
 
-    return _Backend(single, upload, scatter, gather, to_host, _cl.describe_device(single_engine.device))
+    return _Backend(single, upload, scatter, gather, accumulate, to_host,
+                    _cl.describe_device(single_engine.device))
 
 
 def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, backend="numpy", ctx=None,
@@ -504,7 +522,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
     running = single_nodes[..., :3] + single_nodes[..., 3:]
     gathered_sum, orders = None, []
     for k in range(2, wanted + 1):
-        gathered_sum = gathered.copy() if gathered_sum is None else gathered_sum + gathered
+        gathered_sum = run.accumulate(gathered_sum, gathered)
         new, state = run.scatter(gathered, pending_ground,
                                  None if HARMONIC_SOURCE_ORDERS is None or k <= HARMONIC_SOURCE_ORDERS else 0)
         del gathered

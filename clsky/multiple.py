@@ -269,13 +269,14 @@ class MultipleScatteringEngine(_cl.Engine):
     ----------
     settings : TableSettings
         Its view_steps, sampling and dtype are compiled in.
-    ctx, profile, fast_math
+    ctx, profile, fast_math, queue, allocator
         See :class:`clsky._cl.Engine`.
     """
 
-    def __init__(self, settings: TableSettings = TableSettings(), ctx=None, profile=False, fast_math=False):
+    def __init__(self, settings: TableSettings = TableSettings(), ctx=None, profile=False, fast_math=False,
+                 queue=None, allocator=None):
         self.settings = settings.scatter_settings           # its view steps are those of the scatter
-        super().__init__(ctx, np.dtype(settings.dtype), profile, fast_math)
+        super().__init__(ctx, np.dtype(settings.dtype), profile, fast_math, queue, allocator)
 
     def program_sources(self):
         declaration = _atmosphere_cl.declaration(self.ctx.devices[0], self.dtype)
@@ -293,11 +294,11 @@ class MultipleScatteringEngine(_cl.Engine):
             raise ValueError(f"table must have shape (D, H, W, 6), got {table.shape}")
         padded = np.zeros(table.shape[:3] + (8,), dtype=self.dtype)
         padded[..., :6] = table
-        return cla.to_device(self.queue, padded)
+        return cla.to_device(self.queue, padded, allocator=self.allocator)
 
     def upload_matrices(self, matrices):
         """Gather matrices on the device, to reuse across orders."""
-        return cla.to_device(self.queue, np.ascontiguousarray(matrices, dtype=self.dtype))
+        return cla.to_device(self.queue, np.ascontiguousarray(matrices, dtype=self.dtype), allocator=self.allocator)
 
     def gather(self, matrices, table, out=None, accumulate=False):
         """out[z, i, x, c] (+)= sum_j M[c // 3][(z,) i, j] table[z, j, x, c].
@@ -322,7 +323,7 @@ class MultipleScatteringEngine(_cl.Engine):
                              f"{height}, got {matrices.shape}")
         matrices_d = matrices if isinstance(matrices, cla.Array) else self.upload_matrices(matrices)
         if out is None:
-            out = cla.empty(self.queue, table_d.shape, self.dtype)
+            out = cla.empty(self.queue, table_d.shape, self.dtype, allocator=self.allocator)
             accumulate = False
         per_node = matrices.ndim == 4
         event = self.kernels["gather"](
@@ -333,8 +334,10 @@ class MultipleScatteringEngine(_cl.Engine):
         return out
 
     def scatter(self, atmosphere: AtmosphereParameters, gathered, combine_species=False, ground_radiance=None,
-                cos_azimuth=1.0):
-        """Next order from a gathered table, as a padded device array (D, H, W, 8).
+                cos_azimuth=1.0, out=None, node=0):
+        """Next order from a gathered table, as a padded device array (D, H, W, 8): ``out`` if given,
+        a padded device array (N, D, H, W, 8) whose slab ``node`` receives it (the nodes of
+        :mod:`clsky.azimuth`), else a new one.
 
         With ``combine_species`` (physical mode) channels 0-2 and 3-5 both hold Rayleigh + Mie. With a
         reflecting ground (``atmosphere.has_ground``, which needs ``combine_species``), rays that end on
@@ -354,17 +357,48 @@ class MultipleScatteringEngine(_cl.Engine):
             if ground is None or ground.shape != (depth, 3):
                 raise ValueError(f"ground_radiance must have shape (D, 3) = ({depth}, 3), got "
                                  f"{None if ground is None else ground.shape}")
-            ground_d = cla.to_device(self.queue, padded4(ground, self.dtype))
+            ground_d = cla.to_device(self.queue, padded4(ground, self.dtype), allocator=self.allocator)
         else:
-            ground_d = cla.zeros(self.queue, 4, self.dtype)        # not read without -DGROUND
-        out = cla.empty(self.queue, (depth, height, width, 8), self.dtype)
+            ground_d = cla.zeros(self.queue, 4, self.dtype, allocator=self.allocator)   # not read without -DGROUND
+        if out is None:
+            out = cla.empty(self.queue, (depth, height, width, 8), self.dtype, allocator=self.allocator)
+        elif out.shape[-4:] != (depth, height, width, 8) or not 0 <= node < out.size // (depth * height * width * 8):
+            raise ValueError(f"out must be a padded table (N, {depth}, {height}, {width}, 8) with node < N, got "
+                             f"{out.shape} and node {node}")
         atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
         event = self.kernels_with(_atmosphere_cl.feature_defines(atmosphere))["scatter"](
             self.queue, _scatter_global_size(width, height, depth), SCATTER_WORK_GROUP, atmosphere_d, np.int32(width),
             np.int32(height), np.int32(depth), np.int32(MAPPINGS[self.settings.mapping]),
             self.real2(self.settings.sun_w_range), np.int32(bool(combine_species)), self.real(cos_azimuth),
             gathered_d.data,
-            ground_d.data, out.data)
+            ground_d.data, out.data, np.uint64(node * depth * height * width))
         self._record("scatter", event)
         out.add_event(event)
         return out
+
+    def combine_nodes(self, nodes, weights, out):
+        """out = sum_n weights[n] nodes[n]: the padded device tables (N, D, H, W, 8) ``nodes`` combined
+        into the padded device table ``out`` (D, H, W, 8) (an azimuth harmonic of an order's nodes,
+        :mod:`clsky.azimuth`; kernels/multiple.cl: combine_nodes)."""
+        weights = np.ascontiguousarray(weights, dtype=self.dtype)
+        cells = out.size // 8
+        if weights.shape != (nodes.shape[0],) or nodes.shape[1:] != out.shape or out.shape[-1] != 8:
+            raise ValueError(f"nodes (N, D, H, W, 8), weights (N,) and out (D, H, W, 8) must agree, got "
+                             f"{nodes.shape}, {weights.shape} and {out.shape}")
+        weights_d = cla.to_device(self.queue, weights, allocator=self.allocator)
+        event = self.kernels["combine_nodes"](self.queue, (cells,), None, nodes.data, weights_d.data,
+                                              np.int32(weights.size), np.uint64(cells), self.real(1.0),
+                                              self.real(0.0), out.data)
+        self._record("combine_nodes", event)
+        return out
+
+    def add_into(self, total, addend):
+        """total += addend, padded device tables of one shape (kernels/multiple.cl: add_into)."""
+        if total.shape != addend.shape or total.shape[-1] != 8:
+            raise ValueError(f"total and addend must be padded tables (..., 8) of one shape, got {total.shape} "
+                             f"and {addend.shape}")
+        cells = total.size // 8
+        event = self.kernels["add_into"](self.queue, (cells,), None, total.data, addend.data, np.uint64(cells),
+                                         self.real(1.0))
+        self._record("add_into", event)
+        return total

@@ -167,7 +167,11 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         from .single import SingleScatteringEngine
 
         single_engine = SingleScatteringEngine(settings, ctx=ctx, fast_math=fast_math)
-        engine = MultipleScatteringEngine(settings, ctx=single_engine.ctx, fast_math=fast_math)
+        queue = cl.CommandQueue(single_engine.ctx)
+        # the orders' tables reuse the buffers of the orders before (clsky._cl.memory_pool); a buffer goes
+        # back to the pool when dropped, and the download of the copy queue that reads it has been waited
+        # for by then (on_host) or is followed by no new array before that wait
+        engine = MultipleScatteringEngine(settings, fast_math=fast_math, queue=queue, allocator=_cl.memory_pool(queue))
         single = single_engine.compute(atmosphere, progress=None if progress is None else
                                        (lambda done, total: progress("single", done, total)))
         device = _cl.describe_device(single_engine.device)
@@ -179,6 +183,9 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
 
         def to_host(gathered):
             return gathered.get()[..., :6].astype(np.float64)
+
+        def add_into(total, gathered):
+            return engine.add_into(total, gathered)
 
         kept = 3 if settings.mode == "physical" else 6    # channels of an order kept on the host
 
@@ -213,6 +220,10 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
 
         def to_host(gathered):
             return gathered
+
+        def add_into(total, gathered):
+            total += gathered
+            return total
 
         def upload(matrices):
             return matrices
@@ -254,7 +265,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
             if gathered_sum is None:
                 gathered_sum = gathered.copy()
             else:
-                gathered_sum += gathered
+                gathered_sum = add_into(gathered_sum, gathered)
             next_input, on_host = scatter(gathered, pending_ground)
             del gathered                  # summed and scattered: its (D, H, W, 8) buffer may go
             # gather the next order from the new one where it is (on the device for OpenCL) before

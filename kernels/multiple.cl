@@ -132,6 +132,8 @@ inline void integrate_gathered_suns(__constant const atmosphere_t *atm, const re
  * added to both channel sets of combine_species (the host refuses a ground without it).
  * cos_azimuth: the cells' view-sun azimuth (1: canonical frame); with -DAZIMUTH_HARMONICS=M, gathered
  * holds M + 1 harmonics (view_ray.cl: add_lookups; clsky/azimuth.py).
+ * The result goes to table + 8 table_offset (table_offset in cells: an azimuth node's slab of a buffer
+ * that holds every node, clsky/azimuth.py).
  * Requires view_ray.cl (and so N_VIEW). */
 #ifndef SCATTER_SUN_NODES
 #error "SCATTER_SUN_NODES (sun nodes per scatter work-item) must be defined"
@@ -139,8 +141,9 @@ inline void integrate_gathered_suns(__constant const atmosphere_t *atm, const re
 __kernel void scatter(__constant const atmosphere_t *atm, const int width, const int height,
                       const int depth, const int mapping, const real2 sun_range, const int combine_species,
                       const real cos_azimuth, __global const real *gathered, __global const real *ground_radiance,
-                      __global real *table)
+                      __global real *table, const ulong table_offset)
 {
+    table += 8 * table_offset;
     const int gx = get_global_id(0);
     const int y = get_global_id(1);
     const int z0 = SCATTER_SUN_NODES * get_global_id(2);
@@ -180,4 +183,33 @@ __kernel void scatter(__constant const atmosphere_t *atm, const int width, const
             vstore8(value, (size_t)xk + (size_t)width * ((size_t)y + (size_t)height * (size_t)z), table);
         }
     }
+}
+
+/* Elementwise steps of the orders with azimuth harmonics (clsky/azimuth.py), over padded tables of
+ * `cells` real8 cells: what PyOpenCL's elementwise a * x + b and a * x + b * y kernels computed before
+ * them, written as the same expressions (so with the same roundings: the compiler forms the same fused
+ * multiply-adds; `one` and `zero` are arguments, 1 and 0, so that it cannot simplify them away) in one
+ * pass with vector loads. Global size: at least `cells`. */
+
+/* harmonic = sum_n weights[n] nodes[n] over the `count` slabs of `cells` cells of nodes (an order at its
+ * azimuth nodes), as h = weights[0] L_0 + zero, then h = one h + weights[n] L_n for n = 1 .. count - 1. */
+__kernel void combine_nodes(__global const real *nodes, __global const real *weights, const int count,
+                            const ulong cells, const real one, const real zero, __global real *harmonic)
+{
+    const size_t cell = get_global_id(0);
+    if (cell >= cells)
+        return;
+    real8 h = weights[0] * vload8(cell, nodes) + zero;
+    for (int n = 1; n < count; ++n)
+        h = one * h + weights[n] * vload8(cell + (size_t)n * (size_t)cells, nodes);
+    vstore8(h, cell, harmonic);
+}
+
+/* total += addend, as one * total + one * addend. */
+__kernel void add_into(__global real *total, __global const real *addend, const ulong cells, const real one)
+{
+    const size_t cell = get_global_id(0);
+    if (cell >= cells)
+        return;
+    vstore8(one * vload8(cell, total) + one * vload8(cell, addend), cell, total);
 }

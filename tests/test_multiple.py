@@ -17,10 +17,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pyopencl.array as cla
 import pytest
 from numpy.testing import assert_allclose
 
 from clsky import ScatteringTable, TableSettings, preset, reference
+from clsky._cl import memory_pool
 from clsky.lookup import TableLookupEngine
 from clsky.multiple import (SPECIES, MultipleScatteringEngine, first_gather_matrices, gather_matrices, gather_matrix,
                             gather_quadrature, phase_azimuth_integrals)
@@ -219,6 +221,69 @@ def test_gather_device_input_and_overwritten_output(multiple_engine, twin_inputs
     assert np.array_equal(out.get(), host)
     with pytest.raises(ValueError, match="matrices must have shape"):
         engine.gather(inputs["matrices"][:, :-1], inputs["single"])
+
+
+def test_scatter_into_a_node_slab(multiple_engine, twin_inputs):
+    """``out``/``node``: the scatter writes slab ``node`` of a (N, D, H, W, 8) buffer, exactly what it
+    returns on its own, and leaves the other slabs as they were; a slab past N or a wrong shape is
+    refused before any launch."""
+    engine = multiple_engine(SMALL)
+    atmosphere = black_preset("physical")
+    gathered = twin_inputs("physical", "default")["gathered"]
+    alone = engine.scatter(atmosphere, gathered).get()
+    out = cla.to_device(engine.queue, np.full((3,) + alone.shape, -1.0, dtype=alone.dtype))
+    assert engine.scatter(atmosphere, gathered, out=out, node=1) is out
+    slabs = out.get()
+    assert np.array_equal(slabs[1], alone)
+    assert np.all(slabs[[0, 2]] == -1.0)
+    for node, shape in ((3, out.shape), (-1, out.shape), (0, (3,) + alone.shape[:-1] + (6,))):
+        with pytest.raises(ValueError, match="out must be a padded table"):
+            engine.scatter(atmosphere, gathered, out=cla.empty(engine.queue, shape, alone.dtype), node=node)
+
+
+@pytest.mark.parametrize("count", [1, 3, 5])
+def test_combine_nodes_and_add_into_match_pyopencl_elementwise(multiple_engine, dtype, count):
+    """combine_nodes and add_into replace chains of PyOpenCL's elementwise kernels (clsky/azimuth.py,
+    clsky/orders.py) and claim their exact roundings: sum_n w_n L_n as L_0 * w_0 then mul_add(1, L_n, w_n),
+    and total + addend, compared bit for bit on values with full mantissas; NumPy's sum within 4 ulp
+    (at most 4 roundings of a sum of 5 terms of one sign, with or without fused multiply-adds)."""
+    engine = multiple_engine(SMALL.replace(dtype=dtype))
+    rng = np.random.default_rng(7)
+    real = np.dtype(dtype).type
+    nodes = rng.uniform(0.0, 2.0, (count, 5, 6, 7, 8)).astype(dtype)
+    weights = rng.uniform(0.1, 1.0, count)
+    nodes_d = cla.to_device(engine.queue, nodes)
+    combined = engine.combine_nodes(nodes_d, weights, cla.empty(engine.queue, nodes.shape[1:], dtype)).get()
+    chain = cla.to_device(engine.queue, nodes[0]) * real(weights[0])
+    for weight, node in zip(weights[1:], nodes[1:]):
+        chain = chain.mul_add(1.0, cla.to_device(engine.queue, node), real(weight))
+    assert np.array_equal(combined, chain.get())
+    expected = np.einsum("n,n...->...", weights, nodes.astype(np.float64))
+    assert_allclose(combined, expected, rtol=4 * np.finfo(dtype).eps, atol=0.0)
+    total, addend = cla.to_device(engine.queue, nodes[0]), cla.to_device(engine.queue, nodes[-1])
+    assert engine.add_into(total, addend) is total
+    assert np.array_equal(total.get(), (cla.to_device(engine.queue, nodes[0]) + addend).get())
+    with pytest.raises(ValueError, match="must agree"):
+        engine.combine_nodes(nodes_d, np.ones(count + 1), cla.empty(engine.queue, nodes.shape[1:], dtype))
+    with pytest.raises(ValueError, match="one shape"):
+        engine.add_into(total, cla.empty(engine.queue, (5, 6, 7, 4), dtype))
+
+
+def test_engines_share_a_queue_and_a_pool(cl_context):
+    """``queue`` and ``allocator``: an engine on another's queue runs in its order and takes its arrays
+    from the pool; a buffer its array drops is handed to the next array of that size (no new memory)."""
+    first = MultipleScatteringEngine(SMALL, ctx=cl_context)
+    pool = memory_pool(first.queue)
+    second = MultipleScatteringEngine(SMALL.replace(mode="physical", azimuth_harmonics=1), queue=first.queue,
+                                      allocator=pool)
+    assert second.queue is first.queue and second.ctx == first.ctx
+    table = second.to_device(np.ones((7, 33, 9, 6)))
+    assert table.allocator is pool and pool.active_blocks == 1
+    managed = pool.managed_bytes
+    del table
+    assert pool.held_blocks == 1
+    again = second.to_device(np.ones((7, 33, 9, 6)))
+    assert pool.managed_bytes == managed and pool.held_blocks == 0 and again.allocator is pool
 
 
 @pytest.mark.parametrize("preset_name", PRESETS)
