@@ -352,8 +352,8 @@ class HarmonicOrders:
     gathered : (M + 1, D, H, W, 6) or None
         Sum over the orders 2..K of the gathered harmonics G_{s,m} (Rayleigh r, g, b, Mie r, g, b; phase
         inside), for :func:`raymarch_higher_orders`.
-    orders : list of (M + 1, D, H, W, 3)
-        L^(k) at the azimuth nodes, k = 2..K.
+    orders : list of (M + 1, D, H, W, 3), or of (D, H, W, 3)
+        L^(k) at the azimuth nodes, k = 2..K; with ``keep_nodes=False``, their azimuth averages.
     record : dict
         harmonics, orders, converged, relative additions, device.
     ground_irradiance : (D, 3) or None
@@ -477,17 +477,21 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
 
 
 def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, backend="numpy", ctx=None,
-                   fast_math=False, progress=None) -> HarmonicOrders:
+                   fast_math=False, progress=None, keep_nodes=True) -> HarmonicOrders:
     """Single scattering and the orders k >= 2 with M = ``settings.azimuth_harmonics`` azimuthal
     harmonics (module docstring), with the physical mode's stopping rule (:mod:`clsky.orders`).
 
     Parameters
     ----------
     backend : {'numpy', 'opencl'}
-        Where the ray integrals run (single scattering and the scatter at each azimuth node); the
-        gathers are matrix products on the host either way (:class:`HarmonicGather`).
+        Where the ray integrals and the gathers run (single scattering and the scatter at each azimuth
+        node); the first gather is matrix products on the host either way (:class:`HarmonicGather`).
     progress : callable, optional
         ``progress(k, relative_addition)`` after each order.
+    keep_nodes : bool
+        Keep each order at its azimuth nodes (default), or only its azimuth average (what the 3D table
+        stores: a third of the memory for M = 2, and the average is taken once, for the ground and the
+        table alike).
 
     Raises
     ------
@@ -526,9 +530,11 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         new, state = run.scatter(gathered, pending_ground,
                                  None if HARMONIC_SOURCE_ORDERS is None or k <= HARMONIC_SOURCE_ORDERS else 0)
         del gathered
-        orders.append(check_finite(new, k, atmosphere, settings))
+        check_finite(new, k, atmosphere, settings)
+        average = azimuth_average(new) if ground_sky is not None or not keep_nodes else None
+        orders.append(new if keep_nodes else average)
         if ground_sky is not None:     # the horizontal ground sees the azimuth average (m = 0)
-            sky = ground.sky_irradiance(atmosphere, settings, azimuth_average(new), factored=False)
+            sky = ground.sky_irradiance(atmosphere, settings, average, factored=False)
             ground_sky = ground_sky + sky
             pending_ground = ground.reflected_radiance(atmosphere, sky)
         running += new
@@ -548,8 +554,10 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
 
 def azimuth_average(order_nodes):
     """The m = 0 harmonic (M + 1, ...) -> (...): the azimuth average of an order, what the 3D table's
-    lookup (which has no azimuth) stores."""
-    return _to_harmonics(order_nodes)[0]
+    lookup (which has no azimuth) stores: the first row of :func:`harmonic_transform` alone (a third of
+    the work of every harmonic for M = 2, and the same values there; within rounding of that row of
+    :func:`_to_harmonics` for M > 2, whose matrix product sums in another order)."""
+    return np.tensordot(harmonic_transform(order_nodes.shape[0] - 1)[0], order_nodes, axes=1)
 
 
 def orders_result(atmosphere: AtmosphereParameters, settings: TableSettings, backend="opencl", ctx=None,
@@ -564,10 +572,9 @@ def orders_result(atmosphere: AtmosphereParameters, settings: TableSettings, bac
 
     start = time.perf_counter()
     result = compute_orders(atmosphere, settings, backend=backend, ctx=ctx, fast_math=fast_math,
-                            progress=None if progress is None else (lambda k, _: progress("orders", k, 0)))
-    orders = [result.single]
-    while result.orders:     # each order's nodes go as soon as their average is taken (peak memory)
-        orders.append(azimuth_average(result.orders.pop(0)))
+                            progress=None if progress is None else (lambda k, _: progress("orders", k, 0)),
+                            keep_nodes=False)
+    orders = [result.single] + result.orders
     additions = result.record["relative_additions"]
     if settings.orders == "auto":
         reason = (f"converged: order {len(orders)} added at most {additions[-1]:.2e} of the running sum (tolerance "

@@ -327,8 +327,8 @@ def _harmonic_phases(settings, orders):
     """The orders of a table with azimuth harmonics (:mod:`clsky.azimuth`, n = M + 1 azimuth nodes): the
     first gather on the host (single scattering at the n nodes and its harmonics, each seen species'
     (n, D, Theta + 1, W 3) interpolation and their harmonic sum, the n gathered harmonics, the padded
-    upload), then the orders loop (every order's n nodes kept on the host and the running sum at the
-    nodes; on the device the gathered sum, the gathered harmonics and the order's n nodes, padded, a
+    upload), then the orders loop (every order's azimuth average kept on the host, the order's n nodes
+    and the running sum at the nodes; on the device the gathered sum, the gathered harmonics and the order's n nodes, padded, a
     harmonic and its gather; each node's padded download)."""
     cells, height, depth, s = _table_sizes(settings)
     n = settings.azimuth_harmonics + 1
@@ -344,7 +344,9 @@ def _harmonic_phases(settings, orders):
     loop = Phase("orders", (
         single,
         Allocation("gather matrices (n, 2, H, H)", 2 * height * height * s, count=n, on_device=True),
-        Allocation("higher orders kept at the nodes (n, D, H, W, 3) float64", cells * 3 * _F64, count=n * (orders - 1)),
+        Allocation("higher orders kept as their azimuth averages (D, H, W, 3) float64", cells * 3 * _F64,
+                   count=orders - 1),
+        Allocation("the order at its nodes on the host (n, D, H, W, 3) float64", cells * 3 * _F64, count=n),
         Allocation("running sum at the nodes (n, D, H, W, 3) float64", cells * 3 * _F64, count=n),
         Allocation("padded tables: gathered sum, gathered, nodes, harmonic, its gather", padded, count=3 * n + 2,
                    on_device=True),

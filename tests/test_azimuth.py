@@ -61,6 +61,26 @@ def test_series_interpolates_the_nodes(harmonics):
     assert_allclose(series, values, rtol=1e-13, atol=1e-14)     # rounding of an (M + 1)-term sum
 
 
+@pytest.mark.parametrize("harmonics", [1, 2, 4, 7])
+def test_azimuth_average_is_the_series_mean(harmonics):
+    """azimuth_average: the mean over phi of the cosine series through the nodes, its m = 0 coefficient.
+    Against a field a + sum_m b_m cos(m phi) sampled at the nodes (mean a, to the rounding of an
+    (M + 1)-term sum), and against the first row of every harmonic: the same bits for M <= 2 (the default
+    animation's tables, whose bits the faster average kept), and above within the rounding of two sums of
+    M + 1 terms in other orders, (M + 1) eps of the largest node value each."""
+    rng = np.random.default_rng(harmonics)
+    a, b = rng.random((5, 3)), rng.random((harmonics, 5, 3))
+    phi = azimuth.azimuth_nodes(harmonics)
+    nodes = a + np.einsum("nm,m...->n...", np.cos(np.outer(phi, np.arange(1, harmonics + 1))), b)
+    average = azimuth.azimuth_average(nodes)
+    assert_allclose(average, a, rtol=1e-13, atol=1e-14)
+    every = azimuth._to_harmonics(nodes)[0]
+    if harmonics <= 2:
+        assert np.array_equal(average, every)
+    else:
+        assert_allclose(average, every, rtol=0, atol=2 * (harmonics + 1) * np.finfo(float).eps * np.abs(nodes).max())
+
+
 def test_chebyshev_is_cosine():
     phi = np.linspace(0.0, math.pi, 17)
     assert_allclose(azimuth.chebyshev(np.cos(phi), 6), np.cos(np.outer(phi, np.arange(7))), atol=1e-14)
