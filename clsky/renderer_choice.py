@@ -8,8 +8,8 @@ add to the ray march's.
 
 A row's cost is its own table's build (``build_cpu_s``: 0 for the rows that read the plan's 3D table or
 none) plus ``frames`` times its cost per frame. The 4D table lookup (``'lut4d'``) needs a table of its
-own: 47 CPU-s to build (README "The 4D table"), the CPU time of 540 sky-view frames, and it saves
-43.9 ms per frame against the sky-view map, so it pays from about 1070 frames on. The scene plan does
+own: 15 CPU-s to build (README "The 4D table"), the CPU time of about 200 sky-view frames, and it
+saves 41.4 ms per frame against the sky-view map, so it pays from about 360 frames on. The scene plan does
 not know how many frames it serves (:class:`clsky.planner.Scene` has no frame count), so it calls
 :func:`choose_renderer` with ``frames=None``, which leaves out every row with a build of its own: the
 plan never picks 'lut4d' (``clsky animate --method lut4d`` / ``compare4d`` asks for it). A caller that
@@ -97,20 +97,20 @@ class RendererRow:
 
 #: The renderers, with their measured costs and errors. Costs: process CPU of one 1024 x 1024 fisheye
 #: frame from the ground (HDR frame on the host), bench/bench_skyview.py (README "Sky-view table"),
-#: 2026-12-02, default table, 2-core machine at load average 11 to 15 (CPU times: the wall times were
-#: up to 4 times longer). The sky-view map's errors: p95 against the per-pixel ray march, the worst of the
-#: ground and 10 km (tests/test_skyview.py: 0.080 / 0.139 % at +30 deg, 0.077 / 0.141 % at +5,
-#: 0.094 / 0.145 % at 0, 0.092 / 0.164 % at -4).
+#: 2026-12-02, default table, 2-core machine at load average 1.5-1.6 (an earlier run at load 11 to 15
+#: gave 72, 87 and 1959 ms; the 4D lookup 43 ms and 47 CPU-s to build). The sky-view map's errors: p95
+#: against the per-pixel ray march, the worst of the ground and 10 km (tests/test_skyview.py: 0.080 /
+#: 0.139 % at +30 deg, 0.077 / 0.141 % at +5, 0.094 / 0.145 % at 0, 0.092 / 0.164 % at -4).
 RENDERERS = (
-    RendererRow("lut", "table lookup", 71.6, LOOKUP_ERROR, False,
+    RendererRow("lut", "table lookup", 55.0, LOOKUP_ERROR, False,
                 "README 'Speed versus accuracy' (error) and 'Sky-view table' (cost)"),
-    RendererRow("skyview", "sky-view map 64 x 128", 86.9,
+    RendererRow("skyview", "sky-view map 64 x 128", 74.4,
                 ((-4.0, 0.00164), (0.0, 0.00145), (5.0, 0.00141), (30.0, 0.00139)), True,
                 "tests/test_skyview.py (error against the ray march); README 'Sky-view table' (cost)"),
-    RendererRow("lut4d", "4D table lookup", 43.0, LOOKUP4D_ERROR, True,
+    RendererRow("lut4d", "4D table lookup", 33.0, LOOKUP4D_ERROR, True,
                 "README 'The 4D table' (error against the ray march of its orders; cost, 1024^2 fisheye at load "
-                "~15; build of 16 x 128 x 128 x 16, 47 CPU-s)", build_cpu_s=47.0),
-    RendererRow("raymarch", "ray march", 1959.2, ((0.0, 0.0),), True,
+                "0.7-1.3; build of 16 x 128 x 128 x 16, 15 CPU-s)", build_cpu_s=15.0),
+    RendererRow("raymarch", "ray march", 1385.7, ((0.0, 0.0),), True,
                 "README 'Sky-view table' (cost); the plan's reference: its error is the quality level's "
                 "(RAY_MARCH_ERROR)"),
 )
