@@ -1,6 +1,9 @@
 """Benchmark: per-frame rendering speed and the default animation's wall time, in one run.
 
-- table-lookup render of a 1024 x 1024 fisheye (frames per second, HDR frame on the host);
+- table-lookup render of a 1024 x 1024 fisheye (frames per second, HDR frame on the host), and the two
+  renderers issue 11 added for dusk on the same frame: the per-frame sky-view map (its default 64 x 128
+  map ray-marched, then read per pixel; clsky/skyview.py) and the 4D table's lookup (a table of the
+  accuracy sweep's 4D size, 16 x 128 x 128 x 16, sun -14 to 60 deg, M = 2, whose build is timed too);
 - per-pixel ray march of a 512 x 512 fisheye at the default samples, and its process CPU time per frame
   beside the exp() bound measured on this machine (bench/_bound.py) and their ratio (issue 12's goal: 2x);
 - the default `clsky animate` (120 frames, 512 x 512, both renderers, comparison, files), wall time.
@@ -27,10 +30,21 @@ from _bound import EXPS_PER_NODE, exp_rate, march_exps
 from _report import SMOKE, add_output_arguments, best_of, load_average, machine, parse_arguments, \
     write_readme_section
 
+import math
+
 import clsky
+from clsky.anim.accuracy import LOOKUP4D_AZIMUTHS, LOOKUP4D_SIZE, LOOKUP4D_SUN_DEG
 from clsky.anim.cameras import FisheyeCamera, sun_direction
 from clsky._cl import describe_device
 from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
+
+
+def table4d_settings(smoke):
+    """The 4D table of the accuracy sweep's 4D candidate (clsky.anim.accuracy), physical mode, M = 2."""
+    size = SMOKE.table if smoke else LOOKUP4D_SIZE
+    return clsky.TableSettings(size=size, mode="physical", parameterization="4d",
+                               azimuth_size=5 if smoke else LOOKUP4D_AZIMUTHS, azimuth_harmonics=2,
+                               sun_cos_range=tuple(math.sin(math.radians(e)) for e in LOOKUP4D_SUN_DEG))
 
 
 def main():
@@ -49,9 +63,18 @@ def main():
 
     table = clsky.ScatteringTable.build("physical", settings)
     renderer = SkyRenderer(table)
+    settings4d = table4d_settings(args.smoke)
+    cpu4d = time.process_time()
+    wall4d = time.perf_counter()
+    renderer4d = SkyRenderer(clsky.ScatteringTable.build("physical", settings4d))
+    wall4d, cpu4d = time.perf_counter() - wall4d, time.process_time() - cpu4d
     sun = sun_direction(50.0, 160.0)
     rows = []
-    for size, method, label in ((sizes[0], renderer.render_table, f"table lookup, fisheye {sizes[0]} x {sizes[0]}"),
+    side = f"fisheye {sizes[0]} x {sizes[0]}"
+    four = " x ".join(map(str, settings4d.size + (settings4d.azimuth_size,)))
+    for size, method, label in ((sizes[0], renderer.render_table, f"table lookup, {side}"),
+                                (sizes[0], renderer.render_skyview, f"sky-view map 64 x 128 (map and read), {side}"),
+                                (sizes[0], renderer4d.render_lut4d, f"4D table lookup ({four}), {side}"),
                                 (sizes[1], renderer.render_raymarch,
                                  f"ray march ({RAYMARCH_DEFAULTS.view_steps} samples), fisheye {sizes[1]} x {sizes[1]}")):
         directions, valid = FisheyeCamera(size).directions()
@@ -86,6 +109,9 @@ def main():
              f"warm-up (HDR float64 frame copied to the host), and their mean process CPU time (PoCL's workers "
              f"included).", "",
              "| render | best | median | CPU per frame | frames/s (best) |", "|---|---:|---:|---:|---:|", *rows, "",
+             f"The 4D table ({four}, float64, sun {LOOKUP4D_SUN_DEG[0]:g} to {LOOKUP4D_SUN_DEG[1]:g} deg, M = 2) "
+             f"took {wall4d:.1f} s wall and {cpu4d:.1f} s of process CPU to build; the sky-view map and the "
+             f"lookups read the default 3D table {' x '.join(map(str, settings.size))}.", "",
              bound_line, "",
              ("Smoke run: `" + " ".join(["clsky", *animate[3:]]) + "`" if args.smoke else
               "Default `clsky animate` (120 frames, 512 x 512 fisheye, table build, both renderers, comparison, "
