@@ -161,13 +161,17 @@ def _checked_values(name, frames, valid):
 
     Invalid pixels may hold anything (NaN outside a fisheye circle, say): they never count.
     """
-    values = frames[..., valid, :]
-    if not np.isfinite(values).all():
+    checked = np.where(valid[..., None], frames, 0.0)
+    # the zeroed invalid pixels change neither test: NaN propagates through min and max, +-inf shows in
+    # one of them, and a negative value in the minimum (two passes, instead of four with copies)
+    low, high = checked.min(initial=0.0), checked.max(initial=0.0)
+    if not (np.isfinite(low) and np.isfinite(high)):
+        values = frames[..., valid, :]
         raise ValueError(f"{name} contains {int((~np.isfinite(values)).sum())} NaN or infinite values "
                          f"on valid pixels")
-    if (values < 0).any():
-        raise ValueError(f"{name} contains negative values on valid pixels (minimum {values.min():.6g})")
-    return np.where(valid[..., None], frames, 0.0)
+    if low < 0:
+        raise ValueError(f"{name} contains negative values on valid pixels (minimum {low:.6g})")
+    return checked
 
 
 def _check_pair(reference, test, valid):

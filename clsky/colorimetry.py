@@ -325,7 +325,14 @@ def _interpolate(table, x, step, half):
     position = np.clip(x / step + half, 0.0, 2.0 * half)
     index = np.minimum(position.astype(np.intp), 2 * half - 1)
     t = (position - index)[:, None]
-    return table[index] * (1.0 - t) + table[index + 1] * t
+    # the same products and sum as table[index] * (1 - t) + table[index + 1] * t, with np.take (a third of
+    # fancy indexing's time on rows) and in place: the conversion of every frame's pixels runs it 4 times
+    low = np.take(table, index, axis=0)
+    low *= 1.0 - t
+    high = np.take(table, index + 1, axis=0)
+    high *= t
+    low += high
+    return low
 
 
 def _solar_power_law_tabulated_xyz(radiance, wavelengths):

@@ -191,6 +191,25 @@ def test_compare_frames_rejects_bad_input():
         compare_frames(frame, frame, valid=np.zeros(frame.shape[:2], dtype=bool))
 
 
+@pytest.mark.parametrize("value, message", [(np.nan, "test contains 1 NaN or infinite values on valid pixels"),
+                                            (np.inf, "test contains 1 NaN or infinite values on valid pixels"),
+                                            (-np.inf, "test contains 1 NaN or infinite values on valid pixels"),
+                                            (-0.25, r"test contains negative values on valid pixels \(minimum -0.25\)")])
+def test_bad_values_count_on_valid_pixels_only(value, message):
+    """One bad value on a valid pixel is refused with its count or the minimum; the same value on an
+    invalid pixel (outside the image circle) is zeroed and never counts."""
+    frame = _sky()
+    valid = np.ones(frame.shape[:2], dtype=bool)
+    valid[0, 0] = False
+    bad = frame.copy()
+    bad[3, 3, 1] = value
+    with pytest.raises(ValueError, match=f"^{message}$"):
+        compare_frames(frame, bad, valid=valid)
+    outside = frame.copy()
+    outside[0, 0, 1] = value
+    assert compare_frames(frame, outside, valid=valid)["p95_rel"] == compare_frames(frame, frame, valid=valid)["p95_rel"]
+
+
 # Colour science -------------------------------------------------------------------------------------
 
 def test_srgb_matrix_rounds_to_the_printed_iec_matrix():
