@@ -362,9 +362,10 @@ class MultipleScatteringEngine(_cl.Engine):
             ground_d = cla.zeros(self.queue, 4, self.dtype, allocator=self.allocator)   # not read without -DGROUND
         if out is None:
             out = cla.empty(self.queue, (depth, height, width, 8), self.dtype, allocator=self.allocator)
-        elif out.shape[-4:] != (depth, height, width, 8) or not 0 <= node < out.size // (depth * height * width * 8):
-            raise ValueError(f"out must be a padded table (N, {depth}, {height}, {width}, 8) with node < N, got "
-                             f"{out.shape} and node {node}")
+        elif (out.shape[-4:] != (depth, height, width, 8) or out.dtype != self.dtype
+              or not 0 <= node < out.size // (depth * height * width * 8)):
+            raise ValueError(f"out must be a padded {self.dtype} table (N, {depth}, {height}, {width}, 8) with "
+                             f"node < N, got {out.dtype} {out.shape} and node {node}")
         atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
         event = self.kernels_with(_atmosphere_cl.feature_defines(atmosphere))["scatter"](
             self.queue, _scatter_global_size(width, height, depth), SCATTER_WORK_GROUP, atmosphere_d, np.int32(width),

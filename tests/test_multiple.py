@@ -236,9 +236,10 @@ def test_scatter_into_a_node_slab(multiple_engine, twin_inputs):
     slabs = out.get()
     assert np.array_equal(slabs[1], alone)
     assert np.all(slabs[[0, 2]] == -1.0)
-    for node, shape in ((3, out.shape), (-1, out.shape), (0, (3,) + alone.shape[:-1] + (6,))):
-        with pytest.raises(ValueError, match="out must be a padded table"):
-            engine.scatter(atmosphere, gathered, out=cla.empty(engine.queue, shape, alone.dtype), node=node)
+    for node, shape, dtype in ((3, out.shape, alone.dtype), (-1, out.shape, alone.dtype),
+                               (0, (3,) + alone.shape[:-1] + (6,), alone.dtype), (0, out.shape, np.float32)):
+        with pytest.raises(ValueError, match="out must be a padded float64 table"):
+            engine.scatter(atmosphere, gathered, out=cla.empty(engine.queue, shape, dtype), node=node)
 
 
 @pytest.mark.parametrize("count", [1, 3, 5])
