@@ -33,8 +33,8 @@ try:
 except ImportError as error:  # pragma: no cover - exercised only on broken installs
     raise ImportError("clsky needs pyopencl: pip install pyopencl (and an OpenCL driver, see README)") from error
 
-__all__ = ["KernelBuildError", "NoDeviceError", "Source", "Engine", "memory_pool", "list_devices", "default_device",
-           "make_context", "real_vector_dtype", "check_dtype", "INSTALL_HINT", "pocl_cache_problem",
+__all__ = ["KernelBuildError", "NoDeviceError", "Source", "Engine", "memory_pool", "list_devices",
+           "default_device", "make_context", "real_vector_dtype", "check_dtype", "INSTALL_HINT", "pocl_cache_problem",
            "no_device_hint", "host_blas_single_threaded"]
 
 INSTALL_HINT = ("install a CPU OpenCL driver: as root `apt-get install pocl-opencl-icd` (fast PoCL 3.1), "

@@ -171,7 +171,8 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         # the orders' tables reuse the buffers of the orders before (clsky._cl.memory_pool); a buffer goes
         # back to the pool when dropped, and the download of the copy queue that reads it has been waited
         # for by then (on_host) or is followed by no new array before that wait
-        engine = MultipleScatteringEngine(settings, fast_math=fast_math, queue=queue, allocator=_cl.memory_pool(queue))
+        engine = MultipleScatteringEngine(settings, fast_math=fast_math, queue=queue,
+                                          allocator=_cl.memory_pool(queue))
         single = single_engine.compute(atmosphere, progress=None if progress is None else
                                        (lambda done, total: progress("single", done, total)))
         device = _cl.describe_device(single_engine.device)

@@ -328,8 +328,8 @@ def _harmonic_phases(settings, orders):
     first gather on the host (single scattering at the n nodes and its harmonics, each seen species'
     (n, D, Theta + 1, W 3) interpolation and their harmonic sum, the n gathered harmonics, the padded
     upload), then the orders loop (every order's azimuth average kept on the host, the order's n nodes
-    and the running sum at the nodes; on the device the gathered sum, the gathered harmonics and the order's n nodes, padded, a
-    harmonic and its gather; each node's padded download)."""
+    and the running sum at the nodes; on the device the gathered sum, the gathered harmonics and the
+    order's n nodes, padded, a harmonic and its gather; the nodes' padded download)."""
     cells, height, depth, s = _table_sizes(settings)
     n = settings.azimuth_harmonics + 1
     padded = cells * 8 * s
