@@ -103,9 +103,7 @@ def default_candidates(base: clsky.TableSettings | None = None):
         # ... at the size issue 11 asks for (float32 export <= 256 MB: 151 MB), bench_lookup4d's: 128 sun
         # nodes over -14 to 60 deg (the frames' path with the planner's margins), 16 azimuth nodes
         (f"4D table {' x '.join(map(str, LOOKUP4D_SIZE))} x {LOOKUP4D_AZIMUTHS}", "parameterization",
-         base.replace(parameterization="4d", size=LOOKUP4D_SIZE, azimuth_size=LOOKUP4D_AZIMUTHS,
-                      sun_cos_range=tuple(math.sin(math.radians(e)) for e in LOOKUP4D_SUN_DEG),
-                      azimuth_harmonics=base.azimuth_harmonics or 2)),
+         lookup4d_settings(base)),
     ]
     candidates = [Candidate(label, knob, settings) for label, knob, settings in table]
     candidates.append(Candidate("fast math", "fast-math", base, fast_math=True))
@@ -118,6 +116,14 @@ def default_candidates(base: clsky.TableSettings | None = None):
 
 #: The sweep's second 4D candidate: (W, H, D) nodes, azimuth nodes and its sun axis [deg] (bench/bench_lookup4d.py's).
 LOOKUP4D_SIZE, LOOKUP4D_AZIMUTHS, LOOKUP4D_SUN_DEG = (16, 128, 128), 16, (-14.0, 60.0)
+
+
+def lookup4d_settings(base: clsky.TableSettings) -> clsky.TableSettings:
+    """``base`` as the 4D table of issue 11's size (:data:`LOOKUP4D_SIZE`, :data:`LOOKUP4D_AZIMUTHS` azimuth
+    nodes, the sun axis over :data:`LOOKUP4D_SUN_DEG`), its orders with ``base``'s harmonics or 2."""
+    return base.replace(parameterization="4d", size=LOOKUP4D_SIZE, azimuth_size=LOOKUP4D_AZIMUTHS,
+                        sun_cos_range=tuple(math.sin(math.radians(e)) for e in LOOKUP4D_SUN_DEG),
+                        azimuth_harmonics=base.azimuth_harmonics or 2)
 
 #: Map sizes (W, H) of the sweep's sky-view candidates (:mod:`clsky.skyview`).
 SKYVIEW_SIZES = ((16, 32), (32, 64), (64, 128))

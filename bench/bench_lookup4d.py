@@ -32,6 +32,7 @@ from _report import SMOKE, add_output_arguments, best_of, load_average, machine,
 
 import clsky
 from clsky.anim import metrics
+from clsky.anim.accuracy import LOOKUP4D_AZIMUTHS, LOOKUP4D_SIZE, LOOKUP4D_SUN_DEG
 from clsky.anim.cameras import FisheyeCamera, sun_direction
 from clsky.quality import quality_level
 from clsky.render import SkyRenderer
@@ -39,8 +40,9 @@ from clsky.table4d import compute_data
 
 #: Sun elevations [deg] measured and the issue's targets for the p95 error.
 ELEVATIONS = {"day": (30.0, 0.01), "golden hour": (5.0, 0.01), "sunset": (0.0, 0.01), "civil twilight": (-4.0, 0.03)}
-#: Sun elevations [deg] the table's sun axis covers (the planner's margins: 10 deg below, 30 above).
-SUN_RANGE_DEG = (-14.0, 60.0)
+#: Sun elevations [deg] the table's sun axis covers (the planner's margins: 10 deg below, 30 above): the
+#: accuracy sweep's 4D candidate's, as its size and azimuth nodes are the defaults here.
+SUN_RANGE_DEG = LOOKUP4D_SUN_DEG
 SUN_AZIMUTH = 200.0
 
 
@@ -54,9 +56,9 @@ def three_d(table):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--size", type=int, nargs=3, default=(16, 128, 128), metavar=("W", "H", "D"),
+    parser.add_argument("--size", type=int, nargs=3, default=LOOKUP4D_SIZE, metavar=("W", "H", "D"),
                         help="nodes along altitude, view (even), sun (default: 16 128 128)")
-    parser.add_argument("--azimuth-size", type=int, default=16, help="azimuth nodes (default 16)")
+    parser.add_argument("--azimuth-size", type=int, default=LOOKUP4D_AZIMUTHS, help="azimuth nodes (default 16)")
     parser.add_argument("--azimuth-sweep", type=int, nargs="*", default=(4, 8, 32),
                         help="other azimuth node counts to measure (default: 4 8 32)")
     parser.add_argument("--sun-sweep", type=int, nargs="*", default=(32, 64),

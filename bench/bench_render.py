@@ -28,23 +28,13 @@ import numpy as np
 
 from _bound import EXPS_PER_NODE, exp_rate, march_exps
 from _report import SMOKE, add_output_arguments, best_of, load_average, machine, parse_arguments, \
-    write_readme_section
-
-import math
+    timed_with_cpu, write_readme_section
 
 import clsky
-from clsky.anim.accuracy import LOOKUP4D_AZIMUTHS, LOOKUP4D_SIZE, LOOKUP4D_SUN_DEG
+from clsky.anim.accuracy import LOOKUP4D_SUN_DEG, lookup4d_settings
 from clsky.anim.cameras import FisheyeCamera, sun_direction
 from clsky._cl import describe_device
 from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
-
-
-def table4d_settings(smoke):
-    """The 4D table of the accuracy sweep's 4D candidate (clsky.anim.accuracy), physical mode, M = 2."""
-    size = SMOKE.table if smoke else LOOKUP4D_SIZE
-    return clsky.TableSettings(size=size, mode="physical", parameterization="4d",
-                               azimuth_size=5 if smoke else LOOKUP4D_AZIMUTHS, azimuth_harmonics=2,
-                               sun_cos_range=tuple(math.sin(math.radians(e)) for e in LOOKUP4D_SUN_DEG))
 
 
 def main():
@@ -63,11 +53,11 @@ def main():
 
     table = clsky.ScatteringTable.build("physical", settings)
     renderer = SkyRenderer(table)
-    settings4d = table4d_settings(args.smoke)
-    cpu4d = time.process_time()
-    wall4d = time.perf_counter()
-    renderer4d = SkyRenderer(clsky.ScatteringTable.build("physical", settings4d))
-    wall4d, cpu4d = time.perf_counter() - wall4d, time.process_time() - cpu4d
+    settings4d = lookup4d_settings(clsky.TableSettings(mode="physical"))     # the accuracy sweep's 4D candidate
+    if args.smoke:
+        settings4d = settings4d.replace(size=SMOKE.table, azimuth_size=5)
+    table4d, wall4d, cpu4d = timed_with_cpu(lambda: clsky.ScatteringTable.build("physical", settings4d))
+    renderer4d = SkyRenderer(table4d)
     sun = sun_direction(50.0, 160.0)
     rows = []
     side = f"fisheye {sizes[0]} x {sizes[0]}"
