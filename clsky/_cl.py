@@ -5,13 +5,16 @@ an ordered list of those files plus, where needed, generated declarations (:clas
 uses ``#include``. Programs are cached in-process by (context, sources, sorted options); PyOpenCL
 caches the compiled binaries on disk.
 
-Device choice (:func:`default_device`): ``PYOPENCL_CTX`` if set; else a GPU; else the fastest PoCL
-build (PoCL 3.1+ vectorises about 4-5x better than the 3.0-rc2 pip build, see ``shared/pocl.md``);
-else any CPU device.
+Device choice (:func:`default_device`): ``PYOPENCL_CTX`` if set; else a GPU; else Intel's CPU OpenCL
+runtime when it is registered (an opt-in, ``scripts/intel_opencl.sh``: the same frames as PoCL, the ray
+march 1.4-1.5x faster on the development machine, README "Speed"); else the fastest PoCL build (PoCL
+3.1+ vectorises about 4-5x better than the 3.0-rc2 pip build, see ``shared/pocl.md``); else any CPU
+device.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import importlib.resources
@@ -35,7 +38,7 @@ except ImportError as error:  # pragma: no cover - exercised only on broken inst
 
 __all__ = ["KernelBuildError", "NoDeviceError", "Source", "Engine", "memory_pool", "list_devices",
            "default_device", "make_context", "real_vector_dtype", "check_dtype", "INSTALL_HINT", "pocl_cache_problem",
-           "no_device_hint", "host_blas_single_threaded"]
+           "no_device_hint", "host_blas_single_threaded", "quiet_compiler_output"]
 
 INSTALL_HINT = ("install a CPU OpenCL driver: as root `apt-get install pocl-opencl-icd` (fast PoCL 3.1), "
                 "or `pip install 'pyopencl[pocl]'` (PoCL pip build)")
@@ -143,10 +146,16 @@ def _release_rank(platform) -> int:
     return 0 if re.search(r"-rc\d", platform.version) else 1
 
 
+def _is_intel_cpu_runtime(device) -> bool:
+    """Intel's CPU OpenCL runtime (platform 'Intel(R) OpenCL', a CPU device), not an Intel GPU's."""
+    return device.platform.name.startswith("Intel(R) OpenCL") and bool(device.type & cl.device_type.CPU)
+
+
 def _device_rank(device) -> tuple:
     is_gpu = bool(device.type & cl.device_type.GPU)
     platform = device.platform
-    return (is_gpu, _pocl_version(platform), _release_rank(platform), device.max_compute_units)
+    return (is_gpu, _is_intel_cpu_runtime(device), _pocl_version(platform), _release_rank(platform),
+            device.max_compute_units)
 
 
 def _all_devices():
@@ -163,9 +172,12 @@ def has_fp64(device) -> bool:
 
 
 def describe_device(device) -> str:
-    """Short name of a device with its platform version, e.g. 'pthread-skylake-avx512 (PoCL 3.1+debian)'."""
+    """Short name of a device with its platform, e.g. 'pthread-skylake-avx512 (PoCL 3.1+debian)' or
+    'AMD EPYC (Intel(R) OpenCL, OpenCL 3.1 LINUX)'."""
     match = re.search(r"PoCL [^ ]+", device.platform.version)
-    return f"{device.name} ({match.group(0) if match else device.platform.version.strip()})"
+    if match:
+        return f"{device.name} ({match.group(0)})"
+    return f"{device.name} ({device.platform.name.strip()}, {device.platform.version.strip()})"
 
 
 def default_device():
@@ -250,6 +262,19 @@ _program_cache: dict = {}
 _program_cache_lock = threading.Lock()
 
 
+@contextlib.contextmanager
+def quiet_compiler_output():
+    """Within: PyOpenCL's warnings about a *successful* build's log are not shown, unless
+    ``PYOPENCL_COMPILER_OUTPUT`` is set (then PyOpenCL prints the whole log). Such logs are chatter, not
+    problems: PoCL on CPUs without AVX-512 says that double8 arguments change the ABI, Intel's CPU runtime
+    logs every build ("Compilation started", ...), also of PyOpenCL's own array kernels. A failed build
+    still raises. Used around clsky's builds and by the command line around the whole command."""
+    with warnings.catch_warnings():
+        if not os.environ.get("PYOPENCL_COMPILER_OUTPUT"):
+            warnings.simplefilter("ignore", cl.CompilerWarning)
+        yield
+
+
 def build_program(context, sources, options=()):
     """Build (or fetch from the in-process cache) the program made of ``sources`` in order.
 
@@ -266,11 +291,7 @@ def build_program(context, sources, options=()):
         parts.append(f"/* ---- {label} ---- */\n#line 1\n{text}\n")
     names = [s.label if isinstance(s, Source) else s for s in sources]
     try:
-        with warnings.catch_warnings():
-            if not os.environ.get("PYOPENCL_COMPILER_OUTPUT"):
-                # a successful build's log (PoCL on CPUs without AVX-512 warns that double8 arguments
-                # change the ABI) would reach users as a stray warning; PYOPENCL_COMPILER_OUTPUT=1 shows it
-                warnings.simplefilter("ignore", cl.CompilerWarning)
+        with quiet_compiler_output():
             program = cl.Program(context, "".join(parts)).build(options=list(options))
     except cl.Error as error:
         device = context.devices[0]

@@ -485,6 +485,13 @@ def main(argv=None, extensions=()):
 
 
 def _main(argv, extensions):
+    from ._cl import quiet_compiler_output
+
+    with quiet_compiler_output():
+        return _run(argv, extensions)
+
+
+def _run(argv, extensions):
     from ._cl import KernelBuildError, NoDeviceError
     from .errors import NumericalError
     from .farm import FarmError
