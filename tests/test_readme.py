@@ -187,7 +187,10 @@ def test_the_readme_shows_command_lines():
     assert any(line.startswith("python bench/") for line in COMMANDS)
 
 
-CLSKY_COMMANDS = [line for line in COMMANDS if not line.startswith("python bench/")]
+#: The lines that install and use Intel's CPU OpenCL runtime (an opt-in): run by tests/test_intel_opencl.py
+#: (slow: the install downloads about 250 MB), which finds them in the README itself.
+RUNTIME_COMMANDS = [line for line in COMMANDS if line.startswith(("./scripts/intel_opencl.sh", "OCL_ICD_VENDORS="))]
+CLSKY_COMMANDS = [line for line in COMMANDS if not line.startswith("python bench/") and line not in RUNTIME_COMMANDS]
 BENCH_COMMANDS = [line for line in COMMANDS if line.startswith("python bench/")]
 
 
@@ -226,6 +229,16 @@ def test_readme_bench_lines_are_run_by_the_smoke_tests(line):
     argv = shlex.split(line)
     assert len(argv) == 2 and (ROOT / argv[1]).is_file(), line
     assert pathlib.Path(argv[1]).stem in HEADERS
+
+
+def test_readme_runtime_lines_are_run_by_their_tests():
+    """The install line of Intel's runtime and the line that uses it are the ones tests/test_intel_opencl.py
+    runs (it reads them from the README: a new line of this kind must be one it knows)."""
+    from test_intel_opencl import INSTALL, USE
+
+    assert RUNTIME_COMMANDS, "the README no longer shows how to install Intel's CPU OpenCL runtime"
+    for line in RUNTIME_COMMANDS:
+        assert line == INSTALL or line.startswith(USE), line
 
 
 def test_the_first_lines_are_the_two_commands():
