@@ -46,6 +46,7 @@ HEADERS = {
     "bench_dask": ["| run | repetition | farm start [s] | wall [s] | table [s] | first frame [s] |",
                    "| repetition | 1 worker against here: first frame [s] | wall per frame [ms] | CPU per frame [ms] |"],
     "bench_lookup4d": ["| frame | sun [deg] | 4D lookup p95 | target | 4D mean Delta E | 3D lookup p95 |"],
+    "bench_runtimes": ["| round | runtime | 3D lookup: wall |"],
     "bench_twilight": ["| | +5 deg | -6 deg |",
                        "| sun [deg] | view | paths | SE [%] | all orders [%] | all orders [SE] | single: paths |"],
 }
@@ -54,7 +55,7 @@ LINES = {
     "bench_render": [r"Ray march against the exp\(\) bound: .* \*\*(\S+)x the bound\*\*"],
 }
 #: Measured wall time of each case (pytest, 2 shared cores): single 3-5 s, orders 5-7 s, montecarlo 10-12 s,
-#: render 9-10 s; skyview 18 s (load 9); spectral 5-7 s; twilight 11 s; dusk 10 s (four skies, two of 15 wavelengths); accuracy 41 s
+#: render 9-10 s; skyview 18 s (load 9); runtimes 7 s (PoCL and Intel's runtime, 2026-12-02); spectral 5-7 s; twilight 11 s; dusk 10 s (four skies, two of 15 wavelengths); accuracy 41 s
 #: (the four 'draft' reference tables: 21 s), quality 109 s (the reference and one doubled group); dask 66 s (two
 #: LocalClusters started, at load average 10); animate 15 s (quiet machine, 2026-12-02: two end-to-end runs
 #: and the stage split). Slow (run by .ci/run): accuracy, quality, dusk, dask and animate, so that the default
