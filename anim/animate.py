@@ -741,12 +741,12 @@ def comparison(hdr, images, shown, valid):
     (:func:`clsky.anim.metrics.composite`), and the metrics of :func:`clsky.anim.metrics.compare_frames`
     with ``'lookup'``, the lookup's name."""
     lookup = next(name for name in hdr if name != "raymarch")
-    error = metrics.error_image(metrics.relative_error_map(hdr["raymarch"], hdr[lookup], valid), valid)
-    image = metrics.composite([images[lookup], images["raymarch"], error],
+    # the error map of the third panel is the one the statistics are taken of: checked and computed once
+    numbers, error_map = metrics.compare_frames(hdr["raymarch"], hdr[lookup], valid, display=shown,
+                                                return_error_map=True)
+    image = metrics.composite([images[lookup], images["raymarch"], metrics.error_image(error_map, valid)],
                               [LOOKUP_NAMES[lookup], "ray march", "relative error"])
-    numbers = {"lookup": LOOKUP_NAMES[lookup], **metrics.compare_frames(hdr["raymarch"], hdr[lookup], valid,
-                                                                          display=shown)}
-    return image, numbers
+    return image, {"lookup": LOOKUP_NAMES[lookup], **numbers}
 
 
 def _frame_writer(config: AnimationConfig, total_frames: int, staging=None) -> writers.FrameWriter:

@@ -254,7 +254,7 @@ def relative_error_map(reference, test, valid=None):
     return _relative_error(reference, test, valid)[0]
 
 
-def compare_frames(reference, test, valid=None, exposure=1.0, display=None):
+def compare_frames(reference, test, valid=None, exposure=1.0, display=None, return_error_map=False):
     """Compare a table-lookup frame with the ray-marched reference.
 
     Parameters
@@ -273,10 +273,14 @@ def compare_frames(reference, test, valid=None, exposure=1.0, display=None):
         both frames; or that pipeline's values already computed for the whole frames, (reference,
         test), each (H, W, 3) (:func:`clsky.anim.animate.display_frames`): the same numbers without a second
         evaluation. Default: the notes' tone map at ``exposure``, decoded with its gamma 2.2.
+    return_error_map : bool
+        Also return the per-pixel relative error map that the statistics are taken of (what
+        :func:`relative_error_map` returns for the same frames), computed once for both.
 
     Returns
     -------
-    dict of str -> float (JSON-serialisable; ``pixels`` is an int)
+    dict of str -> float (JSON-serialisable; ``pixels`` is an int), or (that dict, error map (H, W)) with
+    ``return_error_map``
         ``rmse``: sqrt(mean over valid pixels and channels of (test - ref)^2) [HDR units];
         ``rmse_relative``: rmse / mean(Y_ref) [-];
         ``median_rel``, ``p95_rel``, ``max_rel``: statistics of the relative luminance error e of
@@ -331,7 +335,7 @@ def compare_frames(reference, test, valid=None, exposure=1.0, display=None):
             shown = [frame[valid] for frame in shown]
         delta_e = delta_e_cie76(xyz_to_lab(linear_srgb_to_xyz(np.clip(shown[0], 0.0, 1.0))),
                                 xyz_to_lab(linear_srgb_to_xyz(np.clip(shown[1], 0.0, 1.0))))
-    return {
+    numbers = {
         "rmse": rmse,
         "rmse_relative": rmse / max(mean_luminance, floor),
         "median_rel": float(np.median(errors)),
@@ -341,6 +345,7 @@ def compare_frames(reference, test, valid=None, exposure=1.0, display=None):
         "floor": float(floor),
         "pixels": int(valid.sum()),
     }
+    return (numbers, error) if return_error_map else numbers
 
 
 # Sequences ------------------------------------------------------------------------------------------

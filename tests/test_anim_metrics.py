@@ -175,6 +175,19 @@ def test_floor_for_black_pixels_and_black_frames():
     json.dumps(night, allow_nan=False)
 
 
+def test_compare_frames_returns_the_error_map_it_took_its_statistics_of():
+    """return_error_map: the map is relative_error_map's, bit for bit (the animation's third panel draws it,
+    computed once with the statistics), zero on invalid pixels, and the numbers are the same as without it."""
+    reference = _sky()
+    test = reference * np.linspace(0.9, 1.2, reference.shape[1])[None, :, None]
+    valid = np.ones(reference.shape[:2], dtype=bool)
+    valid[:, :3] = False
+    numbers, error = compare_frames(reference, test, valid, return_error_map=True)
+    assert_array_equal(error, relative_error_map(reference, test, valid))
+    assert numbers == compare_frames(reference, test, valid)
+    assert error[:, :3].max() == 0.0 and numbers["max_rel"] == error.max() > 0.1
+
+
 def test_compare_frames_rejects_bad_input():
     frame = _sky()
     with pytest.raises(ValueError, match="differ in shape"):
