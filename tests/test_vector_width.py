@@ -1,0 +1,111 @@
+"""The kernels in scalar form (-DVECTOR_WIDTH=1: one cell or pixel per work-item) against the double8 form
+clsky runs (issue 12, item 5: nothing may rely on double8 being the fast path).
+
+clsky builds every kernel with VECTOR_WIDTH 8 (eight cells or pixels per work-item in double8 arithmetic:
+PoCL does not vectorise across work-items, its scalar ray march takes 6.4x the CPU time, and on Intel's CPU
+runtime, which does, the scalar ray march took 1.2x; README "Speed", GPUs). A GPU would more likely want the scalar form, which
+runs one lane per work-item: untested on a GPU, but here it must build and give the same numbers. Each
+module's VECTOR_WIDTH is set to 1 (the kernels read it through their build options and global sizes) and
+the whole chain is compared with the double8 one: a table with every order, the azimuth harmonics, ozone and
+a ground (single scattering, scatter, gather), the 4D table's cells, and every renderer on a fisheye.
+
+Tolerance: the two forms run the same operations per lane; only the vector and scalar builds of exp, sqrt
+and the divisions may round differently (PoCL's vector math library against its scalar one), by an ulp or so
+per call. Through the table's orders (about 10, each summing some 50 trapezoid terms of products of such
+values), 1e-12 of each quantity's maximum leaves room for thousands of such roundings and is still 9 orders
+of magnitude below any physical effect (measured: 2.4e-20 of the maximum for the ray march, 512 x 512).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import clsky
+from clsky import _cl, multiple, render, single, table4d
+from clsky.anim.cameras import FisheyeCamera, sun_direction
+from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
+
+#: the modules whose kernels take VECTOR_WIDTH (the transmittance table's takes it from its caller)
+MODULES = (single, multiple, render, table4d)
+RTOL_OF_MAX = 1e-12
+SETTINGS = clsky.TableSettings(size=(9, 33, 7), gather_theta_steps=32, gather_phi_steps=16, mode="physical",
+                               azimuth_harmonics=2)
+RAY = RAYMARCH_DEFAULTS.replace(view_steps=16, sun_steps=20, transmittance_size=(16, 32))
+
+
+def assert_close_to_max(scalar, vector, what):
+    scalar, vector = np.asarray(scalar), np.asarray(vector)
+    assert scalar.shape == vector.shape and np.isfinite(scalar).all(), what
+    scale = np.abs(vector).max()
+    assert scale > 0, what
+    error = np.abs(scalar - vector).max() / scale
+    assert error <= RTOL_OF_MAX, f"{what}: scalar and double8 differ by {error:.2e} of the maximum"
+
+
+def build_and_render(atmosphere, settings, sun_zenith):
+    """The table (data and every order) and the frames of every renderer at one sun."""
+    table = clsky.ScatteringTable.build(atmosphere, settings)
+    renderer = SkyRenderer(table, ray_settings=RAY)
+    prepared = renderer.prepare(*FisheyeCamera(24).directions())
+    sun = sun_direction(sun_zenith, 150.0)
+    frames = {"lookup": renderer.render_table(prepared, sun, 0.0),
+              "raymarch": renderer.render_raymarch(prepared, sun, 0.0),
+              "skyview": renderer.render_skyview(prepared, sun, 0.0)}
+    return table, frames
+
+
+def scalar_programs():
+    """The kernel files of the programs built so far with -DVECTOR_WIDTH=1 (clsky._cl's program cache)."""
+    return {name for (_, sources, options) in _cl._program_cache if "-DVECTOR_WIDTH=1" in options
+            for name in sources if isinstance(name, str)}
+
+
+@pytest.fixture
+def scalar_kernels(monkeypatch):
+    """``use()``: from then on in the test, every kernel is built and launched with VECTOR_WIDTH 1;
+    ``built(files)`` checks that the scalar programs of those kernel files were built (so that a
+    comparison cannot pass by comparing double8 with double8)."""
+    class Scalar:
+        @staticmethod
+        def use():
+            for module in MODULES:
+                monkeypatch.setattr(module, "VECTOR_WIDTH", 1)
+
+        @staticmethod
+        def built(files):
+            missing = set(files) - scalar_programs()
+            assert not missing, f"no scalar build of {sorted(missing)}"
+    return Scalar
+
+
+@pytest.mark.parametrize("sun_zenith", [40.0, 96.0])
+def test_scalar_kernels_give_the_double8_tables_and_frames(cl_context, scalar_kernels, sun_zenith):
+    atmosphere = clsky.preset("physical").replace(ground_albedo=0.3)
+    vector_table, vector_frames = build_and_render(atmosphere, SETTINGS, sun_zenith)
+    scalar_kernels.use()
+    scalar_table, scalar_frames = build_and_render(atmosphere, SETTINGS, sun_zenith)
+    scalar_kernels.built(["single.cl", "multiple.cl", "render.cl"])
+    assert scalar_table.orders_record["orders"] == vector_table.orders_record["orders"]
+    assert_close_to_max(scalar_table.data, vector_table.data, "table")
+    for index, (scalar_order, vector_order) in enumerate(zip(scalar_table.orders, vector_table.orders)):
+        assert_close_to_max(scalar_order, vector_order, f"order {index + 1}")
+    for name in vector_frames:
+        assert_close_to_max(scalar_frames[name], vector_frames[name], f"{name} frame")
+
+
+def test_scalar_kernels_give_the_double8_4d_table(cl_context, scalar_kernels):
+    settings = SETTINGS.replace(size=(5, 16, 5), parameterization="4d", azimuth_size=5)
+    atmosphere = clsky.preset("physical")
+    vector = clsky.ScatteringTable.build(atmosphere, settings)
+    scalar_kernels.use()
+    scalar = clsky.ScatteringTable.build(atmosphere, settings)
+    assert_close_to_max(scalar.data, vector.data, "4D table")
+    directions, valid = FisheyeCamera(24).directions()
+    sun = sun_direction(85.0, 150.0)
+    frames = []
+    for table in (vector, scalar):
+        renderer = SkyRenderer(table)
+        frames.append(renderer.render_lut4d(renderer.prepare(directions, valid), sun, 0.0))
+    assert_close_to_max(frames[1], frames[0], "4D lookup frame")
+    scalar_kernels.built(["table4d.cl", "render.cl"])
