@@ -343,6 +343,17 @@ def memory_pool(queue):
     return cl_tools.MemoryPool(cl_tools.ImmediateAllocator(queue))
 
 
+#: Cells or pixels per work-item of the kernels that integrate along rays (``-DVECTOR_WIDTH``, kernels/real.cl):
+#: 8, in double8 (or float8) arithmetic, which every device runs; PoCL does not vectorise across
+#: work-items by itself, and its scalar ray march costs 6.4x the CPU time, Intel's CPU runtime's 1.2x
+#: (README "Speed", GPUs). 1, one lane per work-item, is the form a GPU may prefer (not measured on
+#: one); tests/test_vector_width.py checks it against 8. An engine reads it when it is made
+#: (:attr:`Engine.vector_width`): its programs and its launches keep that width.
+VECTOR_WIDTH = 8
+#: The widths the kernels accept.
+VECTOR_WIDTHS = (1, 8)
+
+
 class Engine:
     """Owns one OpenCL program: builds it once and fetches every kernel once.
 
@@ -365,12 +376,21 @@ class Engine:
     allocator : pyopencl allocator, optional
         Where the device arrays the engine creates come from (:func:`memory_pool`: buffers freed by one
         order are reused by the next); None: a new buffer each time.
+
+    Attributes
+    ----------
+    vector_width : int
+        :data:`VECTOR_WIDTH` when the engine was made: the ``-DVECTOR_WIDTH`` of its programs and the
+        lanes per work-item of its launches.
     """
 
     sources: tuple = ()
 
     def __init__(self, ctx=None, dtype=np.float64, profile=False, fast_math=False, queue=None, allocator=None):
         self.dtype = np.dtype(dtype)
+        if VECTOR_WIDTH not in VECTOR_WIDTHS:
+            raise ValueError(f"clsky._cl.VECTOR_WIDTH must be one of {VECTOR_WIDTHS}, got {VECTOR_WIDTH!r}")
+        self.vector_width = VECTOR_WIDTH
         if queue is not None:
             ctx = queue.context
         self.ctx = ctx if ctx is not None else make_context(self.dtype)

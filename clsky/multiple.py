@@ -43,7 +43,6 @@ __all__ = ["keeping_first_gather_stacks", "gather_quadrature", "phase_azimuth_in
            "CROSSED_PAIRS", "MultipleScatteringEngine", "SPECIES"]
 
 SPECIES = ("rayleigh", "mie")
-VECTOR_WIDTH = 8
 #: Rows and cells of the gather computed per work-item (-DGATHER_ROWS, -DGATHER_CELLS of kernels/multiple.cl).
 GATHER_ROWS = 4
 GATHER_CELLS = 4
@@ -255,10 +254,10 @@ def first_gather_matrices(atmosphere, settings):
     return {pair: first_gather_matrix(atmosphere, settings, pair) for pair in DIRECT_PAIRS + CROSSED_PAIRS}
 
 
-def _scatter_global_size(width, height, depth):
-    """The scatter kernel's global size: VECTOR_WIDTH cells, one view row and SCATTER_SUN_NODES sun nodes per
-    work-item, each axis rounded up to a multiple of SCATTER_WORK_GROUP."""
-    items = (-(-width // VECTOR_WIDTH), height, -(-depth // SCATTER_SUN_NODES))
+def _scatter_global_size(width, height, depth, vector_width):
+    """The scatter kernel's global size: ``vector_width`` cells, one view row and SCATTER_SUN_NODES sun nodes
+    per work-item, each axis rounded up to a multiple of SCATTER_WORK_GROUP."""
+    items = (-(-width // vector_width), height, -(-depth // SCATTER_SUN_NODES))
     return tuple(-(-n // group) * group for n, group in zip(items, SCATTER_WORK_GROUP))
 
 
@@ -283,7 +282,7 @@ class MultipleScatteringEngine(_cl.Engine):
         return ("real.cl", declaration) + COMMON_SOURCES[1:] + ("mapping.cl", "view_ray.cl", "multiple.cl")
 
     def build_options(self):
-        return (super().build_options() + quadrature_defines(self.settings, VECTOR_WIDTH)
+        return (super().build_options() + quadrature_defines(self.settings, self.vector_width)
                 + [f"-DGATHER_ROWS={GATHER_ROWS}", f"-DGATHER_CELLS={GATHER_CELLS}",
                    f"-DSCATTER_SUN_NODES={SCATTER_SUN_NODES}"] + azimuth_defines(self.settings))
 
@@ -368,7 +367,8 @@ class MultipleScatteringEngine(_cl.Engine):
                              f"node < N, got {out.dtype} {out.shape} and node {node}")
         atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
         event = self.kernels_with(_atmosphere_cl.feature_defines(atmosphere))["scatter"](
-            self.queue, _scatter_global_size(width, height, depth), SCATTER_WORK_GROUP, atmosphere_d, np.int32(width),
+            self.queue, _scatter_global_size(width, height, depth, self.vector_width), SCATTER_WORK_GROUP,
+            atmosphere_d, np.int32(width),
             np.int32(height), np.int32(depth), np.int32(MAPPINGS[self.settings.mapping]),
             self.real2(self.settings.sun_w_range), np.int32(bool(combine_species)), self.real(cos_azimuth),
             gathered_d.data,

@@ -36,7 +36,6 @@ SUN_ANGULAR_RADIUS_DEG = 0.2665
 #: error) of a 256-sample march by day, 2.3 % at most at sun elevation -2 deg (measured).
 RAYMARCH_DEFAULTS = TableSettings(view_steps=48, sun_steps=256, sampling="keller_bohn", sun_transmittance="table",
                                   transmittance_size=(128, 512), orders=1)
-VECTOR_WIDTH = 8
 
 
 def check_directions(directions, sun_direction, altitude):
@@ -103,7 +102,7 @@ def sun_disc_radiance(atmosphere, sun_direction, altitude, steps=512):
     return atmosphere.incident_light * transmittance / solid_angle
 
 
-#: Work-items per work-group of the render kernels (each renders VECTOR_WIDTH pixels).
+#: Work-items per work-group of the render kernels (each renders the engine's vector_width pixels).
 RENDER_WORK_GROUP = 64
 
 
@@ -130,7 +129,7 @@ class RenderEngine(_cl.Engine):
                    "skyview.cl"))
 
     def build_options(self):
-        return super().build_options() + quadrature_defines(self.ray_settings, VECTOR_WIDTH)
+        return super().build_options() + quadrature_defines(self.ray_settings, self.vector_width)
 
 
 class SkyRenderer:
@@ -228,7 +227,7 @@ class SkyRenderer:
             check_kernel_buffer(name, argument, array_d, count, self.engine.dtype)
         check_kernel_buffer(name, "valid", directions.valid, n, np.uint8)
         kernel = self.engine.kernels_with(self._defines)[name]
-        items = -(-n // VECTOR_WIDTH)
+        items = -(-n // self.engine.vector_width)
         # an explicit work-group size: left to PoCL, a large frame got work-groups whose private arrays
         # (the ray march's per-lane sums and ground values) overflowed its worker threads' stacks
         # (segmentation fault at 256 x 256 with a ground); the kernel returns for items beyond n

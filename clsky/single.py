@@ -15,8 +15,6 @@ from .transmittance import COMMON_SOURCES, quadrature_defines, TransmittanceEngi
 
 __all__ = ["SingleScatteringEngine"]
 
-#: Cells per work-item along the altitude axis (real8 arithmetic; see kernels/single.cl).
-VECTOR_WIDTH = 8
 #: Sun-zenith layers per kernel launch (progress is reported between launches).
 SLAB_LAYERS = 4
 
@@ -47,7 +45,7 @@ class SingleScatteringEngine(_cl.Engine):
         return ("real.cl", declaration) + COMMON_SOURCES[1:] + ("mapping.cl", "view_ray.cl", "single.cl")
 
     def build_options(self):
-        return super().build_options() + quadrature_defines(self.settings, VECTOR_WIDTH)
+        return super().build_options() + quadrature_defines(self.settings, self.vector_width)
 
     def compute(self, atmosphere: AtmosphereParameters, size=None, mapping=None, progress=None, cos_azimuth=1.0):
         """The single-scattering table.
@@ -85,7 +83,7 @@ class SingleScatteringEngine(_cl.Engine):
         slabs = range(0, depth, SLAB_LAYERS)
         for done, z_offset in enumerate(slabs, start=1):
             slab = min(SLAB_LAYERS, depth - z_offset)
-            event = kernel(self.queue, (-(-width // VECTOR_WIDTH), height, slab), None, atmosphere_d,
+            event = kernel(self.queue, (-(-width // self.vector_width), height, slab), None, atmosphere_d,
                            np.int32(width), np.int32(height), np.int32(depth), np.int32(z_offset),
                            np.int32(MAPPINGS[settings.mapping]), self.real2(settings.sun_w_range),
                            sun_table_d.data, np.int32(tw),

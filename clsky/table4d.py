@@ -46,7 +46,6 @@ from .transmittance import COMMON_SOURCES, azimuth_defines, column_channels, qua
 
 __all__ = ["Table4DEngine", "compute_data", "check_atmosphere", "node_rays", "data_shape"]
 
-VECTOR_WIDTH = 8
 #: Work-items per work-group of ``table4d_cells`` (as the render kernels: private arrays per lane).
 WORK_GROUP = 64
 
@@ -89,7 +88,7 @@ class Table4DEngine(_cl.Engine):
         return ("real.cl", declaration) + COMMON_SOURCES[1:] + ("mapping.cl", "view_ray.cl", "table4d.cl")
 
     def build_options(self):
-        return super().build_options() + quadrature_defines(self.settings, VECTOR_WIDTH)
+        return super().build_options() + quadrature_defines(self.settings, self.vector_width)
 
     def compute(self, atmosphere: AtmosphereParameters, gathered=None, ground_irradiance=None):
         """``data`` (A, D, H, W, C) of the 4D table (float64), ``gathered`` the orders' gathered source
@@ -134,7 +133,7 @@ class Table4DEngine(_cl.Engine):
                             (harmonics + 1) * depth * height * width * 8 if has_multiple else padded.size, self.dtype)
         check_kernel_buffer("table4d_cells", "sun_table", sun_table_d, tw * th * column_channels(atmosphere),
                             self.dtype)
-        items = -(-n // VECTOR_WIDTH)
+        items = -(-n // self.vector_width)
         local = min(WORK_GROUP, items)
         for a in range(settings.azimuth_size):
             cells = np.ascontiguousarray(np.stack(node_rays(atmosphere, settings, a), axis=1), dtype=self.dtype)

@@ -3,10 +3,11 @@ clsky runs (issue 12, item 5: nothing may rely on double8 being the fast path).
 
 clsky builds every kernel with VECTOR_WIDTH 8 (eight cells or pixels per work-item in double8 arithmetic:
 PoCL does not vectorise across work-items, its scalar ray march takes 6.4x the CPU time, and on Intel's CPU
-runtime, which does, the scalar ray march took 1.2x; README "Speed", GPUs). A GPU would more likely want the scalar form, which
-runs one lane per work-item: untested on a GPU, but here it must build and give the same numbers. Each
-module's VECTOR_WIDTH is set to 1 (the kernels read it through their build options and global sizes) and
-the whole chain is compared with the double8 one: a table with every order, the azimuth harmonics, ozone and
+runtime, which does, the scalar ray march took 1.2x; README "Speed", GPUs). A GPU would more likely want the
+scalar form, which runs one lane per work-item: untested on a GPU, but here it must build and give the same
+numbers.
+clsky._cl.VECTOR_WIDTH is set to 1 (every engine made afterwards builds and launches its kernels with it)
+and the whole chain is compared with the double8 one: a table with every order, the azimuth harmonics, ozone and
 a ground (single scattering, scatter, gather), the 4D table's cells, and every renderer on a fisheye.
 
 Tolerance: the two forms run the same operations per lane; only the vector and scalar builds of exp, sqrt
@@ -22,12 +23,10 @@ import numpy as np
 import pytest
 
 import clsky
-from clsky import _cl, multiple, render, single, table4d
+from clsky import _cl
 from clsky.anim.cameras import FisheyeCamera, sun_direction
 from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
 
-#: the modules whose kernels take VECTOR_WIDTH (the transmittance table's takes it from its caller)
-MODULES = (single, multiple, render, table4d)
 RTOL_OF_MAX = 1e-12
 SETTINGS = clsky.TableSettings(size=(9, 33, 7), gather_theta_steps=32, gather_phi_steps=16, mode="physical",
                                azimuth_harmonics=2)
@@ -69,8 +68,7 @@ def scalar_kernels(monkeypatch):
     class Scalar:
         @staticmethod
         def use():
-            for module in MODULES:
-                monkeypatch.setattr(module, "VECTOR_WIDTH", 1)
+            monkeypatch.setattr(_cl, "VECTOR_WIDTH", 1)
 
         @staticmethod
         def built(files):
@@ -109,3 +107,19 @@ def test_scalar_kernels_give_the_double8_4d_table(cl_context, scalar_kernels):
         frames.append(renderer.render_lut4d(renderer.prepare(directions, valid), sun, 0.0))
     assert_close_to_max(frames[1], frames[0], "4D lookup frame")
     scalar_kernels.built(["table4d.cl", "render.cl"])
+
+
+def test_an_engine_keeps_its_width_and_refuses_another(cl_context, monkeypatch):
+    """An engine reads the width once, when it is made: programs and launches agree even if the setting
+    changes afterwards; a width the kernels do not accept is refused by name."""
+    table = clsky.ScatteringTable.build(clsky.preset("physical"), SETTINGS.replace(azimuth_harmonics=0))
+    renderer = SkyRenderer(table, ray_settings=RAY)
+    prepared = renderer.prepare(*FisheyeCamera(24).directions())
+    sun = sun_direction(60.0, 150.0)
+    before = renderer.render_raymarch(prepared, sun, 0.0)
+    monkeypatch.setattr(_cl, "VECTOR_WIDTH", 1)
+    assert renderer.engine.vector_width == 8
+    np.testing.assert_array_equal(renderer.render_raymarch(prepared, sun, 0.0), before)
+    monkeypatch.setattr(_cl, "VECTOR_WIDTH", 4)
+    with pytest.raises(ValueError, match=r"clsky._cl.VECTOR_WIDTH must be one of \(1, 8\), got 4"):
+        SkyRenderer(table, ray_settings=RAY)
