@@ -46,7 +46,7 @@ HEADERS = {
     "bench_dask": ["| run | repetition | farm start [s] | wall [s] | table [s] | first frame [s] |",
                    "| repetition | 1 worker against here: first frame [s] | wall per frame [ms] | CPU per frame [ms] |"],
     "bench_lookup4d": ["| frame | sun [deg] | 4D lookup p95 | target | 4D mean Delta E | 3D lookup p95 |"],
-    "bench_runtimes": ["| round | runtime | 3D lookup: wall |"],
+    "bench_runtimes": ["| round | device | width | 3D lookup: wall |"],
     "bench_twilight": ["| | +5 deg | -6 deg |",
                        "| sun [deg] | view | paths | SE [%] | all orders [%] | all orders [SE] | single: paths |"],
 }
