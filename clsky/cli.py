@@ -335,7 +335,6 @@ def table_settings(args, atmosphere):
 def _table_settings(args, atmosphere):
     from .planner import Scene, azimuth_harmonics, sun_axis
     from .quality import QUALITY_LEVELS, quality_level
-    from .settings import TableSettings
 
     level = quality_level(args.quality) if args.quality else None
     from .ground import default_settings
