@@ -17,6 +17,7 @@ import os
 import pathlib
 import platform
 import re
+import resource
 import statistics
 import sys
 import time
@@ -105,6 +106,13 @@ def timed_with_cpu(function):
     wall, cpu = time.perf_counter(), time.process_time()
     result = function()
     return result, time.perf_counter() - wall, time.process_time() - cpu
+
+
+def children_cpu() -> float:
+    """User + system CPU time [s] of the waited-for child processes (and their waited-for children): a
+    command run with subprocess, ffmpeg under it included."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
 
 
 def load_average() -> float:

@@ -25,16 +25,14 @@ import argparse
 import contextlib
 import cProfile
 import datetime
-import os
 import pathlib
 import pstats
-import resource
 import subprocess
 import sys
 import tempfile
 import time
 
-from _report import SMOKE, add_output_arguments, load_average, load_note, machine, parse_arguments, \
+from _report import SMOKE, add_output_arguments, children_cpu, load_average, load_note, machine, parse_arguments, \
     write_readme_section
 
 import clsky.anim.animate
@@ -61,12 +59,6 @@ STAGES = {
     "files (PNG, frames to ffmpeg, metrics)": [("anim/writers.py", "write"), ("anim/writers.py", "__exit__"),
                                                ("anim/writers.py", "write_csv"), ("anim/writers.py", "write_json")],
 }
-
-
-def children_cpu() -> float:
-    """User + system CPU time [s] of the waited-for children (and their waited-for children)."""
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
 
 
 #: ``python -m clsky.anim`` with the frames rendered one after the other (no overlapped pipeline)

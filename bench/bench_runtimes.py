@@ -34,7 +34,6 @@ import datetime
 import json
 import os
 import pathlib
-import resource
 import shutil
 import subprocess
 import sys
@@ -43,8 +42,8 @@ import time
 
 import numpy as np
 
-from _report import SMOKE, add_output_arguments, load_average, load_note, machine, parse_arguments, \
-    write_readme_section
+from _report import SMOKE, add_output_arguments, best_of, children_cpu, load_average, load_note, machine, \
+    parse_arguments, write_readme_section
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 #: where scripts/intel_opencl.sh writes its OpenCL vendors directory
@@ -104,18 +103,10 @@ def worker(smoke: bool, repeat: int, vector_width: int) -> dict:
     for name, size, method in renders:
         prepared = renderer.prepare(*FisheyeCamera(size).directions())
         method(prepared, sun, 0.0)                                                 # warm-up
-        walls, cpu = [], time.process_time()
-        for _ in range(repeat):
-            start = time.perf_counter()
-            method(prepared, sun, 0.0)
-            walls.append(time.perf_counter() - start)
-        result[name] = {"wall": min(walls), "cpu": (time.process_time() - cpu) / repeat}
+        cpu = time.process_time()
+        best, _ = best_of(lambda: method(prepared, sun, 0.0), repeat)
+        result[name] = {"wall": best, "cpu": (time.process_time() - cpu) / repeat}
     return result
-
-
-def children_cpu() -> float:
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
 
 
 def environment(vendors: pathlib.Path | None, selector: str | None = None) -> dict:
