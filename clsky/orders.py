@@ -185,8 +185,9 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         def to_host(gathered):
             return gathered.get()[..., :6].astype(np.float64)
 
-        def add_into(total, gathered):
-            return engine.add_into(total, gathered)
+        def accumulate(total, gathered):
+            """total + gathered (in place in total; a copy of gathered for total None), as azimuth.py's."""
+            return gathered.copy() if total is None else engine.add_into(total, gathered)
 
         kept = 3 if settings.mode == "physical" else 6    # channels of an order kept on the host
 
@@ -222,7 +223,9 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         def to_host(gathered):
             return gathered
 
-        def add_into(total, gathered):
+        def accumulate(total, gathered):
+            if total is None:
+                return gathered.copy()
             total += gathered
             return total
 
@@ -263,10 +266,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
             gathered = gather([(same_species, single)])
             running = single.copy()
         for k in range(2, wanted + 1):
-            if gathered_sum is None:
-                gathered_sum = gathered.copy()
-            else:
-                gathered_sum = add_into(gathered_sum, gathered)
+            gathered_sum = accumulate(gathered_sum, gathered)
             next_input, on_host = scatter(gathered, pending_ground)
             del gathered                  # summed and scattered: its (D, H, W, 8) buffer may go
             # gather the next order from the new one where it is (on the device for OpenCL) before
