@@ -29,20 +29,28 @@ if [ ! -f "$library" ]; then
     exit 1
 fi
 
-# the vendors directory is written beside its final place and swapped in, so that a run that is
-# interrupted leaves the previous one whole
+# the vendors directory is written under a unique name beside its final place, and "vendors" is a link
+# to it, replaced by a rename: a run that is interrupted, or two at once, never leave it half written
 vendors="$prefix/vendors"
 staging=$(mktemp -d "$prefix/.vendors.XXXXXX")
-trap 'rm -rf "$staging"' EXIT
+trap 'rm -rf "$staging" "$staging.link"' EXIT
 printf '%s\n' "$library" > "$staging/intel-cpu.icd"
 for icd in /etc/OpenCL/vendors/*.icd .venv/etc/OpenCL/vendors/*.icd; do
     if [ -f "$icd" ] && ! grep -q libintelocl "$icd"; then
         cp "$icd" "$staging/"
     fi
 done
-rm -rf "$vendors"
-mv "$staging" "$vendors"
+chmod 755 "$staging"
+previous=$(readlink "$vendors" 2>/dev/null || true)
+if [ -e "$vendors" ] && [ ! -L "$vendors" ]; then
+    rm -rf "$vendors"                   # a directory in its place (an earlier version of this script wrote one)
+fi
+ln -s "$(basename "$staging")" "$staging.link"
+mv -T "$staging.link" "$vendors"
 trap - EXIT
+if [ -n "$previous" ] && [ "$previous" != "$(basename "$staging")" ]; then
+    rm -rf "${prefix:?}/$previous"
+fi
 
 log "OpenCL devices with OCL_ICD_VENDORS=$vendors (* = the one clsky uses):"
 OCL_ICD_VENDORS="$vendors" .venv/bin/clsky devices >&2
