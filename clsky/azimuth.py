@@ -373,10 +373,10 @@ class _Backend:
 
     single: Ibar^(1) at the azimuth nodes (M + 1, D, H, W, 6) on the host; upload(gathered): the
     host's gathered harmonics (M + 1, D, H, W, 6) in the backend's form; scatter(gathered,
-    ground_radiance): (the order's nodes (M + 1, D, H, W, 3) on the host, the same in the backend's
-    form); gather(that form): the next order's gathered harmonics (backend's form); accumulate(total,
-    gathered): total + gathered (a copy of gathered for total None; may add in place); to_host(gathered):
-    (M + 1, D, H, W, 6) float64; device: its description."""
+    ground_radiance): (the order's nodes (M + 1, D, H, W, 3) on the host, valid until the next call,
+    the same in the backend's form); gather(that form): the next order's gathered harmonics (backend's
+    form); accumulate(total, gathered): total + gathered (a copy of gathered for total None; may add in
+    place); to_host(gathered): (M + 1, D, H, W, 6) float64; device: its description."""
 
     single: np.ndarray
     upload: object
@@ -417,7 +417,9 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     Every engine runs on one queue and takes its device arrays from one pool
     (:func:`clsky._cl.memory_pool`): an order reuses the buffers of the one before (they are the same
     sizes) instead of faulting in fresh memory, and the nodes come to the host through one reused
-    staging array. The pool goes with the backend."""
+    padded staging array (which also carries the first gather up and the gathered sum down) into one
+    reused host table: what ``scatter`` returns is valid until its next call. The pool goes with the
+    backend."""
     import pyopencl as cl
     import pyopencl.array as cla
 
@@ -432,11 +434,18 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     single = np.stack([single_engine.compute(atmosphere, cos_azimuth=c) for c in cosines])
     transform = harmonic_transform(settings.azimuth_harmonics)
     matrices = [engine.upload_matrices(operators.gather_matrices(m)) for m in range(cosines.size)]
-    staging = []            # the host array each node is read into (allocated once, on first use)
+    staging = []            # the padded host array (M + 1, D, H, W, 8) of every transfer (allocated once)
+    host_nodes = []         # the host table (M + 1, D, H, W, 3) that scatter returns (allocated once)
+
+    def padded_staging(shape):
+        if not staging:
+            staging.append(np.empty(shape[:-1] + (8,), engine.dtype))
+        return staging[0]
 
     def upload(gathered):
-        padded = np.zeros(gathered.shape[:-1] + (8,), dtype=engine.dtype)
+        padded = padded_staging(gathered.shape)
         padded[..., :6] = gathered
+        padded[..., 6:] = 0.0
         return cla.to_device(queue, padded, allocator=pool)
 
     engines = {settings.azimuth_harmonics: engine}
@@ -453,9 +462,11 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
         for node, c in enumerate(cosines):
             engines[read].scatter(atmosphere, gathered_d, combine_species=True, ground_radiance=ground_radiance,
                                   cos_azimuth=c, out=nodes_d, node=node)
-        if not staging:
-            staging.append(np.empty(nodes_d.shape, engine.dtype))
-        return nodes_d.get(ary=staging[0])[..., :3].astype(np.float64), nodes_d     # get() waits for them
+        nodes = nodes_d.get(ary=padded_staging(nodes_d.shape))                      # get() waits for them
+        if not host_nodes:
+            host_nodes.append(np.empty(nodes.shape[:-1] + (3,)))
+        np.copyto(host_nodes[0], nodes[..., :3])
+        return host_nodes[0], nodes_d
 
     def gather(nodes_d):
         """G_m = A_m L_m, L_m = sum_n H[m, n] L(phi_n) (padded: channels 0-2 and 3-5 both hold L)."""
@@ -470,7 +481,7 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
         return gathered_d.copy() if total is None else engine.add_into(total, gathered_d)
 
     def to_host(gathered_d):
-        return gathered_d.get()[..., :6].astype(np.float64)
+        return gathered_d.get(ary=padded_staging(gathered_d.shape))[..., :6].astype(np.float64)
 
     return _Backend(single, upload, scatter, gather, accumulate, to_host,
                     _cl.describe_device(single_engine.device))
@@ -532,7 +543,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         del gathered
         check_finite(new, k, atmosphere, settings)
         average = azimuth_average(new) if ground_sky is not None or not keep_nodes else None
-        orders.append(new if keep_nodes else average)
+        orders.append(new.copy() if keep_nodes else average)     # the backend reuses `new` next order
         if ground_sky is not None:     # the horizontal ground sees the azimuth average (m = 0)
             sky = ground.sky_irradiance(atmosphere, settings, average, factored=False)
             ground_sky = ground_sky + sky

@@ -762,6 +762,34 @@ def own_relative_addition(added, running):
     return max(ratios)
 
 
+def test_relative_addition_and_check_finite_over_many_blocks():
+    """Tables of several BLOCK_CELLS blocks (the stopping test and the finiteness check work block by block,
+    to keep their temporaries small): the same value as the definition over the whole table, exactly (max is
+    exact in any grouping), wherever the largest ratio and the channel maxima lie; a NaN in any block
+    carries through / is refused."""
+    from clsky.errors import NumericalError
+    from clsky.orders import BLOCK_CELLS, check_finite
+
+    rng = np.random.default_rng(7)
+    cells = 7 * ((3 * BLOCK_CELLS + 120) // 7)          # three full blocks and a partial one
+    running = rng.uniform(0.0, 1.0, (cells, 3)) ** 4   # many dark cells (below 1 % of the channel max)
+    added = rng.uniform(0.0, 0.01, (cells, 3)) * running
+    running[2 * BLOCK_CELLS + 5, 1], added[2 * BLOCK_CELLS + 5, 1] = 0.5, 0.15   # the largest ratio, 3rd block
+    running[-1, 2] = 10.0                                                        # a channel maximum, last block
+    expected = own_relative_addition(added, running)
+    assert expected == 0.3                  # every other ratio is below 0.01
+    assert relative_addition(added, running) == expected
+    assert relative_addition(added.reshape(-1, 7, 3), running.reshape(-1, 7, 3)) == expected
+    added[BLOCK_CELLS + 1, 0], running[BLOCK_CELLS + 1, 0] = np.nan, 1.0
+    assert np.isnan(relative_addition(added, running))
+    settings, atmosphere = TableSettings(), black_preset("physical")
+    assert check_finite(running[:-2], 2, atmosphere, settings) is not None
+    order = np.ones((cells, 3))
+    order[-1, 2] = np.inf                                # only in the last, partial block
+    with pytest.raises(NumericalError, match="order 2 of the table has"):
+        check_finite(order, 2, atmosphere, settings)
+
+
 @pytest.mark.parametrize("mode", MODES)
 def test_record_follows_the_definitions(orders_of, mode):
     """relative_additions and shares of the record, recomputed from the orders with own code."""
