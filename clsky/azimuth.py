@@ -62,6 +62,7 @@ physical mode of :func:`clsky.orders.compute_orders` to rounding.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 
@@ -536,29 +537,33 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
                                                    + ground_sky)
     running = single_nodes[..., :3] + single_nodes[..., 3:]
     gathered_sum, orders = None, []
-    for k in range(2, wanted + 1):
-        gathered_sum = run.accumulate(gathered_sum, gathered)
-        new, state = run.scatter(gathered, pending_ground,
-                                 None if HARMONIC_SOURCE_ORDERS is None or k <= HARMONIC_SOURCE_ORDERS else 0)
-        del gathered
-        check_finite(new, k, atmosphere, settings)
-        average = azimuth_average(new) if ground_sky is not None or not keep_nodes else None
-        orders.append(new.copy() if keep_nodes else average)     # the backend reuses `new` next order
-        if ground_sky is not None:     # the horizontal ground sees the azimuth average (m = 0)
-            sky = ground.sky_irradiance(atmosphere, settings, average, factored=False)
-            ground_sky = ground_sky + sky
-            pending_ground = ground.reflected_radiance(atmosphere, sky)
-        running += new
-        addition = relative_addition(new.reshape((-1,) + new.shape[2:]), running.reshape((-1,) + new.shape[2:]))
-        record["relative_additions"].append(addition)
-        if progress is not None:
-            progress(k, addition)
-        if settings.orders == "auto" and addition < settings.order_tolerance:
-            record["converged"] = True
-            break
-        if k < wanted:
-            gathered = run.gather(state)
-        del state
+    # the host's BLAS (azimuth averages, ground irradiances) on one thread beside the OpenCL device's
+    # workers, as clsky._cl.host_blas_single_threaded explains; not the first gather above, whose
+    # matrix products sum in another order on one thread (its tables change by 1e-15 of their maximum)
+    with _cl.host_blas_single_threaded() if backend == "opencl" else contextlib.nullcontext():
+        for k in range(2, wanted + 1):
+            gathered_sum = run.accumulate(gathered_sum, gathered)
+            new, state = run.scatter(gathered, pending_ground,
+                                     None if HARMONIC_SOURCE_ORDERS is None or k <= HARMONIC_SOURCE_ORDERS else 0)
+            del gathered
+            check_finite(new, k, atmosphere, settings)
+            average = azimuth_average(new) if ground_sky is not None or not keep_nodes else None
+            orders.append(new.copy() if keep_nodes else average)     # the backend reuses `new` next order
+            if ground_sky is not None:     # the horizontal ground sees the azimuth average (m = 0)
+                sky = ground.sky_irradiance(atmosphere, settings, average, factored=False)
+                ground_sky = ground_sky + sky
+                pending_ground = ground.reflected_radiance(atmosphere, sky)
+            running += new
+            addition = relative_addition(new.reshape((-1,) + new.shape[2:]), running.reshape((-1,) + new.shape[2:]))
+            record["relative_additions"].append(addition)
+            if progress is not None:
+                progress(k, addition)
+            if settings.orders == "auto" and addition < settings.order_tolerance:
+                record["converged"] = True
+                break
+            if k < wanted:
+                gathered = run.gather(state)
+            del state
     record["orders"] = len(orders) + 1
     return HarmonicOrders(single_nodes[0], run.to_host(gathered_sum), orders, record, ground_sky)
 
