@@ -138,7 +138,10 @@ def delta_e_cie76(lab_1, lab_2):
     numpy.ndarray, shape (...)
     """
     difference = np.asarray(lab_1, dtype=np.float64) - np.asarray(lab_2, dtype=np.float64)
-    return np.sqrt(np.sum(difference * difference, axis=-1))
+    squared = difference * difference
+    # the three terms added in order, as np.sum(..., axis=-1) adds them (the same values), without its
+    # reduction over rows of 3, 5x slower
+    return np.sqrt(squared[..., 0] + squared[..., 1] + squared[..., 2])
 
 
 # One frame ------------------------------------------------------------------------------------------
