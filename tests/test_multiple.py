@@ -21,7 +21,7 @@ import pyopencl.array as cla
 import pytest
 from numpy.testing import assert_allclose
 
-from clsky import ScatteringTable, TableSettings, preset, reference
+from clsky import ScatteringTable, TableSettings, reference
 from clsky._cl import memory_pool
 from clsky.lookup import TableLookupEngine
 from clsky.multiple import (SPECIES, MultipleScatteringEngine, first_gather_matrices, gather_matrices, gather_matrix,
