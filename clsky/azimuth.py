@@ -435,6 +435,8 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     single = np.stack([single_engine.compute(atmosphere, cos_azimuth=c) for c in cosines])
     transform = harmonic_transform(settings.azimuth_harmonics)
     matrices = [engine.upload_matrices(operators.gather_matrices(m)) for m in range(cosines.size)]
+    # allocated on first use, not here: made before the first gather they would add to the build's host
+    # peak (the estimate of clsky.resources, checked against tracemalloc by tests/test_memory.py)
     staging = []            # the padded host array (M + 1, D, H, W, 8) of every transfer (allocated once)
     host_nodes = []         # the host table (M + 1, D, H, W, 3) that scatter returns (allocated once)
 
