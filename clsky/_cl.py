@@ -439,6 +439,10 @@ class Engine:
         record["x"], record["y"] = pair
         return record
 
+    def real8(self, values):
+        """``values`` (8 numbers) as the kernels' ``real8``."""
+        return np.array(tuple(values), dtype=self.dtype).view(real_vector_dtype(self.dtype, 8)).reshape(())
+
     def _record(self, label, event):
         if self.profile:
             self.events.append((label, event))

@@ -73,7 +73,7 @@ from .atmosphere import AtmosphereParameters
 from .errors import ParameterError, is_integer
 from .mapping import altitude_to_u, cos_to_sun_t, cos_to_v, grid_coordinates
 from .multiple import SPECIES, _gather_parts, _phase, _quadrature_key, gather_quadrature
-from .orders import check_finite, relative_addition
+from .orders import _total, check_finite, geometric_ratio, per_channel, relative_addition, tail_factor
 from .settings import MAX_AZIMUTH_HARMONICS, TableSettings
 
 __all__ = ["azimuth_nodes", "harmonic_transform", "harmonic_phase_integrals",
@@ -352,13 +352,17 @@ class HarmonicOrders:
         Single scattering in the canonical frame (node 0), factored, as the 3D table stores it.
     gathered : (M + 1, D, H, W, 6) or None
         Sum over the orders 2..K of the gathered harmonics G_{s,m} (Rayleigh r, g, b, Mie r, g, b; phase
-        inside), for :func:`raymarch_higher_orders`.
+        inside), with the geometric tail's G^(K+1) / (1 - r) when there is one (:mod:`clsky.orders`), for
+        :func:`raymarch_higher_orders`.
     orders : list of (M + 1, D, H, W, 3), or of (D, H, W, 3)
         L^(k) at the azimuth nodes, k = 2..K; with ``keep_nodes=False``, their azimuth averages.
     record : dict
-        harmonics, orders, converged, relative additions, device.
+        harmonics, orders, converged, relative additions, the estimated errors (clsky.orders), the
+        geometric tail's ratio r per wavelength (``tail_ratio``: None without a tail; the orders do not
+        include the tail, the table's is r / (1 - r) times the last order), device.
     ground_irradiance : (D, 3) or None
-        With a reflecting ground, E_sky = sum_{k >= 1} E_k on the ground per sun node (:mod:`clsky.ground`).
+        With a reflecting ground, E_sky = sum_{k >= 1} E_k on the ground per sun node (:mod:`clsky.ground`),
+        with the geometric tail's E_K r / (1 - r).
     """
 
     single: np.ndarray
@@ -376,8 +380,8 @@ class _Backend:
     host's gathered harmonics (M + 1, D, H, W, 6) in the backend's form; scatter(gathered,
     ground_radiance): (the order's nodes (M + 1, D, H, W, 3) on the host, valid until the next call,
     the same in the backend's form); gather(that form): the next order's gathered harmonics (backend's
-    form); accumulate(total, gathered): total + gathered (a copy of gathered for total None; may add in
-    place); to_host(gathered): (M + 1, D, H, W, 6) float64; device: its description."""
+    form); accumulate(total, gathered, scale=None): total + gathered, or total + scale gathered per
+    wavelength (scale (r, g, b)) (a copy of gathered for total None; may add in place); to_host(gathered): (M + 1, D, H, W, 6) float64; device: its description."""
 
     single: np.ndarray
     upload: object
@@ -400,8 +404,10 @@ def _numpy_backend(atmosphere, settings, operators):
     def gather(nodes):
         return operators.gather(_to_harmonics(nodes))
 
-    def accumulate(total, gathered):
-        return gathered.copy() if total is None else total + gathered
+    def accumulate(total, gathered, scale=None):
+        if total is None:
+            return gathered.copy()
+        return total + (gathered if scale is None else gathered * per_channel(scale, gathered.shape[-1]))
 
     return _Backend(single, lambda gathered: gathered, scatter, gather, accumulate, lambda gathered: gathered,
                     "numpy")
@@ -480,8 +486,8 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
             cl.enqueue_copy(queue, out.data, part.data, byte_count=part.nbytes, dst_offset=m * part.nbytes)
         return out
 
-    def accumulate(total, gathered_d):
-        return gathered_d.copy() if total is None else engine.add_into(total, gathered_d)
+    def accumulate(total, gathered_d, scale=None):
+        return gathered_d.copy() if total is None else engine.add_into(total, gathered_d, scale)
 
     def to_host(gathered_d):
         return gathered_d.get(ary=padded_staging(gathered_d.shape))[..., :6].astype(np.float64)
@@ -524,8 +530,8 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         run = _opencl_backend(atmosphere, settings, operators, ctx, fast_math)
     single_nodes = run.single
     wanted = settings.max_orders if settings.orders == "auto" else settings.orders
-    record = {"harmonics": harmonics, "converged": False, "relative_additions": [],
-              "device": run.device}
+    record = {"harmonics": harmonics, "converged": False, "relative_additions": [], "estimated_errors": [],
+              "tail_ratio": None, "device": run.device}
     single_harmonics = _to_harmonics(single_nodes)
     ground_sky = pending_ground = None      # as in clsky.orders: E_1 + ... + E_k, and a / pi of what is pending
     if atmosphere.has_ground:               # E_1 even for single scattering alone: the table's ground term needs it
@@ -538,7 +544,8 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         pending_ground = ground.reflected_radiance(atmosphere, ground.direct_irradiance(atmosphere, settings)
                                                    + ground_sky)
     running = single_nodes[..., :3] + single_nodes[..., 3:]
-    gathered_sum, orders = None, []
+    gathered_sum, orders, totals = None, [], [_total(single_nodes)]
+    previous = None     # order k - 1 at the nodes, for the geometric tail's test (the backend reuses `new`)
     # the host's BLAS (azimuth averages, ground irradiances) on one thread beside the OpenCL device's
     # workers, as clsky._cl.host_blas_single_threaded explains; not the first gather above, whose
     # matrix products sum in another order on one thread (its tables change by 1e-15 of their maximum)
@@ -556,13 +563,30 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
                 ground_sky = ground_sky + sky
                 pending_ground = ground.reflected_radiance(atmosphere, sky)
             running += new
-            addition = relative_addition(new.reshape((-1,) + new.shape[2:]), running.reshape((-1,) + new.shape[2:]))
+            cells = (-1,) + new.shape[2:]
+            addition = relative_addition(new.reshape(cells), running.reshape(cells))
             record["relative_additions"].append(addition)
+            totals.append(_total(new))
+            # the geometric tail (clsky.orders), where it can apply: it adds G^(k+1), gathered below max_orders
+            ratio = geometric_ratio(totals) if settings.orders == "auto" and k < wanted else None
+            error = addition if ratio is None else relative_addition(new.reshape(cells), running.reshape(cells),
+                                                                      previous.reshape(cells), ratio)
+            record["estimated_errors"].append(error)
             if progress is not None:
                 progress(k, addition)
-            if settings.orders == "auto" and addition < settings.order_tolerance:
+            if settings.orders == "auto" and error < settings.order_tolerance:
                 record["converged"] = True
+                if ratio is not None:     # the orders after k: their source and ground light (the table's: the caller)
+                    tail = tail_factor(ratio)
+                    record["tail_ratio"] = ratio.tolist()
+                    gathered_sum = run.accumulate(gathered_sum, run.gather(state), 1.0 + tail)   # G^(k+1) / (1 - r)
+                    if ground_sky is not None:
+                        ground_sky = ground_sky + sky * tail
                 break
+            if settings.orders == "auto":
+                if previous is None:
+                    previous = np.empty_like(new)
+                np.copyto(previous, new)
             if k < wanted:
                 gathered = run.gather(state)
             del state
@@ -586,26 +610,29 @@ def orders_result(atmosphere: AtmosphereParameters, settings: TableSettings, bac
     has no azimuth), ``gathered`` the (M + 1, D, H, W, 6) harmonics for the ray march."""
     import time
 
-    from .orders import OrdersResult, _total, order_shares
+    from .orders import OrdersResult, convergence_reason, order_shares
 
     start = time.perf_counter()
     result = compute_orders(atmosphere, settings, backend=backend, ctx=ctx, fast_math=fast_math,
                             progress=None if progress is None else (lambda k, _: progress("orders", k, 0)),
                             keep_nodes=False)
     orders = [result.single] + result.orders
-    additions = result.record["relative_additions"]
-    if settings.orders == "auto":
-        reason = (f"converged: order {len(orders)} added at most {additions[-1]:.2e} of the running sum (tolerance "
-                  f"{settings.order_tolerance:g})" if result.record["converged"] else
-                  f"not converged: stopped at max_orders = {settings.max_orders}")
+    additions, errors = result.record["relative_additions"], result.record["estimated_errors"]
+    ratio = result.record["tail_ratio"]
+    if settings.orders == "auto" and result.record["converged"]:
+        reason = convergence_reason(len(orders), additions[-1], errors[-1], ratio, settings.order_tolerance)
+    elif settings.orders == "auto":
+        reason = f"not converged: stopped at max_orders = {settings.max_orders}"
     else:
         reason = f"orders={settings.orders} requested"
     record = {"mode": settings.mode, "orders": len(orders), "requested": settings.orders,
               "tolerance": settings.order_tolerance, "max_orders": settings.max_orders,
               "converged": result.record["converged"], "reason": reason, "relative_additions": additions,
+              "estimated_errors": errors, "tail_ratio": ratio,
               "shares": order_shares([_total(order) for order in orders]), "seconds": time.perf_counter() - start,
               "device": result.record["device"], "azimuth_harmonics": settings.azimuth_harmonics}
-    return OrdersResult(orders, record, result.gathered, result.ground_irradiance)
+    return OrdersResult(orders, record, result.gathered, result.ground_irradiance,
+                        None if ratio is None else tail_factor(np.array(ratio)))
 
 
 def raymarch_higher_orders(atmosphere, ray_settings, gathered, grid_settings, directions, sun_direction, altitude):

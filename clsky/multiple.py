@@ -395,13 +395,16 @@ class MultipleScatteringEngine(_cl.Engine):
         self._record("combine_nodes", event)
         return out
 
-    def add_into(self, total, addend):
-        """total += addend, padded device tables of one shape (kernels/multiple.cl: add_into)."""
+    def add_into(self, total, addend, scale=None):
+        """total += addend, padded device tables of one shape (kernels/multiple.cl: add_into); with
+        ``scale`` (r, g, b), total += scale[c % 3] addend on channel c < 6 (the orders' geometric tail:
+        both species' channels of a wavelength scale alike)."""
         if total.shape != addend.shape or total.shape[-1] != 8:
             raise ValueError(f"total and addend must be padded tables (..., 8) of one shape, got {total.shape} "
                              f"and {addend.shape}")
+        scale = np.ones(8) if scale is None else np.concatenate([scale, scale, [0.0, 0.0]])
         cells = total.size // 8
         event = self.kernels["add_into"](self.queue, (cells,), None, total.data, addend.data, np.uint64(cells),
-                                         self.real(1.0))
+                                         self.real(1.0), self.real8(scale))
         self._record("add_into", event)
         return total

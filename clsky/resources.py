@@ -47,9 +47,11 @@ __all__ = ["InsufficientMemoryError", "Allocation", "Phase", "MemoryEstimate", "
 #: Resident memory of a process that imported clsky and built a small table with cached programs [bytes]
 #: (127 MiB measured, PoCL 3.1 on the 2-core development machine).
 BASE_PROCESS_BYTES = 130 * 2**20
-#: Ratio of an order's relative addition to the previous one's, for :func:`expected_orders`: the
-#: default table (tolerance 1e-4) converges at order 10, the high level (1e-5) at 12, draft (1e-2) at 5.
-ORDER_RATIO = 0.4
+#: Orders before the geometric tail's test applies and orders per decade of the tolerance, for
+#: :func:`expected_orders` (an upper bound for the memory estimate): with the tail (:mod:`clsky.orders`),
+#: preset("physical") converges at order 6 for the draft level (tolerance 1e-2), 9 for the default (1e-4)
+#: and 11 for the high (1e-5); the default animation's planned table at 7 (measured 2026-12-03).
+FIRST_ORDERS, ORDERS_PER_DECADE = 3, 1.6
 #: Host bytes per pixel of one frame's processing beyond the directions, buffers and HDR frames, per
 #: method: conversion to cd/m^2, exposure metering, tone map, 8-bit frames, metrics, error image,
 #: composite, PNG and MP4 encoding. Measured as the growth of peak RSS between 2-frame 256^2 and 1024^2
@@ -198,11 +200,11 @@ def format_bytes(nbytes) -> str:
 
 
 def expected_orders(settings: TableSettings) -> int:
-    """Orders a build computes: ``settings.orders``, or for 'auto' the order at which ORDER_RATIO^k falls
-    below the tolerance (at least 2, at most ``max_orders``)."""
+    """Orders a build computes: ``settings.orders``, or for 'auto' FIRST_ORDERS + ORDERS_PER_DECADE per
+    decade of the tolerance below 1, rounded up (at least 2, at most ``max_orders``)."""
     if settings.orders != "auto":
         return settings.orders
-    estimate = math.ceil(math.log(settings.order_tolerance) / math.log(ORDER_RATIO))
+    estimate = math.ceil(FIRST_ORDERS - ORDERS_PER_DECADE * math.log10(settings.order_tolerance))
     return min(settings.max_orders, max(2, estimate))
 
 
@@ -329,7 +331,8 @@ def _harmonic_phases(settings, orders):
     (n, D, Theta + 1, W 3) interpolation and their harmonic sum, the n gathered harmonics, the padded
     upload), then the orders loop (every order's azimuth average kept on the host, the order's n nodes
     and the running sum at the nodes; on the device the gathered sum, the gathered harmonics and the
-    order's n nodes, padded, a harmonic and its gather; the nodes' padded download)."""
+    order's n nodes, padded, a harmonic and its gather; the nodes' padded download; for
+    ``orders="auto"``, the order before at the nodes, which the geometric tail's test reads)."""
     cells, height, depth, s = _table_sizes(settings)
     n = settings.azimuth_harmonics + 1
     padded = cells * 8 * s
@@ -350,7 +353,9 @@ def _harmonic_phases(settings, orders):
         Allocation("running sum at the nodes (n, D, H, W, 3) float64", cells * 3 * _F64, count=n),
         Allocation("padded tables: gathered sum, gathered, nodes, harmonic, its gather", padded, count=3 * n + 2,
                    on_device=True),
-        Allocation("node downloads (D, H, W, 8)", padded, count=n)))
+        Allocation("node downloads (D, H, W, 8)", padded, count=n))
+        + ((Allocation("the order before at its nodes (n, D, H, W, 3) float64", cells * 3 * _F64, count=n),)
+           if settings.orders == "auto" else ()))
     return [first, loop]
 
 
@@ -363,6 +368,9 @@ def _combine_phase(settings, table, orders):
     allocations.append(Allocation(f"combined table (D, H, W, {combined}) float64", cells * combined * _F64))
     if orders > 1 and settings.mode == "physical":
         allocations.append(Allocation(f"sum of the higher orders (D, H, W, {kept})", cells * kept * _F64))
+    if orders > 1 and settings.orders == "auto":
+        allocations.append(Allocation(f"the geometric tail, the last order times r / (1 - r) (D, H, W, {kept})",
+                                      cells * kept * _F64))
     if settings.mie_layout == "notes":
         allocations.append(Allocation("table in the notes' layout", cells * settings.channels * _F64))
     return Phase("combine", tuple(allocations))

@@ -210,11 +210,13 @@ __kernel void combine_nodes(__global const real *nodes, __global const real *wei
     vstore8(h, cell, harmonic);
 }
 
-/* total += addend, as one * total + one * addend. */
-__kernel void add_into(__global real *total, __global const real *addend, const ulong cells, const real one)
+/* total += scale addend per channel, as one * total + scale * addend (scale all ones: the sum, as PyOpenCL's
+ * elementwise one * total + one * addend formed it; the orders' geometric tail scales per wavelength). */
+__kernel void add_into(__global real *total, __global const real *addend, const ulong cells, const real one,
+                       const real8 scale)
 {
     const size_t cell = get_global_id(0);
     if (cell >= cells)
         return;
-    vstore8(one * vload8(cell, total) + one * vload8(cell, addend), cell, total);
+    vstore8(one * vload8(cell, total) + scale * vload8(cell, addend), cell, total);
 }

@@ -126,11 +126,31 @@ def view_nodes(ctx) -> tuple:
 METRIC_KEYS = ("rmse", "median_rel", "p95_rel", "max_rel", "mean_delta_e", "floor")
 
 
+def _plain_sum_of_orders():
+    """A context in which ``orders="auto"`` sums the orders plainly and stops at the first relative
+    addition below the tolerance, as every commit before the geometric tail did (clsky.orders,
+    2026-12-03): :func:`clsky.orders.geometric_ratio` then finds no ratio, the one switch of the tail
+    and of its stopping test. A tree without the tail has nothing to switch."""
+    import contextlib
+    from unittest import mock
+
+    import clsky.orders
+
+    stack = contextlib.ExitStack()
+    if hasattr(clsky.orders, "geometric_ratio"):
+        import clsky.azimuth
+
+        for module in (clsky.orders, clsky.azimuth):
+            stack.enter_context(mock.patch.object(module, "geometric_ratio", lambda totals: None))
+    return stack
+
+
 def display_frames(ctx, directory, tone_map=None) -> tuple:
     """The atmosphere-plus preset's compare animation (table | ray march | error panels, dithered, 3
     frames of 24 px), written under ``directory``: SHA-256 of each PNG frame's decoded pixels, and each
     frame's METRIC_KEYS. ``tone_map`` None leaves the config's default (the only choice before
-    anim/display.py)."""
+    anim/display.py). Its table sums the orders plainly (:func:`_plain_sum_of_orders`), as the pinned
+    commit did: so the pin also holds the orders loop without the tail to its results, bit for bit."""
     import pathlib
 
     from PIL import Image
@@ -144,7 +164,8 @@ def display_frames(ctx, directory, tone_map=None) -> tuple:
     config = AnimationConfig(frames=3, size=24, table_size=(9, 33, 7), preset="atmosphere-plus",
                              mode="atmosphere-plus", start_elevation_deg=-4.0, max_elevation_deg=30.0,
                              output=str(directory / "sky.mp4"), **options)
-    result = render_animation(config, ctx=ctx)
+    with _plain_sum_of_orders():
+        result = render_animation(config, ctx=ctx)
     frames = sorted((directory / "sky_frames").glob("*.png"))
     hashes = [hashlib.sha256(np.asarray(Image.open(f)).tobytes()).hexdigest() for f in frames]
     return hashes, [[row[key] for key in METRIC_KEYS] for row in result.rows]
