@@ -381,7 +381,8 @@ class _Backend:
     ground_radiance): (the order's nodes (M + 1, D, H, W, 3) on the host, valid until the next call,
     the same in the backend's form); gather(that form): the next order's gathered harmonics (backend's
     form); accumulate(total, gathered, scale=None): total + gathered, or total + scale gathered per
-    wavelength (scale (r, g, b)) (a copy of gathered for total None; may add in place); to_host(gathered): (M + 1, D, H, W, 6) float64; device: its description."""
+    wavelength (scale (r, g, b)) (a copy of gathered for total None; may add in place);
+    to_host(gathered): (M + 1, D, H, W, 6) float64; device: its description."""
 
     single: np.ndarray
     upload: object
