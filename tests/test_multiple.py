@@ -862,7 +862,8 @@ def test_geometric_ratio_and_tail_factor():
 
 TAIL_CASES = {     # (atmosphere, settings): a black ground, an optically thick one (r ~ 0.89), a ground
     "physical": (lambda: black_preset("physical"), SMALL.replace(mode="physical")),
-    "thick atmosphere-plus": (lambda: thick(black_preset("physical")), THICK_SETTINGS.replace(mode="atmosphere-plus")),
+    "thick atmosphere-plus": (lambda: thick(black_preset("physical")),
+                              THICK_SETTINGS.replace(mode="atmosphere-plus")),
     "ground": (lambda: preset("physical"), SMALL.replace(mode="physical")),
 }
 
@@ -873,8 +874,8 @@ def test_geometric_tail_against_many_orders(orders_of, case):
     1e-10 or less: the table, the ray march's gathered source and the ground's irradiance within the
     tolerance (1e-4) in the bright part, which the stopping rule's error estimate aims at (measured
     2.9e-5, 7.8e-5 and 2.2e-5 for the tables, 7.6e-5 at most elsewhere), and the tail at least 3x closer
-    than the plain sum of the same orders (measured 9x, 16x and 9x): the tail carries the light of the
-    orders left out, not a guess of its size."""
+    than the plain sum of the same orders (measured 9x, 16x and 9x): the tail adds the light of the
+    orders left out, where a wrong tail would add error."""
     make_atmosphere, settings = TAIL_CASES[case]
     atmosphere = make_atmosphere()
     result = orders_of(atmosphere, settings)
