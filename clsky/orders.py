@@ -427,7 +427,11 @@ def convergence_reason(k, addition, error, ratio, tolerance):
 
 def _total(order):
     """Light an order carries per wavelength (r, g, b), summed over all cells (factored: R + M)."""
-    per_channel = order.reshape(-1, order.shape[-1]).sum(axis=0)
+    flat = order.reshape(-1, order.shape[-1])
+    # one strided column at a time: NumPy runs flat.sum(axis=0) as a reduction over rows of 3 or 6, 5x
+    # slower (57 against 10 ms for an order of the default animation's table); its pairwise sums group
+    # the cells differently, so a total changes in its last bits
+    per_channel = np.array([flat[:, channel].sum() for channel in range(flat.shape[1])])
     return per_channel[:3] + per_channel[3:6] if per_channel.size == 6 else per_channel
 
 
