@@ -233,15 +233,24 @@ class HarmonicGather:
     def first_gather(self, single_harmonics):
         """G_{s,m} (M + 1, D, H, W, 6) of single scattering's harmonics Ibar_{s',n} (M + 1, D, H, W, 6),
         factored (Rayleigh r, g, b, Mie r, g, b without phase)."""
-        count, depth, height, width, _ = single_harmonics.shape
+        count, depth, height, width, channels = single_harmonics.shape
+        # one product for both species' columns (P is the same), on the contiguous table: per species
+        # it first copied each species' strided channels (2 x 61 MB for the default animation's table);
+        # the same sums, bit for bit, in about a quarter less time
+        seen = np.matmul(self.p, single_harmonics.reshape(count, depth, height, width * channels))
+        seen = seen.reshape(count, depth, -1, width, channels)                 # (n, D, Theta + 1, W, 6)
         out = np.empty((count, depth, height, width, 6))
-        harmonic = 0.0
+        harmonic = None
         for other_index, other in enumerate(SPECIES):
-            table = single_harmonics[..., 3 * other_index:3 * other_index + 3]
-            seen = np.matmul(self.p, table.reshape(count, depth, height, width * 3))   # (n, D, Theta + 1, W*3)
             # p_m(z, a) = sum_n C_{m,n}(z, a) seen_n(z, a), summed over the species s' seen (both gathering
             # species apply the same K_{s,m} to it: one matrix product per gathering species, not two)
-            harmonic = harmonic + np.einsum("mnza,nzac->mzac", self.sun[other], seen)
+            term = np.einsum("mnza,nzawc->mzawc", self.sun[other], seen[..., 3 * other_index:3 * other_index + 3])
+            if harmonic is None:
+                harmonic = term
+            else:
+                harmonic += term
+        del seen, term
+        harmonic = harmonic.reshape(count, depth, -1, width * 3)
         for index, species in enumerate(SPECIES):
             gathered = np.matmul(self.view[species][:, None], harmonic)              # (m, D, H, W * 3)
             out[..., 3 * index:3 * index + 3] = gathered.reshape(count, depth, height, width, 3)

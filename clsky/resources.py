@@ -327,9 +327,9 @@ def _orders_phases(settings, orders):
 
 def _harmonic_phases(settings, orders):
     """The orders of a table with azimuth harmonics (:mod:`clsky.azimuth`, n = M + 1 azimuth nodes): the
-    first gather on the host (single scattering at the n nodes and its harmonics, each seen species'
-    (n, D, Theta + 1, W 3) interpolation and their harmonic sum, the n gathered harmonics, the padded
-    upload), then the orders loop (every order's azimuth average kept on the host, the order's n nodes
+    first gather on the host (single scattering at the n nodes and its harmonics, both seen species'
+    interpolation (n, D, Theta + 1, W 6), a species' harmonic term and their sum, the n gathered
+    harmonics, the padded upload), then the orders loop (every order's azimuth average kept on the host, the order's n nodes
     and the running sum at the nodes; on the device the gathered sum, the gathered harmonics and the
     order's n nodes, padded, a harmonic and its gather; the nodes' padded download; for
     ``orders="auto"``, the order before at the nodes, which the geometric tail's test reads)."""
@@ -340,7 +340,8 @@ def _harmonic_phases(settings, orders):
     single = Allocation("single scattering at the azimuth nodes (n, D, H, W, 6) float64", cells * 6 * _F64, count=n)
     first = Phase("first gather", (
         single, Allocation("single scattering's harmonics (n, D, H, W, 6) float64", cells * 6 * _F64, count=n),
-        Allocation("interpolated single scattering and its harmonic sum (n, D, Theta + 1, W 3)", seen, count=3),
+        # both species interpolated at once (n, D, Theta + 1, W 6), a species' harmonic sum and the sum of both
+        Allocation("interpolated single scattering and its harmonic sums (n, D, Theta + 1, W 3)", seen, count=4),
         Allocation("gathered harmonics (n, D, H, W, 6) float64", cells * 6 * _F64, count=n),
         Allocation("padded upload (n, D, H, W, 8)", cells * 8 * _F64, count=n),
         Allocation("gathered harmonics on the device (n, D, H, W, 8)", padded, count=n, on_device=True)))
