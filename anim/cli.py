@@ -343,7 +343,8 @@ def run_bench(args):
         accuracy_plot.pareto_plot(rows, targets["--plot"], force=args.force, size=args.size, staging=staging)
         accuracy_plot.elevation_plot(rows, targets["--elevation-plot"], force=args.force, staging=staging)
     for row in rows:
-        print(f"{row['candidate']:>24}: build {row['build_s']:6.2f} s, frame {1e3 * row['render_s']:7.1f} ms, "
+        print(f"{row['candidate']:>24}: build {row['build_s']:6.2f} s ({row['build_cpu_s']:6.2f} CPU-s), frame "
+              f"{1e3 * row['render_s']:7.1f} ms ({1e3 * row['render_cpu_s']:7.1f} CPU-ms), "
               f"worst p95 error {100 * row['p95_rel']:8.2f} %, worst mean Delta E {row['mean_delta_e']:6.2f}")
     print(f"{len(rows)} candidates -> {targets['--output']}, {targets['--plot']}, {targets['--elevation-plot']}")
     return 0

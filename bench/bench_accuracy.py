@@ -34,7 +34,7 @@ import tempfile
 
 import numpy as np
 
-from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
+from _report import SMOKE, add_output_arguments, load_average, load_note, machine, parse_arguments, write_readme_section
 
 import clsky
 from clsky.anim import accuracy, accuracy_plot, writers
@@ -91,7 +91,9 @@ def run(args, candidates, level):
             raise SystemExit(f"{args.reference_cache} holds {valid.shape} frames, not {args.size} x {args.size}")
     else:
         reference, valid = accuracy.render_reference(args.size, level=level)
+    load_start = load_average()
     rows = accuracy.measure(candidates, reference, valid)
+    load_end = load_average()
     if args.docs is not None:
         args.docs.mkdir(parents=True, exist_ok=True)
         writers.write_csv(args.docs / "accuracy.csv", rows, force=True)
@@ -101,20 +103,23 @@ def run(args, candidates, level):
         print("wrote " + ", ".join(map(str, written)), flush=True)
     front = {r["candidate"] for r in accuracy.pareto_front(rows)}
     names = list(accuracy.SUN_ELEVATIONS)
-    lines = [f"Measured {datetime.date.today()} on {machine()}, {describe_device(default_device())}: "
+    lines = [f"Measured {datetime.date.today()} on {machine()}, {describe_device(default_device())} (load average "
+             f"{load_start:.2f} before the candidates, {load_end:.2f} after): "
              f"{args.size} x {args.size} fisheye frames from the ground, sun at elevations "
              + ", ".join(f"{e:g} deg ({n})" for n, e in accuracy.SUN_ELEVATIONS.items())
              + ". Error: 95th percentile of the relative HDR luminance error against the reference "
              f"(the '{level}' quality level, `anim/accuracy.py`; how far it converged: \"Quality levels\" "
              "below). Build: table "
-             "(single + orders); render: one frame. * = on the Pareto front (render time vs worst error). "
-             "Raw numbers: `docs/accuracy.csv`.", "",
-             "| candidate | knob | build [s] | render [ms] | " + " | ".join(f"p95 {n} [%]" for n in names)
-             + " | worst mean Delta E |",
-             "|---|---|---:|---:|" + "---:|" * len(names) + "---:|"]
+             "(single + orders); render: one frame; each in wall and process CPU time (every thread, PoCL's "
+             "workers included). * = on the Pareto front (render time vs worst error). "
+             "Raw numbers: `docs/accuracy.csv`." + load_note(max(load_start, load_end)), "",
+             "| candidate | knob | build [s] | CPU [s] | render [ms] | CPU [ms] | "
+             + " | ".join(f"p95 {n} [%]" for n in names) + " | worst mean Delta E |",
+             "|---|---|---:|---:|---:|---:|" + "---:|" * len(names) + "---:|"]
     for r in rows:
         mark = " *" if r["candidate"] in front else ""
-        lines.append(f"| {r['candidate']}{mark} | {r['knob']} | {r['build_s']:.2f} | {1e3 * r['render_s']:.1f} | "
+        lines.append(f"| {r['candidate']}{mark} | {r['knob']} | {r['build_s']:.2f} | {r['build_cpu_s']:.2f} | "
+                     f"{1e3 * r['render_s']:.1f} | {1e3 * r['render_cpu_s']:.1f} | "
                      + " | ".join(f"{100 * r[f'p95_rel {n}']:.2f}" for n in names)
                      + f" | {r['mean_delta_e']:.2f} |")
     markdown = "\n".join(lines)

@@ -34,10 +34,10 @@ import datetime
 import json
 import pathlib
 import tempfile
-import time
 
 import numpy as np
-from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
+from _report import (SMOKE, add_output_arguments, load_average, load_note, machine, parse_arguments,
+                     timed_with_cpu, write_readme_section)
 
 import clsky
 from clsky.anim import accuracy, animate, metrics, writers
@@ -54,14 +54,13 @@ FRAMES_PATH = (min(accuracy.SUN_ELEVATIONS.values()), max(accuracy.SUN_ELEVATION
 
 
 def frames_of(table, ray, size, method="raymarch"):
-    """{frame name: HDR} of the four frames, and the mean render time of one frame [s]."""
+    """{frame name: HDR} of the four frames, and the mean wall and process CPU time of one frame [s]."""
     directions, valid = FisheyeCamera(size).directions()
     with SkyRenderer(table, ray) as renderer:
         prepared = renderer.prepare(directions, valid)
         accuracy.render_frames(renderer, method, prepared)                  # warm-up
-        start = time.perf_counter()
-        frames = accuracy.render_frames(renderer, method, prepared)
-        return frames, (time.perf_counter() - start) / len(frames)
+        frames, wall, cpu = timed_with_cpu(lambda: accuracy.render_frames(renderer, method, prepared))
+        return frames, wall / len(frames), cpu / len(frames)
 
 
 def errors(reference, frames, valid):
@@ -69,17 +68,14 @@ def errors(reference, frames, valid):
 
 
 def built(atmosphere, settings, repeat=1, smoke=False):
-    """The table and its build time [s]: the fastest of ``repeat`` builds (the least noisy figure).
-    ``smoke``: cut the table to at most SMOKE.table nodes per axis, and build it once."""
+    """The table and its build's wall and process CPU time [s]: the least of each over ``repeat`` builds
+    (the least noisy figures). ``smoke``: cut the table to at most SMOKE.table nodes per axis, and build
+    it once."""
     if smoke:
         settings = settings.replace(size=tuple(min(n, m) for n, m in zip(settings.size, SMOKE.table)))
         repeat = SMOKE.repeat
-    seconds = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        table = clsky.ScatteringTable.build(atmosphere, settings)
-        seconds.append(time.perf_counter() - start)
-    return table, min(seconds)
+    runs = [timed_with_cpu(lambda: clsky.ScatteringTable.build(atmosphere, settings)) for _ in range(repeat)]
+    return runs[-1][0], min(run[1] for run in runs), min(run[2] for run in runs)
 
 
 def percent(values):
@@ -111,25 +107,29 @@ def main():
 
 
 def run(args, reference_name):
-    stamp = f"Measured {datetime.date.today()} on {machine()}, {describe_device(default_device())}"
+    stamp = (f"Measured {datetime.date.today()} on {machine()}, {describe_device(default_device())} (load average "
+             f"{load_average():.2f} at the start)")
+    loads = []
 
     if args.reference_cache and args.reference_cache.exists():
         cached = np.load(args.reference_cache)
         reference, valid = {name: cached[name] for name in NAMES}, cached["valid"]
         reference_seconds, change = float(cached["seconds"]), json.loads(str(cached["convergence"]))
+        reference_cpu = float(cached["cpu_seconds"]) if "cpu_seconds" in cached.files else None
         args.groups = [g for g in change if g != "sum"]
         if valid.shape != (args.size, args.size):
             raise SystemExit(f"{args.reference_cache} holds {valid.shape} frames, not {args.size} x {args.size}")
     else:
-        start = time.perf_counter()
-        reference, valid = accuracy.render_reference(args.size, level=reference_name)
-        reference_seconds = time.perf_counter() - start
+        (reference, valid), reference_seconds, reference_cpu = timed_with_cpu(
+            lambda: accuracy.render_reference(args.size, level=reference_name))
+        loads.append(load_average())
         if args.reference_cache:    # kept even if the convergence fails (a doubled group may not fit in memory)
-            np.savez(args.reference_cache, valid=valid, seconds=reference_seconds, convergence="{}", **reference)
+            np.savez(args.reference_cache, valid=valid, seconds=reference_seconds, cpu_seconds=reference_cpu,
+                     convergence="{}", **reference)
         change = accuracy.reference_convergence(reference, valid, groups=args.groups, level=reference_name)
         if args.reference_cache:
-            np.savez(args.reference_cache, valid=valid, seconds=reference_seconds, convergence=json.dumps(change),
-                     **reference)
+            np.savez(args.reference_cache, valid=valid, seconds=reference_seconds, cpu_seconds=reference_cpu,
+                     convergence=json.dumps(change), **reference)
     print(f"reference: {reference_seconds:.0f} s", flush=True)
     for group, values in change.items():
         print(f"reference, {group} doubled: {percent(values)} %", flush=True)
@@ -139,12 +139,14 @@ def run(args, reference_name):
         if name == "reference":
             continue
         plan = plan_scene(Scene(FRAMES_PATH, quality=name))
-        table, build = built(plan.atmosphere, plan.table, smoke=args.smoke)
-        frames, render = frames_of(table, level.ray, args.size)
-        lut, lut_render = frames_of(table, level.ray, args.size, method="lut")
+        table, build, build_cpu = built(plan.atmosphere, plan.table, smoke=args.smoke)
+        frames, render, render_cpu = frames_of(table, level.ray, args.size)
+        lut, _, _ = frames_of(table, level.ray, args.size, method="lut")
+        loads.append(load_average())
         error = errors(reference, frames, valid)
         rows.append({"level": name, "budget": level.budget, "table": "x".join(map(str, table.settings.size)),
-                     "samples": level.ray.view_steps, "build_s": build, "render_s": render,
+                     "samples": level.ray.view_steps, "build_s": build, "build_cpu_s": build_cpu,
+                     "render_s": render, "render_cpu_s": render_cpu, "load": loads[-1],
                      **{f"p95_rel {n}": error[n] for n in NAMES}, "worst": max(error.values()),
                      "lut_worst": max(errors(reference, lut, valid).values())})
         print(rows[-1], flush=True)
@@ -156,18 +158,21 @@ def run(args, reference_name):
     lines = [f"{stamp}: {args.size} x {args.size} fisheye frames from the ground (`bench/bench_quality.py`). "
              "Each level is planned for the four frames' sun path (-4 to 45 deg); error: 95th percentile of "
              "the relative HDR luminance error of its ray-marched frames against the reference. Build: the "
-             "table; render: one frame by ray march. The last column is the same table's lookup (worst frame).",
-             "", "| level | promise | table | samples | build [s] | render [ms] | "
-             + " | ".join(f"{n} [%]" for n in NAMES) + " | lookup, worst [%] |",
-             "|---|---:|---|---:|---:|---:|" + "---:|" * len(NAMES) + "---:|"]
+             "table, its wall and process CPU time (every thread, PoCL's workers included); render: one frame "
+             "by ray march, the mean of the four. The lookup column is the same table's lookup (worst frame); "
+             "load: the 1-minute load average after the row." + load_note(max(loads)),
+             "", "| level | promise | table | samples | build [s] | CPU [s] | render [ms] | CPU [ms] | "
+             + " | ".join(f"{n} [%]" for n in NAMES) + " | lookup, worst [%] | load |",
+             "|---|---:|---|---:|---:|---:|---:|---:|" + "---:|" * len(NAMES) + "---:|---:|"]
     for r in rows:
         lines.append(f"| {r['level']} | {100 * r['budget']:g} % | {r['table']} | {r['samples']} | {r['build_s']:.2f} | "
-                     f"{1e3 * r['render_s']:.1f} | " + percent({n: r[f"p95_rel {n}"] for n in NAMES})
-                     + f" | {100 * r['lut_worst']:.0f} |")
+                     f"{r['build_cpu_s']:.2f} | {1e3 * r['render_s']:.1f} | {1e3 * r['render_cpu_s']:.1f} | "
+                     + percent({n: r[f"p95_rel {n}"] for n in NAMES}) + f" | {100 * r['lut_worst']:.0f} | {r['load']:.2f} |")
     reference_level = accuracy.reference_level(level=reference_name)
     lines += ["", f"The reference ('{reference_name}' level: " + "{} x {} altitude x view ".format(*reference_level.table.size[:2])
               + f"nodes, sun nodes every {reference_level.sun_node_spacing:g} in w on each frame's sun range, "
-              f"{reference_level.ray.view_steps} samples; {reference_seconds:.0f} s for the four frames) "
+              f"{reference_level.ray.view_steps} samples; {reference_seconds:.0f} s"
+              + ("" if reference_cpu is None else f" and {reference_cpu:.0f} CPU-s") + " for the four frames) "
               "changes this much when each group of its counts is doubled; their sum bounds the change of "
               "doubling them all"
               + ("" if len(args.groups) == len(accuracy.REFERENCE_GROUPS) else
@@ -185,28 +190,30 @@ def run(args, reference_name):
     config = animate.AnimationConfig(size=SMOKE.frame) if args.smoke else animate.AnimationConfig()
     directions, camera_valid = animate._camera(config).directions()
     plan = animate.plan_animation(config, animate.sun_positions(config), directions, camera_valid)
-    planned, planned_build = built(plan.atmosphere, plan.table, repeat=3, smoke=args.smoke)
-    full, full_build = built(plan.atmosphere, plan.full_table, repeat=3, smoke=args.smoke)
-    planned_frames, _ = frames_of(planned, plan.level.ray, args.size)
-    full_frames, _ = frames_of(full, plan.level.ray, args.size)
+    planned, planned_build, planned_cpu = built(plan.atmosphere, plan.table, repeat=3, smoke=args.smoke)
+    full, full_build, full_cpu = built(plan.atmosphere, plan.full_table, repeat=3, smoke=args.smoke)
+    plan_load = load_average()
+    planned_frames, _, _ = frames_of(planned, plan.level.ray, args.size)
+    full_frames, _, _ = frames_of(full, plan.level.ray, args.size)
     planned_error, full_error = errors(reference, planned_frames, valid), errors(reference, full_frames, valid)
     between = errors(full_frames, planned_frames, valid)
     cells = [int(np.prod(t.settings.size)) for t in (planned, full)]
     lines = [f"{stamp}. The plan of the README's main job (`clsky animate`: sun from -6 to 60 deg, all-sky "
              "fisheye from the ground, 1 % budget), as `clsky animate` prints it:", "", "```",
              plan.describe(), "```", "",
-             "| table | sun axis | cells | build [s] | " + " | ".join(f"{n} [%]" for n in NAMES) + " |",
-             "|---|---|---:|---:|" + "---:|" * len(NAMES),
+             "| table | sun axis | cells | build [s] | CPU [s] | " + " | ".join(f"{n} [%]" for n in NAMES) + " |",
+             "|---|---|---:|---:|---:|" + "---:|" * len(NAMES),
              f"| planned | {planned.settings.size[2]} nodes, elevations {np.degrees(np.arcsin(plan.table.sun_cos_range[0])):.1f} "
-             f"to {np.degrees(np.arcsin(plan.table.sun_cos_range[1])):.1f} deg | {cells[0]} | {planned_build:.2f} | "
+             f"to {np.degrees(np.arcsin(plan.table.sun_cos_range[1])):.1f} deg | {cells[0]} | {planned_build:.2f} | {planned_cpu:.2f} | "
              + percent(planned_error) + " |",
-             f"| full, same quality | {full.settings.size[2]} nodes, whole axis | {cells[1]} | {full_build:.2f} | "
+             f"| full, same quality | {full.settings.size[2]} nodes, whole axis | {cells[1]} | {full_build:.2f} | {full_cpu:.2f} | "
              + percent(full_error) + " |",
-             f"| planned vs full | | {cells[0] / cells[1]:.2f} x | {planned_build / full_build:.2f} x | "
+             f"| planned vs full | | {cells[0] / cells[1]:.2f} x | {planned_build / full_build:.2f} x | {planned_cpu / full_cpu:.2f} x | "
              + percent(between) + " |", "",
              "Errors: 95th percentile against the reference (planned vs full: between the two), ray march "
-             f"{plan.level.ray.view_steps} samples, {args.size} x {args.size} frames. Build times: the fastest of "
-             "three builds each, in the same run."]
+             f"{plan.level.ray.view_steps} samples, {args.size} x {args.size} frames. Build times: the least wall and the "
+             f"least process CPU time of three builds each, in the same run (load average {plan_load:.2f} after "
+             f"them)."]
     plan_markdown = "\n".join(lines)
     print(quality_markdown)
     print(plan_markdown)

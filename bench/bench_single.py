@@ -1,6 +1,10 @@
 """Benchmark: the default single-scattering table (32 x 256 x 32, float64) through OpenCL and through
 its NumPy twin, side by side in one run. Prints the table and writes it into README.md.
 
+Each side is timed in wall time and process CPU time (every thread, PoCL's workers included), and the
+ratio is given for both (issue 12: on a shared machine the wall-time ratio swings with the load, the
+CPU-time ratio much less); the load average is recorded after each row.
+
 Usage: python bench/bench_single.py [--repeat N] [--no-readme] [--smoke]
 
 ``--smoke``: an 8 x 32 x 8 table, one repetition, print only (bench/_report.py).
@@ -11,9 +15,9 @@ from __future__ import annotations
 import argparse
 import datetime
 
-import numpy as np
 
-from _report import SMOKE, add_output_arguments, best_of, machine, parse_arguments, write_readme_section
+from _report import (SMOKE, add_output_arguments, load_average, load_note, machine, parse_arguments,
+                     timed_with_cpu, write_readme_section)
 
 from clsky import TableSettings, preset, reference
 from clsky._cl import describe_device
@@ -32,24 +36,31 @@ def main():
     atmosphere = preset("atmosphere-plus")
     rows = []
     base = TableSettings(size=size)
+    load_start = load_average()
     for label, settings in (("default (sun transmittance from the 2D table)", base),
                             ("sun rays re-marched (30 steps each)", base.replace(sun_transmittance="march")),
                             ("float32 kernels (NumPy twin in float64)", base.replace(dtype="float32"))):
         engine = SingleScatteringEngine(settings)
         engine.compute(atmosphere)                                  # warm-up: compile and first launch
-        cl_best, _ = best_of(lambda: engine.compute(atmosphere), args.repeat)
-        numpy_best, _ = best_of(lambda: reference.single_scattering(atmosphere, settings), 1)
+        timings = [timed_with_cpu(lambda: engine.compute(atmosphere)) for _ in range(args.repeat)]
+        cl_wall, cl_cpu = min(t[1] for t in timings), min(t[2] for t in timings)
+        _, numpy_wall, numpy_cpu = timed_with_cpu(lambda: reference.single_scattering(atmosphere, settings))
         device = describe_device(engine.device)
-        check = np.abs(engine.compute(atmosphere) - reference.single_scattering(atmosphere, settings)).max()
-        rows.append((label, cl_best, numpy_best, numpy_best / cl_best, check))
-        print(f"{label}: OpenCL {cl_best:.3f} s, NumPy {numpy_best:.2f} s, ratio {numpy_best / cl_best:.1f}x",
-              flush=True)
+        rows.append((label, cl_wall, cl_cpu, numpy_wall, numpy_cpu, load_average()))
+        print(f"{label}: OpenCL {cl_wall:.3f} s ({cl_cpu:.3f} CPU-s), NumPy {numpy_wall:.2f} s ({numpy_cpu:.2f} "
+              f"CPU-s), ratio {numpy_wall / cl_wall:.1f}x wall, {numpy_cpu / cl_cpu:.1f}x CPU", flush=True)
 
+    highest = max(row[-1] for row in rows)
     lines = [f"Single-scattering table {' x '.join(map(str, size))}, 30 + 30 Keller & Bohn trapezoid steps, measured "
-             f"{datetime.date.today()} on {machine()}, OpenCL device {device}; OpenCL: best of "
-             f"{args.repeat} after a warm-up, NumPy twin: one run, same process.", "",
-             "| settings | OpenCL [s] | NumPy twin [s] | NumPy / OpenCL |", "|---|---:|---:|---:|"]
-    lines += [f"| {label} | {cl:.3f} | {npy:.2f} | {ratio:.1f}x |" for label, cl, npy, ratio, _ in rows]
+             f"{datetime.date.today()} on {machine()}, OpenCL device {device} (load average {load_start:.2f} at the "
+             f"start); OpenCL: the least wall and the least process CPU time of {args.repeat} runs after a warm-up; "
+             f"NumPy twin: one run, same process. Process CPU time counts every thread (PoCL's workers); load: the "
+             f"1-minute load average after the row.{load_note(highest)}", "",
+             "| settings | OpenCL wall [s] | CPU [s] | NumPy twin wall [s] | CPU [s] | NumPy / OpenCL: wall | CPU "
+             "| load |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
+    lines += [f"| {label} | {cl_wall:.3f} | {cl_cpu:.3f} | {npy_wall:.2f} | {npy_cpu:.2f} | {npy_wall / cl_wall:.1f}x "
+              f"| {npy_cpu / cl_cpu:.1f}x | {load:.2f} |"
+              for label, cl_wall, cl_cpu, npy_wall, npy_cpu, load in rows]
     markdown = "\n".join(lines)
     print(markdown)
     if not args.no_readme:

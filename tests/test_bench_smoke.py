@@ -22,7 +22,8 @@ BENCH = ROOT / "bench"
 
 #: script: the start of the header line of each Markdown table it prints
 HEADERS = {
-    "bench_single": ["| settings | OpenCL [s] | NumPy twin [s] | NumPy / OpenCL |"],
+    "bench_single": ["| settings | OpenCL wall [s] | CPU [s] | NumPy twin wall [s] | CPU [s] | NumPy / OpenCL: wall | CPU "
+                     "| load |"],
     "bench_orders": ["| table | W x H x D | orders | first build: wall | CPU | repeated: wall | CPU | load |",
                      "| mode | orders | OpenCL wall | CPU | NumPy twins wall | CPU | NumPy / OpenCL: wall | CPU | load |",
                      "| mode | sun zenith [deg] | order 1 | order 2 | order 3 | order 4 | orders 5+ |"],
@@ -33,12 +34,12 @@ HEADERS = {
     "bench_animate": ["| run | frames | wall [s] | CPU [s] | CPU / wall | load before | load after |",
                       "| stage | CPU [s], BLAS 1 thread | per frame [ms] | CPU [s], BLAS unlimited | per frame [ms] |"],
     "bench_memory": ["| run | table (W x H x D) | measured peak | estimate | estimate / measured |"],
-    "bench_accuracy": ["| candidate | knob | build [s] | render [ms] | p95 day [%] |"],
-    "bench_quality": ["| level | promise | table | samples | build [s] | render [ms] | day [%] |",
-                      "| doubled | day [%] |", "| table | sun axis | cells | build [s] | day [%] |"],
+    "bench_accuracy": ["| candidate | knob | build [s] | CPU [s] | render [ms] | CPU [ms] | p95 day [%] |"],
+    "bench_quality": ["| level | promise | table | samples | build [s] | CPU [s] | render [ms] | CPU [ms] | day [%] |",
+                      "| doubled | day [%] |", "| table | sun axis | cells | build [s] | CPU [s] | day [%] |"],
     "bench_view_nodes": ["| preset | sampling | rays | n | Ibar median | Ibar p95 | Ibar max |",
                          "| preset | observer [km] | planner picks | rays hitting the ground |",
-                         "| sampling | table [s] | ray march [ms] |"],
+                         "| sampling | table [s] | CPU [s] | ray march [ms] | CPU [ms] |"],
     "bench_dusk": ["| sky | display | zenith sRGB (8 bit) | blue: b > g > r | linear b / g | linear g / r |"],
     "bench_spectral": ["| build | batches | wall [s] | CPU [s] | wall / three | load |",
                        "| mode against N = 6 | sun zenith [deg] | PSNR [dB] | mean Delta E 2000 | Bruneton's anchor |"],
