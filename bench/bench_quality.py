@@ -167,7 +167,8 @@ def run(args, reference_name):
     for r in rows:
         lines.append(f"| {r['level']} | {100 * r['budget']:g} % | {r['table']} | {r['samples']} | {r['build_s']:.2f} | "
                      f"{r['build_cpu_s']:.2f} | {1e3 * r['render_s']:.1f} | {1e3 * r['render_cpu_s']:.1f} | "
-                     + percent({n: r[f"p95_rel {n}"] for n in NAMES}) + f" | {100 * r['lut_worst']:.0f} | {r['load']:.2f} |")
+                     + percent({n: r[f"p95_rel {n}"] for n in NAMES})
+                     + f" | {100 * r['lut_worst']:.0f} | {r['load']:.2f} |")
     reference_level = accuracy.reference_level(level=reference_name)
     lines += ["", f"The reference ('{reference_name}' level: " + "{} x {} altitude x view ".format(*reference_level.table.size[:2])
               + f"nodes, sun nodes every {reference_level.sun_node_spacing:g} in w on each frame's sun range, "
@@ -204,14 +205,18 @@ def run(args, reference_name):
              "| table | sun axis | cells | build [s] | CPU [s] | " + " | ".join(f"{n} [%]" for n in NAMES) + " |",
              "|---|---|---:|---:|---:|" + "---:|" * len(NAMES),
              f"| planned | {planned.settings.size[2]} nodes, elevations {np.degrees(np.arcsin(plan.table.sun_cos_range[0])):.1f} "
-             f"to {np.degrees(np.arcsin(plan.table.sun_cos_range[1])):.1f} deg | {cells[0]} | {planned_build:.2f} | {planned_cpu:.2f} | "
+             f"to {np.degrees(np.arcsin(plan.table.sun_cos_range[1])):.1f} deg | {cells[0]} | {planned_build:.2f} | "
+             f"{planned_cpu:.2f} | "
              + percent(planned_error) + " |",
-             f"| full, same quality | {full.settings.size[2]} nodes, whole axis | {cells[1]} | {full_build:.2f} | {full_cpu:.2f} | "
+             f"| full, same quality | {full.settings.size[2]} nodes, whole axis | {cells[1]} | {full_build:.2f} | "
+             f"{full_cpu:.2f} | "
              + percent(full_error) + " |",
-             f"| planned vs full | | {cells[0] / cells[1]:.2f} x | {planned_build / full_build:.2f} x | {planned_cpu / full_cpu:.2f} x | "
+             f"| planned vs full | | {cells[0] / cells[1]:.2f} x | {planned_build / full_build:.2f} x | "
+             f"{planned_cpu / full_cpu:.2f} x | "
              + percent(between) + " |", "",
              "Errors: 95th percentile against the reference (planned vs full: between the two), ray march "
-             f"{plan.level.ray.view_steps} samples, {args.size} x {args.size} frames. Build times: the least wall and the "
+             f"{plan.level.ray.view_steps} samples, {args.size} x {args.size} frames. Build times: the least wall "
+             "and the "
              f"least process CPU time of three builds each, in the same run (load average {plan_load:.2f} after "
              f"them)."]
     plan_markdown = "\n".join(lines)

@@ -328,11 +328,11 @@ def _orders_phases(settings, orders):
 def _harmonic_phases(settings, orders):
     """The orders of a table with azimuth harmonics (:mod:`clsky.azimuth`, n = M + 1 azimuth nodes): the
     first gather on the host (single scattering at the n nodes and its harmonics, both seen species'
-    interpolation (n, D, Theta + 1, W 6), a species' harmonic term and their sum, the n gathered
-    harmonics, the padded upload), then the orders loop (every order's azimuth average kept on the host, the order's n nodes
-    and the running sum at the nodes; on the device the gathered sum, the gathered harmonics and the
-    order's n nodes, padded, a harmonic and its gather; the nodes' padded download; for
-    ``orders="auto"``, the order before at the nodes, which the geometric tail's test reads)."""
+    interpolation (n, D, Theta + 1, W 6), a species' harmonic term and their sum, the n gathered harmonics,
+    the padded upload), then the orders loop (every order's azimuth average kept on the host, the order's n
+    nodes and the running sum at the nodes; on the device the gathered sum, the gathered harmonics and the
+    order's n nodes, padded, a harmonic and its gather; the nodes' padded download; for ``orders="auto"``,
+    the order before at the nodes, which the geometric tail's test reads)."""
     cells, height, depth, s = _table_sizes(settings)
     n = settings.azimuth_harmonics + 1
     padded = cells * 8 * s
