@@ -171,6 +171,7 @@ def relative_addition(added, running_sum, previous=None, ratio=None):
     threshold = BRIGHT_FRACTION * np.array([flat[:, channel].max() for channel in range(flat.shape[1])])
     if ratio is not None:
         r = per_channel(ratio, flat.shape[1])
+        squared_complement = (1.0 - r) ** 2
     # per block, the ratios of its bright cells (0 elsewhere: every ratio is >= 0); the largest of the
     # blocks' maxima is the maximum over the table (max is exact in any grouping; a NaN carries through)
     maxima = []
@@ -179,7 +180,13 @@ def relative_addition(added, running_sum, previous=None, ratio=None):
         bright = (sum_block >= threshold) & (sum_block > 0)
         if bright.any():
             if ratio is not None:
-                added_block = np.abs(added_block - r * previous_block[0]) / (1.0 - r) ** 2
+                # |added - r previous| / (1 - r)^2, the same operations in one temporary (half the time of
+                # a fresh array per operation: 0.10 against 0.20 s per order of the default animation's table)
+                estimate = np.multiply(r, previous_block[0])
+                np.subtract(added_block, estimate, out=estimate)
+                np.abs(estimate, out=estimate)
+                np.divide(estimate, squared_complement, out=estimate)
+                added_block = estimate
             maxima.append(np.divide(added_block, sum_block, out=np.zeros(sum_block.shape), where=bright).max())
     return float(np.max(maxima)) if maxima else 0.0
 
