@@ -108,6 +108,18 @@ def timed_with_cpu(function):
     return result, time.perf_counter() - wall, time.process_time() - cpu
 
 
+def best_timing(function, repeat):
+    """(last result, least wall [s], least CPU [s], highest load average) over ``repeat`` calls of
+    :func:`timed_with_cpu`: the least of each, the least noisy figures."""
+    walls, cpus, loads, result = [], [], [], None
+    for _ in range(repeat):
+        result, wall, cpu = timed_with_cpu(function)
+        walls.append(wall)
+        cpus.append(cpu)
+        loads.append(load_average())
+    return result, min(walls), min(cpus), max(loads)
+
+
 def children_cpu() -> float:
     """User + system CPU time [s] of the waited-for child processes (and their waited-for children): a
     command run with subprocess, ffmpeg under it included."""

@@ -34,8 +34,8 @@ import sys
 
 import numpy as np
 
-from _report import (SMOKE, add_output_arguments, load_average, load_note, machine, parse_arguments,
-                     timed_with_cpu, write_readme_section)
+from _report import (SMOKE, add_output_arguments, best_timing, load_average, load_note, machine,
+                     parse_arguments, timed_with_cpu, write_readme_section)
 
 import clsky
 from clsky import ground
@@ -66,17 +66,6 @@ def fresh_process_build(atmosphere, settings):
     case = json.dumps({"atmosphere": atmosphere.to_dict(), "settings": settings.to_dict()})
     output = subprocess.run([sys.executable, "-c", FRESH_BUILD, case], check=True, capture_output=True, text=True)
     return json.loads(output.stdout.strip().splitlines()[-1])
-
-
-def best_timing(function, repeat):
-    """(last result, least wall [s], least CPU [s], highest load average) over ``repeat`` calls."""
-    walls, cpus, loads, result = [], [], [], None
-    for _ in range(repeat):
-        result, wall, cpu = timed_with_cpu(function)
-        walls.append(wall)
-        cpus.append(cpu)
-        loads.append(load_average())
-    return result, min(walls), min(cpus), max(loads)
 
 
 def build_cases(smoke):

@@ -36,8 +36,8 @@ import pathlib
 import tempfile
 
 import numpy as np
-from _report import (SMOKE, add_output_arguments, load_average, load_note, machine, parse_arguments,
-                     timed_with_cpu, write_readme_section)
+from _report import (SMOKE, add_output_arguments, best_timing, load_average, load_note, machine,
+                     parse_arguments, timed_with_cpu, write_readme_section)
 
 import clsky
 from clsky.anim import accuracy, animate, metrics, writers
@@ -74,8 +74,8 @@ def built(atmosphere, settings, repeat=1, smoke=False):
     if smoke:
         settings = settings.replace(size=tuple(min(n, m) for n, m in zip(settings.size, SMOKE.table)))
         repeat = SMOKE.repeat
-    runs = [timed_with_cpu(lambda: clsky.ScatteringTable.build(atmosphere, settings)) for _ in range(repeat)]
-    return runs[-1][0], min(run[1] for run in runs), min(run[2] for run in runs)
+    table, wall, cpu, _ = best_timing(lambda: clsky.ScatteringTable.build(atmosphere, settings), repeat)
+    return table, wall, cpu
 
 
 def percent(values):
@@ -216,9 +216,8 @@ def run(args, reference_name):
              + percent(between) + " |", "",
              "Errors: 95th percentile against the reference (planned vs full: between the two), ray march "
              f"{plan.level.ray.view_steps} samples, {args.size} x {args.size} frames. Build times: the least wall "
-             "and the "
-             f"least process CPU time of three builds each, in the same run (load average {plan_load:.2f} after "
-             f"them)."]
+             f"and the least process CPU time of three builds each, in the same run (load average "
+             f"{plan_load:.2f} after them)."]
     plan_markdown = "\n".join(lines)
     print(quality_markdown)
     print(plan_markdown)

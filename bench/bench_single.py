@@ -15,9 +15,8 @@ from __future__ import annotations
 import argparse
 import datetime
 
-
-from _report import (SMOKE, add_output_arguments, load_average, load_note, machine, parse_arguments,
-                     timed_with_cpu, write_readme_section)
+from _report import (SMOKE, add_output_arguments, best_timing, load_average, load_note, machine,
+                     parse_arguments, timed_with_cpu, write_readme_section)
 
 from clsky import TableSettings, preset, reference
 from clsky._cl import describe_device
@@ -42,8 +41,7 @@ def main():
                             ("float32 kernels (NumPy twin in float64)", base.replace(dtype="float32"))):
         engine = SingleScatteringEngine(settings)
         engine.compute(atmosphere)                                  # warm-up: compile and first launch
-        timings = [timed_with_cpu(lambda: engine.compute(atmosphere)) for _ in range(args.repeat)]
-        cl_wall, cl_cpu = min(t[1] for t in timings), min(t[2] for t in timings)
+        _, cl_wall, cl_cpu, _ = best_timing(lambda: engine.compute(atmosphere), args.repeat)
         _, numpy_wall, numpy_cpu = timed_with_cpu(lambda: reference.single_scattering(atmosphere, settings))
         device = describe_device(engine.device)
         rows.append((label, cl_wall, cl_cpu, numpy_wall, numpy_cpu, load_average()))
