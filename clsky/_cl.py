@@ -353,6 +353,16 @@ VECTOR_WIDTH = 8
 #: The widths the kernels accept.
 VECTOR_WIDTHS = (1, 8)
 
+#: How the kernels take the non-linear mapping's cube roots (kernels/mapping.cl, ``CUBE_ROOT_UNIT``):
+#: "halley", a bit-pattern seed and three Halley steps, within 3 ulp of the correctly rounded root and
+#: 2.5x cheaper than OpenCL's ``cbrt`` on PoCL here (in double precision; float32 always uses
+#: ``cbrt``); "library", ``cbrt`` itself (``-DCUBE_ROOT_LIBRARY=1``): the kernels of the commits before
+#: 2026-12-03's, bit for bit, which tests/pins.py holds them to. An engine reads it when it is made
+#: (:attr:`Engine.cube_root`).
+CUBE_ROOT = "halley"
+#: The cube roots the kernels offer.
+CUBE_ROOTS = ("halley", "library")
+
 
 class Engine:
     """Owns one OpenCL program: builds it once and fetches every kernel once.
@@ -382,6 +392,8 @@ class Engine:
     vector_width : int
         :data:`VECTOR_WIDTH` when the engine was made: the ``-DVECTOR_WIDTH`` of its programs and the
         lanes per work-item of its launches.
+    cube_root : str
+        :data:`CUBE_ROOT` when the engine was made: how its programs take the mapping's cube roots.
     """
 
     sources: tuple = ()
@@ -391,6 +403,9 @@ class Engine:
         if VECTOR_WIDTH not in VECTOR_WIDTHS:
             raise ValueError(f"clsky._cl.VECTOR_WIDTH must be one of {VECTOR_WIDTHS}, got {VECTOR_WIDTH!r}")
         self.vector_width = VECTOR_WIDTH
+        if CUBE_ROOT not in CUBE_ROOTS:
+            raise ValueError(f"clsky._cl.CUBE_ROOT must be one of {CUBE_ROOTS}, got {CUBE_ROOT!r}")
+        self.cube_root = CUBE_ROOT
         if queue is not None:
             ctx = queue.context
         self.ctx = ctx if ctx is not None else make_context(self.dtype)
@@ -426,6 +441,8 @@ class Engine:
 
     def build_options(self) -> list[str]:
         options = ["-DREAL_IS_DOUBLE=1"] if self.dtype == np.float64 else []
+        if self.cube_root == "library":
+            options.append("-DCUBE_ROOT_LIBRARY=1")
         if self.fast_math:
             options.append("-cl-fast-relaxed-math")
         return options

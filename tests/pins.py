@@ -19,6 +19,12 @@ same inputs as the test (the pin means "bit for bit the code before X", not "the
 and pasting the printed entries into the tests' mappings. :data:`PINS` names, for each pin, the commit
 it belongs to; scripts/record_pins.py refuses a source tree at another commit.
 
+Since 2026-12-03 the kernels take the mapping's cube roots by three Halley steps instead of OpenCL's
+``cbrt`` (``clsky._cl.CUBE_ROOT``; within 3 ulp, the last bits of 9-22 % of a table's values change):
+the pins run today's code with ``cbrt`` (:func:`_library_cube_root`), the choice every pinned commit
+made, so that they still hold each refactor to its commit bit for bit; tests/test_cube_root.py checks
+the Halley root on its own and the tables and frames it gives against ``cbrt``'s.
+
 Where the old and today's APIs differ, the functions below take the path both accept (noted there):
 the field ``ground_albedo`` (absent before the ground, whose atmospheres are all black), the package
 ``anim`` (``clsky.anim`` today) and ``AnimationConfig.tone_map`` (absent before anim/display.py).
@@ -77,17 +83,32 @@ VIEW_NODE_DIRECTIONS = _unit([[0, 0, 1.0], [0.6, 0, 0.8], [0.99, 0, -0.125], [0.
 VIEW_NODE_SUN = np.array([0.0, 0.6, 0.8])
 
 
+def _library_cube_root():
+    """A context in which every engine made takes the mapping's cube roots with OpenCL's ``cbrt``
+    (``clsky._cl.CUBE_ROOT = "library"``), as every commit before 2026-12-03's did. A tree without
+    the choice has nothing to switch."""
+    import contextlib
+    from unittest import mock
+
+    from clsky import _cl
+
+    if not hasattr(_cl, "CUBE_ROOT"):
+        return contextlib.nullcontext()
+    return mock.patch.object(_cl, "CUBE_ROOT", "library")
+
+
 def table_hashes(atmosphere, settings, directions, sun, renders, ctx) -> tuple:
     """Hashes of a table's ``data`` and ``gathered``, then of the pixels of each ``(method, altitude)``
-    in ``renders`` (method 'raymarch' or 'table', altitude [m])."""
+    in ``renders`` (method 'raymarch' or 'table', altitude [m]); cube roots by ``cbrt``."""
     from clsky import ScatteringTable
     from clsky.render import SkyRenderer
 
-    table = ScatteringTable.build(atmosphere, settings, ctx=ctx)
-    hashes = [sha256(table.data), sha256(table.gathered)]
-    with SkyRenderer(table, ctx=ctx) as renderer:
-        for method, altitude in renders:
-            hashes.append(sha256(getattr(renderer, f"render_{method}")(directions, sun, altitude)))
+    with _library_cube_root():
+        table = ScatteringTable.build(atmosphere, settings, ctx=ctx)
+        hashes = [sha256(table.data), sha256(table.gathered)]
+        with SkyRenderer(table, ctx=ctx) as renderer:
+            for method, altitude in renders:
+                hashes.append(sha256(getattr(renderer, f"render_{method}")(directions, sun, altitude)))
     return tuple(hashes)
 
 
@@ -150,7 +171,8 @@ def display_frames(ctx, directory, tone_map=None) -> tuple:
     frames of 24 px), written under ``directory``: SHA-256 of each PNG frame's decoded pixels, and each
     frame's METRIC_KEYS. ``tone_map`` None leaves the config's default (the only choice before
     anim/display.py). Its table sums the orders plainly (:func:`_plain_sum_of_orders`), as the pinned
-    commit did: so the pin also holds the orders loop without the tail to its results, bit for bit."""
+    commit did: so the pin also holds the orders loop without the tail to its results, bit for bit;
+    cube roots by ``cbrt`` (:func:`_library_cube_root`)."""
     import pathlib
 
     from PIL import Image
@@ -164,7 +186,7 @@ def display_frames(ctx, directory, tone_map=None) -> tuple:
     config = AnimationConfig(frames=3, size=24, table_size=(9, 33, 7), preset="atmosphere-plus",
                              mode="atmosphere-plus", start_elevation_deg=-4.0, max_elevation_deg=30.0,
                              output=str(directory / "sky.mp4"), **options)
-    with _plain_sum_of_orders():
+    with _plain_sum_of_orders(), _library_cube_root():
         result = render_animation(config, ctx=ctx)
     frames = sorted((directory / "sky_frames").glob("*.png"))
     hashes = [hashlib.sha256(np.asarray(Image.open(f)).tobytes()).hexdigest() for f in frames]

@@ -1,0 +1,159 @@
+"""The kernels' cube root of the non-linear mapping (kernels/mapping.cl, ``cube_root_unit``) against
+NumPy's, and the tables and frames it gives against those of OpenCL's ``cbrt`` (issue 12).
+
+Since 2026-12-03 the kernels take the cube roots of the view and sun coordinates (``MAPPING_V``, one
+each per ray node of the scatter and the ray march) from a bit-pattern seed and three Halley steps
+instead of OpenCL's ``cbrt``, 2.5x cheaper on PoCL (``clsky._cl.CUBE_ROOT``; "library" keeps
+``cbrt``, which the bit-for-bit pins of tests/pins.py use). The reference here is ``numpy.cbrt``
+(glibc's, itself within 1 ulp of the exact root), which shares no code with the kernels.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+import pyopencl.array as cla
+import pytest
+
+import clsky
+from clsky import _cl
+from clsky.anim.cameras import FisheyeCamera, sun_direction
+from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
+
+DBL_MIN = np.finfo(np.float64).tiny
+
+_TEST_KERNELS = _cl.Source("test kernels (tests/test_cube_root.py)", """
+__kernel void cube_roots(__global const real *x, __global real *scalar, __global real *vector,
+                         __global real *mapped)
+{
+    const int i = get_global_id(0);
+    vstore8(cube_root_unit(vload8(i, x)), i, vector);
+    for (int k = 8 * i; k < 8 * i + 8; ++k) {
+        const real c = x[k];
+        scalar[k] = cube_root_unit(c);
+        mapped[k] = MAPPING_V(c, 1);
+    }
+}
+""")
+
+
+@pytest.fixture(scope="module")
+def cube_roots(cl_context, fp64_available):
+    """``run(x)``: (scalar root, double8 root, MAPPING_V) of float64 ``x`` (a multiple of 8 values)."""
+    if not fp64_available:
+        pytest.skip("the Halley cube root is the float64 kernels'")
+    if "Portable Computing Language" not in cl_context.devices[0].platform.name:
+        pytest.skip("cube_root_unit needs clang's overloadable functions; other compilers may take cbrt")
+    program = _cl.build_program(cl_context, ("real.cl", "mapping.cl", _TEST_KERNELS), ["-DREAL_IS_DOUBLE=1"])
+    kernel = cl.Kernel(program, "cube_roots")
+    queue = cl.CommandQueue(cl_context)
+
+    def run(x):
+        x_d = cla.to_device(queue, np.ascontiguousarray(x, dtype=np.float64))
+        outs = [cla.empty_like(x_d) for _ in range(3)]
+        kernel(queue, (x.size // 8,), None, x_d.data, *(out.data for out in outs))
+        return tuple(out.get() for out in outs)
+
+    return run
+
+
+def arguments():
+    """2^20 cosines uniform in [-1, 1], 2^18 of random sign log-uniform from DBL_MIN to 1, and the ends."""
+    rng = np.random.default_rng(20261203)
+    uniform = rng.uniform(-1.0, 1.0, 2**20)
+    spread = np.exp(rng.uniform(np.log(DBL_MIN), 0.0, 2**18)) * rng.choice([-1.0, 1.0], 2**18)
+    ends = [1.0, -1.0, 0.125, -0.125, 0.5, -0.5, DBL_MIN, -DBL_MIN, np.nextafter(1.0, 0.0), 1e-300]
+    return np.concatenate([uniform, spread, ends, np.zeros((-len(ends)) % 8)])
+
+
+def test_cube_root_is_within_3_ulp_of_numpy(cube_roots):
+    """Three Halley steps from a seed within 3.3 % cube the error three times (3.3e-2 -> ~1e-5 ->
+    ~1e-15 -> rounding): what is left is the last step's rounding, a few ulp. Bound: 3 ulp of the
+    root, as measured over these arguments (2^20 + 2^18 values); both overloads (double, double8)."""
+    x = arguments()
+    expected = np.cbrt(x)
+    ulp = np.spacing(np.abs(expected))
+    for name, root in zip(("double", "double8"), cube_roots(x)[:2]):
+        error = np.abs(root - expected) / ulp
+        assert error.max() <= 3.0, f"{name}: {error.max():.0f} ulp at x = {x[np.argmax(error)]!r}"
+
+
+def test_cube_root_is_exact_at_the_table_ends_and_keeps_signs(cube_roots):
+    """The mapping's ends must map exactly: v(1) = 1 and v(-1) = 0 are the table's first and last
+    nodes (and 1/8, whose root 1/2 is a binary number); zero gives zero with its sign."""
+    x = np.array([1.0, -1.0, 0.125, -0.125, 0.0, -0.0, 1.0, -1.0])
+    for root in cube_roots(x)[:2]:
+        np.testing.assert_array_equal(root, [1.0, -1.0, 0.5, -0.5, 0.0, -0.0, 1.0, -1.0])
+        np.testing.assert_array_equal(np.signbit(root), np.signbit(x))
+    np.testing.assert_array_equal(cube_roots(x)[2], [1.0, 0.0, 0.75, 0.25, 0.5, 0.5, 1.0, 0.0])
+
+
+def test_subnormal_arguments_map_to_the_middle(cube_roots):
+    """Subnormal x is outside the 3-ulp promise (the seed's bit trick assumes a normal number): the
+    root must still be finite, of x's sign and below 3e-103 (kernels/mapping.cl; the exact roots are
+    below 2.82e-103), so that MAPPING_V gives exactly 0.5, as for the exact roots (far under 2^-54)."""
+    rng = np.random.default_rng(7)
+    x = np.exp(rng.uniform(np.log(5e-324), np.log(DBL_MIN), 4096)) * rng.choice([-1.0, 1.0], 4096)
+    x[:2] = 5e-324, -5e-324
+    scalar, vector, mapped = cube_roots(x)
+    for root in (scalar, vector):
+        assert np.isfinite(root).all()
+        np.testing.assert_array_equal(np.signbit(root), np.signbit(x))
+        assert np.abs(root).max() < 3e-103
+    np.testing.assert_array_equal(mapped, 0.5)
+
+
+SETTINGS = clsky.TableSettings(size=(9, 33, 7), gather_theta_steps=32, gather_phi_steps=16, mode="physical",
+                               azimuth_harmonics=2)
+RAY = RAYMARCH_DEFAULTS.replace(view_steps=16, sun_steps=20, transmittance_size=(16, 32))
+
+
+def _table_and_frames(atmosphere, cube_root, monkeypatch):
+    monkeypatch.setattr(_cl, "CUBE_ROOT", cube_root)
+    table = clsky.ScatteringTable.build(atmosphere, SETTINGS)
+    renderer = SkyRenderer(table, ray_settings=RAY)
+    prepared = renderer.prepare(*FisheyeCamera(24).directions())
+    results = {"table": table.data, "gathered": table.gathered}
+    for zenith in (60.0, 93.0):
+        sun = sun_direction(zenith, 150.0)
+        results[f"raymarch {zenith}"] = renderer.render_raymarch(prepared, sun, 0.0)
+        results[f"lookup {zenith}"] = renderer.render_table(prepared, sun, 0.0)
+    return results
+
+
+def test_tables_and_frames_match_those_of_cbrt(monkeypatch, fp64_available):
+    """A table with the azimuth harmonics, ozone and a ground, and ray-marched and looked-up frames
+    by day and at dusk, with the Halley root against ``cbrt``.
+
+    Tolerance, 1e-13 of each quantity's maximum: a root off by 3 ulp (3.3e-16 for |root| <= 1) moves
+    v = (1 + root) / 2 by at most 3e-16 with its rounding, a node's coordinate v (H - 1) by 1e-14
+    (H = 33), and so each trilinear weight by 1e-14: a lookup moves by at most 1e-14 of the table's
+    largest value, and a table sums a few such lookups per order. (Measured: below 1e-15.) That some
+    values do change shows that the Halley root is the one in use (on PoCL, which has it)."""
+    if not fp64_available:
+        pytest.skip("the Halley cube root is the float64 kernels'")
+    atmosphere = clsky.preset("physical").replace(ground_albedo=0.3)
+    halley = _table_and_frames(atmosphere, "halley", monkeypatch)
+    library = _table_and_frames(atmosphere, "library", monkeypatch)
+    changed = 0
+    for key, value in halley.items():
+        reference = library[key]
+        assert np.isfinite(value).all(), key
+        if key != "gathered":                                  # the harmonics m > 0 may be negative
+            assert (value >= 0).all(), key
+        scale = np.abs(reference).max()
+        assert scale > 0, key
+        error = np.abs(value - reference).max() / scale
+        assert error <= 1e-13, f"{key}: Halley and cbrt differ by {error:.1e} of the maximum"
+        changed += int(np.count_nonzero(value != reference))
+    context = _cl.make_context()
+    if "Portable Computing Language" in context.devices[0].platform.name:
+        assert changed > 0, "no value changed: the kernels did not take the Halley cube root"
+
+
+def test_an_unknown_cube_root_is_refused(monkeypatch):
+    monkeypatch.setattr(_cl, "CUBE_ROOT", "newton")
+    with pytest.raises(ValueError, match=r"clsky._cl.CUBE_ROOT must be one of \('halley', 'library'\), "
+                                         r"got 'newton'"):
+        clsky.ScatteringTable.build(clsky.preset("physical"),
+                                    clsky.TableSettings(size=(4, 8, 4), orders=1, mode="physical"))
