@@ -23,7 +23,8 @@
     clamp((MAPPING_V(c, mapping) - (range).x) / ((range).y - (range).x), R(0.0), R(1.0))
 /* texture coordinate v (or w) of cosine c, clamped to [0, 1] */
 #define MAPPING_V(c, mapping) \
-    (R(0.5) * (R(1.0) + ((mapping) ? CUBE_ROOT_UNIT(clamp((c), R(-1.0), R(1.0))) : clamp((c), R(-1.0), R(1.0)))))
+    (R(0.5) * (R(1.0) + ((mapping) ? CUBE_ROOT_UNIT(clamp((c), R(-1.0), R(1.0))) \
+                                   : clamp((c), R(-1.0), R(1.0)))))
 
 /* CUBE_ROOT_UNIT(x): the real cube root of x in [-1, 1], for real and real8 x.
  *
@@ -42,11 +43,12 @@
  * roughly so: within 3.3 % of the root; W. Kahan's bit trick, the constant's high word being B1 =
  * 715094163 of FreeBSD's s_cbrt.c), then three Halley steps y <- y (y^3 + 2|x|) / (2 y^3 + |x|), each
  * cubing the relative error: within 3 ulp of the correctly rounded root for DBL_MIN <= |x| <= 1
- * (tests/test_cube_root.py, 2^20 arguments). The quotient of each step is formed first, so that no
- * product falls to a subnormal (PoCL here flushes those to zero). Subnormal x (|x| < DBL_MIN) get a
- * value of their sign below 3e-103 in magnitude, as their roots are, but not their root: the seed's
- * bit trick assumes a normal number, and rescaling them cost a quarter of the speed; MAPPING_V does
- * not see it (0.5 (1 + y) is 0.5 for every |y| < 2^-54). Zero gives x itself (its sign kept). */
+ * (tests/test_cube_root.py, 2^20 + 2^18 arguments). The quotient of each step is formed first, so
+ * that no product falls to a subnormal (PoCL here flushes those to zero). Subnormal x (|x| <
+ * DBL_MIN) get a value of their sign below 3e-103 in magnitude, as their roots are, but not their
+ * root: the seed's bit trick assumes a normal number, and rescaling them cost a quarter of the
+ * speed; MAPPING_V does not see it (0.5 (1 + y) is 0.5 for every |y| < 2^-54). Zero gives x itself
+ * (its sign kept). */
 #define CUBE_ROOT_UNIT_BODY(x, T, AS_T, AS_U, SELECT_IF)                                             \
     const T a = fabs(x);                                                                            \
     T y = AS_T(AS_U(a) / 3UL + 0x2A9F7893782DA1CEUL);                                                \
