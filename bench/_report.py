@@ -148,3 +148,34 @@ def load_note(highest: float) -> str:
 
 
 _LOAD_WARNED = False
+
+#: The fraction of a run's fastest exp() reading below which a reading is of the slow state.
+SLOW_STATE = 0.8
+_EXP_CONTEXT = None
+
+
+def exp_reading() -> float:
+    """One reading of the machine's state: ``double8`` exp() per CPU-second [M/s] on clsky's device
+    (bench/_bound.py, one run of about 0.1 s).
+
+    On the 2-core virtual machine it reads 1500-1600 M in a fast state and about 900 M in a slow one,
+    which lasts seconds to minutes and takes the ray march about a third more CPU for the same frame
+    (README "This machine runs at two speeds"): readings before and after a row tell which state it
+    ran in, where the load average does not."""
+    global _EXP_CONTEXT
+    from _bound import exp_rate
+    from clsky import _cl
+
+    if _EXP_CONTEXT is None:
+        _EXP_CONTEXT = _cl.make_context()
+    return exp_rate(_EXP_CONTEXT, repeat=1) / 1e6
+
+
+def state_note(readings) -> str:
+    """A sentence for a benchmark's README text when its exp() readings (:func:`exp_reading`) spread
+    over both of the machine's states."""
+    if not readings or min(readings) >= SLOW_STATE * max(readings):
+        return ""
+    return (f" The exp() readings spread from {min(readings):.0f} to {max(readings):.0f} M per CPU-second: "
+            f"rows read below {SLOW_STATE * max(readings):.0f} M ran at least in part in this machine's slow "
+            f"state, their CPU times up to a third higher (README \"This machine runs at two speeds\").")

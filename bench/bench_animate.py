@@ -2,7 +2,8 @@
 
 - End to end: ``python -m clsky.anim animate`` (120 frames, 512 x 512 fisheye, physical preset, table lookup
   and ray march compared, PNG + MP4 + metrics) in a fresh process: wall time, CPU time of the process
-  and its children (ffmpeg) from ``getrusage(RUSAGE_CHILDREN)``, the load average before and after; run
+  and its children (ffmpeg) from ``getrusage(RUSAGE_CHILDREN)``, the load average and the machine's exp()
+  rate (bench/_report.py, exp_reading: which of its two speeds it ran at) before and after; run
   twice, side by side: with the overlapped frame pipeline (the default: frame i + 1 rendered on a worker
   thread while frame i is displayed, compared and written, ``clsky.anim.pipeline``) and without it
   (``clsky.anim.animate.OVERLAP_FRAMES = False``: one frame after the other).
@@ -32,8 +33,8 @@ import sys
 import tempfile
 import time
 
-from _report import SMOKE, add_output_arguments, children_cpu, load_average, load_note, machine, parse_arguments, \
-    write_readme_section
+from _report import SMOKE, add_output_arguments, children_cpu, exp_reading, load_average, load_note, machine, \
+    parse_arguments, state_note, write_readme_section
 
 import clsky.anim.animate
 from clsky.anim.animate import AnimationConfig, render_animation
@@ -67,14 +68,17 @@ SERIAL = ("import sys, clsky.anim.animate, clsky.anim.cli; clsky.anim.animate.OV
 
 
 def end_to_end(arguments, overlap=True):
-    """(wall [s], CPU [s], load before, load after) of ``python -m clsky.anim animate <arguments>`` (with
-    ``overlap`` False: the frames one after the other)."""
+    """(wall [s], CPU [s], load before, load after, exp() reading before, after [M per CPU-second]) of
+    ``python -m clsky.anim animate <arguments>`` (with ``overlap`` False: the frames one after the
+    other)."""
     program = ["-m", "clsky.anim"] if overlap else ["-c", SERIAL]
     with tempfile.TemporaryDirectory() as directory:
+        exp_before = exp_reading()
         load_before, cpu, wall = load_average(), children_cpu(), time.perf_counter()
         subprocess.run([sys.executable, *program, "animate", "--progress", "none", *arguments], cwd=directory,
                        check=True, stdout=subprocess.DEVNULL)
-        return time.perf_counter() - wall, children_cpu() - cpu, load_before, load_average()
+        wall, cpu, load_after = time.perf_counter() - wall, children_cpu() - cpu, load_average()
+        return wall, cpu, load_before, load_after, exp_before, exp_reading()
 
 
 def stage_split(config_options, blas_limited=True):
@@ -121,10 +125,11 @@ def main():
     runs = {}
     for overlap in (True, False):
         runs[overlap] = end_to_end(command, overlap)
-        wall, cpu, load_before, load_after = runs[overlap]
+        wall, cpu, load_before, load_after, _, _ = runs[overlap]
         print(f"end to end ({'overlapped' if overlap else 'serial'}): wall {wall:.1f} s, CPU {cpu:.1f} s, load "
               f"{load_before:.1f} -> {load_after:.1f}", flush=True)
-    highest = max(max(run[2:]) for run in runs.values())
+    highest = max(max(run[2:4]) for run in runs.values())
+    readings = [reading for run in runs.values() for reading in run[4:]]
     # a discarded warm-up at the smoke size: kernel compilation and the colour conversion's tables
     # (built once per process) would otherwise land in the first variant only
     stage_split({"frames": SMOKE.animation_frames, "size": SMOKE.frame, **options})
@@ -139,13 +144,14 @@ def main():
     lines = [f"Measured {datetime.date.today()} on {machine()}. End to end: `{shown}` "
              f"in a fresh process (table build, both renderers, comparison, PNG + MP4 + metrics); CPU time of the "
              f"process and its children (ffmpeg), load average before and after; with the overlapped frame "
-             f"pipeline (default) and with the frames one after the other, run one after the other."
-             f"{load_note(highest)}", "",
-             "| run | frames | wall [s] | CPU [s] | CPU / wall | load before | load after |",
-             "|---|---|---:|---:|---:|---:|---:|",
+             f"pipeline (default) and with the frames one after the other, run one after the other; exp(): the "
+             f"machine's double8 exp() rate read before and after the run [M per CPU-second] (about 900 in its "
+             f"slow state, 1500-1600 in its fast one).{load_note(highest)}{state_note(readings)}", "",
+             "| run | frames | wall [s] | CPU [s] | CPU / wall | load before | load after | exp() |",
+             "|---|---|---:|---:|---:|---:|---:|---|",
              *(f"| `{shown}` | {'overlapped' if overlap else 'one after the other'} | {wall:.1f} | {cpu:.1f} | "
-               f"{cpu / wall:.2f} | {load_before:.1f} | {load_after:.1f} |"
-               for overlap, (wall, cpu, load_before, load_after) in runs.items()), "",
+               f"{cpu / wall:.2f} | {load_before:.1f} | {load_after:.1f} | {exp_before:.0f} / {exp_after:.0f} |"
+               for overlap, (wall, cpu, load_before, load_after, exp_before, exp_after) in runs.items()), "",
              f"Where the CPU time goes: the same animation at {args.stage_frames} frames, one after the other, in "
              f"one process after a warm-up (kernels compiled, the colour conversion's tables built), cProfile "
              f"on the process CPU clock (PoCL's worker threads count towards the stage that waits for them); "

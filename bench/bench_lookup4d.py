@@ -149,8 +149,8 @@ def main():
         f"{1000 * cpu4d:.0f} ms process CPU), 3D lookup {1000 * best3d:.0f} ms ({1 / best3d:.1f} fps; median "
         f"{1000 * median3d:.0f} ms), side by side; load average {load_end[0]:.1f} / {load_end[1]:.1f} / "
         f"{load_end[2]:.1f} (1 / 5 / 15 min) at the end.", "",
-        f"Other node counts, p95 error of the 4D lookup: azimuth nodes of the same table (the same orders); "
-        f"sun nodes of tables built anew (the ray march of each one's own orders as reference):", "",
+        "Other node counts, p95 error of the 4D lookup: azimuth nodes of the same table (the same orders); "
+        "sun nodes of tables built anew (the ray march of each one's own orders as reference):", "",
         "| azimuth x sun nodes | float32 [MB] | " + " | ".join(f"{n} ({e:+g} deg)" for n, (e, _) in ELEVATIONS.items())
         + " |", "|---:|---:|" + "---:|" * len(ELEVATIONS), *sweep]
     markdown = "\n".join(lines)

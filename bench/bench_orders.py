@@ -17,7 +17,10 @@ planned table within 4 s, the full default table 10x or more faster than its Num
 3. The share of each order at a few sun angles (from the same OpenCL results).
 
 Every timing has its wall time, this process' CPU time (all threads: PoCL's workers included) and the
-load average; a load above the core count is warned about (the wall times are then inflated).
+load average; a load above the core count is warned about (the wall times are then inflated). Each row
+also has the machine's exp() rate read just before and just after it (bench/_report.py, exp_reading):
+about 900 instead of 1500-1600 M per CPU-second in the machine's slow state, where CPU times run up to a
+third higher.
 
 Usage: python bench/bench_orders.py [--repeat N] [--no-readme] [--smoke]
 
@@ -34,8 +37,8 @@ import sys
 
 import numpy as np
 
-from _report import (SMOKE, add_output_arguments, best_timing, load_average, load_note, machine,
-                     parse_arguments, timed_with_cpu, write_readme_section)
+from _report import (SMOKE, add_output_arguments, best_timing, exp_reading, load_average, load_note, machine,
+                     parse_arguments, state_note, timed_with_cpu, write_readme_section)
 
 import clsky
 from clsky import ground
@@ -116,20 +119,24 @@ def main():
               "disk caches warm (a warm-up process ran first) and the in-process caches (compiled programs, "
               f"gather matrices) empty. *Repeated*: the least of {args.repeat} builds after one in the same "
               "process. Wall and process CPU time (all threads) [s]; load: the highest 1-minute load average "
-              "seen after the builds of the row.", "",
-              "| table | W x H x D | orders | first build: wall | CPU | repeated: wall | CPU | load |",
-              "|---|---|---:|---:|---:|---:|---:|---:|"]
+              "seen after the builds of the row; exp(): the machine's double8 exp() rate read before and after "
+              "the row [M per CPU-second] (about 900 in its slow state, 1500-1600 in its fast one).", "",
+              "| table | W x H x D | orders | first build: wall | CPU | repeated: wall | CPU | load | exp() |",
+              "|---|---|---:|---:|---:|---:|---:|---:|---|"]
     cases = build_cases(args.smoke)
     fresh_process_build(*cases[0][1:])                                        # warm-up: fills the disk caches
-    highest = start_load
+    highest, readings = start_load, []
     for label, atmosphere, settings in cases:
+        before = exp_reading()
         first = fresh_process_build(atmosphere, settings)
         first_load = load_average()
         clsky.ScatteringTable.build(atmosphere, settings)                    # warm-up in this process
         table, wall, cpu, load = best_timing(lambda: clsky.ScatteringTable.build(atmosphere, settings), args.repeat)
+        after = exp_reading()
+        readings += [before, after]
         builds.append(f"| {label} | {' x '.join(map(str, settings.size))} | {table.orders_record['orders']} | "
                       f"{first['wall']:.2f} | {first['cpu']:.2f} | {wall:.2f} | {cpu:.2f} | "
-                      f"{max(first_load, load):.2f} |")
+                      f"{max(first_load, load):.2f} | {before:.0f} / {after:.0f} |")
         highest = max(highest, first_load, load)
         print(builds[-1], f"(import clsky: {first['import_wall']:.2f} s wall)", flush=True)
 
@@ -137,9 +144,11 @@ def main():
               f"`clsky.orders.compute_orders` with `backend=\"opencl\"` (the least of {args.repeat} runs after a "
               "warm-up; kernel compilation excluded) and `backend=\"numpy\"` (the NumPy twins, one run, same "
               f"process), {stamp}. Wall and process CPU time [s]; load: the highest 1-minute load average seen "
-              "after the runs of the row.", "",
-              "| mode | orders | OpenCL wall | CPU | NumPy twins wall | CPU | NumPy / OpenCL: wall | CPU | load |",
-              "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+              "after the runs of the row; exp(): the machine's double8 exp() rate read before and after the row "
+              "[M per CPU-second].", "",
+              "| mode | orders | OpenCL wall | CPU | NumPy twins wall | CPU | NumPy / OpenCL: wall | CPU | load | "
+              "exp() |",
+              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
     shares = ["Share of each order in the table (sum over altitudes and view directions at the sun node "
               "nearest the given zenith; r / g / b, in %). The physical mode's order 1 counts Rayleigh + "
               "Mie with phase 1 (their mean over the sphere).", "",
@@ -149,20 +158,24 @@ def main():
         atmosphere = clsky.preset(mode)
         settings = clsky.TableSettings(mode=mode, size=size)
         compute_orders(atmosphere, settings)                                     # warm-up
+        before = exp_reading()
         result, wall, cpu, load = best_timing(lambda: compute_orders(atmosphere, settings), args.repeat)
         twins, numpy_wall, numpy_cpu = timed_with_cpu(lambda: compute_orders(atmosphere, settings, backend="numpy"))
+        after = exp_reading()
+        readings += [before, after]
         load = max(load, load_average())
         highest = max(highest, load)
         difference = max(np.abs(a - b).max() / np.abs(b).max() for a, b in zip(result.orders, twins.orders))
         timing.append(f"| {mode} | {result.record['orders']} | {wall:.2f} | {cpu:.2f} | {numpy_wall:.1f} | "
-                      f"{numpy_cpu:.1f} | {numpy_wall / wall:.1f}x | {numpy_cpu / cpu:.1f}x | {load:.2f} |")
+                      f"{numpy_cpu:.1f} | {numpy_wall / wall:.1f}x | {numpy_cpu / cpu:.1f}x | {load:.2f} | "
+                      f"{before:.0f} / {after:.0f} |")
         print(timing[-1], f"(max difference of any order: {difference:.1e} of its maximum)", flush=True)
         for zenith, share in shares_at_sun_nodes(result, settings, atmosphere):
             columns = [share[0], share[1], share[2], share[3], share[4:].sum(axis=0)]
             cells = " | ".join("/".join(f"{100 * v:.1f}" for v in column) for column in columns)
             shares.append(f"| {mode} | {zenith:.1f} | {cells} |")
-    builds[0] += load_note(highest)
-    timing[0] += load_note(highest)
+    builds[0] += load_note(highest) + state_note(readings)
+    timing[0] += load_note(highest) + state_note(readings)
     print("\n".join(builds + [""] + timing + [""] + shares))
     if not args.no_readme:
         write_readme_section("builds", "\n".join(builds))

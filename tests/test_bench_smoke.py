@@ -24,14 +24,15 @@ BENCH = ROOT / "bench"
 HEADERS = {
     "bench_single": ["| settings | OpenCL wall [s] | CPU [s] | NumPy twin wall [s] | CPU [s] | NumPy / OpenCL: wall | CPU "
                      "| load |"],
-    "bench_orders": ["| table | W x H x D | orders | first build: wall | CPU | repeated: wall | CPU | load |",
-                     "| mode | orders | OpenCL wall | CPU | NumPy twins wall | CPU | NumPy / OpenCL: wall | CPU | load |",
+    "bench_orders": ["| table | W x H x D | orders | first build: wall | CPU | repeated: wall | CPU | load | exp() |",
+                     "| mode | orders | OpenCL wall | CPU | NumPy twins wall | CPU | NumPy / OpenCL: wall | CPU | load | "
+                     "exp() |",
                      "| mode | sun zenith [deg] | order 1 | order 2 | order 3 | order 4 | orders 5+ |"],
     "bench_montecarlo": ["| mode (preset) | quadrature | altitude [m] | cos view | sun zenith [deg] | deviation [%] | "
                          "deviation [SE] |"],
     "bench_render": ["| render | best | median | CPU per frame | frames/s (best) |"],
     "bench_skyview": ["| frame | renderer | wall [ms] | CPU [ms] | frames/s (wall) | p95 +30 deg [%] |"],
-    "bench_animate": ["| run | frames | wall [s] | CPU [s] | CPU / wall | load before | load after |",
+    "bench_animate": ["| run | frames | wall [s] | CPU [s] | CPU / wall | load before | load after | exp() |",
                       "| stage | CPU [s], BLAS 1 thread | per frame [ms] | CPU [s], BLAS unlimited | per frame [ms] |"],
     "bench_memory": ["| run | table (W x H x D) | measured peak | estimate | estimate / measured |"],
     "bench_accuracy": ["| candidate | knob | build [s] | CPU [s] | render [ms] | CPU [ms] | p95 day [%] |"],
