@@ -146,7 +146,7 @@ def main():
              f"process and its children (ffmpeg), load average before and after; with the overlapped frame "
              f"pipeline (default) and with the frames one after the other, run one after the other; exp(): the "
              f"machine's double8 exp() rate read before and after the run [M per CPU-second] (about 900 in its "
-             f"slow state, 1500-1600 in its fast one).{load_note(highest)}{state_note(readings)}", "",
+             f"slow state, 1500-1700 in its fast one).{load_note(highest)}{state_note(readings)}", "",
              "| run | frames | wall [s] | CPU [s] | CPU / wall | load before | load after | exp() |",
              "|---|---|---:|---:|---:|---:|---:|---|",
              *(f"| `{shown}` | {'overlapped' if overlap else 'one after the other'} | {wall:.1f} | {cpu:.1f} | "

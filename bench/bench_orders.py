@@ -19,7 +19,7 @@ planned table within 4 s, the full default table 10x or more faster than its Num
 Every timing has its wall time, this process' CPU time (all threads: PoCL's workers included) and the
 load average; a load above the core count is warned about (the wall times are then inflated). Each row
 also has the machine's exp() rate read just before and just after it (bench/_report.py, exp_reading):
-about 900 instead of 1500-1600 M per CPU-second in the machine's slow state, where CPU times run up to a
+about 900 instead of 1500-1700 M per CPU-second in the machine's slow state, where CPU times run up to a
 third higher.
 
 Usage: python bench/bench_orders.py [--repeat N] [--no-readme] [--smoke]
@@ -120,7 +120,7 @@ def main():
               f"gather matrices) empty. *Repeated*: the least of {args.repeat} builds after one in the same "
               "process. Wall and process CPU time (all threads) [s]; load: the highest 1-minute load average "
               "seen after the builds of the row; exp(): the machine's double8 exp() rate read before and after "
-              "the row [M per CPU-second] (about 900 in its slow state, 1500-1600 in its fast one).", "",
+              "the row [M per CPU-second] (about 900 in its slow state, 1500-1700 in its fast one).", "",
               "| table | W x H x D | orders | first build: wall | CPU | repeated: wall | CPU | load | exp() |",
               "|---|---|---:|---:|---:|---:|---:|---:|---|"]
     cases = build_cases(args.smoke)
