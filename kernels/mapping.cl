@@ -35,6 +35,7 @@
  * compilers without clang's overloadable functions. */
 #if defined(REAL_IS_DOUBLE) && defined(__clang__) && !defined(CUBE_ROOT_LIBRARY)
 #define CUBE_ROOT_UNIT(x) cube_root_unit(x)
+#define CUBE_ROOT_HALLEY 1
 
 /* The body of cube_root_unit, for a scalar or vector type T (AS_T, AS_U: the reinterpretations of
  * T as itself and as its unsigned 64-bit integer type; SELECT_IF(a, b, m): b where m, else a).
@@ -70,4 +71,5 @@ inline double8 __attribute__((overloadable)) cube_root_unit(const double8 x)
 }
 #else
 #define CUBE_ROOT_UNIT(x) cbrt(x)
+#define CUBE_ROOT_HALLEY 0
 #endif
