@@ -354,7 +354,7 @@ VECTOR_WIDTH = 8
 VECTOR_WIDTHS = (1, 8)
 
 #: How the kernels take the non-linear mapping's cube roots (kernels/mapping.cl, ``CUBE_ROOT_UNIT``):
-#: "halley", a bit-pattern seed and three Halley steps, within 3 ulp of the correctly rounded root and
+#: "halley", a bit-pattern seed and three Halley steps, within 3 ulp of the exact root and
 #: 2.5x cheaper than OpenCL's ``cbrt`` on PoCL here (in double precision; float32 always uses
 #: ``cbrt``); "library", ``cbrt`` itself (``-DCUBE_ROOT_LIBRARY=1``): the kernels of the commits before
 #: 2026-12-03's, bit for bit, which tests/pins.py holds them to. An engine reads it when it is made
