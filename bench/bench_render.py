@@ -27,8 +27,8 @@ import time
 
 import numpy as np
 
-from _bound import EXPS_PER_NODE, exp_rate, march_exps
-from _report import SMOKE, add_output_arguments, best_of, load_average, machine, parse_arguments, \
+from _bound import EXPS_PER_NODE, march_exps
+from _report import SMOKE, add_output_arguments, best_of, exp_reading, load_average, machine, parse_arguments, \
     timed_with_cpu, write_readme_section
 
 import clsky
@@ -44,9 +44,9 @@ BOUND_PAIRS = 8
 FAST_STATE = 0.15
 
 
-def march_beside_bound(march, ctx, count):
+def march_beside_bound(march, count):
     """[(process CPU time of one ``march`` [s], the exp() rate read right after it [1/s])] for
-    ``count`` frames.
+    ``count`` frames (:func:`_report.exp_reading`).
 
     Why pairs: on this virtual machine the CPU time of the same work is not steady. For seconds at a
     time the double8 exp() kernel runs at about 900 M per CPU-second instead of 1500-1700 (only while
@@ -58,7 +58,7 @@ def march_beside_bound(march, ctx, count):
         cpu = time.process_time()
         march()
         cpu = time.process_time() - cpu
-        pairs.append((cpu, exp_rate(ctx, repeat=1)))
+        pairs.append((cpu, 1e6 * exp_reading()))
     return pairs
 
 
@@ -110,7 +110,7 @@ def main():
         print(rows[-1], flush=True)
     # the march's CPU time per frame against its exponentials at the device's measured exp() rate
     # (prepared, valid: the loop's last row, the march's fisheye)
-    pairs = march_beside_bound(lambda: renderer.render_raymarch(prepared, sun, 0.0), renderer.engine.ctx,
+    pairs = march_beside_bound(lambda: renderer.render_raymarch(prepared, sun, 0.0),
                                BOUND_PAIRS if not args.smoke else 2)
     march_cpu, rate = fast_state(pairs)
     exps = march_exps(int(np.count_nonzero(valid)), RAYMARCH_DEFAULTS.view_steps)
