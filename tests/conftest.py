@@ -18,6 +18,7 @@ import pytest
 
 from clsky import TableSettings, preset
 from clsky._cl import NoDeviceError, has_fp64, make_context
+from clsky.render import RAYMARCH_DEFAULTS
 from clsky.single import SingleScatteringEngine
 from clsky.transmittance import TransmittanceEngine
 
@@ -169,6 +170,36 @@ TOLERANCES = {
     },
 }
 
+
+
+# A small table and its frames, for comparing two builds of the kernels -----------------------------
+
+#: A small table through every path of the orders (physical mode, azimuth harmonics M = 2), for the
+#: tests that compare two builds of the same kernels (tests/test_vector_width.py, test_cube_root.py).
+SMALL_TABLE = TableSettings(size=(9, 33, 7), gather_theta_steps=32, gather_phi_steps=16, mode="physical",
+                            azimuth_harmonics=2)
+#: A short ray march for the same tests.
+SMALL_RAY = RAYMARCH_DEFAULTS.replace(view_steps=16, sun_steps=20, transmittance_size=(16, 32))
+
+
+def build_and_render(atmosphere, settings, sun_zeniths):
+    """The table (data and every order) and {"<renderer> <sun zenith>": frame} of every renderer (3D
+    lookup, ray march with SMALL_RAY, sky-view map) on a 24 px fisheye from the ground, for each sun
+    zenith [deg] in ``sun_zeniths`` (azimuth 150 deg)."""
+    from clsky import ScatteringTable
+    from clsky.anim.cameras import FisheyeCamera, sun_direction
+    from clsky.render import SkyRenderer
+
+    table = ScatteringTable.build(atmosphere, settings)
+    renderer = SkyRenderer(table, ray_settings=SMALL_RAY)
+    prepared = renderer.prepare(*FisheyeCamera(24).directions())
+    frames = {}
+    for zenith in sun_zeniths:
+        sun = sun_direction(zenith, 150.0)
+        frames[f"lookup {zenith:g}"] = renderer.render_table(prepared, sun, 0.0)
+        frames[f"raymarch {zenith:g}"] = renderer.render_raymarch(prepared, sun, 0.0)
+        frames[f"skyview {zenith:g}"] = renderer.render_skyview(prepared, sun, 0.0)
+    return table, frames
 
 def black_preset(name):
     """The preset ``name`` with a black ground (``ground_albedo`` 0).

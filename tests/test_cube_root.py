@@ -18,8 +18,8 @@ import pytest
 
 import clsky
 from clsky import _cl
-from clsky.anim.cameras import FisheyeCamera, sun_direction
-from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
+
+from conftest import SMALL_TABLE, build_and_render
 
 DBL_MIN = np.finfo(np.float64).tiny
 
@@ -134,27 +134,17 @@ def test_subnormal_arguments_map_to_the_middle(cube_roots):
     np.testing.assert_array_equal(mapped, 0.5)
 
 
-SETTINGS = clsky.TableSettings(size=(9, 33, 7), gather_theta_steps=32, gather_phi_steps=16, mode="physical",
-                               azimuth_harmonics=2)
-RAY = RAYMARCH_DEFAULTS.replace(view_steps=16, sun_steps=20, transmittance_size=(16, 32))
-
-
 def _table_and_frames(atmosphere, cube_root, monkeypatch):
+    """{name: array} of SMALL_TABLE's data and gathered harmonics and of every renderer's frames by day
+    and at dusk, with the kernels' cube root ``cube_root``."""
     monkeypatch.setattr(_cl, "CUBE_ROOT", cube_root)
-    table = clsky.ScatteringTable.build(atmosphere, SETTINGS)
-    renderer = SkyRenderer(table, ray_settings=RAY)
-    prepared = renderer.prepare(*FisheyeCamera(24).directions())
-    results = {"table": table.data, "gathered": table.gathered}
-    for zenith in (60.0, 93.0):
-        sun = sun_direction(zenith, 150.0)
-        results[f"raymarch {zenith}"] = renderer.render_raymarch(prepared, sun, 0.0)
-        results[f"lookup {zenith}"] = renderer.render_table(prepared, sun, 0.0)
-    return results
+    table, frames = build_and_render(atmosphere, SMALL_TABLE, [60.0, 93.0])
+    return {"table": table.data, "gathered": table.gathered, **frames}
 
 
 def test_tables_and_frames_match_those_of_cbrt(monkeypatch, fp64_available):
-    """A table with the azimuth harmonics, ozone and a ground, and ray-marched and looked-up frames
-    by day and at dusk, with the Halley root against ``cbrt``.
+    """A table with the azimuth harmonics, ozone and a ground, and its ray-marched, looked-up and
+    sky-view frames by day and at dusk, with the Halley root against ``cbrt``.
 
     Tolerance, 1e-13 of each quantity's maximum: a root off by 3 ulp (3.3e-16 for |root| <= 1) moves
     v = (1 + root) / 2 by at most 3e-16 with its rounding, a node's coordinate v (H - 1) by 1e-14

@@ -25,12 +25,11 @@ import pytest
 import clsky
 from clsky import _cl
 from clsky.anim.cameras import FisheyeCamera, sun_direction
-from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
+from clsky.render import SkyRenderer
+
+from conftest import SMALL_RAY as RAY, SMALL_TABLE as SETTINGS, build_and_render
 
 RTOL_OF_MAX = 1e-12
-SETTINGS = clsky.TableSettings(size=(9, 33, 7), gather_theta_steps=32, gather_phi_steps=16, mode="physical",
-                               azimuth_harmonics=2)
-RAY = RAYMARCH_DEFAULTS.replace(view_steps=16, sun_steps=20, transmittance_size=(16, 32))
 
 
 def assert_close_to_max(scalar, vector, what):
@@ -40,18 +39,6 @@ def assert_close_to_max(scalar, vector, what):
     assert scale > 0, what
     error = np.abs(scalar - vector).max() / scale
     assert error <= RTOL_OF_MAX, f"{what}: scalar and double8 differ by {error:.2e} of the maximum"
-
-
-def build_and_render(atmosphere, settings, sun_zenith):
-    """The table (data and every order) and the frames of every renderer at one sun."""
-    table = clsky.ScatteringTable.build(atmosphere, settings)
-    renderer = SkyRenderer(table, ray_settings=RAY)
-    prepared = renderer.prepare(*FisheyeCamera(24).directions())
-    sun = sun_direction(sun_zenith, 150.0)
-    frames = {"lookup": renderer.render_table(prepared, sun, 0.0),
-              "raymarch": renderer.render_raymarch(prepared, sun, 0.0),
-              "skyview": renderer.render_skyview(prepared, sun, 0.0)}
-    return table, frames
 
 
 def scalar_programs():
@@ -80,9 +67,9 @@ def scalar_kernels(monkeypatch):
 @pytest.mark.parametrize("sun_zenith", [40.0, 96.0])
 def test_scalar_kernels_give_the_double8_tables_and_frames(cl_context, scalar_kernels, sun_zenith):
     atmosphere = clsky.preset("physical").replace(ground_albedo=0.3)
-    vector_table, vector_frames = build_and_render(atmosphere, SETTINGS, sun_zenith)
+    vector_table, vector_frames = build_and_render(atmosphere, SETTINGS, [sun_zenith])
     scalar_kernels.use()
-    scalar_table, scalar_frames = build_and_render(atmosphere, SETTINGS, sun_zenith)
+    scalar_table, scalar_frames = build_and_render(atmosphere, SETTINGS, [sun_zenith])
     scalar_kernels.built(["single.cl", "multiple.cl", "render.cl"])
     assert scalar_table.orders_record["orders"] == vector_table.orders_record["orders"]
     assert_close_to_max(scalar_table.data, vector_table.data, "table")
