@@ -58,16 +58,21 @@ typedef int8 intv;
 #define CONVERT_INTV(v) convert_int8(v)
 #define CONVERT_REALV(v) CONVERT_REAL8(v)
 #define INT_LANE(v, k) (((int *)&(v))[k])
-/* GATHER_REALV(p, i): the realv of p[i.s0], ..., p[i.s7] (i an intv), built in registers rather than
- * lane by lane through a stack array */
-#define GATHER_REALV(p, i) ((realv)((p)[(i).s0], (p)[(i).s1], (p)[(i).s2], (p)[(i).s3], (p)[(i).s4], \
-                                    (p)[(i).s5], (p)[(i).s6], (p)[(i).s7]))
+/* LOAD_LANES(n, v, p, i, offset): declares v##0 .. v##7, the real##n (n = 2, 4, 8) at p + offset +
+ * i.sk of each lane k (i an intv); LANES_OF(v, s): the realv of component s of v##0 .. v##7, built in
+ * registers. Together they gather n contiguous values per lane with one vector load each (a transpose),
+ * rather than n scalar loads per lane. */
+#define LOAD_LANES(n, v, p, i, offset)                                                                     \
+    const real##n v##0 = vload##n(0, (p) + (i).s0 + (offset)), v##1 = vload##n(0, (p) + (i).s1 + (offset)), \
+                  v##2 = vload##n(0, (p) + (i).s2 + (offset)), v##3 = vload##n(0, (p) + (i).s3 + (offset)), \
+                  v##4 = vload##n(0, (p) + (i).s4 + (offset)), v##5 = vload##n(0, (p) + (i).s5 + (offset)), \
+                  v##6 = vload##n(0, (p) + (i).s6 + (offset)), v##7 = vload##n(0, (p) + (i).s7 + (offset))
+#define LANES_OF(v, s) ((realv)((v##0).s, (v##1).s, (v##2).s, (v##3).s, (v##4).s, (v##5).s, (v##6).s, (v##7).s))
 #else
 typedef int intv;
 #define CONVERT_INTV(v) ((int)(v))
 #define CONVERT_REALV(v) ((real)(v))
 #define INT_LANE(v, k) (v)
-#define GATHER_REALV(p, i) ((p)[i])
 #endif
 /* mask type of real8 comparisons */
 #ifdef REAL_IS_DOUBLE
