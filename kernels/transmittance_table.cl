@@ -32,7 +32,7 @@ inline realv bilinear_channel(const realv t00, const realv t10, const realv t01,
  * i + COLUMN_CHANNELS. Their 2 COLUMN_CHANNELS values are contiguous in the table; with 8 lanes each
  * lane reads them as one real4 (and a real2 with ozone) and the lanes are put together in registers
  * (LOAD_LANES, LANES_OF), instead of 2 COLUMN_CHANNELS scalar reads per lane: the same values, the
- * ray march about 5 % faster (A/B, README "Speed"). Reads exactly those values (no read past a node). */
+ * ray march about 4 % faster (A/B, README "Speed"). Reads exactly those values (no read past a node). */
 inline void adjacent_columns(__global const real *table, const intv i, realv *left, realv *right)
 {
 #if VECTOR_WIDTH == 8
