@@ -171,7 +171,6 @@ TOLERANCES = {
 }
 
 
-
 # A small table and its frames, for comparing two builds of the kernels -----------------------------
 
 #: A small table through every path of the orders (physical mode, azimuth harmonics M = 2), for the
@@ -200,6 +199,7 @@ def build_and_render(atmosphere, settings, sun_zeniths):
         frames[f"raymarch {zenith:g}"] = renderer.render_raymarch(prepared, sun, 0.0)
         frames[f"skyview {zenith:g}"] = renderer.render_skyview(prepared, sun, 0.0)
     return table, frames
+
 
 def black_preset(name):
     """The preset ``name`` with a black ground (``ground_albedo`` 0).
