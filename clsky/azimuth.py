@@ -291,7 +291,8 @@ def single_scattering_nodes(atmosphere: AtmosphereParameters, settings: TableSet
 
 def gathered_along(atmosphere, ray_settings, gathered, grid_settings, h0, mu_v, mu_s, nu=None):
     """beta_s / (4 pi) Integral rho_s T(P, Pa) G_s(P) ds (n, 6) along rays, G_s the clamped cosine series
-    of ``gathered`` (M + 1, D, H, W, 6) at the local azimuth (module docstring); nu None: canonical."""
+    of ``gathered`` (M + 1, D, H, W, 6) at the local azimuth (module docstring); nu None: canonical; taken at
+    the nodes as ``ray_settings.source_stride`` says (:func:`clsky.reference.source_at_stride`)."""
     count = gathered.shape[0]
     width, height, depth = grid_settings.size
     rays = reference._ViewRays(atmosphere, ray_settings, h0, mu_v, mu_s, nu)
@@ -309,6 +310,7 @@ def gathered_along(atmosphere, ray_settings, gathered, grid_settings, h0, mu_v, 
                                     column(nu))
         weights = chebyshev(cos_phi, count - 1)
         g = np.maximum(np.einsum("cnm,cnmk->cnk", weights, g), 0.0)
+    g = reference.source_at_stride(g, rays.nodes, ray_settings.source_stride)
     transmittance = np.exp(-reference._optical_depth_of(atmosphere, *rays.view))
     return rays.integrate(atmosphere, transmittance, g[..., 0:3], g[..., 3:6])
 

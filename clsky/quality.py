@@ -59,7 +59,8 @@ class QualityLevel:
     sun_node_spacing : float
         Largest spacing of the sun axis' nodes in texture coordinate w.
     ray : TableSettings
-        The ray march's quadrature (samples per ray = ``ray.view_steps``).
+        The ray march's quadrature (samples per ray = ``ray.view_steps``; the higher orders' source on
+        every ``ray.source_stride``-th of them: 2 for 'draft' and 'default', 1 for the others).
     twilight_harmonics : int
         The azimuth harmonics M of the higher orders (``TableSettings.azimuth_harmonics``,
         :mod:`clsky.azimuth`) that the scene planner gives a table whose sun goes below
@@ -79,18 +80,19 @@ class QualityLevel:
         return max(4, math.ceil((w_high - w_low) / self.sun_node_spacing - 1e-9) + 1)
 
 
-def _level(name, budget, size_wh, spacing, samples, **table):
+def _level(name, budget, size_wh, spacing, samples, source_stride=1, **table):
     base = TableSettings(mode="physical", **table)
-    level = QualityLevel(name, budget, base, spacing, RAYMARCH_DEFAULTS.replace(view_steps=samples))
+    ray = RAYMARCH_DEFAULTS.replace(view_steps=samples, source_stride=source_stride)
+    level = QualityLevel(name, budget, base, spacing, ray)
     return dataclasses.replace(level, table=base.replace(size=size_wh + (level.sun_nodes(),)))
 
 
 #: The levels, fastest first.
 QUALITY_LEVELS = {
     level.name: level for level in (
-        _level("draft", 0.10, (16, 128), 0.015, 16, view_steps=15, multiple_view_steps=10, sun_steps=15,
-               gather_theta_steps=64, gather_phi_steps=32, order_tolerance=1e-2),
-        _level("default", 0.01, (32, 256), 0.004, 48),
+        _level("draft", 0.10, (16, 128), 0.015, 16, source_stride=2, view_steps=15, multiple_view_steps=10,
+               sun_steps=15, gather_theta_steps=64, gather_phi_steps=32, order_tolerance=1e-2),
+        _level("default", 0.01, (32, 256), 0.004, 48, source_stride=2),
         _level("high", 1e-3, (32, 256), 0.002, 128, view_steps=60, multiple_view_steps=40, sun_steps=60,
                order_tolerance=1e-5),
         _level("reference", 5e-4, (32, 256), 0.0015, 256, view_steps=120, multiple_view_steps=None,

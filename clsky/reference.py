@@ -201,7 +201,8 @@ class _ViewRays:
     """Nodes along view rays (h0, mu_v, mu_s, nu), as in view_ray.cl (nu defaults to the table's
     canonical cos(phi - delta)).
 
-    Arrays have shape (cells, N_VIEW + 1): distance s, altitude h, radius r, the sun and view cosines
+    Arrays have shape (cells, N_VIEW + 1): the nodes' placement in [0, 1] (:func:`view_nodes`: (N_VIEW + 1,)
+    unless it differs between rays), distance s, altitude h, radius r, the sun and view cosines
     at each node, densities, the column densities from the observer, and the trapezoid half steps
     (cells, N_VIEW). ``density`` and ``view`` are tuples over the species (R, M, and O with ozone;
     :func:`densities`); ``density_r``, ``density_m`` name the scatterers'.
@@ -219,6 +220,7 @@ class _ViewRays:
         self.hits_ground = hits_ground[:, 0]
         length = np.where(hits_ground, distance_to_ground(h0, mu_v, rp), distance_to_top(h0, mu_v, rp, ra))
         nodes = view_nodes(settings.view_steps, settings.sampling, hits_ground)
+        self.nodes = nodes
         self.s = length * nodes
         self.h = altitude_along(h0, r0, mu_v, self.s, rp)
         self.h[:, -1] = np.where(hits_ground[:, 0], 0.0, self.h[:, -1])   # a ground hit ends on the ground
@@ -471,8 +473,25 @@ def trilinear(table, fx, fy, fz):
     return value
 
 
+def source_at_stride(source, nodes, stride):
+    """A gathered source ``source`` (cells, N_VIEW + 1, channels) at a ray's nodes as the kernels' integrals
+    take it with ``TableSettings.source_stride`` (``integrate_gathered`` of ``kernels/view_ray.cl``): itself
+    for 1; for 2, at each odd node i < N_VIEW linear in distance between its neighbours,
+    (1 - w_i) G_(i-1) + w_i G_(i+1), w_i = (x_i - x_(i-1)) / (x_(i+1) - x_(i-1)) of the nodes' placement
+    ``nodes`` (:attr:`_ViewRays.nodes`)."""
+    if stride == 1:
+        return source
+    odd = np.arange(1, source.shape[1] - 1, 2)
+    nodes = np.asarray(nodes, dtype=np.float64)
+    w = ((nodes[..., odd] - nodes[..., odd - 1]) / (nodes[..., odd + 1] - nodes[..., odd - 1]))[..., None]
+    source = source.copy()
+    source[:, odd] = (1.0 - w) * source[:, odd - 1] + w * source[:, odd + 1]
+    return source
+
+
 def _gathered_along(atmosphere, ray_settings, gathered, grid_settings, h0, mu_v, mu_s, nu=None):
-    """beta_s / (4 pi) Integral rho_s T(P, Pa) Gbar_s(P) ds along rays (n, 6); Gbar on grid_settings' grid."""
+    """beta_s / (4 pi) Integral rho_s T(P, Pa) Gbar_s(P) ds along rays (n, 6); Gbar on grid_settings' grid,
+    taken at the nodes as ``ray_settings.source_stride`` says (:func:`source_at_stride`)."""
     from .mapping import altitude_to_u, cos_to_sun_t, cos_to_v
 
     width, height, depth = grid_settings.size
@@ -481,6 +500,7 @@ def _gathered_along(atmosphere, ray_settings, gathered, grid_settings, h0, mu_v,
                   altitude_to_u(rays.h, atmosphere.atmosphere_height, grid_settings.mapping) * (width - 1),
                   cos_to_v(rays.mu_view, grid_settings.mapping) * (height - 1),
                   cos_to_sun_t(rays.mu_sun, grid_settings.mapping, grid_settings.sun_cos_range) * (depth - 1))
+    g = source_at_stride(g, rays.nodes, ray_settings.source_stride)
     transmittance = np.exp(-_optical_depth_of(atmosphere, *rays.view))
     return rays.integrate(atmosphere, transmittance, g[..., 0:3], g[..., 3:6])
 

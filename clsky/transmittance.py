@@ -29,11 +29,14 @@ def sampling_defines(sampling):
 
 def quadrature_defines(settings, vector_width):
     """The -D options of a program integrating along rays with ``settings``' quadrature (view and sun
-    steps, node placement, sun transmittance method) in ``vector_width`` lanes."""
+    steps, node placement, sun transmittance method, the gathered source's stride) in ``vector_width``
+    lanes."""
     options = [f"-DN_VIEW={settings.view_steps}", f"-DN_SUN={settings.sun_steps}", f"-DVECTOR_WIDTH={vector_width}"]
     options += sampling_defines(settings.sampling)
     if settings.sun_transmittance == "table":
         options.append("-DSUN_TRANSMITTANCE_TABLE=1")
+    if settings.source_stride != 1:
+        options.append(f"-DSOURCE_STRIDE={settings.source_stride}")
     return options
 
 

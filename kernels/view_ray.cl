@@ -307,6 +307,13 @@ inline realv ray_sun_cos(const view_march_t *ray, const realv mu_s, const realv 
     return clamp((ray->r0 * mu_s + ray->s * nu) * ray->inv_r, R(-1.0), R(1.0));
 }
 
+/* Lane k's integrands f[0..5] (ray_step) as one real8, 2 zeros. */
+inline real8 lane_integrands(const realv *f, const int k)
+{
+    return (real8)(LANE(f[0], k), LANE(f[1], k), LANE(f[2], k), LANE(f[3], k), LANE(f[4], k), LANE(f[5], k),
+                   R(0.0), R(0.0));
+}
+
 /* What the lookups of one ray node share whatever the sun: each lane's integrands as one real8
  * (f[0..5], 2 zeros) and the table's altitude and view corner cells and weights at node coordinates
  * (fx, fy); the coordinates are clamped before the conversion (NaN-safe: fmax returns the other
@@ -326,8 +333,7 @@ inline void prepare_lookups(const int width, const int height, const realv *f, c
     node->ax = fx - CONVERT_REALV(node->ix);
     node->ay = fy - CONVERT_REALV(node->iy);
     for (int k = 0; k < VECTOR_WIDTH; ++k)
-        node->factor[k] = (real8)(LANE(f[0], k), LANE(f[1], k), LANE(f[2], k), LANE(f[3], k), LANE(f[4], k),
-                                  LANE(f[5], k), R(0.0), R(0.0));
+        node->factor[k] = lane_integrands(f, k);
 }
 
 #ifndef AZIMUTH_HARMONICS
@@ -394,6 +400,30 @@ inline void add_lookups(__global const real *gathered, const int width, const in
     }
 }
 
+/* The higher orders' source on every SOURCE_STRIDE-th view node (integrate_gathered). */
+#ifndef SOURCE_STRIDE
+#define SOURCE_STRIDE 1
+#endif
+#if SOURCE_STRIDE != 1 && SOURCE_STRIDE != 2
+#error "SOURCE_STRIDE must be 1 or 2"
+#endif
+#if SOURCE_STRIDE == 2
+/* Odd node i < N_VIEW of integrate_gathered with -DSOURCE_STRIDE=2 (its comment): sum[k] += f_i (1 - w_i)
+ * Gbar_(i-1) now, pending[k] = f_i w_i for node i + 1's lookup. */
+inline void source_between(const view_march_t *ray, const int i, const real8 *last_source, real8 *pending,
+                           real8 *sum)
+{
+    const view_node_t before = view_node_at(i - 1, ray->hits_ground), here = view_node_at(i, ray->hits_ground),
+                      after = view_node_at(i + 1, ray->hits_ground);
+    const realv w = V(0.0) + (here - before) / (after - before);
+    for (int k = 0; k < VECTOR_WIDTH; ++k) {
+        const real8 f = lane_integrands(ray->f, k);
+        sum[k] += (f * (R(1.0) - LANE(w, k))) * last_source[k];
+        pending[k] = f * LANE(w, k);
+    }
+}
+#endif
+
 /* In-scattering of a gathered table along the ray, per lane k:
  *   sum[k].s012 = Integral rho_R T(P, Pa) Gbar_R dt (r, g, b), sum[k].s345 the same with rho_M, Gbar_M
  * with Gbar (padded (D, H, W, 8), the table's grid, mapping and sun_range) looked up trilinearly at each node's
@@ -403,7 +433,13 @@ inline void add_lookups(__global const real *gathered, const int width, const in
  * With single != 0 (the per-pixel ray march), the same pass also accumulates single scattering into
  * single[0..5] as integrate_single does (sun columns from sun_table or re-marched), sharing the
  * geometry, densities and view transmittance of each node. With -DGROUND and ground != 0, also
- * ground[0..GROUND_VALUES - 1] of the last node (the direct irradiance only with single != 0). */
+ * ground[0..GROUND_VALUES - 1] of the last node (the direct irradiance only with single != 0).
+ * With -DSOURCE_STRIDE=2 (TableSettings.source_stride) Gbar is looked up at the even nodes and the last
+ * one only, and taken linear in distance between two of them at the odd node i between:
+ * Gbar_i = (1 - w_i) Gbar_(i-1) + w_i Gbar_(i+1), w_i = (s_i - s_(i-1)) / (s_(i+1) - s_(i-1)); node i's
+ * integrand adds f_i (1 - w_i) Gbar_(i-1) at once and leaves f_i w_i pending for node i + 1's lookup.
+ * Gbar is a smooth field of the higher orders: about half the lookups' cost for a change of the
+ * radiance of about 2e-4 by day (README, "Speed"). */
 inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h0, const realv mu_v,
                                const realv mu_s, const realv nu, __global const real *gathered,
                                const int width, const int height, const int depth, const int mapping,
@@ -421,6 +457,11 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
     if (single)
         for (int c = 0; c < 6; ++c)
             single[c] = V(0.0);
+#if SOURCE_STRIDE == 2
+    real8 last_source[VECTOR_WIDTH], pending[VECTOR_WIDTH];   /* Gbar at the last lookup; f_i w_i of the odd node */
+    for (int k = 0; k < VECTOR_WIDTH; ++k)
+        last_source[k] = pending[k] = (real8)(R(0.0));
+#endif
 
     for (int i = 0; i <= N_VIEW; ++i) {
         ray_step(atm, i, &ray);
@@ -442,11 +483,30 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
                 ground_direct(atm, sun, lit, ground);
 #endif
         }
+#if SOURCE_STRIDE == 2
+        if ((i & 1) && i < N_VIEW) {
+            source_between(&ray, i, last_source, pending, sum);
+            continue;
+        }
+#endif
         const realv fx = MAPPING_U(ray.h, mapping, ha) * (real)(width - 1);
         const realv fy = MAPPING_V(ray.mu_view_here, mapping) * (real)(height - 1);
         const realv fz = MAPPING_SUN_T(mu_sun_here, mapping, sun_range) * (real)(depth - 1);
         node_lookup_t node;
+#if SOURCE_STRIDE == 2
+        /* the source itself: add_lookups with unit integrands into zeros (1 g + 0 is g exactly) */
+        const realv unit[6] = {V(1.0), V(1.0), V(1.0), V(1.0), V(1.0), V(1.0)};
+        prepare_lookups(width, height, unit, fx, fy, &node);
+        for (int k = 0; k < VECTOR_WIDTH; ++k)
+            last_source[k] = (real8)(R(0.0));
+        add_lookups(gathered, width, height, depth, &node, fz, &ray, mu_s, nu, last_source);
+        for (int k = 0; k < VECTOR_WIDTH; ++k) {
+            sum[k] += (lane_integrands(ray.f, k) + pending[k]) * last_source[k];
+            pending[k] = (real8)(R(0.0));
+        }
+#else
         prepare_lookups(width, height, ray.f, fx, fy, &node);
         add_lookups(gathered, width, height, depth, &node, fz, &ray, mu_s, nu, sum);
+#endif
     }
 }

@@ -97,6 +97,26 @@ def _library_cube_root():
     return mock.patch.object(_cl, "CUBE_ROOT", "library")
 
 
+def _source_at_every_node():
+    """A context in which the quality levels' ray marches look the higher orders' source up at every
+    view node (``TableSettings.source_stride = 1``), as every commit before 2026-12-03's second session
+    did (the 'draft' and 'default' levels take 2 since). A tree without the setting has nothing to
+    switch."""
+    import contextlib
+    import dataclasses
+    from unittest import mock
+
+    from clsky import settings
+
+    if not any(field.name == "source_stride" for field in dataclasses.fields(settings.TableSettings)):
+        return contextlib.nullcontext()
+    from clsky import quality
+
+    levels = {name: dataclasses.replace(level, ray=level.ray.replace(source_stride=1))
+              for name, level in quality.QUALITY_LEVELS.items()}
+    return mock.patch.dict(quality.QUALITY_LEVELS, levels)
+
+
 def table_hashes(atmosphere, settings, directions, sun, renders, ctx) -> tuple:
     """Hashes of a table's ``data`` and ``gathered``, then of the pixels of each ``(method, altitude)``
     in ``renders`` (method 'raymarch' or 'table', altitude [m]); cube roots by ``cbrt``."""
@@ -169,7 +189,8 @@ def _plain_sum_of_orders():
 def display_frames(ctx, directory, tone_map=None) -> tuple:
     """The atmosphere-plus preset's compare animation (table | ray march | error panels, dithered, 3
     frames of 24 px), written under ``directory``: SHA-256 of each PNG frame's decoded pixels, and each
-    frame's METRIC_KEYS. ``tone_map`` None leaves the config's default (the only choice before
+    frame's METRIC_KEYS; the source of the ray march's higher orders at every node
+    (:func:`_source_at_every_node`). ``tone_map`` None leaves the config's default (the only choice before
     anim/display.py). Its table sums the orders plainly (:func:`_plain_sum_of_orders`), as the pinned
     commit did: so the pin also holds the orders loop without the tail to its results, bit for bit;
     cube roots by ``cbrt`` (:func:`_library_cube_root`)."""
@@ -186,7 +207,7 @@ def display_frames(ctx, directory, tone_map=None) -> tuple:
     config = AnimationConfig(frames=3, size=24, table_size=(9, 33, 7), preset="atmosphere-plus",
                              mode="atmosphere-plus", start_elevation_deg=-4.0, max_elevation_deg=30.0,
                              output=str(directory / "sky.mp4"), **options)
-    with _plain_sum_of_orders(), _library_cube_root():
+    with _plain_sum_of_orders(), _library_cube_root(), _source_at_every_node():
         result = render_animation(config, ctx=ctx)
     frames = sorted((directory / "sky_frames").glob("*.png"))
     hashes = [hashlib.sha256(np.asarray(Image.open(f)).tobytes()).hexdigest() for f in frames]

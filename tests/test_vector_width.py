@@ -96,6 +96,22 @@ def test_scalar_kernels_give_the_double8_4d_table(cl_context, scalar_kernels):
     scalar_kernels.built(["table4d.cl", "render.cl"])
 
 
+def test_scalar_kernels_give_the_double8_strided_ray_march(cl_context, scalar_kernels):
+    """The ray march with the higher orders' source on every other node (source_stride 2, the quality
+    levels' choice), at 15 samples (the last node, odd, looked up itself), with the azimuth harmonics."""
+    table = clsky.ScatteringTable.build("physical", SETTINGS.replace(azimuth_harmonics=2))
+    ray = RAY.replace(view_steps=15, source_stride=2)
+    directions, valid = FisheyeCamera(24).directions()
+    sun = sun_direction(94.0, 150.0)
+    frames = []
+    for use in (lambda: None, scalar_kernels.use):
+        use()
+        renderer = SkyRenderer(table, ray_settings=ray)
+        frames.append(renderer.render_raymarch(renderer.prepare(directions, valid), sun, 0.0))
+    scalar_kernels.built(["render.cl"])
+    assert_close_to_max(frames[1], frames[0], "strided ray march")
+
+
 def test_an_engine_keeps_its_width_and_refuses_another(cl_context, monkeypatch):
     """An engine reads the width once, when it is made: programs and launches agree even if the setting
     changes afterwards; a width the kernels do not accept is refused by name."""

@@ -1,0 +1,183 @@
+"""The higher orders' source on every other view node (``TableSettings.source_stride = 2``; kernels/view_ray.cl:
+integrate_gathered, clsky.reference.source_at_stride).
+
+1. The kernel against its twin (reference.render_raymarch with the same settings): both modes, the azimuth
+   harmonics, observers on the ground, at 3 km and in space, the sun high, low and below the horizon,
+   an even and an odd number of samples (the last node is looked up itself).
+2. A closed form: with a gathered table that is the same everywhere, the linear interpolation is exact, so
+   stride 2 gives stride 1's frames to rounding.
+3. What it changes: the frames of the physical preset within a bound measured here (the README's
+   figures are of the default animation's table and ray march).
+4. The settings: its range, its absence from the parameters hash at 1, the scatter never striding, the
+   quality levels that take it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from clsky import ScatteringTable, TableSettings, azimuth, reference
+from clsky.anim.cameras import FisheyeCamera, sun_direction
+from clsky.errors import ParameterError
+from clsky.quality import QUALITY_LEVELS
+from clsky.render import SkyRenderer, sun_disc_radiance
+
+from conftest import TOLERANCES, max_error_report
+from test_render import COS_SUN_RADIUS, LUMINANCE, RAY, SMALL, SUN_AZIMUTH
+
+logger = logging.getLogger(__name__)
+
+#: variant -> (preset, table settings)
+VARIANTS = {
+    "physical": ("physical", SMALL.replace(mode="physical")),
+    "atmosphere-plus": ("atmosphere-plus", SMALL.replace(mode="atmosphere-plus")),
+    "harmonics": ("physical", SMALL.replace(mode="physical", azimuth_harmonics=2)),
+}
+
+
+@pytest.fixture(scope="module")
+def tables(cl_context):
+    """``tables(variant)``: a cached small table of ``variant`` (VARIANTS)."""
+    cache = {}
+
+    def get(variant):
+        if variant not in cache:
+            name, settings = VARIANTS[variant]
+            cache[variant] = ScatteringTable.build(name, settings, ctx=cl_context)
+        return cache[variant]
+
+    return get
+
+
+def render(table, ray, directions, sun, altitude, ctx):
+    renderer = SkyRenderer(table, ray, ctx=ctx)
+    try:
+        return renderer.render_raymarch(directions, sun, altitude)
+    finally:
+        renderer.close()
+
+
+def directions_from(altitude):
+    """The 32 x 32 fisheye's directions, looking down from space (as tests/test_render.py's)."""
+    directions, valid = FisheyeCamera(32).directions()
+    if altitude > 100e3:
+        directions[..., 2] *= -1.0
+    return directions, valid
+
+
+# 1. The kernel against its twin -------------------------------------------------------------------
+
+def twin(table, ray, directions, sun, altitude):
+    """The ray march's twin (tests/test_render.py's; with harmonics: single scattering and the ground,
+    plus :func:`clsky.azimuth.raymarch_higher_orders`, as tests/test_azimuth.py's)."""
+    disc = sun_disc_radiance(table.atmosphere, sun, altitude)
+    if not table.settings.azimuth_harmonics:
+        return reference.render_raymarch(table.atmosphere, ray, directions, sun, altitude, disc, COS_SUN_RADIUS,
+                                         table.gathered, table.settings,
+                                         physical=(table.settings.mode == "physical"),
+                                         ground_irradiance=table.ground_irradiance)
+    return (reference.render_raymarch(table.atmosphere, ray, directions, sun, altitude, disc, COS_SUN_RADIUS,
+                                      grid_settings=table.settings, ground_irradiance=table.ground_irradiance)
+            + azimuth.raymarch_higher_orders(table.atmosphere, ray, table.gathered, table.settings, directions,
+                                             sun, altitude))
+
+
+@pytest.mark.parametrize("samples", [16, 15])
+@pytest.mark.parametrize("sun_zenith", [30.0, 89.0, 95.0])
+@pytest.mark.parametrize("altitude", [0.0, 3000.0, 150e3])
+@pytest.mark.parametrize("variant", sorted(VARIANTS))
+def test_stride_two_matches_twin(tables, cl_context, variant, altitude, sun_zenith, samples):
+    table = tables(variant)
+    ray = RAY.replace(view_steps=samples, source_stride=2)
+    sun = sun_direction(sun_zenith, SUN_AZIMUTH)
+    directions, _ = directions_from(altitude)
+    actual = render(table, ray, directions, sun, altitude, cl_context)
+    desired = twin(table, ray, directions, sun, altitude)
+    assert np.isfinite(actual).all() and (actual >= 0.0).all()
+    sky = (directions @ sun) < COS_SUN_RADIUS
+    tolerance = TOLERANCES["float64"]["render_raymarch"]       # the stride-1 march's, against its twin
+    logger.info(max_error_report(actual, desired, f"stride 2 {variant} h={altitude:g} sun {sun_zenith:g} "
+                                                  f"N={samples}"))
+    assert_allclose(actual, desired, rtol=tolerance.rtol, atol=tolerance.atol(desired[sky]))
+
+
+# 2. A closed form: a source that is the same everywhere -------------------------------------------
+
+@pytest.mark.parametrize("samples", [16, 15])
+@pytest.mark.parametrize("variant", ["physical", "harmonics"])
+def test_constant_source_is_interpolated_exactly(tables, cl_context, variant, samples):
+    """G the same at every cell (and harmonic m >= 1 zero): (1 - w) G + w G = G, so each odd node's
+    f (1 - w) G + f w G differs from f G by rounding only: the frames agree to 1e-13 of their sky's
+    brightest pixel (a few ulp of the sums of 16 nodes; the sun disc, which has no source, is equal).
+    It holds the bookkeeping (every node's integrand counted once, with the whole source), whatever w;
+    the twin test above holds w."""
+    table = tables(variant)
+    gathered = np.asarray(table.gathered)
+    average = gathered.reshape(-1, 6).mean(axis=0)       # a typical source, the same in every cell
+    constant = np.broadcast_to(average, gathered.shape).copy()
+    if table.settings.azimuth_harmonics:
+        constant[1:] = 0.0                                # cos(m phi) terms: none
+    table = dataclasses.replace(table, gathered=constant)
+    sun = sun_direction(60.0, SUN_AZIMUTH)
+    directions, valid = directions_from(0.0)
+    every = render(table, RAY.replace(view_steps=samples), directions, sun, 0.0, cl_context)
+    other = render(table, RAY.replace(view_steps=samples, source_stride=2), directions, sun, 0.0, cl_context)
+    sky = valid & ((directions @ sun) < COS_SUN_RADIUS)
+    assert_allclose(other, every, rtol=0.0, atol=1e-13 * every[sky].max())
+
+
+# 3. What it changes -------------------------------------------------------------------------------
+
+#: Largest relative luminance change of stride 2 against stride 1 (physical preset, the small table, 16
+#: samples, a 32 x 32 fisheye from the ground) per sun zenith [deg]: twice what was measured on
+#: 2026-12-03 (see the log; the README's figures: the default animation's 512 x 512 frames, 48 samples).
+STRIDE_CHANGE = {30.0: 2e-3, 89.0: 3e-2, 95.0: 1e-2}
+
+
+@pytest.mark.parametrize("sun_zenith", sorted(STRIDE_CHANGE))
+def test_stride_two_changes_the_frames_little(tables, cl_context, sun_zenith):
+    table = tables("harmonics")
+    sun = sun_direction(sun_zenith, SUN_AZIMUTH)
+    directions, valid = directions_from(0.0)
+    every = render(table, RAY, directions, sun, 0.0, cl_context) @ LUMINANCE
+    other = render(table, RAY.replace(source_stride=2), directions, sun, 0.0, cl_context) @ LUMINANCE
+    sky = valid & ((directions @ sun) < COS_SUN_RADIUS)
+    floor = 1e-3 * np.percentile(every[sky], 99)        # as clsky.anim.metrics' relative error
+    change = np.abs(other - every)[sky] / np.maximum(every[sky], floor)
+    logger.info(f"sun zenith {sun_zenith:g}: stride 2 against 1, luminance max {change.max():.2e}, "
+                f"p95 {np.percentile(change, 95):.2e}")
+    assert 0.0 < change.max() <= STRIDE_CHANGE[sun_zenith]
+
+
+# 4. The settings ----------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("value", [0, 3, 1.5, "2"])
+def test_source_stride_out_of_range_is_refused(value):
+    with pytest.raises(ParameterError, match="source_stride"):
+        TableSettings(source_stride=value)
+
+
+def test_source_stride_leaves_the_parameters_hash_at_one():
+    assert "source_stride" not in TableSettings().to_dict()
+    assert "source_stride" not in TableSettings(parameterization="4d", mode="physical", size=(8, 16, 8)).to_dict()
+    assert TableSettings(source_stride=2).to_dict()["source_stride"] == 2
+    assert TableSettings.from_dict(TableSettings(source_stride=2).to_dict()).source_stride == 2
+
+
+def test_the_scatter_never_strides():
+    settings = TableSettings(source_stride=2)
+    assert settings.scatter_settings.source_stride == 1
+    assert settings.scatter_settings.view_steps == settings.multiple_view_steps
+    plain = TableSettings(multiple_view_steps=None, source_stride=2).scatter_settings
+    assert (plain.source_stride, plain.view_steps) == (1, 30)
+
+
+def test_quality_levels_that_stride():
+    assert {name: level.ray.source_stride for name, level in QUALITY_LEVELS.items()} == \
+        {"draft": 2, "default": 2, "high": 1, "reference": 1}
+    assert all(level.table.source_stride == 1 for level in QUALITY_LEVELS.values())
