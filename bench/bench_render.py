@@ -6,7 +6,11 @@
   accuracy sweep's 4D size, 16 x 128 x 128 x 16, sun -14 to 60 deg, M = 2, whose build is timed too);
 - per-pixel ray march of a 512 x 512 fisheye at the default samples, and its process CPU time per frame
   beside the exp() bound measured on this machine (bench/_bound.py) and their ratio (issue 12's goal: 2x),
-  from frames each followed by a reading of the bound (:func:`march_beside_bound`);
+  from frames each followed by a reading of the bound (:func:`march_beside_bound`); the same with the
+  higher orders' source on every other node (``TableSettings.source_stride = 2``, the 'draft' and
+  'default' quality levels' ray march);
+- each row's process CPU time per frame is the least and the median of its frames, each frame timed on
+  its own: one disturbed frame moves a mean, not these;
 - the default `clsky animate` (120 frames, 512 x 512, both renderers, comparison, files), wall time.
 Prints the table and writes it into README.md.
 
@@ -20,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -28,7 +33,7 @@ import time
 import numpy as np
 
 from _bound import EXPS_PER_NODE, march_exps
-from _report import SMOKE, add_output_arguments, best_of, exp_reading, load_average, machine, parse_arguments, \
+from _report import SMOKE, add_output_arguments, exp_reading, load_average, machine, parse_arguments, \
     timed_with_cpu, write_readme_section
 
 import clsky
@@ -69,6 +74,31 @@ def fast_state(pairs):
     return min(cpu for cpu, rate in pairs if rate >= (1.0 - FAST_STATE) * fastest), fastest
 
 
+def frames_timed(render, count):
+    """(best wall, median wall, least CPU, median CPU) [s] of ``count`` calls of ``render``, each timed on
+    its own (wall time and process CPU time, PoCL's workers included)."""
+    walls, cpus = [], []
+    for _ in range(count):
+        wall, cpu = time.perf_counter(), time.process_time()
+        render()
+        walls.append(time.perf_counter() - wall)
+        cpus.append(time.process_time() - cpu)
+    return min(walls), statistics.median(walls), min(cpus), statistics.median(cpus)
+
+
+def bound_sentence(label, pairs, exps):
+    """What ``pairs`` (:func:`march_beside_bound`) of a march of ``exps`` exponentials say against the
+    exp() bound: (sentence, ratio)."""
+    march_cpu, rate = fast_state(pairs)
+    bound = exps / rate
+    cpus, rates = [cpu for cpu, _ in pairs], [rate for _, rate in pairs]
+    return (f"{label}: {1000 * march_cpu:.0f} CPU-ms per frame, its exponentials {1000 * bound:.0f} CPU-ms at "
+            f"the {rate / 1e6:.0f} M double8 exp() per CPU-second read beside it: **{march_cpu / bound:.1f}x the "
+            f"bound** ({len(pairs)} frames, each followed by a reading of exp(): {1000 * min(cpus):.0f}-"
+            f"{1000 * max(cpus):.0f} CPU-ms, {min(rates) / 1e6:.0f}-{max(rates) / 1e6:.0f} M per CPU-second)",
+            march_cpu / bound)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=5)
@@ -85,6 +115,7 @@ def main():
 
     table = clsky.ScatteringTable.build("physical", settings)
     renderer = SkyRenderer(table)
+    strided = SkyRenderer(table, RAYMARCH_DEFAULTS.replace(source_stride=2))
     settings4d = lookup4d_settings(clsky.TableSettings(mode="physical"))     # the accuracy sweep's 4D candidate
     if args.smoke:
         settings4d = settings4d.replace(size=SMOKE.table, azimuth_size=5)
@@ -98,34 +129,32 @@ def main():
                                 (sizes[0], renderer.render_skyview, f"sky-view map 64 x 128 (map and read), {side}"),
                                 (sizes[0], renderer4d.render_lut4d, f"4D table lookup ({four}), {side}"),
                                 (sizes[1], renderer.render_raymarch,
-                                 f"ray march ({RAYMARCH_DEFAULTS.view_steps} samples), fisheye {sizes[1]} x {sizes[1]}")):
+                                 f"ray march ({RAYMARCH_DEFAULTS.view_steps} samples), fisheye {sizes[1]} x {sizes[1]}"),
+                                (sizes[1], strided.render_raymarch,
+                                 f"ray march ({RAYMARCH_DEFAULTS.view_steps} samples, the higher orders' source on "
+                                 f"every other node), fisheye {sizes[1]} x {sizes[1]}")):
         directions, valid = FisheyeCamera(size).directions()
         prepared = renderer.prepare(directions, valid)
         method(prepared, sun, 0.0)                                     # warm-up
-        cpu = time.process_time()
-        best, median = best_of(lambda: method(prepared, sun, 0.0), args.repeat)
-        cpu = (time.process_time() - cpu) / args.repeat
-        rows.append(f"| {label} | {1000 * best:.0f} ms | {1000 * median:.0f} ms | {1000 * cpu:.0f} ms | "
-                    f"{1 / best:.1f} |")
+        best, median, least_cpu, median_cpu = frames_timed(lambda: method(prepared, sun, 0.0), args.repeat)
+        rows.append(f"| {label} | {1000 * best:.0f} ms | {1000 * median:.0f} ms | {1000 * least_cpu:.0f} ms | "
+                    f"{1000 * median_cpu:.0f} ms | {1 / best:.1f} |")
         print(rows[-1], flush=True)
-    # the march's CPU time per frame against its exponentials at the device's measured exp() rate
-    # (prepared, valid: the loop's last row, the march's fisheye)
-    pairs = march_beside_bound(lambda: renderer.render_raymarch(prepared, sun, 0.0),
-                               BOUND_PAIRS if not args.smoke else 2)
-    march_cpu, rate = fast_state(pairs)
+    # the marches' CPU time per frame against their exponentials at the device's measured exp() rate
+    # (prepared, valid: the loop's last rows', the marches' fisheye); the strided march has the same
+    # exponentials (8 per node: single scattering's, at every node)
     exps = march_exps(int(np.count_nonzero(valid)), RAYMARCH_DEFAULTS.view_steps)
-    bound = exps / rate
+    count = BOUND_PAIRS if not args.smoke else 2
+    sentences = [bound_sentence(label, march_beside_bound(lambda: march(prepared, sun, 0.0), count), exps)
+                 for label, march in (("Ray march", renderer.render_raymarch),
+                                      ("with the higher orders' source on every other node", strided.render_raymarch))]
     load = load_average()
-    cpus, rates = [cpu for cpu, _ in pairs], [rate for _, rate in pairs]
-    bound_line = (f"Ray march against the exp() bound: {1000 * march_cpu:.0f} CPU-ms per frame; its "
-                  f"{exps / 1e6:.1f} M exponentials ({EXPS_PER_NODE} per ray node, "
-                  f"{RAYMARCH_DEFAULTS.view_steps + 1} nodes, {np.count_nonzero(valid)} pixels) take "
-                  f"{1000 * bound:.0f} CPU-ms at the {rate / 1e6:.0f} M double8 exp() per CPU-second measured "
-                  f"here: **{march_cpu / bound:.1f}x the bound** (goal: 2x; load average {load:.1f}). "
-                  f"{len(pairs)} frames, each followed by a reading of exp(): {1000 * min(cpus):.0f}-"
-                  f"{1000 * max(cpus):.0f} CPU-ms, {min(rates) / 1e6:.0f}-{max(rates) / 1e6:.0f} M per "
-                  f"CPU-second; the figures above are the least frame and the fastest reading among the pairs "
-                  f"whose reading is within {100 * FAST_STATE:.0f} % of the fastest.")
+    bound_line = (f"Ray marches against the exp() bound: their {exps / 1e6:.1f} M exponentials ({EXPS_PER_NODE} per "
+                  f"ray node, {RAYMARCH_DEFAULTS.view_steps + 1} nodes, {np.count_nonzero(valid)} pixels) at the "
+                  f"machine's exp() rate (goal: 2x; load average {load:.1f}). "
+                  + "; ".join(sentence for sentence, _ in sentences)
+                  + f". Each figure is the least frame and the fastest reading among the pairs whose reading is "
+                  f"within {100 * FAST_STATE:.0f} % of the fastest.")
     print(bound_line, flush=True)
     animation = "not measured (--skip-animation)"
     if not args.skip_animation:
@@ -136,9 +165,10 @@ def main():
         print("default animate:", animation, flush=True)
     lines = [f"Rendering, measured {datetime.date.today()} on {machine()}, OpenCL device "
              f"{describe_device(renderer.engine.device)}; best and median wall time of {args.repeat} frames after a "
-             f"warm-up (HDR float64 frame copied to the host), and their mean process CPU time (PoCL's workers "
-             f"included).", "",
-             "| render | best | median | CPU per frame | frames/s (best) |", "|---|---:|---:|---:|---:|", *rows, "",
+             f"warm-up (HDR float64 frame copied to the host), and the least and the median process CPU time of a "
+             f"frame (PoCL's workers included).", "",
+             "| render | best | median | CPU per frame: least | median | frames/s (best) |",
+             "|---|---:|---:|---:|---:|---:|", *rows, "",
              f"The 4D table ({four}, float64, sun {LOOKUP4D_SUN_DEG[0]:g} to {LOOKUP4D_SUN_DEG[1]:g} deg, M = 2) "
              f"took {wall4d:.1f} s wall and {cpu4d:.1f} s of process CPU to build; the sky-view map and the "
              f"lookups read the default 3D table {' x '.join(map(str, settings.size))}.", "",
