@@ -46,8 +46,9 @@ SUN_AZIMUTH = 200.0
 
 @dataclasses.dataclass(frozen=True)
 class Candidate:
-    """One way to make a frame: table lookup with ``table`` settings, a ray march of ``samples``, or a
-    sky-view map of ``skyview`` = (W, H) nodes (:class:`clsky.skyview.SkyViewSettings`)."""
+    """One way to make a frame: table lookup with ``table`` settings, a ray march of ``samples`` (its higher
+    orders' source on every ``source_stride``-th node, ``TableSettings.source_stride``), or a sky-view map
+    of ``skyview`` = (W, H) nodes (:class:`clsky.skyview.SkyViewSettings`)."""
 
     label: str
     knob: str
@@ -55,6 +56,7 @@ class Candidate:
     samples: int | None = None
     fast_math: bool = False
     skyview: tuple | None = None
+    source_stride: int = 1
 
     @property
     def method(self):
@@ -109,6 +111,8 @@ def default_candidates(base: clsky.TableSettings | None = None):
     candidates.append(Candidate("fast math", "fast-math", base, fast_math=True))
     candidates += [Candidate(f"ray march {n} samples", "ray march samples", base, samples=n)
                    for n in (16, 32, 48, 96)]
+    candidates.append(Candidate("ray march 48 samples, source on every other node", "ray march samples", base,
+                                samples=48, source_stride=2))        # the default quality level's march
     candidates += [Candidate(f"sky-view {w} x {h}", "sky-view map size", base, skyview=(w, h))
                    for w, h in SKYVIEW_SIZES]
     return candidates
@@ -244,7 +248,8 @@ def measure(candidates, reference, valid, atmosphere="physical", progress=None):
         start, cpu = time.perf_counter(), time.process_time()
         table = clsky.ScatteringTable.build(atmosphere, settings, fast_math=candidate.fast_math)
         build, build_cpu = time.perf_counter() - start, time.process_time() - cpu
-        ray = None if candidate.samples is None else RAYMARCH_DEFAULTS.replace(view_steps=candidate.samples)
+        ray = None if candidate.samples is None else RAYMARCH_DEFAULTS.replace(view_steps=candidate.samples,
+                                                                              source_stride=candidate.source_stride)
         renderer = SkyRenderer(table, ray, fast_math=candidate.fast_math)
         prepared = renderer.prepare(directions, valid)
         render_frames(renderer, candidate.method, prepared, candidate.skyview)      # warm-up (compilation)
