@@ -99,9 +99,8 @@ def _library_cube_root():
 
 def _source_at_every_node():
     """A context in which the quality levels' ray marches look the higher orders' source up at every
-    view node (``TableSettings.source_stride = 1``), as every commit before 2026-12-03's second session
-    did (the 'draft' and 'default' levels take 2 since). A tree without the setting has nothing to
-    switch."""
+    view node (``TableSettings.source_stride = 1``), as every commit before a98be11 (2026-12-03) did (the
+    'draft' and 'default' levels take 2 since). A tree without the setting has nothing to switch."""
     import contextlib
     import dataclasses
     from unittest import mock

@@ -97,8 +97,9 @@ def test_scalar_kernels_give_the_double8_4d_table(cl_context, scalar_kernels):
 
 
 def test_scalar_kernels_give_the_double8_strided_ray_march(cl_context, scalar_kernels):
-    """The ray march with the higher orders' source on every other node (source_stride 2, the quality
-    levels' choice), at 15 samples (the last node, odd, looked up itself), with the azimuth harmonics."""
+    """The ray march with the higher orders' source on every other node (source_stride 2, the draft and
+    default levels' choice), at 15 samples (the last node, odd, looked up itself), with the azimuth
+    harmonics."""
     table = clsky.ScatteringTable.build("physical", SETTINGS.replace(azimuth_harmonics=2))
     ray = RAY.replace(view_steps=15, source_stride=2)
     directions, valid = FisheyeCamera(24).directions()
