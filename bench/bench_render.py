@@ -76,13 +76,8 @@ def fast_state(pairs):
 
 def frames_timed(render, count):
     """(best wall, median wall, least CPU, median CPU) [s] of ``count`` calls of ``render``, each timed on
-    its own (wall time and process CPU time, PoCL's workers included)."""
-    walls, cpus = [], []
-    for _ in range(count):
-        wall, cpu = time.perf_counter(), time.process_time()
-        render()
-        walls.append(time.perf_counter() - wall)
-        cpus.append(time.process_time() - cpu)
+    its own (:func:`_report.timed_with_cpu`: wall time and process CPU time, PoCL's workers included)."""
+    walls, cpus = zip(*(timed_with_cpu(render)[1:] for _ in range(count)))
     return min(walls), statistics.median(walls), min(cpus), statistics.median(cpus)
 
 
