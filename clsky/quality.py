@@ -55,7 +55,9 @@ class QualityLevel:
         The relative error (95th percentile of the HDR luminance error) the level promises.
     table : TableSettings
         The scattering table's settings; its sun axis' node count (``size[2]``) is the one of a whole
-        sun axis at :attr:`sun_node_spacing` (a planned table covers less and needs fewer).
+        sun axis at :attr:`sun_node_spacing` (a planned table covers less and needs fewer); its scatter of
+        the orders takes the higher orders' source on every ``table.source_stride``-th view node (as
+        ``ray``).
     sun_node_spacing : float
         Largest spacing of the sun axis' nodes in texture coordinate w.
     ray : TableSettings
@@ -81,7 +83,7 @@ class QualityLevel:
 
 
 def _level(name, budget, size_wh, spacing, samples, source_stride=1, **table):
-    base = TableSettings(mode="physical", **table)
+    base = TableSettings(mode="physical", source_stride=source_stride, **table)
     ray = RAYMARCH_DEFAULTS.replace(view_steps=samples, source_stride=source_stride)
     level = QualityLevel(name, budget, base, spacing, ray)
     return dataclasses.replace(level, table=base.replace(size=size_wh + (level.sun_nodes(),)))

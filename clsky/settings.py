@@ -114,12 +114,13 @@ class TableSettings:
         each order a third cheaper for a median error of 0.48 % instead of 0.39 % (README, "Defaults").
     source_stride : int
         1 (default) or 2: the view nodes per lookup of the higher orders' source (the gathered table)
-        in the integrals of a ray with a gathered table (the per-pixel ray march, the sky-view map's
-        nodes, the 4D table's integrals; kernels/view_ray.cl: integrate_gathered), not in the scatter
-        of the orders. 2 looks it up at every other node and the last, linear in distance between:
-        the default animation's ray march takes about a fifth less CPU time for a change of its
-        luminance of about 2e-4 by day and up to 2e-3 in civil twilight (README, "Speed"); the 'draft'
-        and 'default' quality levels' ray marches take it.
+        in every integral of it along a view ray: a table's scatter of the orders (kernels/multiple.cl)
+        and the 4D table's integrals of them, and, in the settings of a ray march, the per-pixel ray
+        march and the sky-view map's nodes (kernels/view_ray.cl: integrate_gathered). 2
+        looks it up at every other node and the last, linear in distance between: the default
+        animation's ray march takes about a fifth less CPU time for a change of its luminance of about
+        2e-4 by day and up to 2e-3 in civil twilight, its table's scatter a third less for a change of
+        under 1e-3 (README, "Speed"); the 'draft' and 'default' quality levels take it for both.
     """
 
     size: tuple = (32, 256, 32)
@@ -238,12 +239,10 @@ class TableSettings:
 
     @property
     def scatter_settings(self) -> "TableSettings":
-        """These settings as the scatter of the higher orders uses them (its view steps; the source at
-        every node)."""
-        if self.multiple_view_steps is None and self.source_stride == 1:
+        """These settings as the scatter of the higher orders uses them (its view steps)."""
+        if self.multiple_view_steps is None:
             return self
-        steps = self.view_steps if self.multiple_view_steps is None else self.multiple_view_steps
-        return self.replace(view_steps=steps, multiple_view_steps=None, source_stride=1)
+        return self.replace(view_steps=self.multiple_view_steps, multiple_view_steps=None)
 
     @property
     def factored_channels(self) -> int:

@@ -315,18 +315,20 @@ inline real8 lane_integrands(const realv *f, const int k)
 }
 
 /* What the lookups of one ray node share whatever the sun: each lane's integrands as one real8
- * (f[0..5], 2 zeros) and the table's altitude and view corner cells and weights at node coordinates
- * (fx, fy); the coordinates are clamped before the conversion (NaN-safe: fmax returns the other
- * operand). */
+ * (f[0..5], 2 zeros), the node's distance s along the ray (the local azimuth's, add_lookups) and the
+ * table's altitude and view corner cells and weights at node coordinates (fx, fy); the coordinates are
+ * clamped before the conversion (NaN-safe: fmax returns the other operand). */
 typedef struct {
     real8 factor[VECTOR_WIDTH];
+    realv s;
     intv ix, iy;
     realv ax, ay;
 } node_lookup_t;
 
-inline void prepare_lookups(const int width, const int height, const realv *f, const realv fx, const realv fy,
-                            node_lookup_t *node)
+inline void prepare_lookups(const int width, const int height, const realv *f, const realv s, const realv fx,
+                            const realv fy, node_lookup_t *node)
 {
+    node->s = s;
     const realv x0 = fmin(fmax(fx, V(0.0)), (real)(width - 2)), y0 = fmin(fmax(fy, V(0.0)), (real)(height - 2));
     node->ix = CONVERT_INTV(x0);
     node->iy = CONVERT_INTV(y0);
@@ -341,16 +343,16 @@ inline void prepare_lookups(const int width, const int height, const realv *f, c
 #endif
 #if AZIMUTH_HARMONICS > 0
 /* cos phi per lane, phi the local azimuth between the view's and the sun's horizontal directions at the
- * ray's current node (distance s from radius r0, the ray's start mu_v, a sun of zenith cosine mu_s and
+ * ray's node at distance s (from radius r0, the ray's start mu_v, a sun of zenith cosine mu_s and
  * scattering cosine nu at the start), in a form free of cancellation near the vertical (P = r0 Z + s V;
  * r sin(view zenith) = r0 sqrt(1 - mu_v^2), r sin(sun zenith) = |P x Sun|,
  * r^2 (nu - mu_view mu_sun) = r0 (r0 (nu - mu_v mu_s) + s (mu_v nu - mu_s))):
  *   cos phi = (r0 (nu - mu_v mu_s) + s (mu_v nu - mu_s)) / (sqrt(1 - mu_v^2) |P x Sun|),
  *   |P x Sun|^2 = r0^2 (1 - mu_s^2) + 2 r0 s (mu_v - mu_s nu) + s^2 (1 - nu^2),
  * 1 where the denominator is 0 (view or sun vertical: no azimuth). */
-inline realv ray_azimuth_cos(const view_march_t *ray, const realv mu_s, const realv nu)
+inline realv ray_azimuth_cos(const view_march_t *ray, const realv s, const realv mu_s, const realv nu)
 {
-    const realv r0 = ray->r0, s = ray->s, mu_v = ray->mu_v;
+    const realv r0 = ray->r0, mu_v = ray->mu_v;
     const realv cross2 = r0 * r0 * fmax(R(1.0) - mu_s * mu_s, V(0.0)) + R(2.0) * r0 * s * (mu_v - mu_s * nu)
                          + s * s * fmax(R(1.0) - nu * nu, V(0.0));
     const realv denominator = sqrt(fmax(R(1.0) - mu_v * mu_v, V(0.0))) * sqrt(fmax(cross2, V(0.0)));
@@ -359,14 +361,14 @@ inline realv ray_azimuth_cos(const view_march_t *ray, const realv mu_s, const re
 }
 #endif
 
-/* sum[k] += lane k's integrands x the gathered source at the ray's current node, for every lane k: the
- * trilinear lookup of the padded table (D, H, W, 8) at the node's altitude and view coordinates
- * (prepare_lookups) and sun coordinate fz. With -DAZIMUTH_HARMONICS=M > 0 (clsky/azimuth.py) `gathered`
- * holds the M + 1 cosine harmonics G_m, each a padded (D, H, W, 8) table, one after the other, and the
- * source is max(0, sum_m G_m cos(m phi)), each G_m looked up at the same corner cells and weights, phi
- * the local azimuth of the lane (ray_azimuth_cos, for the sun of zenith cosine mu_s and scattering cosine
- * nu at the ray's start), cos(m phi) by the Chebyshev recurrence. Without it (M = 0) ray, mu_s and nu are
- * not read and the source is the one table's lookup. */
+/* sum[k] += node->factor[k] x the gathered source at a node of the ray, for every lane k: the trilinear
+ * lookup of the padded table (D, H, W, 8) at the node's altitude and view coordinates (prepare_lookups)
+ * and sun coordinate fz. With -DAZIMUTH_HARMONICS=M > 0 (clsky/azimuth.py) `gathered` holds the M + 1
+ * cosine harmonics G_m, each a padded (D, H, W, 8) table, one after the other, and the source is
+ * max(0, sum_m G_m cos(m phi)), each G_m looked up at the same corner cells and weights, phi the local
+ * azimuth of the lane at the node (ray_azimuth_cos at node->s, for the sun of zenith cosine mu_s and
+ * scattering cosine nu at the ray's start), cos(m phi) by the Chebyshev recurrence. Without it (M = 0)
+ * ray, mu_s and nu are not read and the source is the one table's lookup. */
 inline void add_lookups(__global const real *gathered, const int width, const int height, const int depth,
                         const node_lookup_t *node, const realv fz, const view_march_t *ray, const realv mu_s,
                         const realv nu, real8 *sum)
@@ -376,7 +378,7 @@ inline void add_lookups(__global const real *gathered, const int width, const in
     const realv az = fz - CONVERT_REALV(iz);
 #if AZIMUTH_HARMONICS > 0
     const size_t stride = (size_t)8 * (size_t)width * (size_t)height * (size_t)depth;
-    const realv cos_phi = ray_azimuth_cos(ray, mu_s, nu);
+    const realv cos_phi = ray_azimuth_cos(ray, node->s, mu_s, nu);
 #endif
     for (int k = 0; k < VECTOR_WIDTH; ++k) {
         const size_t base = (size_t)INT_LANE(node->ix, k)
@@ -408,18 +410,19 @@ inline void add_lookups(__global const real *gathered, const int width, const in
 #error "SOURCE_STRIDE must be 1 or 2"
 #endif
 #if SOURCE_STRIDE == 2
-/* Odd node i < N_VIEW of integrate_gathered with -DSOURCE_STRIDE=2 (its comment): sum[k] += f_i (1 - w_i)
- * Gbar_(i-1) now, pending[k] = f_i w_i for node i + 1's lookup. */
-inline void source_between(const view_march_t *ray, const int i, const real8 *last_source, real8 *pending,
-                           real8 *sum)
+/* The current node i of a ray, odd and i < N_VIEW, with -DSOURCE_STRIDE=2: its source is
+ * (1 - w_i) Gbar_(i-1) + w_i Gbar_(i+1), w_i = (s_i - s_(i-1)) / (s_(i+1) - s_(i-1)), so its integrands
+ * f_i go to the lookups on either side: before[k] = f_i (1 - w_i) to node i - 1's, after[k] = f_i w_i to
+ * node i + 1's (lane k). */
+inline void shares_between(const view_march_t *ray, const int i, real8 *before, real8 *after)
 {
-    const view_node_t before = view_node_at(i - 1, ray->hits_ground), here = view_node_at(i, ray->hits_ground),
-                      after = view_node_at(i + 1, ray->hits_ground);
-    const realv w = V(0.0) + (here - before) / (after - before);
+    const view_node_t previous = view_node_at(i - 1, ray->hits_ground), here = view_node_at(i, ray->hits_ground),
+                      next = view_node_at(i + 1, ray->hits_ground);
+    const realv w = V(0.0) + (here - previous) / (next - previous);
     for (int k = 0; k < VECTOR_WIDTH; ++k) {
         const real8 f = lane_integrands(ray->f, k);
-        sum[k] += (f * (R(1.0) - LANE(w, k))) * last_source[k];
-        pending[k] = f * LANE(w, k);
+        before[k] = f * (R(1.0) - LANE(w, k));
+        after[k] = f * LANE(w, k);
     }
 }
 #endif
@@ -485,7 +488,10 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
         }
 #if SOURCE_STRIDE == 2
         if ((i & 1) && i < N_VIEW) {
-            source_between(&ray, i, last_source, pending, sum);
+            real8 share[VECTOR_WIDTH];
+            shares_between(&ray, i, share, pending);
+            for (int k = 0; k < VECTOR_WIDTH; ++k)
+                sum[k] += share[k] * last_source[k];
             continue;
         }
 #endif
@@ -496,7 +502,7 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
 #if SOURCE_STRIDE == 2
         /* the source itself: add_lookups with unit integrands into zeros (1 g + 0 is g exactly) */
         const realv unit[6] = {V(1.0), V(1.0), V(1.0), V(1.0), V(1.0), V(1.0)};
-        prepare_lookups(width, height, unit, fx, fy, &node);
+        prepare_lookups(width, height, unit, ray.s, fx, fy, &node);
         for (int k = 0; k < VECTOR_WIDTH; ++k)
             last_source[k] = (real8)(R(0.0));
         add_lookups(gathered, width, height, depth, &node, fz, &ray, mu_s, nu, last_source);
@@ -505,7 +511,7 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
             pending[k] = (real8)(R(0.0));
         }
 #else
-        prepare_lookups(width, height, ray.f, fx, fy, &node);
+        prepare_lookups(width, height, ray.f, ray.s, fx, fy, &node);
         add_lookups(gathered, width, height, depth, &node, fz, &ray, mu_s, nu, sum);
 #endif
     }

@@ -98,8 +98,9 @@ def _library_cube_root():
 
 
 def _source_at_every_node():
-    """A context in which the quality levels' ray marches look the higher orders' source up at every
-    view node (``TableSettings.source_stride = 1``), as every commit before a98be11 (2026-12-03) did (the
+    """A context in which the quality levels' ray marches and tables look the higher orders' source up at
+    every view node (``TableSettings.source_stride = 1``), as every commit before a98be11 (2026-12-03) did
+    for the ray march and every one before the scatter's stride (2026-12-03, later) for the table (the
     'draft' and 'default' levels take 2 since). A tree without the setting has nothing to switch."""
     import contextlib
     import dataclasses
@@ -111,7 +112,8 @@ def _source_at_every_node():
         return contextlib.nullcontext()
     from clsky import quality
 
-    levels = {name: dataclasses.replace(level, ray=level.ray.replace(source_stride=1))
+    levels = {name: dataclasses.replace(level, ray=level.ray.replace(source_stride=1),
+                                        table=level.table.replace(source_stride=1))
               for name, level in quality.QUALITY_LEVELS.items()}
     return mock.patch.dict(quality.QUALITY_LEVELS, levels)
 

@@ -117,13 +117,14 @@ def channel_totals(order):
 def multiple_engine(cl_context):
     """``multiple_engine(settings)``: a cached MultipleScatteringEngine (keyed by what it compiles in
     or reads from its settings: the scatter's view steps, sun steps, sampling, sun transmittance,
-    dtype, mapping and sun range)."""
+    dtype, mapping, sun range and source stride)."""
     cache = {}
 
     def get(settings: TableSettings) -> MultipleScatteringEngine:
         require_dtype(cl_context, settings.dtype)
         s = settings.scatter_settings
-        key = (s.view_steps, s.sun_steps, s.sampling, s.sun_transmittance, s.dtype, s.mapping, s.sun_cos_range)
+        key = (s.view_steps, s.sun_steps, s.sampling, s.sun_transmittance, s.dtype, s.mapping, s.sun_cos_range,
+               s.source_stride)
         if key not in cache:
             cache[key] = MultipleScatteringEngine(settings, ctx=cl_context)
         return cache[key]

@@ -8,8 +8,12 @@ integrate_gathered, clsky.reference.source_at_stride).
    stride 2 gives stride 1's frames to rounding.
 3. What it changes: the frames of the physical preset within a bound measured here (the README's
    figures are of the default animation's table and ray march).
-4. The settings: its range, its absence from the parameters hash at 1, the scatter never striding, the
-   quality levels that take it.
+4. The settings: its range, its absence from the parameters hash at 1, the scatter taking its table's
+   stride, the quality levels that take it.
+5. The scatter of the orders (kernels/multiple.cl: integrate_gathered_suns, whose odd nodes join the
+   even nodes' lookups before them): against its twins (reference.scatter, azimuth.scatter_nodes), with a
+   ground, an even and an odd number of steps; the constant source's closed form; what it changes in the
+   frames of a table built with it.
 """
 
 from __future__ import annotations
@@ -18,16 +22,18 @@ import dataclasses
 import logging
 
 import numpy as np
+import pyopencl.array as cla
 import pytest
 from numpy.testing import assert_allclose
 
-from clsky import ScatteringTable, TableSettings, azimuth, reference
+from clsky import ScatteringTable, TableSettings, azimuth, preset, reference
 from clsky.anim.cameras import FisheyeCamera, sun_direction
 from clsky.errors import ParameterError
+from clsky.multiple import MultipleScatteringEngine
 from clsky.quality import QUALITY_LEVELS
 from clsky.render import SkyRenderer, sun_disc_radiance
 
-from conftest import TOLERANCES, max_error_report
+from conftest import TOLERANCES, black_preset, max_error_report
 from test_render import COS_SUN_RADIUS, LUMINANCE, RAY, SMALL, SUN_AZIMUTH
 
 logger = logging.getLogger(__name__)
@@ -38,6 +44,9 @@ VARIANTS = {
     "atmosphere-plus": ("atmosphere-plus", SMALL.replace(mode="atmosphere-plus")),
     "harmonics": ("physical", SMALL.replace(mode="physical", azimuth_harmonics=2)),
 }
+#: Tables whose scatter takes the stride (section 5), by the VARIANTS entry they otherwise are.
+SCATTER_STRIDED = {f"{variant}, scatter stride 2": (name, settings.replace(source_stride=2))
+                   for variant, (name, settings) in VARIANTS.items()}
 
 
 @pytest.fixture(scope="module")
@@ -47,7 +56,7 @@ def tables(cl_context):
 
     def get(variant):
         if variant not in cache:
-            name, settings = VARIANTS[variant]
+            name, settings = {**VARIANTS, **SCATTER_STRIDED}[variant]
             cache[variant] = ScatteringTable.build(name, settings, ctx=cl_context)
         return cache[variant]
 
@@ -171,15 +180,148 @@ def test_source_stride_leaves_the_parameters_hash_at_one():
     assert TableSettings.from_dict(TableSettings(source_stride=2).to_dict()).source_stride == 2
 
 
-def test_the_scatter_never_strides():
-    settings = TableSettings(source_stride=2)
-    assert settings.scatter_settings.source_stride == 1
-    assert settings.scatter_settings.view_steps == settings.multiple_view_steps
-    plain = TableSettings(multiple_view_steps=None, source_stride=2).scatter_settings
-    assert (plain.source_stride, plain.view_steps) == (1, 30)
+def test_the_scatter_takes_its_tables_stride():
+    for stride in (1, 2):
+        settings = TableSettings(source_stride=stride)
+        assert settings.scatter_settings.source_stride == stride
+        assert settings.scatter_settings.view_steps == settings.multiple_view_steps
+        plain = TableSettings(multiple_view_steps=None, source_stride=stride).scatter_settings
+        assert (plain.source_stride, plain.view_steps) == (stride, 30)
 
 
 def test_quality_levels_that_stride():
     assert {name: level.ray.source_stride for name, level in QUALITY_LEVELS.items()} == \
         {"draft": 2, "default": 2, "high": 1, "reference": 1}
-    assert all(level.table.source_stride == 1 for level in QUALITY_LEVELS.values())
+    assert all(level.table.source_stride == level.ray.source_stride for level in QUALITY_LEVELS.values())
+
+
+# 5. The scatter of the orders ---------------------------------------------------------------------
+
+#: tests/test_multiple.py's small grid, the orders' source on every other node.
+SCATTER_GRID = TableSettings(size=(9, 33, 7), gather_theta_steps=64, gather_phi_steps=32, source_stride=2)
+#: The physical preset with a bright ground, so that the rays that end on it see it.
+BRIGHT = preset("physical").replace(ground_albedo=0.3)
+#: case -> (atmosphere, combine_species and a ground radiance)
+SCATTER_CASES = {"atmosphere-plus": (black_preset("atmosphere-plus"), False),
+                 "physical": (black_preset("physical"), False),
+                 "ground": (BRIGHT, True)}
+
+
+@pytest.fixture(scope="module")
+def scatter_engine(cl_context):
+    """``scatter_engine(settings)``: a cached MultipleScatteringEngine of ``settings``' scatter."""
+    cache = {}
+
+    def get(settings):
+        key = settings.scatter_settings
+        if key not in cache:
+            cache[key] = MultipleScatteringEngine(settings, ctx=cl_context)
+        return cache[key]
+
+    yield get
+    for engine in cache.values():
+        engine.close()
+
+
+def assert_per_channel(actual, desired, tolerance, label):
+    """assert_allclose channel by channel, atol scaled to each channel's largest value."""
+    assert np.all(np.isfinite(actual)) and np.all(actual >= 0.0)
+    for c in range(desired.shape[-1]):
+        logger.info(max_error_report(actual[..., c], desired[..., c], f"{label} channel {c}"))
+        assert_allclose(actual[..., c], desired[..., c], rtol=tolerance.rtol, atol=tolerance.atol(desired[..., c]),
+                        err_msg=f"{label} channel {c}")
+
+
+def scatter_inputs(settings, seed, constant=False):
+    """A gathered table (D, H, W, 6) of values in [0.5, 2] (or their mean in every cell) and a ground
+    radiance (D, 3) per sun node."""
+    width, height, depth = settings.size
+    rng = np.random.default_rng(seed)
+    gathered = rng.uniform(0.5, 2.0, (depth, height, width, 6))
+    if constant:
+        gathered = np.broadcast_to(gathered.reshape(-1, 6).mean(axis=0), gathered.shape).copy()
+    return gathered, rng.uniform(0.1, 1.0, (depth, 3))
+
+
+def scattered(engine, case, gathered, radiance):
+    atmosphere, combine = SCATTER_CASES[case]
+    if combine:
+        return engine.scatter(atmosphere, gathered, combine_species=True, ground_radiance=radiance).get()[..., :6]
+    return engine.scatter(atmosphere, gathered).get()[..., :6]
+
+
+@pytest.mark.parametrize("steps", [20, 15])
+@pytest.mark.parametrize("case", sorted(SCATTER_CASES))
+def test_scatter_stride_two_matches_twin(scatter_engine, case, steps):
+    """The scatter kernel (each odd node's shares folded into the lookups on either side) against
+    reference.scatter (the source interpolated at the odd nodes, source_at_stride): the stride-1
+    scatter's tolerance (conftest.TOLERANCES' scatter), both sum the same products in another order."""
+    settings = SCATTER_GRID.replace(multiple_view_steps=steps)
+    gathered, radiance = scatter_inputs(settings, steps)
+    atmosphere, combine = SCATTER_CASES[case]
+    actual = scattered(scatter_engine(settings), case, gathered, radiance)
+    desired = reference.scatter(atmosphere, settings, gathered, combine, radiance if combine else None)
+    assert_per_channel(actual, desired, TOLERANCES["float64"]["scatter"], f"scatter stride 2, {case}, N={steps}")
+
+
+@pytest.mark.parametrize("steps", [20, 15])
+def test_scatter_stride_two_with_harmonics_matches_twin(cl_context, steps):
+    """With three azimuth harmonics of both signs (the clamp at 0 exercised) the local azimuth of a
+    looked-up node is its own, not the odd node's after it: against azimuth.scatter_nodes at each azimuth
+    node (the tolerance of tests/test_azimuth.py's stride-1 scatter)."""
+    settings = TableSettings(size=(9, 17, 7), mode="physical", orders=3, gather_theta_steps=32, gather_phi_steps=16,
+                             sun_cos_range=(-0.3, 0.4), azimuth_harmonics=2, multiple_view_steps=steps,
+                             source_stride=2)
+    width, height, depth = settings.size
+    rng = np.random.default_rng(steps)
+    gathered = rng.random((3, depth, height, width, 6))
+    gathered[1:] = 1.2 * (gathered[1:] - 0.5)
+    atmosphere = black_preset("physical")
+    expected = azimuth.scatter_nodes(atmosphere, settings, gathered)
+    padded = np.zeros(gathered.shape[:-1] + (8,))
+    padded[..., :6] = gathered
+    engine = MultipleScatteringEngine(settings, ctx=cl_context)
+    try:
+        padded = cla.to_device(engine.queue, padded)        # the harmonics' buffer, as clsky/azimuth.py's
+        for n, phi in enumerate(azimuth.azimuth_nodes(2)):
+            got = engine.scatter(atmosphere, padded, combine_species=True, cos_azimuth=np.cos(phi)).get()
+            assert_per_channel(got[..., :3], expected[n], TOLERANCES["float64"]["scatter"],
+                               f"harmonics, node {n}, N={steps}")
+    finally:
+        engine.close()
+
+
+@pytest.mark.parametrize("steps", [20, 15])
+@pytest.mark.parametrize("case", ["physical", "ground"])
+def test_scatter_of_a_constant_source_is_the_same_at_either_stride(scatter_engine, case, steps):
+    """The closed form of section 2 in the scatter: a source that is the same in every cell is
+    interpolated exactly, so the two strides differ by rounding only (1e-13 of the largest value: a few
+    ulp of sums of 21 terms), whatever w; the ground's part is not interpolated either way."""
+    settings = SCATTER_GRID.replace(multiple_view_steps=steps)
+    gathered, radiance = scatter_inputs(settings, steps, constant=True)
+    every = scattered(scatter_engine(settings.replace(source_stride=1)), case, gathered, radiance)
+    other = scattered(scatter_engine(settings), case, gathered, radiance)
+    assert_allclose(other, every, rtol=0.0, atol=1e-13 * every.max())
+
+
+#: Largest relative luminance change of a table whose scatter takes stride 2 against stride 1 (the small
+#: physical tables of VARIANTS, ray-marched at every node with 16 samples, a 32 x 32 fisheye from the
+#: ground) per sun zenith [deg]: measured 2026-12-03 9.4e-5, 6.0e-4 and 9.7e-4 (the larger of the two
+#: tables; see the log), each doubled and rounded up to one digit, as section 3's; the change must also not
+#: be 0 (the table's stride did something).
+SCATTER_STRIDE_CHANGE = {30.0: 2e-4, 89.0: 2e-3, 95.0: 2e-3}
+
+
+@pytest.mark.parametrize("variant", ["physical", "harmonics"])
+@pytest.mark.parametrize("sun_zenith", sorted(SCATTER_STRIDE_CHANGE))
+def test_scatter_stride_two_changes_the_frames_little(tables, cl_context, variant, sun_zenith):
+    sun = sun_direction(sun_zenith, SUN_AZIMUTH)
+    directions, valid = directions_from(0.0)
+    every = render(tables(variant), RAY, directions, sun, 0.0, cl_context) @ LUMINANCE
+    other = render(tables(f"{variant}, scatter stride 2"), RAY, directions, sun, 0.0, cl_context) @ LUMINANCE
+    sky = valid & ((directions @ sun) < COS_SUN_RADIUS)
+    floor = 1e-3 * np.percentile(every[sky], 99)
+    change = np.abs(other - every)[sky] / np.maximum(every[sky], floor)
+    logger.info(f"{variant}, sun zenith {sun_zenith:g}: scatter stride 2 against 1, luminance max "
+                f"{change.max():.2e}, p95 {np.percentile(change, 95):.2e}")
+    assert 0.0 < change.max() <= SCATTER_STRIDE_CHANGE[sun_zenith]
