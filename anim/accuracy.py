@@ -113,6 +113,9 @@ def default_candidates(base: clsky.TableSettings | None = None):
                    for n in (16, 32, 48, 96)]
     candidates.append(Candidate("ray march 48 samples, source on every other node", "ray march samples", base,
                                 samples=48, source_stride=2))        # the default quality level's march
+    candidates.append(Candidate("ray march 48 samples, source on every other node, also in the table's scatter",
+                                "ray march samples", base.replace(source_stride=2), samples=48,
+                                source_stride=2))                      # ... and its table's scatter
     candidates += [Candidate(f"sky-view {w} x {h}", "sky-view map size", base, skyview=(w, h))
                    for w, h in SKYVIEW_SIZES]
     return candidates
