@@ -34,6 +34,7 @@ from clsky.quality import QUALITY_LEVELS
 from clsky.render import SkyRenderer, sun_disc_radiance
 
 from conftest import TOLERANCES, black_preset, max_error_report
+import test_multiple
 from test_render import COS_SUN_RADIUS, LUMINANCE, RAY, SMALL, SUN_AZIMUTH
 
 logger = logging.getLogger(__name__)
@@ -201,26 +202,12 @@ def test_quality_levels_that_stride():
 SCATTER_GRID = TableSettings(size=(9, 33, 7), gather_theta_steps=64, gather_phi_steps=32, source_stride=2)
 #: The physical preset with a bright ground, so that the rays that end on it see it.
 BRIGHT = preset("physical").replace(ground_albedo=0.3)
+#: The fixture ``multiple_engine(settings)``: cached scatter engines (keyed by the scatter's stride too).
+multiple_engine = test_multiple.multiple_engine
 #: case -> (atmosphere, combine_species and a ground radiance)
 SCATTER_CASES = {"atmosphere-plus": (black_preset("atmosphere-plus"), False),
                  "physical": (black_preset("physical"), False),
                  "ground": (BRIGHT, True)}
-
-
-@pytest.fixture(scope="module")
-def scatter_engine(cl_context):
-    """``scatter_engine(settings)``: a cached MultipleScatteringEngine of ``settings``' scatter."""
-    cache = {}
-
-    def get(settings):
-        key = settings.scatter_settings
-        if key not in cache:
-            cache[key] = MultipleScatteringEngine(settings, ctx=cl_context)
-        return cache[key]
-
-    yield get
-    for engine in cache.values():
-        engine.close()
 
 
 def assert_per_channel(actual, desired, tolerance, label):
@@ -252,14 +239,14 @@ def scattered(engine, case, gathered, radiance):
 
 @pytest.mark.parametrize("steps", [20, 15])
 @pytest.mark.parametrize("case", sorted(SCATTER_CASES))
-def test_scatter_stride_two_matches_twin(scatter_engine, case, steps):
+def test_scatter_stride_two_matches_twin(multiple_engine, case, steps):
     """The scatter kernel (each odd node's shares folded into the lookups on either side) against
     reference.scatter (the source interpolated at the odd nodes, source_at_stride): the stride-1
     scatter's tolerance (conftest.TOLERANCES' scatter), both sum the same products in another order."""
     settings = SCATTER_GRID.replace(multiple_view_steps=steps)
     gathered, radiance = scatter_inputs(settings, steps)
     atmosphere, combine = SCATTER_CASES[case]
-    actual = scattered(scatter_engine(settings), case, gathered, radiance)
+    actual = scattered(multiple_engine(settings), case, gathered, radiance)
     desired = reference.scatter(atmosphere, settings, gathered, combine, radiance if combine else None)
     assert_per_channel(actual, desired, TOLERANCES["float64"]["scatter"], f"scatter stride 2, {case}, N={steps}")
 
@@ -293,14 +280,14 @@ def test_scatter_stride_two_with_harmonics_matches_twin(cl_context, steps):
 
 @pytest.mark.parametrize("steps", [20, 15])
 @pytest.mark.parametrize("case", ["physical", "ground"])
-def test_scatter_of_a_constant_source_is_the_same_at_either_stride(scatter_engine, case, steps):
+def test_scatter_of_a_constant_source_is_the_same_at_either_stride(multiple_engine, case, steps):
     """The closed form of section 2 in the scatter: a source that is the same in every cell is
     interpolated exactly, so the two strides differ by rounding only (1e-13 of the largest value: a few
     ulp of sums of 21 terms), whatever w; the ground's part is not interpolated either way."""
     settings = SCATTER_GRID.replace(multiple_view_steps=steps)
     gathered, radiance = scatter_inputs(settings, steps, constant=True)
-    every = scattered(scatter_engine(settings.replace(source_stride=1)), case, gathered, radiance)
-    other = scattered(scatter_engine(settings), case, gathered, radiance)
+    every = scattered(multiple_engine(settings.replace(source_stride=1)), case, gathered, radiance)
+    other = scattered(multiple_engine(settings), case, gathered, radiance)
     assert_allclose(other, every, rtol=0.0, atol=1e-13 * every.max())
 
 
