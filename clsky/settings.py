@@ -119,8 +119,9 @@ class TableSettings:
         march and the sky-view map's nodes (kernels/view_ray.cl: integrate_gathered). 2
         looks it up at every other node and the last, linear in distance between: the default
         animation's ray march takes about a fifth less CPU time for a change of its luminance of about
-        2e-4 by day and up to 2e-3 in civil twilight, its table's scatter a third less for a change of
-        under 1e-3 (README, "Speed"); the 'draft' and 'default' quality levels take it for both.
+        2e-4 by day and up to 2e-3 in civil twilight, a scatter of its table a quarter (M = 0) to a
+        third (M = 2) less for a change of the frames under 1e-3 (README, "Speed"); the 'draft' and
+        'default' quality levels take it for both.
     """
 
     size: tuple = (32, 256, 32)
