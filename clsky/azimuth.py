@@ -540,7 +540,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         run = _numpy_backend(atmosphere, settings, operators)
     else:
         run = _opencl_backend(atmosphere, settings, operators, ctx, fast_math)
-    single_nodes = run.single
+    single_nodes, run.single = run.single, None      # the backend's reference goes: the nodes are dropped below
     wanted = settings.max_orders if settings.orders == "auto" else settings.orders
     record = {"harmonics": harmonics, "converged": False, "relative_additions": [], "estimated_errors": [],
               "tail_ratio": None, "device": run.device}
@@ -557,6 +557,10 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
                                                    + ground_sky)
     running = single_nodes[..., :3] + single_nodes[..., 3:]
     gathered_sum, orders, totals = None, [], [_total(single_nodes)]
+    # what the orders no longer read goes before them: the harmonics of single scattering and its nodes
+    # but the canonical one (the build's peak memory is what a build pays for on these VMs, README "Speed")
+    single = single_nodes[0].copy()
+    del single_harmonics, single_nodes
     previous = None     # order k - 1 at the nodes, for the geometric tail's test (the backend reuses `new`)
     # the host's BLAS (azimuth averages, ground irradiances) on one thread beside the OpenCL device's
     # workers, as clsky._cl.host_blas_single_threaded explains; not the first gather above, whose
@@ -603,7 +607,8 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
                 gathered = run.gather(state)
             del state
     record["orders"] = len(orders) + 1
-    return HarmonicOrders(single_nodes[0], run.to_host(gathered_sum), orders, record, ground_sky)
+    del running, previous                               # before the gathered sum's download
+    return HarmonicOrders(single, run.to_host(gathered_sum), orders, record, ground_sky)
 
 
 def azimuth_average(order_nodes):

@@ -329,10 +329,11 @@ def _harmonic_phases(settings, orders):
     """The orders of a table with azimuth harmonics (:mod:`clsky.azimuth`, n = M + 1 azimuth nodes): the
     first gather on the host (single scattering at the n nodes and its harmonics, both seen species'
     interpolation (n, D, Theta + 1, W 6), a species' harmonic term and their sum, the n gathered harmonics,
-    the padded upload), then the orders loop (every order's azimuth average kept on the host, the order's n
-    nodes and the running sum at the nodes; on the device the gathered sum, the gathered harmonics and the
-    order's n nodes, padded, a harmonic and its gather; the nodes' padded download; for ``orders="auto"``,
-    the order before at the nodes, which the geometric tail's test reads)."""
+    the padded upload), then the orders loop (single scattering at the canonical node, every order's
+    azimuth average kept on the host, the order's n nodes and the running sum at the nodes; on the device
+    the gathered sum, the gathered harmonics and the order's n nodes, padded, a harmonic and its gather;
+    the nodes' padded download; for ``orders="auto"``, the order before at the nodes, which the geometric
+    tail's test reads)."""
     cells, height, depth, s = _table_sizes(settings)
     n = settings.azimuth_harmonics + 1
     padded = cells * 8 * s
@@ -346,7 +347,7 @@ def _harmonic_phases(settings, orders):
         Allocation("padded upload (n, D, H, W, 8)", cells * 8 * _F64, count=n),
         Allocation("gathered harmonics on the device (n, D, H, W, 8)", padded, count=n, on_device=True)))
     loop = Phase("orders", (
-        single,
+        _single(cells),                 # the canonical node's: the other nodes and the harmonics go before the loop
         Allocation("gather matrices (n, 2, H, H)", 2 * height * height * s, count=n, on_device=True),
         Allocation("higher orders kept as their azimuth averages (D, H, W, 3) float64", cells * 3 * _F64,
                    count=orders - 1),
