@@ -436,8 +436,8 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     Every engine runs on one queue and takes its device arrays from one pool
     (:func:`clsky._cl.memory_pool`): an order reuses the buffers of the one before (they are the same
     sizes) instead of faulting in fresh memory, and the nodes come to the host through one reused
-    padded staging array (which also carries the first gather up and the gathered sum down) into one
-    reused host table: what ``scatter`` returns is valid until its next call. The pool goes with the
+    padded slab, a node at a time (which also carries the first gather up and the gathered sum down), into
+    one reused host table: what ``scatter`` returns is valid until its next call. The pool goes with the
     backend."""
     import pyopencl as cl
     import pyopencl.array as cla
@@ -455,19 +455,35 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     matrices = [engine.upload_matrices(operators.gather_matrices(m)) for m in range(cosines.size)]
     # allocated on first use, not here: made before the first gather they would add to the build's host
     # peak (the estimate of clsky.resources, checked against tracemalloc by tests/test_memory.py)
-    staging = []            # the padded host array (M + 1, D, H, W, 8) of every transfer (allocated once)
+    # every transfer goes through one padded host slab (D, H, W, 8), a node or a harmonic at a time: a staging
+    # array of all M + 1 (327 MB for the default animation's table) raised the build's peak memory
+    staging = []            # the slab (allocated once)
     host_nodes = []         # the host table (M + 1, D, H, W, 3) that scatter returns (allocated once)
 
-    def padded_staging(shape):
+    def slab_staging(shape):
+        """The padded staging slab of tables of ``shape`` (M + 1, D, H, W, channels)."""
         if not staging:
-            staging.append(np.empty(shape[:-1] + (8,), engine.dtype))
+            staging.append(np.empty(shape[1:-1] + (8,), engine.dtype))
         return staging[0]
 
+    def download(table_d, into, channels):
+        """into[n] = table_d[n, ..., :channels] for every slab n of the padded device table (M + 1, D, H, W, 8),
+        each copy waiting for the commands before it on the queue."""
+        slab = slab_staging(table_d.shape)
+        for n in range(table_d.shape[0]):
+            cl.enqueue_copy(queue, slab, table_d.data, src_offset=table_d.offset + n * slab.nbytes, is_blocking=True)
+            np.copyto(into[n], slab[..., :channels])
+        return into
+
     def upload(gathered):
-        padded = padded_staging(gathered.shape)
-        padded[..., :6] = gathered
-        padded[..., 6:] = 0.0
-        return cla.to_device(queue, padded, allocator=pool)
+        gathered_d = cla.empty(queue, gathered.shape[:-1] + (8,), engine.dtype, allocator=pool)
+        slab = slab_staging(gathered.shape)
+        for n in range(gathered.shape[0]):
+            slab[..., :6] = gathered[n]
+            slab[..., 6:] = 0.0
+            cl.enqueue_copy(queue, gathered_d.data, slab, dst_offset=gathered_d.offset + n * slab.nbytes,
+                            is_blocking=True)
+        return gathered_d
 
     engines = {settings.azimuth_harmonics: engine}
 
@@ -483,11 +499,9 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
         for node, c in enumerate(cosines):
             engines[read].scatter(atmosphere, gathered_d, combine_species=True, ground_radiance=ground_radiance,
                                   cos_azimuth=c, out=nodes_d, node=node)
-        nodes = nodes_d.get(ary=padded_staging(nodes_d.shape))                      # get() waits for them
         if not host_nodes:
-            host_nodes.append(np.empty(nodes.shape[:-1] + (3,)))
-        np.copyto(host_nodes[0], nodes[..., :3])
-        return host_nodes[0], nodes_d
+            host_nodes.append(np.empty(nodes_d.shape[:-1] + (3,)))
+        return download(nodes_d, host_nodes[0], 3), nodes_d                          # waits for the scatters
 
     def gather(nodes_d):
         """G_m = A_m L_m, L_m = sum_n H[m, n] L(phi_n) (padded: channels 0-2 and 3-5 both hold L)."""
@@ -502,7 +516,7 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
         return gathered_d.copy() if total is None else engine.add_into(total, gathered_d, scale)
 
     def to_host(gathered_d):
-        return gathered_d.get(ary=padded_staging(gathered_d.shape))[..., :6].astype(np.float64)
+        return download(gathered_d, np.empty(gathered_d.shape[:-1] + (6,)), 6)
 
     return _Backend(single, upload, scatter, gather, accumulate, to_host,
                     _cl.describe_device(single_engine.device))

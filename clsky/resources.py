@@ -329,10 +329,10 @@ def _harmonic_phases(settings, orders):
     """The orders of a table with azimuth harmonics (:mod:`clsky.azimuth`, n = M + 1 azimuth nodes): the
     first gather on the host (single scattering at the n nodes and its harmonics, both seen species'
     interpolation (n, D, Theta + 1, W 6), a species' harmonic term and their sum, the n gathered harmonics,
-    the padded upload), then the orders loop (single scattering at the canonical node, every order's
+    the padded transfer slab), then the orders loop (single scattering at the canonical node, every order's
     azimuth average kept on the host, the order's n nodes and the running sum at the nodes; on the device
     the gathered sum, the gathered harmonics and the order's n nodes, padded, a harmonic and its gather;
-    the nodes' padded download; for ``orders="auto"``, the order before at the nodes, which the geometric
+    the padded transfer slab; for ``orders="auto"``, the order before at the nodes, which the geometric
     tail's test reads)."""
     cells, height, depth, s = _table_sizes(settings)
     n = settings.azimuth_harmonics + 1
@@ -344,7 +344,7 @@ def _harmonic_phases(settings, orders):
         # both species interpolated at once (n, D, Theta + 1, W 6), a species' harmonic sum and the sum of both
         Allocation("interpolated single scattering and its harmonic sums (n, D, Theta + 1, W 3)", seen, count=4),
         Allocation("gathered harmonics (n, D, H, W, 6) float64", cells * 6 * _F64, count=n),
-        Allocation("padded upload (n, D, H, W, 8)", cells * 8 * _F64, count=n),
+        Allocation("padded transfer slab (D, H, W, 8)", padded),
         Allocation("gathered harmonics on the device (n, D, H, W, 8)", padded, count=n, on_device=True)))
     loop = Phase("orders", (
         _single(cells),                 # the canonical node's: the other nodes and the harmonics go before the loop
@@ -355,7 +355,7 @@ def _harmonic_phases(settings, orders):
         Allocation("running sum at the nodes (n, D, H, W, 3) float64", cells * 3 * _F64, count=n),
         Allocation("padded tables: gathered sum, gathered, nodes, harmonic, its gather", padded, count=3 * n + 2,
                    on_device=True),
-        Allocation("node downloads (D, H, W, 8)", padded, count=n))
+        Allocation("padded transfer slab (D, H, W, 8)", padded))
         + ((Allocation("the order before at its nodes (n, D, H, W, 3) float64", cells * 3 * _F64, count=n),)
            if settings.orders == "auto" else ()))
     return [first, loop]
