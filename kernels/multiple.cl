@@ -93,8 +93,8 @@ __kernel void gather(__global const real *matrices, const int species_stride, co
  * With -DGROUND, ground_t[0..2] the view transmittance T(Pa, Pb) r, g, b of rays that end on the ground
  * (0 elsewhere) and ground_mu[b] the sun cosine at Pb.
  * With -DSOURCE_STRIDE=2 (TableSettings.source_stride) the source is looked up at the even nodes and the
- * last one, linear in distance between (as integrate_gathered). Since an odd node's shares of the lookups
- * on either side (shares_between) do not depend on the sun, they join those lookups' integrands: an even
+ * last one, linear in distance between, by integrate_gathered's scheme: an odd node's shares of the lookups
+ * on either side (shares_between), which do not depend on the sun, join those lookups' integrands; an even
  * node's lookups wait until the odd node after it has added f_i (1 - w_i), and f_i w_i waits for the next
  * even node's. Each sun node's lookups then cost half as many trilinear reads, for the same sums up to
  * rounding (the integrand of a lookup is summed before the product). */

@@ -440,7 +440,8 @@ inline void shares_between(const view_march_t *ray, const int i, real8 *before, 
  * With -DSOURCE_STRIDE=2 (TableSettings.source_stride) Gbar is looked up at the even nodes and the last
  * one only, and taken linear in distance between two of them at the odd node i between:
  * Gbar_i = (1 - w_i) Gbar_(i-1) + w_i Gbar_(i+1), w_i = (s_i - s_(i-1)) / (s_(i+1) - s_(i-1)); node i's
- * integrand adds f_i (1 - w_i) Gbar_(i-1) at once and leaves f_i w_i pending for node i + 1's lookup.
+ * integrand goes to the lookups on either side (shares_between): f_i (1 - w_i) joins node i - 1's, whose
+ * lookup waits for it, and f_i w_i node i + 1's (the scatter's scheme, kernels/multiple.cl).
  * Gbar is a smooth field of the higher orders: about half the lookups' cost for a change of the
  * radiance of about 2e-4 by day (README, "Speed"). */
 inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h0, const realv mu_v,
@@ -460,10 +461,12 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
     if (single)
         for (int c = 0; c < 6; ++c)
             single[c] = V(0.0);
+    node_lookup_t node;                 /* with -DSOURCE_STRIDE=2, an even node's, kept for the odd node after it */
+    realv fz;
 #if SOURCE_STRIDE == 2
-    real8 last_source[VECTOR_WIDTH], pending[VECTOR_WIDTH];   /* Gbar at the last lookup; f_i w_i of the odd node */
+    real8 pending[VECTOR_WIDTH];        /* f_i w_i of the odd node i, for node i + 1's lookup */
     for (int k = 0; k < VECTOR_WIDTH; ++k)
-        last_source[k] = pending[k] = (real8)(R(0.0));
+        pending[k] = (real8)(R(0.0));
 #endif
 
     for (int i = 0; i <= N_VIEW; ++i) {
@@ -488,31 +491,27 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
         }
 #if SOURCE_STRIDE == 2
         if ((i & 1) && i < N_VIEW) {
+            /* node i - 1's lookup waited for this node's share of it */
             real8 share[VECTOR_WIDTH];
             shares_between(&ray, i, share, pending);
             for (int k = 0; k < VECTOR_WIDTH; ++k)
-                sum[k] += share[k] * last_source[k];
+                node.factor[k] += share[k];
+            add_lookups(gathered, width, height, depth, &node, fz, &ray, mu_s, nu, sum);
             continue;
         }
 #endif
         const realv fx = MAPPING_U(ray.h, mapping, ha) * (real)(width - 1);
         const realv fy = MAPPING_V(ray.mu_view_here, mapping) * (real)(height - 1);
-        const realv fz = MAPPING_SUN_T(mu_sun_here, mapping, sun_range) * (real)(depth - 1);
-        node_lookup_t node;
+        fz = MAPPING_SUN_T(mu_sun_here, mapping, sun_range) * (real)(depth - 1);
+        prepare_lookups(width, height, ray.f, ray.s, fx, fy, &node);
 #if SOURCE_STRIDE == 2
-        /* the source itself: add_lookups with unit integrands into zeros (1 g + 0 is g exactly) */
-        const realv unit[6] = {V(1.0), V(1.0), V(1.0), V(1.0), V(1.0), V(1.0)};
-        prepare_lookups(width, height, unit, ray.s, fx, fy, &node);
-        for (int k = 0; k < VECTOR_WIDTH; ++k)
-            last_source[k] = (real8)(R(0.0));
-        add_lookups(gathered, width, height, depth, &node, fz, &ray, mu_s, nu, last_source);
         for (int k = 0; k < VECTOR_WIDTH; ++k) {
-            sum[k] += (lane_integrands(ray.f, k) + pending[k]) * last_source[k];
+            node.factor[k] += pending[k];
             pending[k] = (real8)(R(0.0));
         }
-#else
-        prepare_lookups(width, height, ray.f, ray.s, fx, fy, &node);
-        add_lookups(gathered, width, height, depth, &node, fz, &ray, mu_s, nu, sum);
+        if (i + 1 < N_VIEW)
+            continue;                   /* node i + 1 is odd: its share joins this lookup first */
 #endif
+        add_lookups(gathered, width, height, depth, &node, fz, &ray, mu_s, nu, sum);
     }
 }
