@@ -382,13 +382,20 @@ class MultipleScatteringEngine(_cl.Engine):
     def combine_nodes(self, nodes, weights, out):
         """out = sum_n weights[n] nodes[n]: the padded device tables (N, D, H, W, 8) ``nodes`` combined
         into the padded device table ``out`` (D, H, W, 8) (an azimuth harmonic of an order's nodes,
-        :mod:`clsky.azimuth`; kernels/multiple.cl: combine_nodes)."""
-        weights = np.ascontiguousarray(weights, dtype=self.dtype)
+        :mod:`clsky.azimuth`; kernels/multiple.cl: combine_nodes).
+
+        ``weights`` (N,) on the host, or already on the device (:meth:`upload_matrices`): a host array is
+        uploaded with a blocking copy, which waits for every command before it on the queue; weights
+        uploaded once let the caller enqueue a whole chain of gathers and go on with its own work."""
+        if not isinstance(weights, cla.Array):
+            weights = np.ascontiguousarray(weights, dtype=self.dtype)
         cells = out.size // 8
-        if weights.shape != (nodes.shape[0],) or nodes.shape[1:] != out.shape or out.shape[-1] != 8:
+        if (weights.shape != (nodes.shape[0],) or weights.dtype != self.dtype or nodes.shape[1:] != out.shape
+                or out.shape[-1] != 8):
             raise ValueError(f"nodes (N, D, H, W, 8), weights (N,) and out (D, H, W, 8) must agree, got "
                              f"{nodes.shape}, {weights.shape} and {out.shape}")
-        weights_d = cla.to_device(self.queue, weights, allocator=self.allocator)
+        weights_d = weights if isinstance(weights, cla.Array) else cla.to_device(self.queue, weights,
+                                                                                 allocator=self.allocator)
         event = self.kernels["combine_nodes"](self.queue, (cells,), None, nodes.data, weights_d.data,
                                               np.int32(weights.size), np.uint64(cells), self.real(1.0),
                                               self.real(0.0), out.data)

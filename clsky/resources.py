@@ -328,7 +328,7 @@ def _orders_phases(settings, orders):
 def _harmonic_phases(settings, orders):
     """The orders of a table with azimuth harmonics (:mod:`clsky.azimuth`, n = M + 1 azimuth nodes): the
     first gather on the host (single scattering at the n nodes and its harmonics, both seen species'
-    interpolation (n, D, Theta + 1, W 6), a species' harmonic term and their sum, the n gathered harmonics,
+    interpolation (n, D, Theta + 1, W 6), their harmonic sum, the n gathered harmonics,
     the padded transfer slab), then the orders loop (single scattering at the canonical node, every order's
     azimuth average kept on the host, the order's n nodes and the running sum at the nodes; on the device
     the gathered sum, the gathered harmonics and the order's n nodes, padded, a harmonic and its gather;
@@ -341,8 +341,9 @@ def _harmonic_phases(settings, orders):
     single = Allocation("single scattering at the azimuth nodes (n, D, H, W, 6) float64", cells * 6 * _F64, count=n)
     first = Phase("first gather", (
         single, Allocation("single scattering's harmonics (n, D, H, W, 6) float64", cells * 6 * _F64, count=n),
-        # both species interpolated at once (n, D, Theta + 1, W 6), a species' harmonic sum and the sum of both
-        Allocation("interpolated single scattering and its harmonic sums (n, D, Theta + 1, W 3)", seen, count=4),
+        # both species interpolated at once (n, D, Theta + 1, W 6) and the harmonic sums of both (the second
+        # species' terms go through blocks of two sun layers, HarmonicGather._sun_weighted)
+        Allocation("interpolated single scattering and its harmonic sums (n, D, Theta + 1, W 3)", seen, count=3),
         Allocation("gathered harmonics (n, D, H, W, 6) float64", cells * 6 * _F64, count=n),
         Allocation("padded transfer slab (D, H, W, 8)", padded),
         Allocation("gathered harmonics on the device (n, D, H, W, 8)", padded, count=n, on_device=True)))

@@ -47,7 +47,8 @@ class SingleScatteringEngine(_cl.Engine):
     def build_options(self):
         return super().build_options() + quadrature_defines(self.settings, self.vector_width)
 
-    def compute(self, atmosphere: AtmosphereParameters, size=None, mapping=None, progress=None, cos_azimuth=1.0):
+    def compute(self, atmosphere: AtmosphereParameters, size=None, mapping=None, progress=None, cos_azimuth=1.0,
+                out=None):
         """The single-scattering table.
 
         Parameters
@@ -62,6 +63,9 @@ class SingleScatteringEngine(_cl.Engine):
         cos_azimuth : float
             Cosine of the view-sun azimuth of every cell: 1 (default) is the canonical frame of the 3D
             table; other values are the azimuth nodes of :mod:`clsky.azimuth`.
+        out : numpy.ndarray, shape (D, H, W, 6), float64, optional
+            Where to write the table (C-contiguous), instead of a new array: the azimuth nodes of a
+            table go into one array without a stacked copy.
 
         Returns
         -------
@@ -92,4 +96,9 @@ class SingleScatteringEngine(_cl.Engine):
             if progress is not None:
                 event.wait()
                 progress(done, len(slabs))
-        return table_d.get().astype(np.float64, copy=False)   # no second copy of a float64 table
+        if out is None:
+            return table_d.get().astype(np.float64, copy=False)   # no second copy of a float64 table
+        if self.dtype == np.float64:
+            return table_d.get(ary=out)
+        out[...] = table_d.get()
+        return out

@@ -182,6 +182,23 @@ def test_first_gather_against_literal_sphere_integral(atmosphere, species):
         assert_allclose(gathered[m], _project(literal, m), rtol=0, atol=1e-12 * np.abs(literal).max())
 
 
+def test_first_gather_sun_weighting_is_einsums_sum(atmosphere):
+    """The first gather's weighting of the seen harmonics by C_{s',m,n}(z, a), done a few sun layers at a time
+    (HarmonicGather._sun_weighted), is bit for bit the einsum it replaced: per species s' the sum over n
+    in order, the second species' added to the first's (the planned tables' pins rest on it). An odd
+    number of sun layers (7) leaves a short last block."""
+    settings = TINY.replace(size=(5, 12, 7))
+    operators = azimuth.HarmonicGather(atmosphere, settings, HARMONICS)
+    width, height, depth = settings.size
+    seen = np.random.default_rng(11).random((HARMONICS + 1, depth, settings.gather_theta_steps + 1, width, 6))
+    expected = None
+    for index, species in enumerate(("rayleigh", "mie")):
+        term = np.einsum("mnza,nzawc->mzawc", operators.sun[species], seen[..., 3 * index:3 * index + 3])
+        expected = term if expected is None else expected + term
+    assert depth % operators.SUN_LAYERS_PER_BLOCK != 0
+    assert np.array_equal(operators._sun_weighted(seen), expected)
+
+
 def test_orders_finite_and_non_negative(atmosphere):
     result = azimuth.compute_orders(atmosphere, TINY.replace(sun_cos_range=(-0.2, 0.1), azimuth_harmonics=3))
     for order in result.orders:
@@ -247,6 +264,13 @@ def test_single_at_azimuth_nodes_matches_twin(cl_context, atmosphere):
         _assert_per_channel(got, expected[n], TOLERANCES["float64"]["single_scattering_table"], f"node {n}")
     # the canonical node is the 3D table's single scattering, bit for bit
     assert np.array_equal(engine.compute(atmosphere, cos_azimuth=1.0), engine.compute(atmosphere))
+    # written into a given array (the nodes of a table go into one): the same bits, in it
+    nodes = np.empty((2,) + expected.shape[1:])
+    node = nodes[1]
+    assert engine.compute(atmosphere, cos_azimuth=math.cos(phi), out=node) is node
+    assert np.array_equal(nodes[1], got)
+    single32 = SingleScatteringEngine(KERNEL_GRID.replace(dtype="float32"), ctx=cl_context)
+    assert np.array_equal(single32.compute(atmosphere, out=node), single32.compute(atmosphere))
 
 
 def _random_harmonics(seed, settings):

@@ -260,6 +260,10 @@ def test_combine_nodes_and_add_into_match_pyopencl_elementwise(multiple_engine, 
     for weight, node in zip(weights[1:], nodes[1:]):
         chain = chain.mul_add(1.0, cla.to_device(engine.queue, node), real(weight))
     assert np.array_equal(combined, chain.get())
+    # the weights already on the device (how clsky.azimuth enqueues a chain of gathers): the same bits
+    on_device = engine.combine_nodes(nodes_d, engine.upload_matrices(weights),
+                                     cla.empty(engine.queue, nodes.shape[1:], dtype)).get()
+    assert np.array_equal(on_device, combined)
     expected = np.einsum("n,n...->...", weights, nodes.astype(np.float64))
     assert_allclose(combined, expected, rtol=4 * np.finfo(dtype).eps, atol=0.0)
     total, addend = cla.to_device(engine.queue, nodes[0]), cla.to_device(engine.queue, nodes[-1])
@@ -267,6 +271,10 @@ def test_combine_nodes_and_add_into_match_pyopencl_elementwise(multiple_engine, 
     assert np.array_equal(total.get(), (cla.to_device(engine.queue, nodes[0]) + addend).get())
     with pytest.raises(ValueError, match="must agree"):
         engine.combine_nodes(nodes_d, np.ones(count + 1), cla.empty(engine.queue, nodes.shape[1:], dtype))
+    other = np.float32 if np.dtype(dtype) == np.float64 else np.float64
+    with pytest.raises(ValueError, match="must agree"):        # device weights of the other precision
+        engine.combine_nodes(nodes_d, cla.to_device(engine.queue, np.ones(count, other)),
+                             cla.empty(engine.queue, nodes.shape[1:], dtype))
     with pytest.raises(ValueError, match="one shape"):
         engine.add_into(total, cla.empty(engine.queue, (5, 6, 7, 4), dtype))
 
