@@ -689,7 +689,10 @@ def display_frames(pipeline: display_pipeline.Display, hdr, valid, config: Anima
     if ev is None:
         ev = pipeline.exposure(exposure_reference(hdr), valid)
     shown = {name: pipeline.encode_and_linear(frame, ev) for name, frame in hdr.items()}
-    images = {name: tonemap.to_uint8(encoded, dither=config.dither, seed=seed) for name, (encoded, _) in shown.items()}
+    # every frame of the sun position takes the same dither pattern (the same seed): drawn once
+    noise = tonemap.dither_noise(next(iter(shown.values()))[0].shape, seed) if config.dither else None
+    images = {name: tonemap.to_uint8(encoded, dither=config.dither, seed=seed, noise=noise)
+              for name, (encoded, _) in shown.items()}
     if "raymarch" in shown and len(shown) == 2:
         lookup = next(name for name in shown if name != "raymarch")
         return ev, images, (shown["raymarch"][1], shown[lookup][1])

@@ -115,10 +115,14 @@ def oklab_to_linear_srgb(lab):
 
 def srgb_encode(linear):
     """IEC 61966-2-1 transfer function (piecewise: 12.92 x below 0.0031308, else 1.055 x^(1/2.4) -
-    0.055) through ``colour.cctf_encoding``; input clipped to [0, 1]."""
-    import colour
+    0.055); input clipped to [0, 1].
 
-    return np.asarray(colour.cctf_encoding(np.clip(linear, 0.0, 1.0), function="sRGB"), dtype=np.float64)
+    The expression of colour-science's ``eotf_inverse_sRGB`` (``colour.cctf_encoding(..., function='sRGB')``),
+    which tests/test_display.py holds it to bit for bit, without that function's domain-range scaling
+    and signed power (whose signs are 1 on clipped values): 9 against 20 ms a 512 x 512 frame, twice a
+    frame in the default animation."""
+    x = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
+    return np.where(x <= 0.0031308, x * 12.92, 1.055 * np.power(x, 1 / 2.4) - 0.055)
 
 
 # Tone curves: exposed linear sRGB (>= 0 after gamut mapping) -> display-linear sRGB in [0, 1] -------

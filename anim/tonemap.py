@@ -26,7 +26,7 @@ import numpy as np
 
 from clsky.errors import short
 
-__all__ = ["GAMMA", "REC709_LUMINANCE_WEIGHTS", "tone_map", "to_uint8", "luminance"]
+__all__ = ["GAMMA", "REC709_LUMINANCE_WEIGHTS", "tone_map", "dither_noise", "to_uint8", "luminance"]
 
 #: Display gamma of the tone map (physics.md): a pure power law, not the piecewise sRGB curve.
 GAMMA = 2.2
@@ -88,7 +88,15 @@ def tone_map(hdr, exposure=1.0):
     return (-np.expm1(-exposure * hdr)) ** (1.0 / GAMMA)
 
 
-def to_uint8(display, dither=False, seed=0):
+def dither_noise(shape, seed=0):
+    """The triangular-PDF noise n = u1 - u2 [LSB] that :func:`to_uint8` adds with ``dither`` and ``seed``
+    (u1, u2 of ``numpy.random.default_rng(seed)``, in that order), of ``shape``: computed once for several
+    images dithered alike (the frames of one sun position)."""
+    rng = np.random.default_rng(seed)
+    return rng.random(shape) - rng.random(shape)
+
+
+def to_uint8(display, dither=False, seed=0, noise=None):
     """Quantise display values in [0, 1] to 8-bit code values, rounding to nearest.
 
     Parameters
@@ -101,6 +109,9 @@ def to_uint8(display, dither=False, seed=0):
         Seed of the dither noise (ignored without ``dither``). The same seed gives the same noise
         pattern: reuse it across the frames of an animation for a static pattern (no temporal
         shimmer, smaller MP4), or pass the frame index for independent patterns.
+    noise : numpy.ndarray, optional
+        With ``dither``, the noise to add instead of drawing it from ``seed``: :func:`dither_noise` of the
+        display's shape (the same values as ``seed`` gives, drawn once for several images).
 
     Returns
     -------
@@ -143,8 +154,11 @@ def to_uint8(display, dither=False, seed=0):
         raise ValueError(f"display contains NaN ({int(np.isnan(display).sum())} values)")
     scaled = np.clip(display, 0.0, 1.0) * 255.0
     if dither:
-        rng = np.random.default_rng(seed)
-        scaled = scaled + (rng.random(scaled.shape) - rng.random(scaled.shape))
+        if noise is None:
+            noise = dither_noise(scaled.shape, seed)
+        elif np.shape(noise) != scaled.shape:
+            raise ValueError(f"noise must have the display's shape {scaled.shape}, got {np.shape(noise)}")
+        scaled = scaled + noise
     return np.clip(np.floor(scaled + 0.5), 0, 255).astype(np.uint8)
 
 

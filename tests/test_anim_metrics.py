@@ -12,7 +12,7 @@ from clsky.anim.metrics import (BLACK_FRAME_FLOOR, D65_WHITE_XYZ, INVALID_COLOUR
                           compare_frames, composite, delta_e_cie76, display_floor, display_to_lab,
                           error_image, frame_changes, linear_srgb_to_xyz, relative_error_map,
                           temporal_jumps, xyz_to_lab)
-from clsky.anim.tonemap import luminance, to_uint8, tone_map
+from clsky.anim.tonemap import dither_noise, luminance, to_uint8, tone_map
 
 
 def _sky(height=24, width=32, seed=1):
@@ -78,6 +78,11 @@ def test_dither_keeps_the_mean(level):
     # Each pixel moves by the +-1 LSB noise plus rounding: strictly less than 1.5 LSB.
     assert np.abs(dithered - level).max() < 1.5
     assert_array_equal(to_uint8(flat, dither=True, seed=3), to_uint8(flat, dither=True, seed=3))
+    # the noise drawn once (dither_noise) for several images: the same codes as its seed's
+    assert_array_equal(to_uint8(flat, dither=True, noise=dither_noise(flat.shape, 3)),
+                       to_uint8(flat, dither=True, seed=3))
+    with pytest.raises(ValueError, match="noise must have the display's shape"):
+        to_uint8(flat, dither=True, noise=dither_noise((3, 256), 3))
 
 
 def test_dither_breaks_the_banding_of_a_smooth_gradient():

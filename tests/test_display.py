@@ -240,6 +240,18 @@ def test_srgb_transfer_function():
     assert_allclose(srgb_encode(x), expected, rtol=0, atol=1e-15)
 
 
+def test_srgb_encode_is_colour_sciences_bit_for_bit():
+    """srgb_encode writes out colour-science's sRGB encoding for speed: the same bits on values around the
+    break point, at 0 and 1, beyond them (clipped) and on a random frame, NaN kept."""
+    import colour
+
+    rng = np.random.default_rng(3)
+    x = np.concatenate([[0.0, 1.0, 0.0031308, np.nextafter(0.0031308, 1.0), np.nextafter(0.0031308, 0.0), -0.5,
+                         1.5, 5e-324, np.nan], rng.random(100000), rng.random(1000) * 0.004])
+    expected = np.asarray(colour.cctf_encoding(np.clip(x, 0.0, 1.0), function="sRGB"), dtype=np.float64)
+    assert_array_equal(srgb_encode(x), expected)
+
+
 # 4. Auto-exposure over time ------------------------------------------------------------------------
 
 def display_means(hdr, valid, display):
