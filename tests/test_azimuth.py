@@ -185,7 +185,7 @@ def test_first_gather_against_literal_sphere_integral(atmosphere, species):
 def test_first_gather_sun_weighting_is_einsums_sum(atmosphere):
     """The first gather's weighting of the seen harmonics by C_{s',m,n}(z, a), done a few sun layers at a time
     (HarmonicGather._sun_weighted), is bit for bit the einsum it replaced: per species s' the sum over n
-    in order, the second species' added to the first's (the planned tables' pins rest on it). An odd
+    in order, the second species' added to the first's (so that a harmonic table keeps its bits). An odd
     number of sun layers (7) leaves a short last block."""
     settings = TINY.replace(size=(5, 12, 7))
     operators = azimuth.HarmonicGather(atmosphere, settings, HARMONICS)
