@@ -153,12 +153,6 @@ def _exponential(x):
     return -np.expm1(-x)
 
 
-def _mix(matrix, x, y, z):
-    """``matrix`` applied to the components x, y, z (1-D arrays): faster than (N, 3) @ (3, 3), which
-    NumPy runs without BLAS for an inner size of 3."""
-    return [matrix[i, 0] * x + matrix[i, 1] * y + matrix[i, 2] * z for i in range(3)]
-
-
 def _into_gamut(rgb):
     """``rgb`` with the chroma of out-of-gamut pixels reduced in Oklab at constant L and hue until all
     channels lie in [0, 1] (bisection on the chroma factor t in [0, 1]; t = 0 is the grey of the same
@@ -170,24 +164,65 @@ def _into_gamut(rgb):
     outside = out_of_range[..., 0] | out_of_range[..., 1] | out_of_range[..., 2]
     if not outside.any():
         return rgb
-    m = _matrices()
     lightness, a, b = linear_srgb_to_oklab(rgb[outside]).T
     lightness = np.minimum(lightness, 1.0)
+    shown = np.empty((a.size, 3))
+    for start in range(0, a.size, GAMUT_BLOCK):
+        block = slice(start, start + GAMUT_BLOCK)
+        shown[block] = _chroma_bisection(lightness[block], a[block], b[block]).T
+    rgb[outside] = shown
+    return np.clip(rgb, 0.0, 1.0)
+
+
+#: Pixels per block of the gamut mapping's bisection (:func:`_chroma_bisection`): its dozen work arrays
+#: (128 kB each) then stay in the cache through the block's 16 steps, where over a whole frame's pixels
+#: they went through memory at every operation: a quarter less time on the default animation's frames
+#: (29-36 against 40-46 ms a frame, four alternating runs; blocks of 4096 and 65536 gained less).
+GAMUT_BLOCK = 16384
+
+
+def _chroma_bisection(lightness, a, b):
+    """Linear sRGB (3, n: red, green, blue) of Oklab (L, t a, t b) at the largest chroma factor t of the
+    bisection (:data:`GAMUT_STEPS` halvings of [0, 1], t = 0 kept if no other) whose channels all lie in
+    [0, 1]; ``lightness``, ``a``, ``b`` 1-D arrays of the pixels.
+
+    Every value is the bisection's as written with whole-array expressions, bit for bit: a channel is
+    ((m0 L + m1 (t a)) + m2 (t b)) cubed as (c c) c, then mixed the same way (m0 L is the same product at
+    every step, computed once); the midpoint 0.5 (low + high) is low + 2^-(k+1) exactly (both are
+    multiples of 2^-16 in [0, 1]); min(r, g, b) >= 0 and max(r, g, b) <= 1 is the six comparisons' test
+    (NaN fails both). The arrays are allocated once per block and reused (``out=``)."""
+    m = _matrices()
+    to_lms, to_rgb = m["lab_to_lms"], m["lms_to_rgb"]
+    lightness_terms = [to_lms[i, 0] * lightness for i in range(3)]
+    ta, tb, term, smallest, largest = np.empty((5, a.size))
+    lms, channels = np.empty((3, a.size)), np.empty((3, a.size))
+    inside, below_one = np.empty((2, a.size), dtype=bool)
 
     def shown(t):
-        lms = [c * c * c for c in _mix(m["lab_to_lms"], lightness, t * a, t * b)]
-        return _mix(m["lms_to_rgb"], *lms)
+        np.multiply(t, a, out=ta)
+        np.multiply(t, b, out=tb)
+        for i, c in enumerate(lms):
+            np.multiply(to_lms[i, 1], ta, out=c)
+            np.add(lightness_terms[i], c, out=c)
+            c += np.multiply(to_lms[i, 2], tb, out=term)
+            np.multiply(np.multiply(c, c, out=term), c, out=c)
+        for i, channel in enumerate(channels):
+            np.multiply(to_rgb[i, 0], lms[0], out=channel)
+            channel += np.multiply(to_rgb[i, 1], lms[1], out=term)
+            channel += np.multiply(to_rgb[i, 2], lms[2], out=term)
+        return channels
 
-    low, high = np.zeros(len(a)), np.ones(len(a))
+    low, middle = np.zeros(a.size), np.empty(a.size)
+    half_width = 0.5
     for _ in range(GAMUT_STEPS):
-        middle = 0.5 * (low + high)
-        red, green, blue = shown(middle)
-        inside = ((red >= 0.0) & (red <= 1.0) & (green >= 0.0) & (green <= 1.0) & (blue >= 0.0)
-                  & (blue <= 1.0))
-        low = np.where(inside, middle, low)
-        high = np.where(inside, high, middle)
-    rgb[outside] = np.stack(shown(low), axis=-1)
-    return np.clip(rgb, 0.0, 1.0)
+        red, green, blue = shown(np.add(low, half_width, out=middle))
+        np.minimum(np.minimum(red, green, out=smallest), blue, out=smallest)
+        np.maximum(np.maximum(red, green, out=largest), blue, out=largest)
+        np.logical_and(np.greater_equal(smallest, 0.0, out=inside), np.less_equal(largest, 1.0, out=below_one),
+                       out=inside)
+        np.copyto(low, middle, where=inside)
+        half_width *= 0.5
+    return shown(low)
 
 
 def _luminance_curve(function):
