@@ -78,6 +78,8 @@ PNG_COMPRESS_LEVEL = 2
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 #: PNG colour type of an image's channels: grey, RGB, RGBA (PNG specification, section 11.2.2).
 _PNG_COLOUR_TYPES = {1: 0, 3: 2, 4: 6}
+#: Largest IDAT chunk written (a chunk's length must stay below 2^31).
+_IDAT_BYTES = 1 << 30
 
 
 def _png_chunk(kind, data):
@@ -92,7 +94,9 @@ def _itxt(keyword, value):
             and all(ord(c) < 256 for c in keyword)):
         raise ValueError(f"a PNG text keyword must be 1-79 Latin-1 characters without leading or trailing "
                          f"spaces, got {keyword!r}")
-    return keyword.encode("latin-1") + b"\0\0\0" + b"\0" + b"\0" + str(value).encode("utf-8")
+    # the keyword and its null; compression flag and method 0; an empty language tag and translated
+    # keyword, each ended by a null; the text
+    return keyword.encode("latin-1") + b"\0" + b"\0\0" + b"\0" + b"\0" + str(value).encode("utf-8")
 
 
 def encode_png(image_u8, text=None):
@@ -130,7 +134,9 @@ def encode_png(image_u8, text=None):
     filtered[:, 0] = 1                                                     # the filter type of each row: Sub
     filtered[:, 1:1 + channels] = rows[:, :channels]
     np.subtract(rows[:, channels:], rows[:, :-channels], out=filtered[:, 1 + channels:])   # wraps modulo 256
-    chunks.append(_png_chunk(b"IDAT", zlib.compress(filtered.tobytes(), PNG_COMPRESS_LEVEL)))
+    stream = zlib.compress(filtered.tobytes(), PNG_COMPRESS_LEVEL)
+    # a chunk holds less than 2^31 bytes; the image data may run on over several IDAT chunks
+    chunks += [_png_chunk(b"IDAT", stream[start:start + _IDAT_BYTES]) for start in range(0, len(stream), _IDAT_BYTES)]
     return _PNG_SIGNATURE + b"".join(chunks) + _png_chunk(b"IEND", b"")
 
 

@@ -206,6 +206,18 @@ def test_encode_png_decodes_to_the_same_pixels(shape, mode):
         assert_array_equal(np.asarray(decoded), image)
 
 
+def test_encode_png_splits_its_data_over_idat_chunks(monkeypatch):
+    """Image data longer than a chunk may hold runs on over several IDAT chunks (here of 100 bytes)."""
+    from clsky.anim import writers
+
+    monkeypatch.setattr(writers, "_IDAT_BYTES", 100)
+    image = np.random.default_rng(2).integers(0, 256, (20, 30, 3), dtype=np.uint8)
+    data = encode_png(image)
+    assert data.count(b"IDAT") > 10
+    with Image.open(io.BytesIO(data)) as decoded:
+        assert_array_equal(np.asarray(decoded), image)
+
+
 def test_encode_png_rows_are_sub_filtered():
     """The IDAT stream holds each row as filter type 1 and each byte minus the byte 3 to its left
     (modulo 256): 10 - 250 = 16; the first pixel as it is."""
