@@ -92,6 +92,11 @@ __all__ = ["azimuth_nodes", "harmonic_transform", "harmonic_phase_integrals",
 #: animation's 32 x 256 x 139 table).
 HARMONIC_SOURCE_ORDERS = 2
 
+#: Sun layers per host transfer of the OpenCL backend (its padded staging slab, (L, H, W, 8)): 8 MB for the
+#: default animation's table (32 x 256 x 208) instead of a whole node's 109 MB, which counted in the
+#: build's peak memory (the cost of a first build on these machines, README "Speed").
+TRANSFER_LAYERS = 16
+
 
 def _check_harmonics(harmonics):
     if not is_integer(harmonics) or not 0 <= harmonics <= MAX_AZIMUTH_HARMONICS:
@@ -484,33 +489,39 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     transform_rows = [engine.upload_matrices(row) for row in transform]
     # allocated on first use, not here: made before the first gather they would add to the build's host
     # peak (the estimate of clsky.resources, checked against tracemalloc by tests/test_memory.py)
-    # every transfer goes through one padded host slab (D, H, W, 8), a node or a harmonic at a time: a staging
-    # array of all M + 1 (327 MB for the default animation's table) raised the build's peak memory
+    # every transfer goes through one padded host slab of TRANSFER_LAYERS sun layers (L, H, W, 8), a block of
+    # a node or a harmonic at a time: a staging array of all M + 1 (327 MB for the default animation's
+    # table), then of one whole node (109 MB), raised the build's peak memory
     staging = []            # the slab (allocated once)
     host_nodes = []         # the host table (M + 1, D, H, W, 3) that scatter returns (allocated once)
 
-    def slab_staging(shape):
-        """The padded staging slab of tables of ``shape`` (M + 1, D, H, W, channels)."""
+    def blocks(shape):
+        """(n, z0, z1, slab block) for every block of TRANSFER_LAYERS sun layers of every slab n of tables of
+        ``shape`` (M + 1, D, H, W, channels), in the order of the padded device table's memory."""
         if not staging:
-            staging.append(np.empty(shape[1:-1] + (8,), engine.dtype))
-        return staging[0]
+            staging.append(np.empty((min(TRANSFER_LAYERS, shape[1]),) + shape[2:-1] + (8,), engine.dtype))
+        for n in range(shape[0]):
+            for z0 in range(0, shape[1], TRANSFER_LAYERS):
+                z1 = min(z0 + TRANSFER_LAYERS, shape[1])
+                yield n, z0, z1, staging[0][:z1 - z0]
 
     def download(table_d, into, channels):
         """into[n] = table_d[n, ..., :channels] for every slab n of the padded device table (M + 1, D, H, W, 8),
         each copy waiting for the commands before it on the queue."""
-        slab = slab_staging(table_d.shape)
-        for n in range(table_d.shape[0]):
-            cl.enqueue_copy(queue, slab, table_d.data, src_offset=table_d.offset + n * slab.nbytes, is_blocking=True)
-            np.copyto(into[n], slab[..., :channels])
+        layer = table_d.nbytes // (table_d.shape[0] * table_d.shape[1])
+        for n, z0, z1, block in blocks(table_d.shape):
+            cl.enqueue_copy(queue, block, table_d.data, src_offset=table_d.offset + (n * table_d.shape[1] + z0) * layer,
+                            is_blocking=True)
+            np.copyto(into[n, z0:z1], block[..., :channels])
         return into
 
     def upload(gathered):
         gathered_d = cla.empty(queue, gathered.shape[:-1] + (8,), engine.dtype, allocator=pool)
-        slab = slab_staging(gathered.shape)
-        for n in range(gathered.shape[0]):
-            slab[..., :6] = gathered[n]
-            slab[..., 6:] = 0.0
-            cl.enqueue_copy(queue, gathered_d.data, slab, dst_offset=gathered_d.offset + n * slab.nbytes,
+        layer = gathered_d.nbytes // (gathered.shape[0] * gathered.shape[1])
+        for n, z0, z1, block in blocks(gathered.shape):
+            block[..., :6] = gathered[n, z0:z1]
+            block[..., 6:] = 0.0
+            cl.enqueue_copy(queue, gathered_d.data, block, dst_offset=gathered_d.offset + (n * gathered.shape[1] + z0) * layer,
                             is_blocking=True)
         return gathered_d
 

@@ -328,15 +328,18 @@ def _orders_phases(settings, orders):
 def _harmonic_phases(settings, orders):
     """The orders of a table with azimuth harmonics (:mod:`clsky.azimuth`, n = M + 1 azimuth nodes): the
     first gather on the host (single scattering at the n nodes and its harmonics, both seen species'
-    interpolation (n, D, Theta + 1, W 6), their harmonic sum, the n gathered harmonics,
-    the padded transfer slab), then the orders loop (single scattering at the canonical node, every order's
+    interpolation (n, D, Theta + 1, W 6), their harmonic sum, the n gathered harmonics, the padded transfer
+    slab of L sun layers), then the orders loop (single scattering at the canonical node, every order's
     azimuth average kept on the host, the order's n nodes and the running sum at the nodes; on the device
     the gathered sum, the gathered harmonics and the order's n nodes, padded, a harmonic and its gather;
     the padded transfer slab; for ``orders="auto"``, the order before at the nodes, which the geometric
     tail's test reads)."""
+    from .azimuth import TRANSFER_LAYERS
+
     cells, height, depth, s = _table_sizes(settings)
     n = settings.azimuth_harmonics + 1
     padded = cells * 8 * s
+    slab = padded // depth * min(TRANSFER_LAYERS, depth)          # clsky.azimuth's staging: L sun layers
     seen = n * depth * (settings.gather_theta_steps + 1) * settings.size[0] * 3 * _F64
     single = Allocation("single scattering at the azimuth nodes (n, D, H, W, 6) float64", cells * 6 * _F64, count=n)
     first = Phase("first gather", (
@@ -345,7 +348,7 @@ def _harmonic_phases(settings, orders):
         # species' terms go through blocks of two sun layers, HarmonicGather._sun_weighted)
         Allocation("interpolated single scattering and its harmonic sums (n, D, Theta + 1, W 3)", seen, count=3),
         Allocation("gathered harmonics (n, D, H, W, 6) float64", cells * 6 * _F64, count=n),
-        Allocation("padded transfer slab (D, H, W, 8)", padded),
+        Allocation("padded transfer slab (L, H, W, 8)", slab),
         Allocation("gathered harmonics on the device (n, D, H, W, 8)", padded, count=n, on_device=True)))
     loop = Phase("orders", (
         _single(cells),                 # the canonical node's: the other nodes and the harmonics go before the loop
@@ -356,7 +359,7 @@ def _harmonic_phases(settings, orders):
         Allocation("running sum at the nodes (n, D, H, W, 3) float64", cells * 3 * _F64, count=n),
         Allocation("padded tables: gathered sum, gathered, nodes, harmonic, its gather", padded, count=3 * n + 2,
                    on_device=True),
-        Allocation("padded transfer slab (D, H, W, 8)", padded))
+        Allocation("padded transfer slab (L, H, W, 8)", slab))
         + ((Allocation("the order before at its nodes (n, D, H, W, 3) float64", cells * 3 * _F64, count=n),)
            if settings.orders == "auto" else ()))
     return [first, loop]

@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 import pytest
-from numpy.testing import assert_allclose
+from numpy.testing import assert_allclose, assert_array_equal
 
 from clsky import TableSettings, azimuth, reference
 from clsky.errors import ParameterError
@@ -315,6 +315,21 @@ def test_orders_backends_agree(cl_context, atmosphere, albedo):
     if albedo:
         _assert_per_channel(kernel.ground_irradiance, twin.ground_irradiance, TOLERANCES["float64"]["orders"],
                             "ground irradiance")
+
+
+def test_transfers_in_blocks_of_sun_layers_change_nothing(cl_context, atmosphere, monkeypatch):
+    """The OpenCL backend moves tables to and from the device a block of TRANSFER_LAYERS sun layers at a
+    time: blocks of 3 layers of the 7 (3, 3, 1) give the same orders, gathered sum and ground bit for bit
+    as one block of all 7."""
+    require_dtype(cl_context, "float64")
+    atmosphere = atmosphere.replace(ground_albedo=0.3)
+    whole = azimuth.compute_orders(atmosphere, KERNEL_GRID, backend="opencl", ctx=cl_context)
+    monkeypatch.setattr(azimuth, "TRANSFER_LAYERS", 3)
+    blocked = azimuth.compute_orders(atmosphere, KERNEL_GRID, backend="opencl", ctx=cl_context)
+    assert KERNEL_GRID.size[2] == 7 and blocked.record == whole.record
+    for a, b in zip(blocked.orders + [blocked.gathered, blocked.ground_irradiance],
+                    whole.orders + [whole.gathered, whole.ground_irradiance]):
+        assert_array_equal(a, b)
 
 
 def test_geometric_tail_with_harmonics(cl_context, atmosphere):
