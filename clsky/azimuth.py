@@ -544,12 +544,12 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
         return download(nodes_d, host_nodes[0], 3), nodes_d                          # waits for the scatters
 
     def gather(nodes_d):
-        """G_m = A_m L_m, L_m = sum_n H[m, n] L(phi_n) (padded: channels 0-2 and 3-5 both hold L)."""
+        """G_m = A_m L_m, L_m = sum_n H[m, n] L(phi_n) (padded: channels 0-2 and 3-5 both hold L), each
+        gathered straight into its slab of the stack (no table and copy of its own)."""
         out = cla.empty(queue, nodes_d.shape, engine.dtype, allocator=pool)
         harmonic = cla.empty(queue, nodes_d.shape[1:], engine.dtype, allocator=pool)
         for m, row in enumerate(transform_rows):
-            part = engine.gather(matrices[m], engine.combine_nodes(nodes_d, row, harmonic))
-            cl.enqueue_copy(queue, out.data, part.data, byte_count=part.nbytes, dst_offset=m * part.nbytes)
+            engine.gather(matrices[m], engine.combine_nodes(nodes_d, row, harmonic), out=out, node=m)
         return out
 
     def accumulate(total, gathered_d, scale=None):

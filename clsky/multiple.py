@@ -301,7 +301,7 @@ class MultipleScatteringEngine(_cl.Engine):
         """Gather matrices on the device, to reuse across orders."""
         return cla.to_device(self.queue, np.ascontiguousarray(matrices, dtype=self.dtype), allocator=self.allocator)
 
-    def gather(self, matrices, table, out=None, accumulate=False):
+    def gather(self, matrices, table, out=None, accumulate=False, node=0):
         """out[z, i, x, c] (+)= sum_j M[c // 3][(z,) i, j] table[z, j, x, c].
 
         Parameters
@@ -309,7 +309,9 @@ class MultipleScatteringEngine(_cl.Engine):
         matrices : array (2, H, H) or (2, D, H, H), host or device (:meth:`upload_matrices`)
             Rayleigh and Mie gather matrices (optionally one per sun node).
         table : host array (D, H, W, 6) or padded device array (D, H, W, 8)
-        out : padded device array (D, H, W, 8), optional
+        out : padded device array (D, H, W, 8) or (N, D, H, W, 8), optional
+            Of the second shape, its slab ``node`` receives the result (the harmonics of
+            :mod:`clsky.azimuth`, gathered into one stack without a copy each).
         accumulate : bool
             Add to ``out`` instead of overwriting it.
 
@@ -326,11 +328,16 @@ class MultipleScatteringEngine(_cl.Engine):
         if out is None:
             out = cla.empty(self.queue, table_d.shape, self.dtype, allocator=self.allocator)
             accumulate = False
+        elif (out.shape[-4:] != table_d.shape or out.ndim not in (4, 5) or out.dtype != self.dtype
+              or not 0 <= node < (out.shape[0] if out.ndim == 5 else 1)):
+            raise ValueError(f"out must be a padded {self.dtype} table {table_d.shape} or a stack (N,) + "
+                             f"{table_d.shape} with node < N, got {out.dtype} {out.shape} and node {node}")
         per_node = matrices.ndim == 4
         event = self.kernels["gather"](
             self.queue, (-(-width // GATHER_CELLS), -(-height // GATHER_ROWS), depth), None, matrices_d.data,
             np.int32(matrices.size // 2), np.int32(height * height if per_node else 0), table_d.data,
-            out.data, np.int32(accumulate), np.int32(width), np.int32(height), np.int32(depth))
+            out.data, np.uint64(node * table_d.size), np.int32(accumulate), np.int32(width), np.int32(height),
+            np.int32(depth))
         self._record("gather", event)
         return out
 

@@ -24,7 +24,8 @@
 /* out[z, i, x] (+)= sum_j M[c / 3][(z)][i][j] in[z, j, x] for every channel c of the padded tables
  * (D, H, W, 8): one real8 per cell, channels Rayleigh r, g, b, Mie r, g, b (matrix M[0]), then 2 unused
  * (M[1] for channels 3..7). matrices holds the two sets (Rayleigh, Mie) of H x H entries, per sun node
- * when matrix_z_stride = H * H (else 0), the sets species_stride apart.
+ * when matrix_z_stride = H * H (else 0), the sets species_stride apart. The output table starts
+ * out_offset reals into table_out (a slab of a stack of tables: clsky/azimuth.py's harmonics).
  * Register blocking: a work-item computes GATHER_ROWS rows i for GATHER_CELLS cells x; per j it forms
  * each row's per-channel coefficient vector once (select of the two species' entries) and applies it
  * to every cell's real8. Global size (ceil(W / GATHER_CELLS), ceil(H / GATHER_ROWS), D). */
@@ -32,9 +33,10 @@
 #error "GATHER_ROWS and GATHER_CELLS (the register block of a gather work-item) must be defined"
 #endif
 __kernel void gather(__global const real *matrices, const int species_stride, const int matrix_z_stride,
-                     __global const real *table_in, __global real *table_out, const int accumulate,
-                     const int width, const int height, const int depth)
+                     __global const real *table_in, __global real *table_out, const ulong out_offset,
+                     const int accumulate, const int width, const int height, const int depth)
 {
+    table_out += out_offset;
     const int x0 = GATHER_CELLS * get_global_id(0);
     const int i0 = GATHER_ROWS * get_global_id(1);
     const int z = get_global_id(2);

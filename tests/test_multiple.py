@@ -224,6 +224,23 @@ def test_gather_device_input_and_overwritten_output(multiple_engine, twin_inputs
         engine.gather(inputs["matrices"][:, :-1], inputs["single"])
 
 
+def test_gather_into_a_slab_of_a_stack(multiple_engine, twin_inputs):
+    """``out``/``node``: the gather writes slab ``node`` of a (N, D, H, W, 8) stack (clsky.azimuth's
+    harmonics), exactly what it returns on its own, and leaves the other slabs as they were; a slab past
+    N, a table of another shape or dtype is refused before any launch."""
+    engine = multiple_engine(SMALL)
+    inputs = twin_inputs("physical", "default")
+    alone = engine.gather(inputs["matrices"], inputs["single"]).get()
+    stack = cla.to_device(engine.queue, np.full((3,) + alone.shape, 7.0))
+    assert engine.gather(inputs["matrices"], inputs["single"], out=stack, node=1) is stack
+    got = stack.get()
+    assert np.array_equal(got[1], alone) and np.all(got[[0, 2]] == 7.0)
+    for node, shape, dtype in ((3, stack.shape, np.float64), (-1, stack.shape, np.float64),
+                               (0, (3,) + alone.shape[:-1] + (6,), np.float64), (0, stack.shape, np.float32)):
+        with pytest.raises(ValueError, match="out must be a padded float64 table"):
+            engine.gather(inputs["matrices"], inputs["single"], out=cla.empty(engine.queue, shape, dtype), node=node)
+
+
 def test_scatter_into_a_node_slab(multiple_engine, twin_inputs):
     """``out``/``node``: the scatter writes slab ``node`` of a (N, D, H, W, 8) buffer, exactly what it
     returns on its own, and leaves the other slabs as they were; a slab past N or a wrong shape is
