@@ -464,8 +464,8 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     Every engine runs on one queue and takes its device arrays from one pool
     (:func:`clsky._cl.memory_pool`): an order reuses the buffers of the one before (they are the same
     sizes) instead of faulting in fresh memory, and the nodes come to the host through one reused
-    padded slab, a node at a time (which also carries the first gather up and the gathered sum down), into
-    one reused host table: what ``scatter`` returns is valid until its next call. The pool goes with the
+    padded slab, :data:`TRANSFER_LAYERS` sun layers at a time (which also carries the first gather up and
+    the gathered sum down), into one reused host table: what ``scatter`` returns is valid until its next call. The pool goes with the
     backend."""
     import pyopencl as cl
     import pyopencl.array as cla
@@ -496,33 +496,30 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     host_nodes = []         # the host table (M + 1, D, H, W, 3) that scatter returns (allocated once)
 
     def blocks(shape):
-        """(n, z0, z1, slab block) for every block of TRANSFER_LAYERS sun layers of every slab n of tables of
-        ``shape`` (M + 1, D, H, W, channels), in the order of the padded device table's memory."""
+        """(n, z0, z1, slab block, its byte offset in the padded device table) for every block of
+        TRANSFER_LAYERS sun layers of every slab n of tables of ``shape`` (M + 1, D, H, W, channels)."""
         if not staging:
             staging.append(np.empty((min(TRANSFER_LAYERS, shape[1]),) + shape[2:-1] + (8,), engine.dtype))
+        layer = staging[0][0].nbytes                                  # one padded sun layer (H, W, 8)
         for n in range(shape[0]):
             for z0 in range(0, shape[1], TRANSFER_LAYERS):
                 z1 = min(z0 + TRANSFER_LAYERS, shape[1])
-                yield n, z0, z1, staging[0][:z1 - z0]
+                yield n, z0, z1, staging[0][:z1 - z0], (n * shape[1] + z0) * layer
 
     def download(table_d, into, channels):
         """into[n] = table_d[n, ..., :channels] for every slab n of the padded device table (M + 1, D, H, W, 8),
         each copy waiting for the commands before it on the queue."""
-        layer = table_d.nbytes // (table_d.shape[0] * table_d.shape[1])
-        for n, z0, z1, block in blocks(table_d.shape):
-            cl.enqueue_copy(queue, block, table_d.data, src_offset=table_d.offset + (n * table_d.shape[1] + z0) * layer,
-                            is_blocking=True)
+        for n, z0, z1, block, offset in blocks(table_d.shape):
+            cl.enqueue_copy(queue, block, table_d.data, src_offset=table_d.offset + offset, is_blocking=True)
             np.copyto(into[n, z0:z1], block[..., :channels])
         return into
 
     def upload(gathered):
         gathered_d = cla.empty(queue, gathered.shape[:-1] + (8,), engine.dtype, allocator=pool)
-        layer = gathered_d.nbytes // (gathered.shape[0] * gathered.shape[1])
-        for n, z0, z1, block in blocks(gathered.shape):
+        for n, z0, z1, block, offset in blocks(gathered.shape):
             block[..., :6] = gathered[n, z0:z1]
             block[..., 6:] = 0.0
-            cl.enqueue_copy(queue, gathered_d.data, block, dst_offset=gathered_d.offset + (n * gathered.shape[1] + z0) * layer,
-                            is_blocking=True)
+            cl.enqueue_copy(queue, gathered_d.data, block, dst_offset=gathered_d.offset + offset, is_blocking=True)
         return gathered_d
 
     engines = {settings.azimuth_harmonics: engine}

@@ -301,6 +301,14 @@ class MultipleScatteringEngine(_cl.Engine):
         """Gather matrices on the device, to reuse across orders."""
         return cla.to_device(self.queue, np.ascontiguousarray(matrices, dtype=self.dtype), allocator=self.allocator)
 
+    def _check_out(self, out, shape, node):
+        """ValueError unless ``out`` is a padded device table of ``shape`` (D, H, W, 8) and this engine's
+        dtype, or a stack (N,) + ``shape`` of them with 0 <= ``node`` < N (the slab written; 0 for a table)."""
+        if (out.shape[-4:] != tuple(shape) or out.ndim not in (4, 5) or out.dtype != self.dtype
+                or not 0 <= node < (out.shape[0] if out.ndim == 5 else 1)):
+            raise ValueError(f"out must be a padded {self.dtype} table {tuple(shape)} or a stack (N,) + "
+                             f"{tuple(shape)} with node < N, got {out.dtype} {out.shape} and node {node}")
+
     def gather(self, matrices, table, out=None, accumulate=False, node=0):
         """out[z, i, x, c] (+)= sum_j M[c // 3][(z,) i, j] table[z, j, x, c].
 
@@ -328,10 +336,8 @@ class MultipleScatteringEngine(_cl.Engine):
         if out is None:
             out = cla.empty(self.queue, table_d.shape, self.dtype, allocator=self.allocator)
             accumulate = False
-        elif (out.shape[-4:] != table_d.shape or out.ndim not in (4, 5) or out.dtype != self.dtype
-              or not 0 <= node < (out.shape[0] if out.ndim == 5 else 1)):
-            raise ValueError(f"out must be a padded {self.dtype} table {table_d.shape} or a stack (N,) + "
-                             f"{table_d.shape} with node < N, got {out.dtype} {out.shape} and node {node}")
+        else:
+            self._check_out(out, table_d.shape, node)
         per_node = matrices.ndim == 4
         event = self.kernels["gather"](
             self.queue, (-(-width // GATHER_CELLS), -(-height // GATHER_ROWS), depth), None, matrices_d.data,
@@ -370,10 +376,8 @@ class MultipleScatteringEngine(_cl.Engine):
             ground_d = cla.zeros(self.queue, 4, self.dtype, allocator=self.allocator)   # not read without -DGROUND
         if out is None:
             out = cla.empty(self.queue, (depth, height, width, 8), self.dtype, allocator=self.allocator)
-        elif (out.shape[-4:] != (depth, height, width, 8) or out.dtype != self.dtype
-              or not 0 <= node < out.size // (depth * height * width * 8)):
-            raise ValueError(f"out must be a padded {self.dtype} table (N, {depth}, {height}, {width}, 8) with "
-                             f"node < N, got {out.dtype} {out.shape} and node {node}")
+        else:
+            self._check_out(out, (depth, height, width, 8), node)
         atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
         event = self.kernels_with(_atmosphere_cl.feature_defines(atmosphere))["scatter"](
             self.queue, _scatter_global_size(width, height, depth, self.vector_width), SCATTER_WORK_GROUP,
