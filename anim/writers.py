@@ -468,9 +468,12 @@ class FrameWriter:
         self.check()
         if self.directory is not None:
             self._existing = frame_files(self.directory, self.prefix)
-            if not self.directory.is_dir():
+            try:
                 self.directory.mkdir(parents=True)
                 self._created_directory = True
+            except FileExistsError:                      # there already, or made by a concurrent run just now
+                if not self.directory.is_dir():
+                    raise
         if self._own_staging:
             self._staging = StagedWrites()
         self._state = "open"

@@ -107,6 +107,30 @@ def test_interrupted_forced_run_keeps_the_earlier_frames(tmp_path):
     assert {name: (tmp_path / name).read_bytes() for name in _listing(tmp_path)} == before
 
 
+def test_frame_directory_made_by_a_concurrent_run(tmp_path, monkeypatch):
+    """Two forced runs to one output (CI's 10-round race): the other run creates the frame directory
+    between this writer's check and its mkdir. The writer uses that directory, does not count it as its
+    own (so it never removes it on failure), and writes its frames."""
+    directory = tmp_path / "same_frames"
+    original_mkdir = type(directory).mkdir
+
+    def mkdir_after_the_other_run(self, *args, **kwargs):
+        if self == directory:
+            os.mkdir(self)                                   # the other run wins the race
+        return original_mkdir(self, *args, **kwargs)
+
+    monkeypatch.setattr(type(directory), "mkdir", mkdir_after_the_other_run)
+    with FrameWriter(directory=directory, total_frames=1, force=True) as writer:
+        writer.write(0, _frame(0))
+    assert not writer._created_directory
+    assert _listing(directory) == ["frame_00000.png"]
+    (directory / "frame_00000.png").unlink()
+    with pytest.raises(KeyboardInterrupt):
+        with FrameWriter(directory=directory, total_frames=1, force=True):
+            raise KeyboardInterrupt
+    assert directory.is_dir()                                # not this writer's to remove
+
+
 def test_frame_index_checks(tmp_path):
     with FrameWriter(directory=tmp_path, total_frames=2) as writer:
         writer.write(0, _frame(0))
