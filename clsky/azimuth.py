@@ -73,8 +73,9 @@ from .atmosphere import AtmosphereParameters
 from .errors import ParameterError, is_integer
 from .mapping import altitude_to_u, cos_to_sun_t, cos_to_v, grid_coordinates
 from .multiple import SPECIES, _gather_parts, _phase, _quadrature_key, gather_quadrature
-from .orders import _total, check_finite, geometric_ratio, per_channel, relative_addition, tail_factor
+from .orders import _total, check_finite, geometric_ratio, per_channel, tail_factor
 from .settings import MAX_AZIMUTH_HARMONICS, TableSettings
+from .stopping import DeviceStoppingTest, HostStoppingTest
 
 __all__ = ["azimuth_nodes", "harmonic_transform", "harmonic_phase_integrals",
            "HarmonicGather", "single_scattering_nodes", "scatter_nodes", "HarmonicOrders", "compute_orders",
@@ -421,7 +422,10 @@ class _Backend:
     the same in the backend's form); gather(that form): the next order's gathered harmonics (backend's
     form); accumulate(total, gathered, scale=None): total + gathered, or total + scale gathered per
     wavelength (scale (r, g, b)) (a copy of gathered for total None; may add in place);
-    to_host(gathered): (M + 1, D, H, W, 6) float64; device: its description."""
+    to_host(gathered): (M + 1, D, H, W, 6) float64; stopping_test(single, keep_previous): the orders'
+    stopping test (:mod:`clsky.stopping`), its running sum starting from single scattering ``single``
+    (M + 1, D, H, W, 6) as R + M per wavelength, whose ``add`` takes an order as ``reads`` says,
+    'host' (the first of scatter's pair) or 'backend' (the second); device: its description."""
 
     single: np.ndarray
     upload: object
@@ -429,7 +433,14 @@ class _Backend:
     gather: object
     accumulate: object
     to_host: object
+    stopping_test: object
     device: str
+
+
+def _single_running_sum(single):
+    """The stopping test's running sum of single scattering (factored, (..., 6)): R + M per wavelength
+    (phase 1, its mean over the sphere: clsky.orders)."""
+    return single[..., :3] + single[..., 3:]
 
 
 def _numpy_backend(atmosphere, settings, operators):
@@ -449,8 +460,11 @@ def _numpy_backend(atmosphere, settings, operators):
             return gathered.copy()
         return total + (gathered if scale is None else gathered * per_channel(scale, gathered.shape[-1]))
 
+    def stopping_test(single, keep_previous):
+        return HostStoppingTest(_single_running_sum(single), keep_previous)
+
     return _Backend(single, lambda gathered: gathered, scatter, gather, accumulate, lambda gathered: gathered,
-                    "numpy")
+                    stopping_test, "numpy")
 
 
 def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
@@ -458,8 +472,9 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     each azimuth node's cos_azimuth (kernels/view_ray.cl: table_cell, add_lookups), and the gathers of
     every harmonic with the gather kernel (``MultipleScatteringEngine.gather``, the azimuth average's
     kernel, with :meth:`HarmonicGather.gather_matrices`): an order's nodes, their harmonics and the
-    gathered harmonics stay on the device; only the nodes are copied to the host (the stopping test,
-    the table's azimuth average).
+    gathered harmonics stay on the device, and so does the stopping test (:class:`clsky.stopping.DeviceStoppingTest`,
+    where the device has fp64); only the nodes are copied to the host (the orders' light, the table's
+    azimuth average).
 
     Every engine runs on one queue and takes its device arrays from one pool
     (:func:`clsky._cl.memory_pool`): an order reuses the buffers of the one before (they are the same
@@ -555,7 +570,17 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     def to_host(gathered_d):
         return download(gathered_d, np.empty(gathered_d.shape[:-1] + (6,)), 6)
 
-    return _Backend(single, upload, scatter, gather, accumulate, to_host,
+    def stopping_test(single, keep_previous):
+        """On the device beside the orders (clsky.stopping; the same numbers), where it has fp64, its
+        running sum uploaded a node at a time. Its buffers are its own, not the pool's, so that they are
+        freed with it before the gathered sum's download (held by the pool, they raised the build's peak
+        by their 245 MB there)."""
+        if not _cl.has_fp64(queue.device):
+            return HostStoppingTest(_single_running_sum(single), keep_previous)
+        return DeviceStoppingTest((_single_running_sum(node) for node in single), single.shape[:-1] + (3,),
+                                  keep_previous, engine.dtype, queue=queue)
+
+    return _Backend(single, upload, scatter, gather, accumulate, to_host, stopping_test,
                     _cl.describe_device(single_engine.device))
 
 
@@ -606,13 +631,12 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
     if atmosphere.has_ground:
         pending_ground = ground.reflected_radiance(atmosphere, ground.direct_irradiance(atmosphere, settings)
                                                    + ground_sky)
-    running = single_nodes[..., :3] + single_nodes[..., 3:]
+    stopping = run.stopping_test(single_nodes, settings.orders == "auto")
     gathered_sum, orders, totals = None, [], [_total(single_nodes)]
     # what the orders no longer read goes before them: the harmonics of single scattering and its nodes
     # but the canonical one (the build's peak memory is what a build pays for on these VMs, README "Speed")
     single = single_nodes[0].copy()
     del single_harmonics, single_nodes
-    previous = None     # order k - 1 at the nodes, for the geometric tail's test (the backend reuses `new`)
     # the host's BLAS (azimuth averages, ground irradiances) on one thread beside the OpenCL device's
     # workers, as clsky._cl.host_blas_single_threaded explains; not the first gather above, whose
     # matrix products sum in another order on one thread (its tables change by 1e-15 of their maximum)
@@ -622,8 +646,13 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
             new, state = run.scatter(gathered, pending_ground,
                                      None if HARMONIC_SOURCE_ORDERS is None or k <= HARMONIC_SOURCE_ORDERS else 0)
             del gathered         # first: the pool hands its buffer to the next gather (no more memory)
-            # the next order's source, enqueued before the host's work on this order, which it overlaps on
-            # the OpenCL device (the last order needs it only for the geometric tail, which needs k < wanted)
+            totals.append(_total(new))
+            # the geometric tail (clsky.orders), where it can apply: it adds G^(k+1), gathered below max_orders
+            ratio = geometric_ratio(totals) if settings.orders == "auto" and k < wanted else None
+            # the stopping test (on OpenCL, enqueued on the device, where the order is) and the next order's
+            # source, both before the host's work on this order, which they overlap (the last order needs
+            # the source only for the geometric tail, which needs k < wanted)
+            stopping.add(new if stopping.reads == "host" else state, ratio)
             gathered = run.gather(state) if k < wanted else None
             del state
             check_finite(new, k, atmosphere, settings)
@@ -633,15 +662,8 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
                 sky = ground.sky_irradiance(atmosphere, settings, average, factored=False)
                 ground_sky = ground_sky + sky
                 pending_ground = ground.reflected_radiance(atmosphere, sky)
-            running += new
-            cells = (-1,) + new.shape[2:]
-            addition = relative_addition(new.reshape(cells), running.reshape(cells))
+            addition, error = stopping.result()
             record["relative_additions"].append(addition)
-            totals.append(_total(new))
-            # the geometric tail (clsky.orders), where it can apply: it adds G^(k+1), gathered below max_orders
-            ratio = geometric_ratio(totals) if settings.orders == "auto" and k < wanted else None
-            error = addition if ratio is None else relative_addition(new.reshape(cells), running.reshape(cells),
-                                                                      previous.reshape(cells), ratio)
             record["estimated_errors"].append(error)
             if progress is not None:
                 progress(k, addition)
@@ -654,12 +676,8 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
                     if ground_sky is not None:
                         ground_sky = ground_sky + sky * tail
                 break
-            if settings.orders == "auto":
-                if previous is None:
-                    previous = np.empty_like(new)
-                np.copyto(previous, new)
     record["orders"] = len(orders) + 1
-    del running, previous, gathered                     # before the gathered sum's download
+    del stopping, gathered                              # before the gathered sum's download
     return HarmonicOrders(single, run.to_host(gathered_sum), orders, record, ground_sky)
 
 

@@ -330,10 +330,10 @@ def _harmonic_phases(settings, orders):
     first gather on the host (single scattering at the n nodes and its harmonics, both seen species'
     interpolation (n, D, Theta + 1, W 6), their harmonic sum, the n gathered harmonics, the padded transfer
     slab of L sun layers), then the orders loop (single scattering at the canonical node, every order's
-    azimuth average kept on the host, the order's n nodes and the running sum at the nodes; on the device
-    the gathered sum, the gathered harmonics and the order's n nodes, padded, and a harmonic;
-    the padded transfer slab; for ``orders="auto"``, the order before at the nodes, which the geometric
-    tail's test reads)."""
+    azimuth average kept on the host, the order's n nodes; on the device the gathered sum, the gathered
+    harmonics and the order's n nodes, padded, and a harmonic, and the stopping test's running sum at the
+    nodes (:class:`clsky.stopping.DeviceStoppingTest`); the padded transfer slab; for ``orders="auto"``, the
+    order before at the nodes, on the device too, which the geometric tail's test reads)."""
     from .azimuth import TRANSFER_LAYERS
 
     cells, height, depth, s = _table_sizes(settings)
@@ -356,12 +356,13 @@ def _harmonic_phases(settings, orders):
         Allocation("higher orders kept as their azimuth averages (D, H, W, 3) float64", cells * 3 * _F64,
                    count=orders - 1),
         Allocation("the order at its nodes on the host (n, D, H, W, 3) float64", cells * 3 * _F64, count=n),
-        Allocation("running sum at the nodes (n, D, H, W, 3) float64", cells * 3 * _F64, count=n),
+        Allocation("running sum at the nodes (n, D, H, W, 3) float64", cells * 3 * _F64, count=n, on_device=True),
         # the harmonics are gathered straight into their slabs of the gathered stack (no table of their own)
         Allocation("padded tables: gathered sum, gathered, nodes, a harmonic", padded, count=3 * n + 1,
                    on_device=True),
         Allocation("padded transfer slab (L, H, W, 8)", slab))
-        + ((Allocation("the order before at its nodes (n, D, H, W, 3) float64", cells * 3 * _F64, count=n),)
+        + ((Allocation("the order before at its nodes (n, D, H, W, 3) float64", cells * 3 * _F64, count=n,
+                       on_device=True),)
            if settings.orders == "auto" else ()))
     return [first, loop]
 
