@@ -15,8 +15,19 @@ from .transmittance import COMMON_SOURCES, quadrature_defines, TransmittanceEngi
 
 __all__ = ["SingleScatteringEngine"]
 
-#: Sun-zenith layers per kernel launch (progress is reported between launches).
-SLAB_LAYERS = 4
+#: Sun nodes per work-item (-DSINGLE_SUN_NODES, kernels/single.cl): a view ray's nodes, altitudes, densities
+#: and view columns do not depend on the sun, so one work-item marches a ray once for this many sun nodes,
+#: the same table bit for bit (tests/test_single_twin.py). 8: about a quarter less CPU than one for the
+#: default animation's table (its three azimuth nodes; README "Speed"); 4 and 16 were no better.
+SINGLE_SUN_NODES = 8
+#: Sun-zenith layers per kernel launch (progress is reported between launches): a multiple of
+#: SINGLE_SUN_NODES, so that no work-item computes sun nodes past its launch's slab.
+SLAB_LAYERS = 2 * SINGLE_SUN_NODES
+#: Work-group of the kernel (altitude blocks, view rows, sun blocks), explicit as the scatter's
+#: (clsky.multiple.SCATTER_WORK_GROUP), whose private sums overflowed a PoCL worker's stack in the
+#: work-group PoCL chose itself; here every work-item holds SINGLE_SUN_NODES x 12 realv (6 kB). The view
+#: axis of the launch is padded to a multiple of its rows; the kernel skips the padding.
+SINGLE_WORK_GROUP = (1, 8, 1)
 
 
 class SingleScatteringEngine(_cl.Engine):
@@ -34,6 +45,7 @@ class SingleScatteringEngine(_cl.Engine):
 
     def __init__(self, settings: TableSettings = TableSettings(), ctx=None, profile=False, fast_math=False):
         self.settings = settings
+        self.sun_nodes = SINGLE_SUN_NODES                  # compiled in: its launches keep it
         super().__init__(ctx, np.dtype(settings.dtype), profile, fast_math)
         self._transmittance = None
         if settings.sun_transmittance == "table":
@@ -45,7 +57,8 @@ class SingleScatteringEngine(_cl.Engine):
         return ("real.cl", declaration) + COMMON_SOURCES[1:] + ("mapping.cl", "view_ray.cl", "single.cl")
 
     def build_options(self):
-        return super().build_options() + quadrature_defines(self.settings, self.vector_width)
+        return (super().build_options() + quadrature_defines(self.settings, self.vector_width)
+                + [f"-DSINGLE_SUN_NODES={self.sun_nodes}"])
 
     def compute(self, atmosphere: AtmosphereParameters, size=None, mapping=None, progress=None, cos_azimuth=1.0,
                 out=None):
@@ -87,9 +100,12 @@ class SingleScatteringEngine(_cl.Engine):
         slabs = range(0, depth, SLAB_LAYERS)
         for done, z_offset in enumerate(slabs, start=1):
             slab = min(SLAB_LAYERS, depth - z_offset)
-            event = kernel(self.queue, (-(-width // self.vector_width), height, slab), None, atmosphere_d,
+            global_size = (-(-width // self.vector_width), -(-height // SINGLE_WORK_GROUP[1]) * SINGLE_WORK_GROUP[1],
+                           -(-slab // self.sun_nodes))
+            event = kernel(self.queue, global_size, SINGLE_WORK_GROUP, atmosphere_d,
                            np.int32(width), np.int32(height), np.int32(depth), np.int32(z_offset),
-                           np.int32(MAPPINGS[settings.mapping]), self.real2(settings.sun_w_range),
+                           np.int32(z_offset + slab), np.int32(MAPPINGS[settings.mapping]),
+                           self.real2(settings.sun_w_range),
                            sun_table_d.data, np.int32(tw),
                            np.int32(th), self.real(cos_azimuth), table_d.data)
             self._record("single_scattering", event)

@@ -18,8 +18,10 @@
  * ground-hitting view ray lies on the ground at altitude exactly 0.
  *
  * Each work-item computes VECTOR_WIDTH cells along the altitude axis (x = VECTOR_WIDTH gx + lane), all
- * branch-free in realv arithmetic. Global size (ceil(W / VECTOR_WIDTH), H, slab): a launch covers the
- * sun-zenith layers z_offset .. z_offset + slab - 1 (the host launches slabs to report progress).
+ * branch-free in realv arithmetic, for SINGLE_SUN_NODES sun nodes at once (view_ray.cl:
+ * integrate_single_suns marches each view ray once for all of them). Global size (ceil(W / VECTOR_WIDTH),
+ * H padded to the work-group's rows, ceil(slab / SINGLE_SUN_NODES)): a launch covers the sun-zenith layers
+ * z_offset .. z_end - 1 (the host launches slabs to report progress); rows past H are skipped.
  *
  * cos_azimuth: cosine of the azimuth between view and sun (1: the canonical frame; other values are the
  * azimuth nodes of clsky/azimuth.py).
@@ -28,35 +30,44 @@
  * view_ray.cl.
  */
 __kernel void single_scattering(__constant const atmosphere_t *atm, const int width, const int height,
-                                const int depth, const int z_offset, const int mapping, const real2 sun_range,
-                                __global const real *sun_table, const int tw, const int th,
+                                const int depth, const int z_offset, const int z_end, const int mapping,
+                                const real2 sun_range, __global const real *sun_table, const int tw, const int th,
                                 const real cos_azimuth, __global real *table)
 {
     const int gx = get_global_id(0);
     const int y = get_global_id(1);
-    const int z = get_global_id(2) + z_offset;
-    if (gx * VECTOR_WIDTH >= width || y >= height || z >= depth)
+    const int z0 = z_offset + SINGLE_SUN_NODES * get_global_id(2);
+    if (gx * VECTOR_WIDTH >= width || y >= height || z0 >= z_end)
         return;
 
-    realv h0;
-    real mu_v, mu_s, nu;
-    table_cell(atm, gx, y, z, width, height, depth, mapping, sun_range, cos_azimuth, &h0, &mu_v, &mu_s, &nu);
-    realv sum[6];
-    integrate_single(atm, h0, (realv)(mu_v), (realv)(mu_s), (realv)(nu), sun_table, tw, th, sum, 0);
+    realv h0, mu_s[SINGLE_SUN_NODES], nu[SINGLE_SUN_NODES];
+    real mu_v;
+    for (int b = 0; b < SINGLE_SUN_NODES; ++b) {     /* nodes past the slab's end repeat its last, unstored */
+        real mu_s_b, nu_b;
+        table_cell(atm, gx, y, min(z0 + b, z_end - 1), width, height, depth, mapping, sun_range, cos_azimuth, &h0,
+                   &mu_v, &mu_s_b, &nu_b);
+        mu_s[b] = (realv)(mu_s_b);
+        nu[b] = (realv)(nu_b);
+    }
+    realv sum[SINGLE_SUN_NODES][6];
+    integrate_single_suns(atm, h0, (realv)(mu_v), mu_s, nu, SINGLE_SUN_NODES, sun_table, tw, th, sum, 0);
 
     const real4 beta = atm->beta_rayleigh;
     const real scale_r = R(1.0) / (R(4.0) * PI_REAL);
     const real4 scale_m = atm->beta_mie / (R(4.0) * PI_REAL);
-    for (int k = 0; k < VECTOR_WIDTH; ++k) {
-        const int xk = gx * VECTOR_WIDTH + k;
-        if (xk >= width)
-            break;
-        const size_t cell = 6 * ((size_t)xk + (size_t)width * ((size_t)y + (size_t)height * (size_t)z));
-        table[cell] = beta.x * scale_r * LANE(sum[0], k);
-        table[cell + 1] = beta.y * scale_r * LANE(sum[1], k);
-        table[cell + 2] = beta.z * scale_r * LANE(sum[2], k);
-        table[cell + 3] = scale_m.x * LANE(sum[3], k);
-        table[cell + 4] = scale_m.y * LANE(sum[4], k);
-        table[cell + 5] = scale_m.z * LANE(sum[5], k);
+    for (int b = 0; b < SINGLE_SUN_NODES && z0 + b < z_end; ++b) {
+        const int z = z0 + b;
+        for (int k = 0; k < VECTOR_WIDTH; ++k) {
+            const int xk = gx * VECTOR_WIDTH + k;
+            if (xk >= width)
+                break;
+            const size_t cell = 6 * ((size_t)xk + (size_t)width * ((size_t)y + (size_t)height * (size_t)z));
+            table[cell] = beta.x * scale_r * LANE(sum[b][0], k);
+            table[cell + 1] = beta.y * scale_r * LANE(sum[b][1], k);
+            table[cell + 2] = beta.z * scale_r * LANE(sum[b][2], k);
+            table[cell + 3] = scale_m.x * LANE(sum[b][3], k);
+            table[cell + 4] = scale_m.y * LANE(sum[b][4], k);
+            table[cell + 5] = scale_m.z * LANE(sum[b][5], k);
+        }
     }
 }

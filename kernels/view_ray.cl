@@ -158,14 +158,22 @@ inline void add_ground_reflection(__constant const atmosphere_t *atm, const real
 }
 #endif
 
-/* Single scattering along the ray: sum[0..2] = Integral rho_R T dt (r, g, b), sum[3..5] the same with
- * rho_M, T = T(Pc, P) T(P, Pa), zero where P is in the planet's shadow (decided from P's altitude and
- * sun cosine against the local horizon, never from rounding). Multiply by beta_s / (4 pi) for Ibar.
- * With -DGROUND and ground != 0, also ground[0..GROUND_VALUES - 1] of the last node (ground_view,
- * ground_direct). */
-inline void integrate_single(__constant const atmosphere_t *atm, const realv h0, const realv mu_v,
-                             const realv mu_s, const realv nu, __global const real *sun_table,
-                             const int tw, const int th, realv *sum, realv *ground)
+/* Single scattering along the ray for `count` suns at once (count <= SINGLE_SUN_NODES), sun b of zenith
+ * cosine mu_s[b] and nu[b] = dot(V, Sun_b) at the observer:
+ *   sum[b][0..2] = Integral rho_R T dt (r, g, b), sum[b][3..5] the same with rho_M, T = T(Pc, P) T(P, Pa),
+ * zero where P is in the planet's shadow (decided from P's altitude and sun cosine against the local horizon,
+ * never from rounding). Multiply by beta_s / (4 pi) for Ibar. The ray's nodes, altitudes, densities and
+ * view columns do not depend on the sun: each is computed once for every sun, and each sun's sums are
+ * the same operations as for that sun alone (the single-scattering table marches a ray once for
+ * SINGLE_SUN_NODES sun nodes: single.cl). With -DGROUND and ground != 0, also ground[0..GROUND_VALUES - 1]
+ * of the last node for sun 0 (ground_view, ground_direct). */
+#ifndef SINGLE_SUN_NODES
+#define SINGLE_SUN_NODES 1
+#endif
+inline void integrate_single_suns(__constant const atmosphere_t *atm, const realv h0, const realv mu_v,
+                                  const realv *mu_s, const realv *nu, const int count,
+                                  __global const real *sun_table, const int tw, const int th,
+                                  realv sum[][6], realv *ground)
 {
     const real rp = atm->planet_radius;
     const realv r0 = rp + h0;
@@ -178,11 +186,12 @@ inline void integrate_single(__constant const atmosphere_t *atm, const realv h0,
     const real4 beta_o = atm->ozone_extinction;
     column_t view = column_zero();                          /* column densities from the observer */
     column_t last_density = column_zero();
-    realv last[6];
-    for (int c = 0; c < 6; ++c) {
-        last[c] = V(0.0);
-        sum[c] = V(0.0);
-    }
+    realv last[SINGLE_SUN_NODES][6];
+    for (int b = 0; b < count; ++b)
+        for (int c = 0; c < 6; ++c) {
+            last[b][c] = V(0.0);
+            sum[b][c] = V(0.0);
+        }
     view_node_t node_previous = (view_node_t)(R(0.0));
 
     for (int i = 0; i <= N_VIEW; ++i) {
@@ -192,34 +201,47 @@ inline void integrate_single(__constant const atmosphere_t *atm, const realv h0,
         if (i == N_VIEW)
             h = SELECT(h, V(0.0), hits_ground);
         const realv r = rp + h;
-        const realv mu_sun_here = (r0 * mu_s + s * nu) / r;     /* dot(P, Sun) / |P| */
         const column_t density = densities_at(atm, h, inv_hr, inv_hm);
         const realv half_step = R(0.5) * length * (node - node_previous);
         if (i > 0)
             view = column_step(view, last_density, density, half_step);
-        column_t sun;
-        const maskv lit = sun_column(atm, h, mu_sun_here, sun_table, tw, th, &sun);
-        const column_t column = column_sum(view, sun);
-        const realv t0 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.x, beta_me.x, beta_o.x)), lit);
-        const realv t1 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.y, beta_me.y, beta_o.y)), lit);
-        const realv t2 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.z, beta_me.z, beta_o.z)), lit);
+        for (int b = 0; b < count; ++b) {
+            const realv mu_sun_here = (r0 * mu_s[b] + s * nu[b]) / r;     /* dot(P, Sun) / |P| */
+            column_t sun;
+            const maskv lit = sun_column(atm, h, mu_sun_here, sun_table, tw, th, &sun);
+            const column_t column = column_sum(view, sun);
+            const realv t0 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.x, beta_me.x, beta_o.x)), lit);
+            const realv t1 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.y, beta_me.y, beta_o.y)), lit);
+            const realv t2 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.z, beta_me.z, beta_o.z)), lit);
 #ifdef GROUND
-        if (ground && i == N_VIEW) {
-            ground_view(atm, view, hits_ground, mu_sun_here, ground);
-            ground_direct(atm, sun, lit, ground);
-        }
+            if (ground && b == 0 && i == N_VIEW) {
+                ground_view(atm, view, hits_ground, mu_sun_here, ground);
+                ground_direct(atm, sun, lit, ground);
+            }
 #endif
-        realv f[6];
-        f[0] = density.r * t0; f[1] = density.r * t1; f[2] = density.r * t2;
-        f[3] = density.m * t0; f[4] = density.m * t1; f[5] = density.m * t2;
-        for (int c = 0; c < 6; ++c) {
-            if (i > 0)
-                sum[c] += (last[c] + f[c]) * half_step;
-            last[c] = f[c];
+            realv f[6];
+            f[0] = density.r * t0; f[1] = density.r * t1; f[2] = density.r * t2;
+            f[3] = density.m * t0; f[4] = density.m * t1; f[5] = density.m * t2;
+            for (int c = 0; c < 6; ++c) {
+                if (i > 0)
+                    sum[b][c] += (last[b][c] + f[c]) * half_step;
+                last[b][c] = f[c];
+            }
         }
         last_density = density;
         node_previous = node;
     }
+}
+
+/* Single scattering along the ray for one sun (integrate_single_suns): sum[0..5]. */
+inline void integrate_single(__constant const atmosphere_t *atm, const realv h0, const realv mu_v,
+                             const realv mu_s, const realv nu, __global const real *sun_table,
+                             const int tw, const int th, realv *sum, realv *ground)
+{
+    realv sums[1][6];
+    integrate_single_suns(atm, h0, mu_v, &mu_s, &nu, 1, sun_table, tw, th, sums, ground);
+    for (int c = 0; c < 6; ++c)
+        sum[c] = sums[0][c];
 }
 
 /* The trilinear interpolation of a padded table (D, H, W, 8) between the cells base, base + 1, base + dy,

@@ -105,6 +105,31 @@ def test_one_engine_serves_any_size_and_mapping(single_engine):
                              f"per-call {settings.size} {settings.mapping}")
 
 
+@pytest.mark.parametrize("sun_transmittance", ["table", "march"])
+def test_sun_nodes_per_work_item_change_no_bit(cl_context, dtype, sun_transmittance, monkeypatch):
+    """A work-item marches a view ray once for SINGLE_SUN_NODES sun nodes (kernels/single.cl): each node's
+    sums are the operations of a ray marched for it alone, so the table is the one of one sun node per
+    work-item bit for bit, also across launch slabs that end inside a work-item's block of nodes (depth
+    27: slabs of 16 and 11 layers), on an ozone atmosphere with a ground (its columns and densities);
+    and progress is reported once per slab."""
+    from clsky import single
+
+    require_dtype(cl_context, dtype)
+    settings = TableSettings(size=(11, 13, 27), dtype=dtype, sun_transmittance=sun_transmittance, view_steps=12,
+                             sun_steps=6, transmittance_size=(16, 33))
+    atmosphere = preset("physical")
+    assert single.SINGLE_SUN_NODES == 8 and single.SLAB_LAYERS == 16
+    calls = []
+    shared = single.SingleScatteringEngine(settings, ctx=cl_context).compute(
+        atmosphere, progress=lambda done, total: calls.append((done, total)))
+    assert calls == [(1, 2), (2, 2)]
+    monkeypatch.setattr(single, "SINGLE_SUN_NODES", 1)
+    monkeypatch.setattr(single, "SLAB_LAYERS", 4)
+    alone = single.SingleScatteringEngine(settings, ctx=cl_context).compute(atmosphere)
+    assert np.array_equal(shared, alone)
+    assert np.all(shared >= 0) and shared.max() > 0
+
+
 @pytest.mark.parametrize("precision", ["float64", "float32"])
 def test_near_ground_grid_matches_twin(single_engine, cl_context, precision):
     """The default grid's altitude nodes (W = 32: 104 m, 416 m, ...) with 64 view directions, sun at the
