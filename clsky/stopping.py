@@ -83,9 +83,9 @@ class DeviceStoppingTest(_cl.Engine):
     ----------
     running : iterable of ndarray (..., 3) float64
         The running sum so far (single scattering's), as consecutive slabs along its first axis (each of
-        one or more rows: ``shape[1:]`` or ``(n,) + shape[1:]``), uploaded
-        one at a time (so that the host never holds the whole sum: 122 MB for the default animation's
-        table, which added to the build's peak where it was made).
+        one or more rows: ``shape[1:]`` or ``(n,) + shape[1:]``), uploaded one at a time, so that the host
+        never holds the whole sum (122 MB for the default animation's table, which added to the build's
+        peak where it was made).
     shape : tuple
         The running sum's shape (..., 3).
     keep_previous : bool
