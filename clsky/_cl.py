@@ -456,6 +456,13 @@ class Engine:
         record["x"], record["y"] = pair
         return record
 
+    def real4(self, values):
+        """``values`` (three numbers, e.g. r, g, b, or four) as the kernels' ``real4`` (.w = 0 for three)."""
+        record = np.zeros((), dtype=real_vector_dtype(self.dtype, 4))
+        for name, value in zip(("x", "y", "z", "w"), values):
+            record[name] = value
+        return record
+
     def real8(self, values):
         """``values`` (8 numbers) as the kernels' ``real8``."""
         return np.array(tuple(values), dtype=self.dtype).view(real_vector_dtype(self.dtype, 8)).reshape(())

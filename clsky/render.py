@@ -219,9 +219,8 @@ class SkyRenderer:
         n = directions_d.shape[0]
         if math.prod(shape) != n:
             raise ValueError(f"{name}: prepared directions of shape {shape} hold {n} directions")
-        real4 = _cl.real_vector_dtype(self.engine.dtype, 4)
-        sun4 = _real4(real4, sun)
-        disc = _real4(real4, sun_disc_radiance(self.table.atmosphere, sun, altitude) if sun_disc else np.zeros(3))
+        sun4 = self.engine.real4(sun)
+        disc = self.engine.real4(sun_disc_radiance(self.table.atmosphere, sun, altitude) if sun_disc else np.zeros(3))
         out_d = cla.empty(self.queue, (max(n, 1), 3), self.engine.dtype)
         for argument, array_d, count in buffers + [("directions", directions_d, 3 * n), ("out", out_d, 3 * max(n, 1))]:
             check_kernel_buffer(name, argument, array_d, count, self.engine.dtype)
@@ -384,10 +383,3 @@ class SkyRenderer:
 
     def __exit__(self, *exc):
         self.close()
-
-
-def _real4(dtype, values):
-    record = np.zeros((), dtype=dtype)
-    for name, value in zip(("x", "y", "z"), values):
-        record[name] = value
-    return record

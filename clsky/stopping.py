@@ -166,7 +166,7 @@ class DeviceStoppingTest(_cl.Engine):
         previous = self.previous if self.previous is not None else self.running      # not read without `keep`
         self._record("order_ratios", self.kernels["order_ratios"](
             self.queue, items, None, order.data, self.running.data, previous.data, cells, chunk,
-            self._threshold.data, _double4(r), _double4(squared_complement), np.int32(ratio is not None),
+            self._threshold.data, self.real4(r), self.real4(squared_complement), np.int32(ratio is not None),
             np.int32(self.keep_previous), self._ratios.data))
         self._pending = (cl.enqueue_copy(self.queue, self._host_ratios, self._ratios.data, is_blocking=False),
                          ratio is not None)
@@ -178,9 +178,3 @@ class DeviceStoppingTest(_cl.Engine):
         event.wait()
         addition, error = self._host_ratios.max(axis=0)
         return float(addition), (float(error) if estimated else float(addition))
-
-
-def _double4(values):
-    record = np.zeros((), dtype=_cl.real_vector_dtype(np.float64, 4))
-    record["x"], record["y"], record["z"] = values
-    return record
