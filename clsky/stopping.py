@@ -133,7 +133,7 @@ class DeviceStoppingTest(_cl.Engine):
         self.keep_previous = bool(keep_previous)
         self.previous = cla.empty(self.queue, self.shape, np.float64, allocator=allocator) if keep_previous else None
         self._have_previous = False
-        self._maxima = cla.empty(self.queue, (self.items, 4), np.float64, allocator=allocator)
+        self._maxima = cla.empty(self.queue, (self.items, 3), np.float64, allocator=allocator)
         self._threshold = cla.empty(self.queue, (4,), np.float64, allocator=allocator)
         self._ratios = cla.empty(self.queue, (self.items, 2), np.float64, allocator=allocator)
         self._host_ratios = np.empty((self.items, 2))

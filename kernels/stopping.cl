@@ -28,7 +28,7 @@ inline bool chunk_of(const size_t item, const ulong cells, const uint chunk, ulo
     return *first < cells;
 }
 
-/* S += the order, per value; maxima[4 item + c] = channel c's maximum of the new S over the item's cells. */
+/* S += the order, per value; maxima[3 item + c] = channel c's maximum of the new S over the item's cells. */
 __kernel void running_sum(__global const NODE *order, __global double *running, const ulong cells,
                           const uint chunk, __global double *maxima)
 {
@@ -44,7 +44,7 @@ __kernel void running_sum(__global const NODE *order, __global double *running, 
             peak[c] = fmax(peak[c], sum);
         }
     for (int c = 0; c < 3; ++c)
-        maxima[4 * item + c] = peak[c];
+        maxima[3 * item + c] = peak[c];
 }
 
 /* threshold[c] = fraction x channel c's maximum of S over the table, from running_sum's maxima of `items`
@@ -57,7 +57,7 @@ __kernel void bright_threshold(__global const double *maxima, const uint items, 
     for (int c = 0; c < 3; ++c) {
         double peak = -INFINITY;
         for (uint item = 0; item < items; ++item)
-            peak = fmax(peak, maxima[4 * item + c]);
+            peak = fmax(peak, maxima[3 * item + c]);
         threshold[c] = fraction * peak;
     }
 }
