@@ -238,29 +238,39 @@ class HarmonicGather:
 
     def first_gather(self, single_harmonics):
         """G_{s,m} (M + 1, D, H, W, 6) of single scattering's harmonics Ibar_{s',n} (M + 1, D, H, W, 6),
-        factored (Rayleigh r, g, b, Mie r, g, b without phase)."""
+        factored (Rayleigh r, g, b, Mie r, g, b without phase).
+
+        Done :data:`FIRST_GATHER_LAYERS` sun layers at a time: each block's interpolation P Ibar, its sun
+        weighting (:meth:`_sun_weighted`) and its gathers, so that their temporaries are a few MB that
+        stay in the cache instead of tables of the whole grid (two of 250 MB and two of 123 MB for the
+        default animation's table, faulted in fresh). Every value is the same bits as the whole-grid
+        products: BLAS multiplies each (sun layer, harmonic) matrix on its own, whichever batch it is in."""
         count, depth, height, width, channels = single_harmonics.shape
-        # one product for both species' columns (P is the same), on the contiguous table: per species
-        # it first copied each species' strided channels (2 x 61 MB for the default animation's table);
-        # the same sums, bit for bit, in about a quarter less time
-        seen = np.matmul(self.p, single_harmonics.reshape(count, depth, height, width * channels))
-        seen = seen.reshape(count, depth, -1, width, channels)                 # (n, D, Theta + 1, W, 6)
+        # one product for both species' columns (P is the same), on the contiguous table
+        columns = single_harmonics.reshape(count, depth, height, width * channels)
         out = np.empty((count, depth, height, width, 6))
-        harmonic = self._sun_weighted(seen).reshape(count, depth, -1, width * 3)
-        del seen
-        for index, species in enumerate(SPECIES):
-            gathered = np.matmul(self.view[species][:, None], harmonic)              # (m, D, H, W * 3)
-            out[..., 3 * index:3 * index + 3] = gathered.reshape(count, depth, height, width, 3)
+        for z0 in range(0, depth, self.FIRST_GATHER_LAYERS):
+            z1 = min(z0 + self.FIRST_GATHER_LAYERS, depth)
+            seen = np.matmul(self.p, columns[:, z0:z1]).reshape(count, z1 - z0, -1, width, channels)
+            harmonic = self._sun_weighted(seen, z0).reshape(count, z1 - z0, -1, width * 3)
+            for index, species in enumerate(SPECIES):
+                gathered = np.matmul(self.view[species][:, None], harmonic)            # (m, layers, H, W * 3)
+                out[:, z0:z1, ..., 3 * index:3 * index + 3] = gathered.reshape(count, z1 - z0, height, width, 3)
         return out
+
+    #: Sun layers per block of :meth:`first_gather`: 2.4 MB of interpolated single scattering per
+    #: layer of the default animation's table (M = 2).
+    FIRST_GATHER_LAYERS = 2
 
     #: Sun layers per block of :meth:`_sun_weighted`: its operands (a few hundred kB a layer for the
     #: default animation's table) then stay in the cache between the block's operations.
     SUN_LAYERS_PER_BLOCK = 2
 
-    def _sun_weighted(self, seen):
-        """p_m (M + 1, D, Theta + 1, W, 3) = sum_s' sum_n C_{s',m,n}(z, a) seen_{n,s'}(z, a) of the seen
-        harmonics ``seen`` (M + 1, D, Theta + 1, W, 6), summed over the species s' seen (both gathering
-        species apply the same K_{s,m} to it: one matrix product per gathering species, not two).
+    def _sun_weighted(self, seen, first_layer=0):
+        """p_m (M + 1, L, Theta + 1, W, 3) = sum_s' sum_n C_{s',m,n}(z, a) seen_{n,s'}(z, a) of the seen
+        harmonics ``seen`` (M + 1, L, Theta + 1, W, 6) of the L sun layers from ``first_layer`` on, summed
+        over the species s' seen (both gathering species apply the same K_{s,m} to it: one matrix product
+        per gathering species, not two).
 
         The sums are those of ``np.einsum("mnza,nzawc->mzawc", ...)`` per species s' (over n in order),
         the second species' added to the first's, bit for bit; done a few sun layers at a time, they
@@ -275,7 +285,7 @@ class HarmonicGather:
             product_block, other_block = product[:z1 - z0], other_term[:z1 - z0]
             for m in range(count):
                 for index, species in enumerate(SPECIES):
-                    weights = self.sun[species][m, :, z0:z1, :, None, None]        # C_{s',m,n}(z, a)
+                    weights = self.sun[species][m, :, first_layer + z0:first_layer + z1, :, None, None]
                     part = seen[:, z0:z1, ..., 3 * index:3 * index + 3]
                     term = harmonic[m, z0:z1] if index == 0 else other_block
                     np.multiply(weights[0], part[0], out=term)

@@ -327,26 +327,29 @@ def _orders_phases(settings, orders):
 
 def _harmonic_phases(settings, orders):
     """The orders of a table with azimuth harmonics (:mod:`clsky.azimuth`, n = M + 1 azimuth nodes): the
-    first gather on the host (single scattering at the n nodes and its harmonics, both seen species'
-    interpolation (n, D, Theta + 1, W 6), their harmonic sum, the n gathered harmonics, the padded transfer
-    slab of L sun layers), then the orders loop (single scattering at the canonical node, every order's
-    azimuth average kept on the host, the order's n nodes; on the device the gathered sum, the gathered
-    harmonics and the order's n nodes, padded, and a harmonic, and the stopping test's running sum at the
-    nodes (:class:`clsky.stopping.DeviceStoppingTest`); the padded transfer slab; for ``orders="auto"``, the
+    first gather on the host (single scattering at the n nodes and its harmonics, the n gathered
+    harmonics, the padded transfer slab of L sun layers, and a block of B sun layers' temporaries: both
+    seen species' interpolation (n, B, Theta + 1, W 6), their harmonic sum and a species' gathers), then
+    the orders loop (single scattering at the canonical node, every order's azimuth average kept on the
+    host, the order's n nodes; on the device the gathered sum, the gathered harmonics and the order's n
+    nodes, padded, and a harmonic, and the stopping test's running sum at the nodes
+    (:class:`clsky.stopping.DeviceStoppingTest`); the padded transfer slab; for ``orders="auto"``, the
     order before at the nodes, on the device too, which the geometric tail's test reads)."""
-    from .azimuth import TRANSFER_LAYERS
+    from .azimuth import TRANSFER_LAYERS, HarmonicGather
 
     cells, height, depth, s = _table_sizes(settings)
     n = settings.azimuth_harmonics + 1
     padded = cells * 8 * s
     slab = padded // depth * min(TRANSFER_LAYERS, depth)          # clsky.azimuth's staging: L sun layers
-    seen = n * depth * (settings.gather_theta_steps + 1) * settings.size[0] * 3 * _F64
+    block = min(HarmonicGather.FIRST_GATHER_LAYERS, depth)
+    seen = n * block * (settings.gather_theta_steps + 1) * settings.size[0] * 3 * _F64
     single = Allocation("single scattering at the azimuth nodes (n, D, H, W, 6) float64", cells * 6 * _F64, count=n)
     first = Phase("first gather", (
         single, Allocation("single scattering's harmonics (n, D, H, W, 6) float64", cells * 6 * _F64, count=n),
-        # both species interpolated at once (n, D, Theta + 1, W 6) and the harmonic sums of both (the second
-        # species' terms go through blocks of two sun layers, HarmonicGather._sun_weighted)
-        Allocation("interpolated single scattering and its harmonic sums (n, D, Theta + 1, W 3)", seen, count=3),
+        # B sun layers at a time (HarmonicGather.first_gather): both species interpolated at once
+        # (n, B, Theta + 1, W 6), the harmonic sums of both (n, B, Theta + 1, W 3) and a species' gathers
+        Allocation("a block's interpolated single scattering, its harmonic sums and gathers (n, B, Theta + 1, W 3)",
+                   seen, count=4),
         Allocation("gathered harmonics (n, D, H, W, 6) float64", cells * 6 * _F64, count=n),
         Allocation("padded transfer slab (L, H, W, 8)", slab),
         Allocation("gathered harmonics on the device (n, D, H, W, 8)", padded, count=n, on_device=True)))

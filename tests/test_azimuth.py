@@ -199,6 +199,24 @@ def test_first_gather_sun_weighting_is_einsums_sum(atmosphere):
     assert np.array_equal(operators._sun_weighted(seen), expected)
 
 
+def test_first_gather_in_blocks_of_sun_layers_is_the_whole_grids(atmosphere, monkeypatch):
+    """The first gather, done HarmonicGather.FIRST_GATHER_LAYERS sun layers at a time (interpolation, sun
+    weighting and gathers of a block, then the next), is bit for bit the same products over the whole
+    grid at once (BLAS multiplies each layer's matrices on their own): blocks of 2 with a short last
+    block (7 layers), and of 3, against one block of all 7."""
+    settings = TINY.replace(size=(5, 12, 7))
+    operators = azimuth.HarmonicGather(atmosphere, settings, HARMONICS)
+    width, height, depth = settings.size
+    single = np.random.default_rng(13).random((HARMONICS + 1, depth, height, width, 6))
+    single *= np.exp(np.random.default_rng(14).normal(size=single.shape[:3] + (1, 1)) * 4.0)
+    monkeypatch.setattr(azimuth.HarmonicGather, "FIRST_GATHER_LAYERS", depth)
+    whole = operators.first_gather(single)
+    for layers in (2, 3):
+        monkeypatch.setattr(azimuth.HarmonicGather, "FIRST_GATHER_LAYERS", layers)
+        assert depth % layers != 0
+        assert np.array_equal(operators.first_gather(single), whole)
+
+
 def test_orders_finite_and_non_negative(atmosphere):
     result = azimuth.compute_orders(atmosphere, TINY.replace(sun_cos_range=(-0.2, 0.1), azimuth_harmonics=3))
     for order in result.orders:
