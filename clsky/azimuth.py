@@ -93,11 +93,6 @@ __all__ = ["azimuth_nodes", "harmonic_transform", "harmonic_phase_integrals",
 #: animation's 32 x 256 x 139 table).
 HARMONIC_SOURCE_ORDERS = 2
 
-#: Sun layers per host transfer of the OpenCL backend (its padded staging slab, (L, H, W, 8)): 8 MB for the
-#: default animation's table (32 x 256 x 208) instead of a whole node's 109 MB, which counted in the
-#: build's peak memory (the cost of a first build on these machines, README "Speed").
-TRANSFER_LAYERS = 16
-
 
 def _check_harmonics(harmonics):
     if not is_integer(harmonics) or not 0 <= harmonics <= MAX_AZIMUTH_HARMONICS:
@@ -428,14 +423,14 @@ class _Backend:
 
     single: Ibar^(1) at the azimuth nodes (M + 1, D, H, W, 6) on the host; upload(gathered): the
     host's gathered harmonics (M + 1, D, H, W, 6) in the backend's form; scatter(gathered,
-    ground_radiance): (the order's nodes (M + 1, D, H, W, 3) on the host, valid until the next call,
-    the same in the backend's form); gather(that form): the next order's gathered harmonics (backend's
+    ground_radiance): (a callable returning the order's nodes (M + 1, D, H, W, 3) on the host, valid
+    until the next call, once they are there; the same in the backend's form); gather(that form): the next order's gathered harmonics (backend's
     form); accumulate(total, gathered, scale=None): total + gathered, or total + scale gathered per
     wavelength (scale (r, g, b)) (a copy of gathered for total None; may add in place);
     to_host(gathered): (M + 1, D, H, W, 6) float64; stopping_test(single, keep_previous): the orders'
     stopping test (:mod:`clsky.stopping`), its running sum starting from single scattering ``single``
     (M + 1, D, H, W, 6) as R + M per wavelength, whose ``add`` takes an order as ``reads`` says,
-    'host' (the first of scatter's pair) or 'backend' (the second); device: its description."""
+    'host' (what the first of scatter's pair returns) or 'backend' (the second); device: its description."""
 
     single: np.ndarray
     upload: object
@@ -460,7 +455,7 @@ def _numpy_backend(atmosphere, settings, operators):
 
     def scatter(gathered, ground_radiance, source_harmonics=None):
         nodes = scatter_nodes(atmosphere, settings, gathered, ground_radiance, source_harmonics)
-        return nodes, nodes
+        return (lambda: nodes), nodes
 
     def gather(nodes):
         return operators.gather(_to_harmonics(nodes))
@@ -488,10 +483,11 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
 
     Every engine runs on one queue and takes its device arrays from one pool
     (:func:`clsky._cl.memory_pool`): an order reuses the buffers of the one before (they are the same
-    sizes) instead of faulting in fresh memory, and the nodes come to the host through one reused
-    padded slab, :data:`TRANSFER_LAYERS` sun layers at a time (which also carries the first gather up and
-    the gathered sum down), into one reused host table: what ``scatter`` returns is valid until its next call. The pool goes with the
-    backend."""
+    sizes) instead of faulting in fresh memory. The nodes come to the host on a second queue, one
+    rectangular read of their 3 channels a node (no padded copy on the host), into one reused host
+    table, while the first queue gathers them: what ``scatter`` returns is valid until its next call.
+    The first gather goes up and the gathered sum comes down by rectangular copies too. The pool goes
+    with the backend."""
     import pyopencl as cl
     import pyopencl.array as cla
 
@@ -502,6 +498,7 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     queue = cl.CommandQueue(single_engine.ctx)
     pool = _cl.memory_pool(queue)
     engine = MultipleScatteringEngine(settings, fast_math=fast_math, queue=queue, allocator=pool)
+    copy_queue = cl.CommandQueue(engine.ctx)     # the nodes' downloads overlap the order's gathers
     cosines = np.cos(azimuth_nodes(settings.azimuth_harmonics))
     width, height, depth = settings.size
     single = np.empty((cosines.size, depth, height, width, 6))
@@ -512,39 +509,42 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     # on the device once, so that enqueueing an order's gathers does not wait for them (compute_orders
     # enqueues them before its host work on the order)
     transform_rows = [engine.upload_matrices(row) for row in transform]
-    # allocated on first use, not here: made before the first gather they would add to the build's host
-    # peak (the estimate of clsky.resources, checked against tracemalloc by tests/test_memory.py)
-    # every transfer goes through one padded host slab of TRANSFER_LAYERS sun layers (L, H, W, 8), a block of
-    # a node or a harmonic at a time: a staging array of all M + 1 (327 MB for the default animation's
-    # table), then of one whole node (109 MB), raised the build's peak memory
-    staging = []            # the slab (allocated once)
     host_nodes = []         # the host table (M + 1, D, H, W, 3) that scatter returns (allocated once)
 
-    def blocks(shape):
-        """(n, z0, z1, slab block, its byte offset in the padded device table) for every block of
-        TRANSFER_LAYERS sun layers of every slab n of tables of ``shape`` (M + 1, D, H, W, channels)."""
-        if not staging:
-            staging.append(np.empty((min(TRANSFER_LAYERS, shape[1]),) + shape[2:-1] + (8,), engine.dtype))
-        layer = staging[0][0].nbytes                                  # one padded sun layer (H, W, 8)
-        for n in range(shape[0]):
-            for z0 in range(0, shape[1], TRANSFER_LAYERS):
-                z1 = min(z0 + TRANSFER_LAYERS, shape[1])
-                yield n, z0, z1, staging[0][:z1 - z0], (n * shape[1] + z0) * layer
+    def download(table_d, into, channels, wait_for=None):
+        """Enqueues into[n] = table_d[n, ..., :channels] for every slab n of the padded device table
+        (N, D, H, W, 8) on the copy queue, after the events ``wait_for``: one rectangular read a slab (rows
+        of ``channels`` values out of rows of 8, clEnqueueReadBufferRect) straight into ``into``, through
+        a host table of the device's type for a float32 device. Returns a callable that waits for the
+        reads and returns ``into``."""
+        size = engine.dtype.itemsize
+        rows = int(np.prod(table_d.shape[1:-1]))                       # cells of a slab
+        target = into if into.dtype == engine.dtype else np.empty(into.shape, engine.dtype)
+        reads = [cl.enqueue_copy(copy_queue, target[n], table_d.data, is_blocking=False, wait_for=wait_for,
+                                 buffer_origin=(table_d.offset + n * rows * 8 * size, 0, 0), host_origin=(0, 0, 0),
+                                 region=(channels * size, rows, 1), buffer_pitches=(8 * size, 0),
+                                 host_pitches=(channels * size, 0))
+                 for n in range(table_d.shape[0])]
 
-    def download(table_d, into, channels):
-        """into[n] = table_d[n, ..., :channels] for every slab n of the padded device table (M + 1, D, H, W, 8),
-        each copy waiting for the commands before it on the queue."""
-        for n, z0, z1, block, offset in blocks(table_d.shape):
-            cl.enqueue_copy(queue, block, table_d.data, src_offset=table_d.offset + offset, is_blocking=True)
-            np.copyto(into[n, z0:z1], block[..., :channels])
-        return into
+        def on_host():
+            cl.wait_for_events(reads)
+            if target is not into:
+                np.copyto(into, target)
+            return into
+        return on_host
 
     def upload(gathered):
+        """The first gather's harmonics (M + 1, D, H, W, 6) as a padded device table (M + 1, D, H, W, 8):
+        zeros, then one rectangular write of the 6 channels (rows of 6 values into rows of 8,
+        clEnqueueWriteBufferRect) straight from the host table (from a copy of the device's type for a
+        float32 device)."""
         gathered_d = cla.empty(queue, gathered.shape[:-1] + (8,), engine.dtype, allocator=pool)
-        for n, z0, z1, block, offset in blocks(gathered.shape):
-            block[..., :6] = gathered[n, z0:z1]
-            block[..., 6:] = 0.0
-            cl.enqueue_copy(queue, gathered_d.data, block, dst_offset=gathered_d.offset + offset, is_blocking=True)
+        source = np.ascontiguousarray(gathered, dtype=engine.dtype)
+        size, rows = engine.dtype.itemsize, gathered_d.size // 8
+        cl.enqueue_fill_buffer(queue, gathered_d.data, np.zeros(1, engine.dtype), gathered_d.offset, gathered_d.nbytes)
+        cl.enqueue_copy(queue, gathered_d.data, source, buffer_origin=(gathered_d.offset, 0, 0), host_origin=(0, 0, 0),
+                        region=(6 * size, rows, 1), buffer_pitches=(8 * size, 0), host_pitches=(6 * size, 0),
+                        is_blocking=True)
         return gathered_d
 
     engines = {settings.azimuth_harmonics: engine}
@@ -563,7 +563,7 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
                                   cos_azimuth=c, out=nodes_d, node=node)
         if not host_nodes:
             host_nodes.append(np.empty(nodes_d.shape[:-1] + (3,)))
-        return download(nodes_d, host_nodes[0], 3), nodes_d                          # waits for the scatters
+        return download(nodes_d, host_nodes[0], 3, wait_for=[cl.enqueue_marker(queue)]), nodes_d   # after the scatters
 
     def gather(nodes_d):
         """G_m = A_m L_m, L_m = sum_n H[m, n] L(phi_n) (padded: channels 0-2 and 3-5 both hold L), each
@@ -578,7 +578,7 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
         return gathered_d.copy() if total is None else engine.add_into(total, gathered_d, scale)
 
     def to_host(gathered_d):
-        return download(gathered_d, np.empty(gathered_d.shape[:-1] + (6,)), 6)
+        return download(gathered_d, np.empty(gathered_d.shape[:-1] + (6,)), 6, wait_for=[cl.enqueue_marker(queue)])()
 
     def stopping_test(single, keep_previous):
         """On the device beside the orders (clsky.stopping; the same numbers), where it has fp64, its
@@ -653,17 +653,20 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
     with _cl.host_blas_single_threaded() if backend == "opencl" else contextlib.nullcontext():
         for k in range(2, wanted + 1):
             gathered_sum = run.accumulate(gathered_sum, gathered)
-            new, state = run.scatter(gathered, pending_ground,
-                                     None if HARMONIC_SOURCE_ORDERS is None or k <= HARMONIC_SOURCE_ORDERS else 0)
+            on_host, state = run.scatter(gathered, pending_ground,
+                                         None if HARMONIC_SOURCE_ORDERS is None or k <= HARMONIC_SOURCE_ORDERS else 0)
             del gathered         # first: the pool hands its buffer to the next gather (no more memory)
+            # the next order's source (on OpenCL enqueued on the device, where the order is), before the
+            # host waits for the order's nodes, so that their download overlaps it and the host's work on
+            # the order overlaps the rest (the last order needs the source only for the geometric tail,
+            # which needs k < wanted)
+            gathered = run.gather(state) if k < wanted else None
+            new = on_host()
             totals.append(_total(new))
             # the geometric tail (clsky.orders), where it can apply: it adds G^(k+1), gathered below max_orders
             ratio = geometric_ratio(totals) if settings.orders == "auto" and k < wanted else None
-            # the stopping test (on OpenCL, enqueued on the device, where the order is) and the next order's
-            # source, both before the host's work on this order, which they overlap (the last order needs
-            # the source only for the geometric tail, which needs k < wanted)
+            # the stopping test (on OpenCL enqueued on the device, after the gathers), read below
             stopping.add(new if stopping.reads == "host" else state, ratio)
-            gathered = run.gather(state) if k < wanted else None
             del state
             check_finite(new, k, atmosphere, settings)
             average = azimuth_average(new) if ground_sky is not None or not keep_nodes else None

@@ -328,19 +328,19 @@ def _orders_phases(settings, orders):
 def _harmonic_phases(settings, orders):
     """The orders of a table with azimuth harmonics (:mod:`clsky.azimuth`, n = M + 1 azimuth nodes): the
     first gather on the host (single scattering at the n nodes and its harmonics, the n gathered
-    harmonics, the padded transfer slab of L sun layers, and a block of B sun layers' temporaries: both
-    seen species' interpolation (n, B, Theta + 1, W 6), their harmonic sum and a species' gathers), then
-    the orders loop (single scattering at the canonical node, every order's azimuth average kept on the
-    host, the order's n nodes; on the device the gathered sum, the gathered harmonics and the order's n
-    nodes, padded, and a harmonic, and the stopping test's running sum at the nodes
-    (:class:`clsky.stopping.DeviceStoppingTest`); the padded transfer slab; for ``orders="auto"``, the
-    order before at the nodes, on the device too, which the geometric tail's test reads)."""
-    from .azimuth import TRANSFER_LAYERS, HarmonicGather
+    harmonics (for a float32 device also as float32, uploaded from there), and a block of B sun layers'
+    temporaries: both seen species' interpolation (n, B, Theta + 1, W 6), their harmonic sum and a
+    species' gathers), then the orders loop (single scattering at the canonical node, every order's
+    azimuth average kept on the host, the order's n nodes, and for a float32 device the same as read
+    from it; on the device the gathered sum, the gathered harmonics and the order's n nodes, padded, and
+    a harmonic, and the stopping test's running sum at the nodes (:class:`clsky.stopping.DeviceStoppingTest`);
+    for ``orders="auto"``, the order before at the nodes, on the device too, which the geometric tail's
+    test reads)."""
+    from .azimuth import HarmonicGather
 
     cells, height, depth, s = _table_sizes(settings)
     n = settings.azimuth_harmonics + 1
     padded = cells * 8 * s
-    slab = padded // depth * min(TRANSFER_LAYERS, depth)          # clsky.azimuth's staging: L sun layers
     block = min(HarmonicGather.FIRST_GATHER_LAYERS, depth)
     seen = n * block * (settings.gather_theta_steps + 1) * settings.size[0] * 3 * _F64
     single = Allocation("single scattering at the azimuth nodes (n, D, H, W, 6) float64", cells * 6 * _F64, count=n)
@@ -350,9 +350,10 @@ def _harmonic_phases(settings, orders):
         # (n, B, Theta + 1, W 6), the harmonic sums of both (n, B, Theta + 1, W 3) and a species' gathers
         Allocation("a block's interpolated single scattering, its harmonic sums and gathers (n, B, Theta + 1, W 3)",
                    seen, count=4),
-        Allocation("gathered harmonics (n, D, H, W, 6) float64", cells * 6 * _F64, count=n),
-        Allocation("padded transfer slab (L, H, W, 8)", slab),
-        Allocation("gathered harmonics on the device (n, D, H, W, 8)", padded, count=n, on_device=True)))
+        Allocation("gathered harmonics (n, D, H, W, 6) float64", cells * 6 * _F64, count=n))
+        + ((Allocation("gathered harmonics in the device's type for the upload (n, D, H, W, 6)", cells * 6 * s, count=n),)
+           if s != _F64 else ())
+        + (Allocation("gathered harmonics on the device (n, D, H, W, 8)", padded, count=n, on_device=True),))
     loop = Phase("orders", (
         _single(cells),                 # the canonical node's: the other nodes and the harmonics go before the loop
         Allocation("gather matrices (n, 2, H, H)", 2 * height * height * s, count=n, on_device=True),
@@ -362,8 +363,10 @@ def _harmonic_phases(settings, orders):
         Allocation("running sum at the nodes (n, D, H, W, 3) float64", cells * 3 * _F64, count=n, on_device=True),
         # the harmonics are gathered straight into their slabs of the gathered stack (no table of their own)
         Allocation("padded tables: gathered sum, gathered, nodes, a harmonic", padded, count=3 * n + 1,
-                   on_device=True),
-        Allocation("padded transfer slab (L, H, W, 8)", slab))
+                   on_device=True))
+        # a float32 device's nodes are read into a host table of its type, then widened
+        + ((Allocation("the order at its nodes as read from the device (n, D, H, W, 3)", cells * 3 * s, count=n),)
+           if s != _F64 else ())
         + ((Allocation("the order before at its nodes (n, D, H, W, 3) float64", cells * 3 * _F64, count=n,
                        on_device=True),)
            if settings.orders == "auto" else ()))

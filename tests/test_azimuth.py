@@ -335,19 +335,49 @@ def test_orders_backends_agree(cl_context, atmosphere, albedo):
                             "ground irradiance")
 
 
-def test_transfers_in_blocks_of_sun_layers_change_nothing(cl_context, atmosphere, monkeypatch):
-    """The OpenCL backend moves tables to and from the device a block of TRANSFER_LAYERS sun layers at a
-    time: blocks of 3 layers of the 7 (3, 3, 1) give the same orders, gathered sum and ground bit for bit
-    as one block of all 7."""
+def test_rectangular_transfers_move_the_channels_and_zero_the_padding(cl_context, atmosphere, monkeypatch):
+    """The OpenCL backend's rectangular copies: the first gather goes up as a padded table whose channels
+    0-5 are the host's, bit for bit, and whose padding (6, 7) is zero (the kernels read whole rows of 8)
+    even in a reused buffer (every new device array filled with NaN here), in float64 and float32; and the
+    gathered sum comes down as the device's channels 0-5."""
+    import pyopencl.array as cla
+
+    empty = cla.empty
+
+    def dirty_empty(*args, **kwargs):
+        array = empty(*args, **kwargs)
+        return array.fill(np.nan) if array.dtype.kind == "f" else array
+
+    monkeypatch.setattr(cla, "empty", dirty_empty)
+    operators = azimuth.HarmonicGather(atmosphere, KERNEL_GRID, KERNEL_GRID.azimuth_harmonics)
+    width, height, depth = KERNEL_GRID.size
+    gathered = np.random.default_rng(17).random((3, depth, height, width, 6)) + 0.5
+    for dtype in ("float64", "float32"):
+        require_dtype(cl_context, dtype)
+        run = azimuth._opencl_backend(atmosphere, KERNEL_GRID.replace(dtype=dtype), operators, cl_context, False)
+        gathered_d = run.upload(gathered)
+        padded = gathered_d.get()
+        assert padded.shape == gathered.shape[:-1] + (8,) and padded.dtype == np.dtype(dtype)
+        assert_array_equal(padded[..., :6], gathered.astype(dtype))
+        assert not padded[..., 6:].any()
+        down = run.to_host(gathered_d)
+        assert down.dtype == np.float64
+        assert_array_equal(down, gathered.astype(dtype))
+
+
+def test_float32_build_close_to_float64(cl_context, atmosphere):
+    """A float32 device build with harmonics (its nodes and gathered sum read into float32 host tables,
+    then widened): every order and the gathered harmonics within 3e-6 of their maximum of the float64
+    build's, the bound of the float32 tables of tests/test_extremes.py (measured 4.6e-7 here)."""
+    require_dtype(cl_context, "float32")
     require_dtype(cl_context, "float64")
     atmosphere = atmosphere.replace(ground_albedo=0.3)
-    whole = azimuth.compute_orders(atmosphere, KERNEL_GRID, backend="opencl", ctx=cl_context)
-    monkeypatch.setattr(azimuth, "TRANSFER_LAYERS", 3)
-    blocked = azimuth.compute_orders(atmosphere, KERNEL_GRID, backend="opencl", ctx=cl_context)
-    assert KERNEL_GRID.size[2] == 7 and blocked.record == whole.record
-    for a, b in zip(blocked.orders + [blocked.gathered, blocked.ground_irradiance],
-                    whole.orders + [whole.gathered, whole.ground_irradiance]):
-        assert_array_equal(a, b)
+    double = azimuth.compute_orders(atmosphere, KERNEL_GRID, backend="opencl", ctx=cl_context)
+    single = azimuth.compute_orders(atmosphere, KERNEL_GRID.replace(dtype="float32"), backend="opencl", ctx=cl_context)
+    assert single.record["orders"] == double.record["orders"]
+    for a, b in zip(single.orders + [single.gathered], double.orders + [double.gathered]):
+        assert a.dtype == np.float64 and np.isfinite(a).all()
+        assert np.abs(a - b).max() <= 3e-6 * np.abs(b).max()
 
 
 def test_geometric_tail_with_harmonics(cl_context, atmosphere):
