@@ -57,31 +57,47 @@ inline void adjacent_columns(__global const real *table, const intv i, realv *le
 #endif
 }
 
-/* Bilinear lookup of the column densities (COLUMN_CHANNELS per node) from altitude h along mu to the top.
+/* What a lookup in the table takes from the altitude h alone: the horizon cosine mu_h there, the lower
+ * altitude node x0 and the weight ax of the one above it. A ray node looks up several sun directions at
+ * one altitude (the sun nodes of single scattering, the planet's shadow test): it computes these once. */
+typedef struct {
+    realv mu_h;
+    intv x0;
+    realv ax;
+} sun_table_altitude_t;
+
+inline sun_table_altitude_t sun_table_altitude(__constant const atmosphere_t *atm, const int tw, const realv h)
+{
+    const real ha = atm->top_radius - atm->planet_radius;
+    sun_table_altitude_t a;
+    a.mu_h = horizon_cos(h, atm->planet_radius);
+    const realv fx = sqrt(clamp(h / ha, R(0.0), R(1.0))) * (real)(tw - 1);
+    a.x0 = min(CONVERT_INTV(fx), tw - 2);
+    a.ax = fx - CONVERT_REALV(a.x0);
+    return a;
+}
+
+/* Bilinear lookup of the column densities (COLUMN_CHANNELS per node) from the altitude `at`
+ * (sun_table_altitude) along mu to the top.
  * Only the reads of the 4 corner nodes are per lane (adjacent_columns); the indices, weights and
  * interpolation are computed in realv arithmetic: the same operations as lane by lane, so the same
  * values (checked bit for bit on frames and tables); the per-lane loop stored each lane's result to the
  * stack and read the vector back. The ray march's CPU time fell by about 2 % (A/B, README "Speed"). */
-inline column_t column_density_from_table(__constant const atmosphere_t *atm, __global const real *table,
-                                          const int tw, const int th, const realv h, const realv mu)
+inline column_t column_density_from_table(__global const real *table, const int tw, const int th,
+                                          const sun_table_altitude_t *at, const realv mu)
 {
-    const real ha = atm->top_radius - atm->planet_radius;
-    const realv mu_h = horizon_cos(h, atm->planet_radius);
-    const realv fx = sqrt(clamp(h / ha, R(0.0), R(1.0))) * (real)(tw - 1);
-    const realv fy = sqrt(clamp((mu - mu_h) / (R(1.0) - mu_h), R(0.0), R(1.0))) * (real)(th - 1);
-    const intv x0 = min(CONVERT_INTV(fx), tw - 2);
+    const realv fy = sqrt(clamp((mu - at->mu_h) / (R(1.0) - at->mu_h), R(0.0), R(1.0))) * (real)(th - 1);
     const intv y0 = min(CONVERT_INTV(fy), th - 2);
-    const realv ax = fx - CONVERT_REALV(x0);
     const realv ay = fy - CONVERT_REALV(y0);
-    const intv i00 = COLUMN_CHANNELS * (x0 + y0 * tw);
+    const intv i00 = COLUMN_CHANNELS * (at->x0 + y0 * tw);
     realv c00[COLUMN_CHANNELS], c10[COLUMN_CHANNELS], c01[COLUMN_CHANNELS], c11[COLUMN_CHANNELS];
     adjacent_columns(table, i00, c00, c10);
     adjacent_columns(table, i00 + COLUMN_CHANNELS * tw, c01, c11);
     column_t c;
-    c.r = bilinear_channel(c00[0], c10[0], c01[0], c11[0], ax, ay);
-    c.m = bilinear_channel(c00[1], c10[1], c01[1], c11[1], ax, ay);
+    c.r = bilinear_channel(c00[0], c10[0], c01[0], c11[0], at->ax, ay);
+    c.m = bilinear_channel(c00[1], c10[1], c01[1], c11[1], at->ax, ay);
 #ifdef OZONE
-    c.o = bilinear_channel(c00[2], c10[2], c01[2], c11[2], ax, ay);
+    c.o = bilinear_channel(c00[2], c10[2], c01[2], c11[2], at->ax, ay);
 #endif
     return c;
 }

@@ -81,17 +81,33 @@ inline realv view_ray_length(__constant const atmosphere_t *atm, const realv h0,
     return SELECT(distance_to_top(h0, mu_v, rp, atm->top_radius), distance_to_ground(h0, mu_v, rp), *hits_ground);
 }
 
-/* Column densities *sun [m] from a node at altitude h toward the sun (zenith cosine
- * mu_sun), read from the 2D table (-DSUN_TRANSMITTANCE_TABLE) or re-marched; returns the mask of
+/* What sun_column takes from a node's altitude h alone, whatever the sun: the horizon cosine there and,
+ * with -DSUN_TRANSMITTANCE_TABLE, the altitude's corner and weight in the 2D table (sun_table_altitude).
+ * Computed once per ray node for all the suns it is lit by (a square root and a division each). */
+inline sun_table_altitude_t sun_altitude(__constant const atmosphere_t *atm, const int tw, const realv h)
+{
+#ifdef SUN_TRANSMITTANCE_TABLE
+    return sun_table_altitude(atm, tw, h);
+#else
+    sun_table_altitude_t a;
+    a.mu_h = horizon_cos(h, atm->planet_radius);
+    a.x0 = (intv)(0);
+    a.ax = V(0.0);
+    return a;
+#endif
+}
+
+/* Column densities *sun [m] from a node at altitude h (`at`: sun_altitude of h) toward the sun (zenith
+ * cosine mu_sun), read from the 2D table (-DSUN_TRANSMITTANCE_TABLE) or re-marched; returns the mask of
  * nodes the sun lights (not in the planet's shadow, decided from h and mu_sun against the local
  * horizon). In the shadow the march would cross the planet: it is given zero length, and the
  * caller discards the result. */
-inline maskv sun_column(__constant const atmosphere_t *atm, const realv h, const realv mu_sun,
-                        __global const real *sun_table, const int tw, const int th, column_t *sun)
+inline maskv sun_column(__constant const atmosphere_t *atm, const realv h, const sun_table_altitude_t *at,
+                        const realv mu_sun, __global const real *sun_table, const int tw, const int th, column_t *sun)
 {
-    const maskv lit = isgreaterequal(mu_sun, horizon_cos(h, atm->planet_radius));
+    const maskv lit = isgreaterequal(mu_sun, at->mu_h);
 #ifdef SUN_TRANSMITTANCE_TABLE
-    *sun = column_density_from_table(atm, sun_table, tw, th, h, mu_sun);
+    *sun = column_density_from_table(sun_table, tw, th, at, mu_sun);
 #else
     const realv sun_length = SELECT(V(0.0), distance_to_top(h, mu_sun, atm->planet_radius, atm->top_radius), lit);
     *sun = column_density(atm, h, mu_sun, sun_length);
@@ -205,10 +221,11 @@ inline void integrate_single_suns(__constant const atmosphere_t *atm, const real
         const realv half_step = R(0.5) * length * (node - node_previous);
         if (i > 0)
             view = column_step(view, last_density, density, half_step);
+        const sun_table_altitude_t at = sun_altitude(atm, tw, h);
         for (int b = 0; b < count; ++b) {
             const realv mu_sun_here = (r0 * mu_s[b] + s * nu[b]) / r;     /* dot(P, Sun) / |P| */
             column_t sun;
-            const maskv lit = sun_column(atm, h, mu_sun_here, sun_table, tw, th, &sun);
+            const maskv lit = sun_column(atm, h, &at, mu_sun_here, sun_table, tw, th, &sun);
             const column_t column = column_sum(view, sun);
             const realv t0 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.x, beta_me.x, beta_o.x)), lit);
             const realv t1 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.y, beta_me.y, beta_o.y)), lit);
@@ -500,7 +517,8 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
 #endif
         if (single) {
             column_t sun;
-            const maskv lit = sun_column(atm, ray.h, mu_sun_here, sun_table, tw, th, &sun);
+            const sun_table_altitude_t at = sun_altitude(atm, tw, ray.h);
+            const maskv lit = sun_column(atm, ray.h, &at, mu_sun_here, sun_table, tw, th, &sun);
             const realv s0 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.x, beta_me.x, beta_o.x)), lit);
             const realv s1 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.y, beta_me.y, beta_o.y)), lit);
             const realv s2 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.z, beta_me.z, beta_o.z)), lit);
