@@ -281,6 +281,7 @@ inline real8 trilinear8(__global const real *table, const size_t base, const siz
  * Both integrals take their sun-independent work from here, so that it is written once. */
 typedef struct {
     realv h0, r0, mu_v, length;
+    realv sin_view;                 /* sqrt(1 - mu_v^2): the ray's, for the local azimuth (ray_azimuth_cos) */
     maskv hits_ground;
     real inv_hr, inv_hm;
     column_t view, last_density;
@@ -296,6 +297,7 @@ inline void ray_begin(__constant const atmosphere_t *atm, const realv h0, const 
     ray->h0 = h0;
     ray->r0 = atm->planet_radius + h0;
     ray->mu_v = mu_v;
+    ray->sin_view = sqrt(fmax(R(1.0) - mu_v * mu_v, V(0.0)));
     ray->length = view_ray_length(atm, h0, mu_v, &ray->hits_ground);
     ray->inv_hr = R(1.0) / atm->rayleigh_scale_height;
     ray->inv_hm = R(1.0) / atm->mie_scale_height;
@@ -394,7 +396,7 @@ inline realv ray_azimuth_cos(const view_march_t *ray, const realv s, const realv
     const realv r0 = ray->r0, mu_v = ray->mu_v;
     const realv cross2 = r0 * r0 * fmax(R(1.0) - mu_s * mu_s, V(0.0)) + R(2.0) * r0 * s * (mu_v - mu_s * nu)
                          + s * s * fmax(R(1.0) - nu * nu, V(0.0));
-    const realv denominator = sqrt(fmax(R(1.0) - mu_v * mu_v, V(0.0))) * sqrt(fmax(cross2, V(0.0)));
+    const realv denominator = ray->sin_view * sqrt(fmax(cross2, V(0.0)));
     const realv numerator = r0 * (nu - mu_v * mu_s) + s * (mu_v * nu - mu_s);
     return SELECT(V(1.0), clamp(numerator / denominator, R(-1.0), R(1.0)), isgreater(denominator, V(0.0)));
 }
