@@ -423,14 +423,16 @@ class _Backend:
 
     single: Ibar^(1) at the azimuth nodes (M + 1, D, H, W, 6) on the host; upload(gathered): the
     host's gathered harmonics (M + 1, D, H, W, 6) in the backend's form; scatter(gathered,
-    ground_radiance): (a callable returning the order's nodes (M + 1, D, H, W, 3) on the host, valid
-    until the next call, once they are there; the same in the backend's form); gather(that form): the next order's gathered harmonics (backend's
-    form); accumulate(total, gathered, scale=None): total + gathered, or total + scale gathered per
-    wavelength (scale (r, g, b)) (a copy of gathered for total None; may add in place);
-    to_host(gathered): (M + 1, D, H, W, 6) float64; stopping_test(single, keep_previous): the orders'
-    stopping test (:mod:`clsky.stopping`), its running sum starting from single scattering ``single``
+    ground_radiance): a pair (a callable returning the order's nodes (M + 1, D, H, W, 3) on the
+    host once they are there, valid until the next call; the same nodes in the backend's form);
+    gather(that form): the next order's gathered harmonics (backend's form); accumulate(total,
+    gathered, scale=None): total + gathered, or total + scale gathered per wavelength (scale
+    (r, g, b)) (a copy of gathered for total None; may add in place); to_host(gathered):
+    (M + 1, D, H, W, 6) float64; stopping_test(single, keep_previous): the orders' stopping test
+    (:mod:`clsky.stopping`), its running sum starting from single scattering ``single``
     (M + 1, D, H, W, 6) as R + M per wavelength, whose ``add`` takes an order as ``reads`` says,
-    'host' (what the first of scatter's pair returns) or 'backend' (the second); device: its description."""
+    'host' (what the first of scatter's pair returns) or 'backend' (the second); device: its
+    description."""
 
     single: np.ndarray
     upload: object

@@ -351,8 +351,8 @@ def _harmonic_phases(settings, orders):
         Allocation("a block's interpolated single scattering, its harmonic sums and gathers (n, B, Theta + 1, W 3)",
                    seen, count=4),
         Allocation("gathered harmonics (n, D, H, W, 6) float64", cells * 6 * _F64, count=n))
-        + ((Allocation("gathered harmonics in the device's type for the upload (n, D, H, W, 6)", cells * 6 * s, count=n),)
-           if s != _F64 else ())
+        + ((Allocation("gathered harmonics in the device's type for the upload (n, D, H, W, 6)",
+                       cells * 6 * s, count=n),) if s != _F64 else ())
         + (Allocation("gathered harmonics on the device (n, D, H, W, 8)", padded, count=n, on_device=True),))
     loop = Phase("orders", (
         _single(cells),                 # the canonical node's: the other nodes and the harmonics go before the loop

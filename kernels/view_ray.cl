@@ -83,7 +83,7 @@ inline realv view_ray_length(__constant const atmosphere_t *atm, const realv h0,
 
 /* What sun_column takes from a node's altitude h alone, whatever the sun: the horizon cosine there and,
  * with -DSUN_TRANSMITTANCE_TABLE, the altitude's corner and weight in the 2D table (sun_table_altitude).
- * Computed once per ray node for all the suns it is lit by (a square root and a division each). */
+ * Computed once per ray node for all the suns it is lit by (two square roots and two divisions), not once a sun. */
 inline sun_table_altitude_t sun_altitude(__constant const atmosphere_t *atm, const int tw, const realv h)
 {
 #ifdef SUN_TRANSMITTANCE_TABLE

@@ -439,7 +439,8 @@ def test_raymarch_matches_twin(cl_context, atmosphere, albedo):
     disc = np.zeros(3)
     expected = (reference.render_raymarch(atmosphere, ray, directions, sun, 100.0, disc, 2.0,
                                           grid_settings=table.settings, ground_irradiance=table.ground_irradiance)
-                + azimuth.raymarch_higher_orders(atmosphere, ray, table.gathered, table.settings, directions, sun, 100.0))
+                + azimuth.raymarch_higher_orders(atmosphere, ray, table.gathered, table.settings, directions, sun,
+                                                 100.0))
     _assert_per_channel(got, expected, TOLERANCES["float64"]["scatter"], "ray march")
 
 
