@@ -38,7 +38,7 @@ except ImportError as error:  # pragma: no cover - exercised only on broken inst
 
 __all__ = ["KernelBuildError", "NoDeviceError", "Source", "Engine", "memory_pool", "list_devices",
            "default_device", "make_context", "real_vector_dtype", "check_dtype", "INSTALL_HINT", "pocl_cache_problem",
-           "no_device_hint", "host_blas_single_threaded", "quiet_compiler_output"]
+           "no_device_hint", "host_blas_single_threaded", "host_cores", "quiet_compiler_output"]
 
 INSTALL_HINT = ("install a CPU OpenCL driver: as root `apt-get install pocl-opencl-icd` (fast PoCL 3.1), "
                 "or `pip install 'pyopencl[pocl]'` (PoCL pip build)")
@@ -74,6 +74,16 @@ def host_blas_single_threaded():
     from threadpoolctl import threadpool_limits
 
     return threadpool_limits(limits=1, user_api="blas")
+
+
+def host_cores() -> int:
+    """The CPU cores this process may run on (its affinity mask where the system has one, else the
+    machine's count): how many host threads a stretch of host work with the device idle may use
+    (:meth:`clsky.azimuth.HarmonicGather.first_gather`)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:                          # no affinity masks (macOS, Windows)
+        return max(1, os.cpu_count() or 1)
 
 
 # PoCL's kernel cache -----------------------------------------------------------------------------------

@@ -328,9 +328,9 @@ def _orders_phases(settings, orders):
 def _harmonic_phases(settings, orders):
     """The orders of a table with azimuth harmonics (:mod:`clsky.azimuth`, n = M + 1 azimuth nodes): the
     first gather on the host (single scattering at the n nodes and its harmonics, the n gathered
-    harmonics (for a float32 device also as float32, uploaded from there), and a block of B sun layers'
-    temporaries: both seen species' interpolation (n, B, Theta + 1, W 6), their harmonic sum and a
-    species' gathers), then the orders loop (single scattering at the canonical node, every order's
+    harmonics (for a float32 device also as float32, uploaded from there), and on each of its threads
+    a block of B sun layers' temporaries: both seen species' interpolation (n, B, Theta + 1, W 6), their
+    harmonic sum and a species' gathers), then the orders loop (single scattering at the canonical node, every order's
     azimuth average kept on the host, the order's n nodes, and for a float32 device the same as read
     from it; on the device the gathered sum, the gathered harmonics and the order's n nodes, padded, and
     a harmonic, and the stopping test's running sum at the nodes (:class:`clsky.stopping.DeviceStoppingTest`);
@@ -342,14 +342,16 @@ def _harmonic_phases(settings, orders):
     n = settings.azimuth_harmonics + 1
     padded = cells * 8 * s
     block = min(HarmonicGather.FIRST_GATHER_LAYERS, depth)
+    threads = HarmonicGather.first_gather_threads(depth)
     seen = n * block * (settings.gather_theta_steps + 1) * settings.size[0] * 3 * _F64
     single = Allocation("single scattering at the azimuth nodes (n, D, H, W, 6) float64", cells * 6 * _F64, count=n)
     first = Phase("first gather", (
         single, Allocation("single scattering's harmonics (n, D, H, W, 6) float64", cells * 6 * _F64, count=n),
-        # B sun layers at a time (HarmonicGather.first_gather): both species interpolated at once
-        # (n, B, Theta + 1, W 6), the harmonic sums of both (n, B, Theta + 1, W 3) and a species' gathers
-        Allocation("a block's interpolated single scattering, its harmonic sums and gathers (n, B, Theta + 1, W 3)",
-                   seen, count=4),
+        # B sun layers at a time (HarmonicGather.first_gather), a block on each of its threads: both
+        # species interpolated at once (n, B, Theta + 1, W 6), the harmonic sums of both (n, B, Theta + 1,
+        # W 3) and a species' gathers
+        Allocation("a block's interpolated single scattering, its harmonic sums and gathers (n, B, Theta + 1, W 3)"
+                   " on each first-gather thread", seen, count=4 * threads),
         Allocation("gathered harmonics (n, D, H, W, 6) float64", cells * 6 * _F64, count=n))
         + ((Allocation("gathered harmonics in the device's type for the upload (n, D, H, W, 6)",
                        cells * 6 * s, count=n),) if s != _F64 else ())

@@ -203,7 +203,8 @@ def test_first_gather_in_blocks_of_sun_layers_is_the_whole_grids(atmosphere, mon
     """The first gather, done HarmonicGather.FIRST_GATHER_LAYERS sun layers at a time (interpolation, sun
     weighting and gathers of a block, then the next), is bit for bit the same products over the whole
     grid at once (BLAS multiplies each layer's matrices on their own): blocks of 2 with a short last
-    block (7 layers), and of 3, against one block of all 7."""
+    block (7 layers), and of 3, against one block of all 7; and on 1, 2 and 3 host threads
+    (HarmonicGather.FIRST_GATHER_THREADS), each block on whichever thread takes it."""
     settings = TINY.replace(size=(5, 12, 7))
     operators = azimuth.HarmonicGather(atmosphere, settings, HARMONICS)
     width, height, depth = settings.size
@@ -214,7 +215,20 @@ def test_first_gather_in_blocks_of_sun_layers_is_the_whole_grids(atmosphere, mon
     for layers in (2, 3):
         monkeypatch.setattr(azimuth.HarmonicGather, "FIRST_GATHER_LAYERS", layers)
         assert depth % layers != 0
-        assert np.array_equal(operators.first_gather(single), whole)
+        for threads in (1, 2, 3):
+            monkeypatch.setattr(azimuth.HarmonicGather, "FIRST_GATHER_THREADS", threads)
+            assert azimuth.HarmonicGather.first_gather_threads(depth) == threads
+            assert np.array_equal(operators.first_gather(single), whole)
+
+
+def test_first_gather_threads_at_most_one_a_block(monkeypatch):
+    """The first gather's thread count: the host's cores unless set, never more than its blocks, at least 1."""
+    monkeypatch.setattr(azimuth.HarmonicGather, "FIRST_GATHER_LAYERS", 2)
+    monkeypatch.setattr(azimuth.HarmonicGather, "FIRST_GATHER_THREADS", 8)
+    assert [azimuth.HarmonicGather.first_gather_threads(depth) for depth in (1, 2, 3, 7, 16, 17)] == [1, 1, 2, 4, 8, 8]
+    monkeypatch.setattr(azimuth.HarmonicGather, "FIRST_GATHER_THREADS", None)
+    monkeypatch.setattr(azimuth._cl, "host_cores", lambda: 2)
+    assert azimuth.HarmonicGather.first_gather_threads(208) == 2
 
 
 def test_orders_finite_and_non_negative(atmosphere):
