@@ -55,17 +55,19 @@ FIRST_ORDERS, ORDERS_PER_DECADE = 3, 1.6
 #: Host bytes per pixel of one frame's processing beyond the directions, buffers and HDR frames, per
 #: method: conversion to cd/m^2, exposure metering, tone map, 8-bit frames, metrics, error image,
 #: composite, PNG and MP4 encoding. Measured as the growth of peak RSS between 2-frame 256^2 and 1024^2
-#: fisheye animations of the default (physical) preset: 488 bytes per pixel in all (compare), 334 (lut),
-#: 336 (raymarch), of which the listed arrays are 147 and 123 (2026-12-02, after the physical frames
-#: became cd/m^2 through the power-law conversion; before it, 390 / 195 / 203).
-#: skyview: one frame, processed as lut's (not measured on its own; its map of W x H nodes is negligible).
-FRAME_BYTES_PER_PIXEL = {"compare": 340, "lut": 210, "raymarch": 210, "skyview": 210}
+#: fisheye animations of the default (physical) preset, draft level, table 16 x 64 x 16, without the
+#: overlap, the largest of 3 runs: 448 bytes per pixel in all (compare), 306 (lut), 307 (raymarch), 324
+#: (skyview; 307 but for one run of six, 15 MiB higher), of which the listed arrays are 147 and 123
+#: (2026-12-04, after the host half's rewrite of 2026-12-03: PNG encoding, the gamut mapping in blocks
+#: with reused arrays; on 2026-12-02, 488 / 334 / 336 and the constants 340 / 210 / 210 / 210).
+FRAME_BYTES_PER_PIXEL = {"compare": 305, "lut": 185, "raymarch": 185, "skyview": 205}
 #: Host bytes per pixel that an animation's overlapped pipeline (clsky/anim/pipeline.py) adds: the next
 #: frame, rendered on the worker thread while this one is processed (its downloads, HDR frames and
 #: conversion beside this frame's processing). Measured as FRAME_BYTES_PER_PIXEL, with and without the
-#: overlap, the largest of 2-3 runs each (the peak depends on how the two threads' peaks meet): 270-310
-#: (compare), 130-195 (lut), 210 (raymarch), 145-195 (skyview); 2026-12-02, draft level, table 16 x 64 x 16.
-NEXT_FRAME_BYTES_PER_PIXEL = {"compare": 310, "lut": 200, "raymarch": 215, "skyview": 200}
+#: overlap, the largest of 3 runs each (the peak depends on how the two threads' peaks meet): 175-187
+#: (compare), 121-170 (lut), 172-178 (raymarch), 144-154 (skyview); 2026-12-04, after the host half's
+#: rewrite (2026-12-02: 270-310, 130-195, 210, 145-195 and the constants 310 / 200 / 215 / 200).
+NEXT_FRAME_BYTES_PER_PIXEL = {"compare": 190, "lut": 170, "raymarch": 180, "skyview": 155}
 
 _GIB = 2**30
 
