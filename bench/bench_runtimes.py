@@ -20,7 +20,10 @@ the machine's load shows as a difference between rounds. Prints the table and wr
 (section "Speed", ``bench:runtimes``).
 
 Usage: python bench/bench_runtimes.py [--vendors DIR] [--vector-widths W ...] [--rounds N] [--repeat N]
-[--no-readme] [--smoke]
+[--keep-outputs DIR] [--no-readme] [--smoke]
+
+``--keep-outputs DIR``: keep each configuration's first-round animation (``DIR/<configuration>/``, numbered
+as the table's rows of round 1), to compare with another machine's (a GPU session brings back its own).
 
 ``--smoke``: 8 x 32 x 8 tables, 16 x 16 frames, a 2-frame animation, one round; print only
 (bench/_report.py).
@@ -187,6 +190,8 @@ def main():
                         help="the kernels' vector widths to measure on each device (1 and/or 8; default 8)")
     parser.add_argument("--rounds", type=int, default=2, help="rounds of the configurations, alternating (default 2)")
     parser.add_argument("--repeat", type=int, default=5, help="timed frames per render (default 5)")
+    parser.add_argument("--keep-outputs", type=pathlib.Path, default=None, metavar="DIR",
+                        help="keep each configuration's first-round animation in DIR/<configuration index>/")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     add_output_arguments(parser)
     args = parse_arguments(parser)
@@ -200,6 +205,8 @@ def main():
     vendors = args.vendors or (DEFAULT_VENDORS if DEFAULT_VENDORS.is_dir() else None)
     if vendors is not None and not vendors.is_dir():
         parser.error(f"--vendors {vendors}: no such directory")
+    if args.keep_outputs is not None and args.keep_outputs.exists():
+        parser.error(f"--keep-outputs {args.keep_outputs}: exists already (nothing is overwritten)")
     devices = devices_at_hand(vendors)
     configurations = [(device, width) for device in devices for width in dict.fromkeys(args.vector_widths)]
     label = {index: short_name(device) + (f", width {width}" if len(args.vector_widths) > 1 else "")
@@ -226,6 +233,9 @@ def main():
                     shutil.rmtree(directory)            # the first round's outputs are compared below
         comparisons = {index: same_outputs(scratch / "0-0", scratch / f"{index}-0")
                        for index in range(1, len(configurations))}
+        if args.keep_outputs is not None:
+            for index in range(len(configurations)):
+                shutil.copytree(scratch / f"{index}-0", args.keep_outputs / str(index))
 
     shown = "clsky animate " + " ".join(animate_arguments) if animate_arguments else "clsky animate"
     names = "; ".join(f"{short_name(device)}: {device['name']}" for device in devices)
