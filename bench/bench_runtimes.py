@@ -5,7 +5,8 @@ vendors directory; by default ``.intel-opencl/vendors`` when ``scripts/intel_ope
 which lists Intel's CPU runtime beside the drivers already registered), else through the system's
 registry. Every measurement runs in a fresh process that picks one device with
 ``PYOPENCL_CTX=<platform>:<device>``, and, with ``--vector-widths 8 1``, also the kernels' scalar form
-(``clsky._cl.VECTOR_WIDTH``, the form a GPU may prefer; tests/test_vector_width.py). Per device and width:
+(``clsky._cl.VECTOR_WIDTH``, clsky's default on GPUs; tests/test_vector_width.py). The width is always
+explicit here: 8 unless ``--vector-widths`` says otherwise, also on a GPU. Per device and width:
 
 - renders of the default physical table (32 x 256 x 32): the 3D table lookup and the sky-view map on a
   1024 x 1024 fisheye, the ray march (48 samples) on 512 x 512, as bench_render.py frames them: best wall

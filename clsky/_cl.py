@@ -354,14 +354,21 @@ def memory_pool(queue):
 
 
 #: Cells or pixels per work-item of the kernels that integrate along rays (``-DVECTOR_WIDTH``, kernels/real.cl):
-#: 8, in double8 (or float8) arithmetic, which every device runs; PoCL does not vectorise across
-#: work-items by itself, and its scalar ray march costs 6.4x the CPU time, Intel's CPU runtime's 1.2x
-#: (README "Speed", GPUs). 1, one lane per work-item, is the form a GPU may prefer (not measured on
-#: one); tests/test_vector_width.py checks it against 8. An engine reads it when it is made
-#: (:attr:`Engine.vector_width`): its programs and its launches keep that width.
-VECTOR_WIDTH = 8
+#: None (the default) for each device's own (:func:`default_vector_width`), else 1 or 8 on every device.
+#: 8 is double8 (or float8) arithmetic: PoCL does not vectorise across work-items by itself, and its scalar
+#: ray march costs 6.4x the CPU time, Intel's CPU runtime's 1.2x. 1 is one lane per work-item, what a GPU's
+#: SIMT lanes want: on an NVIDIA H200 the scalar ray march took 3 ms a 512 x 512 frame against 7, the
+#: sky-view map 3 against 5, the same frames (README "Speed", GPUs). tests/test_vector_width.py checks 1
+#: against 8. An engine reads it when it is made (:attr:`Engine.vector_width`): its programs and its
+#: launches keep that width.
+VECTOR_WIDTH = None
 #: The widths the kernels accept.
 VECTOR_WIDTHS = (1, 8)
+
+
+def default_vector_width(device) -> int:
+    """1 on a GPU (its lanes are work-items), 8 on any other device (CPUs: double8 is their vector unit)."""
+    return 1 if device.type & cl.device_type.GPU else 8
 
 #: How the kernels take the non-linear mapping's cube roots (kernels/mapping.cl, ``CUBE_ROOT_UNIT``):
 #: "halley", a bit-pattern seed and three Halley steps, within 3 ulp of the exact root and
@@ -414,7 +421,8 @@ class Engine:
     Attributes
     ----------
     vector_width : int
-        :data:`VECTOR_WIDTH` when the engine was made: the ``-DVECTOR_WIDTH`` of its programs and the
+        :data:`VECTOR_WIDTH` when the engine was made (None: :func:`default_vector_width` of its device):
+        the ``-DVECTOR_WIDTH`` of its programs and the
         lanes per work-item of its launches.
     cube_root : str
         :data:`CUBE_ROOT` when the engine was made: how its programs take the mapping's cube roots.
@@ -424,9 +432,8 @@ class Engine:
 
     def __init__(self, ctx=None, dtype=np.float64, profile=False, fast_math=False, queue=None, allocator=None):
         self.dtype = np.dtype(dtype)
-        if VECTOR_WIDTH not in VECTOR_WIDTHS:
-            raise ValueError(f"clsky._cl.VECTOR_WIDTH must be one of {VECTOR_WIDTHS}, got {VECTOR_WIDTH!r}")
-        self.vector_width = VECTOR_WIDTH
+        if VECTOR_WIDTH is not None and VECTOR_WIDTH not in VECTOR_WIDTHS:
+            raise ValueError(f"clsky._cl.VECTOR_WIDTH must be None or one of {VECTOR_WIDTHS}, got {VECTOR_WIDTH!r}")
         if CUBE_ROOT not in CUBE_ROOTS:
             raise ValueError(f"clsky._cl.CUBE_ROOT must be one of {CUBE_ROOTS}, got {CUBE_ROOT!r}")
         self.cube_root = CUBE_ROOT
@@ -435,6 +442,7 @@ class Engine:
         self.ctx = ctx if ctx is not None else make_context(self.dtype)
         self.device = self.ctx.devices[0]
         check_dtype(self.device, self.dtype)
+        self.vector_width = VECTOR_WIDTH if VECTOR_WIDTH is not None else default_vector_width(self.device)
         self.fast_math = bool(fast_math)
         if queue is None:
             properties = cl.command_queue_properties.PROFILING_ENABLE if profile else 0
