@@ -1,5 +1,10 @@
 """Device choice and the errors a user without a usable device sees."""
 
+import os
+import pathlib
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -111,3 +116,27 @@ def test_vector_width_is_one_lane_on_a_gpu_and_double8_elsewhere():
     assert _cl.VECTOR_WIDTH is None
     assert _cl.default_vector_width(FakeDevice("OpenCL 3.0 CUDA", gpu=True)) == 1
     assert _cl.default_vector_width(FakeDevice("OpenCL 3.0 PoCL 3.1+debian  Linux")) == 8
+
+
+@pytest.mark.slow
+def test_gpu_checks_script_runs_and_keeps_what_it_measured(tmp_path):
+    """scripts/gpu_checks.sh, the checks a session with a GPU runs (README "Speed", GPUs), at its smoke
+    sizes on whatever device clsky picks here (40-45 s on PoCL): every step's log, the kept animations of
+    both vector widths, the profile; and it refuses an output directory that exists."""
+    root = pathlib.Path(__file__).resolve().parent.parent
+    script = root / "scripts" / "gpu_checks.sh"
+    out = tmp_path / "checks"
+    env = {**os.environ, "SMOKE": "1", "PY": sys.executable}
+    result = subprocess.run([str(script), str(out)], env=env, capture_output=True, text=True, timeout=900)
+    assert result.returncode == 0, result.stdout[-4000:] + result.stderr[-2000:]
+    assert "(*: the device clsky uses" in (out / "devices.txt").read_text()
+    assert " passed" in (out / "tests.txt").read_text().splitlines()[-1]
+    assert "| round | device | width |" in (out / "bench_runtimes.txt").read_text()
+    assert "| table | W x H x D |" in (out / "bench_orders.txt").read_text()
+    assert "| render | best |" in (out / "bench_render.txt").read_text()
+    assert "(first_gather)" in (out / "profile.txt").read_text()
+    for configuration in ("0", "1"):
+        assert (out / "anim" / configuration / "sky_metrics.csv").is_file()
+        assert len(list((out / "anim" / configuration / "sky_frames").glob("*.png"))) == 2
+    again = subprocess.run([str(script), str(out)], env=env, capture_output=True, text=True, timeout=60)
+    assert again.returncode == 2 and "exists already" in again.stderr

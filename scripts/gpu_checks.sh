@@ -1,0 +1,102 @@
+#!/usr/bin/env bash
+# The checks to run where a GPU is at hand (README "Speed", GPUs; issue 12): which OpenCL device clsky
+# picks, the kernel-versus-twin tests on it, the benchmarks (printed, README.md left as it is) and a
+# wall-clock profile of the default animation's planned table. Everything goes to OUTDIR (default
+# gpu_checks/, which must not exist), one log per step, and the first-round animations of
+# bench_runtimes are kept there (OUTDIR/anim/<configuration>/) to compare with another machine's frames.
+#
+#   ./scripts/gpu_checks.sh [OUTDIR]
+#
+# NVIDIA's OpenCL library often ships without its registration (no /etc/OpenCL/vendors/nvidia.icd in
+# containers): when the loader lists no GPU and libnvidia-opencl.so.1 is found, this writes a vendors
+# directory (OUTDIR/vendors: nvidia.icd beside the drivers already registered) and points the loader at
+# it with OCL_ICD_VENDORS, as scripts/intel_opencl.sh does for Intel's runtime. Environment:
+#   PY       the Python with clsky (default .venv/bin/python, else python3);
+#   WORKERS  pytest-xdist workers for the tests when xdist is installed (default 8);
+#   SMOKE=1  the benchmarks at their smoke sizes and one test file (tests/test_devices.py runs it on PoCL).
+# Each step is bounded by STEP_LIMIT seconds (default 300); a failing step is reported and the next runs.
+set -uo pipefail
+cd "$(dirname "$0")/.."
+
+out=${1:-gpu_checks}
+if [ -e "$out" ]; then
+    echo "gpu_checks: $out exists already (nothing is overwritten): give another OUTDIR" >&2
+    exit 2
+fi
+mkdir -p "$out" && out=$(realpath "$out")
+PY=${PY:-$( [ -x .venv/bin/python ] && echo .venv/bin/python || echo python3 )}
+STEP_LIMIT=${STEP_LIMIT:-300}
+SMOKE=${SMOKE:-}
+start=$(date +%s)
+failed=0
+
+step() { printf '\n=== [+%ss] %s\n' $(( $(date +%s) - start )) "$*"; }
+# run LOG command...: the command bounded by STEP_LIMIT, its output shown and kept in $out/LOG
+run() {
+    local log=$1; shift
+    timeout -k 10 "$STEP_LIMIT" "$@" 2>&1 | tee "$out/$log"
+    local status=${PIPESTATUS[0]}
+    [ "$status" = 0 ] || { echo "gpu_checks: exit status $status: $*"; failed=1; }
+}
+
+step "machine"
+{ command -v nvidia-smi >/dev/null && nvidia-smi -L; echo "cores: $(nproc); $(uptime)"; } 2>&1 | tee "$out/machine.txt"
+
+step "OpenCL devices"
+gpus=$("$PY" -c "import pyopencl as cl; print(sum(len(p.get_devices(cl.device_type.GPU)) for p in cl.get_platforms()))" \
+       2>/dev/null || echo 0)
+if [ "$gpus" = 0 ] && [ -z "${OCL_ICD_VENDORS:-}" ]; then
+    library=$( (ldconfig -p 2>/dev/null | awk '/libnvidia-opencl\.so\.1/ {print $NF; exit}') )
+    [ -n "$library" ] || library=$(find /usr/local/nvidia /usr/lib /usr/lib64 -name 'libnvidia-opencl.so.1' \
+                                    2>/dev/null | head -1)
+    if [ -n "$library" ]; then
+        mkdir -p "$out/vendors"
+        printf '%s\n' "$library" > "$out/vendors/nvidia.icd"
+        for icd in /etc/OpenCL/vendors/*.icd; do [ -f "$icd" ] && cp "$icd" "$out/vendors/"; done
+        export OCL_ICD_VENDORS="$out/vendors"
+        echo "registered NVIDIA's OpenCL library $library: OCL_ICD_VENDORS=$OCL_ICD_VENDORS"
+    fi
+fi
+run devices.txt "$PY" -m clsky.anim devices
+
+step "kernel-versus-twin tests on clsky's device"
+tests=$("$PY" - <<'EOF'
+import ast, pathlib
+tree = ast.parse(pathlib.Path("tests/test_intel_opencl.py").read_text())
+names = next(node.value for node in ast.walk(tree)
+             if isinstance(node, ast.Assign) and getattr(node.targets[0], "id", "") == "TWIN_TESTS")
+more = ["test_stopping.py", "test_vector_width.py", "test_devices.py", "test_cube_root.py", "test_source_stride.py"]
+print(" ".join("tests/" + name for name in [element.value for element in names.elts] + more))
+EOF
+)
+[ -z "$SMOKE" ] || tests="tests/test_devices.py"
+parallel=()
+"$PY" -c "import xdist" 2>/dev/null && parallel=(-n "${WORKERS:-8}")
+run tests.txt "$PY" -m pytest -q -p no:cacheprovider -m "not slow" -rfEs "${parallel[@]}" $tests
+
+step "benchmarks (printed only)"
+smoke=(); [ -z "$SMOKE" ] || smoke=(--smoke)
+run bench_runtimes.txt "$PY" bench/bench_runtimes.py --vector-widths 8 1 --rounds 1 --no-readme \
+    --keep-outputs "$out/anim" "${smoke[@]}"
+run bench_orders.txt "$PY" bench/bench_orders.py --repeat 2 --no-readme "${smoke[@]}"
+run bench_render.txt "$PY" bench/bench_render.py --no-readme --skip-animation "${smoke[@]}"
+
+step "wall-clock profile of the default animation's planned table (the second build of a process)"
+run profile.txt "$PY" - "${smoke[@]}" <<'EOF'
+import cProfile, pstats, sys
+sys.path.insert(0, "bench")
+import clsky
+from bench_orders import build_cases
+from _report import SMOKE
+
+label, atmosphere, planned = build_cases("--smoke" in sys.argv)[1]
+clsky.ScatteringTable.build(atmosphere, planned.replace(size=SMOKE.table))      # kernels compiled
+clsky.ScatteringTable.build(atmosphere, planned)                                # caches warm
+profile = cProfile.Profile()                                                    # wall clock
+profile.runcall(clsky.ScatteringTable.build, atmosphere, planned)
+print(f"{label}, {' x '.join(map(str, planned.size))}:")
+pstats.Stats(profile).sort_stats("cumulative").print_stats(40)
+EOF
+
+step "done in $(( $(date +%s) - start )) s: $out"
+exit $failed
