@@ -370,10 +370,7 @@ def default_vector_width(device) -> int:
     """1 on a GPU (its lanes are work-items), 8 on any other device (CPUs: double8 is their vector unit)."""
     return 1 if device.type & cl.device_type.GPU else 8
 
-#: How the kernels take the non-linear mapping's cube roots (kernels/mapping.cl, ``CUBE_ROOT_UNIT``):
-#: "halley", a bit-pattern seed and three Halley steps, within 3 ulp of the exact root and
-#: 2.5x cheaper than OpenCL's ``cbrt`` on PoCL here (in double precision; float32 always uses
-#: ``cbrt``); "library", ``cbrt`` itself (``-DCUBE_ROOT_LIBRARY=1``): the kernels of the commits before
+
 #: The build option that makes float32 division and square roots correctly rounded, as float64's always
 #: are. Without it OpenCL allows them 2.5 and 3 ulp, and NVIDIA's compiler takes that: on an H200
 #: (2026-12-04) float32 frames then differed from float64 ones by up to 1.27e-5 of the frame's maximum
@@ -388,6 +385,10 @@ def correctly_rounded_divide_sqrt(device) -> bool:
     return bool(device.single_fp_config & cl.device_fp_config.CORRECTLY_ROUNDED_DIVIDE_SQRT)
 
 
+#: How the kernels take the non-linear mapping's cube roots (kernels/mapping.cl, ``CUBE_ROOT_UNIT``):
+#: "halley", a bit-pattern seed and three Halley steps, within 3 ulp of the exact root and
+#: 2.5x cheaper than OpenCL's ``cbrt`` on PoCL here (in double precision; float32 always uses
+#: ``cbrt``); "library", ``cbrt`` itself (``-DCUBE_ROOT_LIBRARY=1``): the kernels of the commits before
 #: 2026-12-03's, bit for bit, which tests/pins.py holds them to. An engine reads it when it is made
 #: (:attr:`Engine.cube_root`).
 CUBE_ROOT = "halley"
