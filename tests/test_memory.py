@@ -319,8 +319,9 @@ def test_spectral_animation_estimate_matches_the_measured_peak():
     N = 15 wavelengths (5 batches) and with three: the spectral run's extra memory against the
     estimate's, within 25 % (both runs pay the same process overhead beyond the estimate: programs
     built for the new table size, about 45 MiB here, which cancels). Measured (PoCL 3.1, 2 cores,
-    load 9): 233 and 104 MiB, estimate 211 and 61 MiB: extra 129 MiB measured, 150 MiB estimated (1.16;
-    the frames phase counts every batch's directions and pieces at once, an upper bound)."""
+    2026-12-04, two runs): 232-235 and 58-61 MiB, estimate 220 and 61 MiB: extra 174 MiB measured, 159 MiB
+    estimated (0.91; on 2026-12-02 129 against 150, 1.16, before the frames' host half used less memory
+    and its per-pixel constants were measured again)."""
     from clsky.anim.animate import AnimationConfig, memory_estimate, sun_positions
 
     device = resources.device_of()
