@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # The checks to run where a GPU is at hand (README "Speed", GPUs; issue 12): which OpenCL device clsky
 # picks, the kernel-versus-twin tests on it, the benchmarks (printed, README.md left as it is) and a
-# wall-clock profile of the default animation's planned table. Everything goes to OUTDIR (default
-# gpu_checks/, which must not exist), one log per step, and the first-round animations of
-# bench_runtimes are kept there (OUTDIR/anim/<configuration>/) to compare with another machine's frames.
+# profile of the default animation's planned table (wall clock by function, device time by kernel).
+# Everything goes to OUTDIR (default gpu_checks/, which must not exist), one log per step, and the
+# first-round animations of bench_runtimes are kept there (OUTDIR/anim/<configuration>/) to compare
+# with another machine's frames.
 #
 #   ./scripts/gpu_checks.sh [OUTDIR]
 #
@@ -81,21 +82,56 @@ run bench_runtimes.txt "$PY" bench/bench_runtimes.py --vector-widths 8 1 --round
 run bench_orders.txt "$PY" bench/bench_orders.py --repeat 2 --no-readme "${smoke[@]}"
 run bench_render.txt "$PY" bench/bench_render.py --no-readme --skip-animation "${smoke[@]}"
 
-step "wall-clock profile of the default animation's planned table (the second build of a process)"
+step "the default animation's planned table: wall-clock profile and device time per kernel (a process's third build)"
 run profile.txt "$PY" - "${smoke[@]}" <<'EOF'
-import cProfile, pstats, sys
+import collections, cProfile, pstats, sys
 sys.path.insert(0, "bench")
 import clsky
+from clsky import _cl
 from bench_orders import build_cases
 from _report import SMOKE
 
+engines = []                 # every engine made from here on profiles its launches (OpenCL events)
+plain_init = _cl.Engine.__init__
+
+
+def profiling_init(self, ctx=None, dtype=_cl.np.float64, profile=False, fast_math=False, queue=None, allocator=None):
+    plain_init(self, ctx, dtype, True, fast_math, queue, allocator)
+    engines.append(self)
+
+
+_cl.Engine.__init__ = profiling_init
+
+
+class ProfilingQueue(_cl.cl.CommandQueue):
+    """Every queue made from here on profiles (the orders' shared and copy queues too, not an engine's)."""
+
+    def __init__(self, context, device=None, properties=0):
+        super().__init__(context, device, properties | _cl.cl.command_queue_properties.PROFILING_ENABLE)
+
+
+_cl.cl.CommandQueue = ProfilingQueue
 label, atmosphere, planned = build_cases("--smoke" in sys.argv)[1]
 clsky.ScatteringTable.build(atmosphere, planned.replace(size=SMOKE.table))      # kernels compiled
 clsky.ScatteringTable.build(atmosphere, planned)                                # caches warm
+for engine in engines:
+    engine.events.clear()
 profile = cProfile.Profile()                                                    # wall clock
 profile.runcall(clsky.ScatteringTable.build, atmosphere, planned)
 print(f"{label}, {' x '.join(map(str, planned.size))}:")
 pstats.Stats(profile).sort_stats("cumulative").print_stats(40)
+seconds, launches, unprofiled = collections.Counter(), collections.Counter(), 0
+for engine in engines:
+    for kernel, event in engine.events:
+        try:
+            seconds[kernel] += (event.profile.end - event.profile.start) * 1e-9
+            launches[kernel] += 1
+        except _cl.cl.Error:                     # a queue made without profiling (not an engine's own)
+            unprofiled += 1
+print("device time per kernel in that build [s] (launches):")
+for kernel, total in seconds.most_common():
+    print(f"  {kernel:24s} {total:8.3f} ({launches[kernel]})")
+print(f"  all kernels              {sum(seconds.values()):8.3f}; launches not profiled: {unprofiled}")
 EOF
 
 step "done in $(( $(date +%s) - start )) s: $out"
