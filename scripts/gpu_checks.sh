@@ -44,8 +44,8 @@ step "machine"
 { command -v nvidia-smi >/dev/null && nvidia-smi -L; echo "cores: $(nproc); $(uptime)"; } 2>&1 | tee "$out/machine.txt"
 
 step "OpenCL devices"
-gpus=$("$PY" -c "import pyopencl as cl; print(sum(len(p.get_devices(cl.device_type.GPU)) for p in cl.get_platforms()))" \
-       2>/dev/null || echo 0)
+gpus=$("$PY" -c "import pyopencl as cl
+print(sum(len(platform.get_devices(cl.device_type.GPU)) for platform in cl.get_platforms()))" 2>/dev/null || echo 0)
 if [ "$gpus" = 0 ] && [ -z "${OCL_ICD_VENDORS:-}" ]; then
     library=$( (ldconfig -p 2>/dev/null | awk '/libnvidia-opencl\.so\.1/ {print $NF; exit}') )
     [ -n "$library" ] || library=$(find /usr/local/nvidia /usr/lib /usr/lib64 -name 'libnvidia-opencl.so.1' \
