@@ -2,9 +2,9 @@
 # The checks to run where a GPU is at hand (README "Speed", GPUs; issue 12): which OpenCL device clsky
 # picks, the kernel-versus-twin tests on it, the benchmarks (printed, README.md left as it is) and a
 # profile of the default animation's planned table (wall clock by function, device time by kernel).
-# Everything goes to OUTDIR (default gpu_checks/, which must not exist), one log per step, and the
-# first-round animations of bench_runtimes are kept there (OUTDIR/anim/<configuration>/) to compare
-# with another machine's frames.
+# Everything goes to OUTDIR (default gpu_checks/ in the checkout; it must not exist), one log per step,
+# and the first-round animations of bench_runtimes are kept there (OUTDIR/anim/<configuration>/) to
+# compare with another machine's frames.
 #
 #   ./scripts/gpu_checks.sh [OUTDIR]
 #
@@ -17,14 +17,14 @@
 #   SMOKE=1  the benchmarks at their smoke sizes and one test file (tests/test_devices.py runs it on PoCL).
 # Each step is bounded by STEP_LIMIT seconds (default 300); a failing step is reported and the next runs.
 set -uo pipefail
+out=$(realpath -m "${1:-$(dirname "$0")/../gpu_checks}")      # OUTDIR as given, from where it was given
 cd "$(dirname "$0")/.."
 
-out=${1:-gpu_checks}
 if [ -e "$out" ]; then
     echo "gpu_checks: $out exists already (nothing is overwritten): give another OUTDIR" >&2
     exit 2
 fi
-mkdir -p "$out" && out=$(realpath "$out")
+mkdir -p "$out" || exit 2
 PY=${PY:-$( [ -x .venv/bin/python ] && echo .venv/bin/python || echo python3 )}
 STEP_LIMIT=${STEP_LIMIT:-300}
 SMOKE=${SMOKE:-}
