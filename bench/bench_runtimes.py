@@ -49,6 +49,8 @@ import numpy as np
 from _report import SMOKE, add_output_arguments, best_of, children_cpu, load_average, load_note, machine, \
     parse_arguments, write_readme_section
 
+from clsky._files import temporary_prefix
+
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 #: where scripts/intel_opencl.sh writes its OpenCL vendors directory
 DEFAULT_VENDORS = ROOT / ".intel-opencl" / "vendors"
@@ -182,6 +184,21 @@ def same_outputs(first: pathlib.Path, second: pathlib.Path) -> tuple[int, int, f
     return differing, compared, largest, where
 
 
+def keep_outputs(scratch: pathlib.Path, count: int, target: pathlib.Path):
+    """Copy the first round's animations of ``count`` configurations into ``target/<index>/``: staged in
+    a directory of a unique name beside ``target``, then renamed onto it, so that an interrupted run
+    leaves no half copy under that name."""
+    target.parent.mkdir(parents=True, exist_ok=True)
+    staging = pathlib.Path(tempfile.mkdtemp(prefix=temporary_prefix(target, ""), dir=target.parent))
+    try:
+        for index in range(count):
+            shutil.copytree(scratch / f"{index}-0", staging / str(index))
+        os.rename(staging, target)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--vendors", type=pathlib.Path, default=None,
@@ -235,8 +252,7 @@ def main():
         comparisons = {index: same_outputs(scratch / "0-0", scratch / f"{index}-0")
                        for index in range(1, len(configurations))}
         if args.keep_outputs is not None:
-            for index in range(len(configurations)):
-                shutil.copytree(scratch / f"{index}-0", args.keep_outputs / str(index))
+            keep_outputs(scratch, len(configurations), args.keep_outputs)
 
     shown = "clsky animate " + " ".join(animate_arguments) if animate_arguments else "clsky animate"
     names = "; ".join(f"{short_name(device)}: {device['name']}" for device in devices)
