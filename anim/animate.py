@@ -30,7 +30,7 @@ from typing import Callable
 import numpy as np
 
 import clsky
-from clsky._cl import host_blas_single_threaded
+from clsky._cl import host_blas_single_threaded, host_cores
 from clsky._files import StagedWrites, check_output
 from clsky.errors import ParameterError, check_choice, check_integer, check_real, is_real_number
 from clsky.ground import check_ground_mode
@@ -40,7 +40,8 @@ from clsky import colorimetry, skyview, spectrum
 from clsky.solar import ABSOLUTE_UNITS, RELATIVE_UNITS, solar_irradiance_astm_g173, with_solar_spectrum
 from clsky.render import SkyRenderer
 from clsky.settings import SAMPLINGS
-from clsky.resources import MemoryEstimate, check_memory, device_of, estimate_animation_memory
+from clsky.resources import InsufficientMemoryError, MemoryEstimate, check_memory, device_of, \
+    estimate_animation_memory, machine_limits
 
 from . import display as display_pipeline
 from . import pipeline as pipeline_module
@@ -74,6 +75,13 @@ LUT4D_MAX_SIZE = (16, 128)
 #: Render frame i + 1 on a worker thread while frame i is displayed, compared and written
 #: (:func:`clsky.anim.pipeline.prefetched`); False: one after the other, on the calling thread.
 OVERLAP_FRAMES = True
+
+#: Host threads that display and compare frames side by side (:func:`clsky.anim.pipeline.in_order`) with
+#: the overlap; None: :func:`host_frame_workers`'s choice.
+HOST_FRAME_WORKERS = None
+#: The most host threads :func:`host_frame_workers` chooses: each holds a frame's processing
+#: (FRAME_BYTES_PER_PIXEL of clsky.resources, 80 MB at 512 x 512).
+MAX_HOST_FRAME_WORKERS = 8
 
 #: The conversion of absolute three-wavelength frames to XYZ (:func:`clsky.colorimetry.three_wavelength_to_xyz`):
 #: the default ``solar_power_law`` reconstruction, tabulated. Measured per 512 x 512 frame (process CPU,
@@ -454,9 +462,39 @@ def _scene(config: AnimationConfig, positions, directions, valid) -> Scene:
                  error_budget=config.error_budget, quality=config.quality)
 
 
-def memory_estimate(config: AnimationConfig, positions) -> MemoryEstimate:
+def host_frame_workers() -> int:
+    """The host threads of the frames' host halves (:func:`clsky.anim.pipeline.in_order`):
+    :data:`HOST_FRAME_WORKERS` if set, else half the cores this process may use (at least 1, at most
+    :data:`MAX_HOST_FRAME_WORKERS`): the other half goes to the device half's render (PoCL's threads on
+    a CPU device) and to the writer and ffmpeg; 0 without the overlap (:data:`OVERLAP_FRAMES`: all on the
+    calling thread). On the 2-core machine, one: README "Speed" (bench/bench_animate.py) measures two."""
+    if not OVERLAP_FRAMES:
+        return 0
+    if HOST_FRAME_WORKERS is not None:
+        return check_integer("HOST_FRAME_WORKERS", HOST_FRAME_WORKERS, 1, 256)
+    return max(1, min(MAX_HOST_FRAME_WORKERS, host_cores() // 2))
+
+
+def fitting_host_frame_workers(config: AnimationConfig, positions, device=None) -> int:
+    """:func:`host_frame_workers`, fewer where the animation's frames in flight would not fit the memory
+    (:func:`memory_estimate` against ``device``'s and the host's limits); at least one with the overlap,
+    whose estimate :func:`clsky.resources.check_memory` then judges."""
+    workers = host_frame_workers()
+    if workers > 1:
+        limits = machine_limits(device)
+        while workers > 1:
+            try:
+                check_memory(memory_estimate(config, positions, workers), limits)
+                break
+            except InsufficientMemoryError:
+                workers -= 1
+    return workers
+
+
+def memory_estimate(config: AnimationConfig, positions, host_workers=None) -> MemoryEstimate:
     """Peak memory of the animation (:func:`clsky.resources.estimate_animation_memory`), from its
-    settings alone: no pilot, no full-size camera.
+    settings alone: no pilot, no full-size camera; with ``host_workers`` frames processed at once
+    (default :func:`host_frame_workers`).
 
     The table is the plan's sun axis (view elevations from the camera at 64 pixels, ray-march margins)
     with the higher orders kept, an upper bound of the plan (whose pilot may drop them); with
@@ -476,7 +514,8 @@ def memory_estimate(config: AnimationConfig, positions) -> MemoryEstimate:
     return estimate_animation_memory(_with_lookup(_with_sampling(settings, config), config), config.image_shape(),
                                      config.method,
                                      ray_settings(config), hdr_output=config.hdr is not None, batches=batches,
-                                     overlapped=OVERLAP_FRAMES)
+                                     overlapped=OVERLAP_FRAMES,
+                                     host_workers=host_frame_workers() if host_workers is None else host_workers)
 
 
 def build_table(config: AnimationConfig, plan: Plan | None = None, ctx=None, progress=None) -> clsky.ScatteringTable:
@@ -815,7 +854,8 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
     start = time.perf_counter()
     positions = sun_positions(config)
     check_outputs(config, len(positions))
-    check_memory(memory_estimate(config, positions), device=device_of(ctx))
+    workers = fitting_host_frame_workers(config, positions, device_of(ctx)) if farm is None else 1
+    check_memory(memory_estimate(config, positions, workers), device=device_of(ctx))
     camera = _camera(config)
     directions, valid = camera.directions()
     plan = plan_animation(config, positions, directions, valid, ctx=ctx)
@@ -825,7 +865,8 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
     # the frames need the data and the gathered sum only: the higher orders (K - 1 tables) go
     if farm is None:
         renderer, table = make_renderer(config, plan, ctx=ctx, progress=progress)
-        frames = _local_frames(config, positions, renderer, renderer.prepare(directions, valid), valid, lookup)
+        frames = _local_frames(config, positions, renderer, renderer.prepare(directions, valid), valid, lookup,
+                               workers)
     else:
         from .farm import animation_frames
 
@@ -855,18 +896,27 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
     return AnimationResult(rows, temporal, paths, seconds, summary, removed)
 
 
-def _local_frames(config, positions, renderer, prepared, valid, lookup):
+def _local_frames(config, positions, renderer, prepared, valid, lookup, workers):
     """The frame source of a single-process run: ``frames(pipeline)`` yields each frame's
-    :class:`FrameOutputs` in order, rendered and shown here: frame i + 1 renders on a worker thread while
-    this thread displays and compares frame i and the writer writes it (clsky.anim.pipeline: the same
-    frames, in order; OVERLAP_FRAMES = False renders them here, one by one)."""
+    :class:`FrameOutputs` in order, rendered and shown here (clsky.anim.pipeline): frame i + 1 renders,
+    and its exposure is metered, on a worker thread while ``workers`` host threads display and compare
+    the frames before it (:func:`clsky.anim.pipeline.in_order`) and this thread smooths the exposures in
+    frame order and writes; 0 ``workers`` (OVERLAP_FRAMES = False) does all of it here, one frame after
+    the other. The same frames either way."""
     def frames(pipeline):
-        rendered = pipeline_module.prefetched(lambda sun: render_frame(renderer, prepared, sun.direction, config,
-                                                                       lookup),
-                                              positions, overlap=OVERLAP_FRAMES)
+        def rendered_and_metered(sun):
+            hdr = render_frame(renderer, prepared, sun.direction, config, lookup)
+            return hdr, pipeline.metered_ev(exposure_reference(hdr), valid)
+
+        def shown(job):
+            index, sun, hdr, ev = job
+            return frame_outputs(pipeline, hdr, valid, config, sun, index, ev=ev)
+
+        rendered = pipeline_module.prefetched(rendered_and_metered, positions, overlap=OVERLAP_FRAMES)
+        # the exposures are smoothed here, in frame order, as the frames arrive (Display.next_ev)
+        jobs = ((index, sun, hdr, pipeline.next_ev(metered)) for index, (sun, (hdr, metered)) in enumerate(rendered))
         with contextlib.closing(rendered):
-            for index, (sun, hdr) in enumerate(rendered):
-                yield frame_outputs(pipeline, hdr, valid, config, sun, index)
+            yield from pipeline_module.in_order(shown, jobs, workers)
     return frames
 
 

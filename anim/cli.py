@@ -221,9 +221,11 @@ def _check_memory(args, config, positions):
     """Refuse, before any work, an animation or frame that does not fit the machine (exit 2, one line)."""
     from clsky.resources import check_memory, device_of
 
-    from .animate import memory_estimate
+    from .animate import fitting_host_frame_workers, memory_estimate
 
-    check_memory(memory_estimate(config, positions), device=device_of(), options=_memory_options(args, config))
+    device = device_of()
+    workers = fitting_host_frame_workers(config, positions, device)       # fewer frames at once where that fits
+    check_memory(memory_estimate(config, positions, workers), device=device, options=_memory_options(args, config))
 
 
 def run_animate(args):

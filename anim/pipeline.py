@@ -1,31 +1,44 @@
-"""The overlapped frame pipeline: the next frame renders on a worker thread while the caller works on the
-current one.
+"""The overlapped frame pipeline: the next frame renders on a worker thread while host threads work on the
+frames before it.
 
 An animation's frame has two halves that need nothing of each other across frames: the device half
 (:func:`clsky.anim.animate.render_frame`: the OpenCL kernels of both renderers and the conversion to
-cd/m^2) and the host half (display, comparison, PNG encoding, the hand-off to ffmpeg, all on the main
-thread). :func:`prefetched` runs the device half of frame i + 1 on one worker thread while the caller
-runs the host half of frame i: PyOpenCL releases the GIL while it waits for a kernel and its copy, and
-NumPy while it computes on whole frames, so the two halves overlap.
+cd/m^2; the auto-exposure's metering, which needs no other frame) and the host half (display,
+comparison, composite: :func:`clsky.anim.animate.frame_outputs`). :func:`prefetched` runs the device
+half of frame i + 1 on one worker thread while the host half of frame i runs on a host thread
+(:func:`in_order`) and the caller's thread writes the frame before it (PNG, the hand-off to ffmpeg):
+PyOpenCL releases the GIL while it waits for a kernel and its copy, and NumPy while it computes on whole
+frames, so the three overlap.
 
-Who owns the two cores (README, "Speed"): PoCL's two worker threads render on both; the host half is one
-thread (its BLAS limited to one thread, :func:`clsky._cl.host_blas_single_threaded`); ffmpeg keeps x264's
-own threads (its output may depend on their number). With the overlap three busy threads share two cores:
-the device half is the larger (about 0.5 CPU-s of a 0.8 CPU-s frame), so PoCL keeping both cores while
-the host thread takes its share by time slicing leaves no core idle, where limiting PoCL to one core
-would make the device half alone longer than the whole frame's share of two cores.
+Host threads. The host half of one frame is about 0.2 CPU-s on one thread, and the device half shrinks
+with the device: on a GPU or a CPU of many cores it is a few tens of ms, and one host thread then bounds
+the animation (on the H200 of README "GPUs", 45-49 s for the default animation whose ray march took
+3-7 ms a frame). :func:`in_order` gives the host halves of several frames to a pool of threads and hands
+their results back in frame order; the one step that must follow frame order, the auto-exposure's
+smoothing (``Display.next_ev``), runs on the caller's thread between the two, on the EVs metered beside
+the render, as a frame farm does (:mod:`clsky.anim.farm`).
 
-The frames are the same with and without the overlap: each frame is computed by the same calls on the
-same inputs, only on another thread, and the results are consumed in order (tests/test_animate.py
-compares the files of both).
+Who owns the cores (README, "Speed"): PoCL's worker threads render on all of them; the host halves run
+on ``clsky.anim.animate.host_frame_workers`` threads (one on the 2-core machine), their BLAS limited to
+one thread each (:func:`clsky._cl.host_blas_single_threaded`); ffmpeg keeps x264's own threads (its
+output may depend on their number). On two cores the device half is the larger (about 0.5 CPU-s of a
+0.75 CPU-s frame), so PoCL keeping both cores while the host thread takes its share by time slicing
+leaves no core idle, where limiting PoCL to one core would make the device half alone longer than the
+whole frame's share of two cores, and a second host thread only adds contention.
+
+The frames are the same with and without the overlap and with any number of host threads: each frame is
+computed by the same calls on the same inputs, only on another thread, and the results are consumed in
+order (tests/test_animate.py compares the files).
 """
 
 from __future__ import annotations
 
+import collections
+import numbers
 from concurrent.futures import ThreadPoolExecutor
 from typing import Callable, Iterable, Iterator, Tuple, TypeVar
 
-__all__ = ["prefetched"]
+__all__ = ["prefetched", "in_order"]
 
 Item = TypeVar("Item")
 Result = TypeVar("Result")
@@ -60,3 +73,34 @@ def prefetched(function: Callable[[Item], Result], items: Iterable[Item],
         finally:
             if pending is not None:
                 pending.cancel()     # not started yet: dropped; running: the pool waits for it
+
+
+def in_order(function: Callable[[Item], Result], items: Iterable[Item], workers: int = 1) -> Iterator[Result]:
+    """function(item) for every item, yielded in order, computed on ``workers`` threads (0: on the caller's
+    thread, one after the other).
+
+    The caller's thread draws the items (drawing may wait, e.g. for a render) and submits each to the
+    pool; at most ``workers`` + 1 are submitted and not yet yielded (``workers`` running, one waiting), so
+    that the items and results held at once stay bounded. A result is yielded when it is the oldest and
+    done, or when the window is full. An exception raised by ``function`` reaches the caller at its item;
+    if the caller stops early (an exception, or closing the iterator), the items not started are dropped
+    and the running ones finish before this returns.
+    """
+    if isinstance(workers, bool) or not isinstance(workers, numbers.Integral) or workers < 0:
+        raise ValueError(f"workers must be an integer >= 0, got {workers!r}")
+    if workers == 0:
+        for item in items:
+            yield function(item)
+        return
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="clsky-host") as pool:
+        pending = collections.deque()
+        try:
+            for item in items:
+                pending.append(pool.submit(function, item))
+                while pending and (pending[0].done() or len(pending) > workers):
+                    yield pending.popleft().result()
+            while pending:
+                yield pending.popleft().result()
+        finally:
+            for future in pending:
+                future.cancel()     # not started yet: dropped; running: the pool waits for it

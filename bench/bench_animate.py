@@ -4,9 +4,11 @@
   and ray march compared, PNG + MP4 + metrics) in a fresh process: wall time, CPU time of the process
   and its children (ffmpeg) from ``getrusage(RUSAGE_CHILDREN)``, the load average and the machine's exp()
   rate (bench/_report.py, exp_reading: which of its two speeds it ran at) before and after; run
-  twice, side by side: with the overlapped frame pipeline (the default: frame i + 1 rendered on a worker
-  thread while frame i is displayed, compared and written, ``clsky.anim.pipeline``) and without it
-  (``clsky.anim.animate.OVERLAP_FRAMES = False``: one frame after the other).
+  three times, side by side: with the overlapped frame pipeline (the default: frame i + 1 rendered on a
+  worker thread while host threads display and compare the frames before it and the main thread writes,
+  ``clsky.anim.pipeline``) with the machine's default number of host threads
+  (``clsky.anim.animate.host_frame_workers``: one on 2 cores), with one host thread more than that, and
+  without the overlap (``clsky.anim.animate.OVERLAP_FRAMES = False``: one frame after the other).
 - Stage split (without the overlap, so that each stage is timed alone): :func:`clsky.anim.animate.render_animation` in this process at ``--stage-frames`` frames of
   the same size (after a warm-up), under cProfile with the process CPU clock as its timer, so that each stage's figure
   counts PoCL's worker threads while the host waits for them (the stages do not overlap). Run twice,
@@ -52,7 +54,9 @@ STAGES = {
     "ray march (device)": [("clsky/render.py", "render_raymarch"), ("clsky/render.py", "skyview_map", -1)],
     "conversion to cd/m^2 (colorimetry)": [("anim/animate.py", "three_wavelength_frame_to_linear_srgb"),
                                            ("anim/animate.py", "spectral_frame_to_linear_srgb")],
-    "display (exposure, tone curve, 8 bits)": [("anim/animate.py", "display_frames")],
+    # the exposure is metered beside the render (clsky.anim.pipeline), then shown by display_frames
+    "display (exposure, tone curve, 8 bits)": [("anim/animate.py", "display_frames"),
+                                               ("anim/display.py", "metered_ev")],
     "comparison (metrics, Delta E, error image, composite)": [
         ("anim/metrics.py", "compare_frames"), ("anim/metrics.py", "error_image"),
         ("anim/metrics.py", "relative_error_map"), ("anim/metrics.py", "composite"),
@@ -62,16 +66,21 @@ STAGES = {
 }
 
 
-#: ``python -m clsky.anim`` with the frames rendered one after the other (no overlapped pipeline)
-SERIAL = ("import sys, clsky.anim.animate, clsky.anim.cli; clsky.anim.animate.OVERLAP_FRAMES = False; "
-          "sys.argv[0] = 'clsky'; sys.exit(clsky.anim.cli.main())")
+#: ``python -m clsky.anim`` with a setting of clsky.anim.animate changed first
+CHANGED = "import sys, clsky.anim.animate, clsky.anim.cli; clsky.anim.animate.{} = {}; " \
+          "sys.argv[0] = 'clsky'; sys.exit(clsky.anim.cli.main())"
 
 
-def end_to_end(arguments, overlap=True):
+def end_to_end(arguments, overlap=True, host_workers=None):
     """(wall [s], CPU [s], load before, load after, exp() reading before, after [M per CPU-second]) of
     ``python -m clsky.anim animate <arguments>`` (with ``overlap`` False: the frames one after the
-    other)."""
-    program = ["-m", "clsky.anim"] if overlap else ["-c", SERIAL]
+    other; with ``host_workers``: that many host threads, ``HOST_FRAME_WORKERS``)."""
+    if not overlap:
+        program = ["-c", CHANGED.format("OVERLAP_FRAMES", False)]
+    elif host_workers is not None:
+        program = ["-c", CHANGED.format("HOST_FRAME_WORKERS", int(host_workers))]
+    else:
+        program = ["-m", "clsky.anim"]
     with tempfile.TemporaryDirectory() as directory:
         exp_before = exp_reading()
         load_before, cpu, wall = load_average(), children_cpu(), time.perf_counter()
@@ -122,11 +131,15 @@ def main():
         args.frames, args.stage_frames, args.size = SMOKE.animation_frames, SMOKE.animation_frames, SMOKE.frame
         extra, options = ["--table-size", *map(str, SMOKE.table)], {"table_size": SMOKE.table}
     command = ["--frames", str(args.frames), "--size", str(args.size), *extra]
+    workers = clsky.anim.animate.host_frame_workers()
+    variants = {f"overlapped, {workers} host thread{'s' * (workers > 1)} (default)": (True, None),
+                f"overlapped, {workers + 1} host threads": (True, workers + 1),
+                "one after the other": (False, None)}
     runs = {}
-    for overlap in (True, False):
-        runs[overlap] = end_to_end(command, overlap)
-        wall, cpu, load_before, load_after, _, _ = runs[overlap]
-        print(f"end to end ({'overlapped' if overlap else 'serial'}): wall {wall:.1f} s, CPU {cpu:.1f} s, load "
+    for label, (overlap, host_workers) in variants.items():
+        runs[label] = end_to_end(command, overlap, host_workers)
+        wall, cpu, load_before, load_after, _, _ = runs[label]
+        print(f"end to end ({label}): wall {wall:.1f} s, CPU {cpu:.1f} s, load "
               f"{load_before:.1f} -> {load_after:.1f}", flush=True)
     highest = max(max(run[2:4]) for run in runs.values())
     readings = [reading for run in runs.values() for reading in run[4:]]
@@ -144,14 +157,16 @@ def main():
     lines = [f"Measured {datetime.date.today()} on {machine()}. End to end: `{shown}` "
              f"in a fresh process (table build, both renderers, comparison, PNG + MP4 + metrics); CPU time of the "
              f"process and its children (ffmpeg), load average before and after; with the overlapped frame "
-             f"pipeline (default) and with the frames one after the other, run one after the other; exp(): the "
+             f"pipeline and this machine's default number of host threads for the frames' display and "
+             f"comparison, with one thread more, and with the frames one after the other, run one after the "
+             f"other; exp(): the "
              f"machine's double8 exp() rate read before and after the run [M per CPU-second] (about 900 in its "
              f"slow state, 1500-1700 in its fast one).{load_note(highest)}{state_note(readings)}", "",
              "| run | frames | wall [s] | CPU [s] | CPU / wall | load before | load after | exp() |",
              "|---|---|---:|---:|---:|---:|---:|---|",
-             *(f"| `{shown}` | {'overlapped' if overlap else 'one after the other'} | {wall:.1f} | {cpu:.1f} | "
+             *(f"| `{shown}` | {label} | {wall:.1f} | {cpu:.1f} | "
                f"{cpu / wall:.2f} | {load_before:.1f} | {load_after:.1f} | {exp_before:.0f} / {exp_after:.0f} |"
-               for overlap, (wall, cpu, load_before, load_after, exp_before, exp_after) in runs.items()), "",
+               for label, (wall, cpu, load_before, load_after, exp_before, exp_after) in runs.items()), "",
              f"Where the CPU time goes: the same animation at {args.stage_frames} frames, one after the other, in "
              f"one process after a warm-up (kernels compiled, the colour conversion's tables built), cProfile "
              f"on the process CPU clock (PoCL's worker threads count towards the stage that waits for them); "

@@ -427,7 +427,8 @@ def _table_held(settings, cells, orders, keep_orders=True):
 
 def estimate_render_memory(settings: TableSettings, image_shape, method="compare",
                            ray_settings: TableSettings | None = None, keep_orders=False,
-                           hdr_output=False, count_table=True, batches=1, overlapped=False) -> MemoryEstimate:
+                           hdr_output=False, count_table=True, batches=1, overlapped=False,
+                           host_workers=1) -> MemoryEstimate:
     """Peak memory of rendering frames of ``image_shape`` from a table of ``settings``.
 
     Parameters
@@ -454,6 +455,10 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
         The frames go through an animation's overlapped pipeline (``clsky.anim.animate.OVERLAP_FRAMES``),
         which holds the next frame as this one is processed: :data:`NEXT_FRAME_BYTES_PER_PIXEL`, plus a
         spectral animation's next spectral frames.
+    host_workers : int
+        Frames processed at once on host threads (``clsky.anim.animate.host_frame_workers``; with the
+        overlap, the pipeline also holds one more frame's HDR frames, waiting for a thread): each
+        processing counts :data:`FRAME_BYTES_PER_PIXEL` and its HDR frames.
 
     Returns
     -------
@@ -487,6 +492,7 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
     phases = [Phase("renderer", held + upload + (Allocation("upload staging (D, H, W, 8)", gathered),))]
     if pixels:
         frames = 2 if method == "compare" else 1
+        processing = max(1, int(host_workers))
         spectral = ()
         if batches > 1:
             spectral = (Allocation(f"spectral frames (pixels, 3 x {batches}) float64", pixels * 24 * batches,
@@ -501,9 +507,11 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
             Allocation("pixel mask on the device", pixels, count=batches, on_device=True, source="frames"),
             Allocation("frame output on the device (pixels, 3)", pixels * 3 * s, on_device=True, source="frames"),
             Allocation("frame download (pixels, 3)", pixels * 3 * s, source="frames"),
-            Allocation("HDR frames (pixels, 3) float64", pixels * 24, count=frames, source="frames"),
+            Allocation("HDR frames (pixels, 3) float64", pixels * 24,
+                       count=frames * (processing + (1 if overlapped else 0)), source="frames"),
             Allocation("frame processing (tone map, metrics, composite, encoding)",
-                       pixels * (FRAME_BYTES_PER_PIXEL[method] + (12 if hdr_output else 0)), source="frames"))
+                       pixels * (FRAME_BYTES_PER_PIXEL[method] + (12 if hdr_output else 0)), count=processing,
+                       source="frames"))
         if overlapped:
             per_pixel += (Allocation("the next frame, rendered meanwhile (overlapped pipeline)",
                                      pixels * NEXT_FRAME_BYTES_PER_PIXEL[method] + sum(a.total for a in spectral),
@@ -559,18 +567,20 @@ def estimate_spectral_table_memory(settings: TableSettings, batches: int) -> Mem
 
 def estimate_animation_memory(settings: TableSettings, image_shape, method="compare",
                               ray_settings: TableSettings | None = None, hdr_output=False,
-                              batches=None, overlapped=True) -> MemoryEstimate:
+                              batches=None, overlapped=True, host_workers=1) -> MemoryEstimate:
     """The table build, then the frames (:func:`estimate_table_memory`, :func:`estimate_render_memory`
     without the higher orders, which an animation drops once the table is built). ``batches``: None
     for the three-wavelength animation, else the spectral one's ceil(N / 3) batches
     (:func:`estimate_spectral_table_memory`, ``estimate_render_memory(..., batches=B)``).
-    ``overlapped``: the frames go through the overlapped pipeline (``estimate_render_memory``'s)."""
+    ``overlapped``, ``host_workers``: the frames go through the overlapped pipeline with that many host
+    threads (``estimate_render_memory``'s)."""
     if batches is None:
         build = estimate_table_memory(settings)
     else:
         build = estimate_spectral_table_memory(settings, batches)
     render = estimate_render_memory(settings, image_shape, method, ray_settings, keep_orders=False,
-                                    hdr_output=hdr_output, batches=batches or 1, overlapped=overlapped)
+                                    hdr_output=hdr_output, batches=batches or 1, overlapped=overlapped,
+                                    host_workers=host_workers)
     width, height = image_shape
     w, h, d = settings.size
     tables = f"table {w} x {h} x {d}" if batches is None else f"{batches} tables {w} x {h} x {d}"

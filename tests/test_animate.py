@@ -17,6 +17,7 @@ import sys
 import numpy as np
 import pytest
 
+from clsky import resources
 from clsky.anim import metrics
 from clsky.anim.animate import AnimationConfig, render_animation
 
@@ -351,20 +352,56 @@ def test_one_blas_thread_gives_the_same_bytes_as_two(tmp_path, cl_context, monke
 
 def test_overlapped_frames_are_the_bytes_of_serial_ones(tmp_path, cl_context, monkeypatch):
     """The overlapped frame pipeline (clsky.anim.pipeline: frame i + 1 rendered on a worker thread while
-    frame i is displayed, compared and written) writes byte for byte the PNG frames, MP4, metrics CSV and
-    the JSON's frame rows and temporal jumps of the same animation rendered frame after frame on one
-    thread: the same calls on the same inputs, consumed in order. 3 frames, so that one frame renders
-    while another is written and the last has no successor."""
+    host threads display and compare the frames before it and the caller writes) writes byte for byte
+    the PNG frames, MP4, metrics CSV and the JSON's frame rows and temporal jumps of the same animation
+    rendered frame after frame on one thread: the same calls on the same inputs, consumed in order;
+    with one host thread (the 2-core machine's choice) and with three (several frames displayed at
+    once, the auto-exposure smoothed in order between render and display). 5 frames, so that with three
+    host threads four frames are in flight while another is written and the last has no successor."""
     import clsky.anim.animate
 
     outputs = {}
-    for overlap in (False, True):
-        monkeypatch.setattr(clsky.anim.animate, "OVERLAP_FRAMES", overlap)
-        config = AnimationConfig(frames=3, output=str(tmp_path / "sky.mp4"), force=overlap, **TINY)
+    for workers in (None, 1, 3):                  # None: without the overlap
+        monkeypatch.setattr(clsky.anim.animate, "OVERLAP_FRAMES", workers is not None)
+        monkeypatch.setattr(clsky.anim.animate, "HOST_FRAME_WORKERS", workers)
+        config = AnimationConfig(frames=5, output=str(tmp_path / "sky.mp4"), force=workers is not None, **TINY)
+        assert config.auto_exposure
         render_animation(config, ctx=cl_context)
         record = json.loads((tmp_path / "sky_metrics.json").read_text(encoding="utf-8"))
-        outputs[overlap] = ([path.read_bytes() for path in sorted((tmp_path / "sky_frames").iterdir())],
+        outputs[workers] = ([path.read_bytes() for path in sorted((tmp_path / "sky_frames").iterdir())],
                             (tmp_path / "sky.mp4").read_bytes(), (tmp_path / "sky_metrics.csv").read_bytes(),
                             record["frames"], record["temporal"])
-    assert len(outputs[False][0]) == 3
-    assert outputs[True] == outputs[False]
+    assert len(outputs[None][0]) == 5
+    assert len({row["exposure_ev"] for row in outputs[None][3]}) > 1      # the smoothing had work to do
+    assert outputs[1] == outputs[None]
+    assert outputs[3] == outputs[None]
+
+
+def test_host_frame_workers(monkeypatch):
+    """Half the cores, at least one, at most MAX_HOST_FRAME_WORKERS; HOST_FRAME_WORKERS overrides; none
+    without the overlap; fewer where the frames in flight would not fit the memory."""
+    import clsky.anim.animate as animate
+
+    for cores, expected in ((1, 1), (2, 1), (3, 1), (4, 2), (16, 8), (64, animate.MAX_HOST_FRAME_WORKERS)):
+        monkeypatch.setattr(animate, "host_cores", lambda cores=cores: cores)
+        assert animate.host_frame_workers() == expected, cores
+    monkeypatch.setattr(animate, "HOST_FRAME_WORKERS", 3)
+    assert animate.host_frame_workers() == 3
+    monkeypatch.setattr(animate, "HOST_FRAME_WORKERS", 0)
+    with pytest.raises(ValueError, match="HOST_FRAME_WORKERS"):
+        animate.host_frame_workers()
+    monkeypatch.setattr(animate, "HOST_FRAME_WORKERS", 4)
+    monkeypatch.setattr(animate, "OVERLAP_FRAMES", False)
+    assert animate.host_frame_workers() == 0
+    monkeypatch.setattr(animate, "OVERLAP_FRAMES", True)
+    # memory: each thread adds a frame's processing; with room for two threads' frames but not three,
+    # four threads asked for become two
+    config = AnimationConfig(frames=2, size=1024, **{k: v for k, v in TINY.items() if k != "size"})
+    positions = animate.sun_positions(config)
+    peaks = {n: animate.memory_estimate(config, positions, n).peak_bytes() for n in (1, 2, 3, 4)}
+    assert peaks[1] < peaks[2] < peaks[3] < peaks[4]
+    room = (peaks[2] + peaks[3]) // 2
+    monkeypatch.setattr(animate, "machine_limits", lambda device=None: resources.MemoryLimits(room))
+    assert animate.fitting_host_frame_workers(config, positions) == 2
+    monkeypatch.setattr(animate, "machine_limits", lambda device=None: resources.MemoryLimits(peaks[1] // 2))
+    assert animate.fitting_host_frame_workers(config, positions) == 1       # check_memory then refuses it

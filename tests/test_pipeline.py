@@ -7,7 +7,7 @@ import threading
 
 import pytest
 
-from clsky.anim.pipeline import prefetched
+from clsky.anim.pipeline import in_order, prefetched
 
 
 def test_results_in_order_one_ahead_on_one_worker_thread():
@@ -70,3 +70,76 @@ def test_stopping_early_finishes_the_running_call_and_starts_no_other():
     done = list(calls)
     assert done in ([0], [0, 1]), done
     assert calls == done          # nothing ran after close() returned
+
+
+# in_order: the host threads of the frames' host halves ------------------------------------------------
+
+def test_in_order_yields_in_order_from_a_bounded_window_of_threads():
+    """Every result in item order, whatever order the calls finish in (later items are made faster); the
+    calls run on at most ``workers`` threads other than the caller's, and at most ``workers`` + 1 items
+    are drawn and not yet yielded."""
+    import time
+
+    workers, drawn, yielded, threads = 3, [], [], set()
+
+    def items():
+        for item in range(12):
+            assert len(drawn) - len(yielded) <= workers, (drawn, yielded)   # before this item is drawn
+            drawn.append(item)
+            yield item
+
+    def function(item):
+        threads.add(threading.get_ident())
+        time.sleep(0.002 * (12 - item))
+        return item * item
+
+    for result in in_order(function, items(), workers):
+        yielded.append(result)
+    assert yielded == [item * item for item in range(12)]
+    assert 1 <= len(threads) <= workers and threading.get_ident() not in threads
+
+
+def test_in_order_without_workers_runs_on_the_callers_thread():
+    threads = []
+    assert list(in_order(lambda item: threads.append(threading.get_ident()) or item + 1, [1, 2], 0)) == [2, 3]
+    assert set(threads) == {threading.get_ident()}
+    assert list(in_order(lambda item: item, [], 2)) == []
+
+
+@pytest.mark.parametrize("workers", [-1, 1.5, "2"])
+def test_in_order_refuses_a_bad_worker_count(workers):
+    with pytest.raises(ValueError, match="workers"):
+        list(in_order(lambda item: item, [1], workers))
+
+
+@pytest.mark.parametrize("workers", [0, 1, 3])
+def test_in_order_exception_reaches_the_caller_at_its_item(workers):
+    def function(item):
+        if item == 2:
+            raise ValueError("item 2")
+        return item
+
+    received = []
+    with pytest.raises(ValueError, match="item 2"):
+        for result in in_order(function, range(6), workers):
+            received.append(result)
+    assert received == [0, 1]
+
+
+def test_in_order_stopping_early_finishes_the_running_calls_and_starts_no_other():
+    """Closing after the first result with two threads: items 1 and 2 may have been submitted (the
+    window is 3); whichever started completes before close() returns, none after it starts, and the
+    items after the window are never drawn."""
+    calls, drawn = [], []
+
+    def items():
+        for item in range(8):
+            drawn.append(item)
+            yield item
+
+    results = in_order(lambda item: calls.append(item) or item, items(), 2)
+    assert next(results) == 0
+    results.close()
+    done = list(calls)
+    assert set(done) <= {0, 1, 2} and 0 in done, done
+    assert calls == done and max(drawn) <= 3, (calls, drawn)
