@@ -24,6 +24,7 @@ import dataclasses
 import datetime
 import math
 import pathlib
+import threading
 import time
 from typing import Callable
 
@@ -54,7 +55,7 @@ __all__ = ["AnimationConfig", "AnimationResult", "METHODS", "LOOKUP_NAMES", "loo
            "make_table", "renderer_of", "FrameOutputs", "frame_outputs", "exposure_reference",
            "spectral_frame_to_linear_srgb", "three_wavelength_frame_to_linear_srgb", "frame_units",
            "THREE_WAVELENGTH_CONVERSION",
-           "ray_settings", "sun_positions", "check_outputs", "render_animation", "render_frame",
+           "ray_settings", "sun_positions", "check_outputs", "render_animation", "render_frame", "convert_frames",
            "memory_estimate", "display", "display_frames"]
 
 #: What is rendered: table lookup only, ray march only, or both with the comparison.
@@ -674,11 +675,12 @@ def lookup_of(config: AnimationConfig, plan: Plan | None = None) -> str | None:
     return "skyview" if config.method == "skyview" else "lut"
 
 
-def render_frame(renderer: SkyRenderer, prepared, sun_direction, config: AnimationConfig, lookup=None):
+def render_frame(renderer: SkyRenderer, prepared, sun_direction, config: AnimationConfig, lookup=None,
+                 convert=True):
     """HDR frames {lookup: ..., 'raymarch': ...} of one sun position, as ``config.method`` asks: the lookup
     ``lookup`` (a key of :data:`LOOKUP_NAMES`; default :func:`lookup_of` without a plan) and the ray
-    march; absolute frames converted to linear sRGB [cd/m^2] (:func:`spectral_frame_to_linear_srgb` with
-    ``config.wavelengths``, else :func:`three_wavelength_frame_to_linear_srgb`)."""
+    march; in the animation's units (:func:`convert_frames`), or as the renderer returns them with
+    ``convert`` False (the device's work alone)."""
     lookup = lookup_of(config) if lookup is None else lookup
     frames = {}
     if lookup == "lut":
@@ -690,6 +692,13 @@ def render_frame(renderer: SkyRenderer, prepared, sun_direction, config: Animati
                                                     settings=skyview.SkyViewSettings(config.skyview_size or skyview.DEFAULT_SIZE))
     if config.method == "raymarch" or config.compares:
         frames["raymarch"] = renderer.render_raymarch(prepared, sun_direction, config.altitude)
+    return convert_frames(renderer, config, frames) if convert else frames
+
+
+def convert_frames(renderer: SkyRenderer, config: AnimationConfig, frames):
+    """The renderer's HDR frames ``frames`` ({name: frame}) in the animation's units: absolute frames
+    converted to linear sRGB [cd/m^2] (:func:`spectral_frame_to_linear_srgb` with ``config.wavelengths``,
+    else :func:`three_wavelength_frame_to_linear_srgb`), relative ones as they are."""
     if config.wavelengths is not None:
         frames = {name: spectral_frame_to_linear_srgb(frame, renderer.wavelengths) for name, frame in frames.items()}
     elif config.absolute:
@@ -896,27 +905,65 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
     return AnimationResult(rows, temporal, paths, seconds, summary, removed)
 
 
+class _ExposureOrder:
+    """:meth:`clsky.anim.display.Display.next_ev`, the auto-exposure's smoothing, in frame order for frames
+    shown on several threads (:func:`clsky.anim.pipeline.in_order`): frame i's call waits for frame
+    i - 1's. The threads take the frames in order, so whichever frame waits, the one before it is running
+    or done. A frame that fails before its call (:meth:`fail`) breaks the order: the frames after it raise
+    instead of waiting (the caller sees the first failure first, the results coming in order)."""
+
+    def __init__(self, pipeline: display_pipeline.Display):
+        self._pipeline = pipeline
+        self._turn = threading.Condition()
+        self._next = 0
+        self._failed = False
+
+    def next_ev(self, index: int, metered):
+        with self._turn:
+            self._turn.wait_for(lambda: self._next == index or self._failed)
+            try:
+                if self._failed:
+                    raise RuntimeError(f"frame {index} not shown: a frame before it failed")
+                return self._pipeline.next_ev(metered)
+            except BaseException:
+                self._failed = True
+                raise
+            finally:
+                self._next += 1
+                self._turn.notify_all()
+
+    def fail(self):
+        with self._turn:
+            self._failed = True
+            self._turn.notify_all()
+
+
 def _local_frames(config, positions, renderer, prepared, valid, lookup, workers):
     """The frame source of a single-process run: ``frames(pipeline)`` yields each frame's
-    :class:`FrameOutputs` in order, rendered and shown here (clsky.anim.pipeline): frame i + 1 renders,
-    and its exposure is metered, on a worker thread while ``workers`` host threads display and compare
-    the frames before it (:func:`clsky.anim.pipeline.in_order`) and this thread smooths the exposures in
-    frame order and writes; 0 ``workers`` (OVERLAP_FRAMES = False) does all of it here, one frame after
-    the other. The same frames either way."""
+    :class:`FrameOutputs` in order, rendered and shown here (clsky.anim.pipeline): frame i + 1 renders on
+    a worker thread while ``workers`` host threads convert, meter, display and compare the frames before
+    it (:func:`clsky.anim.pipeline.in_order`; the exposures smoothed in frame order, :class:`_ExposureOrder`)
+    and this thread writes them; 0 ``workers`` (OVERLAP_FRAMES = False) does all of it here, one frame
+    after the other. The same frames either way."""
     def frames(pipeline):
-        def rendered_and_metered(sun):
-            hdr = render_frame(renderer, prepared, sun.direction, config, lookup)
-            return hdr, pipeline.metered_ev(exposure_reference(hdr), valid)
+        order = _ExposureOrder(pipeline)
 
         def shown(job):
-            index, sun, hdr, ev = job
-            return frame_outputs(pipeline, hdr, valid, config, sun, index, ev=ev)
+            index, sun, raw = job
+            try:
+                hdr = convert_frames(renderer, config, raw)
+                metered = pipeline.metered_ev(exposure_reference(hdr), valid)
+            except BaseException:
+                order.fail()
+                raise
+            return frame_outputs(pipeline, hdr, valid, config, sun, index, ev=order.next_ev(index, metered))
 
-        rendered = pipeline_module.prefetched(rendered_and_metered, positions, overlap=OVERLAP_FRAMES)
-        # the exposures are smoothed here, in frame order, as the frames arrive (Display.next_ev)
-        jobs = ((index, sun, hdr, pipeline.next_ev(metered)) for index, (sun, (hdr, metered)) in enumerate(rendered))
+        rendered = pipeline_module.prefetched(
+            lambda sun: render_frame(renderer, prepared, sun.direction, config, lookup, convert=False),
+            positions, overlap=OVERLAP_FRAMES)
         with contextlib.closing(rendered):
-            yield from pipeline_module.in_order(shown, jobs, workers)
+            yield from pipeline_module.in_order(shown, ((index, sun, raw) for index, (sun, raw) in enumerate(rendered)),
+                                                workers)
     return frames
 
 

@@ -493,10 +493,15 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
     if pixels:
         frames = 2 if method == "compare" else 1
         processing = max(1, int(host_workers))
-        spectral = ()
+        # the frames a host thread processes, and with the overlap one more waiting for a thread, each
+        # held as rendered (a spectral frame before its conversion) and as converted
+        held_frames = frames * (processing + (1 if overlapped else 0))
+        spectral, next_spectral = (), 0
         if batches > 1:
+            # the next frame's spectral frames and, while the last is assembled, its pieces
+            next_spectral = pixels * 24 * batches * frames + pixels * 24 * batches
             spectral = (Allocation(f"spectral frames (pixels, 3 x {batches}) float64", pixels * 24 * batches,
-                                   count=frames, source="frames"),
+                                   count=held_frames, source="frames"),
                         Allocation("spectral frame pieces (pixels, 3) float64", pixels * 24, count=batches,
                                    source="frames"))
         per_pixel = spectral + (
@@ -507,15 +512,13 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
             Allocation("pixel mask on the device", pixels, count=batches, on_device=True, source="frames"),
             Allocation("frame output on the device (pixels, 3)", pixels * 3 * s, on_device=True, source="frames"),
             Allocation("frame download (pixels, 3)", pixels * 3 * s, source="frames"),
-            Allocation("HDR frames (pixels, 3) float64", pixels * 24,
-                       count=frames * (processing + (1 if overlapped else 0)), source="frames"),
+            Allocation("HDR frames (pixels, 3) float64", pixels * 24, count=held_frames, source="frames"),
             Allocation("frame processing (tone map, metrics, composite, encoding)",
                        pixels * (FRAME_BYTES_PER_PIXEL[method] + (12 if hdr_output else 0)), count=processing,
                        source="frames"))
         if overlapped:
             per_pixel += (Allocation("the next frame, rendered meanwhile (overlapped pipeline)",
-                                     pixels * NEXT_FRAME_BYTES_PER_PIXEL[method] + sum(a.total for a in spectral),
-                                     source="frames"),)
+                                     pixels * NEXT_FRAME_BYTES_PER_PIXEL[method] + next_spectral, source="frames"),)
         phases.append(Phase("frames", held + upload + per_pixel))
     w, h, d = settings.size
     return MemoryEstimate(f"rendering {width} x {height} frames from the table {w} x {h} x {d}", tuple(phases))

@@ -405,3 +405,85 @@ def test_host_frame_workers(monkeypatch):
     assert animate.fitting_host_frame_workers(config, positions) == 2
     monkeypatch.setattr(animate, "machine_limits", lambda device=None: resources.MemoryLimits(peaks[1] // 2))
     assert animate.fitting_host_frame_workers(config, positions) == 1       # check_memory then refuses it
+
+
+def test_exposure_order_calls_next_ev_in_frame_order_whatever_thread_comes_first():
+    """Frames shown on several threads smooth their exposures in frame order (_ExposureOrder): four
+    threads started last frame first all wait for their turn; the Display sees frames 0, 1, 2, 3."""
+    import threading
+
+    from clsky.anim.animate import _ExposureOrder
+
+    class Recording:
+        def __init__(self):
+            self.seen = []
+
+        def next_ev(self, metered):
+            self.seen.append(metered)
+            return -metered
+
+    pipeline = Recording()
+    order = _ExposureOrder(pipeline)
+    results = {}
+    threads = [threading.Thread(target=lambda i=i: results.__setitem__(i, order.next_ev(i, i))) for i in (3, 2, 1, 0)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join(timeout=10)
+    assert not any(thread.is_alive() for thread in threads)
+    assert pipeline.seen == [0, 1, 2, 3] and results == {0: 0, 1: -1, 2: -2, 3: -3}
+
+
+def test_exposure_order_after_a_failure_raises_instead_of_waiting():
+    """A frame that fails before its turn (fail()) releases the frames after it with an error; so does one
+    whose own next_ev raises."""
+    import threading
+
+    from clsky.anim.animate import _ExposureOrder
+
+    class Failing:
+        def next_ev(self, metered):
+            raise ValueError("metering")
+
+    errors = []
+
+    def waiting(order, index):
+        try:
+            order.next_ev(index, 0.0)
+        except RuntimeError as error:
+            errors.append(str(error))
+
+    for cause in ("fail", "next_ev"):
+        order = _ExposureOrder(Failing())
+        thread = threading.Thread(target=waiting, args=(order, 1))
+        thread.start()
+        if cause == "fail":
+            order.fail()
+        else:
+            with pytest.raises(ValueError, match="metering"):
+                order.next_ev(0, 0.0)
+        thread.join(timeout=10)
+        assert not thread.is_alive()
+    assert errors == ["frame 1 not shown: a frame before it failed"] * 2
+
+
+def test_a_frame_failing_on_a_host_thread_stops_the_animation_with_its_error(tmp_path, cl_context, monkeypatch):
+    """Frame 2's conversion fails on one of three host threads: the animation raises that error (the
+    frames after it, waiting for its exposure, stop too) and writes nothing."""
+    import clsky.anim.animate
+
+    convert = clsky.anim.animate.convert_frames
+    calls = []
+
+    def failing(renderer, config, frames):
+        calls.append(None)
+        if len(calls) == 3:
+            raise ArithmeticError("conversion of the third frame")
+        return convert(renderer, config, frames)
+
+    monkeypatch.setattr(clsky.anim.animate, "HOST_FRAME_WORKERS", 3)
+    monkeypatch.setattr(clsky.anim.animate, "convert_frames", failing)
+    config = AnimationConfig(frames=6, output=str(tmp_path / "sky.mp4"), **TINY)
+    with pytest.raises(ArithmeticError, match="third frame"):
+        render_animation(config, ctx=cl_context)
+    assert sorted(path.name for path in tmp_path.iterdir()) == []
