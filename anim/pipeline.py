@@ -2,21 +2,23 @@
 frames before it.
 
 An animation's frame has two halves that need nothing of each other across frames: the device half
-(:func:`clsky.anim.animate.render_frame`: the OpenCL kernels of both renderers and the conversion to
-cd/m^2; the auto-exposure's metering, which needs no other frame) and the host half (display,
-comparison, composite: :func:`clsky.anim.animate.frame_outputs`). :func:`prefetched` runs the device
-half of frame i + 1 on one worker thread while the host half of frame i runs on a host thread
-(:func:`in_order`) and the caller's thread writes the frame before it (PNG, the hand-off to ffmpeg):
-PyOpenCL releases the GIL while it waits for a kernel and its copy, and NumPy while it computes on whole
-frames, so the three overlap.
+(:func:`clsky.anim.animate.render_frame` with ``convert=False``: the OpenCL kernels of both renderers
+and their downloads) and the host half (:func:`clsky.anim.animate.convert_frames` to cd/m^2, the
+auto-exposure's metering, display, comparison and composite). :func:`prefetched` runs the device half of
+frame i + 1 on one worker thread while host threads run the host halves of the frames before it
+(:func:`in_order`) and the caller's thread writes them (PNG, the hand-off to ffmpeg): PyOpenCL releases
+the GIL while it waits for a kernel and its copy, and NumPy while it computes on whole frames, so they
+overlap.
 
-Host threads. The host half of one frame is about 0.2 CPU-s on one thread, and the device half shrinks
-with the device: on a GPU or a CPU of many cores it is a few tens of ms, and one host thread then bounds
-the animation (on the H200 of README "GPUs", 45-49 s for the default animation whose ray march took
+Host threads. The host half of the default animation's 512 x 512 frame is about 0.25 CPU-s on one
+thread (conversion 47, display 78, comparison 55 CPU-ms on the 2-core machine), and the device half
+shrinks with the device: a few ms on a GPU, about 0.5 CPU-s spread over the cores of a CPU (30 ms on 16,
+if PoCL used them all); one host thread then bounds the animation (on the H200 of README "GPUs", 45-49 s for the default animation whose ray march took
 3-7 ms a frame). :func:`in_order` gives the host halves of several frames to a pool of threads and hands
 their results back in frame order; the one step that must follow frame order, the auto-exposure's
-smoothing (``Display.next_ev``), runs on the caller's thread between the two, on the EVs metered beside
-the render, as a frame farm does (:mod:`clsky.anim.farm`).
+smoothing (``Display.next_ev``), waits on each thread for the frame before (``clsky.anim.animate.
+_ExposureOrder``) between the metering and the display, as a frame farm's client smooths the EVs its
+workers metered (:mod:`clsky.anim.farm`).
 
 Who owns the cores (README, "Speed"): PoCL's worker threads render on all of them; the host halves run
 on ``clsky.anim.animate.host_frame_workers`` threads (one on the 2-core machine), their BLAS limited to
@@ -24,7 +26,7 @@ one thread each (:func:`clsky._cl.host_blas_single_threaded`); ffmpeg keeps x264
 output may depend on their number). On two cores the device half is the larger (about 0.5 CPU-s of a
 0.75 CPU-s frame), so PoCL keeping both cores while the host thread takes its share by time slicing
 leaves no core idle, where limiting PoCL to one core would make the device half alone longer than the
-whole frame's share of two cores, and a second host thread only adds contention.
+whole frame's share of two cores; a second host thread measured no faster there (README "Speed").
 
 The frames are the same with and without the overlap and with any number of host threads: each frame is
 computed by the same calls on the same inputs, only on another thread, and the results are consumed in
