@@ -84,9 +84,11 @@ def in_order(function: Callable[[Item], Result], items: Iterable[Item], workers:
     The caller's thread draws the items (drawing may wait, e.g. for a render) and submits each to the
     pool; at most ``workers`` + 1 are submitted and not yet yielded (``workers`` running, one waiting), so
     that the items and results held at once stay bounded. A result is yielded when it is the oldest and
-    done, or when the window is full. An exception raised by ``function`` reaches the caller at its item;
-    if the caller stops early (an exception, or closing the iterator), the items not started are dropped
-    and the running ones finish before this returns.
+    done, or when the window is full. An exception raised by ``function`` reaches the caller at its item.
+    If the caller stops early (an exception, or closing the iterator), the items submitted (at most
+    ``workers`` + 1) still run to their end before this returns and no other is drawn: none is cancelled,
+    because a call may wait for the one before it (the exposure order of clsky.anim.animate), and a call
+    cancelled while the next one had started would leave that one waiting for ever.
     """
     if isinstance(workers, bool) or not isinstance(workers, numbers.Integral) or workers < 0:
         raise ValueError(f"workers must be an integer >= 0, got {workers!r}")
@@ -96,13 +98,9 @@ def in_order(function: Callable[[Item], Result], items: Iterable[Item], workers:
         return
     with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="clsky-host") as pool:
         pending = collections.deque()
-        try:
-            for item in items:
-                pending.append(pool.submit(function, item))
-                while pending and (pending[0].done() or len(pending) > workers):
-                    yield pending.popleft().result()
-            while pending:
+        for item in items:
+            pending.append(pool.submit(function, item))
+            while pending and (pending[0].done() or len(pending) > workers):
                 yield pending.popleft().result()
-        finally:
-            for future in pending:
-                future.cancel()     # not started yet: dropped; running: the pool waits for it
+        while pending:
+            yield pending.popleft().result()
