@@ -7,8 +7,8 @@
   three times, side by side: with the overlapped frame pipeline (the default: frame i + 1 rendered on a
   worker thread while host threads display and compare the frames before it and the main thread writes,
   ``clsky.anim.pipeline``) with the machine's default number of host threads
-  (``clsky.anim.animate.host_frame_workers``: one on 2 cores), with one host thread more than that, and
-  without the overlap (``clsky.anim.animate.OVERLAP_FRAMES = False``: one frame after the other).
+  (``clsky.anim.animate.host_frame_workers``: one on 2 cores), with the other choice (one thread where the
+  default is more, else two), and without the overlap (``clsky.anim.animate.OVERLAP_FRAMES = False``: one frame after the other).
 - Stage split (without the overlap, so that each stage is timed alone): :func:`clsky.anim.animate.render_animation` in this process at ``--stage-frames`` frames of
   the same size (after a warm-up), under cProfile with the process CPU clock as its timer, so that each stage's figure
   counts PoCL's worker threads while the host waits for them (the stages do not overlap). Run twice,
@@ -131,9 +131,11 @@ def main():
         args.frames, args.stage_frames, args.size = SMOKE.animation_frames, SMOKE.animation_frames, SMOKE.frame
         extra, options = ["--table-size", *map(str, SMOKE.table)], {"table_size": SMOKE.table}
     command = ["--frames", str(args.frames), "--size", str(args.size), *extra]
+    # the default number of host threads, and the other choice: one where the default is more, else two
     workers = clsky.anim.animate.host_frame_workers()
+    other = 1 if workers > 1 else 2
     variants = {f"overlapped, {workers} host thread{'s' * (workers > 1)} (default)": (True, None),
-                f"overlapped, {workers + 1} host threads": (True, workers + 1),
+                f"overlapped, {other} host thread{'s' * (other > 1)}": (True, other),
                 "one after the other": (False, None)}
     runs = {}
     for label, (overlap, host_workers) in variants.items():
@@ -158,7 +160,8 @@ def main():
              f"in a fresh process (table build, both renderers, comparison, PNG + MP4 + metrics); CPU time of the "
              f"process and its children (ffmpeg), load average before and after; with the overlapped frame "
              f"pipeline and this machine's default number of host threads for the frames' display and "
-             f"comparison, with one thread more, and with the frames one after the other, run one after the "
+             f"comparison, with one thread where that is more (else two), and with the frames one after the "
+             f"other, run one after the "
              f"other; exp(): the "
              f"machine's double8 exp() rate read before and after the run [M per CPU-second] (about 900 in its "
              f"slow state, 1500-1700 in its fast one).{load_note(highest)}{state_note(readings)}", "",

@@ -81,6 +81,8 @@ run bench_runtimes.txt "$PY" bench/bench_runtimes.py --vector-widths 8 1 --round
     --keep-outputs "$out/anim" "${smoke[@]}"
 run bench_orders.txt "$PY" bench/bench_orders.py --repeat 2 --no-readme "${smoke[@]}"
 run bench_render.txt "$PY" bench/bench_render.py --no-readme --skip-animation "${smoke[@]}"
+# the default animation with the default host threads (half the cores) against one, and one after the other
+run bench_animate.txt "$PY" bench/bench_animate.py --no-readme --stage-frames 2 "${smoke[@]}"
 
 step "the default animation's planned table: wall-clock profile and device time per kernel (a process's third build)"
 run profile.txt "$PY" - "${smoke[@]}" <<'EOF'
