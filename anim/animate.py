@@ -56,6 +56,7 @@ __all__ = ["AnimationConfig", "AnimationResult", "METHODS", "LOOKUP_NAMES", "loo
            "spectral_frame_to_linear_srgb", "three_wavelength_frame_to_linear_srgb", "frame_units",
            "THREE_WAVELENGTH_CONVERSION",
            "ray_settings", "sun_positions", "check_outputs", "render_animation", "render_frame", "convert_frames",
+           "metered_exposure",
            "memory_estimate", "display", "display_frames"]
 
 #: What is rendered: table lookup only, ray march only, or both with the comparison.
@@ -77,8 +78,8 @@ LUT4D_MAX_SIZE = (16, 128)
 #: (:func:`clsky.anim.pipeline.prefetched`); False: one after the other, on the calling thread.
 OVERLAP_FRAMES = True
 
-#: Host threads that display and compare frames side by side (:func:`clsky.anim.pipeline.in_order`) with
-#: the overlap; None: :func:`host_frame_workers`'s choice.
+#: Host threads that convert, meter, display and compare frames side by side
+#: (:func:`clsky.anim.pipeline.in_order`) with the overlap; None: :func:`host_frame_workers`'s choice.
 HOST_FRAME_WORKERS = None
 #: The most host threads :func:`host_frame_workers` chooses: each holds a frame's processing
 #: (FRAME_BYTES_PER_PIXEL of clsky.resources, 80 MB at 512 x 512).
@@ -480,7 +481,7 @@ def fitting_host_frame_workers(config: AnimationConfig, positions, device=None) 
     """:func:`host_frame_workers`, fewer where the animation's frames in flight would not fit the memory
     (:func:`memory_estimate` against ``device``'s and the host's limits); at least one with the overlap,
     whose estimate :func:`clsky.resources.check_memory` then judges."""
-    workers = host_frame_workers()
+    workers = min(host_frame_workers(), len(positions))        # no more threads than frames
     if workers > 1:
         limits = machine_limits(device)
         while workers > 1:
@@ -495,7 +496,7 @@ def fitting_host_frame_workers(config: AnimationConfig, positions, device=None) 
 def memory_estimate(config: AnimationConfig, positions, host_workers=None) -> MemoryEstimate:
     """Peak memory of the animation (:func:`clsky.resources.estimate_animation_memory`), from its
     settings alone: no pilot, no full-size camera; with ``host_workers`` frames processed at once
-    (default :func:`host_frame_workers`).
+    (default :func:`host_frame_workers`; never more than the frames).
 
     The table is the plan's sun axis (view elevations from the camera at 64 pixels, ray-march margins)
     with the higher orders kept, an upper bound of the plan (whose pilot may drop them); with
@@ -516,7 +517,8 @@ def memory_estimate(config: AnimationConfig, positions, host_workers=None) -> Me
                                      config.method,
                                      ray_settings(config), hdr_output=config.hdr is not None, batches=batches,
                                      overlapped=OVERLAP_FRAMES,
-                                     host_workers=host_frame_workers() if host_workers is None else host_workers)
+                                     host_workers=min(host_frame_workers() if host_workers is None else host_workers,
+                                                      len(positions)))
 
 
 def build_table(config: AnimationConfig, plan: Plan | None = None, ctx=None, progress=None) -> clsky.ScatteringTable:
@@ -909,33 +911,48 @@ class _ExposureOrder:
     """:meth:`clsky.anim.display.Display.next_ev`, the auto-exposure's smoothing, in frame order for frames
     shown on several threads (:func:`clsky.anim.pipeline.in_order`): frame i's call waits for frame
     i - 1's. The threads take the frames in order, so whichever frame waits, the one before it is running
-    or done. A frame that fails before its call (:meth:`fail`) breaks the order: the frames after it raise
-    instead of waiting (the caller sees the first failure first, the results coming in order)."""
+    or done. A frame that fails before its call (:meth:`fail`) or in it stops the order there: the frames
+    before it go on, those after it raise instead of waiting, and the caller, taking the results in order,
+    meets the failed frame's own error first."""
 
     def __init__(self, pipeline: display_pipeline.Display):
         self._pipeline = pipeline
         self._turn = threading.Condition()
         self._next = 0
-        self._failed = False
+        self._failed_at = None          # the first frame that failed, if any
+
+    def _stopped_before(self, index):
+        return self._failed_at is not None and self._failed_at < index
 
     def next_ev(self, index: int, metered):
         with self._turn:
-            self._turn.wait_for(lambda: self._next == index or self._failed)
+            self._turn.wait_for(lambda: self._next == index or self._stopped_before(index))
+            if self._stopped_before(index):
+                raise RuntimeError(f"frame {index} not shown: frame {self._failed_at} before it failed")
             try:
-                if self._failed:
-                    raise RuntimeError(f"frame {index} not shown: a frame before it failed")
                 return self._pipeline.next_ev(metered)
             except BaseException:
-                self._failed = True
+                self._fail(index)
                 raise
             finally:
                 self._next += 1
                 self._turn.notify_all()
 
-    def fail(self):
+    def fail(self, index: int):
+        """Frame ``index`` failed before its call."""
         with self._turn:
-            self._failed = True
+            self._fail(index)
             self._turn.notify_all()
+
+    def _fail(self, index):
+        self._failed_at = index if self._failed_at is None else min(self._failed_at, index)
+
+
+def metered_exposure(pipeline: display_pipeline.Display, hdr, valid):
+    """The auto-exposure's metered EV of one sun position's HDR frames (``Display.metered_ev`` of
+    :func:`exposure_reference`, before smoothing): what a host thread here and a frame farm's worker
+    (:mod:`clsky.anim.farm`) compute beside each other's frames; None without auto-exposure."""
+    return pipeline.metered_ev(exposure_reference(hdr), valid)
 
 
 def _local_frames(config, positions, renderer, prepared, valid, lookup, workers):
@@ -949,21 +966,28 @@ def _local_frames(config, positions, renderer, prepared, valid, lookup, workers)
         order = _ExposureOrder(pipeline)
 
         def shown(job):
-            index, sun, raw = job
+            # job: [index, sun, rendered frames], the last taken out so that they go once converted
+            index, sun, raw = job[0], job[1], job.pop()
             try:
                 hdr = convert_frames(renderer, config, raw)
-                metered = pipeline.metered_ev(exposure_reference(hdr), valid)
+                del raw
+                metered = metered_exposure(pipeline, hdr, valid)
             except BaseException:
-                order.fail()
+                order.fail(index)
                 raise
             return frame_outputs(pipeline, hdr, valid, config, sun, index, ev=order.next_ev(index, metered))
+
+        def jobs(rendered):
+            for index, (sun, raw) in enumerate(rendered):
+                job = [index, sun, raw]
+                del raw
+                yield job
 
         rendered = pipeline_module.prefetched(
             lambda sun: render_frame(renderer, prepared, sun.direction, config, lookup, convert=False),
             positions, overlap=OVERLAP_FRAMES)
         with contextlib.closing(rendered):
-            yield from pipeline_module.in_order(shown, ((index, sun, raw) for index, (sun, raw) in enumerate(rendered)),
-                                                workers)
+            yield from pipeline_module.in_order(shown, jobs(rendered), workers)
     return frames
 
 

@@ -163,11 +163,11 @@ def _meter(token, hdr):
     """Task: the metered EV of a frame's HDR frames (auto-exposure, before smoothing)."""
     from clsky._cl import host_blas_single_threaded
 
-    from .animate import exposure_reference
+    from .animate import metered_exposure
 
     state = _state(token)
     with host_blas_single_threaded():
-        return state.pipeline.metered_ev(exposure_reference(hdr), state.valid)
+        return metered_exposure(state.pipeline, hdr, state.valid)
 
 
 def _finish(token, hdr, sun, index, ev):

@@ -72,6 +72,7 @@ def prefetched(function: Callable[[Item], Result], items: Iterable[Item],
                 result = pending.result()
                 pending = worker.submit(function, items[index + 1]) if index + 1 < len(items) else None
                 yield item, result
+                del result              # not held here while the next one is awaited: the caller has it
         finally:
             if pending is not None:
                 pending.cancel()     # not started yet: dropped; running: the pool waits for it

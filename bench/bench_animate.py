@@ -54,7 +54,7 @@ STAGES = {
     "ray march (device)": [("clsky/render.py", "render_raymarch"), ("clsky/render.py", "skyview_map", -1)],
     "conversion to cd/m^2 (colorimetry)": [("anim/animate.py", "three_wavelength_frame_to_linear_srgb"),
                                            ("anim/animate.py", "spectral_frame_to_linear_srgb")],
-    # the exposure is metered beside the render (clsky.anim.pipeline), then shown by display_frames
+    # the exposure is metered on the host threads before display_frames shows the frame (clsky.anim.pipeline)
     "display (exposure, tone curve, 8 bits)": [("anim/animate.py", "display_frames"),
                                                ("anim/display.py", "metered_ev")],
     "comparison (metrics, Delta E, error image, composite)": [
@@ -160,8 +160,8 @@ def main():
              f"in a fresh process (table build, both renderers, comparison, PNG + MP4 + metrics); CPU time of the "
              f"process and its children (ffmpeg), load average before and after; with the overlapped frame "
              f"pipeline and this machine's default number of host threads for the frames' display and "
-             f"comparison, with one thread where that is more (else two), and with the frames one after the "
-             f"other, run one after the "
+             f"comparison, with the other choice of threads (one where the default is more, else two), and "
+             f"with the frames one after the other, run one after the "
              f"other; exp(): the "
              f"machine's double8 exp() rate read before and after the run [M per CPU-second] (about 900 in its "
              f"slow state, 1500-1700 in its fast one).{load_note(highest)}{state_note(readings)}", "",

@@ -358,10 +358,29 @@ def test_overlapped_frames_are_the_bytes_of_serial_ones(tmp_path, cl_context, mo
     with one host thread (the 2-core machine's choice) and with three (several frames displayed at
     once, the auto-exposure smoothed in order between render and display). 5 frames, so that with three
     host threads four frames are in flight while another is written and the last has no successor."""
+    import time
+
     import clsky.anim.animate
 
+    # earlier frames convert slower, so that with three threads later frames reach their exposure first:
+    # the smoothing must still take them in frame order
+    convert, renders = clsky.anim.animate.convert_frames, []
+    render = clsky.anim.animate.render_frame
+
+    def recorded_render(*args, **kwargs):
+        frames = render(*args, **kwargs)
+        renders.append(id(frames))
+        return frames
+
+    def slow_convert(renderer, config, frames):
+        time.sleep(0.05 * max(0, 3 - renders.index(id(frames)) % 5))
+        return convert(renderer, config, frames)
+
+    monkeypatch.setattr(clsky.anim.animate, "render_frame", recorded_render)
+    monkeypatch.setattr(clsky.anim.animate, "convert_frames", slow_convert)
     outputs = {}
     for workers in (None, 1, 3):                  # None: without the overlap
+        renders.clear()
         monkeypatch.setattr(clsky.anim.animate, "OVERLAP_FRAMES", workers is not None)
         monkeypatch.setattr(clsky.anim.animate, "HOST_FRAME_WORKERS", workers)
         config = AnimationConfig(frames=5, output=str(tmp_path / "sky.mp4"), force=workers is not None, **TINY)
@@ -394,9 +413,12 @@ def test_host_frame_workers(monkeypatch):
     monkeypatch.setattr(animate, "OVERLAP_FRAMES", False)
     assert animate.host_frame_workers() == 0
     monkeypatch.setattr(animate, "OVERLAP_FRAMES", True)
-    # memory: each thread adds a frame's processing; with room for two threads' frames but not three,
-    # four threads asked for become two
-    config = AnimationConfig(frames=2, size=1024, **{k: v for k, v in TINY.items() if k != "size"})
+    # memory: each thread adds a frame's processing, up to one thread a frame; with room for two threads'
+    # frames but not three, four threads asked for become two
+    short = AnimationConfig(frames=2, size=1024, **{k: v for k, v in TINY.items() if k != "size"})
+    assert animate.memory_estimate(short, animate.sun_positions(short), 4).peak_bytes() == \
+        animate.memory_estimate(short, animate.sun_positions(short), 2).peak_bytes()
+    config = AnimationConfig(frames=6, size=1024, **{k: v for k, v in TINY.items() if k != "size"})
     positions = animate.sun_positions(config)
     peaks = {n: animate.memory_estimate(config, positions, n).peak_bytes() for n in (1, 2, 3, 4)}
     assert peaks[1] < peaks[2] < peaks[3] < peaks[4]
@@ -458,13 +480,50 @@ def test_exposure_order_after_a_failure_raises_instead_of_waiting():
         thread = threading.Thread(target=waiting, args=(order, 1))
         thread.start()
         if cause == "fail":
-            order.fail()
+            order.fail(0)
         else:
             with pytest.raises(ValueError, match="metering"):
                 order.next_ev(0, 0.0)
         thread.join(timeout=10)
         assert not thread.is_alive()
-    assert errors == ["frame 1 not shown: a frame before it failed"] * 2
+    assert errors == ["frame 1 not shown: frame 0 before it failed"] * 2
+
+
+def test_exposure_order_a_later_failure_lets_the_frames_before_it_go_on():
+    """Frame 2 fails while frame 1 waits for frame 0: frames 0 and 1 are smoothed as usual, frame 3 raises
+    naming frame 2 (the caller, taking results in order, meets frame 2's own error first)."""
+    import threading
+
+    from clsky.anim.animate import _ExposureOrder
+
+    class Recording:
+        def __init__(self):
+            self.seen = []
+
+        def next_ev(self, metered):
+            self.seen.append(metered)
+            return metered
+
+    pipeline = Recording()
+    order = _ExposureOrder(pipeline)
+    results = {}
+
+    def frame(index):
+        try:
+            results[index] = order.next_ev(index, float(index))
+        except RuntimeError as error:
+            results[index] = str(error)
+
+    waiting = [threading.Thread(target=frame, args=(index,)) for index in (1, 3)]
+    for thread in waiting:
+        thread.start()
+    order.fail(2)
+    frame(0)
+    for thread in waiting:
+        thread.join(timeout=10)
+    assert not any(thread.is_alive() for thread in waiting)
+    assert pipeline.seen == [0.0, 1.0]
+    assert results == {0: 0.0, 1: 1.0, 3: "frame 3 not shown: frame 2 before it failed"}
 
 
 def test_a_frame_failing_on_a_host_thread_stops_the_animation_with_its_error(tmp_path, cl_context, monkeypatch):
@@ -472,16 +531,24 @@ def test_a_frame_failing_on_a_host_thread_stops_the_animation_with_its_error(tmp
     frames after it, waiting for its exposure, stop too) and writes nothing."""
     import clsky.anim.animate
 
-    convert = clsky.anim.animate.convert_frames
-    calls = []
+    import time
+
+    convert, render, renders = clsky.anim.animate.convert_frames, clsky.anim.animate.render_frame, []
+
+    def recorded_render(*args, **kwargs):
+        frames = render(*args, **kwargs)
+        renders.append(id(frames))
+        return frames
 
     def failing(renderer, config, frames):
-        calls.append(None)
-        if len(calls) == 3:
+        index = renders.index(id(frames))
+        if index == 2:
             raise ArithmeticError("conversion of the third frame")
+        time.sleep(0.1 if index < 2 else 0.0)     # frames 0 and 1 still converting when frame 2 fails
         return convert(renderer, config, frames)
 
     monkeypatch.setattr(clsky.anim.animate, "HOST_FRAME_WORKERS", 3)
+    monkeypatch.setattr(clsky.anim.animate, "render_frame", recorded_render)
     monkeypatch.setattr(clsky.anim.animate, "convert_frames", failing)
     config = AnimationConfig(frames=6, output=str(tmp_path / "sky.mp4"), **TINY)
     with pytest.raises(ArithmeticError, match="third frame"):
