@@ -46,15 +46,17 @@ def test_no_items():
     assert list(prefetched(lambda item: item, [])) == []
 
 
-def test_an_exception_reaches_the_caller_at_its_item():
-    def function(item):
-        if item == 2:
-            raise ValueError("item 2")
-        return item
+def failing_at_two(item):
+    """item, but ValueError for item 2 (the exception tests of both schedulers)."""
+    if item == 2:
+        raise ValueError("item 2")
+    return item
 
+
+def test_an_exception_reaches_the_caller_at_its_item():
     received = []
     with pytest.raises(ValueError, match="item 2"):
-        for item, result in prefetched(function, range(4)):
+        for item, result in prefetched(failing_at_two, range(4)):
             received.append(result)
     assert received == [0, 1]
 
@@ -114,14 +116,9 @@ def test_in_order_refuses_a_bad_worker_count(workers):
 
 @pytest.mark.parametrize("workers", [0, 1, 3])
 def test_in_order_exception_reaches_the_caller_at_its_item(workers):
-    def function(item):
-        if item == 2:
-            raise ValueError("item 2")
-        return item
-
     received = []
     with pytest.raises(ValueError, match="item 2"):
-        for result in in_order(function, range(6), workers):
+        for result in in_order(failing_at_two, range(6), workers):
             received.append(result)
     assert received == [0, 1]
 
