@@ -13,12 +13,12 @@ overlap.
 Host threads. The host half of the default animation's 512 x 512 frame is about 0.25 CPU-s on one
 thread (conversion 47, display 78, comparison 55 CPU-ms on the 2-core machine), and the device half
 shrinks with the device: a few ms on a GPU, about 0.5 CPU-s spread over the cores of a CPU (30 ms on 16,
-if PoCL used them all); one host thread then bounds the animation (on the H200 of README "GPUs", 45-49 s for the default animation whose ray march took
-3-7 ms a frame). :func:`in_order` gives the host halves of several frames to a pool of threads and hands
-their results back in frame order; the one step that must follow frame order, the auto-exposure's
-smoothing (``Display.next_ev``), waits on each thread for the frame before (``clsky.anim.animate.
-_ExposureOrder``) between the metering and the display, as a frame farm's client smooths the EVs its
-workers metered (:mod:`clsky.anim.farm`).
+if PoCL used them all); one host thread then bounds the animation (on the H200 of README "GPUs",
+45-49 s for the default animation whose ray march took 3-7 ms a frame). :func:`in_order` gives the host
+halves of several frames to a pool of threads and hands their results back in frame order; the one step
+that must follow frame order, the auto-exposure's smoothing (``Display.next_ev``), waits on each thread
+for the frame before (``clsky.anim.animate._ExposureOrder``) between the metering and the display, as a
+frame farm's client smooths the EVs its workers metered (:mod:`clsky.anim.farm`).
 
 Who owns the cores (README, "Speed"): PoCL's worker threads render on all of them; the host halves run
 on ``clsky.anim.animate.host_frame_workers`` threads (one on the 2-core machine), their BLAS limited to

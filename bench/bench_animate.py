@@ -8,7 +8,8 @@
   worker thread while host threads display and compare the frames before it and the main thread writes,
   ``clsky.anim.pipeline``) with the machine's default number of host threads
   (``clsky.anim.animate.host_frame_workers``: one on 2 cores), with the other choice (one thread where the
-  default is more, else two), and without the overlap (``clsky.anim.animate.OVERLAP_FRAMES = False``: one frame after the other).
+  default is more, else two), and without the overlap (``clsky.anim.animate.OVERLAP_FRAMES = False``:
+  one frame after the other).
 - Stage split (without the overlap, so that each stage is timed alone): :func:`clsky.anim.animate.render_animation` in this process at ``--stage-frames`` frames of
   the same size (after a warm-up), under cProfile with the process CPU clock as its timer, so that each stage's figure
   counts PoCL's worker threads while the host waits for them (the stages do not overlap). Run twice,
