@@ -136,5 +136,51 @@ for kernel, total in seconds.most_common():
 print(f"  all kernels              {sum(seconds.values()):8.3f}; launches not profiled: {unprofiled}")
 EOF
 
+step "copies: the build's rectangular reads and writes (3 or 6 of 8 doubles a row) against contiguous ones"
+# The planned build moves every order's nodes and its first gather with clEnqueue{Read,Write}BufferRect,
+# rows of 24 or 48 bytes out of 64 (clsky/azimuth.py): cheap on a CPU device; on a GPU perhaps not.
+run copies.txt "$PY" - "${smoke[@]}" <<'EOF'
+import sys, time
+import numpy as np
+import pyopencl as cl
+from clsky import _cl
+
+rows = 4096 if "--smoke" in sys.argv else 32 * 256 * 208          # the planned table's cells, one node
+ctx = _cl.make_context()
+queue = cl.CommandQueue(ctx)
+device = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, rows * 64)
+cl.enqueue_fill_buffer(queue, device, np.zeros(1), 0, rows * 64).wait()
+padded = np.empty((rows, 8))
+print(f"{_cl.describe_device(queue.device)}: {rows} rows of 8 doubles ({rows * 64 / 2**20:.0f} MiB), best of 3")
+
+
+def rectangle(channels, host, read):
+    source, target = (device, host) if read else (host, device)
+    cl.enqueue_copy(queue, target, source, buffer_origin=(0, 0, 0), host_origin=(0, 0, 0),
+                    region=(channels * 8, rows, 1), buffer_pitches=(64, 0), host_pitches=(channels * 8, 0),
+                    is_blocking=True)
+
+
+def contiguous(channels, host, read):
+    if read:
+        cl.enqueue_copy(queue, padded, device, is_blocking=True)
+        host[...] = padded[:, :channels]
+    else:
+        padded[:, :channels] = host
+        cl.enqueue_copy(queue, device, padded, is_blocking=True)
+
+
+for channels in (3, 6):
+    host = np.zeros((rows, channels))
+    for read in (True, False):
+        for label, copy in (("rectangular", rectangle), ("contiguous + host copy", contiguous)):
+            seconds = []
+            for _ in range(3):
+                start = time.perf_counter()
+                copy(channels, host, read)
+                seconds.append(time.perf_counter() - start)
+            print(f"  {'read' if read else 'write'} {channels} of 8 doubles, {label:24s} {1000 * min(seconds):8.1f} ms")
+EOF
+
 step "done in $(( $(date +%s) - start )) s: $out"
 exit $failed

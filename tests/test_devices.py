@@ -122,8 +122,8 @@ def test_vector_width_is_one_lane_on_a_gpu_and_double8_elsewhere():
 def test_gpu_checks_script_runs_and_keeps_what_it_measured(tmp_path):
     """scripts/gpu_checks.sh, the checks a session with a GPU runs (README "Speed", GPUs), at its smoke
     sizes on whatever device clsky picks here (about 40 s on PoCL): every step's log, the kept animations of
-    both vector widths, the profile with every launch's device time; and it refuses an output directory
-    that exists."""
+    both vector widths, the profile with every launch's device time, the copies' timings; and it refuses
+    an output directory that exists."""
     root = pathlib.Path(__file__).resolve().parent.parent
     script = root / "scripts" / "gpu_checks.sh"
     out = tmp_path / "checks"
@@ -138,6 +138,7 @@ def test_gpu_checks_script_runs_and_keeps_what_it_measured(tmp_path):
     assert "| run | frames | wall [s] | CPU [s] |" in (out / "bench_animate.txt").read_text()
     profile = (out / "profile.txt").read_text()
     assert "(first_gather)" in profile and "  scatter " in profile and "launches not profiled: 0" in profile
+    assert (out / "copies.txt").read_text().count(" ms") == 8          # 3 and 6 channels, read and write, 2 ways
     for configuration in ("0", "1"):
         assert (out / "anim" / configuration / "sky_metrics.csv").is_file()
         assert len(list((out / "anim" / configuration / "sky_frames").glob("*.png"))) == 2
