@@ -966,7 +966,9 @@ def _local_frames(config, positions, renderer, prepared, valid, lookup, workers)
         order = _ExposureOrder(pipeline)
 
         def shown(job):
-            # job: [index, sun, rendered frames], the last taken out so that they go once converted
+            # job: [index, sun, rendered frames], the last taken out of it so that they go once converted and
+            # no longer referenced where they were drawn (the last frame drawn stays referenced there, by the
+            # render's generator, until the next draw: the frame the memory estimate counts as waiting)
             index, sun, raw = job[0], job[1], job.pop()
             try:
                 hdr = convert_frames(renderer, config, raw)

@@ -21,7 +21,8 @@ for the frame before (``clsky.anim.animate._ExposureOrder``) between the meterin
 frame farm's client smooths the EVs its workers metered (:mod:`clsky.anim.farm`).
 
 Who owns the cores (README, "Speed"): PoCL's worker threads render on all of them; the host halves run
-on ``clsky.anim.animate.host_frame_workers`` threads (one on the 2-core machine), their BLAS limited to
+on ``clsky.anim.animate.fitting_host_frame_workers`` threads (half the cores, fewer where memory or the
+frame count says so; one on the 2-core machine), their BLAS limited to
 one thread each (:func:`clsky._cl.host_blas_single_threaded`); ffmpeg keeps x264's own threads (its
 output may depend on their number). On two cores the device half is the larger (about 0.5 CPU-s of a
 0.75 CPU-s frame), so PoCL keeping both cores while the host thread takes its share by time slicing
@@ -85,7 +86,9 @@ def in_order(function: Callable[[Item], Result], items: Iterable[Item], workers:
     The caller's thread draws the items (drawing may wait, e.g. for a render) and submits each to the
     pool; at most ``workers`` + 1 are submitted and not yet yielded (``workers`` running, one waiting), so
     that the items and results held at once stay bounded. A result is yielded when it is the oldest and
-    done, or when the window is full. An exception raised by ``function`` reaches the caller at its item.
+    done, or when the window is full. An exception raised by ``function`` reaches the caller at its item;
+    one raised while an item is drawn (an Exception: a failed render) reaches it after the results of the
+    items submitted before it, so that the earliest failure is the one met, as one after the other.
     If the caller stops early (an exception, or closing the iterator), the items submitted (at most
     ``workers`` + 1) still run to their end before this returns and no other is drawn: none is cancelled,
     because a call may wait for the one before it (the exposure order of clsky.anim.animate), and a call
@@ -97,9 +100,18 @@ def in_order(function: Callable[[Item], Result], items: Iterable[Item], workers:
         for item in items:
             yield function(item)
         return
+    items = iter(items)
     with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="clsky-host") as pool:
         pending = collections.deque()
-        for item in items:
+        while True:
+            try:
+                item = next(items)
+            except StopIteration:
+                break
+            except Exception:
+                while pending:           # the items before it first: their results, or the earliest error
+                    yield pending.popleft().result()
+                raise
             pending.append(pool.submit(function, item))
             while pending and (pending[0].done() or len(pending) > workers):
                 yield pending.popleft().result()

@@ -62,8 +62,10 @@ FIRST_ORDERS, ORDERS_PER_DECADE = 3, 1.6
 #: with reused arrays; on 2026-12-02, 488 / 334 / 336 and the constants 340 / 210 / 210 / 210).
 FRAME_BYTES_PER_PIXEL = {"compare": 305, "lut": 185, "raymarch": 185, "skyview": 205}
 #: Host bytes per pixel that an animation's overlapped pipeline (clsky/anim/pipeline.py) adds: the next
-#: frame, rendered on the worker thread while this one is processed (its downloads, HDR frames and
-#: conversion beside this frame's processing). Measured as FRAME_BYTES_PER_PIXEL, with and without the
+#: frame, rendered on the worker thread while this one is processed (its downloads, HDR frames and, when
+#: measured, its conversion beside this frame's processing: since the host threads of 2026-12-04 the
+#: conversion is the host threads', so this now overstates the next frame; kept, the slope test measuring
+#: the estimate 1.01-1.15 of the peak's growth). Measured as FRAME_BYTES_PER_PIXEL, with and without the
 #: overlap, the largest of 3 runs each (the peak depends on how the two threads' peaks meet): 175-187
 #: (compare), 121-170 (lut), 172-178 (raymarch), 144-154 (skyview); 2026-12-04, after the host half's
 #: rewrite (2026-12-02: 270-310, 130-195, 210, 145-195 and the constants 310 / 200 / 215 / 200).

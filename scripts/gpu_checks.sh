@@ -178,6 +178,7 @@ for channels in (3, 6):
             for _ in range(3):
                 start = time.perf_counter()
                 copy(channels, host, read)
+                queue.finish()           # a blocking write returns when the host array is free, maybe sooner
                 seconds.append(time.perf_counter() - start)
             print(f"  {'read' if read else 'write'} {channels} of 8 doubles, {label:24s} {1000 * min(seconds):8.1f} ms")
 EOF

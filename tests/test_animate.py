@@ -350,6 +350,12 @@ def test_one_blas_thread_gives_the_same_bytes_as_two(tmp_path, cl_context, monke
     assert len(frames) == 2 and outputs["two threads"] == (frames, csv_bytes, rows, temporal)
 
 
+def _position(renders, frames):
+    """Where ``frames`` (a render's dict, held in ``renders`` so that no other object takes its id) came
+    in render order: its frame index."""
+    return next(index for index, rendered in enumerate(renders) if rendered is frames)
+
+
 def test_overlapped_frames_are_the_bytes_of_serial_ones(tmp_path, cl_context, monkeypatch):
     """The overlapped frame pipeline (clsky.anim.pipeline: frame i + 1 rendered on a worker thread while
     host threads display and compare the frames before it and the caller writes) writes byte for byte
@@ -369,11 +375,11 @@ def test_overlapped_frames_are_the_bytes_of_serial_ones(tmp_path, cl_context, mo
 
     def recorded_render(*args, **kwargs):
         frames = render(*args, **kwargs)
-        renders.append(id(frames))
+        renders.append(frames)
         return frames
 
     def slow_convert(renderer, config, frames):
-        time.sleep(0.05 * max(0, 3 - renders.index(id(frames)) % 5))
+        time.sleep(0.05 * max(0, 3 - _position(renders, frames) % 5))
         return convert(renderer, config, frames)
 
     monkeypatch.setattr(clsky.anim.animate, "render_frame", recorded_render)
@@ -537,11 +543,11 @@ def test_a_frame_failing_on_a_host_thread_stops_the_animation_with_its_error(tmp
 
     def recorded_render(*args, **kwargs):
         frames = render(*args, **kwargs)
-        renders.append(id(frames))
+        renders.append(frames)
         return frames
 
     def failing(renderer, config, frames):
-        index = renders.index(id(frames))
+        index = _position(renders, frames)
         if index == 2:
             raise ArithmeticError("conversion of the third frame")
         time.sleep(0.1 if index < 2 else 0.0)     # frames 0 and 1 still converting when frame 2 fails

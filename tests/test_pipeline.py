@@ -148,3 +148,33 @@ def test_in_order_stopping_early_finishes_the_submitted_calls_and_draws_no_other
     assert sorted(done) == list(range(len(drawn))) and max(drawn) <= 3, (done, drawn)
     time.sleep(0.05)
     assert calls == done          # nothing ran after close() returned
+
+
+@pytest.mark.parametrize("workers", [0, 1, 3])
+def test_in_order_a_failure_drawing_an_item_comes_after_the_earlier_items_results(workers):
+    """Item 1's call fails, then drawing item 3 fails (a render) while the calls still run (they take
+    50 ms, so that with three threads all three are submitted before any ends): the caller meets item
+    1's error first, as one after the other, not the draw's."""
+    import time
+
+    def items():
+        yield from range(3)
+        raise RuntimeError("drawing item 3")
+
+    def function(item):
+        time.sleep(0.05)
+        if item == 1:
+            raise ValueError("item 1")
+        return item
+
+    received = []
+    with pytest.raises(ValueError, match="item 1"):
+        for result in in_order(function, items(), workers):
+            received.append(result)
+    assert received == [0]
+    # without an earlier failure, the draw's own error after every earlier result
+    received = []
+    with pytest.raises(RuntimeError, match="drawing item 3"):
+        for result in in_order(lambda item: item, items(), workers):
+            received.append(result)
+    assert received == [0, 1, 2]
