@@ -78,12 +78,44 @@ def host_blas_single_threaded():
 
 def host_cores() -> int:
     """The CPU cores this process may run on (its affinity mask where the system has one, else the
-    machine's count): how many host threads a stretch of host work with the device idle may use
-    (:meth:`clsky.azimuth.HarmonicGather.first_gather`)."""
+    machine's count), at most what a cgroup CPU quota allows (:func:`cgroup_cpu_limit`: a container
+    limited to 2 CPUs on a 64-core host gets 2): how many host threads a stretch of host work may use
+    (:meth:`clsky.azimuth.HarmonicGather.first_gather`, ``clsky.anim.animate.host_frame_workers``)."""
     try:
-        return max(1, len(os.sched_getaffinity(0)))
+        cores = max(1, len(os.sched_getaffinity(0)))
     except AttributeError:                          # no affinity masks (macOS, Windows)
-        return max(1, os.cpu_count() or 1)
+        cores = max(1, os.cpu_count() or 1)
+    limit = cgroup_cpu_limit()
+    return cores if limit is None else min(cores, limit)
+
+
+#: Where Linux states a cgroup's CPU quota: v2 "QUOTA PERIOD" ("max PERIOD": none), v1 the quota (-1: none)
+#: and the period, in microseconds (the process's own cgroup, as a container sees it).
+CGROUP_CPU_FILES = {"v2": pathlib.Path("/sys/fs/cgroup/cpu.max"),
+                    "v1_quota": pathlib.Path("/sys/fs/cgroup/cpu/cpu.cfs_quota_us"),
+                    "v1_period": pathlib.Path("/sys/fs/cgroup/cpu/cpu.cfs_period_us")}
+
+
+def cgroup_cpu_limit() -> int | None:
+    """The CPUs a cgroup CPU quota allows this process, ceil(quota / period) and at least 1; None where
+    there is no quota or none can be read (cgroup v2's cpu.max, else v1's cfs files)."""
+    try:
+        quota, period = CGROUP_CPU_FILES["v2"].read_text().split()[:2]
+        if quota == "max":
+            return None
+    except (OSError, ValueError):
+        try:
+            quota = CGROUP_CPU_FILES["v1_quota"].read_text().strip()
+            period = CGROUP_CPU_FILES["v1_period"].read_text().strip()
+        except OSError:
+            return None
+    try:
+        quota, period = int(quota), int(period)
+    except ValueError:
+        return None
+    if quota <= 0 or period <= 0:
+        return None
+    return max(1, -(-quota // period))
 
 
 # PoCL's kernel cache -----------------------------------------------------------------------------------

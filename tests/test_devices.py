@@ -69,6 +69,30 @@ def test_bad_pyopencl_ctx_is_a_clear_error(monkeypatch):
         _cl.make_context()
 
 
+@pytest.mark.parametrize("files, expected", [
+    ({"v2": "200000 100000\n"}, 2),
+    ({"v2": "150000 100000\n"}, 2),                  # 1.5 CPUs: two threads may run at once
+    ({"v2": "50000 100000\n"}, 1),
+    ({"v2": "max 100000\n"}, None),
+    ({"v1_quota": "-1\n", "v1_period": "100000\n"}, None),
+    ({"v1_quota": "300000\n", "v1_period": "100000\n"}, 3),
+    ({"v2": "garbled"}, None),
+    ({}, None),
+])
+def test_cgroup_cpu_quota_limits_the_host_threads(tmp_path, monkeypatch, files, expected):
+    """A container's CPU quota (cgroup v2 cpu.max, else v1's cfs files) caps host_cores, which the affinity
+    mask alone would not: a 2-CPU container on a many-core host must not start a thread per core."""
+    paths = {}
+    for name in _cl.CGROUP_CPU_FILES:
+        paths[name] = tmp_path / name
+        if name in files:
+            paths[name].write_text(files[name])
+    monkeypatch.setattr(_cl, "CGROUP_CPU_FILES", paths)
+    assert _cl.cgroup_cpu_limit() == expected
+    monkeypatch.setattr(_cl.os, "sched_getaffinity", lambda pid: set(range(64)), raising=False)
+    assert _cl.host_cores() == (64 if expected is None else expected)
+
+
 def test_describe_device_names_the_pocl_build():
     assert _cl.describe_device(FakeDevice("OpenCL 3.0 PoCL 3.1+debian  Linux")).endswith("(PoCL 3.1+debian)")
 
