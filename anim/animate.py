@@ -477,20 +477,22 @@ def host_frame_workers() -> int:
     return max(1, min(MAX_HOST_FRAME_WORKERS, host_cores() // 2))
 
 
-def fitting_host_frame_workers(config: AnimationConfig, positions, device=None) -> int:
-    """:func:`host_frame_workers`, fewer where the animation's frames in flight would not fit the memory
-    (:func:`memory_estimate` against ``device``'s and the host's limits); at least one with the overlap,
-    whose estimate :func:`clsky.resources.check_memory` then judges."""
-    workers = min(host_frame_workers(), len(positions))        # no more threads than frames
-    if workers > 1:
-        limits = machine_limits(device)
-        while workers > 1:
-            try:
-                check_memory(memory_estimate(config, positions, workers), limits)
-                break
-            except InsufficientMemoryError:
-                workers -= 1
-    return workers
+def check_animation_memory(config: AnimationConfig, positions, device=None, options=None) -> int:
+    """Refuse, before any work, an animation that does not fit the machine (:func:`memory_estimate`
+    against ``device``'s and the host's limits, :func:`clsky.resources.check_memory` with its
+    ``options``), and return the host threads its frames may use: :func:`host_frame_workers` (no more
+    than the frames), fewer where the frames in flight would not fit, InsufficientMemoryError where
+    even one does not."""
+    workers = min(host_frame_workers(), len(positions))
+    limits = machine_limits(device)
+    while True:
+        try:
+            check_memory(memory_estimate(config, positions, workers), limits, options=options)
+            return workers
+        except InsufficientMemoryError:
+            if workers <= 1:
+                raise
+            workers -= 1
 
 
 def memory_estimate(config: AnimationConfig, positions, host_workers=None) -> MemoryEstimate:
@@ -865,8 +867,10 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
     start = time.perf_counter()
     positions = sun_positions(config)
     check_outputs(config, len(positions))
-    workers = fitting_host_frame_workers(config, positions, device_of(ctx)) if farm is None else 1
-    check_memory(memory_estimate(config, positions, workers), device=device_of(ctx))
+    if farm is None:
+        workers = check_animation_memory(config, positions, device_of(ctx))
+    else:
+        check_memory(memory_estimate(config, positions, 1), device=device_of(ctx))
     camera = _camera(config)
     directions, valid = camera.directions()
     plan = plan_animation(config, positions, directions, valid, ctx=ctx)

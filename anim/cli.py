@@ -219,13 +219,11 @@ def _memory_options(args, config):
 
 def _check_memory(args, config, positions):
     """Refuse, before any work, an animation or frame that does not fit the machine (exit 2, one line)."""
-    from clsky.resources import check_memory, device_of
+    from clsky.resources import device_of
 
-    from .animate import fitting_host_frame_workers, memory_estimate
+    from .animate import check_animation_memory
 
-    device = device_of()
-    workers = fitting_host_frame_workers(config, positions, device)       # fewer frames at once where that fits
-    check_memory(memory_estimate(config, positions, workers), device=device, options=_memory_options(args, config))
+    check_animation_memory(config, positions, device_of(), options=_memory_options(args, config))
 
 
 def run_animate(args):

@@ -21,7 +21,7 @@ for the frame before (``clsky.anim.animate._ExposureOrder``) between the meterin
 frame farm's client smooths the EVs its workers metered (:mod:`clsky.anim.farm`).
 
 Who owns the cores (README, "Speed"): PoCL's worker threads render on all of them; the host halves run
-on ``clsky.anim.animate.fitting_host_frame_workers`` threads (half the cores, fewer where memory or the
+on ``clsky.anim.animate.check_animation_memory`` threads (half the cores, fewer where memory or the
 frame count says so; one on the 2-core machine), their BLAS limited to
 one thread each (:func:`clsky._cl.host_blas_single_threaded`); ffmpeg keeps x264's own threads (its
 output may depend on their number). On two cores the device half is the larger (about 0.5 CPU-s of a

@@ -430,9 +430,10 @@ def test_host_frame_workers(monkeypatch):
     assert peaks[1] < peaks[2] < peaks[3] < peaks[4]
     room = (peaks[2] + peaks[3]) // 2
     monkeypatch.setattr(animate, "machine_limits", lambda device=None: resources.MemoryLimits(room))
-    assert animate.fitting_host_frame_workers(config, positions) == 2
+    assert animate.check_animation_memory(config, positions) == 2
     monkeypatch.setattr(animate, "machine_limits", lambda device=None: resources.MemoryLimits(peaks[1] // 2))
-    assert animate.fitting_host_frame_workers(config, positions) == 1       # check_memory then refuses it
+    with pytest.raises(resources.InsufficientMemoryError):                  # not even one thread's frames fit
+        animate.check_animation_memory(config, positions)
 
 
 def test_exposure_order_calls_next_ev_in_frame_order_whatever_thread_comes_first():
