@@ -403,6 +403,24 @@ def default_vector_width(device) -> int:
     return 1 if device.type & cl.device_type.GPU else 8
 
 
+#: How a padded device table's rows of 8 values come to the host when only 3 or 6 of them are wanted (the
+#: orders' nodes and the gathered sum, :mod:`clsky.azimuth`): None (the default) for each device's own
+#: (:func:`default_rectangular_reads`); True, rectangular reads (clEnqueueReadBufferRect, rows of 3 or 6
+#: values straight into the host table); False, a packing kernel on the device and one contiguous read.
+#: Rectangular reads are the faster on PoCL here (7-11 ms a node of 1.7 million rows, against 22-34 ms for
+#: a contiguous read and a host copy); on an NVIDIA H200 (2026-12-04) rows of 3 doubles took 414 ms a node,
+#: most of the planned table's 10 s there (README "Speed", GPUs). The same bits either way
+#: (tests/test_azimuth.py).
+RECTANGULAR_READS = None
+
+
+def rectangular_reads(device) -> bool:
+    """:data:`RECTANGULAR_READS` if set, else True on a CPU device and False on any other."""
+    if RECTANGULAR_READS is not None:
+        return bool(RECTANGULAR_READS)
+    return bool(device.type & cl.device_type.CPU)
+
+
 #: The build option that makes float32 division and square roots correctly rounded, as float64's always
 #: are. Without it OpenCL allows them 2.5 and 3 ulp, and NVIDIA's compiler takes that: on an H200
 #: (2026-12-04) float32 frames then differed from float64 ones by up to 1.27e-5 of the frame's maximum

@@ -508,11 +508,12 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
 
     Every engine runs on one queue and takes its device arrays from one pool
     (:func:`clsky._cl.memory_pool`): an order reuses the buffers of the one before (they are the same
-    sizes) instead of faulting in fresh memory. The nodes come to the host on a second queue, one
-    rectangular read of their 3 channels a node (no padded copy on the host), into one reused host
-    table, while the first queue gathers them: what ``scatter`` returns is valid until its next call.
-    The first gather goes up and the gathered sum comes down by rectangular copies too. The pool goes
-    with the backend."""
+    sizes) instead of faulting in fresh memory. The nodes come to the host on a second queue, their 3
+    channels (no padded copy on the host; by rectangular reads on a CPU, packed on the device and read
+    at once elsewhere: :func:`clsky._cl.rectangular_reads`), into one reused host table, while the first
+    queue gathers them: what ``scatter`` returns is valid until its next call. The gathered sum comes down
+    the same way, and the first gather goes up by a rectangular write (rows of 6 values into rows of 8:
+    17 ms on an H200, no slower than a contiguous write). The pool goes with the backend."""
     import pyopencl as cl
     import pyopencl.array as cla
 
@@ -524,6 +525,7 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     pool = _cl.memory_pool(queue)
     engine = MultipleScatteringEngine(settings, fast_math=fast_math, queue=queue, allocator=pool)
     copy_queue = cl.CommandQueue(engine.ctx)     # the nodes' downloads overlap the order's gathers
+    rectangular = _cl.rectangular_reads(queue.device)
     cosines = np.cos(azimuth_nodes(settings.azimuth_harmonics))
     width, height, depth = settings.size
     single = np.empty((cosines.size, depth, height, width, 6))
@@ -536,23 +538,34 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     transform_rows = [engine.upload_matrices(row) for row in transform]
     host_nodes = []         # the host table (M + 1, D, H, W, 3) that scatter returns (allocated once)
 
-    def download(table_d, into, channels, wait_for=None):
-        """Enqueues into[n] = table_d[n, ..., :channels] for every slab n of the padded device table
-        (N, D, H, W, 8) on the copy queue, after the events ``wait_for``: one rectangular read a slab (rows
-        of ``channels`` values out of rows of 8, clEnqueueReadBufferRect) straight into ``into``, through
-        a host table of the device's type for a float32 device. Returns a callable that waits for the
-        reads and returns ``into``."""
-        size = engine.dtype.itemsize
-        rows = int(np.prod(table_d.shape[1:-1]))                       # cells of a slab
+    def download(table_d, into, channels):
+        """Enqueues into = table_d[..., :channels] for the padded device table (N, D, H, W, 8) on the copy
+        queue, after every command enqueued on the queue so far, straight into ``into`` (through a host table
+        of the device's type for a float32 device). Where :func:`clsky._cl.rectangular_reads` holds (CPUs),
+        one rectangular read a slab n (rows of ``channels`` values out of rows of 8,
+        clEnqueueReadBufferRect); elsewhere the device packs the channels into a contiguous array of the
+        pool (``MultipleScatteringEngine.pack_channels``, on the queue) and one contiguous read takes it all.
+        Returns a callable that waits for the reads and returns ``into``."""
         target = into if into.dtype == engine.dtype else np.empty(into.shape, engine.dtype)
-        reads = [cl.enqueue_copy(copy_queue, target[n], table_d.data, is_blocking=False, wait_for=wait_for,
-                                 buffer_origin=(table_d.offset + n * rows * 8 * size, 0, 0), host_origin=(0, 0, 0),
-                                 region=(channels * size, rows, 1), buffer_pitches=(8 * size, 0),
-                                 host_pitches=(channels * size, 0))
-                 for n in range(table_d.shape[0])]
+        held = []           # the packed array, until its read is done (in the pool sooner, a kernel could reuse it)
+        if rectangular:
+            size = engine.dtype.itemsize
+            rows = int(np.prod(table_d.shape[1:-1]))                       # cells of a slab
+            after = [cl.enqueue_marker(queue)]
+            reads = [cl.enqueue_copy(copy_queue, target[n], table_d.data, is_blocking=False, wait_for=after,
+                                     buffer_origin=(table_d.offset + n * rows * 8 * size, 0, 0),
+                                     host_origin=(0, 0, 0),
+                                     region=(channels * size, rows, 1), buffer_pitches=(8 * size, 0),
+                                     host_pitches=(channels * size, 0))
+                     for n in range(table_d.shape[0])]
+        else:
+            held.append(cla.empty(queue, into.shape, engine.dtype, allocator=pool))
+            packed = engine.pack_channels(table_d, channels, held[0])
+            reads = [cl.enqueue_copy(copy_queue, target, held[0].data, is_blocking=False, wait_for=[packed])]
 
         def on_host():
             cl.wait_for_events(reads)
+            held.clear()
             if target is not into:
                 np.copyto(into, target)
             return into
@@ -588,7 +601,7 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
                                   cos_azimuth=c, out=nodes_d, node=node)
         if not host_nodes:
             host_nodes.append(np.empty(nodes_d.shape[:-1] + (3,)))
-        return download(nodes_d, host_nodes[0], 3, wait_for=[cl.enqueue_marker(queue)]), nodes_d   # after the scatters
+        return download(nodes_d, host_nodes[0], 3), nodes_d                # after the scatters
 
     def gather(nodes_d):
         """G_m = A_m L_m, L_m = sum_n H[m, n] L(phi_n) (padded: channels 0-2 and 3-5 both hold L), each
@@ -603,7 +616,7 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
         return gathered_d.copy() if total is None else engine.add_into(total, gathered_d, scale)
 
     def to_host(gathered_d):
-        return download(gathered_d, np.empty(gathered_d.shape[:-1] + (6,)), 6, wait_for=[cl.enqueue_marker(queue)])()
+        return download(gathered_d, np.empty(gathered_d.shape[:-1] + (6,)), 6)()
 
     def stopping_test(single, keep_previous):
         """On the device beside the orders (clsky.stopping; the same numbers), where it has fp64, its

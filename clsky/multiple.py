@@ -413,6 +413,21 @@ class MultipleScatteringEngine(_cl.Engine):
         self._record("combine_nodes", event)
         return out
 
+    def pack_channels(self, padded, channels, out):
+        """out = padded[..., :channels] as one contiguous device array (kernels/multiple.cl: pack_channels):
+        the padded device table ``padded`` (..., 8) and ``out`` (..., channels) of the same leading shape,
+        1 <= channels <= 8. Returns the kernel's event (``out`` is ready once it completes), for a read on
+        another queue to wait for."""
+        if (padded.shape[-1] != 8 or out.shape != padded.shape[:-1] + (channels,) or not 1 <= channels <= 8
+                or out.dtype != self.dtype or padded.dtype != self.dtype):
+            raise ValueError(f"padded (..., 8) and out (..., channels) must agree, 1 <= channels <= 8, in "
+                             f"{self.dtype}; got {padded.shape} {padded.dtype}, {out.shape} {out.dtype}")
+        rows = padded.size // 8
+        event = self.kernels["pack_channels"](self.queue, (rows,), None, padded.data, np.uint64(rows),
+                                              np.int32(channels), out.data)
+        self._record("pack_channels", event)
+        return event
+
     def add_into(self, total, addend, scale=None):
         """total += addend, padded device tables of one shape (kernels/multiple.cl: add_into); with
         ``scale`` (r, g, b), total += scale[c % 3] addend on channel c < 6 (the orders' geometric tail:

@@ -349,12 +349,19 @@ def test_orders_backends_agree(cl_context, atmosphere, albedo):
                             "ground irradiance")
 
 
-def test_rectangular_transfers_move_the_channels_and_zero_the_padding(cl_context, atmosphere, monkeypatch):
-    """The OpenCL backend's rectangular copies: the first gather goes up as a padded table whose channels
-    0-5 are the host's, bit for bit, and whose padding (6, 7) is zero (the kernels read whole rows of 8)
-    even in a reused buffer (every new device array filled with NaN here), in float64 and float32; and the
-    gathered sum comes down as the device's channels 0-5."""
+@pytest.mark.parametrize("rectangular", [True, False], ids=["rectangular-reads", "packed-reads"])
+def test_rectangular_transfers_move_the_channels_and_zero_the_padding(cl_context, atmosphere, monkeypatch,
+                                                                     rectangular):
+    """The OpenCL backend's copies: the first gather goes up (a rectangular write) as a padded table whose
+    channels 0-5 are the host's, bit for bit, and whose padding (6, 7) is zero (the kernels read whole rows
+    of 8) even in a reused buffer (every new device array filled with NaN here), in float64 and float32;
+    and the gathered sum comes down as the device's channels 0-5, by rectangular reads (CPUs' way) and by
+    the packing kernel and one read (GPUs' way, clsky._cl.RECTANGULAR_READS)."""
     import pyopencl.array as cla
+
+    from clsky import _cl
+
+    monkeypatch.setattr(_cl, "RECTANGULAR_READS", rectangular)
 
     empty = cla.empty
 
@@ -377,6 +384,70 @@ def test_rectangular_transfers_move_the_channels_and_zero_the_padding(cl_context
         down = run.to_host(gathered_d)
         assert down.dtype == np.float64
         assert_array_equal(down, gathered.astype(dtype))
+
+
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
+def test_packed_reads_are_the_rectangular_reads_bit_for_bit(cl_context, atmosphere, monkeypatch, dtype):
+    """The orders, their nodes' azimuth averages, the gathered harmonics and the ground irradiance of a
+    build whose downloads are packed on the device and read at once (GPUs' way) are those of rectangular
+    reads (CPUs' way), bit for bit: both copy the same device values (reflecting ground, 3 orders)."""
+    from clsky import _cl
+
+    require_dtype(cl_context, dtype)
+    settings = KERNEL_GRID.replace(dtype=dtype)
+    atmosphere = atmosphere.replace(ground_albedo=0.3)
+    results = {}
+    for rectangular in (True, False):
+        monkeypatch.setattr(_cl, "RECTANGULAR_READS", rectangular)
+        results[rectangular] = azimuth.compute_orders(atmosphere, settings, backend="opencl", ctx=cl_context,
+                                                      keep_nodes=True)
+    packed, rectangle = results[False], results[True]
+    assert packed.record["orders"] == rectangle.record["orders"] == 3
+    for a, b in zip(packed.orders + [packed.gathered, packed.ground_irradiance],
+                    rectangle.orders + [rectangle.gathered, rectangle.ground_irradiance]):
+        assert_array_equal(a, b)
+
+
+def test_rectangular_reads_on_cpus_only(monkeypatch):
+    """The default: rectangular reads on a CPU device, the packing kernel on a GPU or an accelerator (an
+    H200 read rows of 3 of 8 doubles 13x slower than a contiguous whole); RECTANGULAR_READS overrides."""
+    import types
+
+    import pyopencl as cl
+
+    from clsky import _cl
+
+    def device(kind):
+        return types.SimpleNamespace(type=kind)
+
+    monkeypatch.setattr(_cl, "RECTANGULAR_READS", None)
+    assert _cl.rectangular_reads(device(cl.device_type.CPU))
+    assert not _cl.rectangular_reads(device(cl.device_type.GPU))
+    assert not _cl.rectangular_reads(device(cl.device_type.ACCELERATOR))
+    monkeypatch.setattr(_cl, "RECTANGULAR_READS", True)
+    assert _cl.rectangular_reads(device(cl.device_type.GPU))
+    monkeypatch.setattr(_cl, "RECTANGULAR_READS", False)
+    assert not _cl.rectangular_reads(device(cl.device_type.CPU))
+
+
+def test_pack_channels_copies_and_checks_its_arrays(cl_context):
+    """MultipleScatteringEngine.pack_channels: padded[..., :channels] bit for bit for 1, 3, 6 and 8 channels
+    (random doubles), and a ValueError naming the shapes when out does not fit."""
+    import pyopencl.array as cla
+
+    from clsky.multiple import MultipleScatteringEngine
+
+    require_dtype(cl_context, "float64")
+    engine = MultipleScatteringEngine(KERNEL_GRID, ctx=cl_context)
+    padded = np.random.default_rng(5).random((2, 3, 5, 7, 8))
+    padded_d = cla.to_device(engine.queue, padded)
+    for channels in (1, 3, 6, 8):
+        out = cla.empty(engine.queue, padded.shape[:-1] + (channels,), np.float64)
+        engine.pack_channels(padded_d, channels, out).wait()
+        assert_array_equal(out.get(), padded[..., :channels])
+    wrong = cla.empty(engine.queue, padded.shape[:-1] + (4,), np.float64)
+    with pytest.raises(ValueError, match=r"\(2, 3, 5, 7, 4\)"):
+        engine.pack_channels(padded_d, 3, wrong)
 
 
 def test_float32_build_close_to_float64(cl_context, atmosphere):
