@@ -14,11 +14,20 @@
 # it with OCL_ICD_VENDORS, as scripts/intel_opencl.sh does for Intel's runtime. Environment:
 #   PY       the Python with clsky (default .venv/bin/python, else python3);
 #   WORKERS  pytest-xdist workers for the tests when xdist is installed (default 8);
-#   SMOKE=1  the benchmarks at their smoke sizes and one test file (tests/test_devices.py runs it on PoCL).
+#   SMOKE=1  the benchmarks at their smoke sizes and one test file (tests/test_devices.py runs it on PoCL);
+#   ONLY     the steps to run, by name, when device time is short (default all): tests runtimes orders
+#            render animate profile copies (the machine and its OpenCL devices are always shown).
 # Each step is bounded by STEP_LIMIT seconds (default 300); a failing step is reported and the next runs.
 set -uo pipefail
 out=$(realpath -m "${1:-$(dirname "$0")/../gpu_checks}")      # OUTDIR as given, from where it was given
 cd "$(dirname "$0")/.."
+
+STEPS="tests runtimes orders render animate profile copies"
+ONLY=${ONLY:-$STEPS}
+for name in $ONLY; do
+    [[ " $STEPS " == *" $name "* ]] || { echo "gpu_checks: ONLY: no step '$name' (steps: $STEPS)" >&2; exit 2; }
+done
+wanted() { [[ " $ONLY " == *" $1 "* ]]; }
 
 if [ -e "$out" ]; then
     echo "gpu_checks: $out exists already (nothing is overwritten): give another OUTDIR" >&2
@@ -41,7 +50,8 @@ run() {
 }
 
 step "machine"
-{ command -v nvidia-smi >/dev/null && nvidia-smi -L; echo "cores: $(nproc); $(uptime)"; } 2>&1 | tee "$out/machine.txt"
+{ command -v nvidia-smi >/dev/null && nvidia-smi -L; echo "cores: $(nproc); kernel: $(uname -r); $(uptime)"; } 2>&1 |
+    tee "$out/machine.txt"
 
 step "OpenCL devices"
 gpus=$("$PY" -c "import pyopencl as cl
@@ -60,6 +70,7 @@ if [ "$gpus" = 0 ] && [ -z "${OCL_ICD_VENDORS:-}" ]; then
 fi
 run devices.txt "$PY" -m clsky.anim devices
 
+if wanted tests; then
 step "kernel-versus-twin tests on clsky's device"
 tests=$("$PY" - <<'EOF'
 import ast, pathlib
@@ -74,16 +85,19 @@ EOF
 parallel=()
 "$PY" -c "import xdist" 2>/dev/null && parallel=(-n "${WORKERS:-8}")
 run tests.txt "$PY" -m pytest -q -p no:cacheprovider -m "not slow" -rfEs "${parallel[@]}" $tests
+fi
 
-step "benchmarks (printed only)"
 smoke=(); [ -z "$SMOKE" ] || smoke=(--smoke)
-run bench_runtimes.txt "$PY" bench/bench_runtimes.py --vector-widths 8 1 --rounds 1 --no-readme \
+wanted runtimes || wanted orders || wanted render || wanted animate && step "benchmarks (printed only)"
+wanted runtimes && run bench_runtimes.txt "$PY" bench/bench_runtimes.py --vector-widths 8 1 --rounds 1 --no-readme \
     --keep-outputs "$out/anim" "${smoke[@]}"
-run bench_orders.txt "$PY" bench/bench_orders.py --repeat 2 --no-readme "${smoke[@]}"
-run bench_render.txt "$PY" bench/bench_render.py --no-readme --skip-animation "${smoke[@]}"
-# the default animation with the default host threads (half the cores) against one, and one after the other
-run bench_animate.txt "$PY" bench/bench_animate.py --no-readme --stage-frames 2 "${smoke[@]}"
+wanted orders && run bench_orders.txt "$PY" bench/bench_orders.py --repeat 2 --no-readme "${smoke[@]}"
+wanted render && run bench_render.txt "$PY" bench/bench_render.py --no-readme --skip-animation "${smoke[@]}"
+# the default animation with the default host threads (half the cores) against one, and one after the other;
+# the frames' host half alone on 1, 2, 4, ... host threads
+wanted animate && run bench_animate.txt "$PY" bench/bench_animate.py --no-readme --stage-frames 2 "${smoke[@]}"
 
+if wanted profile; then
 step "the default animation's planned table: wall-clock profile and device time per kernel (a process's third build)"
 run profile.txt "$PY" - "${smoke[@]}" <<'EOF'
 import collections, cProfile, pstats, sys
@@ -122,6 +136,7 @@ profile = cProfile.Profile()                                                    
 profile.runcall(clsky.ScatteringTable.build, atmosphere, planned)
 print(f"{label}, {' x '.join(map(str, planned.size))}:")
 pstats.Stats(profile).sort_stats("cumulative").print_stats(40)
+pstats.Stats(profile).sort_stats("tottime").print_stats(25)           # where the host itself spends it
 seconds, launches, unprofiled = collections.Counter(), collections.Counter(), 0
 for engine in engines:
     for kernel, event in engine.events:
@@ -136,6 +151,9 @@ for kernel, total in seconds.most_common():
 print(f"  all kernels              {sum(seconds.values()):8.3f}; launches not profiled: {unprofiled}")
 EOF
 
+fi
+
+if wanted copies; then
 step "copies: the build's rectangular reads and writes (3 or 6 of 8 doubles a row) against contiguous ones"
 # The planned build moves every order's nodes and its first gather with clEnqueue{Read,Write}BufferRect,
 # rows of 24 or 48 bytes out of 64 (clsky/azimuth.py): cheap on a CPU device; on a GPU perhaps not.
@@ -182,6 +200,7 @@ for channels in (3, 6):
                 seconds.append(time.perf_counter() - start)
             print(f"  {'read' if read else 'write'} {channels} of 8 doubles, {label:24s} {1000 * min(seconds):8.1f} ms")
 EOF
+fi
 
 step "done in $(( $(date +%s) - start )) s: $out"
 exit $failed
