@@ -9,12 +9,17 @@
   ``clsky.anim.pipeline``) with the machine's default number of host threads
   (``clsky.anim.animate.host_frame_workers``: one on 2 cores), with the other choice (one thread where the
   default is more, else two), and without the overlap (``clsky.anim.animate.OVERLAP_FRAMES = False``:
-  one frame after the other).
+  one frame after the other); after a discarded 3-frame run of the same animation (its kernels compiled
+  and cached first, as on a machine that has run clsky before).
 - Stage split (without the overlap, so that each stage is timed alone): :func:`clsky.anim.animate.render_animation` in this process at ``--stage-frames`` frames of
   the same size (after a warm-up), under cProfile with the process CPU clock as its timer, so that each stage's figure
   counts PoCL's worker threads while the host waits for them (the stages do not overlap). Run twice,
   side by side: with the frame loop's BLAS on one thread (the default, ``clsky._cl.host_blas_single_threaded``)
   and with OpenBLAS's own thread count, to show what the two thread pools cost when they meet.
+- Host threads: the frames' host half alone (conversion, metering, display, comparison: what
+  ``clsky.anim.animate``'s host threads do, :func:`host_half`) on 1, 2, 4, ... threads up to the default
+  (at least 2), over frames rendered beforehand (no device work while timed), in two rounds, up then down:
+  how far more threads go on this machine.
 Prints the tables and writes them into README.md (section "Speed", ``bench:animate``).
 
 Usage: python bench/bench_animate.py [--frames N] [--size PX] [--stage-frames N] [--no-readme] [--smoke]
@@ -29,12 +34,14 @@ import argparse
 import contextlib
 import cProfile
 import datetime
+import os
 import pathlib
 import pstats
 import subprocess
 import sys
 import tempfile
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 from _report import SMOKE, add_output_arguments, children_cpu, exp_reading, load_average, load_note, machine, \
     parse_arguments, state_note, write_readme_section
@@ -120,6 +127,47 @@ def stage_split(config_options, blas_limited=True):
     return stages, cpu + ffmpeg, wall, load_average()
 
 
+#: Frames rendered for the host-thread timing, and the frames' host halves timed at each thread count
+HOST_HALF_RENDERED, HOST_HALF_JOBS = 4, 24
+
+
+def host_half(options, thread_counts, jobs=HOST_HALF_JOBS):
+    """[(threads, wall, CPU)] per frame [s] of the frames' host half alone (:func:`clsky.anim.animate.convert_frames`,
+    ``metered_exposure`` and ``frame_outputs``, what the animation's host threads do) on each of
+    ``thread_counts`` threads (a pool mapping ``jobs`` frames), over :data:`HOST_HALF_RENDERED` frames of the
+    animation ``options`` rendered beforehand, BLAS on one thread as in the animation. CPU: the process's
+    user and system time (nothing else runs in it meanwhile)."""
+    animate = clsky.anim.animate
+    config = AnimationConfig(**options)
+    positions = animate.sun_positions(config)
+    directions, valid = animate._camera(config).directions()
+    plan = animate.plan_animation(config, positions, directions, valid)
+    renderer, table = animate.make_renderer(config, plan)
+    lookup = animate.lookup_of(config, plan)
+    prepared = renderer.prepare(directions, valid)
+    step = max(1, len(positions) // HOST_HALF_RENDERED)
+    rendered = [(sun, animate.render_frame(renderer, prepared, sun.direction, config, lookup, convert=False))
+                for sun in positions[::step][:HOST_HALF_RENDERED]]
+    pipeline = animate.display(config, table)
+
+    def frame(index):
+        sun, raw = rendered[index % len(rendered)]
+        hdr = animate.convert_frames(renderer, config, raw)
+        return animate.frame_outputs(pipeline, hdr, valid, config, sun, index,
+                                     ev=animate.metered_exposure(pipeline, hdr, valid))
+
+    timings = []
+    with animate.host_blas_single_threaded():
+        frame(0)                                                    # warm-up
+        for threads in thread_counts:
+            cpu, wall = os.times(), time.perf_counter()
+            with ThreadPoolExecutor(threads) as pool:
+                list(pool.map(frame, range(jobs)))
+            wall, now = time.perf_counter() - wall, os.times()
+            timings.append((threads, wall / jobs, (now.user - cpu.user + now.system - cpu.system) / jobs))
+    return timings
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=120, help="frames of the end-to-end run (default 120)")
@@ -138,6 +186,10 @@ def main():
     variants = {f"overlapped, {workers} host thread{'s' * (workers > 1)} (default)": (True, None),
                 f"overlapped, {other} host thread{'s' * (other > 1)}": (True, other),
                 "one after the other": (False, None)}
+    # first, discarded, the same animation at 3 frames (sunrise, noon, sunset: the same scene plan, table and
+    # programs): its kernels compiled into PyOpenCL's cache, which a fresh machine lacks and the first variant
+    # alone would otherwise pay for (likely on the first H200 machine, README "GPUs")
+    end_to_end(["--frames", str(min(3, args.frames)), *command[2:]])
     runs = {}
     for label, (overlap, host_workers) in variants.items():
         runs[label] = end_to_end(command, overlap, host_workers)
@@ -156,6 +208,15 @@ def main():
         highest = max(highest, splits[-1][3])
         print(f"stage split (BLAS {'one thread' if limited else 'unlimited'}): CPU {splits[-1][1]:.1f} s, "
               f"wall {splits[-1][2]:.1f} s", flush=True)
+    counts = [1]
+    while counts[-1] * 2 <= max(2, workers):
+        counts.append(counts[-1] * 2)
+    host_options = {**options, "frames": max(HOST_HALF_RENDERED, SMOKE.animation_frames)}
+    threads = host_half(host_options, counts + counts[::-1], 4 if args.smoke else HOST_HALF_JOBS)
+    for count, wall, cpu in threads:
+        print(f"host half alone, {count} host thread{'s' * (count > 1)}: {1000 * wall:.1f} ms wall, "
+              f"{1000 * cpu:.1f} ms CPU a frame", flush=True)
+    highest = max(highest, load_average())
     shown = "clsky animate " + " ".join(command)
     lines = [f"Measured {datetime.date.today()} on {machine()}. End to end: `{shown}` "
              f"in a fresh process (table build, both renderers, comparison, PNG + MP4 + metrics); CPU time of the "
@@ -163,7 +224,7 @@ def main():
              f"pipeline and this machine's default number of host threads for the frames' display and "
              f"comparison, with the other choice of threads (one where the default is more, else two), and "
              f"with the frames one after the other, run one after the "
-             f"other; exp(): the "
+             f"other after a discarded 3-frame run (kernels compiled and cached); exp(): the "
              f"machine's double8 exp() rate read before and after the run [M per CPU-second] (about 900 in its "
              f"slow state, 1500-1700 in its fast one).{load_note(highest)}{state_note(readings)}", "",
              "| run | frames | wall [s] | CPU [s] | CPU / wall | load before | load after | exp() |",
@@ -186,6 +247,15 @@ def main():
     for _, total, split_wall, _ in splits:
         cells += [f"**{total:.2f}** (wall {split_wall:.1f})", f"{1000 * total / args.stage_frames:.0f}"]
     lines.append("| total | " + " | ".join(cells) + " |")
+    one = threads[0][1]
+    lines += ["", f"Host threads: the frames' host half alone (conversion to cd/m^2, metering, display, comparison) "
+              f"on a pool of threads mapping {4 if args.smoke else HOST_HALF_JOBS} frames of {args.size} x {args.size} rendered "
+              f"beforehand (no device work meanwhile), the thread counts up then down, in this process; "
+              f"wall and process CPU per frame [ms].", "",
+              "| round | host threads | wall a frame [ms] | CPU a frame [ms] | wall, one thread's / this |",
+              "|---:|---:|---:|---:|---:|",
+              *(f"| {1 + (index >= len(counts))} | {count} | {1000 * wall:.1f} | {1000 * cpu:.1f} | {one / wall:.2f}x |"
+                for index, (count, wall, cpu) in enumerate(threads))]
     markdown = "\n".join(lines)
     print(markdown)
     if not args.no_readme:
