@@ -31,7 +31,7 @@ from typing import Callable
 import numpy as np
 
 import clsky
-from clsky._cl import host_blas_single_threaded, host_cores
+from clsky._cl import host_blas_single_threaded, host_cores, rectangular_reads
 from clsky._files import StagedWrites, check_output
 from clsky.errors import ParameterError, check_choice, check_integer, check_real, is_real_number
 from clsky.ground import check_ground_mode
@@ -485,9 +485,10 @@ def check_animation_memory(config: AnimationConfig, positions, device=None, opti
     even one does not."""
     workers = min(host_frame_workers(), len(positions))
     limits = machine_limits(device)
+    packed_reads = device is not None and not rectangular_reads(device)
     while True:
         try:
-            check_memory(memory_estimate(config, positions, workers), limits, options=options)
+            check_memory(memory_estimate(config, positions, workers, packed_reads), limits, options=options)
             return workers
         except InsufficientMemoryError:
             if workers <= 1:
@@ -495,10 +496,11 @@ def check_animation_memory(config: AnimationConfig, positions, device=None, opti
             workers -= 1
 
 
-def memory_estimate(config: AnimationConfig, positions, host_workers=None) -> MemoryEstimate:
+def memory_estimate(config: AnimationConfig, positions, host_workers=None, packed_reads=False) -> MemoryEstimate:
     """Peak memory of the animation (:func:`clsky.resources.estimate_animation_memory`), from its
     settings alone: no pilot, no full-size camera; with ``host_workers`` frames processed at once
-    (default :func:`host_frame_workers`; never more than the frames).
+    (default :func:`host_frame_workers`; never more than the frames); ``packed_reads``: the device packs
+    the table build's reads (``clsky.resources.estimate_table_memory``'s).
 
     The table is the plan's sun axis (view elevations from the camera at 64 pixels, ray-march margins)
     with the higher orders kept, an upper bound of the plan (whose pilot may drop them); with
@@ -520,7 +522,7 @@ def memory_estimate(config: AnimationConfig, positions, host_workers=None) -> Me
                                      ray_settings(config), hdr_output=config.hdr is not None, batches=batches,
                                      overlapped=OVERLAP_FRAMES,
                                      host_workers=min(host_frame_workers() if host_workers is None else host_workers,
-                                                      len(positions)))
+                                                      len(positions)), packed_reads=packed_reads)
 
 
 def build_table(config: AnimationConfig, plan: Plan | None = None, ctx=None, progress=None) -> clsky.ScatteringTable:

@@ -219,7 +219,8 @@ def _table_sizes(settings: TableSettings):
     return cells, height, depth, itemsize
 
 
-def estimate_table_memory(settings: TableSettings, backend="opencl", saving=False) -> MemoryEstimate:
+def estimate_table_memory(settings: TableSettings, backend="opencl", saving=False,
+                          packed_reads=False) -> MemoryEstimate:
     """Peak memory of :meth:`clsky.table.ScatteringTable.build` with ``settings``.
 
     Parameters
@@ -229,6 +230,9 @@ def estimate_table_memory(settings: TableSettings, backend="opencl", saving=Fals
         The NumPy twins hold their arrays on the host (counted as host arrays; a rough estimate).
     saving : bool
         Then :meth:`~clsky.table.ScatteringTable.save`: float32 copies of every order beside the table.
+    packed_reads : bool
+        The device packs what the harmonics' orders read back (not :func:`clsky._cl.rectangular_reads`
+        of the device: GPUs): the packed nodes and gathered sum on the device too.
 
     Returns
     -------
@@ -247,7 +251,7 @@ def estimate_table_memory(settings: TableSettings, backend="opencl", saving=Fals
     orders = expected_orders(settings)
     phases = [_single_phase(settings)]
     if orders > 1 and settings.azimuth_harmonics:
-        phases.extend(_harmonic_phases(settings, orders))
+        phases.extend(_harmonic_phases(settings, orders, packed_reads))
     elif orders > 1:
         if settings.mode == "physical":
             phases.append(_first_gather_phase(settings))
@@ -329,7 +333,7 @@ def _orders_phases(settings, orders):
             Allocation("gathered sum (D, H, W, 6) float64", cells * 6 * _F64)))]
 
 
-def _harmonic_phases(settings, orders):
+def _harmonic_phases(settings, orders, packed_reads=False):
     """The orders of a table with azimuth harmonics (:mod:`clsky.azimuth`, n = M + 1 azimuth nodes): the
     first gather on the host (single scattering at the n nodes and its harmonics, the n gathered
     harmonics (for a float32 device also as float32, uploaded from there), and on each of its threads
@@ -339,7 +343,8 @@ def _harmonic_phases(settings, orders):
     from it; on the device the gathered sum, the gathered harmonics and the order's n nodes, padded, and
     a harmonic, and the stopping test's running sum at the nodes (:class:`clsky.stopping.DeviceStoppingTest`);
     for ``orders="auto"``, the order before at the nodes, on the device too, which the geometric tail's
-    test reads)."""
+    test reads). With ``packed_reads``, the nodes' 3 channels and the gathered harmonics' 6 packed on the
+    device for their reads (kernels/multiple.cl: pack_channels), both held by the orders' memory pool."""
     from .azimuth import HarmonicGather
 
     cells, height, depth, s = _table_sizes(settings)
@@ -375,7 +380,10 @@ def _harmonic_phases(settings, orders):
            if s != _F64 else ())
         + ((Allocation("the order before at its nodes (n, D, H, W, 3) float64", cells * 3 * _F64, count=n,
                        on_device=True),)
-           if settings.orders == "auto" else ()))
+           if settings.orders == "auto" else ())
+        + ((Allocation("the nodes and the gathered harmonics packed for their reads (n, D, H, W, 3 + 6)",
+                       cells * 9 * s, count=n, on_device=True),)
+           if packed_reads else ()))
     return [first, loop]
 
 
@@ -538,7 +546,7 @@ def estimate_directions_memory(pixels, dtype="float64") -> MemoryEstimate:
         Allocation("frame download (pixels, 3)", pixels * 3 * s, source="frames"))),))
 
 
-def estimate_spectral_table_memory(settings: TableSettings, batches: int) -> MemoryEstimate:
+def estimate_spectral_table_memory(settings: TableSettings, batches: int, packed_reads=False) -> MemoryEstimate:
     """Peak memory of :meth:`clsky.spectrum.SpectralTable.build` with ``keep_orders=False`` (what an
     animation builds): ``batches`` tables built one after the other.
 
@@ -550,7 +558,7 @@ def estimate_spectral_table_memory(settings: TableSettings, batches: int) -> Mem
         gathered sum) and, for the physical mode's higher orders, the two first-gather stacks
         (2, D, H, H) float64 that :func:`clsky.multiple.keeping_first_gather_stacks` keeps for the
         whole build (the last batch computes none: its first-gather phase holds the kept two instead
-        of one of its own).
+        of one of its own). ``packed_reads``: :func:`estimate_table_memory`'s.
     """
     cells, height, depth, _ = _table_sizes(settings)
     orders = expected_orders(settings)
@@ -561,7 +569,7 @@ def estimate_spectral_table_memory(settings: TableSettings, batches: int) -> Mem
         kept = (Allocation("first-gather matrix stacks kept for the batches (2, D, H, H) float64",
                            2 * depth * height * height * _F64, count=2),)
     phases = []
-    for phase in estimate_table_memory(settings).phases:
+    for phase in estimate_table_memory(settings, packed_reads=packed_reads).phases:
         own = tuple(a for a in phase.allocations if not a.label.startswith("first-gather matrix stack (2, D, H, H) "
                                                                            "float64"))
         phases.append(Phase(f"last batch: {phase.name}", (built if batches > 1 else ()) + kept + own))
@@ -572,17 +580,18 @@ def estimate_spectral_table_memory(settings: TableSettings, batches: int) -> Mem
 
 def estimate_animation_memory(settings: TableSettings, image_shape, method="compare",
                               ray_settings: TableSettings | None = None, hdr_output=False,
-                              batches=None, overlapped=True, host_workers=1) -> MemoryEstimate:
+                              batches=None, overlapped=True, host_workers=1,
+                              packed_reads=False) -> MemoryEstimate:
     """The table build, then the frames (:func:`estimate_table_memory`, :func:`estimate_render_memory`
     without the higher orders, which an animation drops once the table is built). ``batches``: None
     for the three-wavelength animation, else the spectral one's ceil(N / 3) batches
     (:func:`estimate_spectral_table_memory`, ``estimate_render_memory(..., batches=B)``).
     ``overlapped``, ``host_workers``: the frames go through the overlapped pipeline with that many host
-    threads (``estimate_render_memory``'s)."""
+    threads (``estimate_render_memory``'s). ``packed_reads``: :func:`estimate_table_memory`'s."""
     if batches is None:
-        build = estimate_table_memory(settings)
+        build = estimate_table_memory(settings, packed_reads=packed_reads)
     else:
-        build = estimate_spectral_table_memory(settings, batches)
+        build = estimate_spectral_table_memory(settings, batches, packed_reads)
     render = estimate_render_memory(settings, image_shape, method, ray_settings, keep_orders=False,
                                     hdr_output=hdr_output, batches=batches or 1, overlapped=overlapped,
                                     host_workers=host_workers)

@@ -283,6 +283,56 @@ def test_animation_estimate_drops_the_higher_orders():
     assert np.isfinite(frames.bytes())
 
 
+def test_packed_reads_count_on_the_device(monkeypatch):
+    """Where the device packs the harmonics' reads (GPUs: clsky._cl.rectangular_reads), the orders'
+    phase holds the packed nodes (3 channels) and gathered harmonics (6) on the device too, n (D, H, W, 9)
+    in the kernels' type, and nothing else changes; the table build's check and the animation's count it
+    for such a device (a stand-in GPU: the same estimate as packed_reads=True)."""
+    import types
+
+    import pyopencl as cl
+
+    from clsky.anim import animate
+
+    settings = clsky.TableSettings(size=(16, 64, 16), mode="physical", orders=4, azimuth_harmonics=2)
+    plain = resources.estimate_table_memory(settings)
+    packed = resources.estimate_table_memory(settings, packed_reads=True)
+    extra = 3 * 16 * 64 * 16 * 9 * 8                      # n = M + 1 = 3, float64
+    assert [p.name for p in packed.phases] == [p.name for p in plain.phases]
+    for a, b in zip(plain.phases, packed.phases):
+        assert b.bytes(True) - a.bytes(True) == (extra if a.name == "orders" else 0), a.name
+        assert b.bytes(False) == a.bytes(False), a.name
+    no_harmonics = settings.replace(azimuth_harmonics=0)
+    assert (resources.estimate_table_memory(no_harmonics, packed_reads=True).device_bytes
+            == resources.estimate_table_memory(no_harmonics).device_bytes)
+
+    config = animate.AnimationConfig(frames=2, size=64)
+    positions = animate.sun_positions(config)
+    on_gpu = animate.memory_estimate(config, positions, 1, packed_reads=True)
+    on_cpu = animate.memory_estimate(config, positions, 1)
+    assert on_gpu.device_bytes > on_cpu.device_bytes
+    assert [p.bytes(False) for p in on_gpu.phases] == [p.bytes(False) for p in on_cpu.phases]
+
+    checked = []
+    monkeypatch.setattr(animate, "HOST_FRAME_WORKERS", 1)
+
+    def check(estimate, *args, **kwargs):
+        checked.append(estimate.device_bytes)
+        raise InsufficientMemoryError("stop here")
+
+    for kind in (cl.device_type.GPU, cl.device_type.CPU):
+        device = types.SimpleNamespace(type=kind)
+        monkeypatch.setattr(animate, "machine_limits", lambda device: MemoryLimits(None))
+        monkeypatch.setattr(animate, "check_memory", check)
+        with pytest.raises(InsufficientMemoryError):
+            animate.check_animation_memory(config, positions, device)
+        monkeypatch.setattr(resources, "device_of", lambda ctx, dtype: device)
+        monkeypatch.setattr(resources, "check_memory", check)
+        with pytest.raises(InsufficientMemoryError):
+            clsky.ScatteringTable.build(black_preset("physical"), settings)
+    assert checked == [on_gpu.device_bytes, packed.device_bytes, on_cpu.device_bytes, plain.device_bytes]
+
+
 # 4. The spectral animation: N / 3 tables ----------------------------------------------------------------
 
 def test_spectral_animation_estimate_counts_every_batch():
