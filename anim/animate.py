@@ -31,7 +31,8 @@ from typing import Callable
 import numpy as np
 
 import clsky
-from clsky._cl import host_blas_single_threaded, host_cores, rectangular_reads
+from clsky._cl import host_blas_single_threaded, host_cores
+from clsky._cl import packed_reads as device_packs_reads
 from clsky._files import StagedWrites, check_output
 from clsky.errors import ParameterError, check_choice, check_integer, check_real, is_real_number
 from clsky.ground import check_ground_mode
@@ -485,10 +486,10 @@ def check_animation_memory(config: AnimationConfig, positions, device=None, opti
     even one does not."""
     workers = min(host_frame_workers(), len(positions))
     limits = machine_limits(device)
-    packed_reads = device is not None and not rectangular_reads(device)
     while True:
         try:
-            check_memory(memory_estimate(config, positions, workers, packed_reads), limits, options=options)
+            check_memory(memory_estimate(config, positions, workers, device_packs_reads(device)), limits,
+                         options=options)
             return workers
         except InsufficientMemoryError:
             if workers <= 1:
@@ -500,7 +501,7 @@ def memory_estimate(config: AnimationConfig, positions, host_workers=None, packe
     """Peak memory of the animation (:func:`clsky.resources.estimate_animation_memory`), from its
     settings alone: no pilot, no full-size camera; with ``host_workers`` frames processed at once
     (default :func:`host_frame_workers`; never more than the frames); ``packed_reads``: the device packs
-    the table build's reads (``clsky.resources.estimate_table_memory``'s).
+    the table build's reads (``clsky.resources.estimate_table_memory``'s ``packed_reads``).
 
     The table is the plan's sun axis (view elevations from the camera at 64 pixels, ray-march margins)
     with the higher orders kept, an upper bound of the plan (whose pilot may drop them); with
@@ -872,7 +873,8 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
     if farm is None:
         workers = check_animation_memory(config, positions, device_of(ctx))
     else:
-        check_memory(memory_estimate(config, positions, 1), device=device_of(ctx))
+        device = device_of(ctx)
+        check_memory(memory_estimate(config, positions, 1, device_packs_reads(device)), device=device)
     camera = _camera(config)
     directions, valid = camera.directions()
     plan = plan_animation(config, positions, directions, valid, ctx=ctx)

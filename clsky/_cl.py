@@ -405,12 +405,12 @@ def default_vector_width(device) -> int:
 
 #: How a padded device table's rows of 8 values come to the host when only 3 or 6 of them are wanted (the
 #: orders' nodes and the gathered sum, :mod:`clsky.azimuth`): None (the default) for each device's own
-#: (:func:`default_rectangular_reads`); True, rectangular reads (clEnqueueReadBufferRect, rows of 3 or 6
-#: values straight into the host table); False, a packing kernel on the device and one contiguous read.
-#: Rectangular reads are the faster on PoCL here (7-11 ms a node of 1.7 million rows, against 22-34 ms for
-#: a contiguous read and a host copy); on an NVIDIA H200 (2026-12-04) rows of 3 doubles took 414 ms a node,
-#: most of the planned table's 10 s there (README "Speed", GPUs). The same bits either way
-#: (tests/test_azimuth.py).
+#: (:func:`rectangular_reads`); True, rectangular reads (clEnqueueReadBufferRect, rows of 3 or 6 values
+#: straight into the host table); False, a packing kernel on the device and one contiguous read. On PoCL
+#: here a node's 1.7 million rows of 3 read rectangularly in 6-8 ms, packed in 23-29 ms (scripts/gpu_checks.sh's
+#: copies step, 2026-12-04); on an NVIDIA H200 rectangularly in 400-414 ms, against 26-32 ms for a contiguous
+#: read of all 8: most of the planned table's 10.3 s there, which took 2.2 s with packed reads (README
+#: "Speed", GPUs). The same bits either way (tests/test_azimuth.py).
 RECTANGULAR_READS = None
 
 
@@ -419,6 +419,13 @@ def rectangular_reads(device) -> bool:
     if RECTANGULAR_READS is not None:
         return bool(RECTANGULAR_READS)
     return bool(device.type & cl.device_type.CPU)
+
+
+def packed_reads(device) -> bool:
+    """True where a table build on ``device`` (a pyopencl.Device, or None: no device) packs its reads on
+    the device (not :func:`rectangular_reads`): what its memory estimate counts
+    (``clsky.resources.estimate_table_memory``'s ``packed_reads``)."""
+    return device is not None and not rectangular_reads(device)
 
 
 #: The build option that makes float32 division and square roots correctly rounded, as float64's always

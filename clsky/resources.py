@@ -246,6 +246,8 @@ def estimate_table_memory(settings: TableSettings, backend="opencl", saving=Fals
         orders (K - 1 kept tables N c 8, the running sum N c 8, three padded device tables 3 x N 8 s,
         the download N 8 s or else the stopping test's temporaries, 11 N c); the combination into the
         table (N C 8) beside the gathered sum (N 6 8); with ``saving``, float32 copies of the orders.
+        With azimuth harmonics and ``packed_reads``, also the packed nodes (n N 3 s) on the device, and
+        the gathered sum's read (n N 6 s packed) once the stopping test's buffers are gone.
     """
     cells, _, _, s = _table_sizes(settings)
     orders = expected_orders(settings)
@@ -343,8 +345,10 @@ def _harmonic_phases(settings, orders, packed_reads=False):
     from it; on the device the gathered sum, the gathered harmonics and the order's n nodes, padded, and
     a harmonic, and the stopping test's running sum at the nodes (:class:`clsky.stopping.DeviceStoppingTest`);
     for ``orders="auto"``, the order before at the nodes, on the device too, which the geometric tail's
-    test reads). With ``packed_reads``, the nodes' 3 channels and the gathered harmonics' 6 packed on the
-    device for their reads (kernels/multiple.cl: pack_channels), both held by the orders' memory pool."""
+    test reads). With ``packed_reads``, the nodes' 3 channels packed on the device for their read
+    (kernels/multiple.cl: pack_channels) in the orders, and a phase for the gathered sum's read: the orders'
+    arrays but the stopping test's, and the gathered harmonics' 6 channels packed (the pool holds both
+    packed arrays then)."""
     from .azimuth import HarmonicGather
 
     cells, height, depth, s = _table_sizes(settings)
@@ -381,10 +385,19 @@ def _harmonic_phases(settings, orders, packed_reads=False):
         + ((Allocation("the order before at its nodes (n, D, H, W, 3) float64", cells * 3 * _F64, count=n,
                        on_device=True),)
            if settings.orders == "auto" else ())
-        + ((Allocation("the nodes and the gathered harmonics packed for their reads (n, D, H, W, 3 + 6)",
-                       cells * 9 * s, count=n, on_device=True),)
+        + ((Allocation("the order at its nodes packed for its read (n, D, H, W, 3) in the kernels' type",
+                       cells * 3 * s, count=n, on_device=True),)
            if packed_reads else ()))
-    return [first, loop]
+    if not packed_reads:
+        return [first, loop]
+    # the gathered sum's read comes after the stopping test's buffers went (clsky.azimuth.compute_orders);
+    # the pool still holds the packed nodes beside the gathered harmonics packed
+    stopping_test = ("running sum at the nodes", "the order before at its nodes (")
+    read = Phase("the gathered harmonics' read",
+                 tuple(a for a in loop.allocations if not a.label.startswith(stopping_test))
+                 + (Allocation("the gathered harmonics packed for their read (n, D, H, W, 6) in the kernels' type",
+                               cells * 6 * s, count=n, on_device=True),))
+    return [first, loop, read]
 
 
 def _combine_phase(settings, table, orders):

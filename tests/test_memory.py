@@ -7,6 +7,7 @@ it needs and how much there is (CLI: exit 2, naming the option); the estimate be
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 import subprocess
@@ -283,25 +284,37 @@ def test_animation_estimate_drops_the_higher_orders():
     assert np.isfinite(frames.bytes())
 
 
-def test_packed_reads_count_on_the_device(monkeypatch):
-    """Where the device packs the harmonics' reads (GPUs: clsky._cl.rectangular_reads), the orders'
-    phase holds the packed nodes (3 channels) and gathered harmonics (6) on the device too, n (D, H, W, 9)
-    in the kernels' type, and nothing else changes; the table build's check and the animation's count it
-    for such a device (a stand-in GPU: the same estimate as packed_reads=True)."""
+def test_packed_reads_count_on_the_device(monkeypatch, tmp_path):
+    """Where the device packs the harmonics' reads (GPUs: clsky._cl.packed_reads), the orders hold the
+    nodes packed (n (D, H, W, 3) in the kernels' type) on the device too, and a phase follows for the
+    gathered sum's read: the orders' arrays without the stopping test's (freed before it), with the
+    gathered harmonics packed (n (D, H, W, 6)) beside the packed nodes the pool still holds; nothing else
+    changes, on the host nothing at all. The table build's check and the animation's (local and farm) count
+    them for such a device (a stand-in GPU), not for a CPU."""
     import types
 
     import pyopencl as cl
 
     from clsky.anim import animate
 
-    settings = clsky.TableSettings(size=(16, 64, 16), mode="physical", orders=4, azimuth_harmonics=2)
-    plain = resources.estimate_table_memory(settings)
-    packed = resources.estimate_table_memory(settings, packed_reads=True)
-    extra = 3 * 16 * 64 * 16 * 9 * 8                      # n = M + 1 = 3, float64
-    assert [p.name for p in packed.phases] == [p.name for p in plain.phases]
-    for a, b in zip(plain.phases, packed.phases):
-        assert b.bytes(True) - a.bytes(True) == (extra if a.name == "orders" else 0), a.name
-        assert b.bytes(False) == a.bytes(False), a.name
+    cells, n = 16 * 64 * 16, 3                              # n = M + 1
+    for orders, dtype in (("auto", "float64"), (4, "float64"), (4, "float32")):
+        settings = clsky.TableSettings(size=(16, 64, 16), mode="physical", orders=orders, azimuth_harmonics=2,
+                                       dtype=dtype)
+        s = np.dtype(dtype).itemsize
+        plain = resources.estimate_table_memory(settings)
+        packed = resources.estimate_table_memory(settings, packed_reads=True)
+        names = [p.name for p in plain.phases]
+        at = names.index("orders") + 1
+        assert [p.name for p in packed.phases] == names[:at] + ["the gathered harmonics' read"] + names[at:]
+        read = packed.phases[at]
+        for a, b in zip(plain.phases, packed.phases[:at] + packed.phases[at + 1:]):
+            assert b.bytes(True) - a.bytes(True) == (n * cells * 3 * s if a.name == "orders" else 0), a.name
+            assert b.bytes(False) == a.bytes(False), a.name
+        stopping_test = n * cells * 3 * 8 * (2 if orders == "auto" else 1)  # running sum (and order before)
+        orders_phase = plain.phases[at - 1]
+        assert read.bytes(True) == orders_phase.bytes(True) - stopping_test + n * cells * (3 + 6) * s
+        assert read.bytes(False) == orders_phase.bytes(False)
     no_harmonics = settings.replace(azimuth_harmonics=0)
     assert (resources.estimate_table_memory(no_harmonics, packed_reads=True).device_bytes
             == resources.estimate_table_memory(no_harmonics).device_bytes)
@@ -311,8 +324,11 @@ def test_packed_reads_count_on_the_device(monkeypatch):
     on_gpu = animate.memory_estimate(config, positions, 1, packed_reads=True)
     on_cpu = animate.memory_estimate(config, positions, 1)
     assert on_gpu.device_bytes > on_cpu.device_bytes
-    assert [p.bytes(False) for p in on_gpu.phases] == [p.bytes(False) for p in on_cpu.phases]
+    assert on_gpu.peak_bytes(unified=False) == on_cpu.peak_bytes(unified=False)        # the host's
 
+    settings = clsky.TableSettings(size=(16, 64, 16), mode="physical", orders=4, azimuth_harmonics=2)
+    plain = resources.estimate_table_memory(settings)
+    packed = resources.estimate_table_memory(settings, packed_reads=True)
     checked = []
     monkeypatch.setattr(animate, "HOST_FRAME_WORKERS", 1)
 
@@ -320,17 +336,30 @@ def test_packed_reads_count_on_the_device(monkeypatch):
         checked.append(estimate.device_bytes)
         raise InsufficientMemoryError("stop here")
 
+    from clsky import cli
+
+    table_args = types.SimpleNamespace(size=settings.size, quality=None, backend="opencl")
+    saved = resources.estimate_table_memory(settings, saving=True)
+    saved_packed = resources.estimate_table_memory(settings, saving=True, packed_reads=True)
+    farm_config = dataclasses.replace(config, output=str(tmp_path / "sky.mp4"))
     for kind in (cl.device_type.GPU, cl.device_type.CPU):
         device = types.SimpleNamespace(type=kind)
         monkeypatch.setattr(animate, "machine_limits", lambda device: MemoryLimits(None))
         monkeypatch.setattr(animate, "check_memory", check)
+        monkeypatch.setattr(animate, "device_of", lambda ctx=None: device)
         with pytest.raises(InsufficientMemoryError):
             animate.check_animation_memory(config, positions, device)
+        with pytest.raises(InsufficientMemoryError):
+            animate.render_animation(farm_config, farm=object())          # the farm's check, before any work
         monkeypatch.setattr(resources, "device_of", lambda ctx, dtype: device)
         monkeypatch.setattr(resources, "check_memory", check)
         with pytest.raises(InsufficientMemoryError):
             clsky.ScatteringTable.build(black_preset("physical"), settings)
-    assert checked == [on_gpu.device_bytes, packed.device_bytes, on_cpu.device_bytes, plain.device_bytes]
+        with pytest.raises(InsufficientMemoryError):
+            cli._check_table_memory(table_args, settings)                  # clsky table's
+    assert checked == [on_gpu.device_bytes, on_gpu.device_bytes, packed.device_bytes, saved_packed.device_bytes,
+                       on_cpu.device_bytes, on_cpu.device_bytes, plain.device_bytes, saved.device_bytes]
+    assert not list(tmp_path.iterdir())
 
 
 # 4. The spectral animation: N / 3 tables ----------------------------------------------------------------
