@@ -419,9 +419,10 @@ class MultipleScatteringEngine(_cl.Engine):
         1 <= channels <= 8. Returns the kernel's event (``out`` is ready once it completes), for a read on
         another queue to wait for."""
         if (padded.shape[-1] != 8 or out.shape != padded.shape[:-1] + (channels,) or not 1 <= channels <= 8
-                or out.dtype != self.dtype or padded.dtype != self.dtype):
+                or out.dtype != self.dtype or padded.dtype != self.dtype or not padded.flags.c_contiguous
+                or not out.flags.c_contiguous):
             raise ValueError(f"padded (..., 8) and out (..., channels) must agree, 1 <= channels <= 8, in "
-                             f"{self.dtype}; got {padded.shape} {padded.dtype}, {out.shape} {out.dtype}")
+                             f"{self.dtype}, C-contiguous; got {padded.shape} {padded.dtype}, {out.shape} {out.dtype}")
         rows = padded.size // 8
         event = self.kernels["pack_channels"](self.queue, (rows,), None, padded.data, np.uint64(rows),
                                               np.int32(channels), out.data)

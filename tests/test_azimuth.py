@@ -393,16 +393,29 @@ def test_packed_reads_are_the_rectangular_reads_bit_for_bit(cl_context, atmosphe
     reads (CPUs' way), bit for bit: both copy the same device values (reflecting ground, 3 orders)."""
     from clsky import _cl
 
+    from clsky.multiple import MultipleScatteringEngine
+
     require_dtype(cl_context, dtype)
     settings = KERNEL_GRID.replace(dtype=dtype)
     atmosphere = atmosphere.replace(ground_albedo=0.3)
-    results = {}
+    pack = MultipleScatteringEngine.pack_channels
+    packs = []
+
+    def counted(engine, padded, channels, out):
+        packs.append(channels)
+        return pack(engine, padded, channels, out)
+
+    monkeypatch.setattr(MultipleScatteringEngine, "pack_channels", counted)
+    results, packed_channels = {}, {}
     for rectangular in (True, False):
         monkeypatch.setattr(_cl, "RECTANGULAR_READS", rectangular)
         results[rectangular] = azimuth.compute_orders(atmosphere, settings, backend="opencl", ctx=cl_context,
                                                       keep_nodes=True)
+        packed_channels[rectangular], packs[:] = list(packs), []
     packed, rectangle = results[False], results[True]
     assert packed.record["orders"] == rectangle.record["orders"] == 3
+    # each way taken: no packing for rectangular reads; the 2 orders' nodes (3 channels), the gathered sum (6)
+    assert packed_channels == {True: [], False: [3, 3, 6]}
     for a, b in zip(packed.orders + [packed.gathered, packed.ground_irradiance],
                     rectangle.orders + [rectangle.gathered, rectangle.ground_irradiance]):
         assert_array_equal(a, b)
