@@ -23,7 +23,7 @@ out=$(realpath -m "${1:-$(dirname "$0")/../gpu_checks}")      # OUTDIR as given,
 cd "$(dirname "$0")/.."
 
 STEPS="tests runtimes orders render animate profile copies"
-ONLY=${ONLY:-$STEPS}
+ONLY=$(echo ${ONLY:-$STEPS})                                # its names separated by single spaces
 for name in $ONLY; do
     [[ " $STEPS " == *" $name "* ]] || { echo "gpu_checks: ONLY: no step '$name' (steps: $STEPS)" >&2; exit 2; }
 done
@@ -154,14 +154,17 @@ EOF
 fi
 
 if wanted copies; then
-step "copies: the build's rectangular reads and writes (3 or 6 of 8 doubles a row) against contiguous ones"
-# The planned build moves every order's nodes and its first gather with clEnqueue{Read,Write}BufferRect,
-# rows of 24 or 48 bytes out of 64 (clsky/azimuth.py): cheap on a CPU device; on a GPU perhaps not.
+step "copies: rectangular reads and writes (3 or 6 of 8 doubles a row), contiguous ones, packed reads"
+# The planned build reads every order's nodes (3 of 8 doubles a row) and the gathered sum (6) by
+# clEnqueueReadBufferRect on CPUs and packed on the device (pack_channels) elsewhere, and writes its first
+# gather (6) by clEnqueueWriteBufferRect (clsky/azimuth.py, clsky._cl.rectangular_reads): all three timed.
 run copies.txt "$PY" - "${smoke[@]}" <<'EOF'
 import sys, time
 import numpy as np
 import pyopencl as cl
-from clsky import _cl
+import pyopencl.array as cla
+from clsky import TableSettings, _cl
+from clsky.multiple import MultipleScatteringEngine
 
 rows = 4096 if "--smoke" in sys.argv else 32 * 256 * 208          # the planned table's cells, one node
 ctx = _cl.make_context()
@@ -169,6 +172,8 @@ queue = cl.CommandQueue(ctx)
 device = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, rows * 64)
 cl.enqueue_fill_buffer(queue, device, np.zeros(1), 0, rows * 64).wait()
 padded = np.empty((rows, 8))
+engine = MultipleScatteringEngine(TableSettings(), queue=queue)
+padded_d = cla.Array(queue, (rows, 8), np.float64, data=device)
 print(f"{_cl.describe_device(queue.device)}: {rows} rows of 8 doubles ({rows * 64 / 2**20:.0f} MiB), best of 3")
 
 
@@ -188,10 +193,18 @@ def contiguous(channels, host, read):
         cl.enqueue_copy(queue, device, padded, is_blocking=True)
 
 
+def packed(channels, host, read):
+    """What clsky.azimuth reads on devices other than CPUs: the channels packed on the device, one read."""
+    packed_d = cla.empty(queue, (rows, channels), np.float64)
+    engine.pack_channels(padded_d, channels, packed_d)
+    cl.enqueue_copy(queue, host, packed_d.data, is_blocking=True)
+
+
 for channels in (3, 6):
     host = np.zeros((rows, channels))
     for read in (True, False):
-        for label, copy in (("rectangular", rectangle), ("contiguous + host copy", contiguous)):
+        ways = (("rectangular", rectangle), ("contiguous + host copy", contiguous)) + ((("packed", packed),) if read else ())
+        for label, copy in ways:
             seconds = []
             for _ in range(3):
                 start = time.perf_counter()

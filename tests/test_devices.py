@@ -162,9 +162,26 @@ def test_gpu_checks_script_runs_and_keeps_what_it_measured(tmp_path):
     assert "| run | frames | wall [s] | CPU [s] |" in (out / "bench_animate.txt").read_text()
     profile = (out / "profile.txt").read_text()
     assert "(first_gather)" in profile and "  scatter " in profile and "launches not profiled: 0" in profile
-    assert (out / "copies.txt").read_text().count(" ms") == 8          # 3 and 6 channels, read and write, 2 ways
+    # 3 and 6 channels: reads 3 ways (rectangular, contiguous, packed), writes 2
+    assert (out / "copies.txt").read_text().count(" ms") == 10
     for configuration in ("0", "1"):
         assert (out / "anim" / configuration / "sky_metrics.csv").is_file()
         assert len(list((out / "anim" / configuration / "sky_frames").glob("*.png"))) == 2
     again = subprocess.run([str(script), str(out)], env=env, capture_output=True, text=True, timeout=60)
     assert again.returncode == 2 and "exists already" in again.stderr
+
+
+def test_gpu_checks_script_runs_only_the_steps_asked(tmp_path):
+    """ONLY (a short device lease): the steps named, separated by any blanks, and no other; a name that is
+    no step exits 2 before anything is written."""
+    script = pathlib.Path(__file__).resolve().parent.parent / "scripts" / "gpu_checks.sh"
+    env = {**os.environ, "SMOKE": "1", "PY": sys.executable}
+    bad = subprocess.run([str(script), str(tmp_path / "bad")], env={**env, "ONLY": "copies profiles"},
+                         capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "no step 'profiles'" in bad.stderr and not (tmp_path / "bad").exists()
+    out = tmp_path / "checks"
+    result = subprocess.run([str(script), str(out)], env={**env, "ONLY": "copies\tprofile"}, capture_output=True,
+                            text=True, timeout=600)
+    assert result.returncode == 0, result.stdout[-4000:] + result.stderr[-2000:]
+    assert sorted(path.name for path in out.iterdir() if path.is_file()) == ["copies.txt", "devices.txt",
+                                                                             "machine.txt", "profile.txt"]
