@@ -189,7 +189,9 @@ def main():
     # first, discarded, the same animation at 3 frames (sunrise, noon, sunset: the same scene plan, table and
     # programs): its kernels compiled into PyOpenCL's cache, which a fresh machine lacks and the first variant
     # alone would otherwise pay for (likely on the first H200 machine, README "GPUs")
-    end_to_end(["--frames", str(min(3, args.frames)), *command[2:]])
+    warm_up = end_to_end(["--frames", str(min(3, args.frames)), *command[2:]])
+    print(f"discarded warm-up ({min(3, args.frames)} frames): wall {warm_up[0]:.1f} s, CPU {warm_up[1]:.1f} s",
+          flush=True)
     runs = {}
     for label, (overlap, host_workers) in variants.items():
         runs[label] = end_to_end(command, overlap, host_workers)
@@ -248,10 +250,11 @@ def main():
         cells += [f"**{total:.2f}** (wall {split_wall:.1f})", f"{1000 * total / args.stage_frames:.0f}"]
     lines.append("| total | " + " | ".join(cells) + " |")
     one = threads[0][1]
+    jobs = 4 if args.smoke else HOST_HALF_JOBS
     lines += ["", f"Host threads: the frames' host half alone (conversion to cd/m^2, metering, display, comparison) "
-              f"on a pool of threads mapping {4 if args.smoke else HOST_HALF_JOBS} frames of {args.size} x {args.size} rendered "
-              f"beforehand (no device work meanwhile), the thread counts up then down, in this process; "
-              f"wall and process CPU per frame [ms].", "",
+              f"on a pool of threads mapping {jobs} frames of {args.size} x {args.size}, {HOST_HALF_RENDERED} rendered "
+              f"beforehand and taken in turn (no device work meanwhile), the thread counts up then down, in this "
+              f"process; wall and process CPU per frame [ms].", "",
               "| round | host threads | wall a frame [ms] | CPU a frame [ms] | wall, one thread's / this |",
               "|---:|---:|---:|---:|---:|",
               *(f"| {1 + (index >= len(counts))} | {count} | {1000 * wall:.1f} | {1000 * cpu:.1f} | {one / wall:.2f}x |"
