@@ -188,7 +188,7 @@ def main():
                 "one after the other": (False, None)}
     # first, discarded, the same animation at 3 frames (sunrise, noon, sunset: the same scene plan, table and
     # programs): its kernels compiled into PyOpenCL's cache, which a fresh machine lacks and the first variant
-    # alone would otherwise pay for (likely on the first H200 machine, README "GPUs")
+    # alone would otherwise pay for (one candidate for the first H200 machine's figures, README "GPUs")
     warm_up = end_to_end(["--frames", str(min(3, args.frames)), *command[2:]])
     print(f"discarded warm-up ({min(3, args.frames)} frames): wall {warm_up[0]:.1f} s, CPU {warm_up[1]:.1f} s",
           flush=True)
