@@ -31,8 +31,7 @@ from typing import Callable
 import numpy as np
 
 import clsky
-from clsky._cl import host_blas_single_threaded, host_cores
-from clsky._cl import packed_reads as device_packs_reads
+from clsky._cl import host_blas_single_threaded, host_cores, packed_reads
 from clsky._files import StagedWrites, check_output
 from clsky.errors import ParameterError, check_choice, check_integer, check_real, is_real_number
 from clsky.ground import check_ground_mode
@@ -488,8 +487,7 @@ def check_animation_memory(config: AnimationConfig, positions, device=None, opti
     limits = machine_limits(device)
     while True:
         try:
-            check_memory(memory_estimate(config, positions, workers, device_packs_reads(device)), limits,
-                         options=options)
+            check_memory(memory_estimate(config, positions, workers, device), limits, options=options)
             return workers
         except InsufficientMemoryError:
             if workers <= 1:
@@ -497,11 +495,11 @@ def check_animation_memory(config: AnimationConfig, positions, device=None, opti
             workers -= 1
 
 
-def memory_estimate(config: AnimationConfig, positions, host_workers=None, packed_reads=False) -> MemoryEstimate:
+def memory_estimate(config: AnimationConfig, positions, host_workers=None, device=None) -> MemoryEstimate:
     """Peak memory of the animation (:func:`clsky.resources.estimate_animation_memory`), from its
     settings alone: no pilot, no full-size camera; with ``host_workers`` frames processed at once
-    (default :func:`host_frame_workers`; never more than the frames); ``packed_reads``: the device packs
-    the table build's reads (``clsky.resources.estimate_table_memory``'s ``packed_reads``).
+    (default :func:`host_frame_workers`; never more than the frames), on ``device`` (a pyopencl.Device,
+    or None: no device), whose table build may pack its reads (:func:`clsky._cl.packed_reads`).
 
     The table is the plan's sun axis (view elevations from the camera at 64 pixels, ray-march margins)
     with the higher orders kept, an upper bound of the plan (whose pilot may drop them); with
@@ -523,7 +521,7 @@ def memory_estimate(config: AnimationConfig, positions, host_workers=None, packe
                                      ray_settings(config), hdr_output=config.hdr is not None, batches=batches,
                                      overlapped=OVERLAP_FRAMES,
                                      host_workers=min(host_frame_workers() if host_workers is None else host_workers,
-                                                      len(positions)), packed_reads=packed_reads)
+                                                      len(positions)), packed_reads=packed_reads(device))
 
 
 def build_table(config: AnimationConfig, plan: Plan | None = None, ctx=None, progress=None) -> clsky.ScatteringTable:
@@ -870,11 +868,11 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
     start = time.perf_counter()
     positions = sun_positions(config)
     check_outputs(config, len(positions))
+    device = device_of(ctx)
     if farm is None:
-        workers = check_animation_memory(config, positions, device_of(ctx))
+        workers = check_animation_memory(config, positions, device)
     else:
-        device = device_of(ctx)
-        check_memory(memory_estimate(config, positions, 1, device_packs_reads(device)), device=device)
+        check_memory(memory_estimate(config, positions, 1, device), device=device)
     camera = _camera(config)
     directions, valid = camera.directions()
     plan = plan_animation(config, positions, directions, valid, ctx=ctx)

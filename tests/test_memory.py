@@ -321,8 +321,10 @@ def test_packed_reads_count_on_the_device(monkeypatch, tmp_path):
 
     config = animate.AnimationConfig(frames=2, size=64)
     positions = animate.sun_positions(config)
-    on_gpu = animate.memory_estimate(config, positions, 1, packed_reads=True)
-    on_cpu = animate.memory_estimate(config, positions, 1)
+    gpu, cpu = (types.SimpleNamespace(type=kind) for kind in (cl.device_type.GPU, cl.device_type.CPU))
+    on_gpu = animate.memory_estimate(config, positions, 1, gpu)
+    on_cpu = animate.memory_estimate(config, positions, 1, cpu)
+    assert on_cpu.device_bytes == animate.memory_estimate(config, positions, 1).device_bytes
     assert on_gpu.device_bytes > on_cpu.device_bytes
     assert on_gpu.peak_bytes(unified=False) == on_cpu.peak_bytes(unified=False)        # the host's
 
@@ -342,8 +344,7 @@ def test_packed_reads_count_on_the_device(monkeypatch, tmp_path):
     saved = resources.estimate_table_memory(settings, saving=True)
     saved_packed = resources.estimate_table_memory(settings, saving=True, packed_reads=True)
     farm_config = dataclasses.replace(config, output=str(tmp_path / "sky.mp4"))
-    for kind in (cl.device_type.GPU, cl.device_type.CPU):
-        device = types.SimpleNamespace(type=kind)
+    for device in (gpu, cpu):
         monkeypatch.setattr(animate, "machine_limits", lambda device: MemoryLimits(None))
         monkeypatch.setattr(animate, "check_memory", check)
         monkeypatch.setattr(animate, "device_of", lambda ctx=None: device)
