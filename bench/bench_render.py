@@ -8,7 +8,8 @@
   beside the exp() bound measured on this machine (bench/_bound.py) and their ratio (issue 12's goal: 2x),
   from frames each followed by a reading of the bound (:func:`march_beside_bound`); the same with the
   higher orders' source on every other node (``TableSettings.source_stride = 2``, the 'draft' and
-  'default' quality levels' ray march);
+  'default' quality levels' ray march), and that march for 4 suns a launch (``render_raymarch_suns``, what
+  an animation does on CPUs: ``clsky.render.ray_march_suns``), per frame;
 - each row's process CPU time per frame is the least and the median of its frames, each frame timed on
   its own: one disturbed frame moves a mean, not these;
 - the default `clsky animate` (120 frames, 512 x 512, both renderers, comparison, files), wall time.
@@ -41,6 +42,9 @@ from clsky.anim.accuracy import LOOKUP4D_SUN_DEG, lookup4d_settings
 from clsky.anim.cameras import FisheyeCamera, sun_direction
 from clsky._cl import describe_device
 from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
+
+#: Suns a launch of the batched ray march's rows (clsky.render.ray_march_suns on CPUs).
+LAUNCH_SUNS = 4
 
 
 #: Frames of the ray march, each followed by a reading of the exp() rate.
@@ -81,15 +85,15 @@ def frames_timed(render, count):
     return min(walls), statistics.median(walls), min(cpus), statistics.median(cpus)
 
 
-def bound_sentence(label, pairs, exps):
-    """What ``pairs`` (:func:`march_beside_bound`) of a march of ``exps`` exponentials say against the
-    exp() bound: (sentence, ratio)."""
+def bound_sentence(label, pairs, exps, timed="frames"):
+    """What ``pairs`` (:func:`march_beside_bound`, CPU per frame) of a march of ``exps`` exponentials a frame
+    say against the exp() bound: (sentence, ratio); ``timed``: what each pair timed."""
     march_cpu, rate = fast_state(pairs)
     bound = exps / rate
     cpus, rates = [cpu for cpu, _ in pairs], [rate for _, rate in pairs]
     return (f"{label}: {1000 * march_cpu:.0f} CPU-ms per frame, its exponentials {1000 * bound:.0f} CPU-ms at "
             f"the {rate / 1e6:.0f} M double8 exp() per CPU-second read beside it: **{march_cpu / bound:.1f}x the "
-            f"bound** ({len(pairs)} frames, each followed by a reading of exp(): {1000 * min(cpus):.0f}-"
+            f"bound** ({len(pairs)} {timed}, each followed by a reading of exp(): {1000 * min(cpus):.0f}-"
             f"{1000 * max(cpus):.0f} CPU-ms, {min(rates) / 1e6:.0f}-{max(rates) / 1e6:.0f} M per CPU-second)",
             march_cpu / bound)
 
@@ -117,6 +121,12 @@ def main():
     table4d, wall4d, cpu4d = timed_with_cpu(lambda: clsky.ScatteringTable.build("physical", settings4d))
     renderer4d = SkyRenderer(table4d)
     sun = sun_direction(50.0, 160.0)
+    suns = [sun_direction(50.0 + 0.5 * k, 160.0) for k in range(LAUNCH_SUNS)]    # an animation's next suns
+
+    def strided_suns(prepared, _sun, altitude):
+        """The strided march of LAUNCH_SUNS suns in one call (a row's times are then divided by them)."""
+        return strided.render_raymarch_suns(prepared, suns, altitude)
+
     rows = []
     side = f"fisheye {sizes[0]} x {sizes[0]}"
     four = " x ".join(map(str, settings4d.size + (settings4d.azimuth_size,)))
@@ -127,11 +137,14 @@ def main():
                                  f"ray march ({RAYMARCH_DEFAULTS.view_steps} samples), fisheye {sizes[1]} x {sizes[1]}"),
                                 (sizes[1], strided.render_raymarch,
                                  f"ray march ({RAYMARCH_DEFAULTS.view_steps} samples, the higher orders' source on "
-                                 f"every other node), fisheye {sizes[1]} x {sizes[1]}")):
+                                 f"every other node), fisheye {sizes[1]} x {sizes[1]}"),
+                                (sizes[1], strided_suns,
+                                 f"the same, {LAUNCH_SUNS} suns a launch (an animation's on CPUs), per frame")):
         directions, valid = FisheyeCamera(size).directions()
         prepared = renderer.prepare(directions, valid)
         method(prepared, sun, 0.0)                                     # warm-up
-        best, median, least_cpu, median_cpu = frames_timed(lambda: method(prepared, sun, 0.0), args.repeat)
+        best, median, least_cpu, median_cpu = (t / (LAUNCH_SUNS if method is strided_suns else 1) for t in
+                                               frames_timed(lambda: method(prepared, sun, 0.0), args.repeat))
         rows.append(f"| {label} | {1000 * best:.0f} ms | {1000 * median:.0f} ms | {1000 * least_cpu:.0f} ms | "
                     f"{1000 * median_cpu:.0f} ms | {1 / best:.1f} |")
         print(rows[-1], flush=True)
@@ -140,9 +153,13 @@ def main():
     # exponentials (8 per node: single scattering's, at every node)
     exps = march_exps(int(np.count_nonzero(valid)), RAYMARCH_DEFAULTS.view_steps)
     count = BOUND_PAIRS if not args.smoke else 2
-    sentences = [bound_sentence(label, march_beside_bound(lambda: march(prepared, sun, 0.0), count), exps)
-                 for label, march in (("Ray march", renderer.render_raymarch),
-                                      ("with the higher orders' source on every other node", strided.render_raymarch))]
+    sentences = [bound_sentence(label, [(cpu / frames, rate) for cpu, rate in
+                                        march_beside_bound(lambda: march(prepared, sun, 0.0), count)], exps,
+                                "frames" if frames == 1 else f"launches of {frames} frames")
+                 for label, march, frames in (
+                     ("Ray march", renderer.render_raymarch, 1),
+                     ("with the higher orders' source on every other node", strided.render_raymarch, 1),
+                     (f"that march for {LAUNCH_SUNS} suns a launch, per frame", strided_suns, LAUNCH_SUNS))]
     load = load_average()
     bound_line = (f"Ray marches against the exp() bound: their {exps / 1e6:.1f} M exponentials ({EXPS_PER_NODE} per "
                   f"ray node, {RAYMARCH_DEFAULTS.view_steps + 1} nodes, {np.count_nonzero(valid)} pixels) at the "

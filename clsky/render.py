@@ -24,8 +24,8 @@ from .settings import MAPPINGS, TableSettings
 from .table import ScatteringTable
 from .transmittance import COMMON_SOURCES, TransmittanceEngine, azimuth_defines, column_channels, quadrature_defines
 
-__all__ = ["SkyRenderer", "RenderEngine", "SUN_ANGULAR_RADIUS_DEG", "RAYMARCH_DEFAULTS", "sun_disc_radiance",
-           "check_directions", "check_render_table"]
+__all__ = ["SkyRenderer", "RenderEngine", "SUN_ANGULAR_RADIUS_DEG", "RAYMARCH_DEFAULTS", "RAY_MARCH_SUNS",
+           "sun_disc_radiance", "check_directions", "check_render_table", "ray_march_suns", "ray_march_batch"]
 
 #: Angular radius of the sun disc [deg].
 SUN_ANGULAR_RADIUS_DEG = 0.2665
@@ -104,6 +104,38 @@ def sun_disc_radiance(atmosphere, sun_direction, altitude, steps=512):
 
 #: Work-items per work-group of the render kernels (each renders the engine's vector_width pixels).
 RENDER_WORK_GROUP = 64
+
+#: Suns (frames) a ray-march launch marches each pixel's ray for at once
+#: (:meth:`SkyRenderer.render_raymarch_suns`, ``-DRAY_SUNS``, kernels/view_ray.cl): a ray's geometry,
+#: densities, view transmittance and the lookups' altitude and view parts are computed once for all of
+#: them, each sun's sums are the operations of its own march (the same frames, bit for bit on PoCL).
+#: None: :func:`ray_march_suns` of the device. README "Speed" measures it.
+RAY_MARCH_SUNS = None
+#: At most this many bytes of float64 frames per ray-march launch (the frames it returns; its output on
+#: the device no more): larger frames take fewer suns at once (:func:`ray_march_batch`).
+RAY_MARCH_BATCH_BYTES = 64 * 2**20
+
+
+def ray_march_suns(device) -> int:
+    """:data:`RAY_MARCH_SUNS` if set, else the suns per ray-march launch for ``device`` (a pyopencl.Device):
+    4 on CPUs, where the sun-independent share of a node was 43 % of the march's CPU (README "Speed"),
+    1 elsewhere (not measured on a GPU, whose march takes milliseconds)."""
+    if RAY_MARCH_SUNS is not None:
+        if RAY_MARCH_SUNS not in (1, 2, 4, 8):
+            raise ValueError(f"clsky.render.RAY_MARCH_SUNS must be None, 1, 2, 4 or 8, got {RAY_MARCH_SUNS!r}")
+        return RAY_MARCH_SUNS
+    import pyopencl as cl
+
+    return 4 if device.type & cl.device_type.CPU else 1
+
+
+def ray_march_batch(pixels: int, suns: int) -> int:
+    """Suns per ray-march launch for frames of ``pixels`` pixels: ``suns`` (:func:`ray_march_suns`), halved
+    until the launch's float64 frames (pixels, 3) fit :data:`RAY_MARCH_BATCH_BYTES`, at least 1 (512 x 512
+    frames: 8 suns at most)."""
+    while suns > 1 and suns * max(pixels, 1) * 24 > RAY_MARCH_BATCH_BYTES:
+        suns //= 2
+    return suns
 
 
 @dataclasses.dataclass(frozen=True)
@@ -205,36 +237,60 @@ class SkyRenderer:
                                   cla.to_device(self.queue, np.ascontiguousarray(mask.ravel(), dtype=np.uint8)))
 
     def _launch(self, name, directions, sun_direction, altitude, valid, extra_args, buffers, sun_disc=True):
-        """Launch kernel ``name`` once ``buffers`` ((argument, array_d, values indexed) for ``extra_args``)
-        and the directions, mask and output have passed :func:`~clsky.lookup.check_kernel_buffer`;
-        ``sun_disc`` False: without the sun's disc (its radiance passed as 0)."""
+        """Launch kernel ``name`` (render_table, render_table4d) for one sun: :meth:`_launch_suns`."""
+        return self._launch_suns(name, directions, [sun_direction], altitude, valid, extra_args, buffers, sun_disc)[0]
+
+    def _launch_suns(self, name, directions, sun_directions, altitude, valid, extra_args, buffers, sun_disc=True):
+        """Frames (len(sun_directions), ..., 3) of kernel ``name`` once ``buffers`` ((argument, array_d, values
+        indexed) for ``extra_args``) and the directions, mask and output have passed
+        :func:`~clsky.lookup.check_kernel_buffer`; ``sun_disc`` False: without the sun's disc (its radiance
+        passed as 0). render_raymarch takes the suns :func:`ray_march_batch` at a time (the last launch's
+        missing suns repeat its last one, their frames dropped), the other kernels one sun."""
         if not isinstance(directions, PreparedDirections):
             directions = self.prepare(directions, valid)
         elif valid is not None:
             raise ValueError("valid must be given to prepare(), not with prepared directions")
-        _, sun, altitude = check_directions(np.zeros((0, 3)), sun_direction, altitude)
+        checked = [check_directions(np.zeros((0, 3)), sun_direction, altitude) for sun_direction in sun_directions]
+        suns, altitude = [sun for _, sun, _ in checked], checked[0][2]
         if name in ("render_table", "render_table4d") or self._has_gathered:
-            self._check_sun_covered(sun)
+            for sun in suns:
+                self._check_sun_covered(sun)
         shape, directions_d = directions.shape, directions.array
         n = directions_d.shape[0]
         if math.prod(shape) != n:
             raise ValueError(f"{name}: prepared directions of shape {shape} hold {n} directions")
-        sun4 = self.engine.real4(sun)
-        disc = self.engine.real4(sun_disc_radiance(self.table.atmosphere, sun, altitude) if sun_disc else np.zeros(3))
-        out_d = cla.empty(self.queue, (max(n, 1), 3), self.engine.dtype)
-        for argument, array_d, count in buffers + [("directions", directions_d, 3 * n), ("out", out_d, 3 * max(n, 1))]:
+        batch = (ray_march_batch(n, ray_march_suns(self.engine.device))
+                 if name == "render_raymarch" and len(suns) > 1 else 1)
+        out_d = cla.empty(self.queue, (batch, max(n, 1), 3), self.engine.dtype)
+        for argument, array_d, count in buffers + [("directions", directions_d, 3 * n),
+                                                   ("out", out_d, batch * 3 * max(n, 1))]:
             check_kernel_buffer(name, argument, array_d, count, self.engine.dtype)
         check_kernel_buffer(name, "valid", directions.valid, n, np.uint8)
-        kernel = self.engine.kernels_with(self._defines)[name]
+        kernel = self.engine.kernels_with(self._defines + ([f"-DRAY_SUNS={batch}"] if batch > 1 else []))[name]
         items = -(-n // self.engine.vector_width)
         # an explicit work-group size: left to PoCL, a large frame got work-groups whose private arrays
         # (the ray march's per-lane sums and ground values) overflowed its worker threads' stacks
         # (segmentation fault at 256 x 256 with a ground); the kernel returns for items beyond n
         local = min(RENDER_WORK_GROUP, items)
-        kernel(self.queue, (-(-items // local) * local,), (local,), self._atmosphere_d, *extra_args, np.int32(n),
-               directions_d.data, directions.valid.data, sun4, self.engine.real(altitude), disc,
-               self.engine.real(self._cos_sun_radius), out_d.data)
-        return out_d.get()[:n].reshape(shape + (3,)).astype(np.float64, copy=False)
+        frames = []
+        for start in range(0, len(suns), batch):
+            launch = suns[start:start + batch]
+            launch += launch[-1:] * (batch - len(launch))
+            discs = [sun_disc_radiance(self.table.atmosphere, sun, altitude) if sun_disc else np.zeros(3)
+                     for sun in launch]
+            if name == "render_raymarch":
+                suns_d = cla.to_device(self.queue, np.array([np.concatenate([sun, [0.0], disc, [0.0]])
+                                                             for sun, disc in zip(launch, discs)], self.engine.dtype))
+                sun_args = (suns_d.data,)
+            else:
+                sun_args = (self.engine.real4(launch[0]),)
+            kernel(self.queue, (-(-items // local) * local,), (local,), self._atmosphere_d, *extra_args, np.int32(n),
+                   directions_d.data, directions.valid.data, *sun_args, self.engine.real(altitude),
+                   *(() if name == "render_raymarch" else (self.engine.real4(discs[0]),)),
+                   self.engine.real(self._cos_sun_radius), out_d.data)
+            frames.append(out_d.get()[:len(suns) - start, :n])
+        frames = frames[0] if len(frames) == 1 else np.concatenate(frames)       # one launch: the download itself
+        return frames.reshape((len(suns),) + shape + (3,)).astype(np.float64, copy=False)
 
     def _check_sun_covered(self, sun):
         """A table planned for a scene covers its sun path only (``sun_cos_range``): refuse a sun outside
@@ -327,6 +383,25 @@ class SkyRenderer:
         orders from the table's gathered in-scatter, and a reflecting ground lit by the sun at the ground
         point's true sun cosine and by the table's ground_irradiance); ``sun_disc`` False: the sky
         without the sun's disc (the sky-view map's nodes, :meth:`skyview_map`)."""
+        return self._raymarch(directions, [sun_direction], altitude, valid, sun_disc)[0]
+
+    def render_raymarch_suns(self, directions, sun_directions, altitude=0.0, valid=None, sun_disc=True):
+        """:meth:`render_raymarch` for each of ``sun_directions`` (a sequence of suns, each 3 values):
+        frames (len(sun_directions), ..., 3), each the same as :meth:`render_raymarch` for its sun alone.
+        Each pixel's ray is marched once for several suns (:func:`ray_march_suns`, :func:`ray_march_batch`):
+        its geometry, densities and view transmittance computed once for them (README "Speed")."""
+        sun_directions = list(sun_directions)
+        if not sun_directions:
+            raise ValueError("sun_directions must hold at least one sun direction")
+        check_directions(np.zeros((0, 3)), (0.0, 0.0, 1.0), altitude)         # the altitude, named as such
+        for index, sun_direction in enumerate(sun_directions):
+            try:
+                check_directions(np.zeros((0, 3)), sun_direction, altitude)
+            except ValueError as error:
+                raise ValueError(f"sun_directions[{index}]: {error}") from None
+        return self._raymarch(directions, sun_directions, altitude, valid, sun_disc)
+
+    def _raymarch(self, directions, sun_directions, altitude, valid, sun_disc):
         t = self._check_table_unchanged()
         depth, height, width = self._gathered_shape[-4:-1] if self._has_gathered else (2, 2, 2)
         tw, th = self._sun_table_size
@@ -339,7 +414,8 @@ class SkyRenderer:
         buffers = [("gathered", self._gathered_d, (harmonics + 1) * depth * height * width * 8),
                    ("sun_table", self._sun_table_d, th * tw * column_channels(t.atmosphere)),
                    ("ground_irradiance", self._ground_d, 4 * self._ground_depth)]
-        return self._launch("render_raymarch", directions, sun_direction, altitude, valid, args, buffers, sun_disc)
+        return self._launch_suns("render_raymarch", directions, sun_directions, altitude, valid, args, buffers,
+                                 sun_disc)
 
     def skyview_map(self, sun_direction, altitude=0.0, settings=None):
         """The per-frame sky-view map (H, W, 3) of :mod:`clsky.skyview` (``settings``: a

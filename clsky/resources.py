@@ -451,7 +451,7 @@ def _table_held(settings, cells, orders, keep_orders=True):
 def estimate_render_memory(settings: TableSettings, image_shape, method="compare",
                            ray_settings: TableSettings | None = None, keep_orders=False,
                            hdr_output=False, count_table=True, batches=1, overlapped=False,
-                           host_workers=1) -> MemoryEstimate:
+                           host_workers=1, ray_march_suns=1) -> MemoryEstimate:
     """Peak memory of rendering frames of ``image_shape`` from a table of ``settings``.
 
     Parameters
@@ -482,6 +482,10 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
         Frames processed at once on host threads (``clsky.anim.animate.host_frame_workers``; with the
         overlap, the pipeline also holds one more frame's HDR frames, waiting for a thread): each
         processing counts :data:`FRAME_BYTES_PER_PIXEL` and its HDR frames.
+    ray_march_suns : int
+        Suns per ray-march launch (:meth:`clsky.render.SkyRenderer.render_raymarch_suns`, an animation's
+        :func:`clsky.render.ray_march_batch`): the launch's output and download hold that many frames, and
+        its float64 frames wait on the host until their turn.
 
     Returns
     -------
@@ -539,6 +543,15 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
             Allocation("frame processing (tone map, metrics, composite, encoding)",
                        pixels * (FRAME_BYTES_PER_PIXEL[method] + (12 if hdr_output else 0)), count=processing,
                        source="frames"))
+        if ray_march_suns > 1 and method in ("compare", "raymarch"):
+            more = int(ray_march_suns) - 1
+            per_pixel += (
+                Allocation("the ray march's other suns: output on the device (pixels, 3)", pixels * 3 * s,
+                           count=more, on_device=True, source="frames"),
+                Allocation("the ray march's other suns: download (pixels, 3)", pixels * 3 * s, count=more,
+                           source="frames"),
+                Allocation("the ray march's frames of a launch (pixels, 3) float64", pixels * 24,
+                           count=int(ray_march_suns), source="frames"))
         if overlapped:
             per_pixel += (Allocation("the next frame, rendered meanwhile (overlapped pipeline)",
                                      pixels * NEXT_FRAME_BYTES_PER_PIXEL[method] + next_spectral, source="frames"),)
@@ -594,20 +607,20 @@ def estimate_spectral_table_memory(settings: TableSettings, batches: int, packed
 def estimate_animation_memory(settings: TableSettings, image_shape, method="compare",
                               ray_settings: TableSettings | None = None, hdr_output=False,
                               batches=None, overlapped=True, host_workers=1,
-                              packed_reads=False) -> MemoryEstimate:
+                              packed_reads=False, ray_march_suns=1) -> MemoryEstimate:
     """The table build, then the frames (:func:`estimate_table_memory`, :func:`estimate_render_memory`
     without the higher orders, which an animation drops once the table is built). ``batches``: None
     for the three-wavelength animation, else the spectral one's ceil(N / 3) batches
     (:func:`estimate_spectral_table_memory`, ``estimate_render_memory(..., batches=B)``).
     ``overlapped``, ``host_workers``: the frames go through the overlapped pipeline with that many host
-    threads (``estimate_render_memory``'s). ``packed_reads``: :func:`estimate_table_memory`'s."""
+    threads, and ``ray_march_suns``: ``estimate_render_memory``'s. ``packed_reads``: :func:`estimate_table_memory`'s."""
     if batches is None:
         build = estimate_table_memory(settings, packed_reads=packed_reads)
     else:
         build = estimate_spectral_table_memory(settings, batches, packed_reads)
     render = estimate_render_memory(settings, image_shape, method, ray_settings, keep_orders=False,
                                     hdr_output=hdr_output, batches=batches or 1, overlapped=overlapped,
-                                    host_workers=host_workers)
+                                    host_workers=host_workers, ray_march_suns=ray_march_suns)
     width, height = image_shape
     w, h, d = settings.size
     tables = f"table {w} x {h} x {d}" if batches is None else f"{batches} tables {w} x {h} x {d}"

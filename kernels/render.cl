@@ -121,57 +121,71 @@ __kernel void render_table(__constant const atmosphere_t *atm, __global const re
 /* has_multiple: add the higher orders from `gathered` (padded (D, H, W, 8) on the table's grid);
  * physical: 1 for the physical mode (phase inside G), 0 for atmosphere-plus (F_s(nu) applied here).
  * ground_irradiance: ground_depth x 4 reals, the sky's irradiance E_sky r, g, b (and 0) on the ground
- * per sun node of the table (mapping, sun_range), read only with -DGROUND. */
+ * per sun node of the table (mapping, sun_range), read only with -DGROUND.
+ * RAY_SUNS frames at once (view_ray.cl: integrate_gathered_for_suns; clsky.render.RAY_MARCH_SUNS): suns
+ * holds 8 reals per sun, its direction (x, y, z, 0) and its disc's radiance (r, g, b, 0); out holds the
+ * frames one after the other, n x 3 reals each. */
 __kernel void render_raymarch(__constant const atmosphere_t *atm, __global const real *gathered, const int width,
                               const int height, const int depth, const int mapping, const real2 sun_range,
                               const int has_multiple,
                               const int physical, __global const real *sun_table, const int tw, const int th,
                               __global const real *ground_irradiance, const int ground_depth,
                               const int n, __global const real *directions, __global const uchar *valid,
-                              const real4 sun, const real altitude,
-                              const real4 sun_radiance, const real cos_sun_radius, __global real *out)
+                              __global const real *suns, const real altitude,
+                              const real cos_sun_radius, __global real *out)
 {
     const int first = get_global_id(0) * VECTOR_WIDTH;
-    if (first >= n || all_invalid(valid, first, n, out))
+    if (first >= n)
         return;
-    realv mu_v_observer, horizon, h, mu_v, mu_s, nu;
-    const maskv inside = pixel_rays(atm, directions, first, n, sun, altitude, &mu_v_observer, &horizon, &h, &mu_v,
-                                    &mu_s, &nu);
+    int invalid = 1;
+    for (int b = 0; b < RAY_SUNS; ++b)
+        invalid = all_invalid(valid, first, n, out + (size_t)b * (size_t)(3 * n));
+    if (invalid)
+        return;
+    realv mu_v_observer, horizon, h, mu_v, mu_s[RAY_SUNS], nu[RAY_SUNS];
+    maskv inside;
+    for (int b = 0; b < RAY_SUNS; ++b)          /* the same h, mu_v, horizon and inside for every sun */
+        inside = pixel_rays(atm, directions, first, n, vload4(2 * b, suns), altitude, &mu_v_observer, &horizon, &h,
+                            &mu_v, &mu_s[b], &nu[b]);
 
-    realv single[6];
-    real8 multiple[VECTOR_WIDTH];
+    realv single[RAY_SUNS][6];
+    real8 multiple[RAY_SUNS][VECTOR_WIDTH];
 #ifdef GROUND
-    realv ground[GROUND_VALUES];
+    realv ground[RAY_SUNS][GROUND_VALUES];
 #else
     realv *ground = 0;
 #endif
     if (has_multiple)   /* one pass along the ray for both */
-        integrate_gathered(atm, h, mu_v, mu_s, nu, gathered, width, height, depth, mapping, sun_range, multiple,
-                           sun_table, tw, th, single, ground);
+        integrate_gathered_for_suns(atm, h, mu_v, mu_s, nu, gathered, width, height, depth, mapping, sun_range,
+                                    multiple, sun_table, tw, th, single, ground);
     else
-        integrate_single(atm, h, mu_v, mu_s, nu, sun_table, tw, th, single, ground);
+        integrate_single_suns(atm, h, mu_v, mu_s, nu, RAY_SUNS, sun_table, tw, th, single, ground);
 
     const real scale = R(1.0) / (R(4.0) * PI_REAL);
     const real3 beta_r = atm->beta_rayleigh.xyz * scale;
     const real3 beta_m = atm->beta_mie.xyz * scale;
     const real3 light = atm->incident_light.xyz;
-    for (int k = 0; k < VECTOR_WIDTH && first + k < n; ++k) {
-        real3 value = sun_disc(LANE(nu, k), LANE(mu_v_observer, k), LANE(horizon, 0), sun_radiance, cos_sun_radius);
-        if (MASK_LANE(inside, k)) {
-            const real f_r = phase_rayleigh(atm, LANE(nu, k)), f_m = phase_mie(atm, LANE(nu, k));
-            const real3 ibar_r = beta_r * (real3)(LANE(single[0], k), LANE(single[1], k), LANE(single[2], k));
-            const real3 ibar_m = beta_m * (real3)(LANE(single[3], k), LANE(single[4], k), LANE(single[5], k));
-            real3 sky = f_r * ibar_r + f_m * ibar_m;
-            if (has_multiple) {
-                const real3 g_r = beta_r * multiple[k].s012, g_m = beta_m * multiple[k].s345;
-                sky += physical ? g_r + g_m : f_r * g_r + f_m * g_m;
-            }
+    for (int b = 0; b < RAY_SUNS; ++b) {
+        const real4 sun_radiance = vload4(2 * b + 1, suns);
+        for (int k = 0; k < VECTOR_WIDTH && first + k < n; ++k) {
+            const real nu_k = LANE(nu[b], k);
+            real3 value = sun_disc(nu_k, LANE(mu_v_observer, k), LANE(horizon, 0), sun_radiance, cos_sun_radius);
+            if (MASK_LANE(inside, k)) {
+                const real f_r = phase_rayleigh(atm, nu_k), f_m = phase_mie(atm, nu_k);
+                const real3 ibar_r = beta_r * (real3)(LANE(single[b][0], k), LANE(single[b][1], k), LANE(single[b][2], k));
+                const real3 ibar_m = beta_m * (real3)(LANE(single[b][3], k), LANE(single[b][4], k), LANE(single[b][5], k));
+                real3 sky = f_r * ibar_r + f_m * ibar_m;
+                if (has_multiple) {
+                    const real3 g_r = beta_r * multiple[b][k].s012, g_m = beta_m * multiple[b][k].s345;
+                    sky += physical ? g_r + g_m : f_r * g_r + f_m * g_m;
+                }
 #ifdef GROUND
-            add_ground_reflection(atm, ground, k, ground_irradiance, ground_depth, mapping, sun_range, &sky);
+                add_ground_reflection(atm, ground[b], k, ground_irradiance, ground_depth, mapping, sun_range, &sky);
 #endif
-            value += light * sky;
+                value += light * sky;
+            }
+            store_radiance(out + (size_t)b * (size_t)(3 * n), first + k, valid[first + k] ? value : (real3)(R(0.0)));
         }
-        store_radiance(out, first + k, valid[first + k] ? value : (real3)(R(0.0)));
     }
 }
 

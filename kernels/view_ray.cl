@@ -174,6 +174,14 @@ inline void add_ground_reflection(__constant const atmosphere_t *atm, const real
 }
 #endif
 
+/* The ground values of several suns (integrate_single_suns, integrate_gathered_for_suns): ground[b][0..6]
+ * with -DGROUND, unused (0) without. */
+#ifdef GROUND
+#define GROUND_OF_SUNS realv (*ground)[GROUND_VALUES]
+#else
+#define GROUND_OF_SUNS realv *ground
+#endif
+
 /* Single scattering along the ray for `count` suns at once (count <= SINGLE_SUN_NODES), sun b of zenith
  * cosine mu_s[b] and nu[b] = dot(V, Sun_b) at the observer:
  *   sum[b][0..2] = Integral rho_R T dt (r, g, b), sum[b][3..5] the same with rho_M, T = T(Pc, P) T(P, Pa),
@@ -181,15 +189,19 @@ inline void add_ground_reflection(__constant const atmosphere_t *atm, const real
  * never from rounding). Multiply by beta_s / (4 pi) for Ibar. The ray's nodes, altitudes, densities and
  * view columns do not depend on the sun: each is computed once for every sun, and each sun's sums are
  * the same operations as for that sun alone (the single-scattering table marches a ray once for
- * SINGLE_SUN_NODES sun nodes: single.cl). With -DGROUND and ground != 0, also ground[0..GROUND_VALUES - 1]
- * of the last node for sun 0 (ground_view, ground_direct). */
+ * SINGLE_SUN_NODES sun nodes: single.cl). With -DGROUND and ground != 0, also ground[b][0..GROUND_VALUES - 1]
+ * of the last node for each sun (ground_view, ground_direct). */
+/* Suns per ray of the per-pixel ray march (render.cl: render_raymarch; clsky.render.RAY_MARCH_SUNS). */
+#ifndef RAY_SUNS
+#define RAY_SUNS 1
+#endif
 #ifndef SINGLE_SUN_NODES
-#define SINGLE_SUN_NODES 1
+#define SINGLE_SUN_NODES RAY_SUNS
 #endif
 inline void integrate_single_suns(__constant const atmosphere_t *atm, const realv h0, const realv mu_v,
                                   const realv *mu_s, const realv *nu, const int count,
                                   __global const real *sun_table, const int tw, const int th,
-                                  realv sum[][6], realv *ground)
+                                  realv sum[][6], GROUND_OF_SUNS)
 {
     const real rp = atm->planet_radius;
     const realv r0 = rp + h0;
@@ -231,9 +243,9 @@ inline void integrate_single_suns(__constant const atmosphere_t *atm, const real
             const realv t1 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.y, beta_me.y, beta_o.y)), lit);
             const realv t2 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.z, beta_me.z, beta_o.z)), lit);
 #ifdef GROUND
-            if (ground && b == 0 && i == N_VIEW) {
-                ground_view(atm, view, hits_ground, mu_sun_here, ground);
-                ground_direct(atm, sun, lit, ground);
+            if (ground && i == N_VIEW) {
+                ground_view(atm, view, hits_ground, mu_sun_here, ground[b]);
+                ground_direct(atm, sun, lit, ground[b]);
             }
 #endif
             realv f[6];
@@ -256,7 +268,11 @@ inline void integrate_single(__constant const atmosphere_t *atm, const realv h0,
                              const int tw, const int th, realv *sum, realv *ground)
 {
     realv sums[1][6];
+#ifdef GROUND
+    integrate_single_suns(atm, h0, mu_v, &mu_s, &nu, 1, sun_table, tw, th, sums, (realv (*)[GROUND_VALUES])ground);
+#else
     integrate_single_suns(atm, h0, mu_v, &mu_s, &nu, 1, sun_table, tw, th, sums, ground);
+#endif
     for (int c = 0; c < 6; ++c)
         sum[c] = sums[0][c];
 }
@@ -468,16 +484,21 @@ inline void shares_between(const view_march_t *ray, const int i, real8 *before, 
 }
 #endif
 
-/* In-scattering of a gathered table along the ray, per lane k:
- *   sum[k].s012 = Integral rho_R T(P, Pa) Gbar_R dt (r, g, b), sum[k].s345 the same with rho_M, Gbar_M
+/* In-scattering of a gathered table along the ray for RAY_SUNS suns at once, per sun b and lane k:
+ *   sum[b][k].s012 = Integral rho_R T(P, Pa) Gbar_R dt (r, g, b), sum[b][k].s345 the same with rho_M, Gbar_M
  * with Gbar (padded (D, H, W, 8), the table's grid, mapping and sun_range) looked up trilinearly at each node's
  * altitude, view and sun cosines (and, with -DAZIMUTH_HARMONICS, summed over its harmonics at the local
- * azimuth: add_lookups). The trapezoid sum_i (f_(i-1) + f_i) h_i / 2 is accumulated as
- * sum_i f_i (h_i + h_(i+1)) / 2, so that each lane's 6 channels are one real8 FMA per node.
+ * azimuth: add_lookups); sun b of zenith cosine mu_s[b] and scattering cosine nu[b] at the ray's start.
+ * The trapezoid sum_i (f_(i-1) + f_i) h_i / 2 is accumulated as sum_i f_i (h_i + h_(i+1)) / 2, so that each
+ * lane's 6 channels are one real8 FMA per node.
  * With single != 0 (the per-pixel ray march), the same pass also accumulates single scattering into
- * single[0..5] as integrate_single does (sun columns from sun_table or re-marched), sharing the
+ * single[b][0..5] as integrate_single does (sun columns from sun_table or re-marched), sharing the
  * geometry, densities and view transmittance of each node. With -DGROUND and ground != 0, also
- * ground[0..GROUND_VALUES - 1] of the last node (the direct irradiance only with single != 0).
+ * ground[b][0..GROUND_VALUES - 1] of the last node (the direct irradiance only with single != 0).
+ * A ray's geometry, densities, view transmittance and the lookups' altitude and view parts (ray_step,
+ * prepare_lookups) do not depend on the sun: each node computes them once for its RAY_SUNS suns, and each
+ * sun's sums are the operations of the ray marched for it alone (the scatter's integrate_gathered_suns
+ * does the same for a table's sun nodes, kernels/multiple.cl).
  * With -DSOURCE_STRIDE=2 (TableSettings.source_stride) Gbar is looked up at the even nodes and the last
  * one only, and taken linear in distance between two of them at the odd node i between:
  * Gbar_i = (1 - w_i) Gbar_(i-1) + w_i Gbar_(i+1), w_i = (s_i - s_(i-1)) / (s_(i+1) - s_(i-1)); node i's
@@ -485,11 +506,12 @@ inline void shares_between(const view_march_t *ray, const int i, real8 *before, 
  * lookup waits for it, and f_i w_i node i + 1's (the scatter's scheme, kernels/multiple.cl).
  * Gbar is a smooth field of the higher orders: about half the lookups' cost for a change of the
  * radiance of about 2e-4 by day (README, "Speed"). */
-inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h0, const realv mu_v,
-                               const realv mu_s, const realv nu, __global const real *gathered,
-                               const int width, const int height, const int depth, const int mapping,
-                               const real2 sun_range, real8 *sum, __global const real *sun_table, const int tw, const int th,
-                               realv *single, realv *ground)
+inline void integrate_gathered_for_suns(__constant const atmosphere_t *atm, const realv h0, const realv mu_v,
+                                        const realv *mu_s, const realv *nu, __global const real *gathered,
+                                        const int width, const int height, const int depth, const int mapping,
+                                        const real2 sun_range, real8 sum[RAY_SUNS][VECTOR_WIDTH],
+                                        __global const real *sun_table, const int tw, const int th,
+                                        realv (*single)[6], GROUND_OF_SUNS)
 {
     const real ha = atm->top_radius - atm->planet_radius;
     const real4 beta = atm->beta_rayleigh;
@@ -497,54 +519,63 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
     const real4 beta_o = atm->ozone_extinction;
     view_march_t ray;
     ray_begin(atm, h0, mu_v, &ray);
-    for (int k = 0; k < VECTOR_WIDTH; ++k)
-        sum[k] = (real8)(R(0.0));
-    if (single)
-        for (int c = 0; c < 6; ++c)
-            single[c] = V(0.0);
+    for (int b = 0; b < RAY_SUNS; ++b) {
+        for (int k = 0; k < VECTOR_WIDTH; ++k)
+            sum[b][k] = (real8)(R(0.0));
+        if (single)
+            for (int c = 0; c < 6; ++c)
+                single[b][c] = V(0.0);
+    }
     node_lookup_t node;                 /* with -DSOURCE_STRIDE=2, an even node's, kept for the odd node after it */
-    realv fz;
+    realv fz[RAY_SUNS];
 #if SOURCE_STRIDE == 2
-    real8 pending[VECTOR_WIDTH];        /* f_i w_i of the odd node i, for node i + 1's lookup */
+    real8 pending[VECTOR_WIDTH];        /* f_i w_i of the odd node i, for node i + 1's lookups */
     for (int k = 0; k < VECTOR_WIDTH; ++k)
         pending[k] = (real8)(R(0.0));
 #endif
 
     for (int i = 0; i <= N_VIEW; ++i) {
         ray_step(atm, i, &ray);
-        const realv mu_sun_here = ray_sun_cos(&ray, mu_s, nu);
+        realv mu_sun_here[RAY_SUNS];
+        for (int b = 0; b < RAY_SUNS; ++b)
+            mu_sun_here[b] = ray_sun_cos(&ray, mu_s[b], nu[b]);
 #ifdef GROUND
         if (ground && i == N_VIEW)
-            ground_view(atm, ray.view, ray.hits_ground, mu_sun_here, ground);
+            for (int b = 0; b < RAY_SUNS; ++b)
+                ground_view(atm, ray.view, ray.hits_ground, mu_sun_here[b], ground[b]);
 #endif
         if (single) {
-            column_t sun;
             const sun_table_altitude_t at = sun_altitude(atm, tw, ray.h);
-            const maskv lit = sun_column(atm, ray.h, &at, mu_sun_here, sun_table, tw, th, &sun);
-            const realv s0 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.x, beta_me.x, beta_o.x)), lit);
-            const realv s1 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.y, beta_me.y, beta_o.y)), lit);
-            const realv s2 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.z, beta_me.z, beta_o.z)), lit);
-            single[0] += ray.f[0] * s0; single[1] += ray.f[1] * s1; single[2] += ray.f[2] * s2;
-            single[3] += ray.f[3] * s0; single[4] += ray.f[4] * s1; single[5] += ray.f[5] * s2;
+            for (int b = 0; b < RAY_SUNS; ++b) {
+                column_t sun;
+                const maskv lit = sun_column(atm, ray.h, &at, mu_sun_here[b], sun_table, tw, th, &sun);
+                const realv s0 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.x, beta_me.x, beta_o.x)), lit);
+                const realv s1 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.y, beta_me.y, beta_o.y)), lit);
+                const realv s2 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.z, beta_me.z, beta_o.z)), lit);
+                single[b][0] += ray.f[0] * s0; single[b][1] += ray.f[1] * s1; single[b][2] += ray.f[2] * s2;
+                single[b][3] += ray.f[3] * s0; single[b][4] += ray.f[4] * s1; single[b][5] += ray.f[5] * s2;
 #ifdef GROUND
-            if (ground && i == N_VIEW)
-                ground_direct(atm, sun, lit, ground);
+                if (ground && i == N_VIEW)
+                    ground_direct(atm, sun, lit, ground[b]);
 #endif
+            }
         }
 #if SOURCE_STRIDE == 2
         if ((i & 1) && i < N_VIEW) {
-            /* node i - 1's lookup waited for this node's share of it */
+            /* node i - 1's lookups waited for this node's share of them */
             real8 share[VECTOR_WIDTH];
             shares_between(&ray, i, share, pending);
             for (int k = 0; k < VECTOR_WIDTH; ++k)
                 node.factor[k] += share[k];
-            add_lookups(gathered, width, height, depth, &node, fz, &ray, mu_s, nu, sum);
+            for (int b = 0; b < RAY_SUNS; ++b)
+                add_lookups(gathered, width, height, depth, &node, fz[b], &ray, mu_s[b], nu[b], sum[b]);
             continue;
         }
 #endif
         const realv fx = MAPPING_U(ray.h, mapping, ha) * (real)(width - 1);
         const realv fy = MAPPING_V(ray.mu_view_here, mapping) * (real)(height - 1);
-        fz = MAPPING_SUN_T(mu_sun_here, mapping, sun_range) * (real)(depth - 1);
+        for (int b = 0; b < RAY_SUNS; ++b)
+            fz[b] = MAPPING_SUN_T(mu_sun_here[b], mapping, sun_range) * (real)(depth - 1);
         prepare_lookups(width, height, ray.f, ray.s, fx, fy, &node);
 #if SOURCE_STRIDE == 2
         for (int k = 0; k < VECTOR_WIDTH; ++k) {
@@ -552,8 +583,27 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
             pending[k] = (real8)(R(0.0));
         }
         if (i + 1 < N_VIEW)
-            continue;                   /* node i + 1 is odd: its share joins this lookup first */
+            continue;                   /* node i + 1 is odd: its share joins these lookups first */
 #endif
-        add_lookups(gathered, width, height, depth, &node, fz, &ray, mu_s, nu, sum);
+        for (int b = 0; b < RAY_SUNS; ++b)
+            add_lookups(gathered, width, height, depth, &node, fz[b], &ray, mu_s[b], nu[b], sum[b]);
     }
 }
+
+#if RAY_SUNS == 1
+/* integrate_gathered_for_suns for one sun (table4d.cl): sum[k], single[0..5], ground[0..GROUND_VALUES - 1]. */
+inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h0, const realv mu_v,
+                               const realv mu_s, const realv nu, __global const real *gathered,
+                               const int width, const int height, const int depth, const int mapping,
+                               const real2 sun_range, real8 *sum, __global const real *sun_table, const int tw, const int th,
+                               realv *single, realv *ground)
+{
+#ifdef GROUND
+    realv (*ground_of_suns)[GROUND_VALUES] = (realv (*)[GROUND_VALUES])ground;
+#else
+    realv *ground_of_suns = ground;
+#endif
+    integrate_gathered_for_suns(atm, h0, mu_v, &mu_s, &nu, gathered, width, height, depth, mapping, sun_range,
+                                (real8 (*)[VECTOR_WIDTH])sum, sun_table, tw, th, (realv (*)[6])single, ground_of_suns);
+}
+#endif

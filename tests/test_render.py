@@ -410,3 +410,129 @@ def test_large_frame_with_a_ground_renders(cl_context):
     with SkyRenderer(table, level.ray, ctx=cl_context) as sky:
         image = sky.render_raymarch(directions, sun_direction(96.0, 180.0), 0.0, valid=valid)
     assert np.isfinite(image).all() and (image >= 0.0).all() and image[valid].max() > 0.0
+
+
+# 6. Several suns per ray-march launch ----------------------------------------------------------------
+
+#: Five suns (so that a launch of 2 or 4 suns ends padded), high to twilight, at different azimuths.
+FIVE_SUNS = [sun_direction(zenith, SUN_AZIMUTH + 17.0 * i) for i, zenith in enumerate((30.0, 60.0, 85.0, 89.0, 95.0))]
+
+
+def assert_same_frames(cl_context, frames, alone):
+    """Bit for bit on CPUs (PoCL, Intel's runtime: each sun's sums are the operations of its own march); on
+    other devices the compiler may contract the two programs' products and sums into FMAs differently
+    (tests/test_single_twin.py, the sun nodes per work-item): 2 epsilon of the frames' maximum there."""
+    import pyopencl as cl
+
+    if cl_context.devices[0].type & cl.device_type.CPU:
+        assert_array_equal(frames, alone)
+    else:
+        assert np.abs(frames - alone).max() <= 2 * np.finfo(frames.dtype).eps * alone.max()
+
+
+@pytest.mark.parametrize("suns_per_launch", [2, 4, 8])
+@pytest.mark.parametrize("variant,altitude", [("physical", 0.0), ("atmosphere-plus", 3000.0), ("single-only", 0.0),
+                                              ("physical", 150e3)])
+def test_suns_per_launch_change_no_bit(renderer, cl_context, monkeypatch, variant, altitude, suns_per_launch):
+    """render_raymarch_suns marches each pixel's ray once for several suns (-DRAY_SUNS): each frame is
+    render_raymarch's for its sun alone, with higher orders (both modes) or without, a ground and ozone
+    (the physical preset), from space (each sun's entry point), the sun's disc on; 5 suns, so that the
+    last launch of 2 or 4 repeats its last sun."""
+    from clsky import render
+
+    monkeypatch.setattr(render, "RAY_MARCH_SUNS", suns_per_launch)
+    sky = renderer(variant)
+    directions = fisheye_directions(FIVE_SUNS[0], altitude)
+    prepared = sky.prepare(directions)
+    frames = sky.render_raymarch_suns(prepared, FIVE_SUNS, altitude)
+    alone = np.array([sky.render_raymarch(prepared, sun, altitude) for sun in FIVE_SUNS])
+    assert frames.shape == (5, 32, 32, 3) and frames.dtype == np.float64
+    assert_same_frames(cl_context, frames, alone)
+    assert np.isfinite(frames).all() and (frames >= 0.0).all() and frames.max() > 0.0
+
+
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
+def test_suns_per_launch_with_harmonics_and_source_stride(cl_context, monkeypatch, dtype):
+    """The same with azimuth harmonics (M = 2: each sun's local azimuth at each node) and the higher orders'
+    source on every other node (source_stride 2: the lookups wait for the odd node's share), masked pixels,
+    in both precisions."""
+    from clsky import render
+
+    require_dtype(cl_context, dtype)
+    monkeypatch.setattr(render, "RAY_MARCH_SUNS", 4)
+    table = ScatteringTable.build("physical", SMALL.replace(mode="physical", azimuth_harmonics=2, dtype=dtype),
+                                  ctx=cl_context)
+    directions, valid = FisheyeCamera(24).directions()
+    with SkyRenderer(table, RAY.replace(source_stride=2, dtype=dtype), ctx=cl_context) as sky:
+        prepared = sky.prepare(directions, valid)
+        frames = sky.render_raymarch_suns(prepared, FIVE_SUNS, 0.0)
+        alone = np.array([sky.render_raymarch(prepared, sun, 0.0) for sun in FIVE_SUNS])
+    assert_same_frames(cl_context, frames, alone)
+    assert (frames[:, ~valid] == 0.0).all() and frames[:, valid].max() > 0.0
+
+
+def test_large_frame_with_a_ground_renders_four_suns_at_once(cl_context, monkeypatch):
+    """test_large_frame_with_a_ground_renders with 4 suns a launch, whose private arrays (sums, ground values)
+    are 4 times larger: finite and non-negative, the sun 6 deg below the horizon in one of them."""
+    from clsky import render
+    from clsky.quality import quality_level
+
+    monkeypatch.setattr(render, "RAY_MARCH_SUNS", 4)
+    level = quality_level("draft")
+    table = ScatteringTable.build("physical", level.table.replace(size=(16, 64, 16), mode="physical"), ctx=cl_context)
+    directions, valid = FisheyeCamera(256).directions()
+    suns = [sun_direction(zenith, 180.0) for zenith in (96.0, 92.0, 88.0, 60.0)]
+    with SkyRenderer(table, level.ray, ctx=cl_context) as sky:
+        frames = sky.render_raymarch_suns(directions, suns, 0.0, valid=valid)
+    assert frames.shape == (4, 256, 256, 3)
+    assert np.isfinite(frames).all() and (frames >= 0.0).all() and frames[:, valid].max() > 0.0
+
+
+def test_ray_march_batch_and_its_setting(monkeypatch):
+    """Suns per launch: the setting (None: 4 on CPUs, 1 elsewhere; else 1, 2, 4 or 8, a ValueError naming it
+    otherwise), halved until a launch's float64 frames fit RAY_MARCH_BATCH_BYTES (64 MiB)."""
+    from clsky import render
+
+    class Device:
+        def __init__(self, kind):
+            self.type = kind
+
+    import pyopencl as cl
+
+    assert render.ray_march_suns(Device(cl.device_type.CPU)) == 4
+    assert render.ray_march_suns(Device(cl.device_type.GPU)) == 1
+    monkeypatch.setattr(render, "RAY_MARCH_SUNS", 8)
+    assert render.ray_march_suns(Device(cl.device_type.GPU)) == 8
+    monkeypatch.setattr(render, "RAY_MARCH_SUNS", 3)
+    with pytest.raises(ValueError, match=r"clsky.render.RAY_MARCH_SUNS must be None, 1, 2, 4 or 8, got 3"):
+        render.ray_march_suns(Device(cl.device_type.CPU))
+    assert render.ray_march_batch(512 * 512, 8) == 8            # 48 MiB
+    assert render.ray_march_batch(1024 * 1024, 8) == 2          # 8 and 4 frames: 192 and 96 MiB
+    assert render.ray_march_batch(1024 * 1024, 4) == 2
+    assert render.ray_march_batch(4096 * 4096, 4) == 1
+    assert render.ray_march_batch(0, 4) == 4
+
+
+def test_render_raymarch_suns_refuses_no_sun_and_names_a_bad_one(renderer):
+    sky = renderer("physical")
+    with pytest.raises(ValueError, match="sun_directions must hold at least one"):
+        sky.render_raymarch_suns(GOOD_DIRECTIONS, [], 0.0)
+    with pytest.raises(ValueError, match=r"^sun_directions\[1\]: sun_direction must be a finite unit vector"):
+        sky.render_raymarch_suns(GOOD_DIRECTIONS, [GOOD_SUN, [0.0, 0.0, 2.0]], 0.0)
+    with pytest.raises(ValueError, match=r"^altitude must be finite"):
+        sky.render_raymarch_suns(GOOD_DIRECTIONS, [GOOD_SUN], -1.0)
+
+
+def test_suns_per_launch_in_the_scalar_form(renderer, cl_context, monkeypatch):
+    """The same in the kernels' scalar form (one pixel a work-item, GPUs' default; clsky._cl.VECTOR_WIDTH),
+    forced here: the physical table (ground, ozone, higher orders), 4 suns a launch."""
+    from clsky import _cl, render
+
+    monkeypatch.setattr(render, "RAY_MARCH_SUNS", 4)
+    monkeypatch.setattr(_cl, "VECTOR_WIDTH", 1)
+    directions = fisheye_directions(FIVE_SUNS[0], 0.0)
+    with SkyRenderer(renderer("physical").table, RAY, ctx=cl_context) as sky:
+        assert sky.engine.vector_width == 1
+        frames = sky.render_raymarch_suns(directions, FIVE_SUNS, 0.0)
+        alone = np.array([sky.render_raymarch(directions, sun, 0.0) for sun in FIVE_SUNS])
+    assert_same_frames(cl_context, frames, alone)
