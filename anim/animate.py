@@ -19,6 +19,7 @@ Example
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import dataclasses
 import datetime
@@ -39,7 +40,7 @@ from clsky.planner import Plan, Scene, azimuth_harmonics, plan_scene, sun_axis, 
 from clsky.quality import QUALITY_LEVELS, QualityLevel, level_for_budget, quality_level
 from clsky import colorimetry, skyview, spectrum
 from clsky.solar import ABSOLUTE_UNITS, RELATIVE_UNITS, solar_irradiance_astm_g173, with_solar_spectrum
-from clsky.render import SkyRenderer
+from clsky.render import SkyRenderer, ray_march_batch, ray_march_suns
 from clsky.settings import SAMPLINGS
 from clsky.resources import InsufficientMemoryError, MemoryEstimate, check_memory, device_of, \
     estimate_animation_memory, machine_limits
@@ -521,7 +522,8 @@ def memory_estimate(config: AnimationConfig, positions, host_workers=None, devic
                                      ray_settings(config), hdr_output=config.hdr is not None, batches=batches,
                                      overlapped=OVERLAP_FRAMES,
                                      host_workers=min(host_frame_workers() if host_workers is None else host_workers,
-                                                      len(positions)), packed_reads=packed_reads(device))
+                                                      len(positions)), packed_reads=packed_reads(device),
+                                     ray_march_suns=ray_march_suns_of(config, device))
 
 
 def build_table(config: AnimationConfig, plan: Plan | None = None, ctx=None, progress=None) -> clsky.ScatteringTable:
@@ -681,11 +683,12 @@ def lookup_of(config: AnimationConfig, plan: Plan | None = None) -> str | None:
 
 
 def render_frame(renderer: SkyRenderer, prepared, sun_direction, config: AnimationConfig, lookup=None,
-                 convert=True):
+                 convert=True, raymarch=None):
     """HDR frames {lookup: ..., 'raymarch': ...} of one sun position, as ``config.method`` asks: the lookup
     ``lookup`` (a key of :data:`LOOKUP_NAMES`; default :func:`lookup_of` without a plan) and the ray
-    march; in the animation's units (:func:`convert_frames`), or as the renderer returns them with
-    ``convert`` False (the device's work alone)."""
+    march (``raymarch`` if given: its frame, rendered already with other suns'); in the animation's units
+    (:func:`convert_frames`), or as the renderer returns them with ``convert`` False (the device's work
+    alone)."""
     lookup = lookup_of(config) if lookup is None else lookup
     frames = {}
     if lookup == "lut":
@@ -695,9 +698,48 @@ def render_frame(renderer: SkyRenderer, prepared, sun_direction, config: Animati
     elif lookup == "skyview":
         frames["skyview"] = renderer.render_skyview(prepared, sun_direction, config.altitude,
                                                     settings=skyview.SkyViewSettings(config.skyview_size or skyview.DEFAULT_SIZE))
-    if config.method == "raymarch" or config.compares:
-        frames["raymarch"] = renderer.render_raymarch(prepared, sun_direction, config.altitude)
+    if marches(config):
+        frames["raymarch"] = (renderer.render_raymarch(prepared, sun_direction, config.altitude) if raymarch is None
+                              else raymarch)
     return convert_frames(renderer, config, frames) if convert else frames
+
+
+def marches(config: AnimationConfig) -> bool:
+    """Whether the animation's frames include the per-pixel ray march (its method, or a comparison)."""
+    return config.method == "raymarch" or config.compares
+
+
+def ray_march_suns_of(config: AnimationConfig, device) -> int:
+    """Suns per ray-march launch of a single-process animation on ``device`` (None: 1):
+    :func:`clsky.render.ray_march_batch` of its frames for :func:`clsky.render.ray_march_suns` of the device;
+    1 for a spectral animation (its renderer marches one sun at a time) or one without a ray march."""
+    if device is None or config.wavelengths is not None or not marches(config):
+        return 1
+    width, height = config.image_shape()
+    return ray_march_batch(width * height, ray_march_suns(device))
+
+
+def frames_rendered(renderer: SkyRenderer, prepared, config: AnimationConfig, lookup, positions):
+    """``render(sun)``: :func:`render_frame` (``convert`` False) of each of ``positions`` in turn, to be called
+    with them in their order and from one thread at a time (:func:`clsky.anim.pipeline.prefetched`), the
+    ray march of :func:`ray_march_suns_of` suns per launch (:meth:`SkyRenderer.render_raymarch_suns`: each
+    frame the same as its own march), the frames of the suns after this one kept until their turn."""
+    batch = ray_march_suns_of(config, renderer.engine.device) if isinstance(renderer, SkyRenderer) else 1
+    marched = collections.deque()
+    turns = iter(range(len(positions)))
+
+    def render(sun):
+        index = next(turns)
+        if positions[index] is not sun:
+            raise ValueError(f"frames_rendered: sun {index} called out of order")
+        raymarch = None
+        if batch > 1 and marches(config):
+            if not marched:
+                marched.extend(renderer.render_raymarch_suns(
+                    prepared, [position.direction for position in positions[index:index + batch]], config.altitude))
+            raymarch = marched.popleft()
+        return render_frame(renderer, prepared, sun.direction, config, lookup, convert=False, raymarch=raymarch)
+    return render
 
 
 def convert_frames(renderer: SkyRenderer, config: AnimationConfig, frames):
@@ -991,9 +1033,8 @@ def _local_frames(config, positions, renderer, prepared, valid, lookup, workers)
                 del raw
                 yield job
 
-        rendered = pipeline_module.prefetched(
-            lambda sun: render_frame(renderer, prepared, sun.direction, config, lookup, convert=False),
-            positions, overlap=OVERLAP_FRAMES)
+        rendered = pipeline_module.prefetched(frames_rendered(renderer, prepared, config, lookup, positions),
+                                              positions, overlap=OVERLAP_FRAMES)
         with contextlib.closing(rendered):
             yield from pipeline_module.in_order(shown, jobs(rendered), workers)
     return frames

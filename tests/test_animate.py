@@ -402,6 +402,52 @@ def test_overlapped_frames_are_the_bytes_of_serial_ones(tmp_path, cl_context, mo
     assert outputs[3] == outputs[None]
 
 
+def test_suns_per_ray_march_launch_write_the_same_bytes(tmp_path, cl_context, monkeypatch):
+    """An animation whose ray march takes 4 suns a launch (clsky.anim.animate.frames_rendered,
+    SkyRenderer.render_raymarch_suns; the CPUs' default) writes byte for byte the frames, MP4 and metrics of
+    one sun a launch: 5 frames, launches of 4 and 1 (padded to 4), with a ground (albedo 0.3)."""
+    from clsky import render
+    from clsky.render import SkyRenderer
+
+    launches = []
+    marched = SkyRenderer.render_raymarch_suns
+
+    def recorded(self, directions, sun_directions, *args, **kwargs):
+        launches.append(len(list(sun_directions)))
+        return marched(self, directions, sun_directions, *args, **kwargs)
+
+    monkeypatch.setattr(SkyRenderer, "render_raymarch_suns", recorded)
+    outputs = {}
+    for suns in (1, 4):
+        launches.clear()
+        monkeypatch.setattr(render, "RAY_MARCH_SUNS", suns)
+        config = AnimationConfig(frames=5, ground_albedo=0.3, output=str(tmp_path / "sky.mp4"), force=suns > 1,
+                                 **TINY)
+        render_animation(config, ctx=cl_context)
+        outputs[suns] = ([path.read_bytes() for path in sorted((tmp_path / "sky_frames").iterdir())],
+                         (tmp_path / "sky.mp4").read_bytes(), (tmp_path / "sky_metrics.csv").read_bytes())
+        # the animation's frames: launches of (at most) 4 suns; the plan's pilot frames and the sky-view
+        # map's nodes march one sun each
+        assert sorted(n for n in launches if n > 1) == ([] if suns == 1 else [4]), launches
+    assert len(outputs[1][0]) == 5
+    assert outputs[4] == outputs[1]
+
+
+def test_frames_rendered_takes_the_suns_in_order(cl_context):
+    """frames_rendered's function renders the suns in their order, once each: another sun raises."""
+    from clsky.anim.animate import frames_rendered, lookup_of, make_renderer, sun_positions, _camera
+
+    config = AnimationConfig(frames=3, **TINY)
+    positions = sun_positions(config)
+    directions, valid = _camera(config).directions()
+    renderer, _ = make_renderer(config, None, ctx=cl_context)
+    with renderer:
+        render = frames_rendered(renderer, renderer.prepare(directions, valid), config, lookup_of(config), positions)
+        render(positions[0])
+        with pytest.raises(ValueError, match="frames_rendered: sun 1 called out of order"):
+            render(positions[2])
+
+
 def test_host_frame_workers(monkeypatch):
     """Half the cores, at least one, at most MAX_HOST_FRAME_WORKERS; HOST_FRAME_WORKERS overrides; none
     without the overlap; fewer where the frames in flight would not fit the memory."""

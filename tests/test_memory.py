@@ -301,6 +301,41 @@ def test_animation_estimate_drops_the_higher_orders():
     assert np.isfinite(frames.bytes())
 
 
+def test_suns_per_ray_march_launch_count_their_frames(monkeypatch):
+    """A ray march of K suns a launch (clsky.render.ray_march_batch) holds K frames on the device (3 s each
+    pixel), downloads K and returns them as float64 (24 bytes a pixel), the frames after this one waiting
+    for their turn: K - 1 more of the first two, K of the third, for the methods that march; the lookups'
+    alone nothing more. An animation on a CPU counts its default (4 suns for 512 x 512 frames), none on a
+    stand-in GPU (1)."""
+    import types
+
+    import pyopencl as cl
+
+    from clsky.anim.animate import AnimationConfig, memory_estimate, ray_march_suns_of, sun_positions
+
+    settings = clsky.TableSettings(size=(16, 64, 16))
+    pixels, s = 512 * 512, 8
+    for method in ("compare", "raymarch", "lut"):
+        one = resources.estimate_render_memory(settings, (512, 512), method).phases[-1]
+        four = resources.estimate_render_memory(settings, (512, 512), method, ray_march_suns=4).phases[-1]
+        marches = method != "lut"
+        assert four.bytes(True) - one.bytes(True) == (3 * pixels * 3 * s if marches else 0), method
+        assert four.bytes(False) - one.bytes(False) == (3 * pixels * 3 * s + 4 * pixels * 24 if marches else 0), method
+    config = AnimationConfig(frames=6)
+    cpu = types.SimpleNamespace(type=cl.device_type.CPU)
+    gpu = types.SimpleNamespace(type=cl.device_type.GPU)
+    assert ray_march_suns_of(config, cpu) == 4 and ray_march_suns_of(config, gpu) == 1
+    assert ray_march_suns_of(config, None) == 1
+    assert ray_march_suns_of(dataclasses.replace(config, method="lut"), cpu) == 1
+    assert ray_march_suns_of(dataclasses.replace(config, size=2048), cpu) == 1          # 4 frames: 384 MiB
+    from clsky.anim import animate
+
+    monkeypatch.setattr(animate, "estimate_animation_memory", lambda *args, **kwargs: kwargs["ray_march_suns"])
+    monkeypatch.setattr(animate, "packed_reads", lambda device: False)
+    positions = sun_positions(config)
+    assert [memory_estimate(config, positions, 1, device) for device in (cpu, gpu)] == [4, 1]
+
+
 def test_packed_reads_count_on_the_device(monkeypatch, tmp_path):
     """Where the device packs the harmonics' reads (GPUs: clsky._cl.packed_reads), the orders hold the
     nodes packed (n (D, H, W, 3) in the kernels' type) on the device too, and a phase follows for the
