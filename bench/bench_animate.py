@@ -52,14 +52,15 @@ from clsky.anim.animate import AnimationConfig, render_animation
 #: stage label: the functions (module file suffix, function name[, sign]) whose cumulative CPU time it is,
 #: a sign of -1 taking a callee's time out: the sky-view map (``skyview_map``) is ray-marched by
 #: ``render_raymarch`` inside ``render_skyview``, so it is a stage of its own, out of both; otherwise the
-#: functions of different stages never call one another, so the stages add up
+#: functions of different stages never call one another, so the stages add up. Every ray march, of one sun
+#: or of several a launch (``render_raymarch_suns``, the animation's), goes through ``SkyRenderer._raymarch``.
 STAGES = {
     "scene plan and table build": [("anim/animate.py", "plan_animation"), ("anim/animate.py", "make_renderer")],
     "lookup (device: the 3D or 4D table, or the sky-view map's per-pixel read)": [
         ("clsky/render.py", "render_table"), ("clsky/render.py", "render_lut4d"),
         ("clsky/render.py", "render_skyview"), ("clsky/render.py", "skyview_map", -1)],
     "sky-view map (the ray march at its nodes)": [("clsky/render.py", "skyview_map")],
-    "ray march (device)": [("clsky/render.py", "render_raymarch"), ("clsky/render.py", "skyview_map", -1)],
+    "ray march (device)": [("clsky/render.py", "_raymarch"), ("clsky/render.py", "skyview_map", -1)],
     "conversion to cd/m^2 (colorimetry)": [("anim/animate.py", "three_wavelength_frame_to_linear_srgb"),
                                            ("anim/animate.py", "spectral_frame_to_linear_srgb")],
     # the exposure is metered on the host threads before display_frames shows the frame (clsky.anim.pipeline)
@@ -118,6 +119,9 @@ def stage_split(config_options, blas_limited=True):
         wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
         ffmpeg = children_cpu() - children
     stats = pstats.Stats(profile).stats
+    if config.compares and not any(file.endswith("clsky/render.py") and name == "_raymarch" for file, _, name in stats):
+        raise RuntimeError("bench_animate: the ray march's stage function (SkyRenderer._raymarch, STAGES) was not "
+                           "called: renamed? The stage split would count the march as 'other'")
     stages = {}
     for label, functions in STAGES.items():
         stages[label] = sum((sign[0] if sign else 1) * entry[3] for (file, _, name), entry in stats.items()
