@@ -41,6 +41,7 @@ import clsky
 from clsky.anim.accuracy import LOOKUP4D_SUN_DEG, lookup4d_settings
 from clsky.anim.cameras import FisheyeCamera, sun_direction
 from clsky._cl import describe_device
+from clsky import render
 from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
 
 #: Suns a launch of the batched ray march's rows (clsky.render.ray_march_suns on CPUs).
@@ -123,8 +124,10 @@ def main():
     sun = sun_direction(50.0, 160.0)
     suns = [sun_direction(50.0 + 0.5 * k, 160.0) for k in range(LAUNCH_SUNS)]    # an animation's next suns
 
+    render.RAY_MARCH_SUNS = LAUNCH_SUNS         # on any device (GPUs march one sun a launch by default)
+
     def strided_suns(prepared, _sun, altitude):
-        """The strided march of LAUNCH_SUNS suns in one call (a row's times are then divided by them)."""
+        """The strided march of LAUNCH_SUNS suns in one launch (a row's times are then divided by them)."""
         return strided.render_raymarch_suns(prepared, suns, altitude)
 
     rows = []

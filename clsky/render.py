@@ -259,6 +259,8 @@ class SkyRenderer:
         n = directions_d.shape[0]
         if math.prod(shape) != n:
             raise ValueError(f"{name}: prepared directions of shape {shape} hold {n} directions")
+        if n == 0:                              # no pixel: nothing to launch
+            return np.zeros((len(suns),) + shape + (3,))
         batch = (ray_march_batch(n, ray_march_suns(self.engine.device))
                  if name == "render_raymarch" and len(suns) > 1 else 1)
         out_d = cla.empty(self.queue, (batch, max(n, 1), 3), self.engine.dtype)
@@ -272,7 +274,8 @@ class SkyRenderer:
         # (the ray march's per-lane sums and ground values) overflowed its worker threads' stacks
         # (segmentation fault at 256 x 256 with a ground); the kernel returns for items beyond n
         local = min(RENDER_WORK_GROUP, items)
-        frames = []
+        # the frames of each launch copied out, so that none holds its launch's download (padded suns included)
+        frames = np.empty((len(suns),) + shape + (3,)) if len(suns) > 1 else None
         for start in range(0, len(suns), batch):
             launch = suns[start:start + batch]
             launch += launch[-1:] * (batch - len(launch))
@@ -288,9 +291,11 @@ class SkyRenderer:
                    directions_d.data, directions.valid.data, *sun_args, self.engine.real(altitude),
                    *(() if name == "render_raymarch" else (self.engine.real4(discs[0]),)),
                    self.engine.real(self._cos_sun_radius), out_d.data)
-            frames.append(out_d.get()[:len(suns) - start, :n])
-        frames = frames[0] if len(frames) == 1 else np.concatenate(frames)       # one launch: the download itself
-        return frames.reshape((len(suns),) + shape + (3,)).astype(np.float64, copy=False)
+            out = out_d.get()[:len(suns) - start, :n]
+            if frames is None:                  # one sun: the download itself
+                return out.reshape((1,) + shape + (3,)).astype(np.float64, copy=False)
+            frames[start:start + batch] = out.reshape((len(out),) + shape + (3,))
+        return frames
 
     def _check_sun_covered(self, sun):
         """A table planned for a scene covers its sun path only (``sun_cos_range``): refuse a sun outside
@@ -388,11 +393,15 @@ class SkyRenderer:
     def render_raymarch_suns(self, directions, sun_directions, altitude=0.0, valid=None, sun_disc=True):
         """:meth:`render_raymarch` for each of ``sun_directions`` (a sequence of suns, each 3 values):
         frames (len(sun_directions), ..., 3), each the same as :meth:`render_raymarch` for its sun alone.
-        Each pixel's ray is marched once for several suns (:func:`ray_march_suns`, :func:`ray_march_batch`):
-        its geometry, densities and view transmittance computed once for them (README "Speed")."""
+        Each pixel's ray is marched once for several suns (:func:`ray_march_suns`, :func:`ray_march_batch`;
+        on CPUs: elsewhere one sun a launch by default): its geometry, densities and view transmittance
+        computed once for them (README "Speed")."""
         sun_directions = list(sun_directions)
         if not sun_directions:
             raise ValueError("sun_directions must hold at least one sun direction")
+        if np.ndim(sun_directions[0]) == 0:
+            raise ValueError(f"sun_directions must be a sequence of sun directions of 3 values each, got "
+                             f"{short(sun_directions)} (for one sun: render_raymarch)")
         check_directions(np.zeros((0, 3)), (0.0, 0.0, 1.0), altitude)         # the altitude, named as such
         for index, sun_direction in enumerate(sun_directions):
             try:

@@ -122,7 +122,7 @@ __kernel void render_table(__constant const atmosphere_t *atm, __global const re
  * physical: 1 for the physical mode (phase inside G), 0 for atmosphere-plus (F_s(nu) applied here).
  * ground_irradiance: ground_depth x 4 reals, the sky's irradiance E_sky r, g, b (and 0) on the ground
  * per sun node of the table (mapping, sun_range), read only with -DGROUND.
- * RAY_SUNS frames at once (view_ray.cl: integrate_gathered_for_suns; clsky.render.RAY_MARCH_SUNS): suns
+ * RAY_SUNS frames at once (view_ray.cl: integrate_ray_suns; clsky.render.RAY_MARCH_SUNS): suns
  * holds 8 reals per sun, its direction (x, y, z, 0) and its disc's radiance (r, g, b, 0); out holds the
  * frames one after the other, n x 3 reals each. */
 __kernel void render_raymarch(__constant const atmosphere_t *atm, __global const real *gathered, const int width,
@@ -139,7 +139,7 @@ __kernel void render_raymarch(__constant const atmosphere_t *atm, __global const
         return;
     int invalid = 1;
     for (int b = 0; b < RAY_SUNS; ++b)
-        invalid = all_invalid(valid, first, n, out + (size_t)b * (size_t)(3 * n));
+        invalid = all_invalid(valid, first, n, out + (size_t)b * (size_t)3 * (size_t)n);
     if (invalid)
         return;
     realv mu_v_observer, horizon, h, mu_v, mu_s[RAY_SUNS], nu[RAY_SUNS];
@@ -156,7 +156,7 @@ __kernel void render_raymarch(__constant const atmosphere_t *atm, __global const
     realv *ground = 0;
 #endif
     if (has_multiple)   /* one pass along the ray for both */
-        integrate_gathered_for_suns(atm, h, mu_v, mu_s, nu, gathered, width, height, depth, mapping, sun_range,
+        integrate_ray_suns(atm, h, mu_v, mu_s, nu, gathered, width, height, depth, mapping, sun_range,
                                     multiple, sun_table, tw, th, single, ground);
     else
         integrate_single_suns(atm, h, mu_v, mu_s, nu, RAY_SUNS, sun_table, tw, th, single, ground);
@@ -184,7 +184,7 @@ __kernel void render_raymarch(__constant const atmosphere_t *atm, __global const
 #endif
                 value += light * sky;
             }
-            store_radiance(out + (size_t)b * (size_t)(3 * n), first + k, valid[first + k] ? value : (real3)(R(0.0)));
+            store_radiance(out + (size_t)b * (size_t)3 * (size_t)n, first + k, valid[first + k] ? value : (real3)(R(0.0)));
         }
     }
 }

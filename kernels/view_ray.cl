@@ -174,7 +174,7 @@ inline void add_ground_reflection(__constant const atmosphere_t *atm, const real
 }
 #endif
 
-/* The ground values of several suns (integrate_single_suns, integrate_gathered_for_suns): ground[b][0..6]
+/* The ground values of several suns (integrate_single_suns, integrate_ray_suns): ground[b][0..6]
  * with -DGROUND, unused (0) without. */
 #ifdef GROUND
 #define GROUND_OF_SUNS realv (*ground)[GROUND_VALUES]
@@ -506,7 +506,7 @@ inline void shares_between(const view_march_t *ray, const int i, real8 *before, 
  * lookup waits for it, and f_i w_i node i + 1's (the scatter's scheme, kernels/multiple.cl).
  * Gbar is a smooth field of the higher orders: about half the lookups' cost for a change of the
  * radiance of about 2e-4 by day (README, "Speed"). */
-inline void integrate_gathered_for_suns(__constant const atmosphere_t *atm, const realv h0, const realv mu_v,
+inline void integrate_ray_suns(__constant const atmosphere_t *atm, const realv h0, const realv mu_v,
                                         const realv *mu_s, const realv *nu, __global const real *gathered,
                                         const int width, const int height, const int depth, const int mapping,
                                         const real2 sun_range, real8 sum[RAY_SUNS][VECTOR_WIDTH],
@@ -591,7 +591,7 @@ inline void integrate_gathered_for_suns(__constant const atmosphere_t *atm, cons
 }
 
 #if RAY_SUNS == 1
-/* integrate_gathered_for_suns for one sun (table4d.cl): sum[k], single[0..5], ground[0..GROUND_VALUES - 1]. */
+/* integrate_ray_suns for one sun (table4d.cl): sum[k], single[0..5], ground[0..GROUND_VALUES - 1]. */
 inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h0, const realv mu_v,
                                const realv mu_s, const realv nu, __global const real *gathered,
                                const int width, const int height, const int depth, const int mapping,
@@ -603,7 +603,7 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
 #else
     realv *ground_of_suns = ground;
 #endif
-    integrate_gathered_for_suns(atm, h0, mu_v, &mu_s, &nu, gathered, width, height, depth, mapping, sun_range,
+    integrate_ray_suns(atm, h0, mu_v, &mu_s, &nu, gathered, width, height, depth, mapping, sun_range,
                                 (real8 (*)[VECTOR_WIDTH])sum, sun_table, tw, th, (realv (*)[6])single, ground_of_suns);
 }
 #endif

@@ -405,7 +405,7 @@ def test_overlapped_frames_are_the_bytes_of_serial_ones(tmp_path, cl_context, mo
 def test_suns_per_ray_march_launch_write_the_same_bytes(tmp_path, cl_context, monkeypatch):
     """An animation whose ray march takes 4 suns a launch (clsky.anim.animate.frames_rendered,
     SkyRenderer.render_raymarch_suns; the CPUs' default) writes byte for byte the frames, MP4 and metrics of
-    one sun a launch: 5 frames, launches of 4 and 1 (padded to 4), with a ground (albedo 0.3)."""
+    one sun a launch: 6 frames, launches of 4 and 2 suns (the second padded to 4), with a ground (albedo 0.3)."""
     from clsky import render
     from clsky.render import SkyRenderer
 
@@ -421,15 +421,15 @@ def test_suns_per_ray_march_launch_write_the_same_bytes(tmp_path, cl_context, mo
     for suns in (1, 4):
         launches.clear()
         monkeypatch.setattr(render, "RAY_MARCH_SUNS", suns)
-        config = AnimationConfig(frames=5, ground_albedo=0.3, output=str(tmp_path / "sky.mp4"), force=suns > 1,
+        config = AnimationConfig(frames=6, ground_albedo=0.3, output=str(tmp_path / "sky.mp4"), force=suns > 1,
                                  **TINY)
         render_animation(config, ctx=cl_context)
         outputs[suns] = ([path.read_bytes() for path in sorted((tmp_path / "sky_frames").iterdir())],
                          (tmp_path / "sky.mp4").read_bytes(), (tmp_path / "sky_metrics.csv").read_bytes())
         # the animation's frames: launches of (at most) 4 suns; the plan's pilot frames and the sky-view
         # map's nodes march one sun each
-        assert sorted(n for n in launches if n > 1) == ([] if suns == 1 else [4]), launches
-    assert len(outputs[1][0]) == 5
+        assert sorted(n for n in launches if n > 1) == ([] if suns == 1 else [2, 4]), launches
+    assert len(outputs[1][0]) == 6
     assert outputs[4] == outputs[1]
 
 

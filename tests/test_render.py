@@ -418,6 +418,18 @@ def test_large_frame_with_a_ground_renders(cl_context):
 FIVE_SUNS = [sun_direction(zenith, SUN_AZIMUTH + 17.0 * i) for i, zenith in enumerate((30.0, 60.0, 85.0, 89.0, 95.0))]
 
 
+def launches_recorded(sky, monkeypatch):
+    """The -DRAY_SUNS=k of every program variant ``sky``'s kernels are fetched for from now on (k = 1: none)."""
+    sizes, plain = [], sky.engine.kernels_with
+
+    def recorded(defines=()):
+        sizes.append(next((int(d.split("=")[1]) for d in defines if d.startswith("-DRAY_SUNS=")), 1))
+        return plain(defines)
+
+    monkeypatch.setattr(sky.engine, "kernels_with", recorded)
+    return sizes
+
+
 def assert_same_frames(cl_context, frames, alone):
     """Bit for bit on CPUs (PoCL, Intel's runtime: each sun's sums are the operations of its own march); on
     other devices the compiler may contract the two programs' products and sums into FMAs differently
@@ -436,18 +448,27 @@ def assert_same_frames(cl_context, frames, alone):
 def test_suns_per_launch_change_no_bit(renderer, cl_context, monkeypatch, variant, altitude, suns_per_launch):
     """render_raymarch_suns marches each pixel's ray once for several suns (-DRAY_SUNS): each frame is
     render_raymarch's for its sun alone, with higher orders (both modes) or without, a ground and ozone
-    (the physical preset), from space (each sun's entry point), the sun's disc on; 5 suns, so that the
-    last launch of 2 or 4 repeats its last sun."""
+    (the physical preset), from space (each sun's entry point), each sun's disc in a pixel of its own
+    (the first row's); 5 suns, so that the last launch of 2 or 4 repeats its last sun."""
     from clsky import render
 
     monkeypatch.setattr(render, "RAY_MARCH_SUNS", suns_per_launch)
     sky = renderer(variant)
     directions = fisheye_directions(FIVE_SUNS[0], altitude)
+    directions[0, :5] = FIVE_SUNS
     prepared = sky.prepare(directions)
+    launches = launches_recorded(sky, monkeypatch)
     frames = sky.render_raymarch_suns(prepared, FIVE_SUNS, altitude)
+    assert launches == [suns_per_launch]                 # one program, launched ceil(5 / k) times
     alone = np.array([sky.render_raymarch(prepared, sun, altitude) for sun in FIVE_SUNS])
     assert frames.shape == (5, 32, 32, 3) and frames.dtype == np.float64
     assert_same_frames(cl_context, frames, alone)
+    if altitude == 0.0:                                  # the suns above the horizon: each frame its own disc
+        for b in range(4):
+            disc = sun_disc_radiance(sky.table.atmosphere, FIVE_SUNS[b], altitude)
+            # the disc outshines the sky around it: ~1/(6.8e-5 sr) of the transmitted sunlight against a sky
+            # radiance of order 1 (0.2 % of it at 89 deg), so the pixel is its disc within 1 %
+            assert_allclose(frames[b, 0, b], disc, rtol=1e-2)
     assert np.isfinite(frames).all() and (frames >= 0.0).all() and frames.max() > 0.0
 
 
@@ -465,7 +486,9 @@ def test_suns_per_launch_with_harmonics_and_source_stride(cl_context, monkeypatc
     directions, valid = FisheyeCamera(24).directions()
     with SkyRenderer(table, RAY.replace(source_stride=2, dtype=dtype), ctx=cl_context) as sky:
         prepared = sky.prepare(directions, valid)
+        launches = launches_recorded(sky, monkeypatch)
         frames = sky.render_raymarch_suns(prepared, FIVE_SUNS, 0.0)
+        assert launches == [4]
         alone = np.array([sky.render_raymarch(prepared, sun, 0.0) for sun in FIVE_SUNS])
     assert_same_frames(cl_context, frames, alone)
     assert (frames[:, ~valid] == 0.0).all() and frames[:, valid].max() > 0.0
@@ -521,6 +544,18 @@ def test_render_raymarch_suns_refuses_no_sun_and_names_a_bad_one(renderer):
         sky.render_raymarch_suns(GOOD_DIRECTIONS, [GOOD_SUN, [0.0, 0.0, 2.0]], 0.0)
     with pytest.raises(ValueError, match=r"^altitude must be finite"):
         sky.render_raymarch_suns(GOOD_DIRECTIONS, [GOOD_SUN], -1.0)
+    with pytest.raises(ValueError, match=r"^sun_directions must be a sequence of sun directions of 3 values each, "
+                                         r"got .*\(for one sun: render_raymarch\)"):
+        sky.render_raymarch_suns(GOOD_DIRECTIONS, GOOD_SUN, 0.0)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_no_pixel_renders_no_frame(renderer, method):
+    """Zero directions (shape (0, 3)) give frames of no pixel, without a launch (a work-group of 0 items
+    divided by zero before)."""
+    sky = renderer("physical")
+    assert getattr(sky, method)(np.zeros((0, 3)), GOOD_SUN, 0.0).shape == (0, 3)
+    assert sky.render_raymarch_suns(np.zeros((0, 3)), [GOOD_SUN, GOOD_SUN], 0.0).shape == (2, 0, 3)
 
 
 def test_suns_per_launch_in_the_scalar_form(renderer, cl_context, monkeypatch):
@@ -533,6 +568,8 @@ def test_suns_per_launch_in_the_scalar_form(renderer, cl_context, monkeypatch):
     directions = fisheye_directions(FIVE_SUNS[0], 0.0)
     with SkyRenderer(renderer("physical").table, RAY, ctx=cl_context) as sky:
         assert sky.engine.vector_width == 1
+        launches = launches_recorded(sky, monkeypatch)
         frames = sky.render_raymarch_suns(directions, FIVE_SUNS, 0.0)
+        assert launches == [4]
         alone = np.array([sky.render_raymarch(directions, sun, 0.0) for sun in FIVE_SUNS])
     assert_same_frames(cl_context, frames, alone)
