@@ -500,7 +500,8 @@ def memory_estimate(config: AnimationConfig, positions, host_workers=None, devic
     """Peak memory of the animation (:func:`clsky.resources.estimate_animation_memory`), from its
     settings alone: no pilot, no full-size camera; with ``host_workers`` frames processed at once
     (default :func:`host_frame_workers`; never more than the frames), on ``device`` (a pyopencl.Device,
-    or None: no device), whose table build may pack its reads (:func:`clsky._cl.packed_reads`).
+    or None: no device), whose table build may pack its reads (:func:`clsky._cl.packed_reads`) and whose
+    ray march takes :func:`ray_march_suns_of` suns a launch (never more than the frames).
 
     The table is the plan's sun axis (view elevations from the camera at 64 pixels, ray-march margins)
     with the higher orders kept, an upper bound of the plan (whose pilot may drop them); with
@@ -523,7 +524,7 @@ def memory_estimate(config: AnimationConfig, positions, host_workers=None, devic
                                      overlapped=OVERLAP_FRAMES,
                                      host_workers=min(host_frame_workers() if host_workers is None else host_workers,
                                                       len(positions)), packed_reads=packed_reads(device),
-                                     ray_march_suns=ray_march_suns_of(config, device))
+                                     ray_march_suns=min(ray_march_suns_of(config, device), len(positions)))
 
 
 def build_table(config: AnimationConfig, plan: Plan | None = None, ctx=None, progress=None) -> clsky.ScatteringTable:

@@ -156,8 +156,8 @@ __kernel void render_raymarch(__constant const atmosphere_t *atm, __global const
     realv *ground = 0;
 #endif
     if (has_multiple)   /* one pass along the ray for both */
-        integrate_ray_suns(atm, h, mu_v, mu_s, nu, gathered, width, height, depth, mapping, sun_range,
-                                    multiple, sun_table, tw, th, single, ground);
+        integrate_ray_suns(atm, h, mu_v, mu_s, nu, gathered, width, height, depth, mapping, sun_range, multiple,
+                           sun_table, tw, th, single, ground);
     else
         integrate_single_suns(atm, h, mu_v, mu_s, nu, RAY_SUNS, sun_table, tw, th, single, ground);
 

@@ -174,6 +174,11 @@ inline void add_ground_reflection(__constant const atmosphere_t *atm, const real
 }
 #endif
 
+/* Suns per ray of the per-pixel ray march (render.cl: render_raymarch; clsky.render.RAY_MARCH_SUNS). */
+#ifndef RAY_SUNS
+#define RAY_SUNS 1
+#endif
+
 /* The ground values of several suns (integrate_single_suns, integrate_ray_suns): ground[b][0..6]
  * with -DGROUND, unused (0) without. */
 #ifdef GROUND
@@ -191,10 +196,6 @@ inline void add_ground_reflection(__constant const atmosphere_t *atm, const real
  * the same operations as for that sun alone (the single-scattering table marches a ray once for
  * SINGLE_SUN_NODES sun nodes: single.cl). With -DGROUND and ground != 0, also ground[b][0..GROUND_VALUES - 1]
  * of the last node for each sun (ground_view, ground_direct). */
-/* Suns per ray of the per-pixel ray march (render.cl: render_raymarch; clsky.render.RAY_MARCH_SUNS). */
-#ifndef RAY_SUNS
-#define RAY_SUNS 1
-#endif
 #ifndef SINGLE_SUN_NODES
 #define SINGLE_SUN_NODES RAY_SUNS
 #endif
@@ -507,11 +508,11 @@ inline void shares_between(const view_march_t *ray, const int i, real8 *before, 
  * Gbar is a smooth field of the higher orders: about half the lookups' cost for a change of the
  * radiance of about 2e-4 by day (README, "Speed"). */
 inline void integrate_ray_suns(__constant const atmosphere_t *atm, const realv h0, const realv mu_v,
-                                        const realv *mu_s, const realv *nu, __global const real *gathered,
-                                        const int width, const int height, const int depth, const int mapping,
-                                        const real2 sun_range, real8 sum[RAY_SUNS][VECTOR_WIDTH],
-                                        __global const real *sun_table, const int tw, const int th,
-                                        realv (*single)[6], GROUND_OF_SUNS)
+                               const realv *mu_s, const realv *nu, __global const real *gathered,
+                               const int width, const int height, const int depth, const int mapping,
+                               const real2 sun_range, real8 sum[RAY_SUNS][VECTOR_WIDTH],
+                               __global const real *sun_table, const int tw, const int th,
+                               realv (*single)[6], GROUND_OF_SUNS)
 {
     const real ha = atm->top_radius - atm->planet_radius;
     const real4 beta = atm->beta_rayleigh;
@@ -604,6 +605,6 @@ inline void integrate_gathered(__constant const atmosphere_t *atm, const realv h
     realv *ground_of_suns = ground;
 #endif
     integrate_ray_suns(atm, h0, mu_v, &mu_s, &nu, gathered, width, height, depth, mapping, sun_range,
-                                (real8 (*)[VECTOR_WIDTH])sum, sun_table, tw, th, (realv (*)[6])single, ground_of_suns);
+                       (real8 (*)[VECTOR_WIDTH])sum, sun_table, tw, th, (realv (*)[6])single, ground_of_suns);
 }
 #endif

@@ -334,6 +334,7 @@ def test_suns_per_ray_march_launch_count_their_frames(monkeypatch):
     monkeypatch.setattr(animate, "packed_reads", lambda device: False)
     positions = sun_positions(config)
     assert [memory_estimate(config, positions, 1, device) for device in (cpu, gpu)] == [4, 1]
+    assert memory_estimate(config, positions[:1], 1, cpu) == 1                         # one frame (clsky render)
 
 
 def test_packed_reads_count_on_the_device(monkeypatch, tmp_path):
