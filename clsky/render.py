@@ -263,9 +263,9 @@ class SkyRenderer:
             return np.zeros((len(suns),) + shape + (3,))
         batch = (ray_march_batch(n, ray_march_suns(self.engine.device))
                  if name == "render_raymarch" and len(suns) > 1 else 1)
-        out_d = cla.empty(self.queue, (batch, max(n, 1), 3), self.engine.dtype)
+        out_d = cla.empty(self.queue, (batch, n, 3), self.engine.dtype)
         for argument, array_d, count in buffers + [("directions", directions_d, 3 * n),
-                                                   ("out", out_d, batch * 3 * max(n, 1))]:
+                                                   ("out", out_d, batch * 3 * n)]:
             check_kernel_buffer(name, argument, array_d, count, self.engine.dtype)
         check_kernel_buffer(name, "valid", directions.valid, n, np.uint8)
         kernel = self.engine.kernels_with(self._defines + ([f"-DRAY_SUNS={batch}"] if batch > 1 else []))[name]
