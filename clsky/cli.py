@@ -402,16 +402,13 @@ def run_devices(args):
 
 def _check_table_memory(args, settings):
     """Refuse, before any work, a table (with its save) that does not fit the machine (exit 2, one line)."""
-    from ._cl import packed_reads
-    from .resources import check_memory, device_of, estimate_table_memory
+    from .resources import check_table_memory
 
     if args.size is not None:
         option = "--size " + " ".join(str(n) for n in args.size)
     else:
         option = f"--quality {args.quality}" if args.quality else None
-    device = device_of(None, settings.dtype) if args.backend == "opencl" else None
-    check_memory(estimate_table_memory(settings, args.backend, saving=True, packed_reads=packed_reads(device)),
-                 device=device, options={"table": option})
+    check_table_memory(settings, args.backend, saving=True, options={"table": option})
 
 
 def run_table(args):

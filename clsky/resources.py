@@ -41,7 +41,8 @@ from .settings import TableSettings
 __all__ = ["InsufficientMemoryError", "Allocation", "Phase", "MemoryEstimate", "MemoryLimits",
            "estimate_table_memory", "estimate_spectral_table_memory", "estimate_render_memory",
            "estimate_animation_memory", "expected_orders",
-           "estimate_directions_memory", "machine_limits", "device_of", "check_memory", "host_available_bytes",
+           "estimate_directions_memory", "machine_limits", "device_of", "check_memory", "check_table_memory",
+           "host_available_bytes",
            "format_bytes", "BASE_PROCESS_BYTES", "FRAME_BYTES_PER_PIXEL", "NEXT_FRAME_BYTES_PER_PIXEL"]
 
 #: Resident memory of a process that imported clsky and built a small table with cached programs [bytes]
@@ -729,3 +730,16 @@ def check_memory(estimate: MemoryEstimate, limits: MemoryLimits | None = None, d
             f"{_prefix(biggest, options)}{estimate.what} needs {format_bytes(need)} of memory ({where}; "
             f"most: {biggest.label}, {format_bytes(biggest.total)}); {format_bytes(limits.host_available)} "
             f"is available")
+
+
+def check_table_memory(settings: TableSettings, backend="opencl", ctx=None, saving=False, options=None):
+    """Refuse, before any work, a table build of ``settings`` (with its save: ``saving``) that does not fit
+    the machine: :func:`estimate_table_memory` against the host and, with the OpenCL backend, the device
+    it runs on (``ctx``'s, default clsky's), counting the reads that device packs
+    (:func:`clsky._cl.packed_reads`); ``options`` as :func:`check_memory`'s. What
+    :meth:`clsky.table.ScatteringTable.build` and ``clsky table`` check."""
+    from ._cl import packed_reads
+
+    device = device_of(ctx, settings.dtype) if backend == "opencl" else None
+    check_memory(estimate_table_memory(settings, backend, saving=saving, packed_reads=packed_reads(device)),
+                 device=device, options=options)

@@ -311,11 +311,9 @@ class ScatteringTable:
 
             check_atmosphere(atmosphere, settings)
         from .orders import compute_orders
-        from ._cl import packed_reads
-        from .resources import check_memory, device_of, estimate_table_memory
+        from .resources import check_table_memory
 
-        device = device_of(ctx, settings.dtype) if backend == "opencl" else None
-        check_memory(estimate_table_memory(settings, backend, packed_reads=packed_reads(device)), device=device)
+        check_table_memory(settings, backend, ctx)
         start = time.perf_counter()
         result = compute_orders(atmosphere, settings, backend=backend, ctx=ctx, fast_math=fast_math,
                                 progress=progress)
