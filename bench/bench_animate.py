@@ -218,7 +218,8 @@ def main():
     while counts[-1] * 2 <= max(2, workers):
         counts.append(counts[-1] * 2)
     host_options = {**options, "frames": max(HOST_HALF_RENDERED, SMOKE.animation_frames)}
-    threads = host_half(host_options, counts + counts[::-1], 4 if args.smoke else HOST_HALF_JOBS)
+    jobs = 4 if args.smoke else HOST_HALF_JOBS
+    threads = host_half(host_options, counts + counts[::-1], jobs)
     for count, wall, cpu in threads:
         print(f"host half alone, {count} host thread{'s' * (count > 1)}: {1000 * wall:.1f} ms wall, "
               f"{1000 * cpu:.1f} ms CPU a frame", flush=True)
@@ -254,7 +255,6 @@ def main():
         cells += [f"**{total:.2f}** (wall {split_wall:.1f})", f"{1000 * total / args.stage_frames:.0f}"]
     lines.append("| total | " + " | ".join(cells) + " |")
     one = threads[0][1]
-    jobs = 4 if args.smoke else HOST_HALF_JOBS
     lines += ["", f"Host threads: the frames' host half alone (conversion to cd/m^2, metering, display, comparison) "
               f"on a pool of threads mapping {jobs} frames of {args.size} x {args.size}, {HOST_HALF_RENDERED} rendered "
               f"beforehand and taken in turn (no device work meanwhile), the thread counts up then down, in this "
