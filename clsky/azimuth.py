@@ -208,15 +208,17 @@ class HarmonicGather:
                         c[i, j] = 0.5 * (k_sun[i + j] + k_sun[abs(i - j)])
             self.sun[species] = c * (eps / (2.0 * math.pi))[:, None, None, None]
 
-    def single_ground_irradiance(self, single_harmonics):
-        """E_1 (D, 3) on the ground of single scattering's harmonics (M + 1, D, H, W, 6) [units of I_I]:
-        sum_s sum_a wT_a sin(Theta_a) max(cos(Theta_a), 0) 2 pi sum_n C_{s,0,n}(z, a) (P Ibar_{s,n})(a) at
-        altitude 0, the azimuth integral of the phase to the sun times each harmonic (M = 0 is
-        :func:`clsky.ground.sky_irradiance` of a factored order)."""
+    def single_ground_irradiance(self, single_nodes):
+        """E_1 (D, 3) on the ground of single scattering at the azimuth nodes (M + 1, D, H, W, 6) [units
+        of I_I]: sum_s sum_a wT_a sin(Theta_a) max(cos(Theta_a), 0) 2 pi sum_n C_{s,0,n}(z, a)
+        (P Ibar_{s,n})(a) at altitude 0 (its harmonics Ibar_{s,n} of the nodes there alone), the azimuth
+        integral of the phase to the sun times each harmonic (M = 0 is :func:`clsky.ground.sky_irradiance`
+        of a factored order)."""
         hemisphere = self.weights * np.maximum(self.cos_theta, 0.0)
+        single_harmonics = _to_harmonics(single_nodes[:, :, :, 0])                        # (n, D, H, 6)
         total = 0.0
         for index, species in enumerate(SPECIES):
-            seen = np.matmul(self.p, single_harmonics[:, :, :, 0, 3 * index:3 * index + 3])   # (n, D, Theta, 3)
+            seen = np.matmul(self.p, single_harmonics[..., 3 * index:3 * index + 3])      # (n, D, Theta, 3)
             total = total + 2.0 * math.pi * np.einsum("a,nza,nzac->zc", hemisphere, self.sun[species][0], seen)
         return total
 
@@ -232,27 +234,30 @@ class HarmonicGather:
                     depth, height, width, 3)
         return out
 
-    def first_gather(self, single_harmonics):
-        """G_{s,m} (M + 1, D, H, W, 6) of single scattering's harmonics Ibar_{s',n} (M + 1, D, H, W, 6),
-        factored (Rayleigh r, g, b, Mie r, g, b without phase).
+    def first_gather(self, single_nodes):
+        """G_{s,m} (M + 1, D, H, W, 6) of single scattering at the azimuth nodes (M + 1, D, H, W, 6),
+        factored (Rayleigh r, g, b, Mie r, g, b without phase), through its harmonics Ibar_{s',n}
+        (:func:`harmonic_transform`).
 
-        Done :data:`FIRST_GATHER_LAYERS` sun layers at a time: each block's interpolation P Ibar, its sun
-        weighting (:meth:`_sun_weighted`) and its gathers, so that their temporaries are a few MB that
-        stay in the cache instead of tables of the whole grid (two of 250 MB and two of 123 MB for the
-        default animation's table, faulted in fresh). Every value is the same bits as the whole-grid
-        products: BLAS multiplies each (sun layer, harmonic) matrix on its own, whichever batch it is in.
+        Done :data:`FIRST_GATHER_LAYERS` sun layers at a time: each block's harmonics, their
+        interpolation P Ibar, its sun weighting (:meth:`_sun_weighted`) and its gathers, so that their
+        temporaries are a few MB that stay in the cache instead of tables of the whole grid (the
+        harmonics, 245 MB for the default animation's table, and two of 250 MB and two of 123 MB,
+        faulted in fresh). Every value is the same bits as the whole-grid products: BLAS multiplies each
+        (sun layer, harmonic) matrix on its own, whichever batch it is in, and each cell's harmonics
+        are the same three products and sums in any block (tested).
 
         The blocks are independent and the device waits for all of them (the orders start from their
         sum): :meth:`first_gather_threads` host threads take them, each with a one-thread BLAS (NumPy
         releases the GIL in its loops and in BLAS); the same bits on any number of threads."""
-        count, depth, height, width, channels = single_harmonics.shape
-        # one product for both species' columns (P is the same), on the contiguous table
-        columns = single_harmonics.reshape(count, depth, height, width * channels)
+        count, depth, height, width, channels = single_nodes.shape
         out = np.empty((count, depth, height, width, 6))
 
         def gather_block(z0):
             z1 = min(z0 + self.FIRST_GATHER_LAYERS, depth)
-            seen = np.matmul(self.p, columns[:, z0:z1]).reshape(count, z1 - z0, -1, width, channels)
+            # one product for both species' columns (P is the same)
+            columns = _to_harmonics(single_nodes[:, z0:z1]).reshape(count, z1 - z0, height, width * channels)
+            seen = np.matmul(self.p, columns).reshape(count, z1 - z0, -1, width, channels)
             harmonic = self._sun_weighted(seen, z0).reshape(count, z1 - z0, -1, width * 3)
             for index, species in enumerate(SPECIES):
                 gathered = np.matmul(self.view[species][:, None], harmonic)            # (m, layers, H, W * 3)
@@ -668,23 +673,22 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
     wanted = settings.max_orders if settings.orders == "auto" else settings.orders
     record = {"harmonics": harmonics, "converged": False, "relative_additions": [], "estimated_errors": [],
               "tail_ratio": None, "device": run.device}
-    single_harmonics = _to_harmonics(single_nodes)
     ground_sky = pending_ground = None      # as in clsky.orders: E_1 + ... + E_k, and a / pi of what is pending
     if atmosphere.has_ground:               # E_1 even for single scattering alone: the table's ground term needs it
-        ground_sky = operators.single_ground_irradiance(single_harmonics)
+        ground_sky = operators.single_ground_irradiance(single_nodes)
     if wanted == 1:
         record["orders"] = 1
         return HarmonicOrders(single_nodes[0], None, [], record, ground_sky)
-    gathered = run.upload(operators.first_gather(single_harmonics))
+    gathered = run.upload(operators.first_gather(single_nodes))
     if atmosphere.has_ground:
         pending_ground = ground.reflected_radiance(atmosphere, ground.direct_irradiance(atmosphere, settings)
                                                    + ground_sky)
     stopping = run.stopping_test(single_nodes, settings.orders == "auto")
     gathered_sum, orders, totals = None, [], [_total(single_nodes)]
-    # what the orders no longer read goes before them: the harmonics of single scattering and its nodes
-    # but the canonical one (the build's peak memory is what a build pays for on these VMs, README "Speed")
+    # what the orders no longer read goes before them: single scattering's nodes but the canonical one
+    # (the build's peak memory is what a build pays for on these VMs, README "Speed")
     single = single_nodes[0].copy()
-    del single_harmonics, single_nodes
+    del single_nodes
     # the host's BLAS (azimuth averages, ground irradiances) on one thread beside the OpenCL device's
     # workers, as clsky._cl.host_blas_single_threaded explains (the first gather above has its own threads)
     with _cl.host_blas_single_threaded() if backend == "opencl" else contextlib.nullcontext():

@@ -338,10 +338,11 @@ def _orders_phases(settings, orders):
 
 def _harmonic_phases(settings, orders, packed_reads=False):
     """The orders of a table with azimuth harmonics (:mod:`clsky.azimuth`, n = M + 1 azimuth nodes): the
-    first gather on the host (single scattering at the n nodes and its harmonics, the n gathered
-    harmonics (for a float32 device also as float32, uploaded from there), and on each of its threads
-    a block of B sun layers' temporaries: both seen species' interpolation (n, B, Theta + 1, W 6), their
-    harmonic sum and a species' gathers), then the orders loop (single scattering at the canonical node, every order's
+    first gather on the host (single scattering at the n nodes, the n gathered harmonics (for a float32
+    device also as float32, uploaded from there), and on each of its threads a block of B sun layers'
+    temporaries: the block's harmonics of single scattering and the copy of its nodes that their product
+    takes, both seen species' interpolation (n, B, Theta + 1, W 6), their harmonic sum and a species'
+    gathers), then the orders loop (single scattering at the canonical node, every order's
     azimuth average kept on the host, the order's n nodes, and for a float32 device the same as read
     from it; on the device the gathered sum, the gathered harmonics and the order's n nodes, padded, and
     a harmonic, and the stopping test's running sum at the nodes (:class:`clsky.stopping.DeviceStoppingTest`);
@@ -360,10 +361,12 @@ def _harmonic_phases(settings, orders, packed_reads=False):
     seen = n * block * (settings.gather_theta_steps + 1) * settings.size[0] * 3 * _F64
     single = Allocation("single scattering at the azimuth nodes (n, D, H, W, 6) float64", cells * 6 * _F64, count=n)
     first = Phase("first gather", (
-        single, Allocation("single scattering's harmonics (n, D, H, W, 6) float64", cells * 6 * _F64, count=n),
-        # B sun layers at a time (HarmonicGather.first_gather), a block on each of its threads: both
-        # species interpolated at once (n, B, Theta + 1, W 6), the harmonic sums of both (n, B, Theta + 1,
-        # W 3) and a species' gathers
+        single,
+        # B sun layers at a time (HarmonicGather.first_gather), a block on each of its threads: the
+        # block's harmonics and the copy of its nodes (n, B, H, W, 6), both species interpolated at once
+        # (n, B, Theta + 1, W 6), the harmonic sums of both (n, B, Theta + 1, W 3) and a species' gathers
+        Allocation("a block's single scattering at the nodes (a copy) and its harmonics (n, B, H, W, 6) on each "
+                   "first-gather thread", n * block * height * settings.size[0] * 6 * _F64, count=2 * threads),
         Allocation("a block's interpolated single scattering, its harmonic sums and gathers (n, B, Theta + 1, W 3)"
                    " on each first-gather thread", seen, count=4 * threads),
         Allocation("gathered harmonics (n, D, H, W, 6) float64", cells * 6 * _F64, count=n))

@@ -177,7 +177,9 @@ def test_first_gather_against_literal_sphere_integral(atmosphere, species):
                                   np.cos(np.outer(np.arange(HARMONICS + 1), phi)), sun_phase)
     literal = _literal(atmosphere, TINY, field, species)
     channels = slice(0, 3) if species == "rayleigh" else slice(3, 6)
-    gathered = operators.first_gather(single)[..., channels]
+    # first_gather takes single scattering at the azimuth nodes: the series' values there
+    series_at_nodes = np.cos(np.outer(azimuth.azimuth_nodes(HARMONICS), np.arange(HARMONICS + 1)))
+    gathered = operators.first_gather(np.tensordot(series_at_nodes, single, axes=1))[..., channels]
     for m in range(HARMONICS + 1):
         assert_allclose(gathered[m], _project(literal, m), rtol=0, atol=1e-12 * np.abs(literal).max())
 
@@ -200,11 +202,14 @@ def test_first_gather_sun_weighting_is_einsums_sum(atmosphere):
 
 
 def test_first_gather_in_blocks_of_sun_layers_is_the_whole_grids(atmosphere, monkeypatch):
-    """The first gather, done HarmonicGather.FIRST_GATHER_LAYERS sun layers at a time (interpolation, sun
-    weighting and gathers of a block, then the next), is bit for bit the same products over the whole
-    grid at once (BLAS multiplies each layer's matrices on their own): blocks of 2 with a short last
+    """The first gather, done HarmonicGather.FIRST_GATHER_LAYERS sun layers at a time (harmonics of the
+    nodes, interpolation, sun weighting and gathers of a block, then the next), is bit for bit the same
+    products over the whole grid at once (BLAS multiplies each layer's matrices on their own, and each
+    cell's harmonics are the same three products and sums in any block): blocks of 2 with a short last
     block (7 layers), and of 3, against one block of all 7; and on 1, 2 and 3 host threads
-    (HarmonicGather.FIRST_GATHER_THREADS), each block on whichever thread takes it."""
+    (HarmonicGather.FIRST_GATHER_THREADS), each block on whichever thread takes it. The one block of all
+    layers is also the products of the harmonics of the whole grid taken first (what the first gather
+    did before its blocks took the harmonics)."""
     settings = TINY.replace(size=(5, 12, 7))
     operators = azimuth.HarmonicGather(atmosphere, settings, HARMONICS)
     width, height, depth = settings.size
@@ -212,6 +217,13 @@ def test_first_gather_in_blocks_of_sun_layers_is_the_whole_grids(atmosphere, mon
     single *= np.exp(np.random.default_rng(14).normal(size=single.shape[:3] + (1, 1)) * 4.0)
     monkeypatch.setattr(azimuth.HarmonicGather, "FIRST_GATHER_LAYERS", depth)
     whole = operators.first_gather(single)
+    harmonics = azimuth._to_harmonics(single).reshape(HARMONICS + 1, depth, height, width * 6)
+    seen = np.matmul(operators.p, harmonics).reshape(HARMONICS + 1, depth, -1, width, 6)
+    weighted = operators._sun_weighted(seen).reshape(HARMONICS + 1, depth, -1, width * 3)
+    for index, species in enumerate(("rayleigh", "mie")):
+        products = np.matmul(operators.view[species][:, None], weighted).reshape(HARMONICS + 1, depth, height,
+                                                                                 width, 3)
+        assert_array_equal(whole[..., 3 * index:3 * index + 3], products)
     for layers in (2, 3):
         monkeypatch.setattr(azimuth.HarmonicGather, "FIRST_GATHER_LAYERS", layers)
         assert depth % layers != 0
