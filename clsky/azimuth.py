@@ -577,18 +577,9 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
         return on_host
 
     def upload(gathered):
-        """The first gather's harmonics (M + 1, D, H, W, 6) as a padded device table (M + 1, D, H, W, 8):
-        zeros, then one rectangular write of the 6 channels (rows of 6 values into rows of 8,
-        clEnqueueWriteBufferRect) straight from the host table (from a copy of the device's type for a
-        float32 device)."""
-        gathered_d = cla.empty(queue, gathered.shape[:-1] + (8,), engine.dtype, allocator=pool)
-        source = np.ascontiguousarray(gathered, dtype=engine.dtype)
-        size, rows = engine.dtype.itemsize, gathered_d.size // 8
-        cl.enqueue_fill_buffer(queue, gathered_d.data, np.zeros(1, engine.dtype), gathered_d.offset, gathered_d.nbytes)
-        cl.enqueue_copy(queue, gathered_d.data, source, buffer_origin=(gathered_d.offset, 0, 0), host_origin=(0, 0, 0),
-                        region=(6 * size, rows, 1), buffer_pitches=(8 * size, 0), host_pitches=(6 * size, 0),
-                        is_blocking=True)
-        return gathered_d
+        """The first gather's harmonics (M + 1, D, H, W, 6) as a padded device table (M + 1, D, H, W, 8)
+        from the pool (:func:`clsky._cl.upload_padded`: a zero fill and one rectangular write)."""
+        return _cl.upload_padded(queue, gathered, engine.dtype, allocator=pool)
 
     engines = {settings.azimuth_harmonics: engine}
 

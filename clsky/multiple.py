@@ -293,9 +293,7 @@ class MultipleScatteringEngine(_cl.Engine):
         table = np.asarray(table)
         if table.ndim != 4 or table.shape[3] != 6:
             raise ValueError(f"table must have shape (D, H, W, 6), got {table.shape}")
-        padded = np.zeros(table.shape[:3] + (8,), dtype=self.dtype)
-        padded[..., :6] = table
-        return cla.to_device(self.queue, padded, allocator=self.allocator)
+        return _cl.upload_padded(self.queue, table, self.dtype, allocator=self.allocator)
 
     def upload_matrices(self, matrices):
         """Gather matrices on the device, to reuse across orders."""

@@ -200,12 +200,12 @@ class SkyRenderer:
         self._has_gathered = table.gathered is not None
         self._atmosphere_d = _atmosphere_cl.to_device(self.queue, table.atmosphere, dtype)
         self._table_d = cla.to_device(self.queue, np.ascontiguousarray(table.data, dtype=dtype))
-        padded = np.zeros(self._gathered_shape[:-1] + (8,) if self._has_gathered else (2, 2, 2, 8), dtype=dtype)
-        if self._has_gathered:   # (D, H, W, 6), or with azimuth harmonics (M + 1, D, H, W, 6)
-            padded[..., :6] = table.gathered
         self._defines = (_atmosphere_cl.feature_defines(table.atmosphere)
                          + (azimuth_defines(table.settings) if self._has_gathered else []))
-        self._gathered_d = cla.to_device(self.queue, padded)
+        # (D, H, W, 6), or with azimuth harmonics (M + 1, D, H, W, 6), padded to 8 channels on the device;
+        # without it a small zero table the kernel does not read
+        self._gathered_d = (_cl.upload_padded(self.queue, table.gathered, dtype) if self._has_gathered
+                            else cla.zeros(self.queue, (2, 2, 2, 8), dtype))
         # the sky's irradiance on a reflecting ground per sun node (D, 4); not read for a black ground
         self._ground_depth = table.settings.size[2] if table.atmosphere.has_ground else 2
         ground = padded4(table.ground_irradiance, dtype) if table.atmosphere.has_ground else np.zeros((2, 4), dtype)

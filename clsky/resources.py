@@ -298,8 +298,8 @@ def _single_phase(settings):
 def _first_gather_phase(settings):
     """The physical mode's first gather, same species then crossed, counted as one moment (an upper
     bound): a (2, D, H, H) float64 matrix stack on the host and one on the device (the same-species
-    stack goes once its gather ran), single scattering and its swap, a staging copy and three padded
-    device tables."""
+    stack goes once its gather ran), single scattering and its swap, for a float32 device a copy of the
+    kernels' type to upload (:func:`clsky._cl.upload_padded`), and three padded device tables."""
     from .multiple import FIRST_GATHER_CHUNK
 
     cells, height, depth, s = _table_sizes(settings)
@@ -310,9 +310,16 @@ def _first_gather_phase(settings):
         Allocation("first-gather matrix stack (2, D, H, H) float64", stack * _F64),
         Allocation("first-gather product temporary",
                    FIRST_GATHER_CHUNK * height * (settings.gather_theta_steps + 1) * _F64),
-        Allocation("upload staging (D, H, W, 8)", padded),
         Allocation("first-gather matrix stack (2, D, H, H)", stack * s, on_device=True),
-        Allocation("padded tables (D, H, W, 8)", padded, count=3, on_device=True)))
+        Allocation("padded tables (D, H, W, 8)", padded, count=3, on_device=True))
+        + _upload_staging(cells * 6, s))
+
+
+def _upload_staging(values, s):
+    """What :func:`clsky._cl.upload_padded` adds on the host to upload ``values`` float64 values to a
+    device of ``s`` bytes a real: nothing for float64 (it writes from the table itself), else a copy
+    of the kernels' type."""
+    return () if s == _F64 else (Allocation("upload staging in the kernels' type (..., 6)", values * s),)
 
 
 def _orders_phases(settings, orders):
@@ -520,7 +527,7 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
               # 2 columns per node, 3 with ozone (transmittance.column_channels): counted as 3
               Allocation("ray-march transmittance table", int(np.prod(ray_settings.transmittance_size)) * 3 * s,
                          count=batches, on_device=True))
-    phases = [Phase("renderer", held + upload + (Allocation("upload staging (D, H, W, 8)", gathered),))]
+    phases = [Phase("renderer", held + upload + _upload_staging(gathered // (8 * s) * 6 if orders > 1 else 0, s))]
     if pixels:
         frames = 2 if method == "compare" else 1
         processing = max(1, int(host_workers))

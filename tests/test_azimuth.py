@@ -399,6 +399,41 @@ def test_rectangular_transfers_move_the_channels_and_zero_the_padding(cl_context
 
 
 @pytest.mark.parametrize("dtype", ["float64", "float32"])
+def test_upload_padded_pads_every_table_shape_with_zeros(cl_context, monkeypatch, dtype):
+    """clsky._cl.upload_padded, which the harmonic build (above), MultipleScatteringEngine.to_device and
+    the renderer's gathered sum go through: a host table (..., C) arrives as (..., 8) of the device's
+    type, channels 0..C-1 the host's values (rounded to float32 as a cast rounds them), the rest zero in
+    a buffer that held NaN, for 1, 3, 6 and 8 channels, a non-contiguous table and leading shapes of 1
+    to 4 axes; a table of no channels, more than 8 or no values is refused before any transfer."""
+    import pyopencl as cl
+    import pyopencl.array as cla
+
+    from clsky import _cl
+
+    require_dtype(cl_context, dtype)
+    queue = cl.CommandQueue(cl_context)
+    empty = cla.empty
+
+    def dirty_empty(*args, **kwargs):
+        array = empty(*args, **kwargs)
+        return array.fill(np.nan)
+
+    monkeypatch.setattr(cla, "empty", dirty_empty)
+    rng = np.random.default_rng(23)
+    for shape in ((5, 1), (4, 3), (2, 3, 5, 6), (3, 2, 3, 5, 6), (7, 8)):
+        table = rng.random(shape) + 0.5
+        padded = _cl.upload_padded(queue, table, dtype).get()
+        assert padded.shape == shape[:-1] + (8,) and padded.dtype == np.dtype(dtype)
+        assert_array_equal(padded[..., :shape[-1]], table.astype(dtype))
+        assert not padded[..., shape[-1]:].any()
+    strided = rng.random((4, 5, 12))[..., ::2]                              # (4, 5, 6), not contiguous
+    assert_array_equal(_cl.upload_padded(queue, strided, dtype).get()[..., :6], strided.astype(dtype))
+    for bad in (np.zeros(3), np.zeros((4, 9)), np.zeros((0, 6)), np.zeros((4, 0))):
+        with pytest.raises(ValueError, match=r"upload_padded: table must have shape \(\.\.\., C\)"):
+            _cl.upload_padded(queue, bad, dtype)
+
+
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
 def test_packed_reads_are_the_rectangular_reads_bit_for_bit(cl_context, atmosphere, monkeypatch, dtype):
     """The orders, their nodes' azimuth averages, the gathered harmonics and the ground irradiance of a
     build whose downloads are packed on the device and read at once (GPUs' way) are those of rectangular
