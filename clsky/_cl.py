@@ -385,30 +385,33 @@ def memory_pool(queue):
     return cl_tools.MemoryPool(cl_tools.ImmediateAllocator(queue))
 
 
-def upload_padded(queue, table, dtype, width=8, allocator=None):
-    """A host table (..., C), C <= ``width``, as a device array (..., width) of ``dtype`` whose channels C
-    on are zero (the kernels' padded tables: one real8 a cell): a zero fill, then one rectangular write
-    (rows of C values into rows of ``width``, clEnqueueWriteBufferRect) straight from the table, or from
-    a copy of ``dtype`` where it has another type (a float32 device). No padded copy on the host: on a CPU
-    device that copy was fresh memory faulted in (the default animation's gathered harmonics: 327 MB,
-    0.1-0.3 s a 100 MB, :func:`memory_pool`), and on an NVIDIA H200 the rectangular write of rows of 6
-    into rows of 8 was no slower than a contiguous one (17 ms for the default animation's table). The
-    write is blocking: the table may go once this returns. The array comes from ``allocator`` if given."""
+def upload_padded(queue, table, dtype, width=8, copies=1, allocator=None):
+    """A host table (..., C), ``copies`` C <= ``width``, as a device array (..., width) of ``dtype`` whose
+    channels are the table's (``copies`` times side by side: 2 for an order's nodes, whose channels 0-2
+    and 3-5 both hold L) and then zeros (the kernels' padded tables: one real8 a cell): a zero fill, then
+    a rectangular write a copy (rows of C values into rows of ``width``, clEnqueueWriteBufferRect)
+    straight from the table, or from a copy of ``dtype`` where it has another type (a float32 device). No
+    padded copy on the host: on a CPU device that copy was fresh memory faulted in (the default
+    animation's gathered harmonics: 327 MB, 0.1-0.3 s a 100 MB, :func:`memory_pool`), and on an NVIDIA
+    H200 the rectangular write of rows of 6 into rows of 8 was no slower than a contiguous one (17 ms for
+    the default animation's table). The writes are blocking: the table may go once this returns. The
+    array comes from ``allocator`` if given."""
     import pyopencl.array as cla
 
     dtype = np.dtype(dtype)
     table = np.asarray(table)
     channels = table.shape[-1] if table.ndim else 0
-    if table.ndim < 2 or not 1 <= channels <= width or table.size == 0:
-        raise ValueError(f"upload_padded: table must have shape (..., C) with 1 <= C <= {width} and values, "
-                         f"got {table.shape}")
+    if table.ndim < 2 or not 1 <= channels * copies <= width or copies < 1 or table.size == 0:
+        raise ValueError(f"upload_padded: table must have shape (..., C) with 1 <= C <= {width // max(copies, 1)} "
+                         f"({copies} copies a row of {width}) and values, got {table.shape}")
     source = np.ascontiguousarray(table, dtype=dtype)
     padded = cla.empty(queue, table.shape[:-1] + (width,), dtype, allocator=allocator)
     size, rows = dtype.itemsize, padded.size // width
     cl.enqueue_fill_buffer(queue, padded.data, np.zeros(1, dtype), padded.offset, padded.nbytes)
-    cl.enqueue_copy(queue, padded.data, source, buffer_origin=(padded.offset, 0, 0), host_origin=(0, 0, 0),
-                    region=(channels * size, rows, 1), buffer_pitches=(width * size, 0),
-                    host_pitches=(channels * size, 0), is_blocking=True)
+    for copy in range(copies):
+        cl.enqueue_copy(queue, padded.data, source, buffer_origin=(padded.offset + copy * channels * size, 0, 0),
+                        host_origin=(0, 0, 0), region=(channels * size, rows, 1), buffer_pitches=(width * size, 0),
+                        host_pitches=(channels * size, 0), is_blocking=True)
     return padded
 
 

@@ -51,6 +51,15 @@ k > 2 reads only the azimuth average G_0 of their source (:data:`HARMONIC_SOURCE
 (:func:`raymarch_higher_orders`) integrates the whole series of the gathered tables of all orders
 along each pixel's ray.
 
+Summed harmonics. Where the next order reads G_0 alone, the harmonics m >= 1 of an order's gathered
+G^(k) are only ever added to the gathered sum, and the gather is linear: sum_k A_m L_m^(k) =
+A_m sum_k L_m^(k). So such an order gathers its azimuth average alone (the next order's source), the
+host sums the nodes of those orders as the gathered sum takes them (the geometric tail's 1 + r / (1 -
+r) included, an order that converged without a tail left out), and the harmonics m >= 1 of that sum
+are gathered once after the orders: 8 gathers instead of 18 for the default animation's table, the
+same sum to rounding (6e-16 of its largest value there; tests/test_azimuth.py against every order
+gathered), for one more table of nodes on the host (README "Speed").
+
 Ground. A Lambertian ground (``ground_albedo`` > 0) works as in :mod:`clsky.ground`: the rays of every
 azimuth node that end on the ground see its radiance at their true ground point's sun cosine; the
 horizontal ground's irradiance of an order k >= 2 is that of its azimuth average (m = 0), and single
@@ -93,6 +102,28 @@ __all__ = ["azimuth_nodes", "harmonic_transform", "harmonic_phase_integrals",
 #: one lookup per sample instead of M + 1 (0.68 instead of 1.12 CPU-s per node on the default
 #: animation's 32 x 256 x 139 table).
 HARMONIC_SOURCE_ORDERS = 2
+
+
+def _add_nodes(total, nodes, scale=None):
+    """total + nodes, or + scale nodes per wavelength (scale (r, g, b)): the host's sum of orders' nodes
+    (M + 1, D, H, W, 3), in place (a copy of nodes for total None), the scaled nodes a sun layer at a
+    time (no temporary of the whole table)."""
+    if total is None:
+        total = np.zeros_like(nodes) if scale is not None else nodes.copy()
+        if scale is None:
+            return total
+    if scale is None:
+        total += nodes
+        return total
+    scale = per_channel(scale, nodes.shape[-1])
+    for layer in range(nodes.shape[1]):
+        total[:, layer] += nodes[:, layer] * scale
+    return total
+
+
+def _reads_harmonics(k):
+    """Whether order k's scatter reads every harmonic of its source (:data:`HARMONIC_SOURCE_ORDERS`)."""
+    return HARMONIC_SOURCE_ORDERS is None or k <= HARMONIC_SOURCE_ORDERS
 
 
 def _check_harmonics(harmonics):
@@ -222,16 +253,17 @@ class HarmonicGather:
             total = total + 2.0 * math.pi * np.einsum("a,nza,nzac->zc", hemisphere, self.sun[species][0], seen)
         return total
 
-    def gather(self, harmonics_table):
-        """G_{s,m} (M + 1, D, H, W, 6) of an order's harmonics L_m (M + 1, D, H, W, 3), phase applied."""
+    def gather(self, harmonics_table, first=0):
+        """G_{s,m} (N, D, H, W, 6) of an order's harmonics L_m (N, D, H, W, 3), m = ``first`` .. ``first``
+        + N - 1 (default all M + 1 from m = 0), phase applied."""
         count, depth, height, width, _ = harmonics_table.shape
         out = np.empty((count, depth, height, width, 6))
-        for m in range(count):
-            columns = harmonics_table[m].reshape(depth, height, width * 3)
+        for index_m in range(count):
+            columns = harmonics_table[index_m].reshape(depth, height, width * 3)
             seen = np.matmul(self.p, columns)                               # (D, Theta + 1, W * 3)
             for index, species in enumerate(SPECIES):
-                out[m, ..., 3 * index:3 * index + 3] = np.matmul(self.view[species][m], seen).reshape(
-                    depth, height, width, 3)
+                out[index_m, ..., 3 * index:3 * index + 3] = np.matmul(self.view[species][first + index_m],
+                                                                       seen).reshape(depth, height, width, 3)
         return out
 
     def first_gather(self, single_nodes):
@@ -380,7 +412,8 @@ def gathered_along(atmosphere, ray_settings, gathered, grid_settings, h0, mu_v, 
 def scatter_nodes(atmosphere: AtmosphereParameters, settings: TableSettings, gathered, ground_radiance=None,
                   source_harmonics=None):
     """The next order L^(k+1) (M + 1, D, H, W, 3) at the azimuth nodes from the gathered harmonics
-    ``gathered`` (M + 1, D, H, W, 6), phase applied and both species combined; twin of
+    ``gathered`` (M + 1, D, H, W, 6, or its first ``source_harmonics`` + 1 alone), phase applied and
+    both species combined (M from ``settings.azimuth_harmonics``); twin of
     ``MultipleScatteringEngine.scatter(combine_species=True)`` at each node's cos_azimuth. With a
     reflecting ground, rays that end on it add T L_g(mu_sun there), ``ground_radiance`` L_g (D, 3) per
     sun node (:mod:`clsky.ground`), as :func:`clsky.reference.scatter` does along the true ray.
@@ -388,7 +421,7 @@ def scatter_nodes(atmosphere: AtmosphereParameters, settings: TableSettings, gat
     azimuth average, the M = 0 kernel at each node's cos_azimuth); None: all."""
     from .ground import interpolate_sun_axis
 
-    count = gathered.shape[0]
+    count = settings.azimuth_harmonics + 1
     source = gathered if source_harmonics is None else gathered[:source_harmonics + 1]
     altitudes, cos_view, cos_sun = grid_coordinates(settings.size, atmosphere.atmosphere_height,
                                                     settings.mapping, settings.sun_cos_range)
@@ -453,9 +486,12 @@ class _Backend:
     host's gathered harmonics (M + 1, D, H, W, 6) in the backend's form; scatter(gathered,
     ground_radiance): a pair (a callable returning the order's nodes (M + 1, D, H, W, 3) on the
     host once they are there, valid until the next call; the same nodes in the backend's form);
-    gather(that form): the next order's gathered harmonics (backend's form); accumulate(total,
-    gathered, scale=None): total + gathered, or total + scale gathered per wavelength (scale
-    (r, g, b)) (a copy of gathered for total None; may add in place); to_host(gathered):
+    gather(that form, harmonics=None): the next order's gathered harmonics (backend's form), only the
+    first ``harmonics`` of them computed (default all); accumulate(total, gathered, scale=None,
+    harmonics=None): total + gathered, or total + scale gathered per wavelength (scale (r, g, b)), in
+    the first ``harmonics`` harmonics only (default all) (a copy of gathered for total None; may add in
+    place); gather_summed(total, node_sum): total + A_m L_m in each harmonic m >= 1, L_m the harmonics
+    of ``node_sum`` (M + 1, D, H, W, 3) on the host (in place); to_host(gathered):
     (M + 1, D, H, W, 6) float64; stopping_test(single, keep_previous): the orders' stopping test
     (:mod:`clsky.stopping`), its running sum starting from single scattering ``single``
     (M + 1, D, H, W, 6) as R + M per wavelength, whose ``add`` takes an order as ``reads`` says,
@@ -467,6 +503,7 @@ class _Backend:
     scatter: object
     gather: object
     accumulate: object
+    gather_summed: object
     to_host: object
     stopping_test: object
     device: str
@@ -487,19 +524,26 @@ def _numpy_backend(atmosphere, settings, operators):
         nodes = scatter_nodes(atmosphere, settings, gathered, ground_radiance, source_harmonics)
         return (lambda: nodes), nodes
 
-    def gather(nodes):
-        return operators.gather(_to_harmonics(nodes))
+    def gather(nodes, harmonics=None):
+        return operators.gather(_to_harmonics(nodes)[:harmonics])
 
-    def accumulate(total, gathered, scale=None):
+    def accumulate(total, gathered, scale=None, harmonics=None):
         if total is None:
             return gathered.copy()
-        return total + (gathered if scale is None else gathered * per_channel(scale, gathered.shape[-1]))
+        out = total.copy()
+        addend = gathered[:harmonics]
+        out[:addend.shape[0]] += addend if scale is None else addend * per_channel(scale, addend.shape[-1])
+        return out
+
+    def gather_summed(total, node_sum):
+        total[1:] += operators.gather(_to_harmonics(node_sum)[1:], first=1)
+        return total
 
     def stopping_test(single, keep_previous):
         return HostStoppingTest(_single_running_sum(single), keep_previous)
 
-    return _Backend(single, lambda gathered: gathered, scatter, gather, accumulate, lambda gathered: gathered,
-                    stopping_test, "numpy")
+    return _Backend(single, lambda gathered: gathered, scatter, gather, accumulate, gather_summed,
+                    lambda gathered: gathered, stopping_test, "numpy")
 
 
 def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
@@ -599,17 +643,29 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
             host_nodes.append(np.empty(nodes_d.shape[:-1] + (3,)))
         return download(nodes_d, host_nodes[0], 3), nodes_d                # after the scatters
 
-    def gather(nodes_d):
+    def gather(nodes_d, harmonics=None):
         """G_m = A_m L_m, L_m = sum_n H[m, n] L(phi_n) (padded: channels 0-2 and 3-5 both hold L), each
-        gathered straight into its slab of the stack (no table and copy of its own)."""
+        gathered straight into its slab of the stack (no table and copy of its own); with ``harmonics``
+        only the first that many (the stack keeps its M + 1 slabs, so that it takes the buffer of the
+        stack before it from the pool: no new memory)."""
         out = cla.empty(queue, nodes_d.shape, engine.dtype, allocator=pool)
         harmonic = cla.empty(queue, nodes_d.shape[1:], engine.dtype, allocator=pool)
-        for m, row in enumerate(transform_rows):
+        for m, row in enumerate(transform_rows[:harmonics]):
             engine.gather(matrices[m], engine.combine_nodes(nodes_d, row, harmonic), out=out, node=m)
         return out
 
-    def accumulate(total, gathered_d, scale=None):
-        return gathered_d.copy() if total is None else engine.add_into(total, gathered_d, scale)
+    def accumulate(total, gathered_d, scale=None, harmonics=None):
+        return gathered_d.copy() if total is None else engine.add_into(total, gathered_d, scale, slabs=harmonics)
+
+    def gather_summed(total_d, node_sum):
+        """total_d[m] += A_m L_m for m >= 1, L_m the harmonics of the host's ``node_sum`` (M + 1, D, H, W,
+        3), uploaded as padded nodes (both channel sets L) into the pool's buffer of an order's nodes."""
+        nodes_d = _cl.upload_padded(queue, node_sum, engine.dtype, copies=2, allocator=pool)
+        harmonic = cla.empty(queue, nodes_d.shape[1:], engine.dtype, allocator=pool)
+        for m in range(1, len(transform_rows)):
+            engine.gather(matrices[m], engine.combine_nodes(nodes_d, transform_rows[m], harmonic), out=total_d,
+                          node=m, accumulate=True)
+        return total_d
 
     def to_host(gathered_d):
         return download(gathered_d, np.empty(gathered_d.shape[:-1] + (6,)), 6)()
@@ -624,7 +680,7 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
         return DeviceStoppingTest((_single_running_sum(node) for node in single), single.shape[:-1] + (3,),
                                   keep_previous, engine.dtype, queue=queue)
 
-    return _Backend(single, upload, scatter, gather, accumulate, to_host, stopping_test,
+    return _Backend(single, upload, scatter, gather, accumulate, gather_summed, to_host, stopping_test,
                     _cl.describe_device(single_engine.device))
 
 
@@ -676,6 +732,9 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
                                                    + ground_sky)
     stopping = run.stopping_test(single_nodes, settings.orders == "auto")
     gathered_sum, orders, totals = None, [], [_total(single_nodes)]
+    # the sum of the nodes of the orders whose gathered harmonics m >= 1 join the gathered sum alone, and
+    # whether the order before was one (its gathered G^(k - 1) then holds the azimuth average alone)
+    node_sum, summed = None, False
     # what the orders no longer read goes before them: single scattering's nodes but the canonical one
     # (the build's peak memory is what a build pays for on these VMs, README "Speed")
     single = single_nodes[0].copy()
@@ -684,15 +743,17 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
     # workers, as clsky._cl.host_blas_single_threaded explains (the first gather above has its own threads)
     with _cl.host_blas_single_threaded() if backend == "opencl" else contextlib.nullcontext():
         for k in range(2, wanted + 1):
-            gathered_sum = run.accumulate(gathered_sum, gathered)
-            on_host, state = run.scatter(gathered, pending_ground,
-                                         None if HARMONIC_SOURCE_ORDERS is None or k <= HARMONIC_SOURCE_ORDERS else 0)
+            gathered_sum = run.accumulate(gathered_sum, gathered, harmonics=1 if summed else None)
+            on_host, state = run.scatter(gathered, pending_ground, None if _reads_harmonics(k) else 0)
             del gathered         # first: the pool hands its buffer to the next gather (no more memory)
             # the next order's source (on OpenCL enqueued on the device, where the order is), before the
             # host waits for the order's nodes, so that their download overlaps it and the host's work on
             # the order overlaps the rest (the last order needs the source only for the geometric tail,
-            # which needs k < wanted)
-            gathered = run.gather(state) if k < wanted else None
+            # which needs k < wanted). Where the next order reads its source's azimuth average alone, only
+            # that is gathered: the other harmonics of G^(k), A_m L_m^(k), only ever join the gathered sum,
+            # so their L_m^(k) are summed instead and gathered once after the orders (module docstring)
+            summed = k < wanted and harmonics > 0 and not _reads_harmonics(k + 1)
+            gathered = run.gather(state, 1 if summed else None) if k < wanted else None
             new = on_host()
             totals.append(_total(new))
             # the geometric tail (clsky.orders), where it can apply: it adds G^(k+1), gathered below max_orders
@@ -712,17 +773,26 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
             record["estimated_errors"].append(error)
             if progress is not None:
                 progress(k, addition)
-            if settings.orders == "auto" and error < settings.order_tolerance:
+            converged = settings.orders == "auto" and error < settings.order_tolerance
+            tail = tail_factor(ratio) if converged and ratio is not None else None
+            # G^(k) joins the gathered sum (next order, or with the tail's 1 + tail now), but for an order
+            # converged without a tail: so do its summed harmonics' nodes
+            if summed and not (converged and tail is None):
+                node_sum = _add_nodes(node_sum, new, None if tail is None else 1.0 + tail)
+            if converged:
                 record["converged"] = True
-                if ratio is not None:     # the orders after k: their source and ground light (the table's: the caller)
-                    tail = tail_factor(ratio)
+                if tail is not None:      # the orders after k: their source and ground light (the table's: the caller)
                     record["tail_ratio"] = ratio.tolist()
-                    gathered_sum = run.accumulate(gathered_sum, gathered, 1.0 + tail)   # G^(k+1) / (1 - r)
+                    gathered_sum = run.accumulate(gathered_sum, gathered, 1.0 + tail,    # G^(k+1) / (1 - r)
+                                                  harmonics=1 if summed else None)
                     if ground_sky is not None:
                         ground_sky = ground_sky + sky * tail
                 break
     record["orders"] = len(orders) + 1
     del stopping, gathered                              # before the gathered sum's download
+    if node_sum is not None:
+        gathered_sum = run.gather_summed(gathered_sum, node_sum)
+        del node_sum
     return HarmonicOrders(single, run.to_host(gathered_sum), orders, record, ground_sky)
 
 

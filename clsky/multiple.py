@@ -427,15 +427,19 @@ class MultipleScatteringEngine(_cl.Engine):
         self._record("pack_channels", event)
         return event
 
-    def add_into(self, total, addend, scale=None):
+    def add_into(self, total, addend, scale=None, slabs=None):
         """total += addend, padded device tables of one shape (kernels/multiple.cl: add_into); with
         ``scale`` (r, g, b), total += scale[c % 3] addend on channel c < 6 (the orders' geometric tail:
-        both species' channels of a wavelength scale alike)."""
+        both species' channels of a wavelength scale alike); with ``slabs``, only in the first that many
+        slabs of stacks (N, D, H, W, 8) (clsky.azimuth: an order's gathered azimuth average, the first
+        harmonic, into the gathered sum's)."""
         if total.shape != addend.shape or total.shape[-1] != 8:
             raise ValueError(f"total and addend must be padded tables (..., 8) of one shape, got {total.shape} "
                              f"and {addend.shape}")
+        if slabs is not None and not (total.ndim == 5 and 1 <= slabs <= total.shape[0]):
+            raise ValueError(f"slabs must be in [1, N] for stacks (N, D, H, W, 8), got {slabs} for {total.shape}")
         scale = np.ones(8) if scale is None else np.concatenate([scale, scale, [0.0, 0.0]])
-        cells = total.size // 8
+        cells = (total.size if slabs is None else total[0].size * slabs) // 8
         event = self.kernels["add_into"](self.queue, (cells,), None, total.data, addend.data, np.uint64(cells),
                                          self.real(1.0), self.real8(scale))
         self._record("add_into", event)

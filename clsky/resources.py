@@ -350,7 +350,8 @@ def _harmonic_phases(settings, orders, packed_reads=False):
     temporaries: the block's harmonics of single scattering and the copy of its nodes that their product
     takes, both seen species' interpolation (n, B, Theta + 1, W 6), their harmonic sum and a species'
     gathers), then the orders loop (single scattering at the canonical node, every order's
-    azimuth average kept on the host, the order's n nodes, and for a float32 device the same as read
+    azimuth average kept on the host, the order's n nodes and the sum of the summed orders' nodes, and
+    for a float32 device the same as read
     from it; on the device the gathered sum, the gathered harmonics and the order's n nodes, padded, and
     a harmonic, and the stopping test's running sum at the nodes (:class:`clsky.stopping.DeviceStoppingTest`);
     for ``orders="auto"``, the order before at the nodes, on the device too, which the geometric tail's
@@ -386,6 +387,8 @@ def _harmonic_phases(settings, orders, packed_reads=False):
         Allocation("higher orders kept as their azimuth averages (D, H, W, 3) float64", cells * 3 * _F64,
                    count=orders - 1),
         Allocation("the order at its nodes on the host (n, D, H, W, 3) float64", cells * 3 * _F64, count=n),
+        # the orders whose gathered harmonics m >= 1 are summed (clsky.azimuth, "Summed harmonics")
+        Allocation("the summed orders' nodes on the host (n, D, H, W, 3) float64", cells * 3 * _F64, count=n),
         Allocation("running sum at the nodes (n, D, H, W, 3) float64", cells * 3 * _F64, count=n, on_device=True),
         # the harmonics are gathered straight into their slabs of the gathered stack (no table of their own)
         Allocation("padded tables: gathered sum, gathered, nodes, a harmonic", padded, count=3 * n + 1,
