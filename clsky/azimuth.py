@@ -106,15 +106,14 @@ HARMONIC_SOURCE_ORDERS = 2
 
 def _add_nodes(total, nodes, scale=None):
     """total + nodes, or + scale nodes per wavelength (scale (r, g, b)): the host's sum of orders' nodes
-    (M + 1, D, H, W, 3), in place (a copy of nodes for total None), the scaled nodes a sun layer at a
-    time (no temporary of the whole table)."""
-    if total is None:
-        total = np.zeros_like(nodes) if scale is not None else nodes.copy()
-        if scale is None:
-            return total
+    (M + 1, D, H, W, 3), in place (for total None, a new sum), the scaled nodes a sun layer at a time (no
+    temporary of the whole table)."""
     if scale is None:
+        if total is None:
+            return nodes.copy()
         total += nodes
         return total
+    total = np.zeros_like(nodes) if total is None else total
     scale = per_channel(scale, nodes.shape[-1])
     for layer in range(nodes.shape[1]):
         total[:, layer] += nodes[:, layer] * scale
@@ -643,16 +642,22 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
             host_nodes.append(np.empty(nodes_d.shape[:-1] + (3,)))
         return download(nodes_d, host_nodes[0], 3), nodes_d                # after the scatters
 
-    def gather(nodes_d, harmonics=None):
-        """G_m = A_m L_m, L_m = sum_n H[m, n] L(phi_n) (padded: channels 0-2 and 3-5 both hold L), each
-        gathered straight into its slab of the stack (no table and copy of its own); with ``harmonics``
-        only the first that many (the stack keeps its M + 1 slabs, so that it takes the buffer of the
-        stack before it from the pool: no new memory)."""
-        out = cla.empty(queue, nodes_d.shape, engine.dtype, allocator=pool)
+    def gather_harmonics(nodes_d, out, harmonics, accumulate=False):
+        """out[m] (+)= A_m L_m for each m of ``harmonics``, L_m = sum_n H[m, n] L(phi_n) of the padded nodes
+        (channels 0-2 and 3-5 both hold L), each gathered straight into its slab of the stack ``out`` (no
+        table and copy of its own)."""
         harmonic = cla.empty(queue, nodes_d.shape[1:], engine.dtype, allocator=pool)
-        for m, row in enumerate(transform_rows[:harmonics]):
-            engine.gather(matrices[m], engine.combine_nodes(nodes_d, row, harmonic), out=out, node=m)
+        for m in harmonics:
+            engine.gather(matrices[m], engine.combine_nodes(nodes_d, transform_rows[m], harmonic), out=out, node=m,
+                          accumulate=accumulate)
         return out
+
+    def gather(nodes_d, harmonics=None):
+        """The order's gathered harmonics G_m = A_m L_m, only the first ``harmonics`` (default all) computed:
+        the stack keeps its M + 1 slabs, so that it takes the buffer of the stack before it from the pool
+        (no new memory)."""
+        out = cla.empty(queue, nodes_d.shape, engine.dtype, allocator=pool)
+        return gather_harmonics(nodes_d, out, range(len(transform_rows))[:harmonics])
 
     def accumulate(total, gathered_d, scale=None, harmonics=None):
         return gathered_d.copy() if total is None else engine.add_into(total, gathered_d, scale, slabs=harmonics)
@@ -661,11 +666,7 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
         """total_d[m] += A_m L_m for m >= 1, L_m the harmonics of the host's ``node_sum`` (M + 1, D, H, W,
         3), uploaded as padded nodes (both channel sets L) into the pool's buffer of an order's nodes."""
         nodes_d = _cl.upload_padded(queue, node_sum, engine.dtype, copies=2, allocator=pool)
-        harmonic = cla.empty(queue, nodes_d.shape[1:], engine.dtype, allocator=pool)
-        for m in range(1, len(transform_rows)):
-            engine.gather(matrices[m], engine.combine_nodes(nodes_d, transform_rows[m], harmonic), out=total_d,
-                          node=m, accumulate=True)
-        return total_d
+        return gather_harmonics(nodes_d, total_d, range(1, len(transform_rows)), accumulate=True)
 
     def to_host(gathered_d):
         return download(gathered_d, np.empty(gathered_d.shape[:-1] + (6,)), 6)()

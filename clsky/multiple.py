@@ -439,7 +439,7 @@ class MultipleScatteringEngine(_cl.Engine):
         if slabs is not None and not (total.ndim == 5 and 1 <= slabs <= total.shape[0]):
             raise ValueError(f"slabs must be in [1, N] for stacks (N, D, H, W, 8), got {slabs} for {total.shape}")
         scale = np.ones(8) if scale is None else np.concatenate([scale, scale, [0.0, 0.0]])
-        cells = (total.size if slabs is None else total[0].size * slabs) // 8
+        cells = (total.size if slabs is None else total.size // total.shape[0] * slabs) // 8
         event = self.kernels["add_into"](self.queue, (cells,), None, total.data, addend.data, np.uint64(cells),
                                          self.real(1.0), self.real8(scale))
         self._record("add_into", event)
