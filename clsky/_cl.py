@@ -36,9 +36,9 @@ try:
 except ImportError as error:  # pragma: no cover - exercised only on broken installs
     raise ImportError("clsky needs pyopencl: pip install pyopencl (and an OpenCL driver, see README)") from error
 
-__all__ = ["KernelBuildError", "NoDeviceError", "Source", "Engine", "memory_pool", "upload_padded", "list_devices",
-           "default_device", "make_context", "real_vector_dtype", "check_dtype", "INSTALL_HINT", "pocl_cache_problem",
-           "no_device_hint", "host_blas_single_threaded", "host_cores", "quiet_compiler_output"]
+__all__ = ["KernelBuildError", "NoDeviceError", "Source", "Engine", "memory_pool", "upload_padded", "upload_packed",
+           "list_devices", "default_device", "make_context", "real_vector_dtype", "check_dtype", "INSTALL_HINT",
+           "pocl_cache_problem", "no_device_hint", "host_blas_single_threaded", "host_cores", "quiet_compiler_output"]
 
 INSTALL_HINT = ("install a CPU OpenCL driver: as root `apt-get install pocl-opencl-icd` (fast PoCL 3.1), "
                 "or `pip install 'pyopencl[pocl]'` (PoCL pip build)")
@@ -413,6 +413,35 @@ def upload_padded(queue, table, dtype, width=8, copies=1, allocator=None):
                         host_origin=(0, 0, 0), region=(channels * size, rows, 1), buffer_pitches=(width * size, 0),
                         host_pitches=(channels * size, 0), is_blocking=True)
     return padded
+
+
+def upload_packed(queue, stack, dtype, pad=8, allocator=None):
+    """A stack of N host tables (N, ..., C) as one flat device array of ``dtype`` whose cells hold the N
+    tables' C values one after the other: the stack's layout (..., N, C), contiguous, then ``pad`` zeros
+    (the gathered source's packed cells, kernels/view_ray.cl: GATHERED_PACKED; a kernel reading 8 reals at
+    a cell's last values may read past the last cell). One rectangular write a table (rows of C values
+    into rows of N C, clEnqueueWriteBufferRect) straight from the stack, or from a copy of ``dtype`` where
+    it has another type; no interleaved copy on the host (the default animation's: 245 MB of fresh
+    memory). The writes are blocking: the stack may go once this returns. The array comes from
+    ``allocator`` if given."""
+    import pyopencl.array as cla
+
+    dtype = np.dtype(dtype)
+    stack = np.asarray(stack)
+    if stack.ndim < 3 or stack.size == 0 or pad < 0:
+        raise ValueError(f"upload_packed: stack must have shape (N, ..., C) with values and pad >= 0, got "
+                         f"{stack.shape} and pad {pad}")
+    count, channels = stack.shape[0], stack.shape[-1]
+    rows, size = stack[0].size // channels, dtype.itemsize
+    packed = cla.empty(queue, (stack.size + pad,), dtype, allocator=allocator)
+    if pad:
+        cl.enqueue_fill_buffer(queue, packed.data, np.zeros(1, dtype), packed.offset + stack.size * size, pad * size)
+    for n in range(count):
+        cl.enqueue_copy(queue, packed.data, np.ascontiguousarray(stack[n], dtype=dtype),
+                        buffer_origin=(packed.offset + n * channels * size, 0, 0), host_origin=(0, 0, 0),
+                        region=(channels * size, rows, 1), buffer_pitches=(count * channels * size, 0),
+                        host_pitches=(channels * size, 0), is_blocking=True)
+    return packed
 
 
 #: Cells or pixels per work-item of the kernels that integrate along rays (``-DVECTOR_WIDTH``, kernels/real.cl):

@@ -42,7 +42,8 @@ from .atmosphere import AtmosphereParameters
 from .errors import ParameterError
 from .mapping import grid4d_coordinates, scatter_cos
 from .settings import MAPPINGS, TableSettings
-from .transmittance import COMMON_SOURCES, azimuth_defines, column_channels, quadrature_defines
+from .transmittance import COMMON_SOURCES, azimuth_defines, column_channels, gathered_source_reals, \
+    quadrature_defines, upload_gathered_source
 
 __all__ = ["Table4DEngine", "compute_data", "check_atmosphere", "node_rays", "data_shape"]
 
@@ -106,10 +107,8 @@ class Table4DEngine(_cl.Engine):
         width, height, depth = settings.size
         has_multiple = gathered is not None
         channels = 9 if has_multiple else 6
-        padded = np.zeros(np.shape(gathered)[:-1] + (8,) if has_multiple else (2, 2, 2, 8), dtype=self.dtype)
-        if has_multiple:
-            padded[..., :6] = gathered
-        gathered_d = cla.to_device(self.queue, padded)
+        gathered_d = (upload_gathered_source(self.queue, gathered, self.dtype) if has_multiple
+                      else cla.zeros(self.queue, 8, self.dtype))     # not read without the higher orders
         if settings.sun_transmittance == "table":
             tw, th = settings.transmittance_size
             engine = TransmittanceEngine(self.ctx, self.dtype, steps=settings.sun_steps, sampling=settings.sampling)
@@ -122,15 +121,15 @@ class Table4DEngine(_cl.Engine):
                                  else np.zeros((2, 4), self.dtype))     # not read without -DGROUND
         if atmosphere.has_ground:
             check_kernel_buffer("table4d_cells", "ground_irradiance", ground_d, 4 * depth, self.dtype)
-        defines = _atmosphere_cl.feature_defines(atmosphere) + (azimuth_defines(settings) if has_multiple else [])
+        defines = _atmosphere_cl.feature_defines(atmosphere) + (azimuth_defines(settings, packed=True) if has_multiple
+                                                                else [])
         kernel = self.kernels_with(defines)["table4d_cells"]
         atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
         n = width * height * depth
         out = np.empty((settings.azimuth_size, n, channels))
         out_d = cla.empty(self.queue, (n, channels), self.dtype)
-        harmonics = settings.azimuth_harmonics if has_multiple else 0
         check_kernel_buffer("table4d_cells", "gathered", gathered_d,
-                            (harmonics + 1) * depth * height * width * 8 if has_multiple else padded.size, self.dtype)
+                            gathered_source_reals(np.shape(gathered)) if has_multiple else 8, self.dtype)
         check_kernel_buffer("table4d_cells", "sun_table", sun_table_d, tw * th * column_channels(atmosphere),
                             self.dtype)
         items = -(-n // self.vector_width)
