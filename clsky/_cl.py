@@ -36,9 +36,9 @@ try:
 except ImportError as error:  # pragma: no cover - exercised only on broken installs
     raise ImportError("clsky needs pyopencl: pip install pyopencl (and an OpenCL driver, see README)") from error
 
-__all__ = ["KernelBuildError", "NoDeviceError", "Source", "Engine", "memory_pool", "upload_padded", "upload_packed",
-           "list_devices", "default_device", "make_context", "real_vector_dtype", "check_dtype", "INSTALL_HINT",
-           "pocl_cache_problem", "no_device_hint", "host_blas_single_threaded", "host_cores", "quiet_compiler_output"]
+__all__ = ["KernelBuildError", "NoDeviceError", "Source", "Engine", "memory_pool", "upload_padded", "list_devices",
+           "default_device", "make_context", "real_vector_dtype", "check_dtype", "INSTALL_HINT", "pocl_cache_problem",
+           "no_device_hint", "host_blas_single_threaded", "host_cores", "quiet_compiler_output"]
 
 INSTALL_HINT = ("install a CPU OpenCL driver: as root `apt-get install pocl-opencl-icd` (fast PoCL 3.1), "
                 "or `pip install 'pyopencl[pocl]'` (PoCL pip build)")
@@ -385,7 +385,7 @@ def memory_pool(queue):
     return cl_tools.MemoryPool(cl_tools.ImmediateAllocator(queue))
 
 
-def upload_padded(queue, table, dtype, width=8, copies=1, allocator=None):
+def upload_padded(queue, table, dtype, width=8, copies=1, allocator=None, interleaved=False):
     """A host table (..., C), ``copies`` C <= ``width``, as a device array (..., width) of ``dtype`` whose
     channels are the table's (``copies`` times side by side: 2 for an order's nodes, whose channels 0-2
     and 3-5 both hold L) and then zeros (the kernels' padded tables: one real8 a cell): a zero fill, then
@@ -394,54 +394,32 @@ def upload_padded(queue, table, dtype, width=8, copies=1, allocator=None):
     padded copy on the host: on a CPU device that copy was fresh memory faulted in (the default
     animation's gathered harmonics: 327 MB, 0.1-0.3 s a 100 MB, :func:`memory_pool`), and on an NVIDIA
     H200 the rectangular write of rows of 6 into rows of 8 was no slower than a contiguous one (17 ms for
-    the default animation's table). The writes are blocking: the table may go once this returns. The
-    array comes from ``allocator`` if given."""
+    the default animation's table). With ``interleaved`` a stack of N tables (N, ..., C) arrives with its
+    tables interleaved row by row, as (..., N, width): table n's rows a row pitch of N ``width`` apart
+    (the gathered source's harmonics, :func:`clsky.transmittance.upload_gathered_source`). The writes are
+    blocking: the table may go once this returns. The array comes from ``allocator`` if given."""
     import pyopencl.array as cla
 
     dtype = np.dtype(dtype)
     table = np.asarray(table)
     channels = table.shape[-1] if table.ndim else 0
-    if table.ndim < 2 or not 1 <= channels * copies <= width or copies < 1 or table.size == 0:
-        raise ValueError(f"upload_padded: table must have shape (..., C) with 1 <= C <= {width // max(copies, 1)} "
+    if table.ndim < 2 + bool(interleaved) or not 1 <= channels * copies <= width or copies < 1 or table.size == 0:
+        stack = "a stack (N, ..., C)" if interleaved else "shape (..., C)"
+        raise ValueError(f"upload_padded: table must have {stack} with 1 <= C <= {width // max(copies, 1)} "
                          f"({copies} copies a row of {width}) and values, got {table.shape}")
-    source = np.ascontiguousarray(table, dtype=dtype)
-    padded = cla.empty(queue, table.shape[:-1] + (width,), dtype, allocator=allocator)
-    size, rows = dtype.itemsize, padded.size // width
+    tables = table if interleaved else table[None]
+    shape = tables.shape[1:-1] + (len(tables), width) if interleaved else table.shape[:-1] + (width,)
+    padded = cla.empty(queue, shape, dtype, allocator=allocator)
+    size, rows, pitch = dtype.itemsize, tables[0].size // channels, len(tables) * width * dtype.itemsize
     cl.enqueue_fill_buffer(queue, padded.data, np.zeros(1, dtype), padded.offset, padded.nbytes)
-    for copy in range(copies):
-        cl.enqueue_copy(queue, padded.data, source, buffer_origin=(padded.offset + copy * channels * size, 0, 0),
-                        host_origin=(0, 0, 0), region=(channels * size, rows, 1), buffer_pitches=(width * size, 0),
-                        host_pitches=(channels * size, 0), is_blocking=True)
+    for n, one in enumerate(tables):
+        source = np.ascontiguousarray(one, dtype=dtype)
+        for copy in range(copies):
+            cl.enqueue_copy(queue, padded.data, source,
+                            buffer_origin=(padded.offset + (n * width + copy * channels) * size, 0, 0),
+                            host_origin=(0, 0, 0), region=(channels * size, rows, 1), buffer_pitches=(pitch, 0),
+                            host_pitches=(channels * size, 0), is_blocking=True)
     return padded
-
-
-def upload_packed(queue, stack, dtype, pad=8, allocator=None):
-    """A stack of N host tables (N, ..., C) as one flat device array of ``dtype`` whose cells hold the N
-    tables' C values one after the other: the stack's layout (..., N, C), contiguous, then ``pad`` zeros
-    (the gathered source's packed cells, kernels/view_ray.cl: GATHERED_PACKED; a kernel reading 8 reals at
-    a cell's last values may read past the last cell). One rectangular write a table (rows of C values
-    into rows of N C, clEnqueueWriteBufferRect) straight from the stack, or from a copy of ``dtype`` where
-    it has another type; no interleaved copy on the host (the default animation's: 245 MB of fresh
-    memory). The writes are blocking: the stack may go once this returns. The array comes from
-    ``allocator`` if given."""
-    import pyopencl.array as cla
-
-    dtype = np.dtype(dtype)
-    stack = np.asarray(stack)
-    if stack.ndim < 3 or stack.size == 0 or pad < 0:
-        raise ValueError(f"upload_packed: stack must have shape (N, ..., C) with values and pad >= 0, got "
-                         f"{stack.shape} and pad {pad}")
-    count, channels = stack.shape[0], stack.shape[-1]
-    rows, size = stack[0].size // channels, dtype.itemsize
-    packed = cla.empty(queue, (stack.size + pad,), dtype, allocator=allocator)
-    if pad:
-        cl.enqueue_fill_buffer(queue, packed.data, np.zeros(1, dtype), packed.offset + stack.size * size, pad * size)
-    for n in range(count):
-        cl.enqueue_copy(queue, packed.data, np.ascontiguousarray(stack[n], dtype=dtype),
-                        buffer_origin=(packed.offset + n * channels * size, 0, 0), host_origin=(0, 0, 0),
-                        region=(channels * size, rows, 1), buffer_pitches=(count * channels * size, 0),
-                        host_pitches=(channels * size, 0), is_blocking=True)
-    return packed
 
 
 #: Cells or pixels per work-item of the kernels that integrate along rays (``-DVECTOR_WIDTH``, kernels/real.cl):

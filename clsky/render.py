@@ -22,8 +22,8 @@ from .lookup import check_kernel_buffer, check_table_data
 from .resources import check_memory, device_of, estimate_directions_memory, estimate_render_memory
 from .settings import MAPPINGS, TableSettings
 from .table import ScatteringTable
-from .transmittance import COMMON_SOURCES, TransmittanceEngine, azimuth_defines, column_channels, \
-    gathered_source_reals, quadrature_defines, upload_gathered_source
+from .transmittance import COMMON_SOURCES, TransmittanceEngine, azimuth_defines, column_channels, quadrature_defines, \
+    upload_gathered_source
 
 __all__ = ["SkyRenderer", "RenderEngine", "SUN_ANGULAR_RADIUS_DEG", "RAYMARCH_DEFAULTS", "RAY_MARCH_SUNS",
            "sun_disc_radiance", "check_directions", "check_render_table", "ray_march_suns", "ray_march_batch"]
@@ -202,11 +202,11 @@ class SkyRenderer:
         self._atmosphere_d = _atmosphere_cl.to_device(self.queue, table.atmosphere, dtype)
         self._table_d = cla.to_device(self.queue, np.ascontiguousarray(table.data, dtype=dtype))
         self._defines = (_atmosphere_cl.feature_defines(table.atmosphere)
-                         + (azimuth_defines(table.settings, packed=True) if self._has_gathered else []))
-        # (D, H, W, 6), or with azimuth harmonics (M + 1, D, H, W, 6), in the packed layout on the device;
-        # without it a small zero table the kernel does not read
+                         + (azimuth_defines(table.settings, interleaved=True) if self._has_gathered else []))
+        # (D, H, W, 6) padded to (D, H, W, 8), or with azimuth harmonics (M + 1, D, H, W, 6) interleaved into
+        # (D, H, W, M + 1, 8) on the device; without it a small zero table the kernel does not read
         self._gathered_d = (upload_gathered_source(self.queue, table.gathered, dtype) if self._has_gathered
-                            else cla.zeros(self.queue, 8, dtype))
+                            else cla.zeros(self.queue, (2, 2, 2, 8), dtype))
         # the sky's irradiance on a reflecting ground per sun node (D, 4); not read for a black ground
         self._ground_depth = table.settings.size[2] if table.atmosphere.has_ground else 2
         ground = padded4(table.ground_irradiance, dtype) if table.atmosphere.has_ground else np.zeros((2, 4), dtype)
@@ -420,8 +420,8 @@ class SkyRenderer:
                 np.int32(self._has_gathered),
                 np.int32(t.settings.mode == "physical"), self._sun_table_d.data, np.int32(tw), np.int32(th),
                 self._ground_d.data, np.int32(self._ground_depth))
-        gathered_reals = gathered_source_reals(self._gathered_shape) if self._has_gathered else 8
-        buffers = [("gathered", self._gathered_d, gathered_reals),
+        harmonics = t.settings.azimuth_harmonics if self._has_gathered else 0
+        buffers = [("gathered", self._gathered_d, (harmonics + 1) * depth * height * width * 8),
                    ("sun_table", self._sun_table_d, th * tw * column_channels(t.atmosphere)),
                    ("ground_irradiance", self._ground_d, 4 * self._ground_depth)]
         return self._launch_suns("render_raymarch", directions, sun_directions, altitude, valid, args, buffers,

@@ -504,8 +504,7 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
     Returns
     -------
     MemoryEstimate
-        The table held on the host, its device copy (N C s) and gathered sum (N 8 s, or 6 (M + 1) N s with
-        M harmonics: clsky.transmittance.upload_gathered_source), and per
+        The table held on the host, its device copy (N C s) and padded gathered sum (N 8 s), and per
         pixel: directions (24 bytes host, 3 s device), the mask, the output buffer (3 s device, 3 s
         host), the HDR frames (24 bytes each) and :data:`FRAME_BYTES_PER_PIXEL` of frame processing.
         With B = ``batches`` > 1: B tables on the host and on the device, B copies of the directions
@@ -514,7 +513,6 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
         last is assembled its B (pixels, 3) pieces (:meth:`clsky.spectrum.SpectralTable.assemble`).
     """
     from .render import RAYMARCH_DEFAULTS
-    from .transmittance import gathered_source_reals
 
     ray_settings = ray_settings or RAYMARCH_DEFAULTS
     method = {"lut4d": "lut", "compare4d": "compare"}.get(method, method)   # the 4D lookup's frames are the lut's
@@ -524,18 +522,15 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
     pixels = int(width) * int(height)
     held = _table_held(settings, cells, orders, keep_orders) if count_table else ()
     held = tuple(dataclasses.replace(a, count=a.count * batches) for a in held)
-    harmonics = settings.azimuth_harmonics
-    source_shape = ((harmonics + 1,) if harmonics else ()) + tuple(settings.size[::-1]) + (6,)
-    gathered = gathered_source_reals(source_shape) * s if orders > 1 else 8 * s
+    gathered = cells * 8 * s * (settings.azimuth_harmonics + 1) if orders > 1 else 2 * 2 * 2 * 8 * s
     upload = (Allocation(f"table data on the device (D, H, W, {settings.channels})",
                          _data_cells(settings, cells) * settings.channels * s,
                          count=batches, on_device=True),
-              Allocation("gathered sum on the device (D, H, W, 8), or its M + 1 harmonics packed (D, H, W, M + 1, 6)",
-                         gathered, count=batches, on_device=True),
+              Allocation("padded gathered sum on the device (D, H, W, 8)", gathered, count=batches, on_device=True),
               # 2 columns per node, 3 with ozone (transmittance.column_channels): counted as 3
               Allocation("ray-march transmittance table", int(np.prod(ray_settings.transmittance_size)) * 3 * s,
                          count=batches, on_device=True))
-    phases = [Phase("renderer", held + upload + _upload_staging(cells * (harmonics + 1) * 6 if orders > 1 else 0, s))]
+    phases = [Phase("renderer", held + upload + _upload_staging(gathered // (8 * s) * 6 if orders > 1 else 0, s))]
     if pixels:
         frames = 2 if method == "compare" else 1
         processing = max(1, int(host_workers))

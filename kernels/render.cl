@@ -118,8 +118,8 @@ __kernel void render_table(__constant const atmosphere_t *atm, __global const re
     }
 }
 
-/* has_multiple: add the higher orders from `gathered` (the packed cells of view_ray.cl, -DGATHERED_PACKED,
- * on the table's grid);
+/* has_multiple: add the higher orders from `gathered` (padded (D, H, W, 8) on the table's grid, with
+ * harmonics interleaved (D, H, W, M + 1, 8): view_ray.cl, add_lookups);
  * physical: 1 for the physical mode (phase inside G), 0 for atmosphere-plus (F_s(nu) applied here).
  * ground_irradiance: ground_depth x 4 reals, the sky's irradiance E_sky r, g, b (and 0) on the ground
  * per sun node of the table (mapping, sun_range), read only with -DGROUND.

@@ -4,9 +4,9 @@
  *   out[0..5] = beta_s / (4 pi) Integral rho_s T(Pc, P) T(P, Pa) ds   (Ibar_R r, g, b, Ibar_M r, g, b:
  *               single scattering without phase, physics.md), and with has_multiple
  *   out[6..8] = sum_s beta_s / (4 pi) Integral rho_s T(P, Pa) G_s(P) ds  (the higher orders, phase
- *               inside G: the gathered table, or its M + 1 cosine harmonics with -DAZIMUTH_HARMONICS,
- *               in view_ray.cl's packed cells (-DGATHERED_PACKED) on the 3D grid (width, height, depth,
- *               mapping, sun_range)),
+ *               inside G: the gathered table (padded (D, H, W, 8), or its M + 1 cosine harmonics with
+ *               -DAZIMUTH_HARMONICS, interleaved (D, H, W, M + 1, 8): view_ray.cl, add_lookups) on the 3D
+ *               grid (width, height, depth, mapping, sun_range)),
  * the integrals of the per-pixel ray march (view_ray.cl: integrate_single, integrate_gathered; render.cl
  * render_raymarch applies the phase and I_I to the same sums). With -DGROUND (a Lambertian ground),
  * out[6..8] also holds what the ray sees of the ground, T a / pi (mu_sun T_sun + E_sky(mu_sun))

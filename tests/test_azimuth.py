@@ -478,17 +478,18 @@ def test_upload_padded_pads_every_table_shape_with_zeros(cl_context, monkeypatch
 
 
 @pytest.mark.parametrize("dtype", ["float64", "float32"])
-def test_upload_packed_interleaves_the_stack(cl_context, monkeypatch, dtype):
-    """clsky._cl.upload_packed, through which a renderer and the 4D table upload a gathered source with
-    harmonics (transmittance.upload_gathered_source): a stack (N, ..., C) arrives flat as (..., N, C) of the
-    device's type, then 8 zeros, in a buffer that held NaN, for stacks of 1 to 3 tables of 1 to 3 axes and
-    a non-contiguous one; upload_gathered_source packs a stack of harmonics and pads a table without
-    them to (..., 8); a stack of fewer than 3 axes or no values, and a negative pad, are refused."""
+def test_upload_padded_interleaves_a_stack(cl_context, monkeypatch, dtype):
+    """clsky._cl.upload_padded with ``interleaved``, through which a renderer and the 4D table upload a
+    gathered source with harmonics (transmittance.upload_gathered_source): a stack (N, ..., C) arrives as
+    (..., N, 8) of the device's type, table n's values in row n of each cell, the rest zero in a buffer
+    that held NaN, for stacks of 1 to 3 tables of 1 to 3 axes and a non-contiguous one;
+    upload_gathered_source interleaves a stack of harmonics and pads a table without them; a stack of
+    fewer than 3 axes is refused."""
     import pyopencl as cl
     import pyopencl.array as cla
 
     from clsky import _cl
-    from clsky.transmittance import gathered_source_reals, upload_gathered_source
+    from clsky.transmittance import upload_gathered_source
 
     require_dtype(cl_context, dtype)
     queue = cl.CommandQueue(cl_context)
@@ -500,27 +501,26 @@ def test_upload_packed_interleaves_the_stack(cl_context, monkeypatch, dtype):
 
     monkeypatch.setattr(cla, "empty", dirty_empty)
     rng = np.random.default_rng(29)
+
+    def assert_interleaved(device, stack):
+        assert device.shape == stack.shape[1:-1] + (len(stack), 8) and device.dtype == np.dtype(dtype)
+        channels = stack.shape[-1]
+        assert_array_equal(device[..., :channels], np.moveaxis(stack, 0, -2).astype(dtype))
+        assert not device[..., channels:].any()
+
     for shape in ((1, 5, 6), (3, 4, 6), (3, 2, 3, 5, 6), (2, 7, 1)):
         stack = rng.random(shape) + 0.5
-        packed = _cl.upload_packed(queue, stack, dtype).get()
-        assert packed.shape == (stack.size + 8,) and packed.dtype == np.dtype(dtype)
-        assert_array_equal(packed[:-8], np.moveaxis(stack, 0, -2).astype(dtype).ravel())
-        assert not packed[-8:].any()
+        assert_interleaved(_cl.upload_padded(queue, stack, dtype, interleaved=True).get(), stack)
     strided = rng.random((3, 4, 12))[..., ::2]                              # (3, 4, 6), not contiguous
-    assert_array_equal(_cl.upload_packed(queue, strided, dtype, pad=0).get(),
-                       np.moveaxis(strided, 0, -2).astype(dtype).ravel())
+    assert_interleaved(_cl.upload_padded(queue, strided, dtype, interleaved=True).get(), strided)
     harmonics = rng.random((3, 2, 3, 4, 6))
-    source = upload_gathered_source(queue, harmonics, dtype).get()
-    assert source.size == gathered_source_reals(harmonics.shape)
-    assert_array_equal(source[:-8], np.moveaxis(harmonics, 0, -2).astype(dtype).ravel())
-    average = harmonics[0]
-    source = upload_gathered_source(queue, average, dtype).get()
-    assert source.shape == (2, 3, 4, 8) and source.size == gathered_source_reals(average.shape)
-    assert_array_equal(source[..., :6], average.astype(dtype))
-    assert not source[..., 6:].any()
-    for bad, pad in ((np.zeros((4, 6)), 8), (np.zeros((2, 0, 6)), 8), (np.zeros((2, 3, 6)), -1)):
-        with pytest.raises(ValueError, match=r"upload_packed: stack must have shape \(N, \.\.\., C\)"):
-            _cl.upload_packed(queue, bad, dtype, pad=pad)
+    assert_interleaved(upload_gathered_source(queue, harmonics, dtype).get(), harmonics)
+    average = upload_gathered_source(queue, harmonics[0], dtype).get()
+    assert average.shape == (2, 3, 4, 8)
+    assert_array_equal(average[..., :6], harmonics[0].astype(dtype))
+    assert not average[..., 6:].any()
+    with pytest.raises(ValueError, match=r"upload_padded: table must have a stack \(N, \.\.\., C\)"):
+        _cl.upload_padded(queue, np.zeros((4, 6)), dtype, interleaved=True)
 
 
 def test_add_into_the_first_slabs(cl_context):
@@ -685,8 +685,7 @@ def test_geometric_tail_with_harmonics(cl_context, atmosphere):
 def test_raymarch_matches_twin(cl_context, atmosphere, albedo, harmonics):
     """SkyRenderer.render_raymarch of a table with harmonics against reference.render_raymarch (single,
     and the ground) plus azimuth.raymarch_higher_orders, sun 3 deg below the horizon, views all around.
-    M = 1, 2 and 5 read every case of the packed source's groups of 4 harmonics (kernels/view_ray.cl:
-    packed_source; 2, 3, then 4 and 2 harmonics a group)."""
+    M = 1, 2 and 5: the harmonics' strides in the interleaved source (kernels/view_ray.cl: add_lookups)."""
     atmosphere = atmosphere.replace(ground_albedo=albedo)
     from clsky import ScatteringTable
     from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
