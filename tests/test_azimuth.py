@@ -436,6 +436,22 @@ def test_rectangular_transfers_move_the_channels_and_zero_the_padding(cl_context
         assert_array_equal(down, gathered.astype(dtype))
 
 
+def nan_filled_queue(cl_context, monkeypatch, dtype):
+    """A queue on ``cl_context`` (skipping where it lacks ``dtype``), with every pyopencl.array.empty from
+    now on filled with NaN: an upload that leaves any value unwritten shows it."""
+    import pyopencl as cl
+    import pyopencl.array as cla
+
+    require_dtype(cl_context, dtype)
+    empty = cla.empty
+
+    def dirty_empty(*args, **kwargs):
+        return empty(*args, **kwargs).fill(np.nan)
+
+    monkeypatch.setattr(cla, "empty", dirty_empty)
+    return cl.CommandQueue(cl_context)
+
+
 @pytest.mark.parametrize("dtype", ["float64", "float32"])
 def test_upload_padded_pads_every_table_shape_with_zeros(cl_context, monkeypatch, dtype):
     """clsky._cl.upload_padded, which the harmonic build (above), MultipleScatteringEngine.to_device and
@@ -443,20 +459,9 @@ def test_upload_padded_pads_every_table_shape_with_zeros(cl_context, monkeypatch
     type, channels 0..C-1 the host's values (rounded to float32 as a cast rounds them), the rest zero in
     a buffer that held NaN, for 1, 3, 6 and 8 channels, a non-contiguous table and leading shapes of 1
     to 4 axes; a table of no channels, more than 8 or no values is refused before any transfer."""
-    import pyopencl as cl
-    import pyopencl.array as cla
-
     from clsky import _cl
 
-    require_dtype(cl_context, dtype)
-    queue = cl.CommandQueue(cl_context)
-    empty = cla.empty
-
-    def dirty_empty(*args, **kwargs):
-        array = empty(*args, **kwargs)
-        return array.fill(np.nan)
-
-    monkeypatch.setattr(cla, "empty", dirty_empty)
+    queue = nan_filled_queue(cl_context, monkeypatch, dtype)
     rng = np.random.default_rng(23)
     for shape in ((5, 1), (4, 3), (2, 3, 5, 6), (3, 2, 3, 5, 6), (7, 8)):
         table = rng.random(shape) + 0.5
@@ -485,21 +490,10 @@ def test_upload_padded_interleaves_a_stack(cl_context, monkeypatch, dtype):
     that held NaN, for stacks of 1 to 3 tables of 1 to 3 axes and a non-contiguous one;
     upload_gathered_source interleaves a stack of harmonics and pads a table without them; a stack of
     fewer than 3 axes is refused."""
-    import pyopencl as cl
-    import pyopencl.array as cla
-
     from clsky import _cl
     from clsky.transmittance import upload_gathered_source
 
-    require_dtype(cl_context, dtype)
-    queue = cl.CommandQueue(cl_context)
-    empty = cla.empty
-
-    def dirty_empty(*args, **kwargs):
-        array = empty(*args, **kwargs)
-        return array.fill(np.nan)
-
-    monkeypatch.setattr(cla, "empty", dirty_empty)
+    queue = nan_filled_queue(cl_context, monkeypatch, dtype)
     rng = np.random.default_rng(29)
 
     def assert_interleaved(device, stack):
