@@ -80,11 +80,14 @@ typedef long8 maskv8;
 #else
 typedef int8 maskv8;
 #endif
-/* SELECT(a, b, m): b where mask m is true, else a (select() is ambiguous for scalar double) */
+/* SELECT(a, b, m): b where mask m is true, else a (select() is ambiguous for scalar double); ANY_LANE(m):
+ * whether mask m is true in any lane */
 #if VECTOR_WIDTH == 1
 #define SELECT(a, b, m) ((m) ? (b) : (a))
+#define ANY_LANE(m) ((m) != 0)
 #else
 #define SELECT(a, b, m) select((a), (b), (m))
+#define ANY_LANE(m) any(m)
 #endif
 /* lane k of a realv, and of a maskv */
 #define LANE(v, k) (((real *)&(v))[k])

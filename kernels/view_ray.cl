@@ -237,18 +237,24 @@ inline void integrate_single_suns(__constant const atmosphere_t *atm, const real
         const sun_table_altitude_t at = sun_altitude(atm, tw, h);
         for (int b = 0; b < count; ++b) {
             const realv mu_sun_here = (r0 * mu_s[b] + s * nu[b]) / r;     /* dot(P, Sun) / |P| */
-            column_t sun;
-            const maskv lit = sun_column(atm, h, &at, mu_sun_here, sun_table, tw, th, &sun);
-            const column_t column = column_sum(view, sun);
-            const realv t0 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.x, beta_me.x, beta_o.x)), lit);
-            const realv t1 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.y, beta_me.y, beta_o.y)), lit);
-            const realv t2 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.z, beta_me.z, beta_o.z)), lit);
+            realv t0 = V(0.0), t1 = V(0.0), t2 = V(0.0);
 #ifdef GROUND
-            if (ground && i == N_VIEW) {
+            if (ground && i == N_VIEW)
                 ground_view(atm, view, hits_ground, mu_sun_here, ground[b]);
-                ground_direct(atm, sun, lit, ground[b]);
-            }
 #endif
+            /* where no lane is lit, the columns and exponentials would all be discarded: not computed */
+            if (ANY_LANE(isgreaterequal(mu_sun_here, at.mu_h))) {
+                column_t sun;
+                const maskv lit = sun_column(atm, h, &at, mu_sun_here, sun_table, tw, th, &sun);
+                const column_t column = column_sum(view, sun);
+                t0 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.x, beta_me.x, beta_o.x)), lit);
+                t1 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.y, beta_me.y, beta_o.y)), lit);
+                t2 = SELECT(V(0.0), exp(-optical_depth_of(column, beta.z, beta_me.z, beta_o.z)), lit);
+#ifdef GROUND
+                if (ground && i == N_VIEW)
+                    ground_direct(atm, sun, lit, ground[b]);
+#endif
+            }
             realv f[6];
             f[0] = density.r * t0; f[1] = density.r * t1; f[2] = density.r * t2;
             f[3] = density.m * t0; f[4] = density.m * t1; f[5] = density.m * t2;
@@ -561,6 +567,8 @@ inline void integrate_ray_suns(__constant const atmosphere_t *atm, const realv h
         if (single) {
             const sun_table_altitude_t at = sun_altitude(atm, tw, ray.h);
             for (int b = 0; b < RAY_SUNS; ++b) {
+                if (!ANY_LANE(isgreaterequal(mu_sun_here[b], at.mu_h)))
+                    continue;           /* no lane lit (sun_column's test): nothing to add, not computed */
                 column_t sun;
                 const maskv lit = sun_column(atm, ray.h, &at, mu_sun_here[b], sun_table, tw, th, &sun);
                 const realv s0 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.x, beta_me.x, beta_o.x)), lit);
