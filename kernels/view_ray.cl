@@ -97,6 +97,14 @@ inline sun_table_altitude_t sun_altitude(__constant const atmosphere_t *atm, con
 #endif
 }
 
+/* The mask of the lanes whose node (`at`: sun_altitude of its altitude) the sun of zenith cosine mu_sun
+ * lights: not in the planet's shadow, decided from the local horizon (sun_column's test; a ray node whose
+ * lanes are all unlit skips the sun's columns). */
+inline maskv sun_lit(const sun_table_altitude_t *at, const realv mu_sun)
+{
+    return isgreaterequal(mu_sun, at->mu_h);
+}
+
 /* Column densities *sun [m] from a node at altitude h (`at`: sun_altitude of h) toward the sun (zenith
  * cosine mu_sun), read from the 2D table (-DSUN_TRANSMITTANCE_TABLE) or re-marched; returns the mask of
  * nodes the sun lights (not in the planet's shadow, decided from h and mu_sun against the local
@@ -105,7 +113,7 @@ inline sun_table_altitude_t sun_altitude(__constant const atmosphere_t *atm, con
 inline maskv sun_column(__constant const atmosphere_t *atm, const realv h, const sun_table_altitude_t *at,
                         const realv mu_sun, __global const real *sun_table, const int tw, const int th, column_t *sun)
 {
-    const maskv lit = isgreaterequal(mu_sun, at->mu_h);
+    const maskv lit = sun_lit(at, mu_sun);
 #ifdef SUN_TRANSMITTANCE_TABLE
     *sun = column_density_from_table(sun_table, tw, th, at, mu_sun);
 #else
@@ -243,7 +251,7 @@ inline void integrate_single_suns(__constant const atmosphere_t *atm, const real
                 ground_view(atm, view, hits_ground, mu_sun_here, ground[b]);
 #endif
             /* where no lane is lit, the columns and exponentials would all be discarded: not computed */
-            if (ANY_LANE(isgreaterequal(mu_sun_here, at.mu_h))) {
+            if (ANY_LANE(sun_lit(&at, mu_sun_here))) {
                 column_t sun;
                 const maskv lit = sun_column(atm, h, &at, mu_sun_here, sun_table, tw, th, &sun);
                 const column_t column = column_sum(view, sun);
@@ -567,8 +575,8 @@ inline void integrate_ray_suns(__constant const atmosphere_t *atm, const realv h
         if (single) {
             const sun_table_altitude_t at = sun_altitude(atm, tw, ray.h);
             for (int b = 0; b < RAY_SUNS; ++b) {
-                if (!ANY_LANE(isgreaterequal(mu_sun_here[b], at.mu_h)))
-                    continue;           /* no lane lit (sun_column's test): nothing to add, not computed */
+                if (!ANY_LANE(sun_lit(&at, mu_sun_here[b])))
+                    continue;           /* no lane lit: nothing to add, not computed */
                 column_t sun;
                 const maskv lit = sun_column(atm, ray.h, &at, mu_sun_here[b], sun_table, tw, th, &sun);
                 const realv s0 = SELECT(V(0.0), exp(-optical_depth_of(sun, beta.x, beta_me.x, beta_o.x)), lit);
