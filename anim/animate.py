@@ -72,7 +72,7 @@ LOOKUP_NAMES = {"lut": "table lookup", "lut4d": "4D table", "skyview": "sky-view
 LUT4D_HARMONICS = 2
 #: Most altitude and view nodes of the 4D methods' table (its sun axis is the plan's): 16 x 128 x 128 sun
 #: nodes x 16 azimuths is 151 MB as float32 and within 0.6 % (day to sunset) and 2.1 % (-4 deg) of the
-#: ray march of the same orders (README, "The 4D table"); the level's 32 x 256 would be 4 times that.
+#: ray march of the same orders (README, "The 4D table"); the level's 32 x 128 would be twice that.
 LUT4D_MAX_SIZE = (16, 128)
 
 #: Render frame i + 1 on a worker thread while frame i is displayed, compared and written

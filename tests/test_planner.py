@@ -131,7 +131,7 @@ def test_the_default_animation_plan(cl_context):
     assert plan.level.name == "default" and plan.ray is not None and plan.ray.view_steps == 48
     assert plan.table.orders == "auto" and plan.table.sun_cos_range[1] == 1.0
     assert plan.table.sun_cos_range[0] == pytest.approx(math.sin(math.radians(-6.0 - GAMMA_GROUND)))
-    assert plan.table.size[:2] == plan.full_table.size[:2] == (32, 256)
+    assert plan.table.size[:2] == plan.full_table.size[:2] == (32, 128)
     assert 0.75 < plan.work_fraction < 0.9                     # measured 0.83 (-6 to 60 deg)
     text = plan.describe()
     for topic in ("quality", "Mie", "renderer", "view nodes", "higher orders", "sun axis", "altitude axis",
