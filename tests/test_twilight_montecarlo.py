@@ -158,7 +158,7 @@ def test_draft_azimuth_average_at_minus_6_is_far_too_bright(atmosphere):
 
 @pytest.fixture(scope="module")
 def plus_5_rows(atmosphere):
-    """The sun at +5 deg, default level (32 x 256 x N table, ~40 s), every view; 400 000 paths
+    """The sun at +5 deg, default level (32 x 128 x N table, ~20 s), every view; 400 000 paths
     (standard errors 0.1-0.9 %)."""
     return full_deviation(atmosphere, 5.0, tuple(twilight.VIEWS), "default", 400_000, harmonics_used=2)
 
