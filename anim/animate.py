@@ -467,15 +467,18 @@ def _scene(config: AnimationConfig, positions, directions, valid) -> Scene:
 
 def host_frame_workers() -> int:
     """The host threads of the frames' host halves (:func:`clsky.anim.pipeline.in_order`):
-    :data:`HOST_FRAME_WORKERS` if set, else half the cores this process may use (at least 1, at most
-    :data:`MAX_HOST_FRAME_WORKERS`): the other half goes to the device half's render (PoCL's threads on
-    a CPU device) and to the writer and ffmpeg; 0 without the overlap (:data:`OVERLAP_FRAMES`: all on the
-    calling thread). On the 2-core machine, one: README "Speed" (bench/bench_animate.py) measures two."""
+    :data:`HOST_FRAME_WORKERS` if set, else one a core this process may use (at least 1, at most
+    :data:`MAX_HOST_FRAME_WORKERS`), beside the device half's render (PoCL's threads on a CPU device), the
+    writer and ffmpeg, which share the cores with them; 0 without the overlap (:data:`OVERLAP_FRAMES`:
+    all on the calling thread). Measured (README "Speed", bench/bench_animate.py): on the 2-core machine
+    two threads take 7-9 % less wall time than one for the same CPU time (since the default level's
+    cheaper table, 2026-12-05; half the cores, one, was the default before); on the H200 machine's 16
+    cores the cap's eight. Not measured: 4 to 12 cores."""
     if not OVERLAP_FRAMES:
         return 0
     if HOST_FRAME_WORKERS is not None:
         return check_integer("HOST_FRAME_WORKERS", HOST_FRAME_WORKERS, 1, 256)
-    return max(1, min(MAX_HOST_FRAME_WORKERS, host_cores() // 2))
+    return max(1, min(MAX_HOST_FRAME_WORKERS, host_cores()))
 
 
 def check_animation_memory(config: AnimationConfig, positions, device=None, options=None) -> int:

@@ -21,13 +21,14 @@ for the frame before (``clsky.anim.animate._ExposureOrder``) between the meterin
 frame farm's client smooths the EVs its workers metered (:mod:`clsky.anim.farm`).
 
 Who owns the cores (README, "Speed"): PoCL's worker threads render on all of them; the host halves run
-on ``clsky.anim.animate.check_animation_memory`` threads (half the cores, fewer where memory or the
-frame count says so; one on the 2-core machine), their BLAS limited to
+on ``clsky.anim.animate.check_animation_memory`` threads (one a core, at most 8, fewer where memory or
+the frame count says so), their BLAS limited to
 one thread each (:func:`clsky._cl.host_blas_single_threaded`); ffmpeg keeps x264's own threads (its
-output may depend on their number). On two cores the device half is the larger (about 0.5 CPU-s of a
-0.75 CPU-s frame), so PoCL keeping both cores while the host thread takes its share by time slicing
-leaves no core idle, where limiting PoCL to one core would make the device half alone longer than the
-whole frame's share of two cores; a second host thread measured no faster there (README "Speed").
+output may depend on their number). PoCL keeps every core while the host threads take their share by
+time slicing, where limiting PoCL to fewer cores would make the device half alone longer than the whole
+frame's share of them. On two cores one host thread was the default until 2026-12-05, when the default
+level's cheaper table left the host halves the larger share: two measured 7-9 % less wall time for the
+same CPU time (README "Speed").
 
 The frames are the same with and without the overlap and with any number of host threads: each frame is
 computed by the same calls on the same inputs, only on another thread, and the results are consumed in

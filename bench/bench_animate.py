@@ -7,7 +7,7 @@
   three times, side by side: with the overlapped frame pipeline (the default: frame i + 1 rendered on a
   worker thread while host threads display and compare the frames before it and the main thread writes,
   ``clsky.anim.pipeline``) with the machine's default number of host threads
-  (``clsky.anim.animate.host_frame_workers``: one on 2 cores), with the other choice (one thread where the
+  (``clsky.anim.animate.host_frame_workers``: two on 2 cores), with the other choice (one thread where the
   default is more, else two), and without the overlap (``clsky.anim.animate.OVERLAP_FRAMES = False``:
   one frame after the other); after a discarded 3-frame run of the same animation (its kernels compiled
   and cached first, as on a machine that has run clsky before).

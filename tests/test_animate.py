@@ -449,11 +449,11 @@ def test_frames_rendered_takes_the_suns_in_order(cl_context):
 
 
 def test_host_frame_workers(monkeypatch):
-    """Half the cores, at least one, at most MAX_HOST_FRAME_WORKERS; HOST_FRAME_WORKERS overrides; none
+    """One a core, at least one, at most MAX_HOST_FRAME_WORKERS; HOST_FRAME_WORKERS overrides; none
     without the overlap; fewer where the frames in flight would not fit the memory."""
     import clsky.anim.animate as animate
 
-    for cores, expected in ((1, 1), (2, 1), (3, 1), (4, 2), (16, 8), (64, animate.MAX_HOST_FRAME_WORKERS)):
+    for cores, expected in ((1, 1), (2, 2), (3, 3), (4, 4), (16, 8), (64, animate.MAX_HOST_FRAME_WORKERS)):
         monkeypatch.setattr(animate, "host_cores", lambda cores=cores: cores)
         assert animate.host_frame_workers() == expected, cores
     monkeypatch.setattr(animate, "HOST_FRAME_WORKERS", 3)
