@@ -91,7 +91,8 @@ def reference_frames():
 def test_level_keeps_its_promise(reference_frames, cl_context, name):
     """The reference itself has converged to about 0.03 % in twilight and 0.007 % by day (README, "Quality
     levels"), so the levels are held to their budget itself. Measured at 64 x 64 against the reference
-    with the azimuth harmonics (2026-12-02): default 0.62 %, high 0.081 %, worst frame (civil twilight)."""
+    with the azimuth harmonics: default 0.62 % (2026-12-02; 0.70 % since its table's 128 view nodes,
+    2026-12-05), high 0.081 %, worst frame (civil twilight)."""
     reference, valid = reference_frames
     assert worst_error(reference, planned_frames(name, cl_context), valid) < QUALITY_LEVELS[name].budget
 
