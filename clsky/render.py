@@ -22,8 +22,8 @@ from .lookup import check_kernel_buffer, check_table_data
 from .resources import check_memory, device_of, estimate_directions_memory, estimate_render_memory
 from .settings import MAPPINGS, TableSettings
 from .table import ScatteringTable
-from .transmittance import COMMON_SOURCES, TransmittanceEngine, azimuth_defines, column_channels, quadrature_defines, \
-    upload_gathered_source
+from .transmittance import COMMON_SOURCES, NO_GATHERED_GRID, TransmittanceEngine, azimuth_defines, column_channels, \
+    gathered_source_reals, quadrature_defines, upload_gathered_source
 
 __all__ = ["SkyRenderer", "RenderEngine", "SUN_ANGULAR_RADIUS_DEG", "RAYMARCH_DEFAULTS", "RAY_MARCH_SUNS",
            "sun_disc_radiance", "check_directions", "check_render_table", "ray_march_suns", "ray_march_batch"]
@@ -205,8 +205,7 @@ class SkyRenderer:
                          + (azimuth_defines(table.settings, interleaved=True) if self._has_gathered else []))
         # (D, H, W, 6) padded to (D, H, W, 8), or with azimuth harmonics (M + 1, D, H, W, 6) interleaved into
         # (D, H, W, M + 1, 8) on the device; without it a small zero table the kernel does not read
-        self._gathered_d = (upload_gathered_source(self.queue, table.gathered, dtype) if self._has_gathered
-                            else cla.zeros(self.queue, (2, 2, 2, 8), dtype))
+        self._gathered_d = upload_gathered_source(self.queue, table.gathered, dtype)
         # the sky's irradiance on a reflecting ground per sun node (D, 4); not read for a black ground
         self._ground_depth = table.settings.size[2] if table.atmosphere.has_ground else 2
         ground = padded4(table.ground_irradiance, dtype) if table.atmosphere.has_ground else np.zeros((2, 4), dtype)
@@ -413,7 +412,7 @@ class SkyRenderer:
 
     def _raymarch(self, directions, sun_directions, altitude, valid, sun_disc):
         t = self._check_table_unchanged()
-        depth, height, width = self._gathered_shape[-4:-1] if self._has_gathered else (2, 2, 2)
+        depth, height, width = self._gathered_shape[-4:-1] if self._has_gathered else NO_GATHERED_GRID
         tw, th = self._sun_table_size
         args = (self._gathered_d.data, np.int32(width), np.int32(height), np.int32(depth),
                 np.int32(MAPPINGS[t.settings.mapping]), self.engine.real2(t.settings.sun_w_range),
@@ -421,7 +420,7 @@ class SkyRenderer:
                 np.int32(t.settings.mode == "physical"), self._sun_table_d.data, np.int32(tw), np.int32(th),
                 self._ground_d.data, np.int32(self._ground_depth))
         harmonics = t.settings.azimuth_harmonics if self._has_gathered else 0
-        buffers = [("gathered", self._gathered_d, (harmonics + 1) * depth * height * width * 8),
+        buffers = [("gathered", self._gathered_d, gathered_source_reals((depth, height, width), harmonics)),
                    ("sun_table", self._sun_table_d, th * tw * column_channels(t.atmosphere)),
                    ("ground_irradiance", self._ground_d, 4 * self._ground_depth)]
         return self._launch_suns("render_raymarch", directions, sun_directions, altitude, valid, args, buffers,

@@ -513,6 +513,7 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
         last is assembled its B (pixels, 3) pieces (:meth:`clsky.spectrum.SpectralTable.assemble`).
     """
     from .render import RAYMARCH_DEFAULTS
+    from .transmittance import NO_GATHERED_GRID, gathered_source_reals
 
     ray_settings = ray_settings or RAYMARCH_DEFAULTS
     method = {"lut4d": "lut", "compare4d": "compare"}.get(method, method)   # the 4D lookup's frames are the lut's
@@ -522,7 +523,8 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
     pixels = int(width) * int(height)
     held = _table_held(settings, cells, orders, keep_orders) if count_table else ()
     held = tuple(dataclasses.replace(a, count=a.count * batches) for a in held)
-    gathered = cells * 8 * s * (settings.azimuth_harmonics + 1) if orders > 1 else 2 * 2 * 2 * 8 * s
+    gathered = s * (gathered_source_reals(settings.size, settings.azimuth_harmonics) if orders > 1
+                    else gathered_source_reals(NO_GATHERED_GRID))
     upload = (Allocation(f"table data on the device (D, H, W, {settings.channels})",
                          _data_cells(settings, cells) * settings.channels * s,
                          count=batches, on_device=True),

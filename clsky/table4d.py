@@ -42,8 +42,8 @@ from .atmosphere import AtmosphereParameters
 from .errors import ParameterError
 from .mapping import grid4d_coordinates, scatter_cos
 from .settings import MAPPINGS, TableSettings
-from .transmittance import COMMON_SOURCES, azimuth_defines, column_channels, quadrature_defines, \
-    upload_gathered_source
+from .transmittance import COMMON_SOURCES, NO_GATHERED_GRID, azimuth_defines, column_channels, gathered_source_reals, \
+    quadrature_defines, upload_gathered_source
 
 __all__ = ["Table4DEngine", "compute_data", "check_atmosphere", "node_rays", "data_shape"]
 
@@ -107,8 +107,7 @@ class Table4DEngine(_cl.Engine):
         width, height, depth = settings.size
         has_multiple = gathered is not None
         channels = 9 if has_multiple else 6
-        gathered_d = (upload_gathered_source(self.queue, gathered, self.dtype) if has_multiple
-                      else cla.zeros(self.queue, (2, 2, 2, 8), self.dtype))     # not read without the higher orders
+        gathered_d = upload_gathered_source(self.queue, gathered, self.dtype)    # zeros, unread, without them
         if settings.sun_transmittance == "table":
             tw, th = settings.transmittance_size
             engine = TransmittanceEngine(self.ctx, self.dtype, steps=settings.sun_steps, sampling=settings.sampling)
@@ -128,9 +127,9 @@ class Table4DEngine(_cl.Engine):
         n = width * height * depth
         out = np.empty((settings.azimuth_size, n, channels))
         out_d = cla.empty(self.queue, (n, channels), self.dtype)
-        harmonics = settings.azimuth_harmonics if has_multiple else 0
-        check_kernel_buffer("table4d_cells", "gathered", gathered_d,
-                            (harmonics + 1) * depth * height * width * 8 if has_multiple else 2 * 2 * 2 * 8, self.dtype)
+        grid, harmonics = (((depth, height, width), settings.azimuth_harmonics) if has_multiple
+                           else (NO_GATHERED_GRID, 0))
+        check_kernel_buffer("table4d_cells", "gathered", gathered_d, gathered_source_reals(grid, harmonics), self.dtype)
         check_kernel_buffer("table4d_cells", "sun_table", sun_table_d, tw * th * column_channels(atmosphere),
                             self.dtype)
         items = -(-n // self.vector_width)

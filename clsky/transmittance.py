@@ -14,7 +14,8 @@ from .atmosphere import AtmosphereParameters
 from .errors import as_real_array, check_choice, check_integer
 from .settings import SAMPLINGS
 
-__all__ = ["TransmittanceEngine", "azimuth_defines", "check_segments", "column_channels", "upload_gathered_source"]
+__all__ = ["TransmittanceEngine", "azimuth_defines", "check_segments", "column_channels", "upload_gathered_source",
+           "gathered_source_reals", "NO_GATHERED_GRID"]
 
 COMMON_SOURCES = ("real.cl", "geometry.cl", "column.cl", "transmittance_table.cl")
 
@@ -51,6 +52,11 @@ def azimuth_defines(settings, interleaved=False):
     return [f"-DAZIMUTH_HARMONICS={settings.azimuth_harmonics}"] + (["-DGATHERED_INTERLEAVED"] if interleaved else [])
 
 
+#: The grid (D, H, W) of the zero table that stands in for the gathered source of a table without higher
+#: orders (:func:`upload_gathered_source` of None): a valid buffer that the kernels do not read.
+NO_GATHERED_GRID = (2, 2, 2)
+
+
 def upload_gathered_source(queue, gathered, dtype):
     """A table's gathered source (``ScatteringTable.gathered``: (D, H, W, 6), or with M azimuth harmonics
     (M + 1, D, H, W, 6)) on the device as the per-pixel and per-cell ray integrals read it with
@@ -58,9 +64,18 @@ def upload_gathered_source(queue, gathered, dtype):
     (D, H, W, 8), the harmonics interleaved into (D, H, W, M + 1, 8) (:func:`clsky._cl.upload_padded`), so
     that a lookup's corner reads its M + 1 rows of 8 reals side by side, where the orders' stack (M + 1
     tables (D, H, W, 8)) puts them in M + 1 tables of their own: the default animation's ray march (M = 2)
-    takes 3-8 % less CPU time for the same frames, 10-20 % less at dusk (README "Speed")."""
+    takes 3-8 % less CPU time for the same frames, 10-20 % less at dusk (README "Speed"). None (no higher
+    orders): zeros on :data:`NO_GATHERED_GRID`. Its size in reals: :func:`gathered_source_reals`."""
+    if gathered is None:
+        return cla.zeros(queue, NO_GATHERED_GRID + (8,), dtype)
     gathered = np.asarray(gathered)
     return _cl.upload_padded(queue, gathered, dtype, interleaved=gathered.ndim == 5)
+
+
+def gathered_source_reals(grid, harmonics=0) -> int:
+    """Reals of :func:`upload_gathered_source`'s array on the grid (D, H, W) with M = ``harmonics``:
+    8 (M + 1) D H W (a kernel's buffer check, from the grid and harmonics it is given)."""
+    return 8 * (harmonics + 1) * int(np.prod(grid))
 
 
 def column_channels(atmosphere) -> int:
