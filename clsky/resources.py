@@ -57,20 +57,23 @@ FIRST_ORDERS, ORDERS_PER_DECADE = 3, 1.6
 #: method: conversion to cd/m^2, exposure metering, tone map, 8-bit frames, metrics, error image,
 #: composite, PNG and MP4 encoding. Measured as the growth of peak RSS between 2-frame 256^2 and 1024^2
 #: fisheye animations of the default (physical) preset, draft level, table 16 x 64 x 16, without the
-#: overlap, the largest of 3 runs: 448 bytes per pixel in all (compare), 306 (lut), 307 (raymarch), 324
-#: (skyview; 307 but for one run of six, 15 MiB higher), of which the listed arrays are 147 and 123
-#: (2026-12-04, after the host half's rewrite of 2026-12-03: PNG encoding, the gamut mapping in blocks
-#: with reused arrays; on 2026-12-02, 488 / 334 / 336 and the constants 340 / 210 / 210 / 210).
-FRAME_BYTES_PER_PIXEL = {"compare": 305, "lut": 185, "raymarch": 185, "skyview": 205}
-#: Host bytes per pixel that an animation's overlapped pipeline (clsky/anim/pipeline.py) adds: the next
-#: frame, rendered on the worker thread while this one is processed (its downloads, HDR frames and, when
-#: measured, its conversion beside this frame's processing: since the host threads of 2026-12-04 the
-#: conversion is the host threads', so this now overstates the next frame; kept, the slope test measuring
-#: the estimate 1.01-1.15 of the peak's growth). Measured as FRAME_BYTES_PER_PIXEL, with and without the
-#: overlap, the largest of 3 runs each (the peak depends on how the two threads' peaks meet): 175-187
-#: (compare), 121-170 (lut), 172-178 (raymarch), 144-154 (skyview); 2026-12-04, after the host half's
-#: rewrite (2026-12-02: 270-310, 130-195, 210, 145-195 and the constants 310 / 200 / 215 / 200).
-NEXT_FRAME_BYTES_PER_PIXEL = {"compare": 190, "lut": 170, "raymarch": 180, "skyview": 155}
+#: overlap, the largest of 3 runs, less the arrays the estimate lists on a CPU device (2 suns a ray-march
+#: launch): 530 bytes per pixel in all (compare; listed 243), 288 (lut; 123), 315 (raymarch; 219), 298
+#: (skyview; 123) (2026-12-05; the runs of one method within 16 bytes). The ray march's processing is the
+#: lookup's (one frame): it takes the lookup's 165, not the 96 its own runs leave, because its listed arrays
+#: count each launch's frames beside the HDR frame in hand (an upper bound; earlier constants: 305 / 185 /
+#: 185 / 205 from 2026-12-04, 340 / 210 / 210 / 210 from 2026-12-02).
+FRAME_BYTES_PER_PIXEL = {"compare": 287, "lut": 165, "raymarch": 165, "skyview": 175}
+#: Host bytes per pixel that an animation's overlapped pipeline (clsky/anim/pipeline.py) adds with one
+#: host thread beyond the frames it holds (one more set of HDR frames, waiting for the thread): the next
+#: frame, rendered on the worker thread while this one is processed. Measured as FRAME_BYTES_PER_PIXEL
+#: with the overlap and one host thread, less the listed arrays and FRAME_BYTES_PER_PIXEL: 588 bytes per
+#: pixel (compare), 326 (lut), 327 (raymarch), 351 (skyview), the largest of 3 runs, 2026-12-05: 10, 14,
+#: -12 (0 here) and 29. The next frame's render peaks while no frame is being processed: since the host
+#: threads of 2026-12-04 the conversion is theirs, and the 190 / 170 / 180 / 155 measured before (the
+#: render's conversion beside this frame's processing) overstated it. With two host threads the estimate
+#: is 1.03 (compare), 0.94 (lut), 1.09 (raymarch) and 1.00 (skyview) of the largest of 3 runs.
+NEXT_FRAME_BYTES_PER_PIXEL = {"compare": 10, "lut": 15, "raymarch": 0, "skyview": 30}
 
 _GIB = 2**30
 
@@ -447,11 +450,14 @@ def _data_cells(settings, cells):
 
 
 def _table_held(settings, cells, orders, keep_orders=True):
-    """The host arrays of a built table: data, single scattering, gathered sum, higher orders."""
+    """The host arrays of a built table: data, gathered sum and, with ``keep_orders``, its orders
+    (single scattering, the table's first order, and the higher orders). An animation drops the
+    orders once its table is built (:func:`clsky.anim.animate.make_table`), single scattering with them."""
     kept = _kept_channels(settings)
     held = [Allocation(f"table data (D, H, W, {settings.channels}) float64", _data_cells(settings, cells)
-                       * settings.channels * 8),
-            Allocation("single scattering (D, H, W, 6) float64", cells * 6 * 8)]
+                       * settings.channels * 8)]
+    if keep_orders:
+        held.append(Allocation("single scattering (D, H, W, 6) float64", cells * 6 * 8))
     if orders > 1:
         # with azimuth harmonics (clsky/azimuth.py) the gathered sum is M + 1 such tables
         held.append(Allocation("gathered sum (D, H, W, 6) float64", cells * 6 * 8,
@@ -596,7 +602,7 @@ def estimate_spectral_table_memory(settings: TableSettings, batches: int, packed
     -------
     MemoryEstimate
         The last batch's build (:func:`estimate_table_memory`'s phases: the batches grow, the last is
-        the largest) beside the B - 1 built tables without their orders (data, single scattering,
+        the largest) beside the B - 1 built tables without their orders (data and
         gathered sum) and, for the physical mode's higher orders, the two first-gather stacks
         (2, D, H, H) float64 that :func:`clsky.multiple.keeping_first_gather_stacks` keeps for the
         whole build (the last batch computes none: its first-gather phase holds the kept two instead
