@@ -51,8 +51,13 @@ __all__ = ["FrameWriter", "frame_files", "encode_png", "write_png", "write_json"
 #: the RGB -> YUV conversion and the stream tagged as BT.709 (so players decode the colours as they
 #: were encoded; ffmpeg's untagged default is the BT.601 matrix, which players may not assume), the
 #: sRGB transfer tag (PNG viewers assume sRGB too; the tone map's pure 2.2 power law is close to it),
-#: and the index at the front of the file (playback starts before the download ends).
-MP4_OUTPUT_PARAMS = ["-crf", "18", "-vf", "scale=out_color_matrix=bt709:out_range=tv",
+#: and the index at the front of the file (playback starts before the download ends). The tags are set
+#: in the filter graph (``setparams``): from FFmpeg 7 on, the frames' own colour properties override the
+#: ``-color_primaries`` and ``-color_trc`` output options, and the MP4s of imageio-ffmpeg's FFmpeg 9.0
+#: said "bt709/unknown/unknown" (found 2026-12-05); the output options stay for older builds. The tags
+#: change no pixel (the decoded frames hash the same).
+MP4_OUTPUT_PARAMS = ["-crf", "18", "-vf", "scale=out_color_matrix=bt709:out_range=tv,"
+                     "setparams=colorspace=bt709:color_primaries=bt709:color_trc=iec61966-2-1:range=tv",
                      "-colorspace", "bt709", "-color_primaries", "bt709", "-color_trc", "iec61966-2-1",
                      "-movflags", "+faststart"]
 

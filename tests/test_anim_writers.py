@@ -166,6 +166,23 @@ def test_mp4_decodes_with_the_right_frames(tmp_path):
 
 
 @needs_ffmpeg
+def test_mp4_is_tagged_bt709_with_the_srgb_transfer(tmp_path):
+    """The stream says how to decode its colours: limited range, BT.709 matrix and primaries, the sRGB
+    transfer (MP4_OUTPUT_PARAMS), as FFmpeg itself reads the file back: "yuv420p(tv, colorspace/primaries/
+    transfer, ...)". FFmpeg 9.0 wrote "bt709/unknown/unknown" when the tags were output options only."""
+    import subprocess
+
+    target = tmp_path / "sky.mp4"
+    with FrameWriter(directory=tmp_path / "frames", mp4_path=target, fps=24, total_frames=2) as writer:
+        for index in range(2):
+            writer.write(index, _frame(index))
+    probe = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-i", str(target)], capture_output=True,
+                           text=True, timeout=60)
+    stream = next(line for line in probe.stderr.splitlines() if "Video:" in line)
+    assert "yuv420p(tv, bt709/bt709/iec61966-2-1" in stream, stream
+
+
+@needs_ffmpeg
 def test_mp4_refuses_to_overwrite(tmp_path):
     target = tmp_path / "sky.mp4"
     target.write_bytes(b"old movie")
