@@ -274,9 +274,10 @@ def test_frame_estimate_matches_the_measured_slope(tmp_path):
     of two runs at each size: the growth per pixel against the estimate's on this device (what
     ``clsky animate`` checks: its host threads, suns a ray-march launch), within 25 % (the table part
     cancels). The peak depends on how the threads' peaks meet: on 2026-12-05 (PoCL 3.1, 2 cores, two host
-    threads) three single runs gave 838-898 bytes a pixel against the estimate's 923, and the largest of
-    two is what the constants were fitted to (clsky.resources.FRAME_BYTES_PER_PIXEL). Before they were
-    fitted again, with one run, the ratio drifted to 1.17-1.36: the overlap's next frame was overstated."""
+    threads) three single runs gave 838-898 bytes a pixel against the estimate's 923; the per-pixel
+    constants (clsky.resources.FRAME_BYTES_PER_PIXEL) are fitted to the largest of three runs, hence the
+    larger of two here (1.02-1.05 in three runs of this test). Before they were fitted again, with one
+    run, the ratio drifted to 1.17-1.36: the overlap's next frame was overstated."""
     from clsky.anim.animate import AnimationConfig, memory_estimate, sun_positions
 
     wrapper = ("import resource, subprocess, sys; subprocess.run(sys.argv[1:], check=True, capture_output=True); "
@@ -484,11 +485,12 @@ def test_spectral_animation_estimate_matches_the_measured_peak():
     N = 15 wavelengths (5 batches) and with three: the spectral run's extra memory against the
     estimate's, within 25 % (both runs pay the same process overhead beyond the estimate: programs
     built for the new table size, about 45 MiB here, which cancels). Measured (PoCL 3.1, 2 cores,
-    2026-12-05, three runs): 207-211 and 69.5-70.5 MiB, estimate 204 and 59.2 MiB: extra 137-141 MiB
-    measured, 145 MiB estimated (1.03-1.06). The CI run of 2026-12-05 measured 129 MiB extra against the
+    2026-12-05, five runs): 206-211 and 69.5-70.5 MiB, estimate 201 and 59.2 MiB: extra 136-141 MiB
+    measured, 142 MiB estimated (1.01-1.04). The CI run of 2026-12-05 measured 129 MiB extra against the
     175 MiB estimated then (1.36): the estimate counted a single-scattering array a table no longer holds
     once an animation drops its orders (6 MiB a batch, 24 MiB of the difference; fixed, and tested exactly by
-    test_animation_estimate_holds_the_arrays_its_table_keeps); 129 MiB against 145 MiB is 1.12."""
+    test_animation_estimate_holds_the_arrays_its_table_keeps), and the frames' per-pixel constants had
+    grown stale; 129 MiB against 142 MiB is 1.10."""
     from clsky.anim.animate import AnimationConfig, memory_estimate, sun_positions
 
     device = resources.device_of()
