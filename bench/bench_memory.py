@@ -29,7 +29,7 @@ import time
 from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
 
 from clsky.cli import ATMOSPHERE_OVERRIDES, add_atmosphere_overrides
-from clsky.resources import BASE_PROCESS_BYTES, estimate_table_memory, format_bytes
+from clsky.resources import BASE_PROCESS_BYTES, device_of, estimate_table_memory, format_bytes
 
 #: Runs the command in argv[1:] and prints its peak RSS [KiB] (ru_maxrss of the only child).
 _WRAPPER = ("import resource, subprocess, sys; code = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL, "
@@ -83,7 +83,9 @@ def peak_rss(arguments, output):
 
 
 def estimate(arguments):
-    """The estimated peak [bytes] of a case (arrays + :data:`BASE_PROCESS_BYTES`), and its table size."""
+    """The estimated peak [bytes] of a case (arrays + :data:`BASE_PROCESS_BYTES`), and its table size: for an
+    animation the estimate `clsky animate` checks on this machine's device (its suns a ray-march launch,
+    packed reads)."""
     from clsky.anim import cli as anim_cli
     from clsky.anim.animate import memory_estimate, sun_positions
     from clsky import cli
@@ -96,7 +98,7 @@ def estimate(arguments):
         size = settings.size
     else:
         config = anim_cli._config(args)          # every field from the parsed options, as `clsky animate` does
-        result = memory_estimate(config, sun_positions(config))
+        result = memory_estimate(config, sun_positions(config), device=device_of())
         size = result.what.rsplit("table ", 1)[1].rstrip(")")
     return result.peak_bytes() + BASE_PROCESS_BYTES, size
 
