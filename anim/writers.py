@@ -9,9 +9,10 @@ before anything is written (:func:`clsky._files.check_output`); existing outputs
 FileExistsError unless ``force`` (``--force`` on the command line). Each writer takes ``staging=``
 (a :class:`clsky._files.StagedWrites`) to make several files land together.
 
-PNG files are encoded here (:func:`encode_png`: NumPy and a deflate, :func:`deflate_module`); Pillow draws the composite frames' labels
-and reads PNG files back; the MP4 needs imageio and imageio-ffmpeg, and EXR frames the OpenEXR bindings
-(all in the ``anim`` extra of clsky), imported only when an MP4 or EXR frames are requested.
+PNG files are encoded here (:func:`encode_png`: NumPy and a deflate, :func:`deflate_module`); Pillow
+draws the composite frames' labels and reads PNG files back; the MP4 needs imageio and imageio-ffmpeg,
+and EXR frames the OpenEXR bindings (all in the ``anim`` extra of clsky), imported only when an MP4 or
+EXR frames are requested.
 
 Examples
 --------
@@ -50,12 +51,12 @@ __all__ = ["FrameWriter", "frame_files", "encode_png", "write_png", "write_json"
 #: ffmpeg output options of the MP4: constant-quality H.264 at CRF 18 (visually lossless for x264),
 #: the RGB -> YUV conversion and the stream tagged as BT.709 (so players decode the colours as they
 #: were encoded; ffmpeg's untagged default is the BT.601 matrix, which players may not assume), the
-#: sRGB transfer tag (PNG viewers assume sRGB too; the tone map's pure 2.2 power law is close to it),
-#: and the index at the front of the file (playback starts before the download ends). The tags are set
-#: in the filter graph (``setparams``): from FFmpeg 7 on, the frames' own colour properties override the
-#: ``-color_primaries`` and ``-color_trc`` output options, and the MP4s of imageio-ffmpeg's FFmpeg 9.0
-#: said "bt709/unknown/unknown" (found 2026-12-05); the output options stay for older builds. The tags
-#: change no pixel (the decoded frames hash the same).
+#: sRGB transfer tag (the frames are sRGB-encoded, :func:`clsky.anim.display.srgb_encode`, as PNG viewers
+#: assume too), and the index at the front of the file (playback starts before the download ends). The
+#: tags are set in the filter graph (``setparams``): from FFmpeg 7 on, the frames' own colour properties
+#: override the ``-color_primaries`` and ``-color_trc`` output options, and the MP4s of imageio-ffmpeg's
+#: FFmpeg 9.0 said "bt709/unknown/unknown" (found 2026-12-05); the output options stay for older builds.
+#: The tags change no pixel (the decoded frames hash the same).
 MP4_OUTPUT_PARAMS = ["-crf", "18", "-vf", "scale=out_color_matrix=bt709:out_range=tv,"
                      "setparams=colorspace=bt709:color_primaries=bt709:color_trc=iec61966-2-1:range=tv",
                      "-colorspace", "bt709", "-color_primaries", "bt709", "-color_trc", "iec61966-2-1",
@@ -125,8 +126,8 @@ def encode_png(image_u8, text=None):
 
     Every row is filtered with PNG's Sub filter (each byte minus the same channel's byte one pixel to its
     left, modulo 256; PNG specification, section 9.2) and the rows deflated at level
-    :data:`PNG_COMPRESS_LEVEL` (:func:`deflate_module`), in one IDAT chunk; ``text`` ({keyword: str}) goes into iTXt chunks
-    (UTF-8), which Pillow reads back as ``Image.open(path).text``.
+    :data:`PNG_COMPRESS_LEVEL` (:func:`deflate_module`), in one IDAT chunk; ``text`` ({keyword: str}) goes
+    into iTXt chunks (UTF-8), which Pillow reads back as ``Image.open(path).text``.
 
     Why not Pillow's encoder: it chooses each row's filter by trying all five (adaptive filtering), half
     its time for the animation's frames: on the default animation's 1614 x 512 composites it took 36.8 ms

@@ -296,8 +296,8 @@ def test_frame_estimate_matches_the_measured_slope(tmp_path):
         config = AnimationConfig(frames=2, size=size, quality="draft", table_size=(16, 64, 16))
         estimates.append(memory_estimate(config, sun_positions(config), device=device).peak_bytes())
     ratio = (estimates[1] - estimates[0]) / (peaks[1] - peaks[0])
-    print(f"estimated growth {format_bytes(estimates[1] - estimates[0])}, measured {format_bytes(peaks[1] - peaks[0])}, "
-          f"ratio {ratio:.3f}")
+    print(f"estimated growth {format_bytes(estimates[1] - estimates[0])}, measured "
+          f"{format_bytes(peaks[1] - peaks[0])}, ratio {ratio:.3f}")
     assert 0.8 <= ratio <= 1.25, (f"estimated growth {format_bytes(estimates[1] - estimates[0])}, measured "
                                   f"{format_bytes(peaks[1] - peaks[0])}")
 
