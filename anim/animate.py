@@ -23,6 +23,7 @@ import collections
 import contextlib
 import dataclasses
 import datetime
+import functools
 import math
 import pathlib
 import threading
@@ -1008,13 +1009,21 @@ def metered_exposure(pipeline: display_pipeline.Display, hdr, valid):
 
 
 def _local_frames(config, positions, renderer, prepared, valid, lookup, workers):
-    """The frame source of a single-process run: ``frames(pipeline)`` yields each frame's
+    """The frame source of a single-process run: ``frames(pipeline_of)`` yields each frame's
     :class:`FrameOutputs` in order, rendered and shown here (clsky.anim.pipeline): frame i + 1 renders on
     a worker thread while ``workers`` host threads convert, meter, display and compare the frames before
     it (:func:`clsky.anim.pipeline.in_order`; the exposures smoothed in frame order, :class:`_ExposureOrder`)
     and this thread writes them; 0 ``workers`` (OVERLAP_FRAMES = False) does all of it here, one frame
-    after the other. The same frames either way."""
-    def frames(pipeline):
+    after the other. The same frames either way. ``pipeline_of()`` returns the display pipeline: it is
+    called once the first frame's render has started (on the worker thread), so that the display's
+    set-up (importing colour-science, on one core) runs beside that render."""
+    def frames(pipeline_of):
+        rendered = pipeline_module.prefetched(frames_rendered(renderer, prepared, config, lookup, positions),
+                                              positions, overlap=OVERLAP_FRAMES)
+        with contextlib.closing(rendered):
+            yield from _shown_frames(pipeline_of(), rendered)
+
+    def _shown_frames(pipeline, rendered):
         order = _ExposureOrder(pipeline)
 
         def shown(job):
@@ -1031,29 +1040,28 @@ def _local_frames(config, positions, renderer, prepared, valid, lookup, workers)
                 raise
             return frame_outputs(pipeline, hdr, valid, config, sun, index, ev=order.next_ev(index, metered))
 
-        def jobs(rendered):
+        def jobs():
             for index, (sun, raw) in enumerate(rendered):
                 job = [index, sun, raw]
                 del raw
                 yield job
 
-        rendered = pipeline_module.prefetched(frames_rendered(renderer, prepared, config, lookup, positions),
-                                              positions, overlap=OVERLAP_FRAMES)
-        with contextlib.closing(rendered):
-            yield from pipeline_module.in_order(shown, jobs(rendered), workers)
+        yield from pipeline_module.in_order(shown, jobs(), workers)
     return frames
 
 
 def _write_animation(config, positions, frames, table, plan, lookup, staging, progress):
-    """Stage the frames of ``frames(pipeline)`` (:class:`FrameOutputs` in order: :func:`_local_frames`,
-    or a farm's), the MP4 and the metrics in ``staging``; returns the metric rows, the temporal jumps,
-    the target paths and the stale frames to be deleted."""
+    """Stage the frames of ``frames(pipeline_of)`` (:class:`FrameOutputs` in order: :func:`_local_frames`,
+    or a farm's; ``pipeline_of()`` returns the display pipeline, set up at its first call), the MP4 and the
+    metrics in ``staging``; returns the metric rows, the temporal jumps, the target paths and the stale
+    frames to be deleted."""
     rows, means = [], {name: [] for name in (*LOOKUP_NAMES, "raymarch")}
-    pipeline = display(config, table)
+    # set up when the frame source asks for it: a local one starts its first render before (_local_frames)
+    pipeline_of = functools.cache(functools.partial(display, config, table))
     # the frames' host products (sRGB and white-balance matrices, Oklab, XYZ for Delta E) on one BLAS
     # thread: beside PoCL's workers OpenBLAS's threads cost ~100x the CPU of one (README, "Speed")
     with _frame_writer(config, len(positions), staging) as writer, host_blas_single_threaded(), \
-            contextlib.closing(frames(pipeline)) as produced:
+            contextlib.closing(frames(pipeline_of)) as produced:
         for out in produced:
             sun = positions[out.index]
             for name, value in out.means.items():
@@ -1082,7 +1090,7 @@ def _write_animation(config, positions, frames, table, plan, lookup, staging, pr
                    for k, v in dataclasses.asdict(config).items()},
         "table": {"settings": table.settings.to_dict(), "orders": table.orders_record,
                   "metadata": table.metadata, "frame_units": frame_units(config, table)},
-        "display": pipeline.describe(),
+        "display": pipeline_of().describe(),
         "lookup": None if lookup is None else LOOKUP_NAMES[lookup],
         "plan": None if plan is None else {"quality": plan.level.name, "work_fraction": plan.work_fraction,
                                            "renderer": plan.renderer,

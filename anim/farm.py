@@ -183,12 +183,13 @@ def _finish(token, hdr, sun, index, ev):
 
 def animation_frames(farm: Farm, config, table, positions, lookup, window=None):
     """The frame source of an animation on ``farm`` (:func:`clsky.anim.animate.render_animation`'s
-    ``farm=``): ``frames(pipeline)`` yields each frame's :class:`~clsky.anim.animate.FrameOutputs` in
+    ``farm=``): ``frames(pipeline_of)`` yields each frame's :class:`~clsky.anim.animate.FrameOutputs` in
     order, rendered by the workers (module docstring), with the lookup ``lookup`` (the client's
-    :func:`clsky.anim.animate.lookup_of`); ``pipeline`` (the client's display pipeline)
+    :func:`clsky.anim.animate.lookup_of`); ``pipeline_of()`` returns the client's display pipeline, which
     smooths the auto-exposure. At most ``window`` frames are in flight (default: twice the workers'
     threads, at least 4), so that a long or large animation holds a bounded number of HDR frames."""
-    def frames(pipeline):
+    def frames(pipeline_of):
+        pipeline = pipeline_of()
         client = farm.client
         size = window or max(4, 2 * farm.threads)
         job = _Job(farm.new_token(), config, table_payload(table), lookup)

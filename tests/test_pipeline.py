@@ -74,6 +74,29 @@ def test_stopping_early_finishes_the_running_call_and_starts_no_other():
     assert calls == done          # nothing ran after close() returned
 
 
+def test_the_first_call_starts_before_the_first_item_is_asked_for():
+    """With the overlap the first render runs while the caller still sets up (an animation's display):
+    the call of item 0 starts at construction, and closing before any item waits for it to end and
+    starts no other. The 10 s wait only bounds a failure (the call starts within milliseconds)."""
+    started, release, calls = threading.Event(), threading.Event(), []
+
+    def function(item):
+        calls.append(item)
+        started.set()
+        release.wait(10.0)
+        return item
+
+    frames = prefetched(function, range(3))
+    assert started.wait(10.0), "item 0's call did not start before the first item was asked for"
+    closer = threading.Thread(target=frames.close)
+    closer.start()
+    closer.join(0.2)
+    assert closer.is_alive()      # close() waits for the running call (it may hold the device)
+    release.set()
+    closer.join(10.0)
+    assert not closer.is_alive() and calls == [0]
+    assert list(frames) == []     # closed: nothing more
+
 # in_order: the host threads of the frames' host halves ------------------------------------------------
 
 def test_in_order_yields_in_order_from_a_bounded_window_of_threads():
