@@ -826,30 +826,31 @@ def frame_outputs(pipeline: display_pipeline.Display, hdr, valid, config: Animat
     ev, images, shown = display_frames(pipeline, hdr, valid, config, seed=index, ev=ev)
     row = {"frame": index, "sun_zenith_deg": sun.zenith_deg, "sun_azimuth_deg": sun.azimuth_deg,
            "time": sun.time.isoformat() if sun.time is not None else "", "exposure_ev": ev}
-    means = {name: metrics.mean_luminance(frame[None], valid)[0] for name, frame in hdr.items()}
     if config.compares:
-        image, numbers = comparison(hdr, images, shown, valid)
+        image, numbers, means = comparison(hdr, images, shown, valid)
         row.update(numbers)
         frame_hdr = hdr["raymarch"]
     else:
         name = next(iter(hdr))                   # the one frame rendered
         image, frame_hdr = images[name], hdr[name]
+        means = {name: metrics.mean_luminance(frame_hdr[None], valid)[0]}
     return FrameOutputs(index, _even(image), row, means, frame_hdr if config.hdr else None)
 
 
 def comparison(hdr, images, shown, valid):
-    """(composite, numbers) of one sun position's compared HDR frames ``hdr`` ({lookup: ..., 'raymarch': ...},
-    :func:`render_frame`) and their :func:`display_frames` ``images`` and ``shown``: the composite of the
-    lookup (labelled with :data:`LOOKUP_NAMES`), the ray march and their relative error
-    (:func:`clsky.anim.metrics.composite`), and the metrics of :func:`clsky.anim.metrics.compare_frames`
-    with ``'lookup'``, the lookup's name."""
+    """(composite, numbers, means) of one sun position's compared HDR frames ``hdr`` ({lookup: ...,
+    'raymarch': ...}, :func:`render_frame`) and their :func:`display_frames` ``images`` and ``shown``: the
+    composite of the lookup (labelled with :data:`LOOKUP_NAMES`), the ray march and their relative error
+    (:func:`clsky.anim.metrics.composite`), the metrics of :func:`clsky.anim.metrics.compare_frames` with
+    ``'lookup'``, the lookup's name, and each frame's mean luminance ({name: value}, for the temporal
+    jumps)."""
     lookup = next(name for name in hdr if name != "raymarch")
-    # the error map of the third panel is the one the statistics are taken of: checked and computed once
-    numbers, error_map = metrics.compare_frames(hdr["raymarch"], hdr[lookup], valid, display=shown,
-                                                return_error_map=True)
-    image = metrics.composite([images[lookup], images["raymarch"], metrics.error_image(error_map, valid)],
+    # the error map of the third panel and the means are those of the statistics: checked and computed once
+    compared = metrics.frame_comparison(hdr["raymarch"], hdr[lookup], valid, display=shown)
+    image = metrics.composite([images[lookup], images["raymarch"], metrics.error_image(compared.error_map, valid)],
                               [LOOKUP_NAMES[lookup], "ray march", "relative error"])
-    return image, {"lookup": LOOKUP_NAMES[lookup], **numbers}
+    means = dict(zip(("raymarch", lookup), compared.mean_luminance))
+    return image, {"lookup": LOOKUP_NAMES[lookup], **compared.numbers}, means
 
 
 def _frame_writer(config: AnimationConfig, total_frames: int, staging=None) -> writers.FrameWriter:

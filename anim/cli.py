@@ -295,7 +295,7 @@ def run_render(args):
     hdr = render_frame(renderer, renderer.prepare(directions, valid), sun, config, lookup)
     ev, images, shown = display_frames(display(config, table), hdr, valid, config)
     if config.compares:
-        image, numbers = comparison(hdr, images, shown, valid)
+        image, numbers, _ = comparison(hdr, images, shown, valid)
         detail = f"; {LOOKUP_NAMES[lookup]} vs ray march: 95th-percentile error {100 * numbers['p95_rel']:.1f} %"
     else:
         image, detail = images[next(iter(hdr))], ""

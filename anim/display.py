@@ -57,6 +57,7 @@ from clsky import colorimetry
 from clsky.errors import ParameterError
 
 from . import tonemap
+from .pixels import valid_pixels
 from clsky.errors import check_real
 
 __all__ = ["TONE_CURVES", "DEFAULT_TONE_MAP", "WHITE_BALANCES", "SOURCES", "AutoExposure", "Display",
@@ -120,9 +121,14 @@ def srgb_encode(linear):
     The expression of colour-science's ``eotf_inverse_sRGB`` (``colour.cctf_encoding(..., function='sRGB')``),
     which tests/test_display.py holds it to bit for bit, without that function's domain-range scaling
     and signed power (whose signs are 1 on clipped values): 9 against 20 ms a 512 x 512 frame, twice a
-    frame in the default animation."""
+    frame in the default animation. The same operations on each value, in place (two full-frame arrays
+    fewer than ``np.where`` of both branches: 6.8 against 10.7 ms a frame)."""
     x = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
-    return np.where(x <= 0.0031308, x * 12.92, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    encoded = np.power(x, 1 / 2.4, out=np.empty_like(x))        # an array for a scalar too (out= below)
+    encoded *= 1.055
+    encoded -= 0.055
+    np.multiply(x, 12.92, out=encoded, where=x <= 0.0031308)
+    return encoded
 
 
 # Tone curves: exposed linear sRGB (>= 0 after gamut mapping) -> display-linear sRGB in [0, 1] -------
@@ -472,7 +478,7 @@ class Display:
         if self.auto_exposure is None:
             return None
         rgb = self.linear_srgb(frame)
-        pixels = rgb[valid] if valid is not None else rgb.reshape(-1, 3)
+        pixels = valid_pixels(rgb, valid) if valid is not None else rgb.reshape(-1, 3)
         a = self.auto_exposure
         return meter_ev(np.maximum(_luminance(pixels), 0.0), a.key, a.min_ev, a.max_ev) + self.exposure_ev
 

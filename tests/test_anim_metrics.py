@@ -10,8 +10,8 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from clsky.anim.metrics import (BLACK_FRAME_FLOOR, D65_WHITE_XYZ, INVALID_COLOUR, SRGB_TO_XYZ, colormap_viridis,
                           compare_frames, composite, delta_e_cie76, display_floor, display_to_lab,
-                          error_image, frame_changes, linear_srgb_to_xyz, relative_error_map,
-                          temporal_jumps, xyz_to_lab)
+                          error_image, frame_changes, frame_comparison, linear_srgb_to_xyz, mean_luminance,
+                          relative_error_map, temporal_jumps, xyz_to_lab)
 from clsky.anim.tonemap import dither_noise, luminance, to_uint8, tone_map
 
 
@@ -191,6 +191,23 @@ def test_compare_frames_returns_the_error_map_it_took_its_statistics_of():
     assert_array_equal(error, relative_error_map(reference, test, valid))
     assert numbers == compare_frames(reference, test, valid)
     assert error[:, :3].max() == 0.0 and numbers["max_rel"] == error.max() > 0.1
+
+
+def test_frame_comparison_takes_the_means_of_mean_luminance_with_the_numbers():
+    """frame_comparison: compare_frames' numbers and error map, and both frames' means over the valid
+    pixels bit for bit mean_luminance's (an animation's temporal jumps read them from it), whatever the
+    invalid pixels hold."""
+    reference = _sky()
+    test = reference * np.linspace(0.8, 1.3, reference.shape[1])[None, :, None]
+    valid = np.ones(reference.shape[:2], dtype=bool)
+    valid[2:5, 7:] = False
+    reference[~valid] = np.nan
+    compared = frame_comparison(reference, test, valid)
+    numbers, error = compare_frames(reference, test, valid, return_error_map=True)
+    assert compared.numbers == numbers
+    assert_array_equal(compared.error_map, error)
+    assert compared.mean_luminance == (mean_luminance(reference[None], valid)[0], mean_luminance(test[None], valid)[0])
+    assert compared.mean_luminance[1] > compared.mean_luminance[0] > 0
 
 
 def test_compare_frames_rejects_bad_input():
