@@ -100,9 +100,18 @@ def xyz_to_lab(xyz, white=D65_WHITE_XYZ):
         raise ValueError(f"xyz must have shape (..., 3), got shape {xyz.shape}")
     t = xyz / np.asarray(white, dtype=np.float64)
     delta = 6.0 / 29.0
-    f = np.where(t > delta ** 3, np.cbrt(t), t / (3.0 * delta * delta) + 4.0 / 29.0)
-    return np.stack([116.0 * f[..., 1] - 16.0, 500.0 * (f[..., 0] - f[..., 1]),
-                     200.0 * (f[..., 1] - f[..., 2])], axis=-1)
+    # f = where(t > delta^3, cbrt(t), t / (3 delta^2) + 4/29), each branch's operations on each value, in
+    # place: a third fewer full-frame passes than np.where of both branches and a stack (the animation's
+    # Delta E takes it for two frames a frame)
+    f = np.cbrt(t)
+    linear = ~(t > delta ** 3)
+    np.copyto(f, t / (3.0 * delta * delta) + 4.0 / 29.0, where=linear)
+    lab = np.empty_like(f)
+    np.multiply(116.0, f[..., 1], out=lab[..., 0])
+    lab[..., 0] -= 16.0
+    np.multiply(500.0, np.subtract(f[..., 0], f[..., 1], out=lab[..., 1]), out=lab[..., 1])
+    np.multiply(200.0, np.subtract(f[..., 1], f[..., 2], out=lab[..., 2]), out=lab[..., 2])
+    return lab
 
 
 def display_to_lab(display, gamma=GAMMA):
