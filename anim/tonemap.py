@@ -93,7 +93,9 @@ def dither_noise(shape, seed=0):
     (u1, u2 of ``numpy.random.default_rng(seed)``, in that order), of ``shape``: computed once for several
     images dithered alike (the frames of one sun position)."""
     rng = np.random.default_rng(seed)
-    return rng.random(shape) - rng.random(shape)
+    noise = rng.random(shape)
+    noise -= rng.random(shape)
+    return noise
 
 
 def to_uint8(display, dither=False, seed=0, noise=None):

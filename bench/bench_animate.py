@@ -67,7 +67,7 @@ STAGES = {
     "display (exposure, tone curve, 8 bits)": [("anim/animate.py", "display_frames"),
                                                ("anim/display.py", "metered_ev")],
     "comparison (metrics, Delta E, error image, composite)": [
-        ("anim/metrics.py", "compare_frames"), ("anim/metrics.py", "error_image"),
+        ("anim/metrics.py", "frame_comparison"), ("anim/metrics.py", "error_image"),
         ("anim/metrics.py", "relative_error_map"), ("anim/metrics.py", "composite"),
         ("anim/metrics.py", "mean_luminance")],
     "files (PNG, frames to ffmpeg, metrics)": [("anim/writers.py", "write"), ("anim/writers.py", "__exit__"),
