@@ -10,8 +10,9 @@ frame i + 1 on one worker thread while host threads run the host halves of the f
 the GIL while it waits for a kernel and its copy, and NumPy while it computes on whole frames, so they
 overlap.
 
-Host threads. The host half of the default animation's 512 x 512 frame is about 0.25 CPU-s on one
-thread (conversion 47, display 78, comparison 55 CPU-ms on the 2-core machine), and the device half
+Host threads. The host half of the default animation's 512 x 512 frame is about 0.12 CPU-s on one
+thread (conversion 37-45, display 73-80, comparison 46 CPU-ms on the 2-core machine, README "Speed";
+about 0.25 CPU-s before its passes were trimmed), and the device half
 shrinks with the device: a few ms on a GPU, about 0.5 CPU-s spread over the cores of a CPU (30 ms on 16,
 if PoCL used them all); one host thread then bounds the animation (on the H200 of README "GPUs",
 45-49 s for the default animation whose ray march took 3-7 ms a frame). :func:`in_order` gives the host
