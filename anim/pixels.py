@@ -46,7 +46,7 @@ def set_valid_pixels(frame, valid, values):
     """``frame[valid] = values`` in place, for ``frame`` (H, W, C) an array and ``valid`` (H, W) a bool
     mask; ``values`` (n, C) or what broadcasts to it."""
     rows, index = _rows(frame, valid)
-    if rows is None or not np.shares_memory(rows, frame):
+    if rows is None or not np.may_share_memory(rows, frame):      # a strided frame: its rows are a copy
         frame[valid] = values
     else:
         rows[index] = values
