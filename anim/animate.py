@@ -688,12 +688,12 @@ def lookup_of(config: AnimationConfig, plan: Plan | None = None) -> str | None:
 
 
 def render_frame(renderer: SkyRenderer, prepared, sun_direction, config: AnimationConfig, lookup=None,
-                 convert=True, raymarch=None):
+                 convert=True, raymarch=None, sky_map=None):
     """HDR frames {lookup: ..., 'raymarch': ...} of one sun position, as ``config.method`` asks: the lookup
     ``lookup`` (a key of :data:`LOOKUP_NAMES`; default :func:`lookup_of` without a plan) and the ray
-    march (``raymarch`` if given: its frame, rendered already with other suns'); in the animation's units
-    (:func:`convert_frames`), or as the renderer returns them with ``convert`` False (the device's work
-    alone)."""
+    march (``raymarch`` if given: its frame, rendered already with other suns'; ``sky_map`` likewise the
+    sky-view lookup's map); in the animation's units (:func:`convert_frames`), or as the renderer returns
+    them with ``convert`` False (the device's work alone)."""
     lookup = lookup_of(config) if lookup is None else lookup
     frames = {}
     if lookup == "lut":
@@ -702,11 +702,16 @@ def render_frame(renderer: SkyRenderer, prepared, sun_direction, config: Animati
         frames["lut4d"] = renderer.render_lut4d(prepared, sun_direction, config.altitude)
     elif lookup == "skyview":
         frames["skyview"] = renderer.render_skyview(prepared, sun_direction, config.altitude,
-                                                    settings=skyview.SkyViewSettings(config.skyview_size or skyview.DEFAULT_SIZE))
+                                                    settings=skyview_settings(config), sky_map=sky_map)
     if marches(config):
         frames["raymarch"] = (renderer.render_raymarch(prepared, sun_direction, config.altitude) if raymarch is None
                               else raymarch)
     return convert_frames(renderer, config, frames) if convert else frames
+
+
+def skyview_settings(config: AnimationConfig) -> skyview.SkyViewSettings:
+    """The sky-view map's settings of the animation (``config.skyview_size``, else the default size)."""
+    return skyview.SkyViewSettings(config.skyview_size or skyview.DEFAULT_SIZE)
 
 
 def marches(config: AnimationConfig) -> bool:
@@ -728,22 +733,34 @@ def frames_rendered(renderer: SkyRenderer, prepared, config: AnimationConfig, lo
     """``render(sun)``: :func:`render_frame` (``convert`` False) of each of ``positions`` in turn, to be called
     with them in their order and from one thread at a time (:func:`clsky.anim.pipeline.prefetched`), the
     ray march of :func:`ray_march_suns_of` suns per launch (:meth:`SkyRenderer.render_raymarch_suns`: each
-    frame the same as its own march), the frames of the suns after this one kept until their turn."""
-    batch = ray_march_suns_of(config, renderer.engine.device) if isinstance(renderer, SkyRenderer) else 1
-    marched = collections.deque()
+    frame the same as its own march), and the sky-view lookup's maps :func:`clsky.render.ray_march_suns` a
+    launch (:meth:`SkyRenderer.skyview_maps`, likewise), the frames and maps of the suns after this one kept
+    until their turn."""
+    batches = isinstance(renderer, SkyRenderer)          # a spectral renderer marches one sun at a time
+    march_batch = ray_march_suns_of(config, renderer.engine.device) if batches else 1
+    map_batch = ray_march_suns(renderer.engine.device) if batches and lookup == "skyview" else 1
+    marched, maps = collections.deque(), collections.deque()
     turns = iter(range(len(positions)))
+
+    def suns_from(index, batch):
+        return [position.direction for position in positions[index:index + batch]]
 
     def render(sun):
         index = next(turns)
         if positions[index] is not sun:
             raise ValueError(f"frames_rendered: sun {index} called out of order")
-        raymarch = None
-        if batch > 1 and marches(config):
+        raymarch = sky_map = None
+        if march_batch > 1 and marches(config):
             if not marched:
-                marched.extend(renderer.render_raymarch_suns(
-                    prepared, [position.direction for position in positions[index:index + batch]], config.altitude))
+                marched.extend(renderer.render_raymarch_suns(prepared, suns_from(index, march_batch), config.altitude))
             raymarch = marched.popleft()
-        return render_frame(renderer, prepared, sun.direction, config, lookup, convert=False, raymarch=raymarch)
+        if map_batch > 1:
+            if not maps:
+                maps.extend(renderer.skyview_maps(suns_from(index, map_batch), config.altitude,
+                                                  skyview_settings(config)))
+            sky_map = maps.popleft()
+        return render_frame(renderer, prepared, sun.direction, config, lookup, convert=False, raymarch=raymarch,
+                            sky_map=sky_map)
     return render
 
 

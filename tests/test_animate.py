@@ -294,13 +294,13 @@ def _record_blas_threads(monkeypatch):
     """A list that receives, at each frame's comparison, the thread counts of the BLAS libraries."""
     from threadpoolctl import threadpool_info
 
-    seen, compare_frames = [], metrics.compare_frames
+    seen, frame_comparison = [], metrics.frame_comparison
 
     def recording(*args, **kwargs):
         seen.append({info["num_threads"] for info in threadpool_info() if info["user_api"] == "blas"})
-        return compare_frames(*args, **kwargs)
+        return frame_comparison(*args, **kwargs)
 
-    monkeypatch.setattr(metrics, "compare_frames", recording)
+    monkeypatch.setattr(metrics, "frame_comparison", recording)
     return seen
 
 

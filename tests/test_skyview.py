@@ -252,6 +252,55 @@ def test_render_frame_of_method_skyview_is_the_renderers_skyview(cl_context):
         assert np.abs(other - expected).max() > 0.0      # the size reaches the map
 
 
+def test_maps_of_several_suns_are_each_suns_own_map(renderer):
+    """skyview_maps marches the map's nodes once for several suns: each map the same bits as skyview_map
+    of its sun alone, and render_skyview given that map (sky_map=) the same frame as without it; a map of
+    the wrong shape, or with a NaN or a negative value, is refused before the kernel (ValueError)."""
+    sky_renderer = renderer()
+    suns = [sun_direction(zenith, SUN_AZIMUTH + 7.0 * k) for k, zenith in enumerate((30.0, 85.0, 93.0, 97.0))]
+    for altitude in (0.0, 10e3):
+        maps = sky_renderer.skyview_maps(suns, altitude, MAP)
+        assert maps.shape == (len(suns),) + MAP.size[::-1] + (3,)
+        directions = probe_directions(suns[1], altitude)
+        for sun, sky_map in zip(suns, maps):
+            assert_array_equal(sky_map, sky_renderer.skyview_map(sun, altitude, MAP))
+            assert_array_equal(sky_renderer.render_skyview(directions, sun, altitude, settings=MAP, sky_map=sky_map),
+                               sky_renderer.render_skyview(directions, sun, altitude, settings=MAP))
+    bad_maps = [maps[0][:-1], maps[0].copy(), -maps[0]]
+    bad_maps[1][3, 2, 1] = np.nan
+    for bad in bad_maps:
+        with pytest.raises(ValueError, match="sky_map must be a finite, non-negative sky-view map of shape"):
+            sky_renderer.render_skyview(directions, suns[0], 0.0, settings=MAP, sky_map=bad)
+    with pytest.raises(ValueError, match="at least one sun"):
+        sky_renderer.skyview_maps([], 0.0, MAP)
+
+
+def test_an_animations_batched_maps_give_each_frame_its_own(cl_context, monkeypatch):
+    """frames_rendered takes the sky-view maps four suns a launch on a CPU (as the ray march): every
+    frame of a compared sequence the same bits as render_frame of its sun alone."""
+    from clsky.anim import animate
+
+    table = ScatteringTable.build("atmosphere-plus", TableSettings(size=(9, 33, 7), gather_theta_steps=64,
+                                                                    gather_phi_steps=32), ctx=cl_context)
+    with SkyRenderer(table, RAY, ctx=cl_context) as sky_renderer:
+        monkeypatch.setattr(animate, "ray_march_suns", lambda device: 4)
+        directions, valid = FisheyeCamera(24).directions()
+        prepared = sky_renderer.prepare(directions, valid)
+        config = animate.AnimationConfig(method="skyview", skyview_size=(16, 24), preset="atmosphere-plus",
+                                         mode="atmosphere-plus", frames=6)
+        positions = animate.sun_positions(config)
+        calls = []
+        maps_of = sky_renderer.skyview_maps
+        monkeypatch.setattr(sky_renderer, "skyview_maps", lambda suns, *args: calls.append(len(suns)) or maps_of(suns, *args))
+        render = animate.frames_rendered(sky_renderer, prepared, config, "skyview", positions)
+        for sun in positions:
+            assert_array_equal(render(sun)["skyview"],
+                               animate.render_frame(sky_renderer, prepared, sun.direction, config, "skyview",
+                                                    convert=False)["skyview"])
+        # 6 frames: a launch of 4 suns, then one of 2; the references' own maps one sun each (skyview_map)
+        assert [n for n in calls if n > 1] == [4, 2] and calls.count(1) == len(positions)
+
+
 def test_spectral_renderer_reads_one_map_per_batch(cl_context):
     """SpectralRenderer.render_skyview: each batch's SkyRenderer.render_skyview with the same settings,
     assembled (6 wavelengths: two batches of three)."""
