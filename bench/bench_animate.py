@@ -50,8 +50,9 @@ import clsky.anim.animate
 from clsky.anim.animate import AnimationConfig, render_animation
 
 #: stage label: the functions (module file suffix, function name[, sign]) whose cumulative CPU time it is,
-#: a sign of -1 taking a callee's time out: the sky-view map (``skyview_map``) is ray-marched by
-#: ``render_raymarch`` inside ``render_skyview``, so it is a stage of its own, out of both; otherwise the
+#: a sign of -1 taking a callee's time out: the sky-view maps (``skyview_maps``, several suns a launch in an
+#: animation on a CPU, or one inside ``render_skyview`` through ``skyview_map`` where no map is given) are
+#: ray-marched by ``render_raymarch_suns``, so they are a stage of their own, out of both; otherwise the
 #: functions of different stages never call one another, so the stages add up. Every ray march, of one sun
 #: or of several a launch (``render_raymarch_suns``, the animation's), goes through ``SkyRenderer._raymarch``.
 STAGES = {
@@ -59,8 +60,8 @@ STAGES = {
     "lookup (device: the 3D or 4D table, or the sky-view map's per-pixel read)": [
         ("clsky/render.py", "render_table"), ("clsky/render.py", "render_lut4d"),
         ("clsky/render.py", "render_skyview"), ("clsky/render.py", "skyview_map", -1)],
-    "sky-view map (the ray march at its nodes)": [("clsky/render.py", "skyview_map")],
-    "ray march (device)": [("clsky/render.py", "_raymarch"), ("clsky/render.py", "skyview_map", -1)],
+    "sky-view map (the ray march at its nodes)": [("clsky/render.py", "skyview_maps")],
+    "ray march (device)": [("clsky/render.py", "_raymarch"), ("clsky/render.py", "skyview_maps", -1)],
     "conversion to cd/m^2 (colorimetry)": [("anim/animate.py", "three_wavelength_frame_to_linear_srgb"),
                                            ("anim/animate.py", "spectral_frame_to_linear_srgb")],
     # the exposure is metered on the host threads before display_frames shows the frame (clsky.anim.pipeline)
