@@ -465,7 +465,7 @@ class SkyRenderer:
         if sky_map is None:
             sky_map = self.skyview_map(sun, altitude, settings)
         else:
-            sky_map = np.asarray(sky_map)
+            sky_map = np.asarray(sky_map, dtype=np.float64)
             expected = (settings.size[1], settings.size[0], 3)
             if sky_map.shape != expected or not np.isfinite(sky_map).all() or (sky_map < 0).any():
                 raise ValueError(f"sky_map must be a finite, non-negative sky-view map of shape {expected} "
