@@ -316,3 +316,13 @@ def test_spectral_renderer_reads_one_map_per_batch(cl_context):
         assert actual.shape == (16, 16, 6)
         assert_array_equal(actual, np.concatenate(batches, axis=-1))
         assert actual[valid].min() > 0.0
+        # a spectral animation's frames (frames_rendered: no batched maps for a spectral renderer)
+        from clsky.anim import animate
+
+        config = animate.AnimationConfig(method="skyview", skyview_size=(8, 12), wavelengths=6, frames=2)
+        positions = [animate.sunpath.SunPosition(20.0, 40.0), animate.sunpath.SunPosition(30.0, 40.0)]
+        prepared = spectral.prepare(directions, valid)
+        render = animate.frames_rendered(spectral, prepared, config, "skyview", positions)
+        for position in positions:
+            assert_array_equal(render(position)["skyview"],
+                               spectral.render_skyview(prepared, position.direction, 0.0, settings=settings))
