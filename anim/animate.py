@@ -701,11 +701,8 @@ def render_frame(renderer: SkyRenderer, prepared, sun_direction, config: Animati
     elif lookup == "lut4d":
         frames["lut4d"] = renderer.render_lut4d(prepared, sun_direction, config.altitude)
     elif lookup == "skyview":
-        # a map computed already only where frames_rendered batches them (a SkyRenderer's; a spectral
-        # renderer reads one map per wavelength batch)
-        given = {} if sky_map is None else {"sky_map": sky_map}
         frames["skyview"] = renderer.render_skyview(prepared, sun_direction, config.altitude,
-                                                    settings=skyview_settings(config), **given)
+                                                    settings=skyview_settings(config), sky_map=sky_map)
     if marches(config):
         frames["raymarch"] = (renderer.render_raymarch(prepared, sun_direction, config.altitude) if raymarch is None
                               else raymarch)

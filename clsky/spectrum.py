@@ -268,9 +268,13 @@ class SpectralRenderer:
         """Spectral radiance (..., N) by ray march (:meth:`clsky.render.SkyRenderer.render_raymarch`)."""
         return self._render("render_raymarch", directions, sun_direction, altitude, valid)
 
-    def render_skyview(self, directions, sun_direction, altitude=0.0, valid=None, settings=None):
+    def render_skyview(self, directions, sun_direction, altitude=0.0, valid=None, settings=None, sky_map=None):
         """Spectral radiance (..., N) from per-frame sky-view maps, one per batch
-        (:meth:`clsky.render.SkyRenderer.render_skyview`)."""
+        (:meth:`clsky.render.SkyRenderer.render_skyview`), each computed here: ``sky_map`` (the
+        SkyRenderer's map computed already) must be None, a spectral frame's maps being one per batch."""
+        if sky_map is not None:
+            raise ValueError("sky_map: a SpectralRenderer computes one sky-view map per wavelength batch itself; "
+                             "pass None")
         return self._render("render_skyview", directions, sun_direction, altitude, valid, settings=settings)
 
     def close(self):

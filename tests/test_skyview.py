@@ -326,3 +326,5 @@ def test_spectral_renderer_reads_one_map_per_batch(cl_context):
         for position in positions:
             assert_array_equal(render(position)["skyview"],
                                spectral.render_skyview(prepared, position.direction, 0.0, settings=settings))
+        with pytest.raises(ValueError, match="sky_map: a SpectralRenderer computes one sky-view map per"):
+            spectral.render_skyview(prepared, sun, 0.0, settings=settings, sky_map=np.zeros((12, 8, 3)))
