@@ -1074,12 +1074,21 @@ def _write_animation(config, positions, frames, table, plan, lookup, staging, pr
     metrics in ``staging``; returns the metric rows, the temporal jumps, the target paths and the stale
     frames to be deleted."""
     rows, means = [], {name: [] for name in (*LOOKUP_NAMES, "raymarch")}
-    # set up when the frame source asks for it: a local one starts its first render before (_local_frames)
-    pipeline_of = functools.cache(functools.partial(display, config, table))
-    # the frames' host products (sRGB and white-balance matrices, Oklab, XYZ for Delta E) on one BLAS
-    # thread: beside PoCL's workers OpenBLAS's threads cost ~100x the CPU of one (README, "Speed")
-    with _frame_writer(config, len(positions), staging) as writer, host_blas_single_threaded(), \
-            contextlib.closing(frames(pipeline_of)) as produced:
+    with contextlib.ExitStack() as stack:
+        writer = stack.enter_context(_frame_writer(config, len(positions), staging))
+
+        def set_up_display():
+            """The display pipeline, set up when the frame source asks for it (a local one starts its first
+            render before: _local_frames); then the frames' host products (sRGB and white-balance matrices,
+            Oklab, XYZ for Delta E) go to one BLAS thread: beside PoCL's workers OpenBLAS's threads cost
+            ~100x the CPU of one (README, "Speed"). Limited after the set-up, whose colour-science import
+            may load a BLAS of its own (SciPy's), which a limit set before would not see."""
+            pipeline = display(config, table)
+            stack.enter_context(host_blas_single_threaded())
+            return pipeline
+
+        pipeline_of = functools.cache(set_up_display)
+        produced = stack.enter_context(contextlib.closing(frames(pipeline_of)))
         for out in produced:
             sun = positions[out.index]
             for name, value in out.means.items():
