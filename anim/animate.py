@@ -1098,6 +1098,7 @@ def _write_animation(config, positions, frames, table, plan, lookup, staging, pr
             rows.append(out.row)
             if progress is not None:
                 progress("frames", out.index + 1, len(positions))
+        pipeline = pipeline_of()        # the frame source's (set up inside the stack, whatever the source did)
     paths = list(writer.paths)          # the frames and the MP4: they land when ``staging`` commits
     temporal = {}
     if config.compares:
@@ -1117,7 +1118,7 @@ def _write_animation(config, positions, frames, table, plan, lookup, staging, pr
                    for k, v in dataclasses.asdict(config).items()},
         "table": {"settings": table.settings.to_dict(), "orders": table.orders_record,
                   "metadata": table.metadata, "frame_units": frame_units(config, table)},
-        "display": pipeline_of().describe(),
+        "display": pipeline.describe(),
         "lookup": None if lookup is None else LOOKUP_NAMES[lookup],
         "plan": None if plan is None else {"quality": plan.level.name, "work_fraction": plan.work_fraction,
                                            "renderer": plan.renderer,
