@@ -277,7 +277,7 @@ def test_maps_of_several_suns_are_each_suns_own_map(renderer):
 
 def test_an_animations_batched_maps_give_each_frame_its_own(cl_context, monkeypatch):
     """frames_rendered takes the sky-view maps four suns a launch on a CPU (as the ray march): every
-    frame of a compared sequence the same bits as render_frame of its sun alone."""
+    frame of a sky-view sequence the same bits as render_frame of its sun alone."""
     from clsky.anim import animate
 
     table = ScatteringTable.build("atmosphere-plus", TableSettings(size=(9, 33, 7), gather_theta_steps=64,
@@ -303,7 +303,8 @@ def test_an_animations_batched_maps_give_each_frame_its_own(cl_context, monkeypa
 
 def test_spectral_renderer_reads_one_map_per_batch(cl_context):
     """SpectralRenderer.render_skyview: each batch's SkyRenderer.render_skyview with the same settings,
-    assembled (6 wavelengths: two batches of three)."""
+    assembled (6 wavelengths: two batches of three); a spectral animation's frames (frames_rendered) are
+    those, and a map computed elsewhere is refused (sky_map)."""
     from clsky.spectrum import SpectralRenderer, SpectralTable
 
     table = SpectralTable.build("physical", 6, SMALL.replace(size=(8, 32, 8)), ctx=cl_context, keep_orders=False)
