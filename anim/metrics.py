@@ -33,8 +33,8 @@ from clsky.errors import short
 from .pixels import set_valid_pixels, valid_pixels
 from .tonemap import GAMMA, luminance, tone_map
 
-__all__ = ["compare_frames", "frame_comparison", "FrameComparison", "relative_error_map", "relative_error_floor", "display_to_lab",
-           "linear_srgb_to_xyz", "xyz_to_lab", "delta_e_cie76", "SRGB_TO_XYZ", "D65_WHITE_XYZ",
+__all__ = ["compare_frames", "frame_comparison", "FrameComparison", "relative_error_map", "relative_error_floor",
+           "display_to_lab", "linear_srgb_to_xyz", "xyz_to_lab", "delta_e_cie76", "SRGB_TO_XYZ", "D65_WHITE_XYZ",
            "mean_luminance", "relative_jumps", "frame_changes", "display_floor", "temporal_jumps",
            "colormap_viridis", "error_image", "composite", "INVALID_COLOUR", "BLACK_FRAME_FLOOR"]
 

@@ -449,8 +449,8 @@ class SkyRenderer:
         if key not in self._skyview_nodes:
             nodes = skyview.node_directions(settings, altitude, self.table.atmosphere.planet_radius)
             self._skyview_nodes = {key: self.prepare(nodes)}
-        return self.render_raymarch_suns(self._skyview_nodes[key], [skyview.canonical_sun(sun) for _, sun, _ in checked],
-                                         altitude, sun_disc=False)
+        canonical = [skyview.canonical_sun(sun) for _, sun, _ in checked]
+        return self.render_raymarch_suns(self._skyview_nodes[key], canonical, altitude, sun_disc=False)
 
     def render_skyview(self, directions, sun_direction, altitude=0.0, valid=None, settings=None, sky_map=None):
         """HDR radiance (..., 3) from a per-frame sky-view map (Hillaire 2020; :mod:`clsky.skyview`):

@@ -291,7 +291,8 @@ def test_an_animations_batched_maps_give_each_frame_its_own(cl_context, monkeypa
         positions = animate.sun_positions(config)
         calls = []
         maps_of = sky_renderer.skyview_maps
-        monkeypatch.setattr(sky_renderer, "skyview_maps", lambda suns, *args: calls.append(len(suns)) or maps_of(suns, *args))
+        monkeypatch.setattr(sky_renderer, "skyview_maps",
+                            lambda suns, *args: calls.append(len(suns)) or maps_of(suns, *args))
         render = animate.frames_rendered(sky_renderer, prepared, config, "skyview", positions)
         for sun in positions:
             assert_array_equal(render(sun)["skyview"],
