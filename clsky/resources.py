@@ -584,12 +584,14 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
 
 def estimate_directions_memory(pixels, dtype="float64") -> MemoryEstimate:
     """What :meth:`clsky.render.SkyRenderer.prepare` and a frame add for ``pixels`` directions: their
-    device copy (3 s each), the mask and one output buffer (3 s), and the download (3 s)."""
+    device copy (3 s each), the mask, their view zenith angles (s each, kept for the sky-view lookup:
+    :meth:`~clsky.render.SkyRenderer.view_zenith_angles`), one output buffer (3 s), and the download (3 s)."""
     s = np.dtype(dtype).itemsize
     pixels = int(pixels)
     return MemoryEstimate(f"{pixels} ray directions", (Phase("frame", (
         Allocation("ray directions on the device (pixels, 3)", pixels * 3 * s, on_device=True, source="frames"),
         Allocation("pixel mask on the device", pixels, on_device=True, source="frames"),
+        Allocation("view zenith angles on the device (pixels)", pixels * s, on_device=True, source="frames"),
         Allocation("frame output on the device (pixels, 3)", pixels * 3 * s, on_device=True, source="frames"),
         Allocation("frame download (pixels, 3)", pixels * 3 * s, source="frames"))),))
 

@@ -15,9 +15,25 @@
  *   sqrt((1 - cos phi) / 2), no trigonometry per pixel) or phi / pi = 2 atan2(c, |V_h + S_h|) / pi ('linear', 0).
  * Bilinear in (row, column) within the pixel's half only: nothing is interpolated across the horizon.
  * Then the sun's disc is added as render.cl does (sun_disc). Invalid pixels are written as 0.
- * Arguments: horizon_cos = mu_H and horizon_angle = theta_H [rad] of the observer's altitude (host).
+ * Arguments: horizon_cos = mu_H and horizon_angle = theta_H [rad] of the observer's altitude (host);
+ * view_zenith: theta of each pixel, from view_zenith_angles (a camera's directions are the same every frame:
+ * the renderer computes their angles once, clsky.render.PreparedDirections, and every frame reads them).
  * Requires render.cl (all_invalid, sun_disc, store_radiance) and what it requires.
  */
+
+/* The view zenith angle theta = atan2(|V_xy|, V_z) [rad] of directions[i] into out[i], for every pixel
+ * (valid or not), VECTOR_WIDTH pixels a work-item, each lane by the scalar atan2 of a pixel's own, as
+ * render_skyview computed it per frame before it read them from here (the same values; a realv atan2
+ * differs from it in the last bit at about 1 % of pixels). */
+__kernel void view_zenith_angles(const int n, __global const real *directions, __global real *out)
+{
+    const int first = get_global_id(0) * VECTOR_WIDTH;
+    for (int k = 0; k < VECTOR_WIDTH && first + k < n; ++k) {
+        const int i = first + k;
+        const real3 v = (real3)(directions[3 * i], directions[3 * i + 1], directions[3 * i + 2]);
+        out[i] = atan2(sqrt(v.x * v.x + v.y * v.y), v.z);
+    }
+}
 
 /* Lower node and weight of coordinate f in [0, n - 1] (clamped), n >= 2. */
 inline int skyview_node(const real f, const int n, real *weight)
@@ -30,7 +46,7 @@ inline int skyview_node(const real f, const int n, real *weight)
 
 __kernel void render_skyview(__constant const atmosphere_t *atm, __global const real *sky_map, const int width,
                              const int sky_rows, const int ground_rows, const int azimuth_mapping,
-                             const real horizon_cos, const real horizon_angle,
+                             const real horizon_cos, const real horizon_angle, __global const real *view_zenith,
                              const int n, __global const real *directions, __global const uchar *valid,
                              const real4 sun, const real altitude,
                              const real4 sun_radiance, const real cos_sun_radius, __global real *out)
@@ -50,7 +66,7 @@ __kernel void render_skyview(__constant const atmosphere_t *atm, __global const 
         const real3 v = (real3)(directions[3 * i], directions[3 * i + 1], directions[3 * i + 2]);
         const real mu_v = clamp(v.z, R(-1.0), R(1.0));
         const real nu = clamp(dot(v, sun.xyz), R(-1.0), R(1.0));
-        const real theta = atan2(sqrt(v.x * v.x + v.y * v.y), v.z);
+        const real theta = view_zenith[i];
         const real horizontal = sqrt(v.x * v.x + v.y * v.y);
         const real2 view = horizontal > R(0.0) ? (real2)(v.x, v.y) / horizontal : sun_unit;
         const real chord = length(view - sun_unit);           /* |V_h - S_h| = 2 sin(phi / 2) */

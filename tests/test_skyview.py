@@ -1,7 +1,8 @@
 """The per-frame sky-view map (clsky/skyview.py, kernels/skyview.cl, SkyRenderer.render_skyview).
 
 1. The sampling kernel against its NumPy twin (reference.render_skyview) on the renderer's own map and
-   on random maps: ground, 3 km and space, sun high, low and below the horizon, both azimuth mappings.
+   on random maps: ground, 3 km and space, sun high, low and below the horizon, both azimuth mappings;
+   the view zenith angles it reads, computed once per prepared camera, against NumPy's.
 2. The mapping: the map read at its own nodes gives the node values (a round trip of the row and
    column mappings); nothing is interpolated across the horizon (a map of 1 above, 0 below).
 3. Against the full per-pixel ray march, sharing only the ray march with it: a fisheye at four sun
@@ -273,6 +274,32 @@ def test_maps_of_several_suns_are_each_suns_own_map(renderer):
             sky_renderer.render_skyview(directions, suns[0], 0.0, settings=MAP, sky_map=bad)
     with pytest.raises(ValueError, match="at least one sun"):
         sky_renderer.skyview_maps([], 0.0, MAP)
+
+
+def test_view_zenith_angles_are_computed_once_per_prepared_camera(renderer):
+    """render_skyview reads each pixel's view zenith angle from view_zenith_angles, computed at the first
+    frame of prepared directions and kept with them (PreparedDirections.derived): the angles are NumPy's
+    arctan2(hypot(x, y), z) within 1e-15 rad (both about 1 ulp of pi from the true angle of their inputs;
+    a wrong component or axis would be off by O(1)), every pixel's, masked or not; a second frame reads the
+    same buffer; the frames of prepared directions are the bits of raw directions' (prepared on the fly, as
+    before the angles were kept); ``valid`` beside prepared directions is refused."""
+    sky_renderer = renderer()
+    sun = sun_direction(93.0, SUN_AZIMUTH)
+    directions = probe_directions(sun, 0.0)
+    valid = np.ones(directions.shape[:-1], dtype=bool)
+    valid[3:5] = False
+    prepared = sky_renderer.prepare(directions, valid)
+    assert "view_zenith" not in prepared.derived
+    first = sky_renderer.render_skyview(prepared, sun, 0.0, settings=MAP)
+    angles_d = prepared.derived["view_zenith"]
+    assert sky_renderer.view_zenith_angles(prepared) is angles_d
+    assert_allclose(angles_d.get(), np.arctan2(np.hypot(directions[..., 0], directions[..., 1]),
+                                               directions[..., 2]).ravel(), rtol=0.0, atol=1e-15)
+    assert_array_equal(sky_renderer.render_skyview(prepared, sun, 0.0, settings=MAP), first)
+    assert prepared.derived["view_zenith"] is angles_d
+    assert_array_equal(sky_renderer.render_skyview(directions, sun, 0.0, valid, settings=MAP), first)
+    with pytest.raises(ValueError, match="valid must be given to prepare"):
+        sky_renderer.render_skyview(prepared, sun, 0.0, valid, settings=MAP)
 
 
 def test_an_animations_batched_maps_give_each_frame_its_own(cl_context, monkeypatch):
