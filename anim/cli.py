@@ -227,9 +227,12 @@ def _check_memory(args, config, positions):
 
 
 def run_animate(args):
+    from clsky.allocator import reuse_freed_memory
+
     from . import scene
     from .animate import check_outputs, render_animation, sun_positions
 
+    reuse_freed_memory()                         # before any thread: the frames' memory kept for the next frames
     scene.apply_scene(args, args.scene_parser)
     config = _config(args)
     farm = clsky_cli.farm_of(args)               # --workers / --scheduler: checked, started after the checks

@@ -273,33 +273,43 @@ def test_frame_estimate_matches_the_measured_slope(tmp_path):
     """Peak RSS of 2-frame animations at 256^2 and 1024^2 pixels (draft, table 16 x 64 x 16), the largest
     of two runs at each size: the growth per pixel against the estimate's on this device (what
     ``clsky animate`` checks: its host threads, suns a ray-march launch), within 25 % (the table part
-    cancels). The peak depends on how the threads' peaks meet: on 2026-12-05 (PoCL 3.1, 2 cores, two host
-    threads) three single runs gave 838-898 bytes a pixel against the estimate's 923; the per-pixel
-    constants (clsky.resources.FRAME_BYTES_PER_PIXEL) are fitted to the largest of three runs, hence the
-    larger of two here (1.02-1.05 in three runs of this test). Before they were fitted again, with one
-    run, the ratio drifted to 1.17-1.36: the overlap's next frame was overstated."""
+    cancels), with glibc's allocator as it comes (clsky.allocator's tuning switched off): what a program
+    that renders through the library without tuning its allocator holds, the larger peak. The peak
+    depends on how the threads' peaks meet: on 2026-12-05 (PoCL 3.1, 2 cores, two host threads) three
+    single runs gave 838-898 bytes a pixel against the estimate's 923; the per-pixel constants
+    (clsky.resources.FRAME_BYTES_PER_PIXEL) are fitted to the largest of three runs, hence the larger of
+    two here (1.02-1.05 in three runs of this test; 1.08-1.15 in four more, 2026-12-05). Before they were
+    fitted again, with one run, the ratio drifted to 1.17-1.36: the overlap's next frame was overstated.
+    ``clsky animate`` itself (its allocator keeps what the frames free for the next, clsky.allocator) grows
+    by less: 1.31-1.40 in four runs (2026-12-05): its growth must stay within the estimate (the same 0.8 as
+    above) but is not held to the 25 % above it, the estimate being the untuned program's."""
     from clsky.anim.animate import AnimationConfig, memory_estimate, sun_positions
 
     wrapper = ("import resource, subprocess, sys; subprocess.run(sys.argv[1:], check=True, capture_output=True); "
                "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024)")
+    untuned = ("import sys, clsky.allocator; clsky.allocator.reuse_freed_memory = lambda environ=None: {}; "
+               "from clsky.anim.cli import main; sys.exit(main(sys.argv[1:]))")
     device = resources.device_of()
-    peaks, estimates = [], []
+    peaks, estimates = {"untuned": [], "clsky animate": []}, []
     for size in (256, 1024):
-        runs = []
-        for run in range(2):
-            arguments = ["animate", "--frames", "2", "--size", str(size), "--quality", "draft", "--table-size", "16",
-                         "64", "16", "--progress", "none", "-o", str(tmp_path / f"a{size}-{run}.mp4")]
-            result = subprocess.run([sys.executable, "-c", wrapper, sys.executable, "-m", "clsky.anim", *arguments],
-                                    capture_output=True, text=True, check=True, timeout=600)
-            runs.append(int(result.stdout.split()[-1]))
-        peaks.append(max(runs))
+        for name, program in (("untuned", ["-c", untuned]), ("clsky animate", ["-m", "clsky.anim"])):
+            runs = []
+            for run in range(2):
+                arguments = ["animate", "--frames", "2", "--size", str(size), "--quality", "draft", "--table-size",
+                             "16", "64", "16", "--progress", "none", "--force", "-o",
+                             str(tmp_path / f"a{size}-{run}.mp4")]
+                result = subprocess.run([sys.executable, "-c", wrapper, sys.executable, *program, *arguments],
+                                        capture_output=True, text=True, check=True, timeout=600)
+                runs.append(int(result.stdout.split()[-1]))
+            peaks[name].append(max(runs))
         config = AnimationConfig(frames=2, size=size, quality="draft", table_size=(16, 64, 16))
         estimates.append(memory_estimate(config, sun_positions(config), device=device).peak_bytes())
-    ratio = (estimates[1] - estimates[0]) / (peaks[1] - peaks[0])
-    print(f"estimated growth {format_bytes(estimates[1] - estimates[0])}, measured "
-          f"{format_bytes(peaks[1] - peaks[0])}, ratio {ratio:.3f}")
-    assert 0.8 <= ratio <= 1.25, (f"estimated growth {format_bytes(estimates[1] - estimates[0])}, measured "
-                                  f"{format_bytes(peaks[1] - peaks[0])}")
+    ratios = {name: (estimates[1] - estimates[0]) / (peak[1] - peak[0]) for name, peak in peaks.items()}
+    report = "; ".join(f"{name}: measured {format_bytes(peak[1] - peak[0])}, ratio {ratios[name]:.3f}"
+                       for name, peak in peaks.items())
+    print(f"estimated growth {format_bytes(estimates[1] - estimates[0])}; {report}")
+    assert 0.8 <= ratios["untuned"] <= 1.25, report
+    assert 0.8 <= ratios["clsky animate"], report
 
 
 def test_animation_estimate_drops_the_higher_orders():

@@ -34,6 +34,13 @@ SMALL = ["--size", "16", "--frames", "2", "--table-size", "8", "32", "8", "--met
          "--progress", "none"]
 
 
+@pytest.fixture(autouse=True)
+def _allocator_left_alone(monkeypatch):
+    """``clsky animate`` tunes its process's C allocator for good (clsky.allocator); run here, in pytest's
+    process, it leaves that one as it is (tests/test_allocator.py runs the tuning in subprocesses)."""
+    monkeypatch.setattr("clsky.allocator.reuse_freed_memory", lambda environ=None: {})
+
+
 def run(capsys, *args):
     """``clsky ARGS`` in this process: (exit status, stdout, stderr)."""
     status = cli.main([str(arg) for arg in args])
