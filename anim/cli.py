@@ -232,7 +232,7 @@ def run_animate(args):
     from . import scene
     from .animate import check_outputs, render_animation, sun_positions
 
-    reuse_freed_memory()                         # before any thread: the frames' memory kept for the next frames
+    reuse_freed_memory()                         # before the frames' threads: their memory kept for the next frames
     scene.apply_scene(args, args.scene_parser)
     config = _config(args)
     farm = clsky_cli.farm_of(args)               # --workers / --scheduler: checked, started after the checks

@@ -38,8 +38,8 @@ M_TRIM_THRESHOLD, M_MMAP_THRESHOLD, M_ARENA_MAX = -1, -3, -8
 #:     it (a table build's buffers of 50-160 MB) they are mapped and given back when freed, as before;
 #:   trim_threshold 256 MiB: the arena's free top is given back only beyond this (glibc's adaptive
 #:     value is twice the mmap threshold: 64 MiB at most, less than two host threads' frames free at
-#:     once). Measured on the default animation: 64 MiB kept 593 000 of its page faults, 256 MiB 415 000
-#:     (README "Speed"); its peak resident memory did not grow (1.14 GB either way).
+#:     once). The default animation's page faults: 412 000-422 000 with 256 MiB, 593 000 with 64 MiB,
+#:     664 000-1 136 000 untuned (README "Speed"); its peak resident memory did not grow (1.14 GB).
 FRAME_LOOP_MALLOPT = {"arena_max": (M_ARENA_MAX, 1), "mmap_threshold": (M_MMAP_THRESHOLD, 32 * 2**20),
                       "trim_threshold": (M_TRIM_THRESHOLD, 256 * 2**20)}
 

@@ -57,13 +57,13 @@ FIRST_ORDERS, ORDERS_PER_DECADE = 3, 1.6
 #: method: conversion to cd/m^2, exposure metering, tone map, 8-bit frames, metrics, error image,
 #: composite, PNG and MP4 encoding. Measured as the growth of peak RSS between 2-frame 256^2 and 1024^2
 #: fisheye animations of the default (physical) preset, draft level, table 16 x 64 x 16, with glibc's
-#: allocator untuned (``clsky animate``'s, :mod:`clsky.allocator`, peaks lower: 0.82-0.84 of it in four runs), without the
-#: overlap, the largest of 3 runs, less the arrays the estimate lists on a CPU device (2 suns a ray-march
-#: launch): 530 bytes per pixel in all (compare; listed 243), 288 (lut; 123), 315 (raymarch; 219), 298
-#: (skyview; 123) (2026-12-05; the runs of one method within 16 bytes). The ray march's processing is the
-#: lookup's (one frame): it takes the lookup's 165, not the 96 its own runs leave, because its listed arrays
-#: count each launch's frames beside the HDR frame in hand (an upper bound; earlier constants: 305 / 185 /
-#: 185 / 205 from 2026-12-04, 340 / 210 / 210 / 210 from 2026-12-02).
+#: allocator untuned (``clsky animate``'s, :mod:`clsky.allocator`, grows by 0.82-0.84 of that in four
+#: runs), without the overlap, the largest of 3 runs, less the arrays the estimate lists on a CPU device
+#: (2 suns a ray-march launch): 530 bytes per pixel in all (compare; listed 243), 288 (lut; 123), 315
+#: (raymarch; 219), 298 (skyview; 123) (2026-12-05; the runs of one method within 16 bytes). The ray
+#: march's processing is the lookup's (one frame): it takes the lookup's 165, not the 96 its own runs
+#: leave, because its listed arrays count each launch's frames beside the HDR frame in hand (an upper
+#: bound; earlier constants: 305 / 185 / 185 / 205 from 2026-12-04, 340 / 210 / 210 / 210 from 2026-12-02).
 FRAME_BYTES_PER_PIXEL = {"compare": 287, "lut": 165, "raymarch": 165, "skyview": 175}
 #: Host bytes per pixel that an animation's overlapped pipeline (clsky/anim/pipeline.py) adds with one
 #: host thread beyond the frames it holds (one more set of HDR frames, waiting for the thread): the next
