@@ -278,7 +278,7 @@ def test_frame_estimate_matches_the_measured_slope(tmp_path):
     depends on how the threads' peaks meet: on 2026-12-05 (PoCL 3.1, 2 cores, two host threads) three
     single runs gave 838-898 bytes a pixel against the estimate's 923; the per-pixel constants
     (clsky.resources.FRAME_BYTES_PER_PIXEL) are fitted to the largest of three runs, hence the larger of
-    two here (1.02-1.05 in three runs of this test; 1.08-1.15 in four more, 2026-12-05). Before they were
+    two here (1.02-1.05 in three runs of this test; 1.08-1.15 in three more, 2026-12-05). Before they were
     fitted again, with one run, the ratio drifted to 1.17-1.36: the overlap's next frame was overstated.
     ``clsky animate`` itself (its allocator keeps what the frames free for the next, clsky.allocator) grows
     by less: 1.31-1.40 in four runs (2026-12-05): its growth must stay within the estimate (the same 0.8 as
