@@ -249,10 +249,7 @@ class SkyRenderer:
         :func:`~clsky.lookup.check_kernel_buffer`; ``sun_disc`` False: without the sun's disc (its radiance
         passed as 0). render_raymarch takes the suns :func:`ray_march_batch` at a time (the last launch's
         missing suns repeat its last one, their frames dropped), the other kernels one sun."""
-        if not isinstance(directions, PreparedDirections):
-            directions = self.prepare(directions, valid)
-        elif valid is not None:
-            raise ValueError("valid must be given to prepare(), not with prepared directions")
+        directions = self._prepared(directions, valid)
         checked = [check_directions(np.zeros((0, 3)), sun_direction, altitude) for sun_direction in sun_directions]
         suns, altitude = [sun for _, sun, _ in checked], checked[0][2]
         if name in ("render_table", "render_table4d") or self._has_gathered:
@@ -272,11 +269,7 @@ class SkyRenderer:
             check_kernel_buffer(name, argument, array_d, count, self.engine.dtype)
         check_kernel_buffer(name, "valid", directions.valid, n, np.uint8)
         kernel = self.engine.kernels_with(self._defines + ([f"-DRAY_SUNS={batch}"] if batch > 1 else []))[name]
-        items = -(-n // self.engine.vector_width)
-        # an explicit work-group size: left to PoCL, a large frame got work-groups whose private arrays
-        # (the ray march's per-lane sums and ground values) overflowed its worker threads' stacks
-        # (segmentation fault at 256 x 256 with a ground); the kernel returns for items beyond n
-        local = min(RENDER_WORK_GROUP, items)
+        global_size, local_size = self._work_size(n)
         # the frames of each launch copied out, so that none holds its launch's download (padded suns included)
         frames = np.empty((len(suns),) + shape + (3,)) if len(suns) > 1 else None
         for start in range(0, len(suns), batch):
@@ -290,7 +283,7 @@ class SkyRenderer:
                 sun_args = (suns_d.data,)
             else:
                 sun_args = (self.engine.real4(launch[0]),)
-            kernel(self.queue, (-(-items // local) * local,), (local,), self._atmosphere_d, *extra_args, np.int32(n),
+            kernel(self.queue, global_size, local_size, self._atmosphere_d, *extra_args, np.int32(n),
                    directions_d.data, directions.valid.data, *sun_args, self.engine.real(altitude),
                    *(() if name == "render_raymarch" else (self.engine.real4(discs[0]),)),
                    self.engine.real(self._cos_sun_radius), out_d.data)
@@ -299,6 +292,24 @@ class SkyRenderer:
                 return out.reshape((1,) + shape + (3,)).astype(np.float64, copy=False)
             frames[start:start + batch] = out.reshape((len(out),) + shape + (3,))
         return frames
+
+    def _prepared(self, directions, valid):
+        """``directions`` as :class:`PreparedDirections`: prepared here with ``valid`` unless they are
+        already (then ``valid`` must be None: the mask is given to :meth:`prepare`)."""
+        if not isinstance(directions, PreparedDirections):
+            return self.prepare(directions, valid)
+        if valid is not None:
+            raise ValueError("valid must be given to prepare(), not with prepared directions")
+        return directions
+
+    def _work_size(self, n):
+        """Global and local sizes of a launch over ``n`` pixels, ``vector_width`` a work-item: an explicit
+        work-group size (left to PoCL, a large frame got work-groups whose private arrays, the ray march's
+        per-lane sums and ground values, overflowed its worker threads' stacks: segmentation fault at 256 x
+        256 with a ground); the kernels return for items beyond n."""
+        items = -(-n // self.engine.vector_width)
+        local = min(RENDER_WORK_GROUP, items)
+        return (-(-items // local) * local,), (local,)
 
     def _check_sun_covered(self, sun):
         """A table planned for a scene covers its sun path only (``sun_cos_range``): refuse a sun outside
@@ -465,18 +476,15 @@ class SkyRenderer:
 
         settings = settings or skyview.SkyViewSettings()
         _, sun, altitude = check_directions(np.zeros((0, 3)), sun_direction, altitude)
-        if not isinstance(directions, PreparedDirections):
-            directions, valid = self.prepare(directions, valid), None
-        elif valid is not None:
-            raise ValueError("valid must be given to prepare(), not with prepared directions")
-        if sky_map is None:
-            sky_map = self.skyview_map(sun, altitude, settings)
-        else:
+        if sky_map is not None:
             sky_map = np.asarray(sky_map, dtype=np.float64)
             expected = (settings.size[1], settings.size[0], 3)
             if sky_map.shape != expected or not np.isfinite(sky_map).all() or (sky_map < 0).any():
                 raise ValueError(f"sky_map must be a finite, non-negative sky-view map of shape {expected} "
                                  f"(skyview_maps), got shape {sky_map.shape}")
+        directions = self._prepared(directions, valid)      # the angles are kept with prepared directions
+        if sky_map is None:
+            sky_map = self.skyview_map(sun, altitude, settings)
         map_d = cla.to_device(self.queue, np.ascontiguousarray(sky_map, dtype=self.engine.dtype))
         mu_h, angle = skyview.horizon(altitude, self.table.atmosphere.planet_radius)
         width, height = settings.size
@@ -499,10 +507,8 @@ class SkyRenderer:
             angles = cla.empty(self.queue, max(n, 1), self.engine.dtype)   # no empty buffers: nothing reads it then
             if n:
                 check_kernel_buffer("view_zenith_angles", "directions", directions.array, 3 * n, self.engine.dtype)
-                items = -(-n // self.engine.vector_width)
-                local = min(RENDER_WORK_GROUP, items)
-                self.engine.kernels["view_zenith_angles"](self.queue, (-(-items // local) * local,), (local,),
-                                                          np.int32(n), directions.array.data, angles.data)
+                self.engine.kernels["view_zenith_angles"](self.queue, *self._work_size(n), np.int32(n),
+                                                          directions.array.data, angles.data)
             angles = directions.derived.setdefault("view_zenith", angles)
         return angles
 
