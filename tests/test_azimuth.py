@@ -721,6 +721,34 @@ def test_table_file_round_trip_keeps_the_harmonics(cl_context, atmosphere, tmp_p
                         table.orders_record, table.gathered[0], None)
 
 
+def test_table_checks_the_harmonics_finite_of_either_sign(cl_context, atmosphere):
+    """A table's gathered harmonics m >= 1 may be negative but not NaN or infinite (each counted in the
+    error, which names the array); the azimuth average m = 0 must also be >= 0. The harmonics are checked
+    by their minimum and maximum (clsky.table.check_finite_signed), no array of their absolute values."""
+    from clsky import ScatteringTable
+    from clsky.table import TableFormatError
+
+    require_dtype(cl_context, "float64")
+    table = ScatteringTable.build(atmosphere, KERNEL_GRID, ctx=cl_context)
+
+    def with_gathered(cell, value):
+        gathered = table.gathered.copy()
+        gathered[cell] = value
+        return ScatteringTable(table.atmosphere, table.settings, table.data, table.metadata, table.orders,
+                               table.orders_record, gathered, None)
+
+    assert with_gathered((1, 0, 0, 0, 0), -1.0).gathered[1, 0, 0, 0, 0] == -1.0     # m >= 1: either sign
+    assert with_gathered((2, 3, 2, 1, 5), -1e300).gathered.min() == -1e300
+    with pytest.raises(TableFormatError, match="gathered holds 1 NaN values"):
+        with_gathered((2, 3, 2, 1, 5), np.nan)
+    with pytest.raises(TableFormatError, match="gathered holds 1 infinite values"):
+        with_gathered((1, 0, 0, 0, 0), -np.inf)
+    with pytest.raises(TableFormatError, match="gathered holds 1 infinite values"):
+        with_gathered((1, 0, 0, 0, 0), np.inf)
+    with pytest.raises(TableFormatError, match="gathered holds 1 negative values"):
+        with_gathered((0, 0, 0, 0, 0), -1.0)                                        # m = 0: >= 0
+
+
 def test_raw_export_carries_the_harmonics(cl_context, atmosphere, tmp_path):
     """``export_raw`` of a table with harmonics: the table's values, then its gathered harmonics, in one
     float32 .bin, at the offset and in the layout its header states (float32: the export's precision)."""
