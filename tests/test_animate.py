@@ -262,6 +262,35 @@ def test_cli_refuses_existing_output_without_force(tmp_path):
     assert [path.name for path in tmp_path.iterdir()] == ["sky.mp4"]
 
 
+def test_clsky_animate_runs_with_one_blas_thread(monkeypatch, tmp_path):
+    """run_animate renders with NumPy's BLAS on one thread throughout (PoCL's workers own the cores), and
+    gives the limit back when it returns."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from clsky.anim import animate, cli
+
+    def blas_threads():
+        return sorted({pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"})
+
+    seen = []
+
+    class Result:
+        summary = "done"
+
+    def render_animation(*args, **kwargs):
+        seen.append(blas_threads())
+        return Result()
+
+    monkeypatch.setattr(animate, "render_animation", render_animation)
+    monkeypatch.setattr("clsky.allocator.reuse_freed_memory", lambda environ=None: {})
+    monkeypatch.chdir(tmp_path)
+    with threadpool_limits(limits=2, user_api="blas"):
+        assert blas_threads() == [2]
+        assert cli.main(["animate", "--frames", "2", "--size", "16", "--progress", "none"]) == 0
+        assert seen == [[1]]
+        assert blas_threads() == [2]
+
+
 # 3. Real sun positions and the defaults -----------------------------------------------------------
 
 def test_real_sun_positions_one_frame_each(tmp_path, cl_context):
