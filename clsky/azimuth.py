@@ -556,10 +556,10 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
 
     Every engine runs on one queue and takes its device arrays from one pool
     (:func:`clsky._cl.memory_pool`): an order reuses the buffers of the one before (they are the same
-    sizes) instead of faulting in fresh memory. The nodes come to the host on a second queue, their 3
-    channels (no padded copy on the host; by rectangular reads on a CPU, packed on the device and read
-    at once elsewhere: :func:`clsky._cl.rectangular_reads`), into one reused host table, while the first
-    queue gathers them: what ``scatter`` returns is valid until its next call. The gathered sum comes down
+    sizes) instead of faulting in fresh memory. The nodes come to the host on copy queues of their own, their 3
+    channels (no padded copy on the host; by rectangular reads on a CPU, half a slab a queue, packed on the
+    device and read at once elsewhere: :func:`clsky._cl.rectangular_reads`), into one reused host table,
+    while the first queue gathers them: what ``scatter`` returns is valid until its next call. The gathered sum comes down
     the same way, and the first gather goes up by a rectangular write (rows of 6 values into rows of 8:
     17 ms on an H200, no slower than a contiguous write). The pool goes with the backend."""
     import pyopencl as cl
@@ -572,7 +572,10 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     queue = cl.CommandQueue(single_engine.ctx)
     pool = _cl.memory_pool(queue)
     engine = MultipleScatteringEngine(settings, fast_math=fast_math, queue=queue, allocator=pool)
-    copy_queue = cl.CommandQueue(engine.ctx)     # the nodes' downloads overlap the order's gathers
+    # the nodes' downloads overlap the order's gathers; a CPU's rectangular reads split over two queues, which
+    # PoCL's threads copy side by side: the gathered sum's download ends the build alone on the device, 0.5 s
+    # of one core faulting in its fresh host table, 0.23-0.39 s on two (README "Speed")
+    copy_queues = [cl.CommandQueue(engine.ctx) for _ in range(2)]
     rectangular = _cl.rectangular_reads(queue.device)
     cosines = np.cos(azimuth_nodes(settings.azimuth_harmonics))
     width, height, depth = settings.size
@@ -588,10 +591,10 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
 
     def download(table_d, into, channels):
         """Enqueues into = table_d[..., :channels] for the padded device table (N, D, H, W, 8) on the copy
-        queue, after every command enqueued on the queue so far, straight into ``into`` (through a host table
+        queues, after every command enqueued on the queue so far, straight into ``into`` (through a host table
         of the device's type for a float32 device). Where :func:`clsky._cl.rectangular_reads` holds (CPUs),
-        one rectangular read a slab n (rows of ``channels`` values out of rows of 8,
-        clEnqueueReadBufferRect); elsewhere the device packs the channels into a contiguous array of the
+        rectangular reads (rows of ``channels`` values out of rows of 8, clEnqueueReadBufferRect), each half of
+        each slab n on a copy queue of its own; elsewhere the device packs the channels into a contiguous array of the
         pool (``MultipleScatteringEngine.pack_channels``, on the queue) and one contiguous read takes it all.
         Returns a callable that waits for the reads and returns ``into``."""
         target = into if into.dtype == engine.dtype else np.empty(into.shape, engine.dtype)
@@ -600,16 +603,20 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
             size = engine.dtype.itemsize
             rows = int(np.prod(table_d.shape[1:-1]))                       # cells of a slab
             after = [cl.enqueue_marker(queue)]
-            reads = [cl.enqueue_copy(copy_queue, target[n], table_d.data, is_blocking=False, wait_for=after,
-                                     buffer_origin=(table_d.offset + n * rows * 8 * size, 0, 0),
+            parts = [(rows * p // len(copy_queues), rows * (p + 1) // len(copy_queues))
+                     for p in range(len(copy_queues))]
+            reads = [cl.enqueue_copy(copy_queue, target[n].reshape(rows, channels)[first:end], table_d.data,
+                                     is_blocking=False, wait_for=after,
+                                     buffer_origin=(table_d.offset + (n * rows + first) * 8 * size, 0, 0),
                                      host_origin=(0, 0, 0),
-                                     region=(channels * size, rows, 1), buffer_pitches=(8 * size, 0),
+                                     region=(channels * size, end - first, 1), buffer_pitches=(8 * size, 0),
                                      host_pitches=(channels * size, 0))
-                     for n in range(table_d.shape[0])]
+                     for n in range(table_d.shape[0])
+                     for copy_queue, (first, end) in zip(copy_queues, parts) if end > first]
         else:
             held.append(cla.empty(queue, into.shape, engine.dtype, allocator=pool))
             packed = engine.pack_channels(table_d, channels, held[0])
-            reads = [cl.enqueue_copy(copy_queue, target, held[0].data, is_blocking=False, wait_for=[packed])]
+            reads = [cl.enqueue_copy(copy_queues[0], target, held[0].data, is_blocking=False, wait_for=[packed])]
 
         def on_host():
             cl.wait_for_events(reads)
