@@ -554,14 +554,14 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     where the device has fp64); only the nodes are copied to the host (the orders' light, the table's
     azimuth average).
 
-    Every engine runs on one queue and takes its device arrays from one pool
-    (:func:`clsky._cl.memory_pool`): an order reuses the buffers of the one before (they are the same
-    sizes) instead of faulting in fresh memory. The nodes come to the host on copy queues of their own, their 3
-    channels (no padded copy on the host; by rectangular reads on a CPU, half a slab a queue, packed on the
-    device and read at once elsewhere: :func:`clsky._cl.rectangular_reads`), into one reused host table,
-    while the first queue gathers them: what ``scatter`` returns is valid until its next call. The gathered sum comes down
-    the same way, and the first gather goes up by a rectangular write (rows of 6 values into rows of 8:
-    17 ms on an H200, no slower than a contiguous write). The pool goes with the backend."""
+    Every engine runs on one queue and takes its device arrays from one pool (:func:`clsky._cl.memory_pool`):
+    an order reuses the buffers of the one before (they are the same sizes) instead of faulting in fresh
+    memory. The nodes come to the host on copy queues of their own, their 3 channels (no padded copy on the
+    host; by rectangular reads on a CPU, half a slab a queue, packed on the device and read at once elsewhere:
+    :func:`clsky._cl.rectangular_reads`), into one reused host table, while the first queue gathers them: what
+    ``scatter`` returns is valid until its next call. The gathered sum comes down the same way, and the first
+    gather goes up by a rectangular write (rows of 6 values into rows of 8: 17 ms on an H200, no slower than a
+    contiguous write). The pool goes with the backend."""
     import pyopencl as cl
     import pyopencl.array as cla
 
@@ -573,8 +573,8 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     pool = _cl.memory_pool(queue)
     engine = MultipleScatteringEngine(settings, fast_math=fast_math, queue=queue, allocator=pool)
     # the nodes' downloads overlap the order's gathers; a CPU's rectangular reads split over two queues, which
-    # PoCL's threads copy side by side: the gathered sum's download ends the build alone on the device, 0.5 s
-    # of one core faulting in its fresh host table, 0.23-0.39 s on two (README "Speed")
+    # PoCL's threads copy side by side: the gathered sum's download ends the build alone on the device, 0.29-0.47 s
+    # on one core faulting in its fresh host table, 0.24-0.27 s on two (README "Speed")
     copy_queues = [cl.CommandQueue(engine.ctx) for _ in range(2)]
     rectangular = _cl.rectangular_reads(queue.device)
     cosines = np.cos(azimuth_nodes(settings.azimuth_harmonics))
@@ -594,8 +594,9 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
         queues, after every command enqueued on the queue so far, straight into ``into`` (through a host table
         of the device's type for a float32 device). Where :func:`clsky._cl.rectangular_reads` holds (CPUs),
         rectangular reads (rows of ``channels`` values out of rows of 8, clEnqueueReadBufferRect), each half of
-        each slab n on a copy queue of its own; elsewhere the device packs the channels into a contiguous array of the
-        pool (``MultipleScatteringEngine.pack_channels``, on the queue) and one contiguous read takes it all.
+        each slab n on a copy queue of its own; elsewhere the device packs the channels into a contiguous array
+        of the pool (``MultipleScatteringEngine.pack_channels``, on the queue) and one contiguous read takes it
+        all.
         Returns a callable that waits for the reads and returns ``into``."""
         target = into if into.dtype == engine.dtype else np.empty(into.shape, engine.dtype)
         held = []           # the packed array, until its read is done (in the pool sooner, a kernel could reuse it)
