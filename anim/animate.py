@@ -929,7 +929,18 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
     together at the end (frames, metrics, then the MP4; a forced run deletes the stale frames of an
     earlier, longer run): an exception or an interruption leaves the earlier outputs as they were and
     no temporary file. See :class:`clsky._files.StagedWrites` for a failure while the files are renamed.
+
+    NumPy's BLAS runs on one thread throughout, as in the frames' loop (clsky.anim.pipeline: PoCL's workers
+    own the cores; the same values on any number of threads): OpenBLAS's threads, woken by the table build's
+    and the display set-up's host products and the closing metrics, each spun about 0.1 s on the cores PoCL
+    renders on (perf: about 0.2 CPU-s of the default animation; README "Speed").
     """
+    with host_blas_single_threaded():
+        return _render_animation(config, ctx, progress, report, farm)
+
+
+def _render_animation(config, ctx, progress, report, farm) -> AnimationResult:
+    """:func:`render_animation`'s work, under its BLAS limit."""
     start = time.perf_counter()
     positions = sun_positions(config)
     check_outputs(config, len(positions))

@@ -227,7 +227,6 @@ def _check_memory(args, config, positions):
 
 
 def run_animate(args):
-    from clsky._cl import host_blas_single_threaded
     from clsky.allocator import reuse_freed_memory
 
     from . import scene
@@ -246,11 +245,7 @@ def run_animate(args):
     _check_memory(args, config, sun_positions(config))
     progress, close = clsky_cli.progress_bar(args.progress)
     try:
-        # NumPy's BLAS on one thread for the whole run, as the frames' loop has it (clsky.anim.pipeline: PoCL's
-        # workers own the cores; the same values on any number of threads): OpenBLAS's threads, woken by the
-        # table build's and the display set-up's host products and the closing metrics, each spun about 0.1 s
-        # on the cores PoCL renders on (perf: about 0.2 CPU-s of the default animation; README "Speed")
-        with clsky_cli.running_farm(farm), host_blas_single_threaded():
+        with clsky_cli.running_farm(farm):
             result = render_animation(config, progress=progress, report=print, farm=farm)
     finally:
         close()

@@ -24,8 +24,8 @@ frame farm's client smooths the EVs its workers metered (:mod:`clsky.anim.farm`)
 Who owns the cores (README, "Speed"): PoCL's worker threads render on all of them; the host halves run
 on ``clsky.anim.animate.check_animation_memory`` threads (one a core, at most 8, fewer where memory or
 the frame count says so), their BLAS limited to one thread each
-(:func:`clsky._cl.host_blas_single_threaded`; ``clsky animate`` keeps NumPy's BLAS on one thread for its
-whole run, the table's build and the display's set-up included); ffmpeg keeps x264's own threads (its
+(:func:`clsky._cl.host_blas_single_threaded`; ``clsky.anim.animate.render_animation`` keeps NumPy's BLAS on
+one thread throughout, the table's build and the display's set-up included); ffmpeg keeps x264's own threads (its
 output may depend on their number). PoCL keeps every core while the host threads take their share by
 time slicing, where limiting PoCL to fewer cores would make the device half alone longer than the whole
 frame's share of them. On two cores one host thread was the default until 2026-12-05, when the default

@@ -262,31 +262,31 @@ def test_cli_refuses_existing_output_without_force(tmp_path):
     assert [path.name for path in tmp_path.iterdir()] == ["sky.mp4"]
 
 
-def test_clsky_animate_runs_with_one_blas_thread(monkeypatch, tmp_path):
-    """run_animate renders with NumPy's BLAS on one thread throughout (PoCL's workers own the cores), and
-    gives the limit back when it returns."""
+def test_animation_runs_with_one_blas_thread(monkeypatch, tmp_path, cl_context):
+    """render_animation (so ``clsky animate`` too) keeps NumPy's BLAS on one thread from its start, the
+    table's build included (PoCL's workers own the cores), and gives the limit back when it ends, by an
+    exception here."""
     from threadpoolctl import threadpool_info, threadpool_limits
 
-    from clsky.anim import animate, cli
+    from clsky.anim import animate
 
     def blas_threads():
         return sorted({pool["num_threads"] for pool in threadpool_info() if pool["user_api"] == "blas"})
 
     seen = []
 
-    class Result:
-        summary = "done"
+    class Stop(Exception):
+        pass
 
-    def render_animation(*args, **kwargs):
+    def make_renderer(*args, **kwargs):
         seen.append(blas_threads())
-        return Result()
+        raise Stop
 
-    monkeypatch.setattr(animate, "render_animation", render_animation)
-    monkeypatch.setattr("clsky.allocator.reuse_freed_memory", lambda environ=None: {})
-    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(animate, "make_renderer", make_renderer)
     with threadpool_limits(limits=2, user_api="blas"):
         assert blas_threads() == [2]
-        assert cli.main(["animate", "--frames", "2", "--size", "16", "--progress", "none"]) == 0
+        with pytest.raises(Stop):
+            render_animation(AnimationConfig(frames=2, output=str(tmp_path / "sky.mp4"), **TINY), ctx=cl_context)
         assert seen == [[1]]
         assert blas_threads() == [2]
 
