@@ -53,7 +53,7 @@ import math
 
 import numpy as np
 
-from clsky import colorimetry
+from clsky import colorimetry, colour_constants
 from clsky.errors import ParameterError
 
 from . import tonemap
@@ -72,17 +72,16 @@ METER_FLOOR_FRACTION = 1e-3
 GAMUT_STEPS = 16
 
 
-# Colour-science constants (imported lazily: ``import colour`` takes about 2.5 s) ---------------------
+# Colour-science constants (clsky.colour_constants: kept on disk, as ``import colour`` costs 0.6-0.9 s) --
 
 @functools.lru_cache(maxsize=None)
 def _matrices():
     """(sRGB -> XYZ, XYZ -> sRGB, sRGB -> Oklab LMS, Oklab LMS' -> Lab, and inverses): clsky's sRGB
     matrix (:data:`clsky.colorimetry.SRGB_TO_XYZ` and its inverse) and colour-science's Oklab matrices."""
-    from colour.models import oklab
-
+    xyz_to_lms, lms_to_lab = colour_constants.oklab_matrices()
     to_xyz, to_rgb = colorimetry.SRGB_TO_XYZ, colorimetry.XYZ_TO_SRGB
-    to_lms = np.asarray(oklab.MATRIX_1_XYZ_TO_LMS, dtype=np.float64) @ to_xyz
-    to_lab = np.asarray(oklab.MATRIX_2_LMS_TO_LAB, dtype=np.float64)
+    to_lms = xyz_to_lms @ to_xyz
+    to_lab = np.array(lms_to_lab)
     # the inverses to double precision (colour-science prints them to fewer digits: a round trip
     # through its printed inverses moves L by 1e-5 and the hue by 1e-3 deg)
     from_lab = np.linalg.inv(to_lab)
@@ -297,19 +296,24 @@ def white_balance_matrix(source_white_xyz, transform="CAT02"):
 
     Notes
     -----
-    M = XYZ->sRGB . M_cat . sRGB->XYZ, M_cat = ``colour.adaptation.matrix_chromatic_adaptation_VonKries``
-    (the cone responses of the source white scaled to those of D65, CIE 159:2004 for CAT02).
+    M = XYZ->sRGB . M_cat . sRGB->XYZ, M_cat = C^-1 diag(C w_D65 / C w_source) C with C the transform's
+    cone response matrix (:func:`clsky.colour_constants.adaptation_transform`): the operations of
+    ``colour.adaptation.matrix_chromatic_adaptation_VonKries`` (colour-science 0.4.7, in its default
+    division mode: a cone response of 0 gives a factor of 0), the same bits (tests/test_colour_constants.py),
+    without importing colour-science. CIE 159:2004 for CAT02.
     """
-    import colour
-
     source = np.asarray(source_white_xyz, dtype=np.float64)
     if source.shape != (3,) or not np.isfinite(source).all() or not source[1] > 0 or (source < 0).any():
         raise ParameterError("source_white_xyz", "three finite XYZ values >= 0 with Y > 0", source.tolist())
+    cones = colour_constants.adaptation_transform(transform)
     m = _matrices()
     white = m["rgb_to_xyz"].sum(axis=1)           # sRGB white (1, 1, 1): D65 as the matrix has it
-    cat = colour.adaptation.matrix_chromatic_adaptation_VonKries(source, white * source[1] / white[1],
-                                                                 transform=transform)
-    return m["xyz_to_rgb"] @ np.asarray(cat, dtype=np.float64) @ m["rgb_to_xyz"]
+    target = white * source[1] / white[1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        gains = np.nan_to_num(np.matmul(cones, target[:, None])[:, 0] / np.matmul(cones, source[:, None])[:, 0],
+                              nan=0, posinf=0, neginf=0)
+    cat = np.matmul(np.matmul(np.linalg.inv(cones), np.eye(3) * gains[None, :]), cones)
+    return m["xyz_to_rgb"] @ cat @ m["rgb_to_xyz"]
 
 
 # Exposure --------------------------------------------------------------------------------------------

@@ -51,7 +51,8 @@ are 3 x 3 matrices, :func:`three_wavelength_to_xyz_matrix`):
     red, the shortest blue): sRGB_c = K_m sum_lambda cbar_sRGB(lambda) E_sun(lambda) / E_sun(lambda_c)
     (lambda / lambda_c)^p L_c, a diagonal matrix in sRGB.
 
-colour-science is imported inside the functions (``import colour`` costs about 2.5 s).
+colour-science's CMFs come through :mod:`clsky.colour_constants`, which keeps them on disk after the
+first run (``import colour`` costs about 0.6-0.9 s of one core a process).
 
 References
 ----------
@@ -67,6 +68,7 @@ import functools
 
 import numpy as np
 
+from . import colour_constants
 from .solar import solar_irradiance_astm_g173
 
 __all__ = ["MAX_LUMINOUS_EFFICACY", "SRGB_PRIMARIES_XY", "D65_WHITE_XY", "SRGB_TO_XYZ", "XYZ_TO_SRGB",
@@ -78,24 +80,17 @@ __all__ = ["MAX_LUMINOUS_EFFICACY", "SRGB_PRIMARIES_XY", "D65_WHITE_XY", "SRGB_T
 #: K_m, the maximum luminous efficacy of photopic vision [lm/W].
 MAX_LUMINOUS_EFFICACY = 683.0
 #: The colour-matching functions used (colour-science's name).
-CMFS_NAME = "CIE 1931 2 Degree Standard Observer"
+CMFS_NAME = colour_constants.CMFS_NAME
 #: Exponent p of Bruneton's sky factors (lambda / lambda_c)^p (model.cc: -3 for the sky, 0 for the sun).
 BRUNETON_SKY_POWER = -3.0
 #: The three-wavelength reconstruction used unless another is asked for (chosen by bench/bench_spectral.py).
 DEFAULT_THREE_WAVELENGTH_METHOD = "solar_power_law"
 
 
-@functools.lru_cache(maxsize=1)
 def _cmfs():
-    """(wavelengths [nm], values (n, 3)) of the CIE 1931 2-degree CMFs from colour-science, read-only."""
-    import colour
-
-    cmfs = colour.MSDS_CMFS[CMFS_NAME]
-    wavelengths = np.array(cmfs.wavelengths, dtype=np.float64)
-    values = np.array(cmfs.values, dtype=np.float64)
-    wavelengths.setflags(write=False)
-    values.setflags(write=False)
-    return wavelengths, values
+    """(wavelengths [nm], values (n, 3)) of the CIE 1931 2-degree CMFs from colour-science, read-only
+    (:func:`clsky.colour_constants.cie_1931_cmfs`: kept on disk after the first run)."""
+    return colour_constants.cie_1931_cmfs()
 
 
 #: Chromaticities (x, y) of the sRGB / Rec. 709 primaries r, g, b and of its D65 white (IEC 61966-2-1).

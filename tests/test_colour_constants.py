@@ -1,0 +1,174 @@
+"""clsky.colour_constants: colour-science's constants kept on disk, the same bits as the live package.
+
+Every comparison with colour-science here is exact (array_equal): the cache holds colour-science's
+float64 values and the display's von Kries matrix repeats its operations one for one, so any difference
+is a bug, not rounding.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import zipfile
+
+import numpy as np
+import pytest
+
+colour = pytest.importorskip("colour")
+
+from clsky import colour_constants  # noqa: E402
+from clsky.anim.display import white_balance_matrix  # noqa: E402
+from clsky.errors import ParameterError  # noqa: E402
+
+
+@pytest.fixture
+def cache_home(tmp_path, monkeypatch):
+    """An empty XDG_CACHE_HOME, and the in-process constants forgotten before and after."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    colour_constants._constants.cache_clear()
+    yield tmp_path
+    colour_constants._constants.cache_clear()
+
+
+def live_values():
+    from colour.models import oklab
+
+    cmfs = colour.MSDS_CMFS[colour_constants.CMFS_NAME]
+    return {"cmfs_wavelengths": np.asarray(cmfs.wavelengths, dtype=np.float64),
+            "cmfs_values": np.asarray(cmfs.values, dtype=np.float64),
+            "oklab_xyz_to_lms": oklab.MATRIX_1_XYZ_TO_LMS, "oklab_lms_to_lab": oklab.MATRIX_2_LMS_TO_LAB}
+
+
+def assert_same_as_colour_science():
+    live = live_values()
+    wavelengths, values = colour_constants.cie_1931_cmfs()
+    assert np.array_equal(wavelengths, live["cmfs_wavelengths"])
+    assert np.array_equal(values, live["cmfs_values"])
+    xyz_to_lms, lms_to_lab = colour_constants.oklab_matrices()
+    assert np.array_equal(xyz_to_lms, live["oklab_xyz_to_lms"])
+    assert np.array_equal(lms_to_lab, live["oklab_lms_to_lab"])
+    names = colour_constants.adaptation_transform_names()
+    assert set(names) == set(colour.CHROMATIC_ADAPTATION_TRANSFORMS)
+    for name in names:
+        assert np.array_equal(colour_constants.adaptation_transform(name), colour.CHROMATIC_ADAPTATION_TRANSFORMS[name])
+
+
+def test_first_use_writes_the_file_and_later_uses_read_the_same_values(cache_home):
+    path = colour_constants.cache_path()
+    assert path.parent.parent == cache_home and not path.exists()
+    assert_same_as_colour_science()
+    assert path.is_file()
+    colour_constants._constants.cache_clear()
+    written = path.stat().st_mtime_ns
+    assert_same_as_colour_science()                  # from the file
+    assert path.stat().st_mtime_ns == written        # read, not rewritten
+
+
+def test_the_values_are_read_only(cache_home):
+    wavelengths, values = colour_constants.cie_1931_cmfs()
+    with pytest.raises(ValueError):
+        values[0, 0] = 1.0
+    with pytest.raises(ValueError):
+        colour_constants.adaptation_transform("CAT02")[0, 0] = 1.0
+
+
+def damage_truncated(path):
+    path.write_bytes(path.read_bytes()[:200])
+
+
+def damage_one_value(path):
+    """A CMF value changed inside an otherwise valid file (the digest must catch it)."""
+    with np.load(path) as data:
+        arrays = {name: data[name] for name in data.files}
+    arrays["cmfs_values"] = arrays["cmfs_values"].copy()
+    arrays["cmfs_values"][100, 1] *= 1.0 + 2.0 ** -40
+    np.savez(path, **arrays)
+
+
+def damage_version(path):
+    with np.load(path) as data:
+        arrays = {name: data[name] for name in data.files}
+    arrays["version"] = np.array("0.0.1")
+    np.savez(path, **arrays)
+
+
+def damage_missing_array(path):
+    with np.load(path) as data:
+        arrays = {name: data[name] for name in data.files if name != "oklab_lms_to_lab"}
+    np.savez(path, **arrays)
+
+
+def damage_not_a_zip(path):
+    path.write_text("not an npz file")
+
+
+@pytest.mark.parametrize("damage", [damage_truncated, damage_one_value, damage_version, damage_missing_array,
+                                    damage_not_a_zip])
+def test_a_damaged_file_is_ignored_and_rewritten(cache_home, damage):
+    colour_constants.cie_1931_cmfs()
+    path = colour_constants.cache_path()
+    damage(path)
+    colour_constants._constants.cache_clear()
+    assert colour_constants._read(path, colour_constants.colour_science_version()) is None
+    assert_same_as_colour_science()
+    assert colour_constants._read(path, colour_constants.colour_science_version()) is not None
+    assert zipfile.is_zipfile(path)
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only directories")
+def test_an_unwritable_cache_directory_only_costs_the_import(cache_home):
+    cache_home.chmod(0o500)
+    try:
+        assert_same_as_colour_science()
+        assert not colour_constants.cache_path().exists()
+    finally:
+        cache_home.chmod(0o700)
+
+
+def test_a_cache_path_that_is_a_file_only_costs_the_import(cache_home):
+    (cache_home / "clsky").write_text("a file where the directory would be")
+    assert_same_as_colour_science()
+    assert (cache_home / "clsky").is_file()
+
+
+def test_a_run_with_the_file_does_not_import_colour_science(tmp_path):
+    """Two fresh processes on an empty cache: the first imports colour-science and writes the file, the
+    second reads it; both give the display's white balance (which uses all three kinds of constants)."""
+    script = ("import sys, numpy as np; from clsky.anim.display import white_balance_matrix, linear_srgb_to_oklab;"
+              "from clsky import colorimetry;"
+              "m = white_balance_matrix([1.0, 0.9, 0.5]); lab = linear_srgb_to_oklab(np.ones((1, 3)));"
+              "xyz = colorimetry.spectral_to_xyz(np.ones(3), np.array([450.0, 550.0, 650.0]));"
+              "print('colour' in sys.modules, repr(m.tolist()), repr(xyz.tolist()))")
+    env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path))
+    runs = [subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120)
+            for _ in range(2)]
+    for run in runs:
+        assert run.returncode == 0, run.stderr
+    first, second = (run.stdout.split(" ", 1) for run in runs)
+    assert first[0] == "True" and second[0] == "False"
+    assert first[1] == second[1]
+
+
+SOURCES = [[1.0, 1.0, 1.0], [0.9505, 1.0, 1.089], [1.2, 1.0, 0.4], [3.0e3, 2.5e3, 0.5e3], [0.0, 1.0, 0.0],
+           [1.0e-12, 1.0e-12, 1.0e-12]]
+
+
+@pytest.mark.parametrize("transform", sorted(colour.CHROMATIC_ADAPTATION_TRANSFORMS))
+def test_white_balance_is_colour_sciences_von_kries_bit_for_bit(transform):
+    from clsky.anim.display import _matrices
+
+    m = _matrices()
+    white = m["rgb_to_xyz"].sum(axis=1)
+    for source in SOURCES:
+        source = np.asarray(source, dtype=np.float64)
+        cat = colour.adaptation.matrix_chromatic_adaptation_VonKries(source, white * source[1] / white[1],
+                                                                     transform=transform)
+        expected = m["xyz_to_rgb"] @ np.asarray(cat, dtype=np.float64) @ m["rgb_to_xyz"]
+        assert np.array_equal(white_balance_matrix(source, transform=transform), expected), (transform, source)
+        assert np.array_equal(white_balance_matrix(source, transform=transform.upper()), expected)
+
+
+def test_an_unknown_transform_is_refused_with_the_valid_names():
+    with pytest.raises(ParameterError, match=r"transform must be one of .*CAT02.*, got 'CAT99'"):
+        white_balance_matrix([1.0, 1.0, 1.0], transform="CAT99")
