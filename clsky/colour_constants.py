@@ -59,9 +59,16 @@ def colour_science_version() -> str:
     return importlib.metadata.version("colour-science")
 
 
-def cache_path(version: str | None = None) -> pathlib.Path:
-    """Where the constants of colour-science ``version`` (default: the installed one) are kept."""
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+def cache_path(version: str | None = None) -> pathlib.Path | None:
+    """Where the constants of colour-science ``version`` (default: the installed one) are kept:
+    ``$XDG_CACHE_HOME/clsky/`` or ``~/.cache/clsky/`` (an XDG_CACHE_HOME that is not absolute is ignored,
+    as the XDG Base Directory specification asks); None where neither is known (no home directory)."""
+    base = os.environ.get("XDG_CACHE_HOME", "")
+    if not os.path.isabs(base):
+        home = os.path.expanduser("~")
+        if not os.path.isabs(home):
+            return None
+        base = os.path.join(home, ".cache")
     return pathlib.Path(base) / "clsky" / f"colour-science-{version or colour_science_version()}.npz"
 
 
@@ -137,10 +144,11 @@ def _write(path: pathlib.Path, arrays: dict) -> None:
 def _constants() -> dict:
     version = colour_science_version()
     path = cache_path(version)
-    arrays = _read(path, version)
+    arrays = None if path is None else _read(path, version)
     if arrays is None:
         arrays = _from_colour_science(version)
-        _write(path, arrays)
+        if path is not None:
+            _write(path, arrays)
     for value in arrays.values():
         value.setflags(write=False)
     return arrays

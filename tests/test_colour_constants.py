@@ -132,6 +132,22 @@ def test_a_cache_path_that_is_a_file_only_costs_the_import(cache_home):
     assert (cache_home / "clsky").is_file()
 
 
+def test_a_relative_xdg_cache_home_is_ignored(cache_home, monkeypatch):
+    """The XDG Base Directory specification: a relative path in XDG_CACHE_HOME is invalid; ~/.cache then."""
+    monkeypatch.setenv("XDG_CACHE_HOME", "relative/cache")
+    monkeypatch.setenv("HOME", str(cache_home))
+    assert colour_constants.cache_path("1.2.3") == cache_home / ".cache" / "clsky" / "colour-science-1.2.3.npz"
+
+
+def test_without_a_home_directory_nothing_is_written(cache_home, monkeypatch):
+    monkeypatch.delenv("XDG_CACHE_HOME")
+    monkeypatch.setattr(colour_constants.os.path, "expanduser", lambda path: path)     # "~" stays "~"
+    assert colour_constants.cache_path() is None
+    monkeypatch.chdir(cache_home)
+    assert_same_as_colour_science()
+    assert list(cache_home.iterdir()) == []
+
+
 def test_a_run_with_the_file_does_not_import_colour_science(tmp_path):
     """Two fresh processes on an empty cache: the first imports colour-science and writes the file, the
     second reads it; both give the display's white balance (which uses all three kinds of constants)."""
