@@ -4,16 +4,15 @@ clsky uses three things of colour-science (Mansencal et al.): the CIE 1931 2-deg
 functions (``colour.MSDS_CMFS``; :mod:`clsky.colorimetry`), Oklab's two matrices
 (``colour.models.oklab``; the display's gamut mapping) and the chromatic adaptation transforms' cone
 response matrices (``colour.CHROMATIC_ADAPTATION_TRANSFORMS``; the display's white balance). All are
-constants, but ``import colour`` (0.4.7) also imports its plotting module, matplotlib and pandas: about
-0.6 s of one core in a process that has NumPy and SciPy loaded, 0.9 s without SciPy's interpolation (the
-2-core machine), in every ``clsky render`` or ``clsky animate``, where the default animation's
-PoCL threads then wait for its first frames.
+constants, but ``import colour`` (0.4.7) also imports its plotting module, matplotlib, pandas and SciPy's
+interpolation: 0.9-1.0 s of one core on the 2-core machine after clsky's own imports, in every ``clsky
+render`` or ``clsky animate`` (README "Speed", "colour-science's constants kept on disk").
 
 So the first run imports colour-science, takes the constants from it and writes them to
-``$XDG_CACHE_HOME/clsky/colour-science-<version>.npz`` (``~/.cache/clsky`` without XDG_CACHE_HOME; the
-version of the installed colour-science, read from its metadata without importing it, so that an
-upgrade writes a new file); later runs read that file (a few milliseconds). The file is written
-atomically under a unique temporary name (:func:`clsky._files.atomic_write`), so concurrent first runs
+``colour-science-<version>.npz`` in clsky's cache directory (:mod:`clsky._cache`:
+``$XDG_CACHE_HOME/clsky`` or ``~/.cache/clsky``; the version of the installed colour-science, read from
+its metadata without importing it, so that an upgrade writes a new file); later runs read that file (a
+few milliseconds). The file is written atomically under a unique temporary name, so concurrent first runs
 leave one writer's whole file. It is validated before use: the exact set of arrays, their dtypes and
 shapes, finite values, increasing wavelengths, the version, and a SHA-256 digest of all the arrays' bytes;
 a file that fails any check is ignored and rewritten. Where no cache directory can be written the
@@ -34,12 +33,11 @@ from __future__ import annotations
 import functools
 import hashlib
 import importlib.metadata
-import os
 import pathlib
 
 import numpy as np
 
-from ._files import atomic_write
+from ._cache import cache_directory, store
 from .errors import ParameterError
 
 __all__ = ["CMFS_NAME", "cie_1931_cmfs", "oklab_matrices", "adaptation_transform", "adaptation_transform_names",
@@ -60,16 +58,10 @@ def colour_science_version() -> str:
 
 
 def cache_path(version: str | None = None) -> pathlib.Path | None:
-    """Where the constants of colour-science ``version`` (default: the installed one) are kept:
-    ``$XDG_CACHE_HOME/clsky/`` or ``~/.cache/clsky/`` (an XDG_CACHE_HOME that is not absolute is ignored,
-    as the XDG Base Directory specification asks); None where neither is known (no home directory)."""
-    base = os.environ.get("XDG_CACHE_HOME", "")
-    if not os.path.isabs(base):
-        home = os.path.expanduser("~")
-        if not os.path.isabs(home):
-            return None
-        base = os.path.join(home, ".cache")
-    return pathlib.Path(base) / "clsky" / f"colour-science-{version or colour_science_version()}.npz"
+    """Where the constants of colour-science ``version`` (default: the installed one) are kept
+    (:func:`clsky._cache.cache_directory`); None where there is no cache directory."""
+    directory = cache_directory()
+    return None if directory is None else directory / f"colour-science-{version or colour_science_version()}.npz"
 
 
 def _digest(arrays: dict) -> np.ndarray:
@@ -129,17 +121,6 @@ def _read(path: pathlib.Path, version: str):
     return arrays if _valid(arrays, version) else None
 
 
-def _write(path: pathlib.Path, arrays: dict) -> None:
-    """Keep ``arrays`` at ``path``; a directory that cannot be written is no error (the next run imports
-    colour-science again)."""
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_write(path, overwrite=True) as temporary, open(temporary, "wb") as file:
-            np.savez(file, **arrays)
-    except (OSError, ValueError):
-        pass
-
-
 @functools.lru_cache(maxsize=1)
 def _constants() -> dict:
     version = colour_science_version()
@@ -148,7 +129,7 @@ def _constants() -> dict:
     if arrays is None:
         arrays = _from_colour_science(version)
         if path is not None:
-            _write(path, arrays)
+            store(path, lambda file: np.savez(file, **arrays))
     for value in arrays.values():
         value.setflags(write=False)
     return arrays

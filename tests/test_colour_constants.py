@@ -17,6 +17,7 @@ import pytest
 
 colour = pytest.importorskip("colour")
 
+import clsky._cache  # noqa: E402
 from clsky import colour_constants  # noqa: E402
 from clsky.anim.display import white_balance_matrix  # noqa: E402
 from clsky.errors import ParameterError  # noqa: E402
@@ -141,7 +142,7 @@ def test_a_relative_xdg_cache_home_is_ignored(cache_home, monkeypatch):
 
 def test_without_a_home_directory_nothing_is_written(cache_home, monkeypatch):
     monkeypatch.delenv("XDG_CACHE_HOME")
-    monkeypatch.setattr(colour_constants.os.path, "expanduser", lambda path: path)     # "~" stays "~"
+    monkeypatch.setattr(clsky._cache.os.path, "expanduser", lambda path: path)     # "~" stays "~"
     assert colour_constants.cache_path() is None
     monkeypatch.chdir(cache_home)
     assert_same_as_colour_science()

@@ -1,0 +1,45 @@
+"""clsky's own disk cache: where it is, and how a file gets into it.
+
+Two things are kept there, each because recomputing it costs every process a measurable share of a small
+run (README "Speed"): colour-science's constants (:mod:`clsky.colour_constants`) and PoCL programs'
+binaries (:mod:`clsky.program_binaries`). The directory is ``$XDG_CACHE_HOME/clsky`` or
+``~/.cache/clsky`` (an XDG_CACHE_HOME that is not an absolute path is ignored, as the XDG Base Directory
+specification asks); without a home directory there is none. Files land through
+:func:`clsky._files.atomic_write` (a unique temporary beside the target, renamed onto it), so concurrent
+writers leave one writer's whole file and an interrupted one leaves nothing; each reader validates what
+it reads (its own format, a SHA-256 digest) and ignores a file that fails. A directory that cannot be
+written is no error: the thing is then recomputed by every process, as without the cache.
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+
+from ._files import atomic_write
+
+__all__ = ["cache_directory", "store"]
+
+
+def cache_directory(*parts: str) -> pathlib.Path | None:
+    """``$XDG_CACHE_HOME/clsky/<parts>`` or ``~/.cache/clsky/<parts>``; None where neither is known."""
+    base = os.environ.get("XDG_CACHE_HOME", "")
+    if not os.path.isabs(base):
+        home = os.path.expanduser("~")
+        if not os.path.isabs(home):
+            return None
+        base = os.path.join(home, ".cache")
+    return pathlib.Path(base, "clsky", *parts)
+
+
+def store(path: pathlib.Path, write) -> bool:
+    """Put a file at ``path`` (its parent created if needed) by calling ``write(file)`` on a binary file
+    object of a unique temporary, renamed onto ``path`` when ``write`` returns. Returns whether the file
+    landed; an OSError (a read-only or full disk, a file where a directory should be) only returns False."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_write(path, overwrite=True) as temporary, open(temporary, "wb") as file:
+            write(file)
+    except (OSError, ValueError):
+        return False
+    return True
