@@ -72,7 +72,7 @@ METER_FLOOR_FRACTION = 1e-3
 GAMUT_STEPS = 16
 
 
-# Colour-science constants (clsky.colour_constants: kept on disk, as ``import colour`` costs 0.6-0.9 s) --
+# Colour-science constants (clsky.colour_constants: kept on disk, as ``import colour`` costs about 1 s) --
 
 @functools.lru_cache(maxsize=None)
 def _matrices():

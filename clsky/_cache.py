@@ -6,9 +6,10 @@ binaries (:mod:`clsky.program_binaries`). The directory is ``$XDG_CACHE_HOME/cls
 ``~/.cache/clsky`` (an XDG_CACHE_HOME that is not an absolute path is ignored, as the XDG Base Directory
 specification asks); without a home directory there is none. Files land through
 :func:`clsky._files.atomic_write` (a unique temporary beside the target, renamed onto it), so concurrent
-writers leave one writer's whole file and an interrupted one leaves nothing; each reader validates what
-it reads (its own format, a SHA-256 digest) and ignores a file that fails. A directory that cannot be
-written is no error: the thing is then recomputed by every process, as without the cache.
+writers leave one writer's whole file and one that raises (KeyboardInterrupt included) leaves nothing;
+each reader validates what it reads (its own format, a SHA-256 digest) and ignores a file that fails. A
+directory that cannot be written is no error: the thing is then recomputed by every process, as without
+the cache. Nothing is ever deleted from it (README "Known limits").
 """
 
 from __future__ import annotations

@@ -52,7 +52,7 @@ are 3 x 3 matrices, :func:`three_wavelength_to_xyz_matrix`):
     (lambda / lambda_c)^p L_c, a diagonal matrix in sRGB.
 
 colour-science's CMFs come through :mod:`clsky.colour_constants`, which keeps them on disk after the
-first run (``import colour`` costs about 0.6-0.9 s of one core a process).
+first run (``import colour`` costs 0.9-1.0 s of one core a process on the 2-core machine).
 
 References
 ----------
