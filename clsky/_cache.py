@@ -2,7 +2,8 @@
 
 Two things are kept there, each because recomputing it costs every process a measurable share of a small
 run (README "Speed"): colour-science's constants (:mod:`clsky.colour_constants`) and PoCL programs'
-binaries (:mod:`clsky.program_binaries`). The directory is ``$XDG_CACHE_HOME/clsky`` or
+binaries (:mod:`clsky.program_binaries`). The directory is ``$CLSKY_CACHE_DIR`` where that is set to an
+absolute path (the test suite gives each session its own), else ``$XDG_CACHE_HOME/clsky`` or
 ``~/.cache/clsky`` (an XDG_CACHE_HOME that is not an absolute path is ignored, as the XDG Base Directory
 specification asks); without a home directory there is none. Files land through
 :func:`clsky._files.atomic_write` (a unique temporary beside the target, renamed onto it), so concurrent
@@ -23,7 +24,11 @@ __all__ = ["cache_directory", "store"]
 
 
 def cache_directory(*parts: str) -> pathlib.Path | None:
-    """``$XDG_CACHE_HOME/clsky/<parts>`` or ``~/.cache/clsky/<parts>``; None where neither is known."""
+    """``$CLSKY_CACHE_DIR/<parts>`` where that variable holds an absolute path, else
+    ``$XDG_CACHE_HOME/clsky/<parts>`` or ``~/.cache/clsky/<parts>``; None where none is known."""
+    explicit = os.environ.get("CLSKY_CACHE_DIR", "")
+    if os.path.isabs(explicit):
+        return pathlib.Path(explicit, *parts)
     base = os.environ.get("XDG_CACHE_HOME", "")
     if not os.path.isabs(base):
         home = os.path.expanduser("~")

@@ -74,14 +74,15 @@ def _digest(arrays: dict) -> np.ndarray:
     return np.frombuffer(sha.digest(), dtype=np.uint8).copy()
 
 
-def _from_colour_science(version: str) -> dict:
-    """The constants, from an import of colour-science."""
+def _from_colour_science() -> dict:
+    """The constants, from an import of colour-science, labelled with the imported package's version
+    (``colour.__version__``)."""
     import colour
     from colour.models import oklab
 
     cmfs = colour.MSDS_CMFS[CMFS_NAME]
     names = sorted(colour.CHROMATIC_ADAPTATION_TRANSFORMS)
-    arrays = {"format": np.array(_FORMAT), "version": np.array(version),
+    arrays = {"format": np.array(_FORMAT), "version": np.array(str(getattr(colour, "__version__", ""))),
               "cmfs_wavelengths": np.array(cmfs.wavelengths, dtype=np.float64),
               "cmfs_values": np.array(cmfs.values, dtype=np.float64),
               "oklab_xyz_to_lms": np.array(oklab.MATRIX_1_XYZ_TO_LMS, dtype=np.float64),
@@ -96,6 +97,8 @@ def _from_colour_science(version: str) -> dict:
 def _valid(arrays: dict, version: str) -> bool:
     """Whether ``arrays`` (read from a file) are a whole, untouched set for ``version``."""
     if set(arrays) != set(_ARRAYS) or any(arrays[name].dtype.kind != kind for name, kind in _ARRAYS.items()):
+        return False
+    if arrays["cmfs_wavelengths"].ndim != 1 or arrays["adaptation_names"].ndim != 1:
         return False
     n, k = len(arrays["cmfs_wavelengths"]), len(arrays["adaptation_names"])
     shapes = {"format": (), "version": (), "cmfs_wavelengths": (n,), "cmfs_values": (n, 3),
@@ -116,9 +119,9 @@ def _read(path: pathlib.Path, version: str):
     try:
         with np.load(path, allow_pickle=False) as data:
             arrays = {name: data[name] for name in data.files}
+        return arrays if _valid(arrays, version) else None
     except Exception:                       # missing, unreadable, or damaged (zipfile.BadZipFile, zlib.error, ...)
         return None
-    return arrays if _valid(arrays, version) else None
 
 
 @functools.lru_cache(maxsize=1)
@@ -127,8 +130,10 @@ def _constants() -> dict:
     path = cache_path(version)
     arrays = None if path is None else _read(path, version)
     if arrays is None:
-        arrays = _from_colour_science(version)
-        if path is not None:
+        arrays = _from_colour_science()
+        # kept only when the imported colour-science is the installed distribution (not another copy
+        # earlier on the path): the file's name and label say which version its values are
+        if path is not None and str(arrays["version"]) == version:
             store(path, lambda file: np.savez(file, **arrays))
     for value in arrays.values():
         value.setflags(write=False)

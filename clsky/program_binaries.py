@@ -12,14 +12,16 @@ serialises processes with a lock file that a killed process leaves behind (the n
 for it). So clsky keeps PoCL's binaries itself, as llama.cpp's OpenCL backend does for every runtime
 (ggml-opencl's ``cl-program-cache``):
 
-- the key is a SHA-256 of the program's source text, its build options, the device (name, vendor,
-  version, driver version), the platform (name, version: PoCL's includes its LLVM version and build) and
-  PyOpenCL's version, which adds options of its own;
+- the key is a SHA-256 of the program's source text, its build options as PyOpenCL passes them (its
+  include path and ``PYOPENCL_BUILD_OPTIONS`` added), the device (name, vendor, version, driver
+  version), the platform (name, version: PoCL's includes its LLVM version and build), PyOpenCL's version
+  and PoCL's build variables (:data:`POCL_BUILD_VARIABLES`);
 - the file, ``programs/<key>.bin`` in clsky's cache directory (:mod:`clsky._cache`), holds a format line,
   the SHA-256 of the binary and the binary; it lands atomically (a unique temporary, renamed);
 - a file is used only when its format line and digest check out, and a binary that PoCL refuses anyway
   is built from source instead; either way the file is written again from the new build;
-- the program returned is always one built from a binary, the first time too (:func:`build`).
+- the program returned is one built from a binary, the first time too (:func:`build`; the source build's
+  own only where PoCL refuses the binary it just gave).
 
 A program from its binary is the same LLVM bitcode that PoCL would have found in its own cache: PoCL then
 compiles its work-group functions from it at the first launch of each kernel (once per machine: it caches
@@ -33,6 +35,7 @@ driver caches by itself, PyOpenCL's cache serves the others).
 from __future__ import annotations
 
 import hashlib
+import os
 import pathlib
 
 import pyopencl as cl
@@ -41,9 +44,21 @@ from ._cache import cache_directory, store
 
 __all__ = ["FORMAT_LINE", "applies", "binary_path", "build"]
 
+#: PoCL's environment variables that change what it compiles from a source (its extra Clang flags, the
+#: CPU it targets): their values join the key.
+POCL_BUILD_VARIABLES = ("POCL_EXTRA_BUILD_FLAGS", "POCL_LLVM_CPU_NAME")
 #: The first line of a program binary's file; a file that starts otherwise is not used.
 FORMAT_LINE = b"clsky program binary 1\n"
 _DIGEST_SIZE = 32
+
+
+def _runtime_options(context, options) -> str:
+    """The build options as PyOpenCL hands them to the runtime: with its own include path and what the
+    environment's ``PYOPENCL_BUILD_OPTIONS`` adds to every build."""
+    try:
+        return cl.Program._process_build_options(context, list(options))[0].decode("utf-8", "replace")
+    except (AttributeError, TypeError):        # a PyOpenCL without that classmethod: the same inputs
+        return "\n".join([*options, "PYOPENCL_BUILD_OPTIONS=" + os.environ.get("PYOPENCL_BUILD_OPTIONS", "")])
 
 
 def applies(context) -> bool:
@@ -60,8 +75,9 @@ def binary_path(context, source: str, options) -> pathlib.Path | None:
         return None
     device = context.devices[0]
     platform = device.platform
-    words = [FORMAT_LINE.decode(), source, "\n".join(options), device.name, device.vendor, device.version,
-             device.driver_version, platform.name, platform.version, cl.VERSION_TEXT]
+    words = [FORMAT_LINE.decode(), source, _runtime_options(context, options), device.name, device.vendor,
+             device.version, device.driver_version, platform.name, platform.version, cl.VERSION_TEXT,
+             *(f"{name}={os.environ.get(name, '')}" for name in POCL_BUILD_VARIABLES)]
     key = hashlib.sha256("\0".join(words).encode("utf-8")).hexdigest()
     return directory / f"{key}.bin"
 
@@ -98,10 +114,11 @@ def _from_binary(context, binary: bytes, options):
 def build(context, source: str, options) -> cl.Program:
     """``cl.Program(context, source).build(options)``, from the binary kept on disk where there is a valid
     one (module docstring). Without one, the program is built from source, its binary kept for the next
-    process, and the program returned is the one built from that binary: PoCL keys the work-group
-    functions it compiles at a kernel's first launch by the program's hash, which differs between a
-    program from source and one from its binary, so that every run launches binary programs and a
-    machine compiles each kernel's functions once, not once from source and again from the binary.
+    process, and the program returned is the one built from that binary (the source build's where the
+    runtime refuses it): PoCL keys the work-group functions it compiles at a kernel's first launch by
+    the program's hash, which differs between a program from source and one from its binary, so that
+    every run launches binary programs and a machine compiles each kernel's functions once, not once
+    from source and again from the binary.
     Build errors are PyOpenCL's, from the source build."""
     options = list(options)
     path = binary_path(context, source, options)

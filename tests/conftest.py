@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import shutil
+import tempfile
 import time
 
 import numpy as np
@@ -43,6 +45,13 @@ def _deadline():
 
 def pytest_configure(config):
     _deadline()                                  # a malformed value stops the run before any test
+    if not os.environ.get("CLSKY_CACHE_DIR"):
+        # clsky's disk cache (clsky/_cache.py: colour-science's constants, PoCL programs' binaries) of
+        # this session alone, for it and every process it starts: the tests neither depend on what earlier
+        # runs left in ~/.cache/clsky nor fill it (PoCL's own cache stays where it is)
+        directory = tempfile.mkdtemp(prefix="clsky-test-cache-")
+        os.environ["CLSKY_CACHE_DIR"] = directory
+        config.add_cleanup(lambda: shutil.rmtree(directory, ignore_errors=True))
 
 
 #: Under a deadline these run first (in this order, the rest after them in their usual order): the

@@ -25,7 +25,9 @@ from clsky.errors import ParameterError  # noqa: E402
 
 @pytest.fixture
 def cache_home(tmp_path, monkeypatch):
-    """An empty XDG_CACHE_HOME, and the in-process constants forgotten before and after."""
+    """An empty XDG_CACHE_HOME (no CLSKY_CACHE_DIR), and the in-process constants forgotten before and
+    after."""
+    monkeypatch.delenv("CLSKY_CACHE_DIR", raising=False)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     colour_constants._constants.cache_clear()
     yield tmp_path
@@ -61,9 +63,9 @@ def test_first_use_writes_the_file_and_later_uses_read_the_same_values(cache_hom
     assert_same_as_colour_science()
     assert path.is_file()
     colour_constants._constants.cache_clear()
-    written = path.stat().st_mtime_ns
+    written = path.stat()
     assert_same_as_colour_science()                  # from the file
-    assert path.stat().st_mtime_ns == written        # read, not rewritten
+    assert (path.stat().st_ino, path.stat().st_mtime_ns) == (written.st_ino, written.st_mtime_ns)  # not rewritten
 
 
 def test_the_values_are_read_only(cache_home):
@@ -133,6 +135,36 @@ def test_a_cache_path_that_is_a_file_only_costs_the_import(cache_home):
     assert (cache_home / "clsky").is_file()
 
 
+def test_clsky_cache_dir_comes_first_when_absolute(cache_home, monkeypatch):
+    monkeypatch.setenv("CLSKY_CACHE_DIR", str(cache_home / "own"))
+    assert colour_constants.cache_path("1.2.3") == cache_home / "own" / "colour-science-1.2.3.npz"
+    monkeypatch.setenv("CLSKY_CACHE_DIR", "relative")
+    assert colour_constants.cache_path("1.2.3") == cache_home / "clsky" / "colour-science-1.2.3.npz"
+
+
+def zero_dimensional_wavelengths(path):
+    """Arrays that load but have the wrong rank (a 0-d array has no len())."""
+    with np.load(path) as data:
+        arrays = {name: data[name] for name in data.files}
+    arrays["cmfs_wavelengths"] = np.array(500.0)
+    np.savez(path, **arrays)
+
+
+def test_a_file_of_arrays_of_the_wrong_rank_is_ignored(cache_home):
+    colour_constants.cie_1931_cmfs()
+    path = colour_constants.cache_path()
+    zero_dimensional_wavelengths(path)
+    assert colour_constants._read(path, colour_constants.colour_science_version()) is None
+
+
+def test_another_copy_of_colour_science_on_the_path_writes_no_file(cache_home, monkeypatch):
+    """The file's name says the installed distribution's version; values from a colour-science whose
+    own version differs (another copy earlier on the path) are used but not kept under that name."""
+    monkeypatch.setattr(colour, "__version__", "0.0.0-other-copy")
+    assert_same_as_colour_science()
+    assert not colour_constants.cache_path().exists()
+
+
 def test_a_relative_xdg_cache_home_is_ignored(cache_home, monkeypatch):
     """The XDG Base Directory specification: a relative path in XDG_CACHE_HOME is invalid; ~/.cache then."""
     monkeypatch.setenv("XDG_CACHE_HOME", "relative/cache")
@@ -157,7 +189,7 @@ def test_a_run_with_the_file_does_not_import_colour_science(tmp_path):
               "m = white_balance_matrix([1.0, 0.9, 0.5]); lab = linear_srgb_to_oklab(np.ones((1, 3)));"
               "xyz = colorimetry.spectral_to_xyz(np.ones(3), np.array([450.0, 550.0, 650.0]));"
               "print('colour' in sys.modules, repr(m.tolist()), repr(xyz.tolist()))")
-    env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path))
+    env = dict(os.environ, CLSKY_CACHE_DIR=str(tmp_path))
     runs = [subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120)
             for _ in range(2)]
     for run in runs:

@@ -32,6 +32,7 @@ def context():
 
 @pytest.fixture
 def cache_home(tmp_path, monkeypatch):
+    monkeypatch.delenv("CLSKY_CACHE_DIR", raising=False)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     return tmp_path
 
@@ -76,10 +77,17 @@ def test_the_second_build_comes_from_the_binary_and_computes_the_same_bits(conte
     assert np.array_equal(run(context, first), run(context, from_binary))
 
 
-def test_other_options_or_source_are_other_files(context, cache_home):
+def test_other_options_or_source_are_other_files(context, cache_home, monkeypatch):
     path = program_binaries.binary_path(context, SOURCE, OPTIONS)
     assert program_binaries.binary_path(context, SOURCE, ["-DSCALE=0.25"]) != path
     assert program_binaries.binary_path(context, SOURCE + "\n", OPTIONS) != path
+    assert program_binaries.binary_path(context, SOURCE, OPTIONS) == path
+    # what the environment adds to every build: PyOpenCL's options, PoCL's flags and target
+    for name, value in [("PYOPENCL_BUILD_OPTIONS", "-cl-fast-relaxed-math"), ("POCL_EXTRA_BUILD_FLAGS", "-O0"),
+                        ("POCL_LLVM_CPU_NAME", "znver3")]:
+        with monkeypatch.context() as patch:
+            patch.setenv(name, value)
+            assert program_binaries.binary_path(context, SOURCE, OPTIONS) != path, name
     assert program_binaries.binary_path(context, SOURCE, OPTIONS) == path
 
 
