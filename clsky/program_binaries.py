@@ -12,8 +12,8 @@ serialises processes with a lock file that a killed process leaves behind (the n
 for it). So clsky keeps PoCL's binaries itself, as llama.cpp's OpenCL backend does for every runtime
 (ggml-opencl's ``cl-program-cache``):
 
-- the key is a SHA-256 of the program's source text, its build options as PyOpenCL passes them (its
-  include path and ``PYOPENCL_BUILD_OPTIONS`` added), the device (name, vendor, version, driver
+- the key is a SHA-256 of the program's source text, its build options as PyOpenCL passes them
+  (``PYOPENCL_BUILD_OPTIONS`` added; its include path without the virtual environment's place), the device (name, vendor, version, driver
   version), the platform (name, version: PoCL's includes its LLVM version and build), PyOpenCL's version
   and PoCL's build variables (:data:`POCL_BUILD_VARIABLES`);
 - the file, ``programs/<key>.bin`` in clsky's cache directory (:mod:`clsky._cache`), holds a format line,
@@ -53,12 +53,15 @@ _DIGEST_SIZE = 32
 
 
 def _runtime_options(context, options) -> str:
-    """The build options as PyOpenCL hands them to the runtime: with its own include path and what the
-    environment's ``PYOPENCL_BUILD_OPTIONS`` adds to every build."""
+    """The build options as PyOpenCL hands them to the runtime: with what the environment's
+    ``PYOPENCL_BUILD_OPTIONS`` adds to every build, and its include path (``-I .../pyopencl/cl``) written
+    as ``<pyopencl>/cl``, so that a new virtual environment finds the binaries of the old one (clsky's
+    programs include no file: the path changes no code)."""
     try:
-        return cl.Program._process_build_options(context, list(options))[0].decode("utf-8", "replace")
+        text = cl.Program._process_build_options(context, list(options))[0].decode("utf-8", "replace")
     except (AttributeError, TypeError):        # a PyOpenCL without that classmethod: the same inputs
-        return "\n".join([*options, "PYOPENCL_BUILD_OPTIONS=" + os.environ.get("PYOPENCL_BUILD_OPTIONS", "")])
+        text = "\n".join([*options, "PYOPENCL_BUILD_OPTIONS=" + os.environ.get("PYOPENCL_BUILD_OPTIONS", "")])
+    return text.replace(os.path.dirname(os.path.abspath(cl.__file__)), "<pyopencl>")
 
 
 def applies(context) -> bool:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import types
 
 import numpy as np
@@ -89,6 +90,13 @@ def test_other_options_or_source_are_other_files(context, cache_home, monkeypatc
             patch.setenv(name, value)
             assert program_binaries.binary_path(context, SOURCE, OPTIONS) != path, name
     assert program_binaries.binary_path(context, SOURCE, OPTIONS) == path
+
+
+def test_the_key_does_not_hold_the_virtual_environments_place(context):
+    """PyOpenCL adds -I <its package>/cl to every build: a new virtual environment keeps the keys."""
+    options = program_binaries._runtime_options(context, OPTIONS)
+    assert "-DSCALE=0.125" in options and "<pyopencl>" in options
+    assert os.path.dirname(cl.__file__) not in options
 
 
 def flip_a_binary_byte(path):
