@@ -1,8 +1,7 @@
 """clsky's own disk cache: where it is, and how a file gets into it.
 
-Two things are kept there, each because recomputing it costs every process a measurable share of a small
-run (README "Speed"): colour-science's constants (:mod:`clsky.colour_constants`) and PoCL programs'
-binaries (:mod:`clsky.program_binaries`). The directory is ``$CLSKY_CACHE_DIR`` where that is set to an
+What is kept there is what would cost every process a measurable share of a small run to recompute
+(README "Speed"): colour-science's constants (:mod:`clsky.colour_constants`). The directory is ``$CLSKY_CACHE_DIR`` where that is set to an
 absolute path (the test suite gives each session its own), else ``$XDG_CACHE_HOME/clsky`` or
 ``~/.cache/clsky`` (an XDG_CACHE_HOME that is not an absolute path is ignored, as the XDG Base Directory
 specification asks); without a home directory there is none. Files land through

@@ -2,9 +2,8 @@
 
 Kernel sources live in ``kernels/`` (shipped as the ``clsky.kernels`` resource package). A program is
 an ordered list of those files plus, where needed, generated declarations (:class:`Source`); nothing
-uses ``#include``. Programs are cached in-process by (context, sources, sorted options); on PoCL their
-binaries are kept on disk (:mod:`clsky.program_binaries`: a build from source costs PoCL 22-28 ms even
-when its own cache has the program), elsewhere the runtime or PyOpenCL caches them.
+uses ``#include``. Programs are cached in-process by (context, sources, sorted options); on disk the
+runtime caches them (PoCL, NVIDIA) or PyOpenCL does (the others).
 
 Device choice (:func:`default_device`): ``PYOPENCL_CTX`` if set; else a GPU; else Intel's CPU OpenCL
 runtime when it is registered (an opt-in, ``scripts/intel_opencl.sh``: the same frames as PoCL, the ray
@@ -36,8 +35,6 @@ try:
     import pyopencl.tools
 except ImportError as error:  # pragma: no cover - exercised only on broken installs
     raise ImportError("clsky needs pyopencl: pip install pyopencl (and an OpenCL driver, see README)") from error
-
-from . import program_binaries
 
 __all__ = ["KernelBuildError", "NoDeviceError", "Source", "Engine", "memory_pool", "upload_padded", "list_devices",
            "default_device", "make_context", "real_vector_dtype", "check_dtype", "INSTALL_HINT", "pocl_cache_problem",
@@ -337,7 +334,7 @@ def build_program(context, sources, options=()):
     names = [s.label if isinstance(s, Source) else s for s in sources]
     try:
         with quiet_compiler_output():
-            program = program_binaries.build(context, "".join(parts), options)
+            program = cl.Program(context, "".join(parts)).build(options=list(options))
     except cl.Error as error:
         device = context.devices[0]
         raise KernelBuildError(f"building {names} with options {list(options)} on {device.name!r} "
