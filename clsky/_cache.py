@@ -1,10 +1,10 @@
 """clsky's own disk cache: where it is, and how a file gets into it.
 
 What is kept there is what would cost every process a measurable share of a small run to recompute
-(README "Speed"): colour-science's constants (:mod:`clsky.colour_constants`). The directory is ``$CLSKY_CACHE_DIR`` where that is set to an
-absolute path (the test suite gives each session its own), else ``$XDG_CACHE_HOME/clsky`` or
-``~/.cache/clsky`` (an XDG_CACHE_HOME that is not an absolute path is ignored, as the XDG Base Directory
-specification asks); without a home directory there is none. Files land through
+(README "Speed"): colour-science's constants (:mod:`clsky.colour_constants`). The directory is
+``$CLSKY_CACHE_DIR`` where that is set to an absolute path (the test suite gives each session its own),
+else ``$XDG_CACHE_HOME/clsky`` or ``~/.cache/clsky`` (an XDG_CACHE_HOME that is not an absolute path is
+ignored, as the XDG Base Directory specification asks); without a home directory there is none. Files land through
 :func:`clsky._files.atomic_write` (a unique temporary beside the target, renamed onto it), so concurrent
 writers leave one writer's whole file and one that raises (KeyboardInterrupt included) leaves nothing;
 each reader validates what it reads (its own format, a SHA-256 digest) and ignores a file that fails. A

@@ -46,9 +46,9 @@ def _deadline():
 def pytest_configure(config):
     _deadline()                                  # a malformed value stops the run before any test
     if not os.environ.get("CLSKY_CACHE_DIR"):
-        # clsky's disk cache (clsky/_cache.py: colour-science's constants, PoCL programs' binaries) of
-        # this session alone, for it and every process it starts: the tests neither depend on what earlier
-        # runs left in ~/.cache/clsky nor fill it (PoCL's own cache stays where it is)
+        # clsky's disk cache (clsky/_cache.py: colour-science's constants) of this session alone, for it
+        # and every process it starts: the tests neither depend on what earlier runs left in
+        # ~/.cache/clsky nor fill it (PoCL's own cache stays where it is)
         directory = tempfile.mkdtemp(prefix="clsky-test-cache-")
         os.environ["CLSKY_CACHE_DIR"] = directory
         config.add_cleanup(lambda: shutil.rmtree(directory, ignore_errors=True))
