@@ -288,11 +288,40 @@ def translate_errors():
 
 
 def dask_setup(worker):
-    """Run by Dask in each worker process of an embedded LocalCluster at its start (``preload``): the worker
-    ignores SIGINT. Ctrl-C in a terminal reaches the whole process group; the client (clsky) turns it
-    into a clean stop and closes the cluster, while the workers, interrupted too, printed a traceback
-    each."""
+    """Run by Dask in each worker process of an embedded LocalCluster at its start (``preload``).
+
+    - The worker ignores SIGINT. Ctrl-C in a terminal reaches the whole process group; the client (clsky)
+      turns it into a clean stop and closes the cluster, while the workers, interrupted too, printed a
+      traceback each.
+    - The worker's logger drops the connection errors of its own shutdown
+      (:class:`ClosingWorkerConnectionFilter`).
+    """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    logging.getLogger("distributed.worker").addFilter(ClosingWorkerConnectionFilter(worker))
+
+
+class ClosingWorkerConnectionFilter(logging.Filter):
+    """Drops a worker's log records that carry a connection error (an :class:`OSError`, Dask's
+    CommClosedError included) once the worker is closing or closed; every other record passes.
+
+    A worker that closes stops its heartbeat's timer and then closes its connection pool, but a heartbeat
+    already on its way to the scheduler is not cancelled: it fails on the closed pool and distributed
+    (2026.8, ``Worker.heartbeat``) logs "Failed to communicate with scheduler during heartbeat." with the
+    CommClosedError's traceback, at ERROR level, past the cluster's ``silence_logs``. That was a traceback on
+    the terminal of a run that had succeeded (``clsky animate --workers 2``, once in CI). The same error while
+    the worker runs (its scheduler gone mid-run) is still logged.
+    """
+
+    def __init__(self, worker):
+        super().__init__()
+        self.worker = worker
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        from distributed.core import Status
+
+        error = record.exc_info[1] if record.exc_info else None
+        closing = getattr(self.worker, "status", None) in (Status.closing, Status.closed)
+        return not (closing and isinstance(error, OSError))
 
 
 def build_table_task(atmosphere, settings, backend="opencl", fast_math=False):

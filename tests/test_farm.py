@@ -7,6 +7,7 @@
    bit for bit; a sweep is checked whole before any work and lands whole or not at all.
 3. ``--workers`` / ``--scheduler``: bad values and a missing Dask are one line, exit status 2, naming the
    option, before any work.
+4. A farm that closes while its workers' heartbeats wait for the scheduler prints nothing (3-4 s).
 
 One LocalCluster of two spawned workers serves the module; the animation is tiny (4 frames of 24 x 24
 pixels from a 9 x 33 x 7 table). The module takes 25 s on the shared 2-core machine at load average 3
@@ -313,3 +314,71 @@ def test_without_dask_the_option_says_how_to_install_it(option, tmp_path):
     assert result.stderr == (f"clsky: error: {option} needs Dask (dask.distributed), which is not installed: "
                              f"pip install 'clsky[dask]'\n")
     assert list(tmp_path.iterdir()) == []
+
+
+# 4. Shutdown -------------------------------------------------------------------------------------
+
+#: A farm that closes while each worker's heartbeat waits for the scheduler's answer: the scheduler (in this
+#: process, a LocalCluster's) answers heartbeats only after 30 s, so the workers close their connections
+#: under them. Before clsky.farm.ClosingWorkerConnectionFilter each worker printed distributed's "Failed to
+#: communicate with scheduler during heartbeat." and a CommClosedError's traceback (as once in CI, at the end
+#: of `clsky animate --workers 2`).
+HEARTBEAT_IN_FLIGHT = """
+import asyncio, sys, time
+from clsky.farm import Farm
+
+def stall_heartbeats(dask_scheduler):
+    answer = dask_scheduler.handlers["heartbeat_worker"]
+    async def stalled(*args, **kwargs):
+        print("heartbeat stalled", file=sys.stderr, flush=True)
+        await asyncio.sleep(30)
+        return answer(*args, **kwargs)
+    dask_scheduler.handlers["heartbeat_worker"] = stalled
+
+with Farm(workers=2) as farm:
+    farm.client.wait_for_workers(2, timeout=120)
+    farm.client.run_on_scheduler(stall_heartbeats)
+    time.sleep(1.5)                  # three heartbeat periods (0.5 s for small clusters): both workers wait
+print("closed")
+"""
+
+
+def test_a_heartbeat_cut_short_by_the_farms_close_prints_nothing(tmp_path):
+    """The farm closes with both workers' heartbeats on their way (2.4 s on the quiet 2-core machine):
+    nothing on stderr but the test's own lines, and the close does not wait for the stalled answers."""
+    result = subprocess.run([sys.executable, "-c", HEARTBEAT_IN_FLIGHT], cwd=tmp_path, capture_output=True,
+                            text=True, timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert result.stdout == "closed\n"
+    lines = result.stderr.splitlines()
+    assert lines.count("heartbeat stalled") >= 2, "no heartbeat was in flight: the test did not test anything"
+    assert set(lines) == {"heartbeat stalled"}, result.stderr[-2000:]
+
+
+def test_the_filter_drops_connection_errors_of_a_closing_worker_only():
+    """clsky.farm.ClosingWorkerConnectionFilter on records like distributed's: a connection error (an
+    OSError) passes while the worker runs and is dropped once it closes; other records always pass."""
+    import logging
+    import types
+
+    from distributed.comm.core import CommClosedError
+    from distributed.core import Status
+
+    from clsky.farm import ClosingWorkerConnectionFilter
+
+    def record(error):
+        try:
+            raise error
+        except Exception:
+            return logging.LogRecord("distributed.worker", logging.ERROR, __file__, 1, "Failed to communicate "
+                                     "with scheduler during heartbeat.", None, sys.exc_info())
+
+    worker = types.SimpleNamespace(status=Status.running)
+    keep = ClosingWorkerConnectionFilter(worker).filter
+    closed, unexpected = CommClosedError("Stream is closed"), ValueError("a bug")
+    plain = logging.LogRecord("distributed.worker", logging.ERROR, __file__, 1, "no exception", None, None)
+    assert keep(record(closed)) and keep(record(unexpected)) and keep(plain)
+    for status in (Status.closing, Status.closed):
+        worker.status = status
+        assert not keep(record(closed)) and not keep(record(ConnectionResetError()))
+        assert keep(record(unexpected)) and keep(plain)
