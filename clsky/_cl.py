@@ -546,9 +546,22 @@ class Engine:
         self.allocator = allocator
         self.profile = profile
         self.events: list = []
-        self.program = build_program(self.ctx, self.program_sources(), self.build_options())
-        self.kernels = {k.function_name: k for k in self.program.all_kernels()}
         self._feature_kernels: dict = {}
+
+    @functools.cached_property
+    def program(self):
+        """The program of :meth:`program_sources` with :meth:`build_options`, built at its first use.
+
+        An engine whose atmosphere has compile-time features (ozone, a ground: :meth:`kernels_with`) may
+        never launch a kernel of the plain program: the physical preset's single-scattering and
+        transmittance engines do not, nor the pilot's renderer; built in ``__init__``, those programs took
+        7 of the default animation's 22 PoCL builds (22-60 ms each on one core; README "Speed")."""
+        return build_program(self.ctx, self.program_sources(), self.build_options())
+
+    @functools.cached_property
+    def kernels(self) -> dict:
+        """{name: kernel} of :attr:`program` (built at the first use of either)."""
+        return {k.function_name: k for k in self.program.all_kernels()}
 
     def kernels_with(self, defines=()):
         """The kernels of this engine's program built with the extra ``-D`` options ``defines`` (an

@@ -185,3 +185,32 @@ def test_gpu_checks_script_runs_only_the_steps_asked(tmp_path):
     assert result.returncode == 0, result.stdout[-4000:] + result.stderr[-2000:]
     assert sorted(path.name for path in out.iterdir() if path.is_file()) == ["copies.txt", "devices.txt",
                                                                              "machine.txt", "profile.txt"]
+
+
+def test_an_engine_builds_its_plain_program_only_when_it_launches_from_it(cl_context):
+    """clsky._cl.Engine builds its plain program (no compile-time features) at its first use: a table of
+    the physical preset (ozone, a ground) launches only the feature variants of the single-scattering and
+    transmittance programs, so their plain programs are never built (7 of the default animation's 22
+    builds were such); the preset without features (atmosphere-plus) builds and uses the plain ones. A
+    context of its own, so that other tests' builds do not count."""
+    import pyopencl as cl
+
+    import clsky
+    from conftest import SMALL_TABLE
+
+    def built(context, name):
+        """The option sets of the programs built in ``context`` whose last source is ``name``."""
+        return [options for (pointer, sources, options) in _cl._program_cache
+                if pointer == context.int_ptr and sources[-1] == name]
+
+    features = cl.Context(devices=[cl_context.devices[0]])
+    clsky.ScatteringTable.build(clsky.preset("physical"), SMALL_TABLE, ctx=features)
+    for name in ("single.cl", "transmittance.cl"):
+        variants = built(features, name)
+        assert variants and all("-DOZONE=1" in options and "-DGROUND=1" in options for options in variants), name
+    plain = cl.Context(devices=[cl_context.devices[0]])
+    clsky.ScatteringTable.build(clsky.preset("atmosphere-plus").replace(ground_albedo=0.0),
+                                SMALL_TABLE.replace(mode="atmosphere-plus", azimuth_harmonics=0), ctx=plain)
+    for name in ("single.cl", "transmittance.cl"):
+        variants = built(plain, name)
+        assert variants and not any("-DOZONE=1" in options for options in variants), name
