@@ -607,12 +607,12 @@ def spectral_frame_to_linear_srgb(frame, wavelengths):
     return np.maximum(rgb, 0.0)
 
 
-def three_wavelength_frame_to_linear_srgb(frame, wavelengths):
+def three_wavelength_frame_to_linear_srgb(frame, wavelengths, ctx=None):
     """The frame conversion of absolute three-wavelength animations: spectral radiance (..., 3)
-    [W m^-2 sr^-1 nm^-1] at three ``wavelengths`` [nm] -> CIE 1931 XYZ (:data:`THREE_WAVELENGTH_CONVERSION`)
-    -> linear sRGB (..., 3) [cd/m^2]; negative components clipped to 0 (as
-    :func:`spectral_frame_to_linear_srgb`)."""
-    xyz = colorimetry.three_wavelength_to_xyz(frame, wavelengths, THREE_WAVELENGTH_CONVERSION)
+    [W m^-2 sr^-1 nm^-1] at three ``wavelengths`` [nm] -> CIE 1931 XYZ (:data:`THREE_WAVELENGTH_CONVERSION`;
+    on the device of ``ctx`` when given, the same values) -> linear sRGB (..., 3) [cd/m^2]; negative
+    components clipped to 0 (as :func:`spectral_frame_to_linear_srgb`)."""
+    xyz = colorimetry.three_wavelength_to_xyz(frame, wavelengths, THREE_WAVELENGTH_CONVERSION, ctx=ctx)
     return np.maximum(colorimetry.xyz_to_linear_srgb(xyz), 0.0)
 
 
@@ -767,12 +767,14 @@ def frames_rendered(renderer: SkyRenderer, prepared, config: AnimationConfig, lo
 def convert_frames(renderer: SkyRenderer, config: AnimationConfig, frames):
     """The renderer's HDR frames ``frames`` ({name: frame}) in the animation's units: absolute frames
     converted to linear sRGB [cd/m^2] (:func:`spectral_frame_to_linear_srgb` with ``config.wavelengths``,
-    else :func:`three_wavelength_frame_to_linear_srgb`), relative ones as they are."""
+    else :func:`three_wavelength_frame_to_linear_srgb` on the renderer's device: bit for bit the host's
+    values, for half their CPU time, README "Speed"), relative ones as they are."""
     if config.wavelengths is not None:
         frames = {name: spectral_frame_to_linear_srgb(frame, renderer.wavelengths) for name, frame in frames.items()}
     elif config.absolute:
         wavelengths = renderer.table.atmosphere.wavelengths
-        frames = {name: three_wavelength_frame_to_linear_srgb(frame, wavelengths) for name, frame in frames.items()}
+        frames = {name: three_wavelength_frame_to_linear_srgb(frame, wavelengths, renderer.engine.ctx)
+                  for name, frame in frames.items()}
     return frames
 
 
