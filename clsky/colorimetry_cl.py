@@ -126,7 +126,10 @@ _engines = threading.local()
 def solar_power_law_xyz(radiance, wavelengths, ctx):
     """``colorimetry.three_wavelength_to_xyz(radiance, wavelengths, 'solar_power_law_tabulated')`` computed on
     the device of ``ctx`` (a pyopencl.Context), the same values bit for bit; this thread's engine for that
-    context (made at its first call)."""
+    context (made at its first call). A device without double precision (a float32 renderer's) leaves
+    the conversion to the host: it is float64."""
+    if not _cl.has_fp64(ctx.devices[0]):
+        return colorimetry._solar_power_law_tabulated_xyz(radiance, np.asarray(wavelengths, dtype=np.float64))
     engines = _engines.__dict__.setdefault("by_context", {})
     engine = engines.get(ctx.int_ptr)
     if engine is None:

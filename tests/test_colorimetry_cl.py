@@ -143,3 +143,15 @@ def test_the_module_function_keeps_one_engine_per_thread_and_context(cl_context)
     engine = colorimetry_cl._engines.by_context[cl_context.int_ptr]
     solar_power_law_xyz(radiance, WAVELENGTHS[1], cl_context)
     assert colorimetry_cl._engines.by_context[cl_context.int_ptr] is engine
+
+
+def test_a_device_without_double_precision_converts_on_the_host(cl_context, monkeypatch):
+    """A float32 renderer's device may lack fp64: the conversion (float64) then stays on the host, the same
+    values, and no engine is made for it."""
+    from clsky import colorimetry_cl
+
+    monkeypatch.setattr(_cl, "has_fp64", lambda device: False)
+    monkeypatch.setattr(colorimetry_cl, "PowerLawEngine", None)      # making one would raise
+    radiance = sky_like(np.random.default_rng(6), (30,))
+    assert_same_bits(solar_power_law_xyz(radiance, WAVELENGTHS[1], cl_context),
+                     colorimetry._solar_power_law_tabulated_xyz(radiance, np.array(WAVELENGTHS[1])))
