@@ -84,14 +84,14 @@ class PowerLawEngine(_cl.Engine):
         lit = top > 0
         floor = colorimetry.POWER_LAW_FLOOR * top[lit]
         n_lit = int(floor.size)
+        if not n_lit:
+            return np.zeros(np.shape(radiance)[:-1] + (3,))
         stride = -(-n_lit // self.vector_width) * self.vector_width
         rows = np.empty((6, stride))        # r_0, r_1, r_2, then log r_0, log r_1, log r_2; padding 0
         rows[:, n_lit:] = 0.0
         for k, r in enumerate(ratio):
             np.maximum(r[lit], floor, out=rows[k, :n_lit])
             np.log(rows[k, :n_lit], out=rows[3 + k, :n_lit])
-        if not n_lit:
-            return np.zeros(np.shape(radiance)[:-1] + (3,))
         pixels = np.flatnonzero(lit).astype(np.int32)
         tables = self._device_tables(tuple(lam.tolist()))
         (delta_0, inner, outer), (delta_1, _, _) = colorimetry._power_law_tables(tuple(lam.tolist()))

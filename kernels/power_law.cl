@@ -44,8 +44,8 @@ inline void interpolate_columns(__global const real *table, const int n_nodes, c
 /* lit: rows of `stride` values: r_0, r_1, r_2 (the floored ratios, wavelengths ascending), then their
  * logarithms; lit pixel j at column j (j < n_lit; the rows are padded to a multiple of VECTOR_WIDTH).
  * pixels[j]: its pixel's index in xyz (n_pixels rows of X, Y, Z), ascending; every other pixel is unlit
- * and gets 0. inner_k / outer_k: B_k on n_inner nodes of step
- * step_inner, O_k on n_outer nodes of step step_outer (X, Y, Z columns one after the other). */
+ * and gets 0. inner_k / outer_k: B_k on n_inner nodes of step step_inner, O_k on n_outer nodes of step
+ * step_outer (X, Y, Z columns one after the other). */
 __kernel void power_law_xyz(__global const real *lit, const int stride, const int n_lit, __global const int *pixels,
                             __global const real *inner_0, __global const real *outer_0,
                             __global const real *inner_1, __global const real *outer_1,
@@ -59,13 +59,13 @@ __kernel void power_law_xyz(__global const real *lit, const int stride, const in
     realv pair[2][3];
     for (int k = 0; k < 2; ++k) {
 #if VECTOR_WIDTH == 8
-        const realv log_low = vload8(0, lit + (3 + k) * stride + first);
-        const realv log_high = vload8(0, lit + (4 + k) * stride + first);
-        const realv ratio = vload8(0, lit + k * stride + first);
+        const realv log_low = vload8(0, lit + (size_t)(3 + k) * stride + first);
+        const realv log_high = vload8(0, lit + (size_t)(4 + k) * stride + first);
+        const realv ratio = vload8(0, lit + (size_t)k * stride + first);
 #else
-        const realv log_low = lit[(3 + k) * stride + first];
-        const realv log_high = lit[(4 + k) * stride + first];
-        const realv ratio = lit[k * stride + first];
+        const realv log_low = lit[(size_t)(3 + k) * stride + first];
+        const realv log_high = lit[(size_t)(4 + k) * stride + first];
+        const realv ratio = lit[(size_t)k * stride + first];
 #endif
         const realv q = log_high - log_low;
         const real delta = k ? delta_1 : delta_0;
