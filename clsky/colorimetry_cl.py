@@ -24,8 +24,8 @@ from .solar import solar_irradiance_astm_g173
 
 __all__ = ["PowerLawEngine", "solar_power_law_xyz"]
 
-#: Most pixels a frame may have: the kernel indexes the XYZ values (3 a pixel) with 32-bit integers' range.
-MAX_PIXELS = np.iinfo(np.int32).max // 3
+#: Most pixels a frame may have: the kernel takes pixel indices and counts as 32-bit integers.
+MAX_PIXELS = np.iinfo(np.int32).max
 
 #: Work-items per work-group of the kernel (any OpenCL device accepts 64; the global size is rounded up).
 WORK_GROUP = 64
@@ -64,13 +64,14 @@ class PowerLawEngine(_cl.Engine):
 
         held = self._buffers.get(name)
         if held is None or held.size < size:
-            held = self._buffers[name] = cla.empty(self.queue, max(size, 1), dtype)
-        return held[:size] if size else held[:1]
+            held = self._buffers[name] = cla.empty(self.queue, size, dtype)
+        return held[:size]
 
     def xyz(self, radiance, wavelengths):
         """CIE 1931 XYZ (..., 3) of ``radiance`` (..., 3) at three distinct ``wavelengths`` [nm] (any order;
         checked by :func:`clsky.colorimetry.three_wavelength_to_xyz`): ``_solar_power_law_tabulated_xyz``'s
-        values, bit for bit."""
+        values, bit for bit, for finite radiance (what the renderers give: no NaN or Inf leaves a kernel;
+        with an infinite value the twin raises an IndexError and this returns non-finite values)."""
         wavelengths = np.asarray(wavelengths, dtype=np.float64)
         order = np.argsort(wavelengths)
         lam = wavelengths[order]
@@ -128,10 +129,10 @@ def solar_power_law_xyz(radiance, wavelengths, ctx):
     the device of ``ctx`` (a pyopencl.Context), the same values bit for bit; this thread's engine for that
     context (made at its first call). A device without double precision (a float32 renderer's) leaves
     the conversion to the host: it is float64."""
-    if not _cl.has_fp64(ctx.devices[0]):
-        return colorimetry._solar_power_law_tabulated_xyz(radiance, np.asarray(wavelengths, dtype=np.float64))
     engines = _engines.__dict__.setdefault("by_context", {})
-    engine = engines.get(ctx.int_ptr)
+    if ctx.int_ptr not in engines:                    # None: a device without fp64
+        engines[ctx.int_ptr] = PowerLawEngine(ctx) if _cl.has_fp64(ctx.devices[0]) else None
+    engine = engines[ctx.int_ptr]
     if engine is None:
-        engine = engines[ctx.int_ptr] = PowerLawEngine(ctx)
+        return colorimetry._solar_power_law_tabulated_xyz(radiance, np.asarray(wavelengths, dtype=np.float64))
     return engine.xyz(radiance, wavelengths)

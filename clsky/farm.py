@@ -302,7 +302,8 @@ def dask_setup(worker):
 
 class ClosingWorkerConnectionFilter(logging.Filter):
     """Drops a worker's log records that carry a connection error (an :class:`OSError`, Dask's
-    CommClosedError included) once the worker is closing or closed; every other record passes.
+    CommClosedError included) once the worker is closing (gracefully too: retired) or closed; every other
+    record passes.
 
     A worker that closes stops its heartbeat's timer and then closes its connection pool, but a heartbeat
     already on its way to the scheduler is not cancelled: it fails on the closed pool and distributed
@@ -320,7 +321,7 @@ class ClosingWorkerConnectionFilter(logging.Filter):
         from distributed.core import Status
 
         error = record.exc_info[1] if record.exc_info else None
-        closing = getattr(self.worker, "status", None) in (Status.closing, Status.closed)
+        closing = getattr(self.worker, "status", None) in (Status.closing_gracefully, Status.closing, Status.closed)
         return not (closing and isinstance(error, OSError))
 
 

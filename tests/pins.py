@@ -62,11 +62,11 @@ def pinned_for_device(pins: dict, ctx):
     from clsky import _cl
 
     device = _cl.describe_device(ctx.devices[0])
-    device = device if device in pins else SAME_VALUES_AS.get(device, device)
-    if device not in pins:
+    recorded = device if device in pins else SAME_VALUES_AS.get(device, device)
+    if recorded not in pins:
         pytest.skip(f"bit-for-bit values recorded on {', '.join(sorted(pins))}, not on {device} "
                     f"(scripts/record_pins.py records a device)")
-    return pins[device]
+    return pins[recorded]
 
 
 def black_preset(name):

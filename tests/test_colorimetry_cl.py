@@ -63,6 +63,7 @@ def test_the_kernel_gives_the_twins_bits(engine, wavelengths, shape):
     radiance = sky_like(np.random.default_rng(sum(shape)), shape)
     if shape == (1,):
         radiance[0] = (0.2, 0.5, 0.9)                  # a lit single pixel (sky_like's end run unlit it)
+    assert (radiance.reshape(-1, 3).max(axis=1) > 0).any(), "no lit pixel: the kernel would not run"
     expected = colorimetry._solar_power_law_tabulated_xyz(radiance, np.array(wavelengths))
     assert_same_bits(engine.xyz(radiance, wavelengths), expected)
 
@@ -77,6 +78,7 @@ def test_the_frames_reach_every_branch():
     top = ratio.max(axis=1)
     lit = top > 0
     assert 0 < lit.sum() < lit.size and not lit[0] and not lit[-1]
+    assert lit.sum() % 8, "the lit pixels fill whole double8 vectors: the padded lanes go untested"
     logs = np.log(np.maximum(ratio[lit], colorimetry.POWER_LAW_FLOOR * top[lit, None]))
     q = np.diff(logs, axis=1)
     half_width = colorimetry._Q_NODES * colorimetry.POWER_LAW_TABLE_STEPS[0]
@@ -148,10 +150,14 @@ def test_the_module_function_keeps_one_engine_per_thread_and_context(cl_context)
 def test_a_device_without_double_precision_converts_on_the_host(cl_context, monkeypatch):
     """A float32 renderer's device may lack fp64: the conversion (float64) then stays on the host, the same
     values, and no engine is made for it."""
+    import pyopencl as cl
+
     from clsky import colorimetry_cl
 
+    context = cl.Context(devices=[cl_context.devices[0]])           # no engine of this thread's for it yet
     monkeypatch.setattr(_cl, "has_fp64", lambda device: False)
     monkeypatch.setattr(colorimetry_cl, "PowerLawEngine", None)      # making one would raise
     radiance = sky_like(np.random.default_rng(6), (30,))
-    assert_same_bits(solar_power_law_xyz(radiance, WAVELENGTHS[1], cl_context),
+    assert_same_bits(solar_power_law_xyz(radiance, WAVELENGTHS[1], context),
                      colorimetry._solar_power_law_tabulated_xyz(radiance, np.array(WAVELENGTHS[1])))
+    assert colorimetry_cl._engines.by_context[context.int_ptr] is None

@@ -33,7 +33,8 @@ USE = "OCL_ICD_VENDORS=$PWD/.intel-opencl/vendors .venv/bin/clsky "
 #: with its kernel cache warm
 TWIN_TESTS = ["test_single_twin.py", "test_multiple.py", "test_azimuth.py", "test_render.py", "test_lookup.py",
               "test_table4d.py", "test_skyview.py", "test_ground.py", "test_ozone.py", "test_analytic.py",
-              "test_scales.py", "test_spectral.py", "test_table.py", "test_view_nodes.py", "test_extremes.py"]
+              "test_scales.py", "test_spectral.py", "test_table.py", "test_view_nodes.py", "test_extremes.py",
+              "test_colorimetry_cl.py"]
 
 
 @pytest.fixture(scope="module")
