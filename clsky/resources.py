@@ -472,7 +472,7 @@ def _table_held(settings, cells, orders, keep_orders=True):
 def estimate_render_memory(settings: TableSettings, image_shape, method="compare",
                            ray_settings: TableSettings | None = None, keep_orders=False,
                            hdr_output=False, count_table=True, batches=1, overlapped=False,
-                           host_workers=1, ray_march_suns=1) -> MemoryEstimate:
+                           host_workers=1, ray_march_suns=1, device_conversion=False) -> MemoryEstimate:
     """Peak memory of rendering frames of ``image_shape`` from a table of ``settings``.
 
     Parameters
@@ -507,6 +507,12 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
         Suns per ray-march launch (:meth:`clsky.render.SkyRenderer.render_raymarch_suns`, an animation's
         :func:`clsky.render.ray_march_batch`): the launch's output and download hold that many frames, and
         its float64 frames wait on the host until their turn.
+    device_conversion : bool
+        Absolute three-wavelength frames converted to XYZ on the device (:mod:`clsky.colorimetry_cl`): each
+        host thread's engine keeps its buffers (6 reals and an index a lit pixel, XYZ a pixel: 76 bytes a
+        pixel at most) and packs 72 bytes a pixel on the host (the rows it uploads, the XYZ it downloads).
+        Added on 2026-12-05 when the conversion moved: the 2-frame animations' growth went from about 0.9
+        to 1.17 GiB between 256^2 and 1024^2 (tests/test_memory.py, slow).
 
     Returns
     -------
@@ -566,6 +572,12 @@ def estimate_render_memory(settings: TableSettings, image_shape, method="compare
             Allocation("frame processing (tone map, metrics, composite, encoding)",
                        pixels * (FRAME_BYTES_PER_PIXEL[method] + (12 if hdr_output else 0)), count=processing,
                        source="frames"))
+        if device_conversion and batches == 1:
+            per_pixel += (
+                Allocation("the conversion's buffers on the device (lit pixels: 6 reals, an index; XYZ)",
+                           pixels * (6 * 8 + 4 + 3 * 8), count=processing, on_device=True, source="frames"),
+                Allocation("the conversion's host rows and XYZ (pixels, 6 + 3) float64", pixels * 72,
+                           count=processing, source="frames"))
         if ray_march_suns > 1 and method in ("compare", "raymarch"):
             more = int(ray_march_suns) - 1
             per_pixel += (
@@ -632,20 +644,22 @@ def estimate_spectral_table_memory(settings: TableSettings, batches: int, packed
 def estimate_animation_memory(settings: TableSettings, image_shape, method="compare",
                               ray_settings: TableSettings | None = None, hdr_output=False,
                               batches=None, overlapped=True, host_workers=1,
-                              packed_reads=False, ray_march_suns=1) -> MemoryEstimate:
+                              packed_reads=False, ray_march_suns=1, device_conversion=False) -> MemoryEstimate:
     """The table build, then the frames (:func:`estimate_table_memory`, :func:`estimate_render_memory`
     without the higher orders, which an animation drops once the table is built). ``batches``: None
     for the three-wavelength animation, else the spectral one's ceil(N / 3) batches
     (:func:`estimate_spectral_table_memory`, ``estimate_render_memory(..., batches=B)``).
     ``overlapped``, ``host_workers``: the frames go through the overlapped pipeline with that many host
-    threads, and ``ray_march_suns``: ``estimate_render_memory``'s. ``packed_reads``: :func:`estimate_table_memory`'s."""
+    threads, and ``ray_march_suns``, ``device_conversion``: ``estimate_render_memory``'s. ``packed_reads``:
+    :func:`estimate_table_memory`'s."""
     if batches is None:
         build = estimate_table_memory(settings, packed_reads=packed_reads)
     else:
         build = estimate_spectral_table_memory(settings, batches, packed_reads)
     render = estimate_render_memory(settings, image_shape, method, ray_settings, keep_orders=False,
                                     hdr_output=hdr_output, batches=batches or 1, overlapped=overlapped,
-                                    host_workers=host_workers, ray_march_suns=ray_march_suns)
+                                    host_workers=host_workers, ray_march_suns=ray_march_suns,
+                                    device_conversion=device_conversion)
     width, height = image_shape
     w, h, d = settings.size
     tables = f"table {w} x {h} x {d}" if batches is None else f"{batches} tables {w} x {h} x {d}"
