@@ -343,6 +343,21 @@ def _interpolate(columns, x, step, half):
     return values
 
 
+def _lit_ratios(radiance, wavelengths):
+    """The power law's inputs: (lam, the wavelengths ascending; flat, radiance as (n, 3); ratio, each
+    channel's L / E_sun(lambda) in ascending wavelength (3 arrays of n); lit, the pixels whose largest ratio
+    is positive; floor, POWER_LAW_FLOOR times that largest ratio, lit pixels only). Shared by
+    :func:`_solar_power_law_tabulated_xyz` and its device form (:mod:`clsky.colorimetry_cl`)."""
+    order = np.argsort(wavelengths)
+    lam = wavelengths[order]
+    flat = np.asarray(radiance, dtype=np.float64).reshape(-1, 3)
+    sun = solar_irradiance_astm_g173(lam)
+    ratio = [flat[:, channel] / sun[k] for k, channel in enumerate(order)]
+    top = np.maximum(np.maximum(ratio[0], ratio[1]), ratio[2])
+    lit = top > 0
+    return lam, flat, ratio, lit, POWER_LAW_FLOOR * top[lit]
+
+
 def _solar_power_law_tabulated_xyz(radiance, wavelengths):
     """:func:`_solar_power_law_xyz`'s reconstruction, its sums over 1 nm tabulated (module docstring):
     XYZ = r_1 (B_1(q_1) + O_1(clip(q_1 / Delta_1))) + r_2 (B_2(q_2) + O_2(clip(q_2 / Delta_2))), with
@@ -351,14 +366,7 @@ def _solar_power_law_tabulated_xyz(radiance, wavelengths):
     The pixels are taken one channel at a time (1-D arrays; each value is computed by the same operations
     as on rows of 3, so the same bits): 14-15 against 21-35 CPU-ms a 512 x 512 frame with (n, 3) arrays,
     whose row-wise maximum, masked rows and row takes NumPy handles slowly."""
-    order = np.argsort(wavelengths)
-    lam = wavelengths[order]
-    flat = np.asarray(radiance, dtype=np.float64).reshape(-1, 3)
-    sun = solar_irradiance_astm_g173(lam)
-    ratio = [flat[:, channel] / sun[k] for k, channel in enumerate(order)]
-    top = np.maximum(np.maximum(ratio[0], ratio[1]), ratio[2])
-    lit = top > 0
-    floor = POWER_LAW_FLOOR * top[lit]
+    lam, flat, ratio, lit, floor = _lit_ratios(radiance, wavelengths)
     ratio = [np.maximum(r[lit], floor) for r in ratio]
     log_r = [np.log(r) for r in ratio]
     step_q, step_p = POWER_LAW_TABLE_STEPS

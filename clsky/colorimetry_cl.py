@@ -20,7 +20,6 @@ import numpy as np
 
 from . import _cl, colorimetry
 from .lookup import check_kernel_buffer
-from .solar import solar_irradiance_astm_g173
 
 __all__ = ["PowerLawEngine", "solar_power_law_xyz"]
 
@@ -72,18 +71,11 @@ class PowerLawEngine(_cl.Engine):
         checked by :func:`clsky.colorimetry.three_wavelength_to_xyz`): ``_solar_power_law_tabulated_xyz``'s
         values, bit for bit, for finite radiance (what the renderers give: no NaN or Inf leaves a kernel;
         with an infinite value the twin raises an IndexError and this returns non-finite values)."""
-        wavelengths = np.asarray(wavelengths, dtype=np.float64)
-        order = np.argsort(wavelengths)
-        lam = wavelengths[order]
-        flat = np.asarray(radiance, dtype=np.float64).reshape(-1, 3)
-        if flat.shape[0] > MAX_PIXELS:
-            raise ValueError(f"radiance has {flat.shape[0]} pixels, more than the kernel indexes ({MAX_PIXELS})")
-        # the twin's first steps, the same NumPy calls: ratios to the sun, the lit pixels, their floor, logs
-        sun = solar_irradiance_astm_g173(lam)
-        ratio = [flat[:, channel] / sun[k] for k, channel in enumerate(order)]
-        top = np.maximum(np.maximum(ratio[0], ratio[1]), ratio[2])
-        lit = top > 0
-        floor = colorimetry.POWER_LAW_FLOOR * top[lit]
+        if np.size(radiance) // 3 > MAX_PIXELS:
+            raise ValueError(f"radiance has {np.size(radiance) // 3} pixels, more than the kernel indexes "
+                             f"({MAX_PIXELS})")
+        # the twin's first steps (its own function): ratios to the sun, the lit pixels, their floor; then logs
+        lam, flat, ratio, lit, floor = colorimetry._lit_ratios(radiance, np.asarray(wavelengths, dtype=np.float64))
         n_lit = int(floor.size)
         if not n_lit:
             return np.zeros(np.shape(radiance)[:-1] + (3,))
