@@ -38,22 +38,23 @@ class PowerLawEngine(_cl.Engine):
 
     def __init__(self, ctx=None, queue=None):
         super().__init__(ctx, np.float64, queue=queue)
-        self._tables = {}           # wavelengths (ascending) -> 4 device tables
+        self._tables = {}           # wavelengths (ascending) -> _device_tables(wavelengths)
         self._buffers = {}          # name -> pyopencl.array.Array, reused while large enough
 
     def build_options(self):
         return super().build_options() + [f"-DVECTOR_WIDTH={self.vector_width}"]
 
     def _device_tables(self, lam):
-        """The device copies of ``colorimetry._power_law_tables(lam)``: B_0, O_0, B_1, O_1, each its X, Y, Z
-        columns one after the other."""
+        """(device tables, (Delta_0, Delta_1), (inner nodes, outer nodes)) of ``colorimetry._power_law_tables(lam)``:
+        the device copies of B_0, O_0, B_1, O_1, each its X, Y, Z columns one after the other."""
         if lam not in self._tables:
             import pyopencl.array as cla
 
-            tables = []
-            for _, inner, outer in colorimetry._power_law_tables(lam):
+            tables, deltas = [], []
+            for delta, inner, outer in colorimetry._power_law_tables(lam):
                 tables += [cla.to_device(self.queue, np.concatenate(columns)) for columns in (inner, outer)]
-            self._tables[lam] = tables
+                deltas.append(delta)
+            self._tables[lam] = tables, tuple(deltas), (inner[0].size, outer[0].size)
         return self._tables[lam]
 
     def _buffer(self, name, size, dtype):
@@ -86,9 +87,7 @@ class PowerLawEngine(_cl.Engine):
             np.maximum(r[lit], floor, out=rows[k, :n_lit])
             np.log(rows[k, :n_lit], out=rows[3 + k, :n_lit])
         pixels = np.flatnonzero(lit).astype(np.int32)
-        tables = self._device_tables(tuple(lam.tolist()))
-        (delta_0, inner, outer), (delta_1, _, _) = colorimetry._power_law_tables(tuple(lam.tolist()))
-        n_inner, n_outer = inner[0].size, outer[0].size
+        tables, (delta_0, delta_1), (n_inner, n_outer) = self._device_tables(tuple(lam.tolist()))
         rows_d = self._buffer("rows", rows.size, np.float64)
         pixels_d = self._buffer("pixels", n_lit, np.int32)
         xyz_d = self._buffer("xyz", flat.size, np.float64)
