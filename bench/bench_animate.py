@@ -11,14 +11,17 @@
   default is more, else two), and without the overlap (``clsky.anim.animate.OVERLAP_FRAMES = False``:
   one frame after the other); after a discarded 3-frame run of the same animation (its kernels compiled
   and cached first, as on a machine that has run clsky before).
-- Stage split (without the overlap, so that each stage is timed alone): :func:`clsky.anim.animate.render_animation` in this process at ``--stage-frames`` frames of
-  the same size (after a warm-up), under cProfile with the process CPU clock as its timer, so that each stage's figure
+- Stage split (without the overlap, so that each stage is timed alone): :func:`clsky.anim.animate.render_animation` in this process,
+  the same animation (``--stage-frames`` another number of frames; a shorter sweep moves the sun further
+  between frames, and the auto-exposure, smoothed over time, lags behind it: a 12-frame sweep showed the
+  display at twice its cost a frame in the 120-frame one, whose frames leave the gamut less) after a warm-up, under cProfile with the process CPU clock as its timer, so that each stage's figure
   counts PoCL's worker threads while the host waits for them (the stages do not overlap). Run twice,
   side by side: with the frame loop's BLAS on one thread (the default, ``clsky._cl.host_blas_single_threaded``)
   and with OpenBLAS's own thread count, to show what the two thread pools cost when they meet.
 - Host threads: the frames' host half alone (conversion, metering, display, comparison: what
   ``clsky.anim.animate``'s host threads do, :func:`host_half`) on 1, 2, 4, ... threads up to the default
-  (at least 2), over frames rendered beforehand (no device work while timed), in two rounds, up then down:
+  (at least 2), over frames of the animation's suns rendered beforehand (no device work while timed), in
+  two rounds, up then down:
   how far more threads go on this machine.
 Prints the tables and writes them into README.md (section "Speed", ``bench:animate``).
 
@@ -177,13 +180,16 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=120, help="frames of the end-to-end run (default 120)")
     parser.add_argument("--size", type=int, default=512, help="frame size [px] (default 512)")
-    parser.add_argument("--stage-frames", type=int, default=12, help="frames of the stage split (default 12)")
+    parser.add_argument("--stage-frames", type=int, default=None,
+                        help="frames of the stage split (default: --frames, the same animation)")
     add_output_arguments(parser)
     args = parse_arguments(parser)
     extra, options = [], {}
     if args.smoke:
         args.frames, args.stage_frames, args.size = SMOKE.animation_frames, SMOKE.animation_frames, SMOKE.frame
         extra, options = ["--table-size", *map(str, SMOKE.table)], {"table_size": SMOKE.table}
+    if args.stage_frames is None:
+        args.stage_frames = args.frames
     command = ["--frames", str(args.frames), "--size", str(args.size), *extra]
     # the default number of host threads, and the other choice: one where the default is more, else two
     workers = clsky.anim.animate.host_frame_workers()
@@ -218,7 +224,8 @@ def main():
     counts = [1]
     while counts[-1] * 2 <= max(2, workers):
         counts.append(counts[-1] * 2)
-    host_options = {**options, "frames": max(HOST_HALF_RENDERED, SMOKE.animation_frames)}
+    # the suns of the end-to-end animation (every len // HOST_HALF_RENDERED-th)
+    host_options = {**options, "frames": max(HOST_HALF_RENDERED, args.frames)}
     jobs = 4 if args.smoke else HOST_HALF_JOBS
     threads = host_half(host_options, counts + counts[::-1], jobs)
     for count, wall, cpu in threads:
@@ -226,6 +233,7 @@ def main():
               f"{1000 * cpu:.1f} ms CPU a frame", flush=True)
     highest = max(highest, load_average())
     shown = "clsky animate " + " ".join(command)
+    same = "the same animation" if args.stage_frames == args.frames else f"the same animation at {args.stage_frames} frames"
     lines = [f"Measured {datetime.date.today()} on {machine()}. End to end: `{shown}` "
              f"in a fresh process (table build, both renderers, comparison, PNG + MP4 + metrics); CPU time of the "
              f"process and its children (ffmpeg), load average before and after; with the overlapped frame "
@@ -240,7 +248,7 @@ def main():
              *(f"| `{shown}` | {label} | {wall:.1f} | {cpu:.1f} | "
                f"{cpu / wall:.2f} | {load_before:.1f} | {load_after:.1f} | {exp_before:.0f} / {exp_after:.0f} |"
                for label, (wall, cpu, load_before, load_after, exp_before, exp_after) in runs.items()), "",
-             f"Where the CPU time goes: the same animation at {args.stage_frames} frames, one after the other, in "
+             f"Where the CPU time goes: {same}, one after the other, in "
              f"one process after a warm-up (kernels compiled, the colour conversion's tables built), cProfile "
              f"on the process CPU clock (PoCL's worker threads count towards the stage that waits for them); "
              f"the frame loop's host BLAS on one thread (default) and with OpenBLAS's own threads, side by side.",
@@ -257,9 +265,10 @@ def main():
     lines.append("| total | " + " | ".join(cells) + " |")
     one = threads[0][1]
     lines += ["", f"Host threads: the frames' host half alone (conversion to cd/m^2, metering, display, comparison) "
-              f"on a pool of threads mapping {jobs} frames of {args.size} x {args.size}, {HOST_HALF_RENDERED} rendered "
-              f"beforehand and taken in turn (no device work meanwhile), the thread counts up then down, in this "
-              f"process; wall and process CPU per frame [ms].", "",
+              f"on a pool of threads mapping {jobs} frames of {args.size} x {args.size}, {HOST_HALF_RENDERED} of the "
+              f"animation's suns rendered beforehand (evenly spaced) and taken in turn (no device work meanwhile), "
+              f"each at its own metered exposure, the thread counts up then down, in this process; wall and "
+              f"process CPU per frame [ms].", "",
               "| round | host threads | wall a frame [ms] | CPU a frame [ms] | wall, one thread's / this |",
               "|---:|---:|---:|---:|---:|",
               *(f"| {1 + (index >= len(counts))} | {count} | {1000 * wall:.1f} | {1000 * cpu:.1f} | {one / wall:.2f}x |"
