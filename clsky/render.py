@@ -507,8 +507,10 @@ class SkyRenderer:
             angles = cla.empty(self.queue, max(n, 1), self.engine.dtype)   # no empty buffers: nothing reads it then
             if n:
                 check_kernel_buffer("view_zenith_angles", "directions", directions.array, 3 * n, self.engine.dtype)
-                self.engine.kernels["view_zenith_angles"](self.queue, *self._work_size(n), np.int32(n),
-                                                          directions.array.data, angles.data)
+                # from the program the sky-view lookup launches (the atmosphere's features: the same code
+                # for this kernel, which reads none of them), not a plain program built for it alone
+                self.engine.kernels_with(self._defines)["view_zenith_angles"](
+                    self.queue, *self._work_size(n), np.int32(n), directions.array.data, angles.data)
             angles = directions.derived.setdefault("view_zenith", angles)
         return angles
 

@@ -191,11 +191,13 @@ def test_an_engine_builds_its_plain_program_only_when_it_launches_from_it(cl_con
     """clsky._cl.Engine builds its plain program (no compile-time features) at its first use: a table of
     the physical preset (ozone, a ground) launches only the feature variants of the single-scattering and
     transmittance programs, so their plain programs are never built (7 of the default animation's 22
-    builds were such); the preset without features (atmosphere-plus) builds and uses the plain ones. A
-    context of its own, so that other tests' builds do not count."""
+    builds were such), nor does its renderer's sky-view lookup build a plain sky-view program for the
+    view zenith angles (one more); the preset without features (atmosphere-plus) builds and uses the plain
+    ones. A context of its own, so that other tests' builds do not count."""
     import pyopencl as cl
 
     import clsky
+    from clsky.render import SkyRenderer
     from conftest import SMALL_TABLE
 
     def built(context, name):
@@ -208,6 +210,12 @@ def test_an_engine_builds_its_plain_program_only_when_it_launches_from_it(cl_con
     for name in ("single.cl", "transmittance.cl"):
         variants = built(features, name)
         assert variants and all("-DOZONE=1" in options and "-DGROUND=1" in options for options in variants), name
+    # the renderer's sky-view lookup: its view zenith angles come from the lookup's own feature variant
+    renderer = SkyRenderer(clsky.ScatteringTable.build(clsky.preset("physical"), SMALL_TABLE, ctx=features),
+                                 ctx=features)
+    renderer.render_skyview(renderer.prepare(np.array([[0.0, 0.6, 0.8], [0.6, 0.0, 0.8]])), (0.0, 0.0, 1.0))
+    variants = built(features, "skyview.cl")
+    assert variants and all("-DOZONE=1" in options and "-DGROUND=1" in options for options in variants), variants
     plain = cl.Context(devices=[cl_context.devices[0]])
     clsky.ScatteringTable.build(clsky.preset("atmosphere-plus").replace(ground_albedo=0.0),
                                 SMALL_TABLE.replace(mode="atmosphere-plus", azimuth_harmonics=0), ctx=plain)
