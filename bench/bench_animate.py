@@ -11,10 +11,12 @@
   default is more, else two), and without the overlap (``clsky.anim.animate.OVERLAP_FRAMES = False``:
   one frame after the other); after a discarded 3-frame run of the same animation (its kernels compiled
   and cached first, as on a machine that has run clsky before).
-- Stage split (without the overlap, so that each stage is timed alone): :func:`clsky.anim.animate.render_animation` in this process,
-  the same animation (``--stage-frames`` another number of frames; a shorter sweep moves the sun further
-  between frames, and the auto-exposure, smoothed over time, lags behind it: a 12-frame sweep showed the
-  display at twice its cost a frame in the 120-frame one, whose frames leave the gamut less) after a warm-up, under cProfile with the process CPU clock as its timer, so that each stage's figure
+- Stage split (without the overlap, so that each stage is timed alone):
+  :func:`clsky.anim.animate.render_animation` of the same animation in this process (``--stage-frames``:
+  another number of frames; a shorter sweep moves the sun further between frames, and the auto-exposure,
+  smoothed over time, lags behind it: a 12-frame sweep showed the display at twice its cost a frame in the
+  120-frame one, whose frames leave the gamut less), after a warm-up, under cProfile with the process CPU
+  clock as its timer, so that each stage's figure
   counts PoCL's worker threads while the host waits for them (the stages do not overlap). Run twice,
   side by side: with the frame loop's BLAS on one thread (the default, ``clsky._cl.host_blas_single_threaded``)
   and with OpenBLAS's own thread count, to show what the two thread pools cost when they meet.
@@ -233,7 +235,8 @@ def main():
               f"{1000 * cpu:.1f} ms CPU a frame", flush=True)
     highest = max(highest, load_average())
     shown = "clsky animate " + " ".join(command)
-    same = "the same animation" if args.stage_frames == args.frames else f"the same animation at {args.stage_frames} frames"
+    same = "the same animation" if args.stage_frames == args.frames else \
+        f"the same animation at {args.stage_frames} frames"
     lines = [f"Measured {datetime.date.today()} on {machine()}. End to end: `{shown}` "
              f"in a fresh process (table build, both renderers, comparison, PNG + MP4 + metrics); CPU time of the "
              f"process and its children (ffmpeg), load average before and after; with the overlapped frame "
