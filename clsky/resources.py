@@ -61,7 +61,7 @@ FIRST_ORDERS, ORDERS_PER_DECADE = 3, 1.6
 #: runs), without the overlap, the largest of 3 runs, less the arrays the estimate lists on a CPU device
 #: (2 suns a ray-march launch): 530 bytes per pixel in all (compare; listed 243), 288 (lut; 123), 315
 #: (raymarch; 219), 298 (skyview; 123) (2026-12-05; the runs of one method within 16 bytes). The ray
-#: march's processing is the lookup's (one frame): it takes the lookup's 165, not the 96 its own runs
+#: march's processing is the lookup's (one frame): it took the lookup's 165, not the 96 its own runs
 #: leave, because its listed arrays count each launch's frames beside the HDR frame in hand (an upper
 #: bound; earlier constants: 305 / 185 / 185 / 205 from 2026-12-04, 340 / 210 / 210 / 210 from 2026-12-02).
 #: Since the conversion to cd/m^2 runs on the device (its buffers listed, ``device_conversion``) the ray

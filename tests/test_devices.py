@@ -211,8 +211,8 @@ def test_an_engine_builds_its_plain_program_only_when_it_launches_from_it(cl_con
         variants = built(features, name)
         assert variants and all("-DOZONE=1" in options and "-DGROUND=1" in options for options in variants), name
     # the renderer's sky-view lookup: its view zenith angles come from the lookup's own feature variant
-    renderer = SkyRenderer(clsky.ScatteringTable.build(clsky.preset("physical"), SMALL_TABLE, ctx=features),
-                                 ctx=features)
+    table = clsky.ScatteringTable.build(clsky.preset("physical"), SMALL_TABLE, ctx=features)
+    renderer = SkyRenderer(table, ctx=features)
     renderer.render_skyview(renderer.prepare(np.array([[0.0, 0.6, 0.8], [0.6, 0.0, 0.8]])), (0.0, 0.0, 1.0))
     variants = built(features, "skyview.cl")
     assert variants and all("-DOZONE=1" in options and "-DGROUND=1" in options for options in variants), variants
