@@ -78,7 +78,7 @@ import math
 
 import numpy as np
 
-from . import _cl, ground, reference
+from . import _atmosphere_cl, _cl, ground, reference
 from .atmosphere import AtmosphereParameters
 from .errors import ParameterError, is_integer
 from .mapping import altitude_to_u, cos_to_sun_t, cos_to_v, grid_coordinates
@@ -571,7 +571,9 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     single_engine = SingleScatteringEngine(settings, ctx=ctx, fast_math=fast_math)
     queue = cl.CommandQueue(single_engine.ctx)
     pool = _cl.memory_pool(queue)
-    engine = MultipleScatteringEngine(settings, fast_math=fast_math, queue=queue, allocator=pool)
+    # its gathers from the scatter's program (no plain program built for them)
+    features = _atmosphere_cl.feature_defines(atmosphere)
+    engine = MultipleScatteringEngine(settings, fast_math=fast_math, queue=queue, allocator=pool, features=features)
     # the nodes' downloads overlap the order's gathers; a CPU's rectangular reads split over two queues, which
     # PoCL's threads copy side by side: the gathered sum's download ends the build alone on the device, 0.29-0.47 s
     # on one core faulting in its fresh host table, 0.24-0.27 s on two (README "Speed")
@@ -641,7 +643,7 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
         read = settings.azimuth_harmonics if source_harmonics is None else source_harmonics
         if read not in engines:
             engines[read] = MultipleScatteringEngine(settings.replace(azimuth_harmonics=read), fast_math=fast_math,
-                                                     queue=queue, allocator=pool)
+                                                     queue=queue, allocator=pool, features=features)
         nodes_d = cla.empty(queue, (cosines.size,) + gathered_d.shape[1:], engine.dtype, allocator=pool)
         for node, c in enumerate(cosines):
             engines[read].scatter(atmosphere, gathered_d, combine_species=True, ground_radiance=ground_radiance,

@@ -272,12 +272,24 @@ class MultipleScatteringEngine(_cl.Engine):
         Its view_steps, sampling and dtype are compiled in.
     ctx, profile, fast_math, queue, allocator
         See :class:`clsky._cl.Engine`.
+    features : sequence of str, optional
+        The compile-time features (:func:`clsky._atmosphere_cl.feature_defines`) of the atmosphere that
+        it will scatter in. Its gathers, sums and copies read none, but take their kernels from the program
+        built with them, so that an engine scattering in that atmosphere builds one program, not a plain one
+        as well (two of the default animation's builds, 36 and 66 ms of its main thread; README "Speed").
+        Any value is correct: ``scatter`` builds the variant of the atmosphere it is given.
     """
 
     def __init__(self, settings: TableSettings = TableSettings(), ctx=None, profile=False, fast_math=False,
-                 queue=None, allocator=None):
+                 queue=None, allocator=None, features=()):
         self.settings = settings.scatter_settings           # its view steps are those of the scatter
+        self.features = tuple(features)
         super().__init__(ctx, np.dtype(settings.dtype), profile, fast_math, queue, allocator)
+
+    def _featureless_kernels(self):
+        """The kernels that read no compile-time feature (gather, combine_nodes, pack_channels, add_into),
+        from the program built with this engine's ``features``."""
+        return self.kernels_with(self.features)
 
     def program_sources(self):
         declaration = _atmosphere_cl.declaration(self.ctx.devices[0], self.dtype)
@@ -337,7 +349,7 @@ class MultipleScatteringEngine(_cl.Engine):
         else:
             self._check_out(out, table_d.shape, node)
         per_node = matrices.ndim == 4
-        event = self.kernels["gather"](
+        event = self._featureless_kernels()["gather"](
             self.queue, (-(-width // GATHER_CELLS), -(-height // GATHER_ROWS), depth), None, matrices_d.data,
             np.int32(matrices.size // 2), np.int32(height * height if per_node else 0), table_d.data,
             out.data, np.uint64(node * table_d.size), np.int32(accumulate), np.int32(width), np.int32(height),
@@ -405,9 +417,9 @@ class MultipleScatteringEngine(_cl.Engine):
                              f"{nodes.shape}, {weights.shape} and {out.shape}")
         weights_d = weights if isinstance(weights, cla.Array) else cla.to_device(self.queue, weights,
                                                                                  allocator=self.allocator)
-        event = self.kernels["combine_nodes"](self.queue, (cells,), None, nodes.data, weights_d.data,
-                                              np.int32(weights.size), np.uint64(cells), self.real(1.0),
-                                              self.real(0.0), out.data)
+        event = self._featureless_kernels()["combine_nodes"](
+            self.queue, (cells,), None, nodes.data, weights_d.data, np.int32(weights.size), np.uint64(cells),
+            self.real(1.0), self.real(0.0), out.data)
         self._record("combine_nodes", event)
         return out
 
@@ -422,8 +434,8 @@ class MultipleScatteringEngine(_cl.Engine):
             raise ValueError(f"padded (..., 8) and out (..., channels) must agree, 1 <= channels <= 8, in "
                              f"{self.dtype}, C-contiguous; got {padded.shape} {padded.dtype}, {out.shape} {out.dtype}")
         rows = padded.size // 8
-        event = self.kernels["pack_channels"](self.queue, (rows,), None, padded.data, np.uint64(rows),
-                                              np.int32(channels), out.data)
+        event = self._featureless_kernels()["pack_channels"](self.queue, (rows,), None, padded.data,
+                                                             np.uint64(rows), np.int32(channels), out.data)
         self._record("pack_channels", event)
         return event
 
@@ -440,7 +452,7 @@ class MultipleScatteringEngine(_cl.Engine):
             raise ValueError(f"slabs must be in [1, N] for stacks (N, D, H, W, 8), got {slabs} for {total.shape}")
         scale = np.ones(8) if scale is None else np.concatenate([scale, scale, [0.0, 0.0]])
         cells = (total.size if slabs is None else total.size // total.shape[0] * slabs) // 8
-        event = self.kernels["add_into"](self.queue, (cells,), None, total.data, addend.data, np.uint64(cells),
-                                         self.real(1.0), self.real8(scale))
+        event = self._featureless_kernels()["add_into"](self.queue, (cells,), None, total.data, addend.data,
+                                                        np.uint64(cells), self.real(1.0), self.real8(scale))
         self._record("add_into", event)
         return total

@@ -71,7 +71,7 @@ from typing import Callable
 import numpy as np
 import pyopencl as cl
 
-from . import _cl
+from . import _atmosphere_cl, _cl
 from .atmosphere import AtmosphereParameters
 from .errors import NumericalError
 from .multiple import CROSSED_PAIRS, DIRECT_PAIRS, SPECIES, first_gather_stack, gather_matrices
@@ -267,7 +267,8 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         # back to the pool when dropped, and the download of the copy queue that reads it has been waited
         # for by then (on_host) or is followed by no new array before that wait
         engine = MultipleScatteringEngine(settings, fast_math=fast_math, queue=queue,
-                                          allocator=_cl.memory_pool(queue))
+                                          allocator=_cl.memory_pool(queue),
+                                          features=_atmosphere_cl.feature_defines(atmosphere))
         single = single_engine.compute(atmosphere, progress=None if progress is None else
                                        (lambda done, total: progress("single", done, total)))
         device = _cl.describe_device(single_engine.device)

@@ -193,7 +193,10 @@ def test_an_engine_builds_its_plain_program_only_when_it_launches_from_it(cl_con
     transmittance programs, so their plain programs are never built (7 of the default animation's 22
     builds were such), nor does its renderer's sky-view lookup build a plain sky-view program for the
     view zenith angles (one more); the preset without features (atmosphere-plus) builds and uses the plain
-    ones. A context of its own, so that other tests' builds do not count."""
+    ones. The orders' multiple-scattering engines take their gathers and sums from the scatter's feature
+    variant, with azimuth harmonics (clsky.azimuth) and without (clsky.orders), so that no plain
+    multiple-scattering program is built either (two more). A context of its own, so that other tests'
+    builds do not count."""
     import pyopencl as cl
 
     import clsky
@@ -207,7 +210,8 @@ def test_an_engine_builds_its_plain_program_only_when_it_launches_from_it(cl_con
 
     features = cl.Context(devices=[cl_context.devices[0]])
     clsky.ScatteringTable.build(clsky.preset("physical"), SMALL_TABLE, ctx=features)
-    for name in ("single.cl", "transmittance.cl"):
+    clsky.ScatteringTable.build(clsky.preset("physical"), SMALL_TABLE.replace(azimuth_harmonics=0), ctx=features)
+    for name in ("single.cl", "transmittance.cl", "multiple.cl"):
         variants = built(features, name)
         assert variants and all("-DOZONE=1" in options and "-DGROUND=1" in options for options in variants), name
     # the renderer's sky-view lookup: its view zenith angles come from the lookup's own feature variant
@@ -219,6 +223,6 @@ def test_an_engine_builds_its_plain_program_only_when_it_launches_from_it(cl_con
     plain = cl.Context(devices=[cl_context.devices[0]])
     clsky.ScatteringTable.build(clsky.preset("atmosphere-plus").replace(ground_albedo=0.0),
                                 SMALL_TABLE.replace(mode="atmosphere-plus", azimuth_harmonics=0), ctx=plain)
-    for name in ("single.cl", "transmittance.cl"):
+    for name in ("single.cl", "transmittance.cl", "multiple.cl"):
         variants = built(plain, name)
         assert variants and not any("-DOZONE=1" in options for options in variants), name
