@@ -488,8 +488,8 @@ class _Backend:
     gather(that form, harmonics=None): the next order's gathered harmonics (backend's form), only the
     first ``harmonics`` of them computed (default all); accumulate(total, gathered, scale=None,
     harmonics=None): total + gathered, or total + scale gathered per wavelength (scale (r, g, b)), in
-    the first ``harmonics`` harmonics only (default all) (a copy of gathered for total None; may add in
-    place); gather_summed(total, node_sum): total + A_m L_m in each harmonic m >= 1, L_m the harmonics
+    the first ``harmonics`` harmonics only (default all) (for total None gathered itself or a copy, to
+    which later calls may add in place); gather_summed(total, node_sum): total + A_m L_m in each harmonic m >= 1, L_m the harmonics
     of ``node_sum`` (M + 1, D, H, W, 3) on the host (in place); to_host(gathered):
     (M + 1, D, H, W, 6) float64; stopping_test(single, keep_previous): the orders' stopping test
     (:mod:`clsky.stopping`), its running sum starting from single scattering ``single``
@@ -516,8 +516,9 @@ def _single_running_sum(single):
 
 def _numpy_backend(atmosphere, settings, operators):
     """The NumPy twins: the ray integrals of :func:`single_scattering_nodes` and :func:`scatter_nodes`,
-    the gathers of :meth:`HarmonicGather.gather`."""
+    the gathers of :meth:`HarmonicGather.gather` (``operators()`` returns the :class:`HarmonicGather`)."""
     single = single_scattering_nodes(atmosphere, settings)
+    operators = operators()
 
     def scatter(gathered, ground_radiance, source_harmonics=None):
         nodes = scatter_nodes(atmosphere, settings, gathered, ground_radiance, source_harmonics)
@@ -561,7 +562,8 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     :func:`clsky._cl.rectangular_reads`), into one reused host table, while the first queue gathers them: what
     ``scatter`` returns is valid until its next call. The gathered sum comes down the same way, and the first
     gather goes up by a rectangular write (rows of 6 values into rows of 8: 17 ms on an H200, no slower than a
-    contiguous write). The pool goes with the backend."""
+    contiguous write). The pool goes with the backend. ``operators()`` returns the :class:`HarmonicGather`,
+    called once single scattering is done."""
     import pyopencl as cl
     import pyopencl.array as cla
 
@@ -585,6 +587,7 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     for node, c in enumerate(cosines):
         single_engine.compute(atmosphere, cos_azimuth=c, out=single[node])
     transform = harmonic_transform(settings.azimuth_harmonics)
+    operators = operators()         # made on a host thread meanwhile (compute_orders)
     matrices = [engine.upload_matrices(operators.gather_matrices(m)) for m in range(cosines.size)]
     # on the device once, so that enqueueing an order's gathers does not wait for them (compute_orders
     # enqueues them before its host work on the order)
@@ -670,7 +673,10 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
         return gather_harmonics(nodes_d, out, range(len(transform_rows))[:harmonics])
 
     def accumulate(total, gathered_d, scale=None, harmonics=None):
-        return gathered_d.copy() if total is None else engine.add_into(total, gathered_d, scale, slabs=harmonics)
+        """The first order's gathered harmonics become the sum itself, not a copy: a copy was PoCL's one-thread
+        copy of a whole stack into fresh memory (85 ms of the default animation's table, the device's other
+        thread idle); the orders after it add in place into that buffer, after its scatter on the queue."""
+        return gathered_d if total is None else engine.add_into(total, gathered_d, scale, slabs=harmonics)
 
     def gather_summed(total_d, node_sum):
         """total_d[m] += A_m L_m for m >= 1, L_m the harmonics of the host's ``node_sum`` (M + 1, D, H, W,
@@ -722,11 +728,16 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         raise ParameterError("mode", "'physical' with azimuth harmonics", settings.mode)
     if backend not in ("numpy", "opencl"):
         raise ParameterError("backend", "one of ['numpy', 'opencl']", backend)
-    operators = HarmonicGather(atmosphere, settings, harmonics)
-    if backend == "numpy":
-        run = _numpy_backend(atmosphere, settings, operators)
-    else:
-        run = _opencl_backend(atmosphere, settings, operators, ctx, fast_math)
+    _check_harmonics(harmonics)
+    # the gather operators (NumPy: 0.1-0.35 s for the default animation's table, single-threaded) on a host
+    # thread while single scattering runs: the device waited for them with a core idle (README "Speed")
+    with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="clsky-gather-operators") as pool:
+        operators = pool.submit(HarmonicGather, atmosphere, settings, harmonics).result
+        if backend == "numpy":
+            run = _numpy_backend(atmosphere, settings, operators)
+        else:
+            run = _opencl_backend(atmosphere, settings, operators, ctx, fast_math)
+        operators = operators()
     single_nodes, run.single = run.single, None      # the backend's reference goes: the nodes are dropped below
     wanted = settings.max_orders if settings.orders == "auto" else settings.orders
     record = {"harmonics": harmonics, "converged": False, "relative_additions": [], "estimated_errors": [],
@@ -756,7 +767,9 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         for k in range(2, wanted + 1):
             gathered_sum = run.accumulate(gathered_sum, gathered, harmonics=1 if summed else None)
             on_host, state = run.scatter(gathered, pending_ground, None if _reads_harmonics(k) else 0)
-            del gathered         # first: the pool hands its buffer to the next gather (no more memory)
+            # first: the pool hands its buffer to the next gather (no more memory); the first order's is the
+            # gathered sum's (accumulate), and the next gather takes the memory a copy of it would have
+            del gathered
             # the next order's source (on OpenCL enqueued on the device, where the order is), before the
             # host waits for the order's nodes, so that their download overlaps it and the host's work on
             # the order overlaps the rest (the last order needs the source only for the geometric tail,

@@ -282,9 +282,10 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
             return gathered.get()[..., :6].astype(np.float64)
 
         def accumulate(total, gathered, scale=None):
-            """total + gathered (in place in total; a copy of gathered for total None), as azimuth.py's;
-            with ``scale`` (r, g, b), total + scale gathered per wavelength."""
-            return gathered.copy() if total is None else engine.add_into(total, gathered, scale)
+            """total + gathered (in place in total; gathered itself for total None, not a copy: the orders
+            after it add into its buffer after its scatter on the queue), as azimuth.py's; with ``scale``
+            (r, g, b), total + scale gathered per wavelength."""
+            return gathered if total is None else engine.add_into(total, gathered, scale)
 
         kept = 3 if settings.mode == "physical" else 6    # channels of an order kept on the host
 

@@ -425,7 +425,8 @@ def test_rectangular_transfers_move_the_channels_and_zero_the_padding(cl_context
     gathered = np.random.default_rng(17).random((3, depth, height, width, 6)) + 0.5
     for dtype in ("float64", "float32"):
         require_dtype(cl_context, dtype)
-        run = azimuth._opencl_backend(atmosphere, KERNEL_GRID.replace(dtype=dtype), operators, cl_context, False)
+        run = azimuth._opencl_backend(atmosphere, KERNEL_GRID.replace(dtype=dtype), lambda: operators, cl_context,
+                                      False)
         gathered_d = run.upload(gathered)
         padded = gathered_d.get()
         assert padded.shape == gathered.shape[:-1] + (8,) and padded.dtype == np.dtype(dtype)
