@@ -385,7 +385,7 @@ def memory_pool(queue):
     return cl_tools.MemoryPool(cl_tools.ImmediateAllocator(queue))
 
 
-def upload_padded(queue, table, dtype, width=8, copies=1, allocator=None, interleaved=False):
+def upload_padded(queue, table, dtype, width=8, copies=1, allocator=None, interleaved=False, queues=None):
     """A host table (..., C), ``copies`` C <= ``width``, as a device array (..., width) of ``dtype`` whose
     channels are the table's (``copies`` times side by side: 2 for an order's nodes, whose channels 0-2
     and 3-5 both hold L) and then zeros (the kernels' padded tables: one real8 a cell): a zero fill, then
@@ -397,7 +397,12 @@ def upload_padded(queue, table, dtype, width=8, copies=1, allocator=None, interl
     the default animation's table). With ``interleaved`` a stack of N tables (N, ..., C) arrives with its
     tables interleaved row by row, as (..., N, width): table n's rows a row pitch of N ``width`` apart
     (the gathered source's harmonics, :func:`clsky.transmittance.upload_gathered_source`). The writes are
-    blocking: the table may go once this returns. The array comes from ``allocator`` if given."""
+    blocking: the table may go once this returns. The array comes from ``allocator`` if given.
+
+    With ``queues`` (queues of ``queue``'s context), each queue fills and writes its own share of the rows,
+    all of them waited for: PoCL copies each queue's commands on a thread of its own, so two queues take
+    half the wall time of one on a CPU (the default animation's first gather, 117 MB into fresh memory:
+    49-59 against 91-113 ms; the same CPU time). Default: ``queue`` alone."""
     import pyopencl.array as cla
 
     dtype = np.dtype(dtype)
@@ -411,14 +416,24 @@ def upload_padded(queue, table, dtype, width=8, copies=1, allocator=None, interl
     shape = tables.shape[1:-1] + (len(tables), width) if interleaved else table.shape[:-1] + (width,)
     padded = cla.empty(queue, shape, dtype, allocator=allocator)
     size, rows, pitch = dtype.itemsize, tables[0].size // channels, len(tables) * width * dtype.itemsize
-    cl.enqueue_fill_buffer(queue, padded.data, np.zeros(1, dtype), padded.offset, padded.nbytes)
-    for n, one in enumerate(tables):
-        source = np.ascontiguousarray(one, dtype=dtype)
-        for copy in range(copies):
-            cl.enqueue_copy(queue, padded.data, source,
-                            buffer_origin=(padded.offset + (n * width + copy * channels) * size, 0, 0),
-                            host_origin=(0, 0, 0), region=(channels * size, rows, 1), buffer_pitches=(pitch, 0),
-                            host_pitches=(channels * size, 0), is_blocking=True)
+    queues = list(queues) if queues else [queue]
+    sources = [np.ascontiguousarray(one, dtype=dtype).reshape(rows, channels) for one in tables]
+    # other queues start after the commands of `queue` so far (a pool's buffer may still be read there)
+    after = [cl.enqueue_marker(queue)] if any(share is not queue for share in queues) else None
+    writes = []
+    for part, share in enumerate(queues):
+        first, end = rows * part // len(queues), rows * (part + 1) // len(queues)
+        if end == first:
+            continue
+        cl.enqueue_fill_buffer(share, padded.data, np.zeros(1, dtype), padded.offset + first * pitch,
+                               (end - first) * pitch, wait_for=after)
+        writes += [cl.enqueue_copy(share, padded.data, source[first:end],
+                                   buffer_origin=(padded.offset + first * pitch + (n * width + copy * channels) * size,
+                                                  0, 0),
+                                   host_origin=(0, 0, 0), region=(channels * size, end - first, 1),
+                                   buffer_pitches=(pitch, 0), host_pitches=(channels * size, 0), is_blocking=False)
+                   for n, source in enumerate(sources) for copy in range(copies)]
+    cl.wait_for_events(writes)
     return padded
 
 

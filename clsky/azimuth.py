@@ -562,7 +562,7 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     :func:`clsky._cl.rectangular_reads`), into one reused host table, while the first queue gathers them: what
     ``scatter`` returns is valid until its next call. The gathered sum comes down the same way, and the first
     gather goes up by a rectangular write (rows of 6 values into rows of 8: 17 ms on an H200, no slower than a
-    contiguous write). The pool goes with the backend. ``operators()`` returns the :class:`HarmonicGather`,
+    contiguous write; on a CPU half the rows on each copy queue, as the summed nodes after the orders). The pool goes with the backend. ``operators()`` returns the :class:`HarmonicGather`,
     called once single scattering is done."""
     import pyopencl as cl
     import pyopencl.array as cla
@@ -581,6 +581,9 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     # on one core faulting in its fresh host table, 0.24-0.27 s on two (README "Speed")
     copy_queues = [cl.CommandQueue(engine.ctx) for _ in range(2)]
     rectangular = _cl.rectangular_reads(queue.device)
+    # the uploads of the first gather and of the summed nodes likewise split on a CPU: each was one PoCL
+    # thread's fill and write of 156 MB of fresh memory (85 and 100 ms) while the device waited for it
+    upload_queues = copy_queues if rectangular else None
     cosines = np.cos(azimuth_nodes(settings.azimuth_harmonics))
     width, height, depth = settings.size
     single = np.empty((cosines.size, depth, height, width, 6))
@@ -634,8 +637,9 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
 
     def upload(gathered):
         """The first gather's harmonics (M + 1, D, H, W, 6) as a padded device table (M + 1, D, H, W, 8)
-        from the pool (:func:`clsky._cl.upload_padded`: a zero fill and one rectangular write)."""
-        return _cl.upload_padded(queue, gathered, engine.dtype, allocator=pool)
+        from the pool (:func:`clsky._cl.upload_padded`: a zero fill and one rectangular write, on a CPU half
+        the rows a copy queue)."""
+        return _cl.upload_padded(queue, gathered, engine.dtype, allocator=pool, queues=upload_queues)
 
     engines = {settings.azimuth_harmonics: engine}
 
@@ -681,7 +685,7 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     def gather_summed(total_d, node_sum):
         """total_d[m] += A_m L_m for m >= 1, L_m the harmonics of the host's ``node_sum`` (M + 1, D, H, W,
         3), uploaded as padded nodes (both channel sets L) into the pool's buffer of an order's nodes."""
-        nodes_d = _cl.upload_padded(queue, node_sum, engine.dtype, copies=2, allocator=pool)
+        nodes_d = _cl.upload_padded(queue, node_sum, engine.dtype, copies=2, allocator=pool, queues=upload_queues)
         return gather_harmonics(nodes_d, total_d, range(1, len(transform_rows)), accumulate=True)
 
     def to_host(gathered_d):

@@ -453,27 +453,39 @@ def nan_filled_queue(cl_context, monkeypatch, dtype):
     return cl.CommandQueue(cl_context)
 
 
+def share_queues(cl_context, count):
+    """``count`` queues of their own on ``cl_context`` for upload_padded's ``queues`` (None for 0)."""
+    import pyopencl as cl
+
+    return [cl.CommandQueue(cl_context) for _ in range(count)] or None
+
+
+@pytest.mark.parametrize("shares", [0, 2, 3])
 @pytest.mark.parametrize("dtype", ["float64", "float32"])
-def test_upload_padded_pads_every_table_shape_with_zeros(cl_context, monkeypatch, dtype):
+def test_upload_padded_pads_every_table_shape_with_zeros(cl_context, monkeypatch, dtype, shares):
     """clsky._cl.upload_padded, which the harmonic build (above), MultipleScatteringEngine.to_device and
     the renderer's gathered sum go through: a host table (..., C) arrives as (..., 8) of the device's
     type, channels 0..C-1 the host's values (rounded to float32 as a cast rounds them), the rest zero in
     a buffer that held NaN, for 1, 3, 6 and 8 channels, a non-contiguous table and leading shapes of 1
-    to 4 axes; a table of no channels, more than 8 or no values is refused before any transfer."""
+    to 4 axes; a table of no channels, more than 8 or no values is refused before any transfer. The same
+    with the rows shared among 2 or 3 queues of their own (``queues``, the harmonic build's on a CPU; rows
+    that do not divide evenly, a queue without rows): the NaN fill, enqueued on the array's queue, is
+    then not ordered before the shares' zero fills unless upload_padded orders it."""
     from clsky import _cl
 
     queue = nan_filled_queue(cl_context, monkeypatch, dtype)
+    queues = share_queues(cl_context, shares)
     rng = np.random.default_rng(23)
-    for shape in ((5, 1), (4, 3), (2, 3, 5, 6), (3, 2, 3, 5, 6), (7, 8)):
+    for shape in ((5, 1), (4, 3), (2, 3, 5, 6), (3, 2, 3, 5, 6), (7, 8), (1, 6), (2, 6)):
         table = rng.random(shape) + 0.5
-        padded = _cl.upload_padded(queue, table, dtype).get()
+        padded = _cl.upload_padded(queue, table, dtype, queues=queues).get()
         assert padded.shape == shape[:-1] + (8,) and padded.dtype == np.dtype(dtype)
         assert_array_equal(padded[..., :shape[-1]], table.astype(dtype))
         assert not padded[..., shape[-1]:].any()
     strided = rng.random((4, 5, 12))[..., ::2]                              # (4, 5, 6), not contiguous
-    assert_array_equal(_cl.upload_padded(queue, strided, dtype).get()[..., :6], strided.astype(dtype))
+    assert_array_equal(_cl.upload_padded(queue, strided, dtype, queues=queues).get()[..., :6], strided.astype(dtype))
     nodes = rng.random((3, 4, 5, 3))                    # an order's nodes: channels 0-2 and 3-5 both hold them
-    twice = _cl.upload_padded(queue, nodes, dtype, copies=2).get()
+    twice = _cl.upload_padded(queue, nodes, dtype, copies=2, queues=queues).get()
     assert_array_equal(twice[..., :3], nodes.astype(dtype))
     assert_array_equal(twice[..., 3:6], nodes.astype(dtype))
     assert not twice[..., 6:].any()
@@ -483,18 +495,45 @@ def test_upload_padded_pads_every_table_shape_with_zeros(cl_context, monkeypatch
             _cl.upload_padded(queue, bad, dtype, copies=copies)
 
 
+def test_upload_padded_shares_start_after_the_queue(cl_context, monkeypatch):
+    """With ``queues``, the shares' fills and writes wait for every command enqueued on the array's queue
+    before them (a buffer from a pool may still be read there; here the queue's NaN fill of the new
+    buffer, held back until a host thread releases the queue 0.2 s later): without that order the NaN
+    fill lands after the writes."""
+    import threading
+
+    import pyopencl as cl
+
+    from clsky import _cl
+
+    queue = nan_filled_queue(cl_context, monkeypatch, "float64")
+    release = cl.UserEvent(cl_context)
+    cl.enqueue_marker(queue, wait_for=[release])               # the queue's later commands wait for it
+    timer = threading.Timer(0.2, release.set_status, (cl.command_execution_status.COMPLETE,))
+    timer.start()
+    try:
+        table = np.random.default_rng(31).random((4, 5, 6)) + 0.5
+        padded = _cl.upload_padded(queue, table, "float64", queues=share_queues(cl_context, 2)).get()
+    finally:
+        timer.join()
+    assert_array_equal(padded[..., :6], table)
+    assert not padded[..., 6:].any()
+
+
+@pytest.mark.parametrize("shares", [0, 2])
 @pytest.mark.parametrize("dtype", ["float64", "float32"])
-def test_upload_padded_interleaves_a_stack(cl_context, monkeypatch, dtype):
+def test_upload_padded_interleaves_a_stack(cl_context, monkeypatch, dtype, shares):
     """clsky._cl.upload_padded with ``interleaved``, through which a renderer and the 4D table upload a
     gathered source with harmonics (transmittance.upload_gathered_source): a stack (N, ..., C) arrives as
     (..., N, 8) of the device's type, table n's values in row n of each cell, the rest zero in a buffer
     that held NaN, for stacks of 1 to 3 tables of 1 to 3 axes and a non-contiguous one;
     upload_gathered_source interleaves a stack of harmonics and pads a table without them; a stack of
-    fewer than 3 axes is refused."""
+    fewer than 3 axes is refused. The same with the rows shared among 2 queues of their own."""
     from clsky import _cl
     from clsky.transmittance import upload_gathered_source
 
     queue = nan_filled_queue(cl_context, monkeypatch, dtype)
+    queues = share_queues(cl_context, shares)
     rng = np.random.default_rng(29)
 
     def assert_interleaved(device, stack):
@@ -505,9 +544,9 @@ def test_upload_padded_interleaves_a_stack(cl_context, monkeypatch, dtype):
 
     for shape in ((1, 5, 6), (3, 4, 6), (3, 2, 3, 5, 6), (2, 7, 1)):
         stack = rng.random(shape) + 0.5
-        assert_interleaved(_cl.upload_padded(queue, stack, dtype, interleaved=True).get(), stack)
+        assert_interleaved(_cl.upload_padded(queue, stack, dtype, interleaved=True, queues=queues).get(), stack)
     strided = rng.random((3, 4, 12))[..., ::2]                              # (3, 4, 6), not contiguous
-    assert_interleaved(_cl.upload_padded(queue, strided, dtype, interleaved=True).get(), strided)
+    assert_interleaved(_cl.upload_padded(queue, strided, dtype, interleaved=True, queues=queues).get(), strided)
     harmonics = rng.random((3, 2, 3, 4, 6))
     assert_interleaved(upload_gathered_source(queue, harmonics, dtype).get(), harmonics)
     average = upload_gathered_source(queue, harmonics[0], dtype).get()
