@@ -546,7 +546,7 @@ def _numpy_backend(atmosphere, settings, operators):
                     lambda gathered: gathered, stopping_test, "numpy")
 
 
-def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
+def _opencl_backend(atmosphere, settings, operators, ctx, fast_math, background=None):
     """The same on OpenCL: ``SingleScatteringEngine.compute`` and ``MultipleScatteringEngine.scatter`` at
     each azimuth node's cos_azimuth (kernels/view_ray.cl: table_cell, add_lookups), and the gathers of
     every harmonic with the gather kernel (``MultipleScatteringEngine.gather``, the azimuth average's
@@ -562,8 +562,10 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     :func:`clsky._cl.rectangular_reads`), into one reused host table, while the first queue gathers them: what
     ``scatter`` returns is valid until its next call. The gathered sum comes down the same way, and the first
     gather goes up by a rectangular write (rows of 6 values into rows of 8: 17 ms on an H200, no slower than a
-    contiguous write; on a CPU half the rows on each copy queue, as the summed nodes after the orders). The pool goes with the backend. ``operators()`` returns the :class:`HarmonicGather`,
-    called once single scattering is done."""
+    contiguous write; on a CPU half the rows on each copy queue, as the summed nodes after the orders). The
+    pool goes with the backend. ``operators()`` returns the :class:`HarmonicGather`, called once single
+    scattering is done. With ``background`` (a concurrent.futures executor), the orders' scatter programs
+    are built on it while single scattering runs, not at their first launch."""
     import pyopencl as cl
     import pyopencl.array as cla
 
@@ -584,6 +586,15 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
     # the uploads of the first gather and of the summed nodes likewise split on a CPU: each was one PoCL
     # thread's fill and write of 156 MB of fresh memory (85 and 100 ms) while the device waited for it
     upload_queues = copy_queues if rectangular else None
+    # the scatter's engines: every harmonic of the source, and the azimuth average alone where a later order
+    # reads only that (HARMONIC_SOURCE_ORDERS)
+    engines = {settings.azimuth_harmonics: engine}
+    if not _reads_harmonics(settings.max_orders if settings.orders == "auto" else settings.orders):
+        engines.setdefault(0, MultipleScatteringEngine(settings.replace(azimuth_harmonics=0), fast_math=fast_math,
+                                                       queue=queue, allocator=pool, features=features))
+    # their programs built meanwhile on the background's thread: in a fresh process each build took 40-60 ms of
+    # the main thread at its first scatter, the device idle (README "Speed"); a build error surfaces there
+    built = background.submit(lambda: [e.kernels_with(features) for e in engines.values()]) if background else None
     cosines = np.cos(azimuth_nodes(settings.azimuth_harmonics))
     width, height, depth = settings.size
     single = np.empty((cosines.size, depth, height, width, 6))
@@ -641,13 +652,13 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math):
         the rows a copy queue)."""
         return _cl.upload_padded(queue, gathered, engine.dtype, allocator=pool, queues=upload_queues)
 
-    engines = {settings.azimuth_harmonics: engine}
-
     def scatter(gathered_d, ground_radiance, source_harmonics=None):
         """The nodes, (M + 1, D, H, W, 3) on the host and padded (M + 1, D, H, W, 8) on the device; the
         rays read ``source_harmonics`` harmonics of the source (the first ones of the padded
         (M + 1, D, H, W, 8) buffer: a kernel built for fewer harmonics reads only those)."""
         read = settings.azimuth_harmonics if source_harmonics is None else source_harmonics
+        if built is not None:
+            built.result()          # waits for the builds (done long before); re-raises a build's error
         if read not in engines:
             engines[read] = MultipleScatteringEngine(settings.replace(azimuth_harmonics=read), fast_math=fast_math,
                                                      queue=queue, allocator=pool, features=features)
@@ -733,14 +744,15 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
     if backend not in ("numpy", "opencl"):
         raise ParameterError("backend", "one of ['numpy', 'opencl']", backend)
     _check_harmonics(harmonics)
-    # the gather operators (NumPy: 0.1-0.35 s for the default animation's table, single-threaded) on a host
-    # thread while single scattering runs: the device waited for them with a core idle (README "Speed")
-    with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="clsky-gather-operators") as pool:
+    # the gather operators (NumPy: 0.1-0.35 s for the default animation's table, single-threaded), and the
+    # OpenCL backend's scatter programs, on a host thread while single scattering runs: the device waited for
+    # them with a core idle (README "Speed")
+    with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="clsky-orders-setup") as pool:
         operators = pool.submit(HarmonicGather, atmosphere, settings, harmonics).result
         if backend == "numpy":
             run = _numpy_backend(atmosphere, settings, operators)
         else:
-            run = _opencl_backend(atmosphere, settings, operators, ctx, fast_math)
+            run = _opencl_backend(atmosphere, settings, operators, ctx, fast_math, background=pool)
         operators = operators()
     single_nodes, run.single = run.single, None      # the backend's reference goes: the nodes are dropped below
     wanted = settings.max_orders if settings.orders == "auto" else settings.orders

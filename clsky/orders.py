@@ -64,6 +64,7 @@ those results are the plain sum of the orders computed.
 
 from __future__ import annotations
 
+import concurrent.futures
 import dataclasses
 import time
 from typing import Callable
@@ -269,8 +270,13 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         engine = MultipleScatteringEngine(settings, fast_math=fast_math, queue=queue,
                                           allocator=_cl.memory_pool(queue),
                                           features=_atmosphere_cl.feature_defines(atmosphere))
-        single = single_engine.compute(atmosphere, progress=None if progress is None else
-                                       (lambda done, total: progress("single", done, total)))
+        # its program built on a host thread while single scattering runs, not at the first gather (in a fresh
+        # process 40 ms of the main thread, the device idle: clsky.azimuth's _opencl_backend does the same)
+        with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="clsky-orders-setup") as builder:
+            built = builder.submit(engine.kernels_with, engine.features)
+            single = single_engine.compute(atmosphere, progress=None if progress is None else
+                                           (lambda done, total: progress("single", done, total)))
+            built.result()                      # re-raises a build's error
         device = _cl.describe_device(single_engine.device)
 
         def gather(terms, out=None):

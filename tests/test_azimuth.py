@@ -848,3 +848,45 @@ def test_single_scattering_alone_with_harmonics_and_a_ground(cl_context):
     assert np.all(np.isfinite(harmonic.ground_irradiance)) and np.all(harmonic.ground_irradiance >= 0.0)
     scale = np.abs(plain.ground_irradiance).max()
     assert np.abs(harmonic.ground_irradiance - plain.ground_irradiance).max() <= 0.03 * scale
+
+
+def test_orders_build_their_scatter_programs_while_single_scattering_runs(cl_context, monkeypatch):
+    """The OpenCL orders, with azimuth harmonics (clsky.azimuth: both scatter engines, every harmonic and
+    the azimuth average) and without (clsky.orders), build their multiple-scattering programs on a host
+    thread of their own while single scattering runs, not on the main thread at the first gather or
+    scatter (in a fresh process 40-60 ms each with the device idle; README "Speed"); a build that fails
+    there still fails the table build with its error. A context of its own, so that nothing is cached."""
+    import threading
+
+    import pyopencl as cl
+
+    import clsky
+    from clsky import _cl
+    from clsky.multiple import MultipleScatteringEngine
+    from conftest import SMALL_TABLE
+
+    built = []
+    build_program = _cl.build_program
+
+    def recording(context, sources, options=()):
+        if context.int_ptr == own.int_ptr and (context.int_ptr, tuple(sources), tuple(sorted(options))) \
+                not in _cl._program_cache:
+            built.append((sources[-1], threading.current_thread().name))
+        return build_program(context, sources, options)
+
+    monkeypatch.setattr(_cl, "build_program", recording)
+    own = cl.Context(devices=[cl_context.devices[0]])
+    physical = clsky.preset("physical")
+    clsky.ScatteringTable.build(physical, SMALL_TABLE, ctx=own)                           # M = 2
+    clsky.ScatteringTable.build(physical, SMALL_TABLE.replace(azimuth_harmonics=0, multiple_view_steps=12), ctx=own)
+    scatter_builds = [thread for name, thread in built if name == "multiple.cl"]
+    assert len(scatter_builds) == 3 and all(t.startswith("clsky-orders-setup") for t in scatter_builds), built
+    assert all(thread == "MainThread" for name, thread in built if name == "single.cl"), built
+
+    def failing(self, defines=()):
+        raise _cl.KernelBuildError("building multiple.cl failed (test)")
+
+    monkeypatch.setattr(MultipleScatteringEngine, "kernels_with", failing)
+    for harmonics in (2, 0):
+        with pytest.raises(_cl.KernelBuildError, match=r"multiple\.cl failed \(test\)"):
+            clsky.ScatteringTable.build(physical, SMALL_TABLE.replace(azimuth_harmonics=harmonics), ctx=own)
