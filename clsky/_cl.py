@@ -473,6 +473,15 @@ def rectangular_reads(device) -> bool:
     return bool(device.type & cl.device_type.CPU)
 
 
+def upload_share_queues(queue):
+    """Queues for :func:`upload_padded`'s ``queues`` on ``queue``'s device: two queues of its own on a CPU
+    (PoCL copies each queue's commands on a thread of its own: half the wall time on the 2-core machine),
+    None elsewhere (a GPU's copies are its DMA engines', not measured split)."""
+    if not queue.device.type & cl.device_type.CPU:
+        return None
+    return [cl.CommandQueue(queue.context, queue.device) for _ in range(2)]
+
+
 def packed_reads(device) -> bool:
     """True where a table build on ``device`` (a pyopencl.Device, or None: no device) packs its reads on
     the device (not :func:`rectangular_reads`): what its memory estimate counts

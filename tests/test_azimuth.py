@@ -495,6 +495,27 @@ def test_upload_padded_pads_every_table_shape_with_zeros(cl_context, monkeypatch
             _cl.upload_padded(queue, bad, dtype, copies=copies)
 
 
+def test_upload_share_queues_split_on_a_cpu_only(cl_context):
+    """clsky._cl.upload_share_queues, which the renderers and the 4D table pass to upload_padded: two
+    queues of the queue's own context and device on a CPU (PoCL's copies side by side), None on any
+    other device (a stand-in GPU queue)."""
+    import types
+
+    import pyopencl as cl
+
+    from clsky import _cl
+
+    queue = cl.CommandQueue(cl_context)
+    queues = _cl.upload_share_queues(queue)
+    if queue.device.type & cl.device_type.CPU:
+        assert len(queues) == 2 and all(q.context == queue.context and q.device == queue.device for q in queues)
+        assert all(q != queue for q in queues)
+    else:
+        assert queues is None
+    gpu = types.SimpleNamespace(device=types.SimpleNamespace(type=cl.device_type.GPU), context=cl_context)
+    assert _cl.upload_share_queues(gpu) is None
+
+
 def test_upload_padded_shares_start_after_the_queue(cl_context, monkeypatch):
     """With ``queues``, the shares' fills and writes wait for every command enqueued on the array's queue
     before them (a buffer from a pool may still be read there; here the queue's NaN fill of the new
