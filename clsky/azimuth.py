@@ -489,9 +489,9 @@ class _Backend:
     first ``harmonics`` of them computed (default all); accumulate(total, gathered, scale=None,
     harmonics=None): total + gathered, or total + scale gathered per wavelength (scale (r, g, b)), in
     the first ``harmonics`` harmonics only (default all) (for total None gathered itself or a copy, to
-    which later calls may add in place); gather_summed(total, node_sum): total + A_m L_m in each harmonic m >= 1, L_m the harmonics
-    of ``node_sum`` (M + 1, D, H, W, 3) on the host (in place); to_host(gathered):
-    (M + 1, D, H, W, 6) float64; stopping_test(single, keep_previous): the orders' stopping test
+    which later calls may add in place); gather_summed(total, node_sum): total + A_m L_m in each
+    harmonic m >= 1, L_m the harmonics of ``node_sum`` (M + 1, D, H, W, 3) on the host (in place);
+    to_host(gathered): (M + 1, D, H, W, 6) float64; stopping_test(single, keep_previous): the orders' stopping test
     (:mod:`clsky.stopping`), its running sum starting from single scattering ``single``
     (M + 1, D, H, W, 6) as R + M per wavelength, whose ``add`` takes an order as ``reads`` says,
     'host' (what the first of scatter's pair returns) or 'backend' (the second); device: its

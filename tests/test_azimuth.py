@@ -469,8 +469,8 @@ def test_upload_padded_pads_every_table_shape_with_zeros(cl_context, monkeypatch
     a buffer that held NaN, for 1, 3, 6 and 8 channels, a non-contiguous table and leading shapes of 1
     to 4 axes; a table of no channels, more than 8 or no values is refused before any transfer. The same
     with the rows shared among 2 or 3 queues of their own (``queues``, the harmonic build's on a CPU; rows
-    that do not divide evenly, a queue without rows): the NaN fill, enqueued on the array's queue, is
-    then not ordered before the shares' zero fills unless upload_padded orders it."""
+    that do not divide evenly, a queue without rows); that the shares wait for the array's queue, the
+    next test but one."""
     from clsky import _cl
 
     queue = nan_filled_queue(cl_context, monkeypatch, dtype)
