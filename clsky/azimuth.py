@@ -589,12 +589,13 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math, background=
     # the scatter's engines: every harmonic of the source, and the azimuth average alone where a later order
     # reads only that (HARMONIC_SOURCE_ORDERS)
     engines = {settings.azimuth_harmonics: engine}
-    if not _reads_harmonics(settings.max_orders if settings.orders == "auto" else settings.orders):
-        engines.setdefault(0, MultipleScatteringEngine(settings.replace(azimuth_harmonics=0), fast_math=fast_math,
-                                                       queue=queue, allocator=pool, features=features))
+    if settings.azimuth_harmonics and not _reads_harmonics(settings.max_orders if settings.orders == "auto"
+                                                           else settings.orders):
+        engines[0] = MultipleScatteringEngine(settings.replace(azimuth_harmonics=0), fast_math=fast_math,
+                                              queue=queue, allocator=pool, features=features)
     # their programs built meanwhile on the background's thread: in a fresh process each build took 40-60 ms of
     # the main thread at its first scatter, the device idle (README "Speed"); a build error surfaces there
-    built = background.submit(lambda: [e.kernels_with(features) for e in engines.values()]) if background else None
+    built = background.submit(lambda: [e.kernels_with(e.features) for e in engines.values()]) if background else None
     cosines = np.cos(azimuth_nodes(settings.azimuth_harmonics))
     width, height, depth = settings.size
     single = np.empty((cosines.size, depth, height, width, 6))
