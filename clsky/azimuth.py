@@ -74,6 +74,7 @@ from __future__ import annotations
 import concurrent.futures
 import contextlib
 import dataclasses
+import functools
 import math
 
 import numpy as np
@@ -82,13 +83,13 @@ from . import _atmosphere_cl, _cl, ground, reference
 from .atmosphere import AtmosphereParameters
 from .errors import ParameterError, is_integer
 from .mapping import altitude_to_u, cos_to_sun_t, cos_to_v, grid_coordinates
-from .multiple import SPECIES, _gather_parts, _phase, _quadrature_key, gather_quadrature
+from .multiple import SPECIES, _gather_key, _gather_parts, _phase, _quadrature_key, _read_only, gather_quadrature
 from .orders import _total, check_finite, geometric_ratio, per_channel, tail_factor
 from .settings import MAX_AZIMUTH_HARMONICS, TableSettings
 from .stopping import DeviceStoppingTest, HostStoppingTest
 
 __all__ = ["azimuth_nodes", "harmonic_transform", "harmonic_phase_integrals",
-           "HarmonicGather", "single_scattering_nodes", "scatter_nodes", "HarmonicOrders", "compute_orders",
+           "HarmonicGather", "harmonic_gather", "single_scattering_nodes", "scatter_nodes", "HarmonicOrders", "compute_orders",
            "orders_result", "azimuth_average", "gathered_along",
            "raymarch_higher_orders", "local_cos_azimuth"]
 
@@ -355,6 +356,24 @@ class HarmonicGather:
         :func:`clsky.multiple.gather_matrix`, the same product)."""
         with _cl.host_blas_single_threaded():
             return np.stack([self.view[species][harmonic] @ self.p for species in SPECIES])
+
+
+def harmonic_gather(atmosphere: AtmosphereParameters, settings: TableSettings, harmonics: int) -> HarmonicGather:
+    """The :class:`HarmonicGather` of a grid, quadrature, pair of phase functions and M = ``harmonics``,
+    cached, its arrays read-only.
+
+    Keyed as :func:`clsky.multiple.gather_matrices` is: atmospheres that differ only in coefficients,
+    wavelengths or sun (the batches of a spectral build) and a process's later builds of the same grid
+    share one; computing it took 0.27-0.46 CPU-s for the default animation's table (README "Speed")."""
+    return _harmonic_gather(_gather_key(atmosphere), _quadrature_key(settings), _check_harmonics(harmonics))
+
+
+@functools.lru_cache(maxsize=2)
+def _harmonic_gather(atmosphere, settings, harmonics):
+    operators = HarmonicGather(atmosphere, settings, harmonics)
+    for array in (operators.cos_theta, *operators.view.values(), *operators.sun.values()):
+        _read_only(array)                       # p and weights: clsky.multiple's cached parts, read-only
+    return operators
 
 
 def _cos_scatter(cos_view, cos_sun, azimuth):
@@ -745,11 +764,12 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
     if backend not in ("numpy", "opencl"):
         raise ParameterError("backend", "one of ['numpy', 'opencl']", backend)
     _check_harmonics(harmonics)
-    # the gather operators (NumPy: 0.1-0.35 s for the default animation's table, single-threaded), and the
+    # the gather operators (NumPy: 0.27-0.46 s for the default animation's table, single-threaded; cached
+    # for the next build of the grid), and the
     # OpenCL backend's scatter programs, on a host thread while single scattering runs: the device waited for
     # them with a core idle (README "Speed")
     with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="clsky-orders-setup") as pool:
-        operators = pool.submit(HarmonicGather, atmosphere, settings, harmonics).result
+        operators = pool.submit(harmonic_gather, atmosphere, settings, harmonics).result
         if backend == "numpy":
             run = _numpy_backend(atmosphere, settings, operators)
         else:

@@ -130,9 +130,10 @@ def _gather_parts_cached(atmosphere: AtmosphereParameters, settings: TableSettin
     view, sun = {}, {}
     for species in SPECIES:
         phase, mean = _phase(atmosphere, species), _phase_mean(atmosphere, species)
-        view[species] = _conserving(phase_azimuth_integrals(phase, cos_view, theta, phi, phi_weights), weights, mean)
-        sun[species] = _conserving(phase_azimuth_integrals(phase, cos_sun, theta, phi, phi_weights), weights, mean)
-    return p, weights, view, sun
+        for parts, cosines in ((view, cos_view), (sun, cos_sun)):
+            k = phase_azimuth_integrals(phase, cosines, theta, phi, phi_weights)
+            parts[species] = _read_only(_conserving(k, weights, mean))
+    return _read_only(p), _read_only(weights), view, sun      # cached, shared: read-only
 
 
 def _phase_mean(atmosphere, species):

@@ -184,6 +184,31 @@ def test_first_gather_against_literal_sphere_integral(atmosphere, species):
         assert_allclose(gathered[m], _project(literal, m), rtol=0, atol=1e-12 * np.abs(literal).max())
 
 
+def test_operators_cached_per_grid_and_phase_functions(atmosphere):
+    """harmonic_gather: one HarmonicGather per grid, quadrature, phase functions and M, whatever the
+    coefficients or wavelengths (a spectral build's batches share it), read-only, the same values as a new
+    one; a build computes it once for two builds of the same grid."""
+    from clsky import spectrum
+    first, second = spectrum.batch_atmospheres(atmosphere, 6)
+    operators = azimuth.harmonic_gather(first, TINY, HARMONICS)
+    assert azimuth.harmonic_gather(second, TINY, HARMONICS) is operators
+    assert azimuth.harmonic_gather(first.replace(mie_g=-0.7), TINY, HARMONICS) is not operators
+    assert azimuth.harmonic_gather(first, TINY, 1) is not operators
+    assert azimuth.harmonic_gather(first, TINY.replace(gather_phi_steps=20), HARMONICS) is not operators
+    fresh = azimuth.HarmonicGather(atmosphere, TINY, HARMONICS)
+    for name in ("view", "sun"):
+        for species in ("rayleigh", "mie"):
+            array = getattr(operators, name)[species]
+            assert_array_equal(array, getattr(fresh, name)[species])
+            assert not array.flags.writeable
+    assert not operators.p.flags.writeable and not operators.weights.flags.writeable
+    azimuth._harmonic_gather.cache_clear()
+    settings = TINY.replace(azimuth_harmonics=HARMONICS, orders=2)
+    for _ in range(2):
+        azimuth.compute_orders(atmosphere, settings)
+    assert azimuth._harmonic_gather.cache_info()[:2] == (1, 1)          # (hits, misses)
+
+
 def test_first_gather_sun_weighting_is_einsums_sum(atmosphere):
     """The first gather's weighting of the seen harmonics by C_{s',m,n}(z, a), done a few sun layers at a time
     (HarmonicGather._sun_weighted), is bit for bit the einsum it replaced: per species s' the sum over n
