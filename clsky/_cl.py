@@ -473,13 +473,15 @@ def rectangular_reads(device) -> bool:
     return bool(device.type & cl.device_type.CPU)
 
 
-def upload_share_queues(queue):
-    """Queues for :func:`upload_padded`'s ``queues`` on ``queue``'s device: two queues of its own on a CPU
-    (PoCL copies each queue's commands on a thread of its own: half the wall time on the 2-core machine),
-    None elsewhere (a GPU's copies are its DMA engines', not measured split)."""
+def upload_share_queues(queue, reuse=None):
+    """Queues for :func:`upload_padded`'s ``queues`` on ``queue``'s device, the one place that decides
+    whether uploads split: on a CPU two queues (PoCL copies each queue's commands on a thread of its own:
+    half the wall time on the 2-core machine), ``reuse`` where given (queues of the caller's own on that
+    device, such as a table build's copy queues), else two new ones; None elsewhere (a GPU's copies are its
+    DMA engines', not measured split)."""
     if not queue.device.type & cl.device_type.CPU:
         return None
-    return [cl.CommandQueue(queue.context, queue.device) for _ in range(2)]
+    return list(reuse) if reuse else [cl.CommandQueue(queue.context, queue.device) for _ in range(2)]
 
 
 def packed_reads(device) -> bool:

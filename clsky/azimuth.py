@@ -602,9 +602,9 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math, background=
     # on one core faulting in its fresh host table, 0.24-0.27 s on two (README "Speed")
     copy_queues = [cl.CommandQueue(engine.ctx) for _ in range(2)]
     rectangular = _cl.rectangular_reads(queue.device)
-    # the uploads of the first gather and of the summed nodes likewise split on a CPU: each was one PoCL
-    # thread's fill and write of 156 MB of fresh memory (85 and 100 ms) while the device waited for it
-    upload_queues = copy_queues if rectangular else None
+    # the uploads of the first gather and of the summed nodes split on a CPU, on the copy queues: each was one
+    # PoCL thread's fill and write of 156 MB of fresh memory (85 and 100 ms) while the device waited for it
+    upload_queues = _cl.upload_share_queues(queue, reuse=copy_queues)
     # the scatter's engines: every harmonic of the source, and the azimuth average alone where a later order
     # reads only that (HARMONIC_SOURCE_ORDERS)
     engines = {settings.azimuth_harmonics: engine}

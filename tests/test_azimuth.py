@@ -521,9 +521,10 @@ def test_upload_padded_pads_every_table_shape_with_zeros(cl_context, monkeypatch
 
 
 def test_upload_share_queues_split_on_a_cpu_only(cl_context):
-    """clsky._cl.upload_share_queues, which the renderers and the 4D table pass to upload_padded: two
-    queues of the queue's own context and device on a CPU (PoCL's copies side by side), None on any
-    other device (a stand-in GPU queue)."""
+    """clsky._cl.upload_share_queues, which the renderers, the 4D table and the harmonic build pass to
+    upload_padded: two queues of the queue's own context and device on a CPU (PoCL's copies side by side),
+    the caller's own where it gives them (the build's copy queues), None on any other device (a stand-in
+    GPU queue), with or without queues to reuse."""
     import types
 
     import pyopencl as cl
@@ -535,10 +536,12 @@ def test_upload_share_queues_split_on_a_cpu_only(cl_context):
     if queue.device.type & cl.device_type.CPU:
         assert len(queues) == 2 and all(q.context == queue.context and q.device == queue.device for q in queues)
         assert all(q != queue for q in queues)
+        assert _cl.upload_share_queues(queue, reuse=queues[::-1]) == queues[::-1]
     else:
         assert queues is None
     gpu = types.SimpleNamespace(device=types.SimpleNamespace(type=cl.device_type.GPU), context=cl_context)
     assert _cl.upload_share_queues(gpu) is None
+    assert _cl.upload_share_queues(gpu, reuse=[queue, queue]) is None
 
 
 def test_upload_padded_shares_start_after_the_queue(cl_context, monkeypatch):
