@@ -822,7 +822,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
             # the stopping test (on OpenCL enqueued on the device, after the gathers), read below
             stopping.add(new if stopping.reads == "host" else state, ratio)
             del state
-            check_finite(new, k, atmosphere, settings)
+            check_finite(new, k, atmosphere, settings, totals[-1])
             average = azimuth_average(new) if ground_sky is not None or not keep_nodes else None
             orders.append(new.copy() if keep_nodes else average)     # the backend reuses `new` next order
             if ground_sky is not None:     # the horizontal ground sees the azimuth average (m = 0)

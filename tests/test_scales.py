@@ -93,6 +93,32 @@ def test_a_non_finite_order_is_refused():
         check_finite(order, 2, PHYSICAL, settings)
 
 
+@pytest.mark.parametrize("channels", [3, 6])
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf, "inf and -inf", "overflow"])
+def test_check_finite_with_the_orders_total(channels, bad):
+    """With the order's total (clsky.orders._total, as the builds pass it), check_finite refuses exactly
+    what it refuses without: a NaN, an infinity, or both infinities (whose sum is NaN) anywhere, in a
+    Rayleigh or a Mie channel; finite values whose total overflows (1e308 twice) are accepted, by the
+    value-by-value check the infinite total falls back to."""
+    from clsky.orders import _total
+
+    order = np.ones((4, 8, 4, channels))
+    assert check_finite(order, 2, PHYSICAL, TINY, _total(order)) is order
+    if bad == "inf and -inf":
+        order[1, 2, 3, channels - 1], order[3, 7, 0, channels - 1] = np.inf, -np.inf
+    elif bad == "overflow":
+        order[0, 0, 0, 0] = order[3, 7, 3, 0] = 1e308
+    else:
+        order[2, 5, 1, channels - 1] = bad
+    total = _total(order)
+    assert not np.isfinite(total).all()
+    if bad == "overflow":
+        assert check_finite(order, 2, PHYSICAL, TINY, total) is order
+    else:
+        with pytest.raises(NumericalError, match="order 2"):
+            check_finite(order, 2, PHYSICAL, TINY, total)
+
+
 @pytest.mark.parametrize("altitude", [1e155, 1e300, MAX_QUERY_ALTITUDE * 1.001, np.inf])
 def test_huge_altitudes_are_refused_by_both_backends(altitude):
     table = build(PHYSICAL, backend="numpy")
