@@ -89,8 +89,8 @@ from .settings import MAX_AZIMUTH_HARMONICS, TableSettings
 from .stopping import DeviceStoppingTest, HostStoppingTest
 
 __all__ = ["azimuth_nodes", "harmonic_transform", "harmonic_phase_integrals",
-           "HarmonicGather", "harmonic_gather", "single_scattering_nodes", "scatter_nodes", "HarmonicOrders", "compute_orders",
-           "orders_result", "azimuth_average", "gathered_along",
+           "HarmonicGather", "harmonic_gather", "single_scattering_nodes", "scatter_nodes", "HarmonicOrders",
+           "compute_orders", "orders_result", "azimuth_average", "gathered_along",
            "raymarch_higher_orders", "local_cos_azimuth"]
 
 #: Orders k whose scatter reads the harmonics m >= 1 of their gathered source; later orders read its
@@ -364,7 +364,7 @@ def harmonic_gather(atmosphere: AtmosphereParameters, settings: TableSettings, h
 
     Keyed as :func:`clsky.multiple.gather_matrices` is: atmospheres that differ only in coefficients,
     wavelengths or sun (the batches of a spectral build) and a process's later builds of the same grid
-    share one; computing it took 0.27-0.46 CPU-s for the default animation's table (README "Speed")."""
+    share one; computing it took 0.27-0.53 CPU-s for the default animation's table (README "Speed")."""
     return _harmonic_gather(_gather_key(atmosphere), _quadrature_key(settings), _check_harmonics(harmonics))
 
 
@@ -764,10 +764,9 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
     if backend not in ("numpy", "opencl"):
         raise ParameterError("backend", "one of ['numpy', 'opencl']", backend)
     _check_harmonics(harmonics)
-    # the gather operators (NumPy: 0.27-0.46 s for the default animation's table, single-threaded; cached
-    # for the next build of the grid), and the
-    # OpenCL backend's scatter programs, on a host thread while single scattering runs: the device waited for
-    # them with a core idle (README "Speed")
+    # the gather operators (NumPy: 0.27-0.53 s for the default animation's table, single-threaded; cached for
+    # the next build of the grid), and the OpenCL backend's scatter programs, on a host thread while single
+    # scattering runs: the device waited for them with a core idle (README "Speed")
     with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="clsky-orders-setup") as pool:
         operators = pool.submit(harmonic_gather, atmosphere, settings, harmonics).result
         if backend == "numpy":
