@@ -788,14 +788,19 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
     if atmosphere.has_ground:
         pending_ground = ground.reflected_radiance(atmosphere, ground.direct_irradiance(atmosphere, settings)
                                                    + ground_sky)
-    stopping = run.stopping_test(single_nodes, settings.orders == "auto")
-    gathered_sum, orders, totals = None, [], [_total(single_nodes)]
+    # single scattering's light (the first of the orders' totals) and the copy of its canonical node that the
+    # orders keep, on a host thread while the stopping test sums and uploads its running sum: one after the
+    # other they held the first scatter back by 40-70 ms more, the other core idle (README "Speed")
+    with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="clsky-orders-totals") as pool:
+        single_total, single_copy = pool.submit(_total, single_nodes), pool.submit(np.copy, single_nodes[0])
+        stopping = run.stopping_test(single_nodes, settings.orders == "auto")
+        totals, single = [single_total.result()], single_copy.result()
+    gathered_sum, orders = None, []
     # the sum of the nodes of the orders whose gathered harmonics m >= 1 join the gathered sum alone, and
     # whether the order before was one (its gathered G^(k - 1) then holds the azimuth average alone)
     node_sum, summed = None, False
-    # what the orders no longer read goes before them: single scattering's nodes but the canonical one
-    # (the build's peak memory is what a build pays for on these VMs, README "Speed")
-    single = single_nodes[0].copy()
+    # what the orders no longer read goes before them: single scattering's nodes but the canonical one,
+    # copied above (the build's peak memory is what a build pays for on these VMs, README "Speed")
     del single_nodes
     # the host's BLAS (azimuth averages, ground irradiances) on one thread beside the OpenCL device's
     # workers, as clsky._cl.host_blas_single_threaded explains (the first gather above has its own threads)

@@ -939,3 +939,34 @@ def test_orders_build_their_scatter_programs_while_single_scattering_runs(cl_con
     for harmonics in (2, 0):
         with pytest.raises(_cl.KernelBuildError, match=r"multiple\.cl failed \(test\)"):
             clsky.ScatteringTable.build(physical, SMALL_TABLE.replace(azimuth_harmonics=harmonics), ctx=own)
+
+
+def test_single_scatterings_total_and_copy_beside_the_stopping_tests_upload(atmosphere, monkeypatch):
+    """compute_orders takes single scattering's total (the orders' first) and the copy of its canonical
+    node on a host thread of their own while the stopping test sums and uploads its running sum (one after
+    the other they held the first scatter back, the other core idle; README "Speed"): the total is the one
+    the main thread would take, and an error there still fails the build."""
+    import threading
+
+    seen = []
+    total = azimuth._total
+
+    def recording(order):
+        seen.append((order.shape, threading.current_thread().name))
+        return total(order)
+
+    monkeypatch.setattr(azimuth, "_total", recording)
+    settings = TINY.replace(azimuth_harmonics=HARMONICS, orders=3)
+    result = azimuth.compute_orders(atmosphere, settings)
+    nodes_shape = (HARMONICS + 1,) + tuple(reversed(settings.size)) + (6,)
+    assert seen[0] == (nodes_shape, seen[0][1]) and seen[0][1].startswith("clsky-orders-totals"), seen
+    assert all(thread == "MainThread" for _, thread in seen[1:]), seen          # the orders' own totals
+    expected = azimuth.compute_orders(atmosphere, settings.replace(orders=1)).single
+    assert_array_equal(result.single, expected)
+
+    def failing(order):
+        raise MemoryError("test")
+
+    monkeypatch.setattr(azimuth, "_total", failing)
+    with pytest.raises(MemoryError, match="test"):
+        azimuth.compute_orders(atmosphere, settings)
