@@ -207,10 +207,8 @@ class SkyRenderer:
         self._defines = (_atmosphere_cl.feature_defines(table.atmosphere)
                          + (azimuth_defines(table.settings, interleaved=True) if self._has_gathered else []))
         # (D, H, W, 6) padded to (D, H, W, 8), or with azimuth harmonics (M + 1, D, H, W, 6) interleaved into
-        # (D, H, W, M + 1, 8) on the device; without it a small zero table the kernel does not read. On a CPU
-        # its rows split between two queues: the default animation's 163 MB took 123 ms on one PoCL thread
-        self._gathered_d = upload_gathered_source(self.queue, table.gathered, dtype,
-                                                  queues=_cl.upload_share_queues(self.queue))
+        # (D, H, W, M + 1, 8) on the device; without it a small zero table the kernel does not read
+        self._gathered_d = upload_gathered_source(self.queue, table.gathered, dtype)
         # the sky's irradiance on a reflecting ground per sun node (D, 4); not read for a black ground
         self._ground_depth = table.settings.size[2] if table.atmosphere.has_ground else 2
         ground = padded4(table.ground_irradiance, dtype) if table.atmosphere.has_ground else np.zeros((2, 4), dtype)

@@ -107,9 +107,7 @@ class Table4DEngine(_cl.Engine):
         width, height, depth = settings.size
         has_multiple = gathered is not None
         channels = 9 if has_multiple else 6
-        # zeros, unread, without them
-        gathered_d = upload_gathered_source(self.queue, gathered, self.dtype,
-                                            queues=_cl.upload_share_queues(self.queue))
+        gathered_d = upload_gathered_source(self.queue, gathered, self.dtype)    # zeros, unread, without them
         if settings.sun_transmittance == "table":
             tw, th = settings.transmittance_size
             engine = TransmittanceEngine(self.ctx, self.dtype, steps=settings.sun_steps, sampling=settings.sampling)

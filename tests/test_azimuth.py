@@ -521,8 +521,8 @@ def test_upload_padded_pads_every_table_shape_with_zeros(cl_context, monkeypatch
 
 
 def test_upload_share_queues_split_on_a_cpu_only(cl_context):
-    """clsky._cl.upload_share_queues, which the renderers, the 4D table and the harmonic build pass to
-    upload_padded: two queues of the queue's own context and device on a CPU (PoCL's copies side by side),
+    """clsky._cl.upload_share_queues, which upload_gathered_source (the renderers' and the 4D table's) and
+    the harmonic build pass to upload_padded: two queues of the queue's own context and device on a CPU (PoCL's copies side by side),
     the caller's own where it gives them (the build's copy queues), None on any other device (a stand-in
     GPU queue), with or without queues to reuse."""
     import types
