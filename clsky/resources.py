@@ -380,10 +380,12 @@ def _harmonic_phases(settings, orders, packed_reads=False):
     first = Phase("first gather", (
         single,
         # B sun layers at a time (HarmonicGather.first_gather), a block on each of its threads: the
-        # block's harmonics and the copy of its nodes (n, B, H, W, 6), both species interpolated at once
-        # (n, B, Theta + 1, W 6), the harmonic sums of both (n, B, Theta + 1, W 3) and a species' gathers
-        Allocation("a block's single scattering at the nodes (a copy) and its harmonics (n, B, H, W, 6) on each "
-                   "first-gather thread", n * block * height * settings.size[0] * 6 * _F64, count=2 * threads),
+        # block's harmonics, their copy by species and the copy of its nodes (n, B, H, W, 6), both species
+        # interpolated at once (n, B, Theta + 1, W 6), the harmonic sums of both (n, B, Theta + 1, W 3) and
+        # a species' gathers
+        Allocation("a block's single scattering at the nodes (a copy), its harmonics and their copy with each "
+                   "species' channels together (n, B, H, W, 6) on each first-gather thread",
+                   n * block * height * settings.size[0] * 6 * _F64, count=3 * threads),
         Allocation("a block's interpolated single scattering, its harmonic sums and gathers (n, B, Theta + 1, W 3)"
                    " on each first-gather thread", seen, count=4 * threads),
         Allocation("gathered harmonics (n, D, H, W, 6) float64", cells * 6 * _F64, count=n))

@@ -212,8 +212,9 @@ def test_operators_cached_per_grid_and_phase_functions(atmosphere):
 def test_first_gather_sun_weighting_is_einsums_sum(atmosphere):
     """The first gather's weighting of the seen harmonics by C_{s',m,n}(z, a), done a few sun layers at a time
     (HarmonicGather._sun_weighted), is bit for bit the einsum it replaced: per species s' the sum over n
-    in order, the second species' added to the first's (so that a harmonic table keeps its bits). An odd
-    number of sun layers (7) leaves a short last block."""
+    in order, the second species' added to the first's (so that a harmonic table keeps its bits), whether
+    each species' channels come together (the first gather's layout, (2, W, 3) a row) or as strided
+    views. An odd number of sun layers (7) leaves a short last block."""
     settings = TINY.replace(size=(5, 12, 7))
     operators = azimuth.HarmonicGather(atmosphere, settings, HARMONICS)
     width, height, depth = settings.size
@@ -223,7 +224,9 @@ def test_first_gather_sun_weighting_is_einsums_sum(atmosphere):
         term = np.einsum("mnza,nzawc->mzawc", operators.sun[species], seen[..., 3 * index:3 * index + 3])
         expected = term if expected is None else expected + term
     assert depth % operators.SUN_LAYERS_PER_BLOCK != 0
-    assert np.array_equal(operators._sun_weighted(seen), expected)
+    by_species = seen.reshape(seen.shape[:3] + (width, 2, 3)).transpose(0, 1, 2, 4, 3, 5)
+    assert np.array_equal(operators._sun_weighted(np.ascontiguousarray(by_species)), expected)
+    assert np.array_equal(operators._sun_weighted(by_species), expected)
 
 
 def test_first_gather_in_blocks_of_sun_layers_is_the_whole_grids(atmosphere, monkeypatch):
@@ -233,8 +236,9 @@ def test_first_gather_in_blocks_of_sun_layers_is_the_whole_grids(atmosphere, mon
     cell's harmonics are the same three products and sums in any block): blocks of 2 with a short last
     block (7 layers), and of 3, against one block of all 7; and on 1, 2 and 3 host threads
     (HarmonicGather.FIRST_GATHER_THREADS), each block on whichever thread takes it. The one block of all
-    layers is also the products of the harmonics of the whole grid taken first (what the first gather
-    did before its blocks took the harmonics)."""
+    layers is also the products of the harmonics of the whole grid taken first, with the interpolation's
+    columns in the table's order, (W, 6) a row (what the first gather did before its blocks took the
+    harmonics and before it put each species' columns together: BLAS computes each column on its own)."""
     settings = TINY.replace(size=(5, 12, 7))
     operators = azimuth.HarmonicGather(atmosphere, settings, HARMONICS)
     width, height, depth = settings.size
@@ -243,8 +247,8 @@ def test_first_gather_in_blocks_of_sun_layers_is_the_whole_grids(atmosphere, mon
     monkeypatch.setattr(azimuth.HarmonicGather, "FIRST_GATHER_LAYERS", depth)
     whole = operators.first_gather(single)
     harmonics = azimuth._to_harmonics(single).reshape(HARMONICS + 1, depth, height, width * 6)
-    seen = np.matmul(operators.p, harmonics).reshape(HARMONICS + 1, depth, -1, width, 6)
-    weighted = operators._sun_weighted(seen).reshape(HARMONICS + 1, depth, -1, width * 3)
+    seen = np.matmul(operators.p, harmonics).reshape(HARMONICS + 1, depth, -1, width, 2, 3)
+    weighted = operators._sun_weighted(seen.transpose(0, 1, 2, 4, 3, 5)).reshape(HARMONICS + 1, depth, -1, width * 3)
     for index, species in enumerate(("rayleigh", "mie")):
         products = np.matmul(operators.view[species][:, None], weighted).reshape(HARMONICS + 1, depth, height,
                                                                                  width, 3)
