@@ -537,8 +537,16 @@ class _Backend:
 
 def _single_running_sum(single):
     """The stopping test's running sum of single scattering (factored, (..., 6)): R + M per wavelength
-    (phase 1, its mean over the sphere: clsky.orders)."""
-    return single[..., :3] + single[..., 3:]
+    (phase 1, its mean over the sphere: clsky.orders).
+
+    Summed a wavelength at a time: ``single[..., :3] + single[..., 3:]`` is the same sums, but NumPy runs it
+    as a loop of 3 values per cell (15-21 against 7-9 ms a node of the default animation's table, on the
+    host's path to the first scatter, the device idle)."""
+    out = np.empty(single.shape[:-1] + (3,))
+    cells, sums = single.reshape(-1, 6), out.reshape(-1, 3)
+    for channel in range(3):
+        np.add(cells[:, channel], cells[:, 3 + channel], out=sums[:, channel])
+    return out
 
 
 def _numpy_backend(atmosphere, settings, operators):
