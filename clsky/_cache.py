@@ -1,7 +1,8 @@
 """clsky's own disk cache: where it is, and how a file gets into it.
 
 What is kept there is what would cost every process a measurable share of a small run to recompute
-(README "Speed"): colour-science's constants (:mod:`clsky.colour_constants`). The directory is
+(README "Speed"): colour-science's constants (:mod:`clsky.colour_constants`) and the scene plan's pilot
+shares (:func:`clsky.planner.pilot_share`, keyed by :func:`source_digest` among others). The directory is
 ``$CLSKY_CACHE_DIR`` where that is set to an absolute path (the test suite gives each session its own),
 else ``$XDG_CACHE_HOME/clsky`` or ``~/.cache/clsky`` (an XDG_CACHE_HOME that is not an absolute path is
 ignored, as the XDG Base Directory specification asks); without a home directory there is none. Files land through
@@ -14,12 +15,14 @@ the cache. Nothing is ever deleted from it (README "Known limits").
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import os
 import pathlib
 
 from ._files import atomic_write
 
-__all__ = ["cache_directory", "store"]
+__all__ = ["cache_directory", "source_digest", "store"]
 
 
 def cache_directory(*parts: str) -> pathlib.Path | None:
@@ -48,3 +51,22 @@ def store(path: pathlib.Path, write) -> bool:
     except (OSError, ValueError):
         return False
     return True
+
+
+@functools.lru_cache(maxsize=1)
+def source_digest() -> str:
+    """SHA-256 (hex) of clsky's own code: every ``.py`` file of the package and every OpenCL kernel
+    (``.cl``) it builds, by name and content. A result kept on disk under a key that holds it is never
+    read by another version of the code (an edit, an upgrade); about 3 ms the first time in a process."""
+    from ._cl import kernel_directory
+
+    package = pathlib.Path(__file__).resolve().parent
+    sha = hashlib.sha256()
+    for path in sorted(package.rglob("*.py")):
+        sha.update(f"{path.relative_to(package).as_posix()}\n".encode())
+        sha.update(path.read_bytes())
+    for entry in sorted(kernel_directory().iterdir(), key=lambda entry: entry.name):
+        if entry.name.endswith(".cl"):
+            sha.update(f"kernels/{entry.name}\n".encode())
+            sha.update(entry.read_bytes())
+    return sha.hexdigest()

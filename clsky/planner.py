@@ -23,7 +23,8 @@ What the plan decides, and why:
   (:func:`clsky.quality.level_for_budget`).
 * **Higher orders** are dropped when a pilot (a small table on the planned sun range, ray-marched on a
   coarse fisheye at the path's lowest, highest and horizon suns) shows that they add less than half the
-  budget, or when the scene does not want them.
+  budget, or when the scene does not want them. The pilot's share is kept on disk for the next plan of
+  the same scene on the same device and code (:func:`pilot_share`).
 * **Mie** is dropped (its scattering set to 0: the Mie channels hold zeros) only when the scene does
   not want it; an atmosphere without Mie has nothing to drop.
 * **Renderer** (:mod:`clsky.renderer_choice`): the cheapest of the table lookup, the per-frame sky-view
@@ -62,10 +63,14 @@ What the plan decides, and why:
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import json
 import math
 
 import numpy as np
 
+from . import _cl
+from ._cache import cache_directory, source_digest, store
 from .atmosphere import AtmosphereParameters, preset
 from .errors import ParameterError, is_real_number
 from .mapping import cos_to_v
@@ -313,17 +318,25 @@ def sun_axis(atmosphere: AtmosphereParameters, scene: Scene, level: QualityLevel
     return (cos_low, cos_high), level.sun_nodes(w_low, w_high), (low, high), margins
 
 
-def _higher_orders_share(atmosphere, table, scene, ctx=None):
-    """Largest share of the higher orders in ray-marched pixels (95th percentile over a 24 x 24 fisheye
-    from the lowest observer) at the path's lowest, highest and horizon suns, from a pilot table (the
-    planned sun range, 16 x 64 nodes and enough sun nodes, 'draft' quadrature, the plan's view nodes)."""
-    from .render import RAYMARCH_DEFAULTS, SkyRenderer
-    from .table import ScatteringTable
+def _pilot_settings(table):
+    """(table settings, ray settings) of the pilot of a plan's ``table``: the planned sun range, 16 x 64
+    nodes and enough sun nodes, 'draft' quadrature; a 16-step ray march."""
+    from .render import RAYMARCH_DEFAULTS
 
     pilot = quality_level("draft").table.replace(size=(16, 64, max(8, min(64, table.size[2]))),
                                                  sun_cos_range=table.sun_cos_range, mode=table.mode)
+    return pilot, RAYMARCH_DEFAULTS.replace(view_steps=16, transmittance_size=(32, 128))
+
+
+def _higher_orders_share(atmosphere, table, scene, ctx=None):
+    """Largest share of the higher orders in ray-marched pixels (95th percentile over a 24 x 24 fisheye
+    from the lowest observer) at the path's lowest, highest and horizon suns, from a pilot table
+    (:func:`_pilot_settings`, the plan's view nodes)."""
+    from .render import SkyRenderer
+    from .table import ScatteringTable
+
+    pilot, ray = _pilot_settings(table)
     pilot_table = ScatteringTable.build(atmosphere, pilot, ctx=ctx)
-    ray = RAYMARCH_DEFAULTS.replace(view_steps=16, transmittance_size=(32, 128))
     renderer = SkyRenderer(pilot_table, ray, ctx=ctx)
     # the ray march's single scattering does not depend on the table: without the gathered sum, the
     # same table gives the first order alone
@@ -349,6 +362,58 @@ def _higher_orders_share(atmosphere, table, scene, ctx=None):
             share = max(share, float(np.percentile((total[lit] - first[lit]) / total[lit], 95)))
     renderer.close()
     single.close()
+    return share
+
+
+# The pilot's share, kept on disk ---------------------------------------------------------------------
+
+#: Layout of a kept pilot share; a file of another layout is not read (and is rewritten).
+PILOT_FORMAT = 1
+
+
+def pilot_share(atmosphere: AtmosphereParameters, table: TableSettings, scene: Scene, ctx=None) -> float:
+    """:func:`_higher_orders_share` of ``scene`` with the plan's ``table``, kept in clsky's cache
+    directory (:mod:`clsky._cache`) for the next plan of the same scene.
+
+    The pilot (a table and six ray-marched fisheyes) took about 0.45 s of one core at every plan, about
+    a tenth of a default ``clsky render`` (README "Scene plan"). Its share is kept in a small JSON file
+    under the key of everything it is computed from: the code (:func:`clsky._cache.source_digest`),
+    NumPy's version, the device (name, vendor, versions of device, driver and platform), the kernels' form
+    (``clsky._cl.VECTOR_WIDTH``, ``CUBE_ROOT``), the atmosphere, the pilot's table and ray settings, the
+    path's sun elevations and lowest altitude. A file is read only when its key is the whole key and its
+    share a finite number in [-1, 1] (JSON keeps a float's every bit); anything else is computed again
+    and rewritten. Without a cache directory, or where it cannot be written, the pilot runs every time."""
+    pilot, ray = _pilot_settings(table)
+    device = (ctx if ctx is not None else _cl.make_context()).devices[0]
+    key = {"format": PILOT_FORMAT, "clsky": source_digest(), "numpy": np.__version__,
+           "device": [device.name, device.vendor, device.version, device.driver_version, device.platform.name,
+                      device.platform.version],
+           "kernels": {"vector_width": _cl.VECTOR_WIDTH, "cube_root": _cl.CUBE_ROOT},
+           "atmosphere": repr(atmosphere), "pilot": repr(pilot), "ray": repr(ray),
+           "sun_elevations_deg": [float(e) for e in scene.sun_elevations_deg],
+           "altitude_m": float(scene.altitudes_m[0])}
+    text = json.dumps(key, sort_keys=True)
+    directory = cache_directory("pilot-shares")
+    path = None if directory is None else directory / f"{hashlib.sha256(text.encode()).hexdigest()[:32]}.json"
+    share = None if path is None else _kept_share(path, key)
+    if share is None:
+        share = float(_higher_orders_share(atmosphere, table, scene, ctx=ctx))
+        if path is not None:
+            store(path, lambda file: file.write(json.dumps({"key": key, "share": share}, sort_keys=True).encode()))
+    return share
+
+
+def _kept_share(path, key):
+    """The share kept at ``path`` for exactly ``key``, or None (no file, another key, a damaged file)."""
+    try:
+        kept = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError, RecursionError):      # missing, unreadable, not UTF-8, not JSON
+        return None
+    if not isinstance(kept, dict) or kept.get("key") != key:
+        return None
+    share = kept.get("share")
+    if type(share) is not float or not math.isfinite(share) or not -1.0 <= share <= 1.0:
+        return None
     return share
 
 
@@ -428,7 +493,7 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         table, elevations, margins = on_sun_axis(table.replace(orders=1, azimuth_harmonics=0), orders=False)
         decisions.append(("higher orders", "dropped", "not wanted by the scene"))
     else:
-        share = _higher_orders_share(atmosphere, table, scene, ctx=ctx)
+        share = pilot_share(atmosphere, table, scene, ctx=ctx)
         if share < 0.5 * budget:
             table, elevations, margins = on_sun_axis(table.replace(orders=1, azimuth_harmonics=0), orders=False)
             decisions.append(("higher orders", "dropped", f"they add at most {100 * share:.3g} % (pilot), "

@@ -323,3 +323,113 @@ def test_planned_frame_from_altitude_looking_down_meets_the_budget(cl_context, a
         old, _ = _planned_frame_error(cl_context, altitude, sampling="keller_bohn")
         print("keller_bohn error [%]:\n", np.round(100 * old, 3))
         assert np.max(np.abs(old)) > budget
+
+
+# 6. The pilot's share kept on disk ---------------------------------------------------------------------
+
+def _counted_pilot(monkeypatch, share=None):
+    """Record each run of the pilot (clsky.planner._higher_orders_share): the real one, or with ``share``
+    a stand-in that returns it at once."""
+    from clsky import planner
+
+    runs = []
+    real = planner._higher_orders_share
+
+    def pilot(*args, **kwargs):
+        runs.append(real(*args, **kwargs) if share is None else share)
+        return runs[-1]
+
+    monkeypatch.setattr(planner, "_higher_orders_share", pilot)
+    return runs
+
+
+def test_pilot_share_is_kept_and_read_back_bit_for_bit(cl_context, tmp_path, monkeypatch):
+    """The second plan of a scene reads the pilot's share from the cache directory instead of running the
+    pilot: one file holding the key and the share, the same share to the last bit (JSON writes a float's
+    shortest round-trip form), the same plan."""
+    import json
+
+    monkeypatch.setenv("CLSKY_CACHE_DIR", str(tmp_path))
+    runs = _counted_pilot(monkeypatch)
+    scene = Scene((20.0, 60.0), error_budget=0.1)
+    first = plan_scene(scene, ctx=cl_context)
+    second = plan_scene(scene, ctx=cl_context)
+    assert len(runs) == 1 and second.describe() == first.describe() and second.table == first.table
+    (kept,) = (tmp_path / "pilot-shares").iterdir()
+    content = json.loads(kept.read_text(encoding="utf-8"))
+    assert content["share"] == runs[0] and content["key"]["sun_elevations_deg"] == [20.0, 60.0]
+    assert 0.0 < runs[0] < 1.0
+
+
+def test_pilot_share_key_holds_every_input(cl_context, tmp_path, monkeypatch):
+    """Another path, observer altitude, atmosphere, pilot grid (the plan's sun nodes), kernel form or code
+    each runs the pilot again (and keeps a file of its own); the same inputs again do not."""
+    from clsky import _cl, planner
+
+    monkeypatch.setenv("CLSKY_CACHE_DIR", str(tmp_path))
+    runs = _counted_pilot(monkeypatch, share=0.25)
+    scene = Scene((20.0, 60.0), error_budget=0.1)
+
+    def plan(scene=scene, atmosphere="physical"):
+        plan_scene(scene, atmosphere, ctx=cl_context)
+        return len(runs)
+
+    assert plan() == 1 and plan() == 1
+    assert plan(Scene((20.0, 50.0), error_budget=0.1)) == 2
+    assert plan(Scene((20.0, 60.0), altitudes_m=(100.0, 100.0), error_budget=0.1)) == 3
+    assert plan(atmosphere=clsky.preset("physical").replace(mie_g=-0.7)) == 4
+    assert plan(Scene((20.0, 60.0), error_budget=0.01)) == 5         # the default level: other sun nodes
+    monkeypatch.setattr(_cl, "VECTOR_WIDTH", 1)
+    assert plan() == 6
+    monkeypatch.setattr(_cl, "VECTOR_WIDTH", None)
+    monkeypatch.setattr(_cl, "CUBE_ROOT", "library")
+    assert plan() == 7
+    monkeypatch.setattr(_cl, "CUBE_ROOT", "halley")
+    monkeypatch.setattr(planner, "source_digest", lambda: "another version of the code")
+    assert plan() == 8
+    monkeypatch.undo()
+    monkeypatch.setenv("CLSKY_CACHE_DIR", str(tmp_path))
+    runs = _counted_pilot(monkeypatch, share=0.25)
+    assert plan() == 0                                                # the first scene's file, read
+    assert len(list((tmp_path / "pilot-shares").iterdir())) == 8
+
+
+@pytest.mark.parametrize("content", [b"", b"\xff\xfe not UTF-8", b"[1, 2]", b'{"share": 0.25}',
+                                     "wrong key", "share NaN", "share 2.0", "share as text"])
+def test_a_damaged_or_foreign_pilot_file_is_computed_again_and_rewritten(cl_context, tmp_path, monkeypatch,
+                                                                         content):
+    """A kept file that is not the whole key with a finite share in [-1, 1] is not read: the pilot runs,
+    and its share replaces the file."""
+    import json
+
+    monkeypatch.setenv("CLSKY_CACHE_DIR", str(tmp_path))
+    runs = _counted_pilot(monkeypatch, share=0.25)
+    scene = Scene((20.0, 60.0), error_budget=0.1)
+    plan_scene(scene, ctx=cl_context)
+    (path,) = (tmp_path / "pilot-shares").iterdir()
+    kept = json.loads(path.read_text(encoding="utf-8"))
+    if isinstance(content, str):
+        if content == "wrong key":
+            kept["key"]["altitude_m"] = 1.0
+        else:
+            kept["share"] = {"share NaN": float("nan"), "share 2.0": 2.0, "share as text": "0.25"}[content]
+        content = json.dumps(kept).encode()
+    path.write_bytes(content)
+    runs[:] = []
+    plan_scene(scene, ctx=cl_context)
+    assert runs == [0.25]
+    assert json.loads(path.read_text(encoding="utf-8"))["share"] == 0.25
+    plan_scene(scene, ctx=cl_context)
+    assert runs == [0.25]
+
+
+def test_without_a_writable_cache_directory_the_pilot_runs_every_time(cl_context, tmp_path, monkeypatch):
+    """A cache directory that cannot be made (a file stands at its path) is no error: every plan runs the
+    pilot, as before the share was kept."""
+    blocker = tmp_path / "not-a-directory"
+    blocker.write_text("a file")
+    monkeypatch.setenv("CLSKY_CACHE_DIR", str(blocker))
+    runs = _counted_pilot(monkeypatch, share=0.25)
+    for _ in range(2):
+        plan_scene(Scene((20.0, 60.0), error_budget=0.1), ctx=cl_context)
+    assert runs == [0.25, 0.25] and blocker.read_text() == "a file"
