@@ -84,7 +84,7 @@ from .atmosphere import AtmosphereParameters
 from .errors import ParameterError, is_integer
 from .mapping import altitude_to_u, cos_to_sun_t, cos_to_v, grid_coordinates
 from .multiple import SPECIES, _gather_key, _gather_parts, _phase, _quadrature_key, _read_only, gather_quadrature
-from .orders import _total, check_finite, geometric_ratio, per_channel, tail_factor
+from .orders import _total, check_finite, geometric_ratio, per_channel, species_sum, tail_factor
 from .settings import MAX_AZIMUTH_HARMONICS, TableSettings
 from .stopping import DeviceStoppingTest, HostStoppingTest
 
@@ -535,20 +535,6 @@ class _Backend:
     device: str
 
 
-def _single_running_sum(single):
-    """The stopping test's running sum of single scattering (factored, (..., 6)): R + M per wavelength
-    (phase 1, its mean over the sphere: clsky.orders).
-
-    Summed a wavelength at a time: ``single[..., :3] + single[..., 3:]`` is the same sums, but NumPy runs it
-    as a loop of 3 values per cell (15-21 against 7-9 ms a node of the default animation's table, on the
-    host's path to the first scatter, the device idle)."""
-    out = np.empty(single.shape[:-1] + (3,))
-    cells, sums = single.reshape(-1, 6), out.reshape(-1, 3)
-    for channel in range(3):
-        np.add(cells[:, channel], cells[:, 3 + channel], out=sums[:, channel])
-    return out
-
-
 def _numpy_backend(atmosphere, settings, operators):
     """The NumPy twins: the ray integrals of :func:`single_scattering_nodes` and :func:`scatter_nodes`,
     the gathers of :meth:`HarmonicGather.gather` (``operators()`` returns the :class:`HarmonicGather`)."""
@@ -575,7 +561,7 @@ def _numpy_backend(atmosphere, settings, operators):
         return total
 
     def stopping_test(single, keep_previous):
-        return HostStoppingTest(_single_running_sum(single), keep_previous)
+        return HostStoppingTest(species_sum(single), keep_previous)
 
     return _Backend(single, lambda gathered: gathered, scatter, gather, accumulate, gather_summed,
                     lambda gathered: gathered, stopping_test, "numpy")
@@ -744,8 +730,8 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math, background=
         freed with it before the gathered sum's download (held by the pool, they raised the build's peak
         by their 245 MB there)."""
         if not _cl.has_fp64(queue.device):
-            return HostStoppingTest(_single_running_sum(single), keep_previous)
-        return DeviceStoppingTest((_single_running_sum(node) for node in single), single.shape[:-1] + (3,),
+            return HostStoppingTest(species_sum(single), keep_previous)
+        return DeviceStoppingTest((species_sum(node) for node in single), single.shape[:-1] + (3,),
                                   keep_previous, engine.dtype, queue=queue)
 
     return _Backend(single, upload, scatter, gather, accumulate, gather_summed, to_host, stopping_test,

@@ -199,6 +199,18 @@ def per_channel(per_wavelength, channels):
     return per_wavelength if channels == 3 else np.tile(per_wavelength, channels // 3)
 
 
+def species_sum(table):
+    """Rayleigh + Mie per wavelength (..., 3) of a factored table (..., 6): ``table[..., :3] + table[..., 3:]``,
+    summed a wavelength at a time. The same sums, but NumPy runs the slices' sum as a loop of 3 values
+    a cell (15-21 against 7-9 ms for a node of the default animation's table, single scattering's
+    running sum for the stopping test, on the host's path to the first scatter with the device idle)."""
+    out = np.empty(table.shape[:-1] + (3,))
+    cells, sums = table.reshape(-1, 6), out.reshape(-1, 3)
+    for channel in range(3):
+        np.add(cells[:, channel], cells[:, 3 + channel], out=sums[:, channel])
+    return out
+
+
 def geometric_ratio(totals):
     """The ratio r (r, g, b) of the last order's light to the one before's, from the orders' light
     ``totals`` (:func:`_total`, single scattering first), once the last two are higher orders (k >= 3);
@@ -349,7 +361,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
                 return new, lambda: np.ascontiguousarray(new[..., :3])
             new = reference.scatter(atmosphere, settings, gathered)
             if settings.mode == "physical":
-                phased = new[..., :3] + new[..., 3:]
+                phased = species_sum(new)
                 return np.concatenate([phased] * 2, axis=-1), lambda: phased
             return new, lambda: new
 
@@ -372,7 +384,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
             gathered = gather([(upload(first_gather_stack(atmosphere, settings, DIRECT_PAIRS)), single)])
             gathered = gather([(upload(first_gather_stack(atmosphere, settings, CROSSED_PAIRS)),
                                 np.concatenate([single[..., 3:], single[..., :3]], axis=-1))], out=gathered)
-            running = single[..., :3] + single[..., 3:]
+            running = species_sum(single)
         else:
             gathered = gather([(same_species, single)])
             running = single.copy()

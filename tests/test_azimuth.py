@@ -262,18 +262,6 @@ def test_first_gather_in_blocks_of_sun_layers_is_the_whole_grids(atmosphere, mon
             assert np.array_equal(operators.first_gather(single), whole)
 
 
-def test_single_running_sum_is_rayleigh_plus_mie():
-    """The stopping test's running sum of single scattering, summed a wavelength at a time, is
-    R + M per wavelength bit for bit (the sums of ``single[..., :3] + single[..., 3:]``), of a node's
-    contiguous table and of a strided one."""
-    single = np.random.default_rng(17).random((3, 7, 12, 5, 6)) * np.exp(
-        np.random.default_rng(18).normal(size=(3, 7, 12, 5, 1)) * 20.0)
-    for table in (single[1], single[:, 2], single):
-        running = azimuth._single_running_sum(table)
-        assert running.shape == table.shape[:-1] + (3,)
-        assert np.array_equal(running, table[..., :3] + table[..., 3:])
-
-
 def test_first_gather_threads_at_most_one_a_block(monkeypatch):
     """The first gather's thread count: the host's cores unless set, never more than its blocks, at least 1."""
     monkeypatch.setattr(azimuth.HarmonicGather, "FIRST_GATHER_LAYERS", 2)
