@@ -150,10 +150,13 @@ def test_species_sum_is_the_slices_sum_bit_for_bit():
     """orders.species_sum, Rayleigh + Mie per wavelength summed a wavelength at a time, is
     ``table[..., :3] + table[..., 3:]`` to the last bit, for a node's contiguous table, a strided one and a
     stack, over 40 orders of magnitude (the stopping test's running sum and the physical orders' phase
-    sums take it)."""
+    sums take it), in the table's own dtype; a table without 6 channels is refused."""
     rng = np.random.default_rng(17)
     tables = rng.random((3, 7, 12, 5, 6)) * np.exp(rng.normal(size=(3, 7, 12, 5, 1)) * 20.0)
-    for table in (tables[1], tables[:, 2], tables):
+    for table in (tables[1], tables[:, 2], tables, tables[0].astype(np.float32)):
         summed = species_sum(table)
-        assert summed.shape == table.shape[:-1] + (3,)
+        assert summed.shape == table.shape[:-1] + (3,) and summed.dtype == table.dtype
         assert np.array_equal(summed, table[..., :3] + table[..., 3:])
+    for wrong in (tables[..., :3], np.zeros((4, 12)), 1.0):        # 12 channels: a size that 6 divides
+        with pytest.raises(ValueError, match=r"species_sum: table must have shape \(\.\.\., 6\)"):
+            species_sum(wrong)
