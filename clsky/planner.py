@@ -382,7 +382,8 @@ def pilot_share(atmosphere: AtmosphereParameters, table: TableSettings, scene: S
     (``clsky._cl.VECTOR_WIDTH``, ``CUBE_ROOT``), the atmosphere, the pilot's table and ray settings, the
     path's sun elevations and lowest altitude. A file is read only when its key is the whole key and its
     share a finite number in [-1, 1] (JSON keeps a float's every bit); anything else is computed again
-    and rewritten. Without a cache directory, or where it cannot be written, the pilot runs every time."""
+    and rewritten. Without a cache directory, or where it cannot be written, the pilot runs every time.
+    A process-wide setting added later that changes the pilot's values must join the key."""
     pilot, ray = _pilot_settings(table)
     device = (ctx if ctx is not None else _cl.make_context()).devices[0]
     key = {"format": PILOT_FORMAT, "clsky": source_digest(), "numpy": np.__version__,
