@@ -471,7 +471,7 @@ def host_frame_workers() -> int:
     :data:`HOST_FRAME_WORKERS` if set, else one a core this process may use (at least 1, at most
     :data:`MAX_HOST_FRAME_WORKERS`), beside the device half's render (PoCL's threads on a CPU device), the
     writer and ffmpeg, which share the cores with them; 0 without the overlap (:data:`OVERLAP_FRAMES`:
-    all on the calling thread). Measured (README "Speed", bench/bench_animate.py): on the 2-core machine
+    all on the calling thread). Measured (docs/speed-log.md, bench/bench_animate.py): on the 2-core machine
     two threads take 7-9 % less wall time than one for the same CPU time (since the default level's
     cheaper table, 2026-12-05; half the cores, one, was the default before); on the H200 machine's 16
     cores the cap's eight. Not measured: 4 to 12 cores."""
@@ -769,7 +769,7 @@ def convert_frames(renderer: SkyRenderer, config: AnimationConfig, frames):
     """The renderer's HDR frames ``frames`` ({name: frame}) in the animation's units: absolute frames
     converted to linear sRGB [cd/m^2] (:func:`spectral_frame_to_linear_srgb` with ``config.wavelengths``,
     else :func:`three_wavelength_frame_to_linear_srgb` on the renderer's device: bit for bit the host's
-    values, for half their CPU time, README "Speed"), relative ones as they are."""
+    values, for half their CPU time, docs/speed-log.md), relative ones as they are."""
     if config.wavelengths is not None:
         frames = {name: spectral_frame_to_linear_srgb(frame, renderer.wavelengths) for name, frame in frames.items()}
     elif config.absolute:
@@ -936,7 +936,7 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
     NumPy's BLAS runs on one thread throughout, as in the frames' loop (clsky.anim.pipeline: PoCL's workers
     own the cores; the same values on any number of threads): OpenBLAS's threads, woken by the table build's
     and the display set-up's host products and the closing metrics, each spun about 0.1 s on the cores PoCL
-    renders on (perf: about 0.2 CPU-s of the default animation; README "Speed").
+    renders on (perf: about 0.2 CPU-s of the default animation; docs/speed-log.md).
     """
     with host_blas_single_threaded():
         return _render_animation(config, ctx, progress, report, farm)
@@ -1095,7 +1095,7 @@ def _write_animation(config, positions, frames, table, plan, lookup, staging, pr
             """The display pipeline, set up when the frame source asks for it (a local one starts its first
             render before: _local_frames); then the frames' host products (sRGB and white-balance matrices,
             Oklab, XYZ for Delta E) go to one BLAS thread: beside PoCL's workers OpenBLAS's threads cost
-            ~100x the CPU of one (README, "Speed"). Limited after the set-up, whose colour-science import
+            ~100x the CPU of one (docs/speed-log.md). Limited after the set-up, whose colour-science import
             may load a BLAS of its own (SciPy's), which a limit set before would not see."""
             pipeline = display(config, table)
             stack.enter_context(host_blas_single_threaded())

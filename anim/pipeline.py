@@ -11,7 +11,7 @@ the GIL while it waits for a kernel and its copy, and NumPy while it computes on
 overlap.
 
 Host threads. The host half of the default animation's 512 x 512 frame is about 0.12 CPU-s on one
-thread (conversion 37-45, display 73-80, comparison 46 CPU-ms on the 2-core machine, README "Speed";
+thread (conversion 37-45, display 73-80, comparison 46 CPU-ms on the 2-core machine, docs/speed-log.md;
 about 0.25 CPU-s before its passes were trimmed), and the device half
 shrinks with the device: a few ms on a GPU, about 0.5 CPU-s spread over the cores of a CPU (30 ms on 16,
 if PoCL used them all); one host thread then bounds the animation (on the H200 of README "GPUs",
@@ -21,7 +21,7 @@ that must follow frame order, the auto-exposure's smoothing (``Display.next_ev``
 for the frame before (``clsky.anim.animate._ExposureOrder``) between the metering and the display, as a
 frame farm's client smooths the EVs its workers metered (:mod:`clsky.anim.farm`).
 
-Who owns the cores (README, "Speed"): PoCL's worker threads render on all of them; the host halves run
+Who owns the cores (docs/speed-log.md): PoCL's worker threads render on all of them; the host halves run
 on ``clsky.anim.animate.check_animation_memory`` threads (one a core, at most 8, fewer where memory or
 the frame count says so), their BLAS limited to one thread each
 (:func:`clsky._cl.host_blas_single_threaded`; ``clsky.anim.animate.render_animation`` keeps NumPy's BLAS on
@@ -30,7 +30,7 @@ output may depend on their number). PoCL keeps every core while the host threads
 time slicing, where limiting PoCL to fewer cores would make the device half alone longer than the whole
 frame's share of them. On two cores one host thread was the default until 2026-12-05, when the default
 level's cheaper table left the host halves the larger share: two measured 7-9 % less wall time for the
-same CPU time (README "Speed").
+same CPU time (docs/speed-log.md).
 
 The frames are the same with and without the overlap and with any number of host threads: each frame is
 computed by the same calls on the same inputs, only on another thread, and the results are consumed in

@@ -87,7 +87,7 @@ def deflate_module():
     python-isal's ``isal_zlib`` (Intel's ISA-L, in the ``anim`` extra) where it is installed, else the
     standard library's zlib. Both write a standard zlib stream, which every PNG reader decodes to the same
     pixels. On the default animation's 1614 x 512 composites (2026-12-05, 2-core machine) ISA-L's level 2
-    took 3.9 CPU-ms a frame against zlib's 20.0, for 512.7 against 513.6 kB (README, "Speed")."""
+    took 3.9 CPU-ms a frame against zlib's 20.0, for 512.7 against 513.6 kB (docs/speed-log.md)."""
     try:
         from isal import isal_zlib
     except ImportError:

@@ -1,7 +1,7 @@
 """clsky's own disk cache: where it is, and how a file gets into it.
 
 What is kept there is what would cost every process a measurable share of a small run to recompute
-(README "Speed"): colour-science's constants (:mod:`clsky.colour_constants`) and the scene plan's pilot
+(docs/speed-log.md): colour-science's constants (:mod:`clsky.colour_constants`) and the scene plan's pilot
 shares (:func:`clsky.planner.pilot_share`, keyed by :func:`source_digest` among others). The directory is
 ``$CLSKY_CACHE_DIR`` where that is set to an absolute path (the test suite gives each session its own),
 else ``$XDG_CACHE_HOME/clsky`` or ``~/.cache/clsky`` (an XDG_CACHE_HOME that is not an absolute path is

@@ -581,7 +581,7 @@ class Engine:
         An engine whose atmosphere has compile-time features (ozone, a ground: :meth:`kernels_with`) may
         never launch a kernel of the plain program: the physical preset's single-scattering and
         transmittance engines do not, nor the pilot's renderer; built in ``__init__``, those programs took
-        7 of the default animation's 22 PoCL builds (22-60 ms each on one core; README "Speed"). A build
+        7 of the default animation's 22 PoCL builds (22-60 ms each on one core; docs/speed-log.md). A build
         error now surfaces at the first launch. On Python 3.11 ``cached_property`` holds one lock for all
         instances, so two threads' first builds run one after the other (they would share the cores
         anyway)."""

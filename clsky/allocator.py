@@ -8,7 +8,7 @@ and unmapped one by one, and a worker thread's arena gives up a heap (64 MB at m
 empties. The next frame then touches fresh pages, which the kernel must fault in and clear (on the
 2-core development machine at about 0.7 ns a byte, ``clear_page_erms`` 5 % of the default animation's
 CPU samples). :func:`reuse_freed_memory` sets glibc's ``mallopt`` parameters so that the process keeps
-what it frees (README "Speed": the default animation's CPU time and page faults with and without).
+what it frees (docs/speed-log.md: the default animation's CPU time and page faults with and without).
 
 It changes the whole process, for the rest of its life (glibc cannot go back to its adaptive
 threshold): ``clsky animate`` calls it at its start; a program that renders an animation through the
@@ -39,7 +39,7 @@ M_TRIM_THRESHOLD, M_MMAP_THRESHOLD, M_ARENA_MAX = -1, -3, -8
 #:   trim_threshold 256 MiB: the arena's free top is given back only beyond this (glibc's adaptive
 #:     value is twice the mmap threshold: 64 MiB at most, less than two host threads' frames free at
 #:     once). The default animation's page faults: 412 000-422 000 with 256 MiB, 593 000 with 64 MiB,
-#:     664 000-1 136 000 untuned (README "Speed"); its peak resident memory did not grow (1.14 GB).
+#:     664 000-1 136 000 untuned (docs/speed-log.md); its peak resident memory did not grow (1.14 GB).
 FRAME_LOOP_MALLOPT = {"arena_max": (M_ARENA_MAX, 1), "mmap_threshold": (M_MMAP_THRESHOLD, 32 * 2**20),
                       "trim_threshold": (M_TRIM_THRESHOLD, 256 * 2**20)}
 

@@ -58,7 +58,7 @@ host sums the nodes of those orders as the gathered sum takes them (the geometri
 r) included, an order that converged without a tail left out), and the harmonics m >= 1 of that sum
 are gathered once after the orders: 8 gathers instead of 18 for the default animation's table, the
 same sum to rounding (6e-16 of its largest value there; tests/test_azimuth.py against every order
-gathered), for one more table of nodes on the host (README "Speed").
+gathered), for one more table of nodes on the host (docs/speed-log.md).
 
 Ground. A Lambertian ground (``ground_albedo`` > 0) works as in :mod:`clsky.ground`: the rays of every
 azimuth node that end on the ground see its radiance at their true ground point's sun cosine; the
@@ -283,7 +283,7 @@ class HarmonicGather:
         W, 3) rather than (W, 6): its products are the same (each column's own), and the sun weighting
         then multiplies each species' values as contiguous runs of W x 3 instead of runs of 3: the whole
         first gather of the default animation's table in 0.61-0.71 against 0.73-0.94 CPU-s on one
-        thread, the same bits (README "Speed").
+        thread, the same bits (docs/speed-log.md).
 
         The blocks are independent and the device waits for all of them (the orders start from their
         sum): :meth:`first_gather_threads` host threads take them, each with a one-thread BLAS (NumPy
@@ -372,7 +372,7 @@ def harmonic_gather(atmosphere: AtmosphereParameters, settings: TableSettings, h
 
     Keyed as :func:`clsky.multiple.gather_matrices` is: atmospheres that differ only in coefficients,
     wavelengths or sun (the batches of a spectral build) and a process's later builds of the same grid
-    share one; computing it took 0.27-0.53 CPU-s for the default animation's table (README "Speed")."""
+    share one; computing it took 0.27-0.53 CPU-s for the default animation's table (docs/speed-log.md)."""
     return _harmonic_gather(_gather_key(atmosphere), _quadrature_key(settings), _check_harmonics(harmonics))
 
 
@@ -601,7 +601,7 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math, background=
     engine = MultipleScatteringEngine(settings, fast_math=fast_math, queue=queue, allocator=pool, features=features)
     # the nodes' downloads overlap the order's gathers; a CPU's rectangular reads split over two queues, which
     # PoCL's threads copy side by side: the gathered sum's download ends the build alone on the device, 0.29-0.47 s
-    # on one core faulting in its fresh host table, 0.24-0.27 s on two (README "Speed")
+    # on one core faulting in its fresh host table, 0.24-0.27 s on two (docs/speed-log.md)
     copy_queues = [cl.CommandQueue(engine.ctx) for _ in range(2)]
     rectangular = _cl.rectangular_reads(queue.device)
     # the uploads of the first gather and of the summed nodes split on a CPU, on the copy queues: each was one
@@ -615,7 +615,7 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math, background=
         engines[0] = MultipleScatteringEngine(settings.replace(azimuth_harmonics=0), fast_math=fast_math,
                                               queue=queue, allocator=pool, features=features)
     # their programs built meanwhile on the background's thread: in a fresh process each build took 40-60 ms of
-    # the main thread at its first scatter, the device idle (README "Speed"); a build error surfaces there
+    # the main thread at its first scatter, the device idle (docs/speed-log.md); a build error surfaces there
     built = background.submit(lambda: [e.kernels_with(e.features) for e in engines.values()]) if background else None
     cosines = np.cos(azimuth_nodes(settings.azimuth_harmonics))
     width, height, depth = settings.size
@@ -768,7 +768,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
     _check_harmonics(harmonics)
     # the gather operators (NumPy: 0.27-0.53 s for the default animation's table, single-threaded; cached for
     # the next build of the grid), and the OpenCL backend's scatter programs, on a host thread while single
-    # scattering runs: the device waited for them with a core idle (README "Speed")
+    # scattering runs: the device waited for them with a core idle (docs/speed-log.md)
     with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="clsky-orders-setup") as pool:
         operators = pool.submit(harmonic_gather, atmosphere, settings, harmonics).result
         if backend == "numpy":
@@ -792,7 +792,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
                                                    + ground_sky)
     # single scattering's light (the first of the orders' totals) and the copy of its canonical node that the
     # orders keep, on a host thread while the stopping test sums and uploads its running sum: one after the
-    # other they held the first scatter back by 40-70 ms more, the other core idle (README "Speed")
+    # other they held the first scatter back by 40-70 ms more, the other core idle (docs/speed-log.md)
     with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="clsky-orders-totals") as pool:
         single_total, single_copy = pool.submit(_total, single_nodes), pool.submit(np.copy, single_nodes[0])
         stopping = run.stopping_test(single_nodes, settings.orders == "auto")
@@ -802,7 +802,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
     # whether the order before was one (its gathered G^(k - 1) then holds the azimuth average alone)
     node_sum, summed = None, False
     # what the orders no longer read goes before them: single scattering's nodes but the canonical one,
-    # copied above (the build's peak memory is what a build pays for on these VMs, README "Speed")
+    # copied above (the build's peak memory is what a build pays for on these VMs, docs/speed-log.md)
     del single_nodes
     # the host's BLAS (azimuth averages, ground irradiances) on one thread beside the OpenCL device's
     # workers, as clsky._cl.host_blas_single_threaded explains (the first gather above has its own threads)

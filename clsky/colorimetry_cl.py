@@ -5,7 +5,7 @@ NumPy twin) gives: the ratios to the sun, the pixels' floors and the logarithms 
 log may differ in the last bit), and kernels/power_law.cl does the rest, every operation the twin's in
 its order (IEEE arithmetic, no fused multiply-adds). Why: the twin takes some 20 elementwise passes over
 the lit pixels per table it reads (four tables: 13 of its 18-22 ms a 512 x 512 frame on the 2-core
-machine), and the default animation converts two frames a sun (README "Speed").
+machine), and the default animation converts two frames a sun (docs/speed-log.md).
 
 Engines are per thread and per context (:class:`clsky._cl.Engine` is not thread-safe): the animation's
 host threads each convert their own frames. Each engine keeps its device buffers (grown as frames need)

@@ -6,7 +6,7 @@ functions (``colour.MSDS_CMFS``; :mod:`clsky.colorimetry`), Oklab's two matrices
 response matrices (``colour.CHROMATIC_ADAPTATION_TRANSFORMS``; the display's white balance). All are
 constants, but ``import colour`` (0.4.7) also imports its plotting module, matplotlib, pandas and SciPy's
 interpolation: 0.9-1.0 s of one core on the 2-core machine after clsky's own imports, in every ``clsky
-render`` or ``clsky animate`` (README "Speed", "colour-science's constants kept on disk").
+render`` or ``clsky animate`` (docs/speed-log.md, "colour-science's constants kept on disk").
 
 So the first run imports colour-science, takes the constants from it and writes them to
 ``colour-science-<version>.npz`` in clsky's cache directory (:mod:`clsky._cache`:

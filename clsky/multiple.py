@@ -277,7 +277,7 @@ class MultipleScatteringEngine(_cl.Engine):
         The compile-time features (:func:`clsky._atmosphere_cl.feature_defines`) of the atmosphere that
         it will scatter in. Its gathers, sums and copies read none, but take their kernels from the program
         built with them, so that an engine scattering in that atmosphere builds one program, not a plain one
-        as well (two of the default animation's builds, 36 and 66 ms of its main thread; README "Speed").
+        as well (two of the default animation's builds, 36 and 66 ms of its main thread; docs/speed-log.md).
         Any value is correct: ``scatter`` builds the variant of the atmosphere it is given.
     """
 

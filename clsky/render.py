@@ -110,7 +110,7 @@ RENDER_WORK_GROUP = 64
 #: (:meth:`SkyRenderer.render_raymarch_suns`, ``-DRAY_SUNS``, kernels/view_ray.cl): a ray's geometry,
 #: densities, view transmittance and the lookups' altitude and view parts are computed once for all of
 #: them, each sun's sums are the operations of its own march (the same frames, bit for bit on PoCL).
-#: None: :func:`ray_march_suns` of the device. README "Speed" measures it.
+#: None: :func:`ray_march_suns` of the device. docs/speed-log.md measures it.
 RAY_MARCH_SUNS = None
 #: At most this many bytes of float64 frames per ray-march launch (the frames it returns; its output on
 #: the device no more): larger frames take fewer suns at once (:func:`ray_march_batch`).
@@ -119,7 +119,7 @@ RAY_MARCH_BATCH_BYTES = 64 * 2**20
 
 def ray_march_suns(device) -> int:
     """:data:`RAY_MARCH_SUNS` if set, else the suns per ray-march launch for ``device`` (a pyopencl.Device):
-    4 on CPUs, where the sun-independent share of a node was 43 % of the march's CPU (README "Speed"),
+    4 on CPUs, where the sun-independent share of a node was 43 % of the march's CPU (docs/speed-log.md),
     1 elsewhere (not measured on a GPU, whose march takes milliseconds)."""
     if RAY_MARCH_SUNS is not None:
         if RAY_MARCH_SUNS not in (1, 2, 4, 8):
@@ -409,7 +409,7 @@ class SkyRenderer:
         frames (len(sun_directions), ..., 3), each the same as :meth:`render_raymarch` for its sun alone.
         Each pixel's ray is marched once for several suns (:func:`ray_march_suns`, :func:`ray_march_batch`;
         on CPUs: elsewhere one sun a launch by default): its geometry, densities and view transmittance
-        computed once for them (README "Speed")."""
+        computed once for them (docs/speed-log.md)."""
         sun_directions = list(sun_directions)
         if not sun_directions:
             raise ValueError("sun_directions must hold at least one sun direction")
@@ -500,7 +500,7 @@ class SkyRenderer:
         """The view zenith angle atan2(|V_xy|, V_z) [rad] of each of ``directions`` (a :meth:`prepare`
         result), a device array (pixels,) computed on its first call (kernels/skyview.cl: view_zenith_angles)
         and kept with the directions: the sky-view lookup reads them every frame instead of taking a scalar
-        atan2 per pixel (about three quarters of its time on PoCL, README "Speed")."""
+        atan2 per pixel (about three quarters of its time on PoCL, docs/speed-log.md)."""
         angles = directions.derived.get("view_zenith")
         if angles is None:
             n = directions.array.shape[0]

@@ -18,7 +18,7 @@ __all__ = ["SingleScatteringEngine"]
 #: Sun nodes per work-item (-DSINGLE_SUN_NODES, kernels/single.cl): a view ray's nodes, altitudes, densities
 #: and view columns do not depend on the sun, so one work-item marches a ray once for this many sun nodes,
 #: the same table bit for bit (tests/test_single_twin.py). 8: about a quarter less CPU than one for the
-#: default animation's table (its three azimuth nodes; README "Speed"); 4 and 16 were no better.
+#: default animation's table (its three azimuth nodes; docs/speed-log.md); 4 and 16 were no better.
 SINGLE_SUN_NODES = 8
 #: Sun-zenith layers per kernel launch (progress is reported between launches): a multiple of
 #: SINGLE_SUN_NODES, so that no work-item computes sun nodes past its launch's slab.

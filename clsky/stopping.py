@@ -7,7 +7,7 @@ orders the scatter leaves there (kernels/stopping.cl), and gives the same number
 operations on the same values, each rounded once, and maxima, which are exact in any order. It is what
 the harmonic build (:mod:`clsky.azimuth`) uses on OpenCL: on the host the test was the largest part of
 the build's host work on each order (four passes of NumPy over 122 MB tables for the default animation's
-table, some 0.25 s an order, of about 0.6), during which the device had nothing to do (README, "Speed").
+table, some 0.25 s an order, of about 0.6), during which the device had nothing to do (docs/speed-log.md).
 
 Both take an order's values as the backend holds them (``add(order, ratio)``, which ``reads`` names), and
 ``result()`` gives ``(relative addition, estimated error)``; the error is the relative addition when

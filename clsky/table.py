@@ -122,7 +122,7 @@ def _check_values(name, array, nonnegative):
     """The two checks above by the array's minimum and maximum only (NaN propagates through both), no
     array of their own: ``np.abs`` of the default animation's harmonics, checked as non-negative before,
     took 82 MB of memory, which cost 0.04-0.54 s of one core at the end of the table's build where the
-    machine had not handed such memory out lately (README "Speed"), against 0.02 s for the reductions.
+    machine had not handed such memory out lately (docs/speed-log.md), against 0.02 s for the reductions.
     The values are counted only for the error."""
     if array.size == 0:
         return

@@ -64,7 +64,7 @@ def upload_gathered_source(queue, gathered, dtype):
     (D, H, W, 8), the harmonics interleaved into (D, H, W, M + 1, 8) (:func:`clsky._cl.upload_padded`), so
     that a lookup's corner reads its M + 1 rows of 8 reals side by side, where the orders' stack (M + 1
     tables (D, H, W, 8)) puts them in M + 1 tables of their own: the default animation's ray march (M = 2)
-    takes 3-8 % less CPU time for the same frames, 10-20 % less at dusk (README "Speed"). None (no higher
+    takes 3-8 % less CPU time for the same frames, 10-20 % less at dusk (docs/speed-log.md). None (no higher
     orders): zeros on :data:`NO_GATHERED_GRID`. Its size in reals: :func:`gathered_source_reals`. On a CPU its
     rows split between two queues (:func:`clsky._cl.upload_share_queues`): the default animation's 163 MB took
     123 ms on one PoCL thread, 61 on two."""

@@ -32,7 +32,7 @@ inline realv bilinear_channel(const realv t00, const realv t10, const realv t01,
  * i + COLUMN_CHANNELS. Their 2 COLUMN_CHANNELS values are contiguous in the table; with 8 lanes each
  * lane reads them as one real4 (and a real2 with ozone) and the lanes are put together in registers
  * (LOAD_LANES, LANES_OF), instead of 2 COLUMN_CHANNELS scalar reads per lane: the same values, the
- * ray march about 4 % faster (A/B, README "Speed"). Reads exactly those values (no read past a node). */
+ * ray march about 4 % faster (A/B, docs/speed-log.md). Reads exactly those values (no read past a node). */
 inline void adjacent_columns(__global const real *table, const intv i, realv *left, realv *right)
 {
 #if VECTOR_WIDTH == 8
@@ -82,7 +82,7 @@ inline sun_table_altitude_t sun_table_altitude(__constant const atmosphere_t *at
  * Only the reads of the 4 corner nodes are per lane (adjacent_columns); the indices, weights and
  * interpolation are computed in realv arithmetic: the same operations as lane by lane, so the same
  * values (checked bit for bit on frames and tables); the per-lane loop stored each lane's result to the
- * stack and read the vector back. The ray march's CPU time fell by about 2 % (A/B, README "Speed"). */
+ * stack and read the vector back. The ray march's CPU time fell by about 2 % (A/B, docs/speed-log.md). */
 inline column_t column_density_from_table(__global const real *table, const int tw, const int th,
                                           const sun_table_altitude_t *at, const realv mu)
 {

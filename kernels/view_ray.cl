@@ -533,7 +533,7 @@ inline void shares_between(const view_march_t *ray, const int i, real8 *before, 
  * integrand goes to the lookups on either side (shares_between): f_i (1 - w_i) joins node i - 1's, whose
  * lookup waits for it, and f_i w_i node i + 1's (the scatter's scheme, kernels/multiple.cl).
  * Gbar is a smooth field of the higher orders: about half the lookups' cost for a change of the
- * radiance of about 2e-4 by day (README, "Speed"). */
+ * radiance of about 2e-4 by day (docs/speed-log.md). */
 inline void integrate_ray_suns(__constant const atmosphere_t *atm, const realv h0, const realv mu_v,
                                const realv *mu_s, const realv *nu, __global const real *gathered,
                                const int width, const int height, const int depth, const int mapping,

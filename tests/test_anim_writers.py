@@ -245,7 +245,7 @@ def deflate(request, monkeypatch):
 
 
 def test_png_deflate_is_isal_where_installed():
-    """The anim extra installs python-isal, and the encoder then takes its deflate (README "Speed": 5x
+    """The anim extra installs python-isal, and the encoder then takes its deflate (docs/speed-log.md: 5x
     zlib's speed for the frames); without it, the standard library's zlib."""
     from clsky.anim import writers
 

@@ -335,7 +335,7 @@ def _record_blas_threads(monkeypatch):
 
 def test_frame_loop_runs_host_blas_on_one_thread(tmp_path, cl_context, monkeypatch):
     """The frame loop's host matrix products run on one BLAS thread: PoCL's workers own the cores
-    (README, "Speed"); the limit is lifted after the animation."""
+    (docs/speed-log.md); the limit is lifted after the animation."""
     from threadpoolctl import threadpool_info
 
     def threads():       # by library: the animation may load another BLAS (SciPy's) on the way

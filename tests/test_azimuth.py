@@ -907,7 +907,7 @@ def test_orders_build_their_scatter_programs_while_single_scattering_runs(cl_con
     """The OpenCL orders, with azimuth harmonics (clsky.azimuth: both scatter engines, every harmonic and
     the azimuth average) and without (clsky.orders), build their multiple-scattering programs on a host
     thread of their own while single scattering runs, not on the main thread at the first gather or
-    scatter (in a fresh process 40-60 ms each with the device idle; README "Speed"); a build that fails
+    scatter (in a fresh process 40-60 ms each with the device idle; docs/speed-log.md); a build that fails
     there still fails the table build with its error. A context of its own, so that nothing is cached."""
     import threading
 
@@ -948,7 +948,7 @@ def test_orders_build_their_scatter_programs_while_single_scattering_runs(cl_con
 def test_single_scatterings_total_and_copy_beside_the_stopping_tests_upload(atmosphere, monkeypatch):
     """compute_orders takes single scattering's total (the orders' first) and the copy of its canonical
     node on a host thread of their own while the stopping test sums and uploads its running sum (one after
-    the other they held the first scatter back, the other core idle; README "Speed"): the total is the one
+    the other they held the first scatter back, the other core idle; docs/speed-log.md): the total is the one
     the main thread would take, and an error there still fails the build."""
     import threading
 
