@@ -110,7 +110,8 @@ RENDER_WORK_GROUP = 64
 #: (:meth:`SkyRenderer.render_raymarch_suns`, ``-DRAY_SUNS``, kernels/view_ray.cl): a ray's geometry,
 #: densities, view transmittance and the lookups' altitude and view parts are computed once for all of
 #: them, each sun's sums are the operations of its own march (the same frames, bit for bit on PoCL).
-#: None: :func:`ray_march_suns` of the device. docs/speed-log.md measures it.
+#: None: :func:`ray_march_suns` of the device. Measured in docs/speed-log.md ("The ray march of four
+#: suns a launch").
 RAY_MARCH_SUNS = None
 #: At most this many bytes of float64 frames per ray-march launch (the frames it returns; its output on
 #: the device no more): larger frames take fewer suns at once (:func:`ray_march_batch`).
