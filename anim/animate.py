@@ -457,13 +457,13 @@ def plan_animation(config: AnimationConfig, positions, directions, valid, ctx=No
 
 def _scene(config: AnimationConfig, positions, directions, valid) -> Scene:
     """The scene of the animation: its sun path, observer altitude, the view elevations of the valid
-    pixels' ``directions``, and its error budget or quality."""
+    pixels' ``directions``, its error budget or quality, and its frames' rendered (valid) pixels."""
     elevations = [90.0 - p.zenith_deg for p in positions]
     seen = np.degrees(np.arcsin(np.clip(directions[valid][:, 2], -1.0, 1.0)))
     return Scene(sun_elevations_deg=(min(elevations), max(elevations)),
                  altitudes_m=(config.altitude, config.altitude),
                  view_elevations_deg=(float(seen.min()), float(seen.max())),
-                 error_budget=config.error_budget, quality=config.quality)
+                 error_budget=config.error_budget, quality=config.quality, pixels=int(np.count_nonzero(valid)))
 
 
 def host_frame_workers() -> int:

@@ -28,14 +28,16 @@ What the plan decides, and why:
 * **Mie** is dropped (its scattering set to 0: the Mie channels hold zeros) only when the scene does
   not want it; an atmosphere without Mie has nothing to drop.
 * **Renderer** (:mod:`clsky.renderer_choice`): the cheapest of the table lookup, the per-frame sky-view
-  map and the ray march whose measured error over the sun path fits the budget
-  (:attr:`Plan.renderer`). The table lookup alone serves the scene only where its measured error
-  (:data:`LOOKUP_ERROR`) fits at the path's lowest sun; the sky-view map (the ray march read at a map's
-  nodes) where the level's ray-march error plus the map's own fits; otherwise the ray march. The
-  sky-view map and the ray march need the ray march's quadrature and margins, and so does an animation
-  that renders the ray march whatever the plan picks (``plan_scene(..., ray_march=True)``; the plan then
-  says which lookup would do; ``clsky animate --method compare`` compares the ray march with the sky-view
-  map when the plan picks it or the ray march). The 4D table lookup is not a choice of the plan: its
+  map and the ray march whose measured error over the sun path fits the budget, costed for frames of the
+  scene's pixels (:attr:`Plan.renderer`). The table lookup alone serves the scene only where its measured
+  error (:data:`LOOKUP_ERROR`) fits at the path's lowest sun, and on frames where it is the cheaper (below
+  about 630 000 pixels: the sky-view map's own march costs the same whatever the frame, its reading less
+  a pixel); the sky-view map (the ray march read at a map's nodes) where the level's ray-march error plus
+  the map's own fits, on frames large enough to pay for its map (about 7900 pixels); otherwise the ray
+  march. The sky-view map and the ray march need the ray march's quadrature and margins, and so does an
+  animation that renders the ray march whatever the plan picks (``plan_scene(..., ray_march=True)``; the
+  plan then says which lookup would do; ``clsky animate --method compare`` compares the ray march with the
+  sky-view map when the plan picks it or the ray march). The 4D table lookup is not a choice of the plan: its
   table is a build of its own, which pays only over a frame count the plan does not know
   (:mod:`clsky.renderer_choice`).
 * **Azimuth harmonics** (:func:`azimuth_harmonics`): the orders k >= 2 carry the view-sun azimuth
@@ -72,10 +74,10 @@ import numpy as np
 from . import _cl
 from ._cache import cache_directory, source_digest, store
 from .atmosphere import AtmosphereParameters, preset
-from .errors import ParameterError, is_real_number
+from .errors import ParameterError, check_integer, is_real_number
 from .mapping import cos_to_v
 from .quality import QualityLevel, level_for_budget, quality_level
-from .renderer_choice import LOOKUP_ERROR, choose_renderer
+from .renderer_choice import DEFAULT_PIXELS, LOOKUP_ERROR, RENDERERS, choose_renderer
 from .settings import TableSettings
 
 __all__ = ["Scene", "Plan", "plan_scene", "sun_margins", "sun_axis", "view_sampling", "azimuth_harmonics",
@@ -116,6 +118,9 @@ class Scene:
         Relative error allowed in rendered frames, in (0, 1] (default 0.01: 1 %).
     quality : str, optional
         A named level (:data:`clsky.quality.QUALITY_LEVELS`) instead of the one the budget picks.
+    pixels : int
+        Pixels rendered a frame, in [1, 2^31 - 1] (default :data:`clsky.renderer_choice.DEFAULT_PIXELS`,
+        the default animation's 512 x 512 fisheye): which renderer is the cheapest depends on it.
     """
 
     sun_elevations_deg: tuple
@@ -124,6 +129,7 @@ class Scene:
     components: tuple = COMPONENTS
     error_budget: float = 0.01
     quality: str | None = None
+    pixels: int = DEFAULT_PIXELS
 
     def __post_init__(self):
         object.__setattr__(self, "sun_elevations_deg", _check_range("sun_elevations_deg", self.sun_elevations_deg,
@@ -139,6 +145,7 @@ class Scene:
         level_for_budget(self.error_budget)                       # validates error_budget
         if self.quality is not None:
             quality_level(self.quality)                           # validates quality
+        object.__setattr__(self, "pixels", check_integer("pixels", self.pixels, 1, 2 ** 31 - 1))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -424,6 +431,15 @@ def _percent(fraction) -> str:
     return f"{100 * fraction:.0f}" if fraction >= 10.0 else f"{100 * fraction:.3g}"
 
 
+def _costlier(method, chosen, pixels) -> str:
+    """Why the plan passed over the renderer ``method`` for ``chosen`` (a
+    :class:`clsky.renderer_choice.RendererRow`) although both fit the budget: their measured costs a frame
+    of ``pixels`` pixels."""
+    row = next(r for r in RENDERERS if r.method == method)
+    return (f"it costs more a frame of {pixels} pixels ({row.frame_cpu_ms(pixels):.3g} against "
+            f"{chosen.frame_cpu_ms(pixels):.3g} CPU-ms, measured)")
+
+
 def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, ray_march=None) -> Plan:
     """The least table (and ray march) that renders ``scene`` within its error budget.
 
@@ -458,7 +474,7 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     sampling, because = view_sampling(scene.altitudes_m)
     harmonics, harmonics_because = azimuth_harmonics(level, scene.sun_elevations_deg, mode)
     table = level.table.replace(mode=mode, sampling=sampling, azimuth_harmonics=harmonics)
-    chosen, estimate, estimates = choose_renderer(scene.sun_elevations_deg, budget, level.name)
+    chosen, estimate, estimates = choose_renderer(scene.sun_elevations_deg, budget, level.name, pixels=scene.pixels)
     lookup_error, low = estimates["lut"], scene.sun_elevations_deg[0]
     march = f"ray march, {level.ray.view_steps} samples per ray"
     ray = level.ray
@@ -470,12 +486,17 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         decisions.append(("renderer", "table lookup", f"its error at the lowest sun, "
                           f"{low:g} deg, is {_percent(lookup_error)} % (measured)"))
     elif chosen.method == "raymarch":
-        decisions.append(("renderer", march, f"the table lookup's {_percent(lookup_error)} % at the lowest sun, "
-                          f"{low:g} deg, exceeds the budget"))
+        reason = f"the table lookup's {_percent(lookup_error)} % at the lowest sun, {low:g} deg, exceeds the budget"
+        if estimates["skyview"] <= budget:              # tiny frames: marching every pixel costs less than the map
+            reason += (f"; the sky-view map's {100 * estimates['skyview']:.2g} % fits, but "
+                       + _costlier("skyview", chosen, scene.pixels))
+        decisions.append(("renderer", march, reason))
     else:
         would = (f"the {chosen.description}'s {100 * estimate:.2g} % (estimated: the ray march's + its own, "
-                 f"measured) fits; the table lookup's {_percent(lookup_error)} % at the lowest sun, {low:g} deg, "
-                 f"exceeds the budget")
+                 f"measured) fits; " + ("so does the table lookup, but " + _costlier("lut", chosen, scene.pixels)
+                                        if lookup_error <= budget else
+                                        f"the table lookup's {_percent(lookup_error)} % at the lowest sun, {low:g} "
+                                        f"deg, exceeds the budget"))
         decisions.append(("renderer", march, f"asked for; {would}") if ray_march
                          else ("renderer", f"{chosen.description} (--method {chosen.method}), {march} at its nodes",
                                would))

@@ -1,19 +1,28 @@
 """Which renderer a scene's frames need: the cheapest whose measured error fits the error budget.
 
-One row per renderer (:data:`RENDERERS`): its ``--method`` name, its measured cost per frame and its
-measured error against sun elevation, with where each figure comes from. :func:`choose_renderer` takes
+One row per renderer (:data:`RENDERERS`): its ``--method`` name, its measured cost a frame (a part per
+frame and a part per pixel) and its measured error against sun elevation, with where each figure comes
+from. :func:`choose_renderer` takes
 the cheapest row whose estimated error over the scene's sun path fits the budget; the ray march, the
 plan's reference, when none does. A new renderer is one more row: its cost, its errors and whether they
 add to the ray march's.
 
 A row's cost is its own table's build (``build_cpu_s``: 0 for the rows that read the plan's 3D table or
-none) plus ``frames`` times its cost per frame. The 4D table lookup (``'lut4d'``) needs a table of its
-own: 15 CPU-s to build (README "The 4D table"), the CPU time of about 200 sky-view frames, and it
-saves 41.4 ms per frame against the sky-view map, so it pays from about 360 frames on. The scene plan does
-not know how many frames it serves (:class:`clsky.planner.Scene` has no frame count), so it calls
-:func:`choose_renderer` with ``frames=None``, which leaves out every row with a build of its own: the
-plan never picks 'lut4d' (``clsky animate --method lut4d`` / ``compare4d`` asks for it). A caller that
-knows the frame count passes it and the build is counted.
+none) plus ``frames`` times its cost per frame: a part per frame (``fixed_cpu_ms``: the sky-view map's own
+ray march) and a part per rendered pixel (``pixel_cpu_ns``), measured side by side by
+bench/bench_renderer_costs.py (README "Scene plan"). So which row is the cheaper depends on the frame's
+pixels (:class:`clsky.planner.Scene`'s ``pixels``): the sky-view map's map costs about 14 ms whatever the
+frame and its reading 18 ns a pixel, the 3D table lookup 39 ns a pixel, so the lookup is the cheaper below
+about 630 000 pixels (an all-sky fisheye about 900 pixels a side) and the map above, where it is both
+cheaper and closer to the ray march; the ray march, 1.6 us a pixel, costs less than the map's own march
+below about 7900 pixels (a fisheye about 100 pixels a side). The 4D table lookup (``'lut4d'``) needs a
+table of its own, 12 CPU-s to build for the default scene, and reads 46 ns a pixel: it saves 7.4 ms a frame
+against the sky-view map on the default 512 x 512 fisheye, so it pays from about 1700 frames on there, and
+it costs more than the map from about 470 000 pixels on. The scene plan does not know how many frames it
+serves (:class:`clsky.planner.Scene` has no frame count), so it calls :func:`choose_renderer` with
+``frames=None``, which leaves out every row with a build of its own: the plan never picks 'lut4d'
+(``clsky animate --method lut4d`` / ``compare4d`` asks for it). A caller that knows the frame count passes
+it and the build is counted.
 
 A row's error is either its own error against the reference frames (``on_ray_march=False``: the 3D
 lookup replaces the ray march; README "Speed versus accuracy") or what it adds to the ray march its
@@ -30,7 +39,8 @@ import dataclasses
 
 import numpy as np
 
-__all__ = ["RendererRow", "RENDERERS", "LOOKUP4D_ERROR", "RAY_MARCH_ERROR", "LOOKUP_ERROR", "choose_renderer", "error_over"]
+__all__ = ["RendererRow", "RENDERERS", "DEFAULT_PIXELS", "LOOKUP4D_ERROR", "RAY_MARCH_ERROR", "LOOKUP_ERROR",
+           "choose_renderer", "error_over"]
 
 #: Measured error of the 3D table lookup (95th percentile, relative, default table, 64 x 64 all-sky fisheye
 #: from the ground, physical preset with ozone and ground, the harmonics M = 2 in the table and the
@@ -63,6 +73,11 @@ RAY_MARCH_ERROR = {
 LOOKUP4D_ERROR = ((-6.0, 0.039), (-4.0, 0.0213), (0.0, 0.0032), (5.0, 0.0034), (30.0, 0.0058))
 
 
+#: Rendered pixels a frame when the caller does not say: the default animation's 512 x 512 fisheye
+#: (its all-sky disc: :class:`clsky.anim.cameras.FisheyeCamera`).
+DEFAULT_PIXELS = 205892
+
+
 @dataclasses.dataclass(frozen=True)
 class RendererRow:
     """One renderer the plan may pick.
@@ -73,9 +88,11 @@ class RendererRow:
         Its ``clsky animate --method`` name.
     description : str
         As the plan prints it.
-    frame_cpu_ms : float
-        Process CPU time of one 1024 x 1024 fisheye frame [ms] (measured; the order of the rows is all
-        that the choice uses).
+    fixed_cpu_ms : float
+        Process CPU time of a frame that does not depend on its pixels [ms] (the sky-view map's own march).
+    pixel_cpu_ns : float
+        Process CPU time per rendered pixel [ns]: a frame of N pixels costs fixed_cpu_ms + N pixel_cpu_ns
+        (:meth:`frame_cpu_ms`; measured, bench/bench_renderer_costs.py).
     error : tuple of (sun elevation [deg], p95 relative error)
         Its measured error (see the module docstring), ascending in elevation.
     on_ray_march : bool
@@ -89,34 +106,42 @@ class RendererRow:
 
     method: str
     description: str
-    frame_cpu_ms: float
+    fixed_cpu_ms: float
+    pixel_cpu_ns: float
     error: tuple
     on_ray_march: bool
     source: str
     build_cpu_s: float = 0.0
 
-    def cost_cpu_s(self, frames):
-        """Process CPU time [s] of ``frames`` frames: the build plus ``frames`` frames."""
-        return self.build_cpu_s + frames * self.frame_cpu_ms / 1000.0
+    def frame_cpu_ms(self, pixels):
+        """Process CPU time [ms] of one frame of ``pixels`` rendered pixels."""
+        return self.fixed_cpu_ms + pixels * self.pixel_cpu_ns * 1e-6
+
+    def cost_cpu_s(self, frames, pixels):
+        """Process CPU time [s] of ``frames`` frames of ``pixels`` pixels: the build plus the frames."""
+        return self.build_cpu_s + frames * self.frame_cpu_ms(pixels) / 1000.0
 
 
-#: The renderers, with their measured costs and errors. Costs: process CPU of one 1024 x 1024 fisheye
-#: frame from the ground (HDR frame on the host), bench/bench_skyview.py (README "Sky-view table"),
-#: 2026-12-02, default table, 2-core machine at load average 1.5-1.6 (an earlier run at load 11 to 15
-#: gave 72, 87 and 1959 ms; the 4D lookup 43 ms and 47 CPU-s to build). The sky-view map's errors: p95
-#: against the per-pixel ray march, the worst of the ground and 10 km (tests/test_skyview.py: 0.080 /
-#: 0.139 % at +30 deg, 0.077 / 0.141 % at +5, 0.094 / 0.145 % at 0, 0.092 / 0.164 % at -4).
+#: The renderers, with their measured costs and errors. Costs: process CPU of a frame from the ground (HDR
+#: frame on the host), bench/bench_renderer_costs.py (README "Scene plan"), 2026-12-06, Intel Xeon, 2 cores,
+#: PoCL, the default animation's planned table (32 x 128 x 208, M = 2) and ray march; a line through
+#: fisheyes of 256, 512 and 1024 pixels a side (within 2 % of each); one frame a call (an animation
+#: marches its sky-view maps and ray march four suns a launch on a CPU, cheaper a frame). A run minutes
+#: before, in the machine's slow state, measured every cost 10-25 % higher and the crossovers between rows
+#: within 5 % of these. The sky-view map's errors: p95 against the per-pixel ray march, the worst of the
+#: ground and 10 km (tests/test_skyview.py: 0.080 / 0.139 % at +30 deg, 0.077 / 0.141 % at +5, 0.094 /
+#: 0.145 % at 0, 0.092 / 0.164 % at -4).
 RENDERERS = (
-    RendererRow("lut", "table lookup", 55.0, LOOKUP_ERROR, False,
-                "README 'Speed versus accuracy' (error) and 'Sky-view table' (cost)"),
-    RendererRow("skyview", "sky-view map 64 x 128", 74.4,
+    RendererRow("lut", "table lookup", 1.0, 38.5, LOOKUP_ERROR, False,
+                "README 'Speed versus accuracy' (error) and 'Scene plan' (cost)"),
+    RendererRow("skyview", "sky-view map 64 x 128", 13.8, 18.2,
                 ((-4.0, 0.00164), (0.0, 0.00145), (5.0, 0.00141), (30.0, 0.00139)), True,
-                "tests/test_skyview.py (error against the ray march); README 'Sky-view table' (cost)"),
-    RendererRow("lut4d", "4D table lookup", 33.0, LOOKUP4D_ERROR, True,
-                "README 'The 4D table' (error against the ray march of its orders; cost, 1024^2 fisheye at load "
-                "0.7-1.3; build of 16 x 128 x 128 x 16, 15 CPU-s)", build_cpu_s=15.0),
-    RendererRow("raymarch", "ray march", 1385.7, ((0.0, 0.0),), True,
-                "README 'Sky-view table' (cost); the plan's reference: its error is the quality level's "
+                "tests/test_skyview.py (error against the ray march); README 'Scene plan' (cost)"),
+    RendererRow("lut4d", "4D table lookup", 0.8, 45.6, LOOKUP4D_ERROR, True,
+                "README 'The 4D table' (error against the ray march of its orders); README 'Scene plan' (cost and "
+                "build)", build_cpu_s=12.4),
+    RendererRow("raymarch", "ray march", 1.5, 1574.3, ((0.0, 0.0),), True,
+                "README 'Scene plan' (cost); the plan's reference: its error is the quality level's "
                 "(RAY_MARCH_ERROR)"),
 )
 
@@ -131,19 +156,19 @@ def error_over(error, low, high):
     return float(np.interp(at, elevations, values).max())
 
 
-def choose_renderer(sun_elevations_deg, budget, level="default", rows=RENDERERS, frames=None):
+def choose_renderer(sun_elevations_deg, budget, level="default", rows=RENDERERS, frames=None, pixels=DEFAULT_PIXELS):
     """(row, estimated error, {method: estimated error}): the cheapest row of ``rows`` whose estimated
     error over the sun path ``sun_elevations_deg`` = (low, high) [deg] fits ``budget`` (relative), for
     the ray march of quality level ``level`` (a name of :data:`RAY_MARCH_ERROR`); the 'raymarch' row
-    when none fits. The cost of ``frames`` frames (:meth:`RendererRow.cost_cpu_s`) decides; with
-    ``frames=None`` (the frame count unknown) the rows with a build of their own are left out (module
-    docstring) and the cost per frame decides."""
+    when none fits. The cost of ``frames`` frames of ``pixels`` rendered pixels each
+    (:meth:`RendererRow.cost_cpu_s`) decides; with ``frames=None`` (the frame count unknown) the rows
+    with a build of their own are left out (module docstring) and the cost of one frame decides."""
     low, high = sun_elevations_deg
     march = error_over(RAY_MARCH_ERROR[level], low, high)
     estimates = {row.method: error_over(row.error, low, high) + (march if row.on_ray_march else 0.0)
                  for row in rows}
     candidates = [row for row in rows if frames is not None or row.build_cpu_s == 0.0]
-    for row in sorted(candidates, key=lambda r: r.cost_cpu_s(1 if frames is None else frames)):
+    for row in sorted(candidates, key=lambda r: r.cost_cpu_s(1 if frames is None else frames, pixels)):
         if estimates[row.method] <= budget:
             return row, estimates[row.method], estimates
     fallback = next(row for row in rows if row.method == "raymarch")

@@ -164,8 +164,11 @@ def test_cli_animate_planned_run_prints_the_plan(tmp_path):
 def test_planned_compare_uses_the_plans_lookup_the_sky_view_map(tmp_path, cl_context):
     """'compare' with a plan compares the ray march with the plan's renderer: down to -4 deg the 3D
     lookup's measured 498 % exceeds the draft budget (10 %), the sky-view map's 4.8 % (draft ray march
-    4.6 % + map 0.16 %) fits. Its frame is the first panel, labelled, and its metrics are the sky-view
-    map's against the ray march, rendered here independently of the animation."""
+    4.6 % + map 0.16 %) fits; on frames this small (24 x 24) marching every pixel costs less than the
+    map's 8192 rays, so the plan picks the ray march (clsky.renderer_choice), and the comparison's lookup
+    is the map, the closest lookup, either way (lookup_of). Its frame is the first panel, labelled, and
+    its metrics are the sky-view map's against the ray march, rendered here independently of the
+    animation."""
     from clsky.anim.animate import (_camera, lookup_of, make_renderer, plan_animation, sun_positions,
                                     three_wavelength_frame_to_linear_srgb)
     from clsky import skyview
@@ -174,7 +177,7 @@ def test_planned_compare_uses_the_plans_lookup_the_sky_view_map(tmp_path, cl_con
                              output=str(tmp_path / "sky.mp4"))
     result = render_animation(config, ctx=cl_context)
     record = json.loads((tmp_path / "sky_metrics.json").read_text(encoding="utf-8"))
-    assert record["plan"]["renderer"] == "skyview"
+    assert record["plan"]["renderer"] == "raymarch"
     assert record["lookup"] == record["temporal"]["lookup"] == "sky-view map"
     assert all(row["lookup"] == "sky-view map" for row in record["frames"])
     assert len(record["temporal"]["table_jumps"]) == 2 and "sky-view map against the ray march" in result.summary

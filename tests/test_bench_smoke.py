@@ -32,6 +32,7 @@ HEADERS = {
                          "deviation [SE] |"],
     "bench_render": ["| render | best | median | CPU per frame: least | median | frames/s (best) |"],
     "bench_skyview": ["| frame | renderer | wall [ms] | CPU [ms] | frames/s (wall) | p95 +30 deg [%] |"],
+    "bench_renderer_costs": ["| renderer (`--method`) | 8 x 8 (52 px) [ms] |"],
     "bench_animate": ["| run | frames | wall [s] | CPU [s] | CPU / wall | load before | load after | exp() |",
                       "| stage | CPU [s], BLAS 1 thread | per frame [ms] | CPU [s], BLAS unlimited | per frame [ms] |",
                       "| round | host threads | wall a frame [ms] | CPU a frame [ms] | wall, one thread's / this |"],
@@ -59,7 +60,7 @@ LINES = {
                      r"with the higher orders' source on every other node: .*? \*\*(\S+)x the bound\*\*"],
 }
 #: Measured wall time of each case (pytest, 2 shared cores): single 3-5 s, orders 5-7 s, montecarlo 10-12 s,
-#: render 9-10 s; skyview 18 s (load 9); runtimes 7 s (PoCL and Intel's runtime, 2026-12-02); spectral 5-7 s; twilight 11 s; dusk 10 s (four skies, two of 15 wavelengths); accuracy 41 s
+#: render 9-10 s; skyview 18 s (load 9); renderer_costs 2 s; runtimes 7 s (PoCL and Intel's runtime, 2026-12-02); spectral 5-7 s; twilight 11 s; dusk 10 s (four skies, two of 15 wavelengths); accuracy 41 s
 #: (the four 'draft' reference tables: 21 s), quality 109 s (the reference and one doubled group); dask 66 s (two
 #: LocalClusters started, at load average 10); animate 15 s (quiet machine, 2026-12-02: two end-to-end runs
 #: and the stage split). Slow (run by .ci/run): accuracy, quality, dusk, dask and animate, so that the default

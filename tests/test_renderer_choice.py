@@ -8,8 +8,10 @@ import math
 
 import pytest
 
+from clsky.anim.cameras import FisheyeCamera
 from clsky.planner import Scene, plan_scene
-from clsky.renderer_choice import LOOKUP_ERROR, RAY_MARCH_ERROR, RENDERERS, RendererRow, choose_renderer, error_over
+from clsky.renderer_choice import (DEFAULT_PIXELS, LOOKUP_ERROR, RAY_MARCH_ERROR, RENDERERS, RendererRow,
+                                   choose_renderer, error_over)
 
 
 def row(method):
@@ -29,29 +31,51 @@ def test_error_over_takes_the_worst_of_the_path_interpolated_in_log_error():
     assert error_over(bump, 5.0, 15.0) == pytest.approx(0.05, rel=1e-12)
 
 
-def test_rows_are_measured_and_ordered_by_cost():
+#: Rendered pixels of the 1024 x 1024 all-sky fisheye (clsky.anim.cameras.FisheyeCamera).
+FISHEYE_1024 = 823592
+
+
+def test_rows_are_measured_lines_in_the_frame_pixels():
+    """Each row's cost a frame is a part per frame and a part per pixel (bench/bench_renderer_costs.py):
+    the sky-view map's map costs more than a 512 x 512 fisheye's 3D lookup, its reading less a pixel,
+    so the 3D lookup is the cheaper on the default frames and the map on 1024 x 1024 ones."""
     methods = [r.method for r in RENDERERS]
     assert methods == ["lut", "skyview", "lut4d", "raymarch"]
-    # the rows that read the plan's table or none: ordered by their cost per frame
-    costs = [r.frame_cpu_ms for r in RENDERERS if r.build_cpu_s == 0.0]
-    assert costs == sorted(costs) and all(r.frame_cpu_ms > 0 for r in RENDERERS)
-    # the 4D lookup: cheaper per frame than either lookup, but its own table costs 15 CPU-s (README "The 4D table")
-    assert row("lut4d").frame_cpu_ms < row("lut").frame_cpu_ms and row("lut4d").build_cpu_s == 15.0
-    assert all(r.source for r in RENDERERS)
+    assert all(r.fixed_cpu_ms >= 0.0 and r.pixel_cpu_ns > 0.0 and r.source for r in RENDERERS)
+    lut, skyview, lut4d, march = (row(m) for m in methods)
+    assert lut.frame_cpu_ms(1000) == pytest.approx(lut.fixed_cpu_ms + 1000 * lut.pixel_cpu_ns * 1e-6, rel=1e-12)
+    assert lut.frame_cpu_ms(DEFAULT_PIXELS) < skyview.frame_cpu_ms(DEFAULT_PIXELS) < march.frame_cpu_ms(DEFAULT_PIXELS)
+    assert skyview.frame_cpu_ms(FISHEYE_1024) < lut.frame_cpu_ms(FISHEYE_1024) < march.frame_cpu_ms(FISHEYE_1024)
+    crossover = (skyview.fixed_cpu_ms - lut.fixed_cpu_ms) / ((lut.pixel_cpu_ns - skyview.pixel_cpu_ns) * 1e-6)
+    assert DEFAULT_PIXELS < crossover < FISHEYE_1024           # about 630 000 pixels (the module docstring)
+    # the 4D lookup reads more a pixel than the 3D one, and its own table costs 12.4 CPU-s (the default scene's)
+    assert lut4d.pixel_cpu_ns > lut.pixel_cpu_ns and lut4d.build_cpu_s == 12.4
+    assert all(r.build_cpu_s == 0.0 for r in (lut, skyview, march))
     assert set(RAY_MARCH_ERROR) == {"draft", "default", "high", "reference"}
 
 
-@pytest.mark.parametrize("path, budget, level, expected", [
-    ((20.0, 60.0), 0.1, "draft", "lut"),           # by day the lookup is within 4.2 % (measured at +8 deg)
-    ((-6.0, 60.0), 0.01, "default", "skyview"),    # the lookup's 1026 % fails; 0.62 % + the map's fits
-    ((-6.0, 60.0), 1e-3, "high", "raymarch"),      # 0.08 % + the map's 0.16 % exceeds 0.1 %
-    ((-6.0, 60.0), 0.1, "draft", "skyview"),       # 6.0 % + the map's fits 10 %
+def test_the_default_pixels_are_the_default_animations_fisheye():
+    from clsky.anim.animate import AnimationConfig, _camera
+
+    _, valid = _camera(AnimationConfig()).directions()
+    assert int(valid.sum()) == DEFAULT_PIXELS
+    _, valid = FisheyeCamera(1024).directions()
+    assert int(valid.sum()) == FISHEYE_1024
+
+
+@pytest.mark.parametrize("path, budget, level, pixels, expected", [
+    ((20.0, 60.0), 0.1, "draft", DEFAULT_PIXELS, "lut"),   # by day the lookup is within 4.2 % (measured at +8 deg)
+    ((20.0, 60.0), 0.1, "draft", FISHEYE_1024, "skyview"),  # both fit; the map costs less a 1024^2 frame
+    ((-6.0, 60.0), 0.01, "default", DEFAULT_PIXELS, "skyview"),  # the lookup's 1026 % fails; 0.62 % + the map's fits
+    ((-6.0, 60.0), 0.01, "default", 1000, "raymarch"),      # the map fits, but its 8192 rays cost more than 1000
+    ((-6.0, 60.0), 1e-3, "high", DEFAULT_PIXELS, "raymarch"),  # 0.08 % + the map's 0.16 % exceeds 0.1 %
+    ((-6.0, 60.0), 0.1, "draft", FISHEYE_1024, "skyview"),  # 6.0 % + the map's fits 10 %
 ])
-def test_choice_is_the_cheapest_that_fits(path, budget, level, expected):
-    chosen, estimate, estimates = choose_renderer(path, budget, level)
+def test_choice_is_the_cheapest_that_fits(path, budget, level, pixels, expected):
+    chosen, estimate, estimates = choose_renderer(path, budget, level, pixels=pixels)
     assert chosen.method == expected
     assert estimate == estimates[expected]
-    cheaper = [r for r in RENDERERS if r.frame_cpu_ms < chosen.frame_cpu_ms and r.build_cpu_s == 0.0]
+    cheaper = [r for r in RENDERERS if r.frame_cpu_ms(pixels) < chosen.frame_cpu_ms(pixels) and r.build_cpu_s == 0.0]
     assert all(estimates[r.method] > budget for r in cheaper)
     if expected != "raymarch":
         assert estimate <= budget
@@ -59,9 +83,12 @@ def test_choice_is_the_cheapest_that_fits(path, budget, level, expected):
 
 def test_a_new_renderer_is_one_row():
     """A renderer without a table of its own enters as one row and wins where it is the cheapest that
-    fits: here, cheaper than the sky-view map and within the budget in twilight."""
-    other = RendererRow("other", "another lookup", 0.5 * (row("lut").frame_cpu_ms + row("skyview").frame_cpu_ms),
+    fits: here, between the 3D lookup and the sky-view map a frame, and within the budget in twilight."""
+    other = RendererRow("other", "another lookup", 0.5 * (row("lut").fixed_cpu_ms + row("skyview").fixed_cpu_ms),
+                        0.5 * (row("lut").pixel_cpu_ns + row("skyview").pixel_cpu_ns),
                         ((-4.0, 0.02), (45.0, 0.005)), False, "a test row")
+    assert row("lut").frame_cpu_ms(DEFAULT_PIXELS) < other.frame_cpu_ms(DEFAULT_PIXELS) \
+        < row("skyview").frame_cpu_ms(DEFAULT_PIXELS)
     rows = RENDERERS + (other,)
     assert choose_renderer((-6.0, 60.0), 0.03, "default", rows)[0].method == "other"
     assert choose_renderer((-6.0, 60.0), 0.01, "default", rows)[0].method == "skyview"
@@ -69,17 +96,25 @@ def test_a_new_renderer_is_one_row():
 
 
 def test_the_4d_lookup_counts_its_table_build():
-    """Down to -6 deg the 4D lookup's 3.9 % plus the default ray march's 0.70 % fits a 5 % budget, and its
-    33 ms per frame beat the sky-view map's 74.4 ms; but its table costs 15 CPU-s, so it wins only from
-    15 / (0.0744 - 0.033) = 362 frames on. Without a frame count (the scene plan) it is left out."""
+    """Down to -6 deg the 4D lookup's 3.9 % plus the default ray march's 0.70 % fits a 5 % budget; on the
+    default frames it costs less than the sky-view map, but its table costs 12.4 CPU-s, so it wins only from
+    12.4 s / (the map's cost - its own) frames on, about 1700; on 1024 x 1024 frames it costs more than the
+    map and never wins. Without a frame count (the scene plan) it is left out."""
     path, budget = (-6.0, 60.0), 0.05
     chosen, _, estimates = choose_renderer(path, budget, "default")
     assert estimates["lut4d"] == pytest.approx(0.039 + 0.0070, rel=1e-12) and estimates["lut4d"] <= budget
     assert chosen.method == "skyview"                                    # frames unknown: no build counted
-    assert choose_renderer(path, budget, "default", frames=120)[0].method == "skyview"     # 19 s against 9 s
-    assert choose_renderer(path, budget, "default", frames=350)[0].method == "skyview"
-    assert choose_renderer(path, budget, "default", frames=370)[0].method == "lut4d"
-    assert row("lut4d").cost_cpu_s(370) == pytest.approx(15.0 + 370 * 0.033, rel=1e-12)
+    saved_ms = row("skyview").frame_cpu_ms(DEFAULT_PIXELS) - row("lut4d").frame_cpu_ms(DEFAULT_PIXELS)
+    pays_from = 1000.0 * row("lut4d").build_cpu_s / saved_ms
+    assert 1000 < pays_from < 3000                                      # about 1700 (the module docstring)
+    assert choose_renderer(path, budget, "default", frames=120)[0].method == "skyview"
+    assert choose_renderer(path, budget, "default", frames=math.floor(pays_from))[0].method == "skyview"
+    assert choose_renderer(path, budget, "default", frames=math.ceil(pays_from))[0].method == "lut4d"
+    assert row("lut4d").cost_cpu_s(370, DEFAULT_PIXELS) == pytest.approx(
+        12.4 + 370 * row("lut4d").frame_cpu_ms(DEFAULT_PIXELS) / 1000.0, rel=1e-12)
+    # on larger frames it costs more than the map a frame: no frame count makes it win
+    assert row("lut4d").frame_cpu_ms(FISHEYE_1024) > row("skyview").frame_cpu_ms(FISHEYE_1024)
+    assert choose_renderer(path, budget, "default", frames=100000, pixels=FISHEYE_1024)[0].method == "skyview"
     # where it does not fit (1 %: its own 3.9 % at -6 deg), no frame count makes it win
     assert choose_renderer(path, 0.01, "default", frames=100000)[0].method == "skyview"
 
@@ -117,3 +152,38 @@ def test_a_tight_budget_plan_keeps_the_ray_march(cl_context):
 def test_a_day_plan_with_a_loose_budget_picks_the_lookup(cl_context):
     plan = plan_scene(Scene((20.0, 60.0), error_budget=0.1, components=("rayleigh", "mie")), ctx=cl_context)
     assert plan.renderer == "lut" and plan.ray is None
+
+
+def test_a_day_plan_of_large_frames_picks_the_skyview_map(cl_context):
+    """Both lookups fit a loose budget by day; on 1024 x 1024 fisheyes the sky-view map costs less a
+    frame than the 3D table lookup (bench/bench_renderer_costs.py), so the plan takes it, with the ray
+    march's quadrature for its nodes, and says why."""
+    scene = Scene((20.0, 60.0), error_budget=0.1, components=("rayleigh", "mie"), pixels=FISHEYE_1024)
+    plan = plan_scene(scene, ctx=cl_context)
+    assert plan.renderer == "skyview" and plan.ray is not None
+    decision, reason = dict((topic, (d, r)) for topic, d, r in plan.decisions)["renderer"]
+    assert decision.startswith("sky-view map 64 x 128 (--method skyview)")
+    lut, skyview = row("lut").frame_cpu_ms(FISHEYE_1024), row("skyview").frame_cpu_ms(FISHEYE_1024)
+    assert reason.endswith(f"so does the table lookup, but it costs more a frame of {FISHEYE_1024} pixels "
+                           f"({lut:.3g} against {skyview:.3g} CPU-ms, measured)")
+
+
+@pytest.mark.parametrize("pixels", [0, -5, 2 ** 31, 1.5, True])
+def test_scene_pixels_are_checked(pixels):
+    with pytest.raises(ValueError, match=r"pixels must be an integer in \[1, 2147483647\], got"):
+        Scene((20.0, 60.0), pixels=pixels)
+
+
+def test_a_plan_of_tiny_frames_marches_every_pixel(cl_context):
+    """Where the 3D lookup fails, the sky-view map's 64 x 128 rays cost more than marching a frame of a
+    few thousand pixels: the plan takes the ray march (no error of its own beyond the level's) and says
+    that the map would fit."""
+    tiny = 1000
+    assert row("raymarch").frame_cpu_ms(tiny) < row("skyview").frame_cpu_ms(tiny)
+    plan = plan_scene(Scene((-6.0, 60.0), pixels=tiny), ctx=cl_context)
+    assert plan.renderer == "raymarch" and plan.ray is not None
+    reason = dict((topic, r) for topic, _, r in plan.decisions)["renderer"]
+    assert "table lookup's 1026 %" in reason
+    march, skyview = row("raymarch").frame_cpu_ms(tiny), row("skyview").frame_cpu_ms(tiny)
+    assert reason.endswith(f"; the sky-view map's 0.86 % fits, but it costs more a frame of {tiny} pixels "
+                           f"({skyview:.3g} against {march:.3g} CPU-ms, measured)")
