@@ -11,7 +11,8 @@
   'default' quality levels' ray march), and that march for 4 suns a launch (``render_raymarch_suns``, what
   an animation does on CPUs: ``clsky.render.ray_march_suns``), per frame;
 - each row's process CPU time per frame is the least and the median of its frames, each frame timed on
-  its own: one disturbed frame moves a mean, not these;
+  its own: one disturbed frame moves a mean, not these; the rows take their frames in turn, round after
+  round (:func:`frames_in_rounds`);
 - the default `clsky animate` (120 frames, 512 x 512, both renderers, comparison, files), wall time.
 Prints the table and writes it into README.md.
 
@@ -79,11 +80,23 @@ def fast_state(pairs):
     return min(cpu for cpu, rate in pairs if rate >= (1.0 - FAST_STATE) * fastest), fastest
 
 
-def frames_timed(render, count):
-    """(best wall, median wall, least CPU, median CPU) [s] of ``count`` calls of ``render``, each timed on
-    its own (:func:`_report.timed_with_cpu`: wall time and process CPU time, PoCL's workers included)."""
-    walls, cpus = zip(*(timed_with_cpu(render)[1:] for _ in range(count)))
-    return min(walls), statistics.median(walls), min(cpus), statistics.median(cpus)
+def frames_in_rounds(renders, rounds):
+    """[(best wall, median wall, least CPU, median CPU) [s] of each of ``renders``] over ``rounds`` rounds
+    in which each render is called once, in turn, after one warm-up call each; every call timed on its
+    own (:func:`_report.timed_with_cpu`: wall time and process CPU time, PoCL's workers included).
+
+    Why rounds: this machine's speed drifts between two states for seconds to minutes (README "This
+    machine runs at two speeds"); rows measured one after the other each caught a state of their own,
+    and the lookups' CPU a frame moved by up to 23 % between runs (2026-12-06). In turn, every row sees
+    the same mix of states, and its least time the fast state whenever a round had it."""
+    for render in renders:
+        render()
+    times = [[] for _ in renders]
+    for _ in range(rounds):
+        for render, timed in zip(renders, times):
+            timed.append(timed_with_cpu(render)[1:])
+    return [(min(w for w, _ in timed), statistics.median(w for w, _ in timed), min(c for _, c in timed),
+             statistics.median(c for _, c in timed)) for timed in times]
 
 
 def bound_sentence(label, pairs, exps, timed="frames"):
@@ -101,7 +114,7 @@ def bound_sentence(label, pairs, exps, timed="frames"):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--repeat", type=int, default=9)
     parser.add_argument("--skip-animation", action="store_true")
     add_output_arguments(parser)
     args = parse_arguments(parser)
@@ -130,42 +143,44 @@ def main():
         """The strided march of LAUNCH_SUNS suns in one launch (a row's times are then divided by them)."""
         return strided.render_raymarch_suns(prepared, suns, altitude)
 
-    rows = []
     side = f"fisheye {sizes[0]} x {sizes[0]}"
     four = " x ".join(map(str, settings4d.size + (settings4d.azimuth_size,)))
-    for size, method, label in ((sizes[0], renderer.render_table, f"table lookup, {side}"),
-                                (sizes[0], renderer.render_skyview, f"sky-view map 64 x 128 (map and read), {side}"),
-                                (sizes[0], renderer4d.render_lut4d, f"4D table lookup ({four}), {side}"),
-                                (sizes[1], renderer.render_raymarch,
-                                 f"ray march ({RAYMARCH_DEFAULTS.view_steps} samples), fisheye {sizes[1]} x {sizes[1]}"),
-                                (sizes[1], strided.render_raymarch,
-                                 f"ray march ({RAYMARCH_DEFAULTS.view_steps} samples, the higher orders' source on "
-                                 f"every other node), fisheye {sizes[1]} x {sizes[1]}"),
-                                (sizes[1], strided_suns,
-                                 f"the same, {LAUNCH_SUNS} suns a launch (an animation's on CPUs), per frame")):
+    measured = ((sizes[0], renderer.render_table, f"table lookup, {side}"),
+                (sizes[0], renderer.render_skyview, f"sky-view map 64 x 128 (map and read), {side}"),
+                (sizes[0], renderer4d.render_lut4d, f"4D table lookup ({four}), {side}"),
+                (sizes[1], renderer.render_raymarch,
+                 f"ray march ({RAYMARCH_DEFAULTS.view_steps} samples), fisheye {sizes[1]} x {sizes[1]}"),
+                (sizes[1], strided.render_raymarch,
+                 f"ray march ({RAYMARCH_DEFAULTS.view_steps} samples, the higher orders' source on "
+                 f"every other node), fisheye {sizes[1]} x {sizes[1]}"),
+                (sizes[1], strided_suns, f"the same, {LAUNCH_SUNS} suns a launch (an animation's on CPUs), per frame"))
+    prepared, marched = {}, {}
+    for size in sizes:
         directions, valid = FisheyeCamera(size).directions()
-        prepared = renderer.prepare(directions, valid)
-        method(prepared, sun, 0.0)                                     # warm-up
-        best, median, least_cpu, median_cpu = (t / (LAUNCH_SUNS if method is strided_suns else 1) for t in
-                                               frames_timed(lambda: method(prepared, sun, 0.0), args.repeat))
+        prepared[size], marched[size] = renderer.prepare(directions, valid), int(np.count_nonzero(valid))
+    renders = [(lambda method=method, size=size: method(prepared[size], sun, 0.0)) for size, method, _ in measured]
+    timings = frames_in_rounds(renders, args.repeat)
+    rows = []
+    for (_, method, label), timing in zip(measured, timings):
+        best, median, least_cpu, median_cpu = (t / (LAUNCH_SUNS if method is strided_suns else 1) for t in timing)
         rows.append(f"| {label} | {1000 * best:.0f} ms | {1000 * median:.0f} ms | {1000 * least_cpu:.0f} ms | "
                     f"{1000 * median_cpu:.0f} ms | {1 / best:.1f} |")
         print(rows[-1], flush=True)
     # the marches' CPU time per frame against their exponentials at the device's measured exp() rate
-    # (prepared, valid: the loop's last rows', the marches' fisheye); the strided march has the same
-    # exponentials (8 per node: single scattering's, at every node)
-    exps = march_exps(int(np.count_nonzero(valid)), RAYMARCH_DEFAULTS.view_steps)
+    # (the marches' fisheye, sizes[1]); the strided march has the same exponentials (8 per node: single
+    # scattering's, at every node)
+    exps = march_exps(marched[sizes[1]], RAYMARCH_DEFAULTS.view_steps)
     count = BOUND_PAIRS if not args.smoke else 2
     sentences = [bound_sentence(label, [(cpu / frames, rate) for cpu, rate in
-                                        march_beside_bound(lambda: march(prepared, sun, 0.0), count)], exps,
-                                "frames" if frames == 1 else f"launches of {frames} frames")
+                                        march_beside_bound(lambda: march(prepared[sizes[1]], sun, 0.0), count)],
+                                exps, "frames" if frames == 1 else f"launches of {frames} frames")
                  for label, march, frames in (
                      ("Ray march", renderer.render_raymarch, 1),
                      ("with the higher orders' source on every other node", strided.render_raymarch, 1),
                      (f"that march for {LAUNCH_SUNS} suns a launch, per frame", strided_suns, LAUNCH_SUNS))]
     load = load_average()
     bound_line = (f"Ray marches against the exp() bound: their {exps / 1e6:.1f} M exponentials ({EXPS_PER_NODE} per "
-                  f"ray node, {RAYMARCH_DEFAULTS.view_steps + 1} nodes, {np.count_nonzero(valid)} pixels) at the "
+                  f"ray node, {RAYMARCH_DEFAULTS.view_steps + 1} nodes, {marched[sizes[1]]} pixels) at the "
                   f"machine's exp() rate (goal: 2x; load average {load:.1f}). "
                   + "; ".join(sentence for sentence, _ in sentences)
                   + f". Each figure is the least frame and the fastest reading among the pairs whose reading is "
@@ -181,7 +196,8 @@ def main():
     lines = [f"Rendering, measured {datetime.date.today()} on {machine()}, OpenCL device "
              f"{describe_device(renderer.engine.device)}; best and median wall time of {args.repeat} frames after a "
              f"warm-up (HDR float64 frame copied to the host), and the least and the median process CPU time of a "
-             f"frame (PoCL's workers included).", "",
+             f"frame (PoCL's workers included); the rows' frames in {args.repeat} rounds of one frame each, in "
+             f"turn (the machine's state drifts: every row sees the same mix).", "",
              "| render | best | median | CPU per frame: least | median | frames/s (best) |",
              "|---|---:|---:|---:|---:|---:|", *rows, "",
              f"The 4D table ({four}, float64, sun {LOOKUP4D_SUN_DEG[0]:g} to {LOOKUP4D_SUN_DEG[1]:g} deg, M = 2) "
