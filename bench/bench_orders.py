@@ -12,8 +12,11 @@ planned table within 4 s, the full default table 10x or more faster than its Num
    programs and the gather matrices, are empty), and *repeated build*, the best of ``--repeat`` builds
    after one in the same process.
 2. **OpenCL against the NumPy twins**: ``clsky.orders.compute_orders`` on the full default table
-   (32 x 256 x 32), ``backend="opencl"`` (best of ``--repeat`` after a warm-up) against
-   ``backend="numpy"`` (one run), for both modes; ratios in wall and in CPU time.
+   (32 x 256 x 32), ``backend="opencl"`` (best of ``--twin-runs`` batches of ``--repeat`` after a
+   warm-up) against ``backend="numpy"`` (best of ``--twin-runs``), the two in turn: a batch, a twin run,
+   a batch, a twin run (the twins take about 30 s a run, long enough for the machine's state to change
+   under one side only: the ratios of single runs moved by 20-22 % between runs of 2026-12-06); for both
+   modes; ratios in wall and in CPU time.
 3. The share of each order at a few sun angles (from the same OpenCL results).
 
 Every timing has its wall time, this process' CPU time (all threads: PoCL's workers included) and the
@@ -22,9 +25,10 @@ also has the machine's exp() rate read just before and just after it (bench/_rep
 about 900 instead of 1500-1700 M per CPU-second in the machine's slow state, where CPU times run up to a
 third higher.
 
-Usage: python bench/bench_orders.py [--repeat N] [--no-readme] [--smoke]
+Usage: python bench/bench_orders.py [--repeat N] [--twin-runs N] [--no-readme] [--smoke]
 
-``--smoke``: 8 x 32 x 8 tables (the planned one too), one repetition, print only (bench/_report.py).
+``--smoke``: 8 x 32 x 8 tables (the planned one too), one repetition, one twin run, print only
+(bench/_report.py).
 """
 
 from __future__ import annotations
@@ -105,12 +109,14 @@ def shares_at_sun_nodes(result, settings, atmosphere):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeat", type=int, default=3, help="repeated OpenCL builds (NumPy runs once)")
+    parser.add_argument("--repeat", type=int, default=3, help="repeated OpenCL builds (a batch)")
+    parser.add_argument("--twin-runs", type=int, default=2,
+                        help="runs of the NumPy twins, each after a batch of OpenCL runs (in turn)")
     add_output_arguments(parser)
     args = parse_arguments(parser)
     size = SMOKE.table if args.smoke else clsky.TableSettings().size
     if args.smoke:
-        args.repeat = SMOKE.repeat
+        args.repeat, args.twin_runs = SMOKE.repeat, 1
     start_load = load_average()
     stamp = f"measured {datetime.date.today()} on {machine()} (load average {start_load:.2f} at the start)"
 
@@ -141,9 +147,10 @@ def main():
         print(builds[-1], f"(import clsky: {first['import_wall']:.2f} s wall)", flush=True)
 
     timing = [f"Full default table ({' x '.join(map(str, size))}, float64, default settings: orders until 1e-4), "
-              f"`clsky.orders.compute_orders` with `backend=\"opencl\"` (the least of {args.repeat} runs after a "
-              "warm-up; kernel compilation excluded) and `backend=\"numpy\"` (the NumPy twins, one run, same "
-              f"process), {stamp}. Wall and process CPU time [s]; load: the highest 1-minute load average seen "
+              f"`clsky.orders.compute_orders` with `backend=\"opencl\"` (the least of {args.twin_runs} x "
+              f"{args.repeat} runs after a warm-up; kernel compilation excluded) and `backend=\"numpy\"` (the NumPy "
+              f"twins, the least of {args.twin_runs} runs, same process; each twin run after a batch of "
+              f"{args.repeat} OpenCL runs, so that both sides see the same mix of the machine's states), {stamp}. Wall and process CPU time [s]; load: the highest 1-minute load average seen "
               "after the runs of the row; exp(): the machine's double8 exp() rate read before and after the row "
               "[M per CPU-second].", "",
               "| mode | orders | OpenCL wall | CPU | NumPy twins wall | CPU | NumPy / OpenCL: wall | CPU | load | "
@@ -159,8 +166,17 @@ def main():
         settings = clsky.TableSettings(mode=mode, size=size)
         compute_orders(atmosphere, settings)                                     # warm-up
         before = exp_reading()
-        result, wall, cpu, load = best_timing(lambda: compute_orders(atmosphere, settings), args.repeat)
-        twins, numpy_wall, numpy_cpu = timed_with_cpu(lambda: compute_orders(atmosphere, settings, backend="numpy"))
+        opencl_runs, twin_runs, loads = [], [], []
+        for _ in range(args.twin_runs):             # in turn: each side sees the same mix of the machine's states
+            result, wall, cpu, load = best_timing(lambda: compute_orders(atmosphere, settings), args.repeat)
+            opencl_runs.append((wall, cpu))
+            twins, numpy_wall, numpy_cpu = timed_with_cpu(lambda: compute_orders(atmosphere, settings,
+                                                                                 backend="numpy"))
+            twin_runs.append((numpy_wall, numpy_cpu))
+            loads.append(load)
+        (wall, cpu), (numpy_wall, numpy_cpu) = (tuple(min(column) for column in zip(*runs))
+                                                for runs in (opencl_runs, twin_runs))
+        load = max(loads)
         after = exp_reading()
         readings += [before, after]
         load = max(load, load_average())
