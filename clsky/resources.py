@@ -68,7 +68,9 @@ FIRST_ORDERS, ORDERS_PER_DECADE = 3, 1.6
 #: march's 165 overstated its animations' growth by a third (1.32 of it with two host threads and with
 #: one, 2026-12-05, Intel Xeon, the slow slope test's way): 75 brings it to 1.06 and 1.10 by those runs'
 #: growth (the slope test then measured 1.02); the comparison's 0.99 and 0.88 and the lookups' 1.10 and
-#: 1.12 (two threads) were left as they are.
+#: 1.12 (two threads) were left as they are. Measured again on 2026-12-06 the slope test's way (two host
+#: threads, the largest of 3 and of 5 runs): 0.97 (compare), 1.10-1.15 (lut), 1.06 (raymarch), 1.10-1.18
+#: (skyview); kept (README "Memory": an over-estimate is the safe side).
 FRAME_BYTES_PER_PIXEL = {"compare": 287, "lut": 165, "raymarch": 75, "skyview": 175}
 #: Host bytes per pixel that an animation's overlapped pipeline (clsky/anim/pipeline.py) adds with one
 #: host thread beyond the frames it holds (one more set of HDR frames, waiting for the thread): the next
