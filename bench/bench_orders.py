@@ -150,9 +150,9 @@ def main():
               f"`clsky.orders.compute_orders` with `backend=\"opencl\"` (the least of {args.twin_runs} x "
               f"{args.repeat} runs after a warm-up; kernel compilation excluded) and `backend=\"numpy\"` (the NumPy "
               f"twins, the least of {args.twin_runs} runs, same process; each twin run after a batch of "
-              f"{args.repeat} OpenCL runs, so that both sides see the same mix of the machine's states), {stamp}. Wall and process CPU time [s]; load: the highest 1-minute load average seen "
-              "after the runs of the row; exp(): the machine's double8 exp() rate read before and after the row "
-              "[M per CPU-second].", "",
+              f"{args.repeat} OpenCL runs, so that both sides see the same mix of the machine's states), {stamp}. "
+              "Wall and process CPU time [s]; load: the highest 1-minute load average seen after the runs of the "
+              "row; exp(): the machine's double8 exp() rate read before and after the row [M per CPU-second].", "",
               "| mode | orders | OpenCL wall | CPU | NumPy twins wall | CPU | NumPy / OpenCL: wall | CPU | load | "
               "exp() |",
               "|---|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
