@@ -121,8 +121,8 @@ def report(times, prepared, sides, table, build4d, loads, readings, rounds, marc
              f"M = {table.settings.azimuth_harmonics}, its ray march's quadrature); the least of {rounds} rounds "
              f"({march_rounds} for the ray march) in which the renderers and sizes alternate, the median in "
              f"brackets; the line: least squares of the relative residuals through the three least times. Load "
-             f"average {min(loads):.1f}-{max(loads):.1f}; exp() readings (before, after each round) {min(readings):.0f}-{max(readings):.0f} "
-             f"M per CPU-second.{state_note(readings)}", "",
+             f"average {min(loads):.1f}-{max(loads):.1f}; exp() readings (before, after each round) "
+             f"{min(readings):.0f}-{max(readings):.0f} M per CPU-second.{state_note(readings)}", "",
              "| renderer (`--method`) | " + " | ".join(f"{s} x {s} ({n} px) [ms]" for s, n in zip(sides, pixels))
              + " | per frame [ms] | per pixel [ns] | largest residual | in `renderer_choice` [ms + ns] |",
              "|---|" + "---:|" * (len(sides) + 4)]

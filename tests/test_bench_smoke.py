@@ -60,7 +60,8 @@ LINES = {
                      r"with the higher orders' source on every other node: .*? \*\*(\S+)x the bound\*\*"],
 }
 #: Measured wall time of each case (pytest, 2 shared cores): single 3-5 s, orders 5-7 s, montecarlo 10-12 s,
-#: render 9-10 s; skyview 18 s (load 9); renderer_costs 2 s; runtimes 7 s (PoCL and Intel's runtime, 2026-12-02); spectral 5-7 s; twilight 11 s; dusk 10 s (four skies, two of 15 wavelengths); accuracy 41 s
+#: render 9-10 s; skyview 18 s (load 9); renderer_costs 2 s (2026-12-06); runtimes 7 s (PoCL and Intel's runtime,
+#: 2026-12-02); spectral 5-7 s; twilight 11 s; dusk 10 s (four skies, two of 15 wavelengths); accuracy 41 s
 #: (the four 'draft' reference tables: 21 s), quality 109 s (the reference and one doubled group); dask 66 s (two
 #: LocalClusters started, at load average 10); animate 15 s (quiet machine, 2026-12-02: two end-to-end runs
 #: and the stage split). Slow (run by .ci/run): accuracy, quality, dusk, dask and animate, so that the default
