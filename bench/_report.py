@@ -108,6 +108,28 @@ def timed_with_cpu(function):
     return result, time.perf_counter() - wall, time.process_time() - cpu
 
 
+def timed_in_turn(renders, rounds, after_round=None):
+    """[[(wall, CPU) [s] of each timed call] for each of ``renders``]: each called once to warm up, then in
+    rounds, each render once a round, in turn (:func:`timed_with_cpu`). ``rounds``: an int, or one a render
+    (a render then takes part in the first of the rounds only); ``after_round()`` runs after each round.
+
+    Why in turn: this machine's speed drifts between two states for seconds to minutes (README "This
+    machine runs at two speeds"); renders measured one after the other each caught a state of their own
+    (the lookups' CPU a frame moved by 23 % between two runs of 2026-12-06). In turn, every render sees the
+    same mix of states, and its least time the fast state whenever a round had it."""
+    counts = [rounds] * len(renders) if isinstance(rounds, int) else list(rounds)
+    for render in renders:
+        render()
+    times = [[] for _ in renders]
+    for round_ in range(max(counts, default=0)):
+        for render, count, timed in zip(renders, counts, times):
+            if round_ < count:
+                timed.append(timed_with_cpu(render)[1:])
+        if after_round is not None:
+            after_round()
+    return times
+
+
 def best_timing(function, repeat):
     """(last result, least wall [s], least CPU [s], highest load average) over ``repeat`` calls of
     :func:`timed_with_cpu`: the least of each, the least noisy figures."""

@@ -36,7 +36,7 @@ import numpy as np
 
 from _bound import EXPS_PER_NODE, march_exps
 from _report import SMOKE, add_output_arguments, exp_reading, load_average, machine, parse_arguments, \
-    timed_with_cpu, write_readme_section
+    timed_in_turn, timed_with_cpu, write_readme_section
 
 import clsky
 from clsky.anim.accuracy import LOOKUP4D_SUN_DEG, lookup4d_settings
@@ -82,21 +82,10 @@ def fast_state(pairs):
 
 def frames_in_rounds(renders, rounds):
     """[(best wall, median wall, least CPU, median CPU) [s] of each of ``renders``] over ``rounds`` rounds
-    in which each render is called once, in turn, after one warm-up call each; every call timed on its
-    own (:func:`_report.timed_with_cpu`: wall time and process CPU time, PoCL's workers included).
-
-    Why rounds: this machine's speed drifts between two states for seconds to minutes (README "This
-    machine runs at two speeds"); rows measured one after the other each caught a state of their own,
-    and the lookups' CPU a frame moved by up to 23 % between runs (2026-12-06). In turn, every row sees
-    the same mix of states, and its least time the fast state whenever a round had it."""
-    for render in renders:
-        render()
-    times = [[] for _ in renders]
-    for _ in range(rounds):
-        for render, timed in zip(renders, times):
-            timed.append(timed_with_cpu(render)[1:])
+    in which each render is called once, in turn, after one warm-up call each (:func:`_report.timed_in_turn`:
+    wall time and process CPU time of each call, PoCL's workers included)."""
     return [(min(w for w, _ in timed), statistics.median(w for w, _ in timed), min(c for _, c in timed),
-             statistics.median(c for _, c in timed)) for timed in times]
+             statistics.median(c for _, c in timed)) for timed in timed_in_turn(renders, rounds)]
 
 
 def bound_sentence(label, pairs, exps, timed="frames"):

@@ -31,7 +31,7 @@ import datetime
 import numpy as np
 
 from _report import SMOKE, add_output_arguments, exp_reading, load_average, machine, parse_arguments, \
-    state_note, timed_with_cpu, write_readme_section
+    state_note, timed_in_turn, timed_with_cpu, write_readme_section
 
 from clsky._cl import default_device, describe_device
 from clsky.anim import animate
@@ -91,18 +91,16 @@ def main():
         sides, args.rounds, march_rounds = (8, 12, SMOKE.frame), 2, 1
     loads, readings = [load_average()], [exp_reading()]
     methods, prepared, (wall4d, cpu4d), table = renderers(config, sides)
-    for side in sides:                                                       # warm-up: programs built
-        for render in methods.values():
-            render(prepared[side][0])
-    times = {}
-    for round_ in range(args.rounds):
-        for side in sides:
-            for method, render in methods.items():
-                if method == "raymarch" and round_ >= march_rounds:
-                    continue
-                times.setdefault((method, side), []).append(timed_with_cpu(lambda: render(prepared[side][0]))[2])
+    keys = [(method, side) for side in sides for method in methods]
+
+    def machine_state():
         loads.append(load_average())
         readings.append(exp_reading())
+
+    renders = [lambda render=methods[method], side=side: render(prepared[side][0]) for method, side in keys]
+    timed = timed_in_turn(renders, [march_rounds if method == "raymarch" else args.rounds for method, _ in keys],
+                          after_round=machine_state)
+    times = {key: [cpu for _, cpu in calls] for key, calls in zip(keys, timed)}
     markdown = report(times, prepared, sides, table, (wall4d, cpu4d), loads, readings, args.rounds, march_rounds)
     print(markdown)
     if not args.no_readme:

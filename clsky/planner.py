@@ -77,7 +77,7 @@ from .atmosphere import AtmosphereParameters, preset
 from .errors import ParameterError, check_integer, is_real_number
 from .mapping import cos_to_v
 from .quality import QualityLevel, level_for_budget, quality_level
-from .renderer_choice import DEFAULT_PIXELS, LOOKUP_ERROR, RENDERERS, choose_renderer
+from .renderer_choice import DEFAULT_PIXELS, LOOKUP_ERROR, choose_renderer, renderer_row
 from .settings import TableSettings
 
 __all__ = ["Scene", "Plan", "plan_scene", "sun_margins", "sun_axis", "view_sampling", "azimuth_harmonics",
@@ -435,7 +435,7 @@ def _costlier(method, chosen, pixels) -> str:
     """Why the plan passed over the renderer ``method`` for ``chosen`` (a
     :class:`clsky.renderer_choice.RendererRow`) although both fit the budget: their measured costs a frame
     of ``pixels`` pixels."""
-    row = next(r for r in RENDERERS if r.method == method)
+    row = renderer_row(method)
     return (f"it costs more a frame of {pixels} pixels ({row.frame_cpu_ms(pixels):.3g} against "
             f"{chosen.frame_cpu_ms(pixels):.3g} CPU-ms, measured)")
 

@@ -40,7 +40,7 @@ import dataclasses
 import numpy as np
 
 __all__ = ["RendererRow", "RENDERERS", "DEFAULT_PIXELS", "LOOKUP4D_ERROR", "RAY_MARCH_ERROR", "LOOKUP_ERROR",
-           "choose_renderer", "error_over"]
+           "renderer_row", "choose_renderer", "error_over"]
 
 #: Measured error of the 3D table lookup (95th percentile, relative, default table, 64 x 64 all-sky fisheye
 #: from the ground, physical preset with ozone and ground, the harmonics M = 2 in the table and the
@@ -156,6 +156,11 @@ def error_over(error, low, high):
     return float(np.interp(at, elevations, values).max())
 
 
+def renderer_row(method, rows=RENDERERS) -> RendererRow:
+    """The row of ``rows`` whose ``--method`` name is ``method``."""
+    return next(row for row in rows if row.method == method)
+
+
 def choose_renderer(sun_elevations_deg, budget, level="default", rows=RENDERERS, frames=None, pixels=DEFAULT_PIXELS):
     """(row, estimated error, {method: estimated error}): the cheapest row of ``rows`` whose estimated
     error over the sun path ``sun_elevations_deg`` = (low, high) [deg] fits ``budget`` (relative), for
@@ -171,5 +176,5 @@ def choose_renderer(sun_elevations_deg, budget, level="default", rows=RENDERERS,
     for row in sorted(candidates, key=lambda r: r.cost_cpu_s(1 if frames is None else frames, pixels)):
         if estimates[row.method] <= budget:
             return row, estimates[row.method], estimates
-    fallback = next(row for row in rows if row.method == "raymarch")
+    fallback = renderer_row("raymarch", rows)
     return fallback, estimates[fallback.method], estimates

@@ -11,11 +11,10 @@ import pytest
 from clsky.anim.cameras import FisheyeCamera
 from clsky.planner import Scene, plan_scene
 from clsky.renderer_choice import (DEFAULT_PIXELS, LOOKUP_ERROR, RAY_MARCH_ERROR, RENDERERS, RendererRow,
-                                   choose_renderer, error_over)
+                                   choose_renderer, error_over, renderer_row)
 
 
-def row(method):
-    return next(r for r in RENDERERS if r.method == method)
+row = renderer_row
 
 
 def test_error_over_takes_the_worst_of_the_path_interpolated_in_log_error():
