@@ -58,6 +58,18 @@ def add_output_arguments(parser: argparse.ArgumentParser):
     return parser
 
 
+def positive_integer(text: str) -> int:
+    """An argparse type: an integer >= 1 (a count of runs or rounds), else argparse's one-line error naming
+    the option and what was typed."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}")
+    return value
+
+
 def parse_arguments(parser: argparse.ArgumentParser, argv=None):
     """``parser.parse_args(argv)``, with ``--smoke`` implying ``--no-readme``."""
     args = parser.parse_args(argv)

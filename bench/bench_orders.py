@@ -42,7 +42,7 @@ import sys
 import numpy as np
 
 from _report import (SMOKE, add_output_arguments, best_timing, exp_reading, load_average, load_note, machine,
-                     parse_arguments, state_note, timed_with_cpu, write_readme_section)
+                     parse_arguments, positive_integer, state_note, timed_with_cpu, write_readme_section)
 
 import clsky
 from clsky import ground
@@ -109,8 +109,8 @@ def shares_at_sun_nodes(result, settings, atmosphere):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeat", type=int, default=3, help="repeated OpenCL builds (a batch)")
-    parser.add_argument("--twin-runs", type=int, default=2,
+    parser.add_argument("--repeat", type=positive_integer, default=3, help="repeated OpenCL builds (a batch)")
+    parser.add_argument("--twin-runs", type=positive_integer, default=2,
                         help="runs of the NumPy twins, each after a batch of OpenCL runs (in turn)")
     add_output_arguments(parser)
     args = parse_arguments(parser)

@@ -36,7 +36,7 @@ import numpy as np
 
 from _bound import EXPS_PER_NODE, march_exps
 from _report import SMOKE, add_output_arguments, exp_reading, load_average, machine, parse_arguments, \
-    timed_in_turn, timed_with_cpu, write_readme_section
+    positive_integer, timed_in_turn, timed_with_cpu, write_readme_section
 
 import clsky
 from clsky.anim.accuracy import LOOKUP4D_SUN_DEG, lookup4d_settings
@@ -103,7 +103,7 @@ def bound_sentence(label, pairs, exps, timed="frames"):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeat", type=int, default=9)
+    parser.add_argument("--repeat", type=positive_integer, default=9)
     parser.add_argument("--skip-animation", action="store_true")
     add_output_arguments(parser)
     args = parse_arguments(parser)

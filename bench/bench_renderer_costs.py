@@ -31,7 +31,7 @@ import datetime
 import numpy as np
 
 from _report import SMOKE, add_output_arguments, exp_reading, load_average, machine, parse_arguments, \
-    state_note, timed_in_turn, timed_with_cpu, write_readme_section
+    positive_integer, state_note, timed_in_turn, timed_with_cpu, write_readme_section
 
 from clsky._cl import default_device, describe_device
 from clsky.anim import animate
@@ -82,7 +82,7 @@ def line_through(pixels, cpu):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rounds", type=int, default=7)
+    parser.add_argument("--rounds", type=positive_integer, default=7)
     add_output_arguments(parser)
     args = parse_arguments(parser)
     config, sides, march_rounds = AnimationConfig(), SIDES, MARCH_ROUNDS

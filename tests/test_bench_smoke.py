@@ -205,3 +205,15 @@ def test_memory_bench_honours_the_atmosphere_options():
     assert plain == estimate_table_memory(TableSettings(size=size), saving=True).peak_bytes() + BASE_PROCESS_BYTES
     physical = TableSettings(size=size, mode="physical")
     assert ground == estimate_table_memory(physical, saving=True).peak_bytes() + BASE_PROCESS_BYTES > plain
+
+
+@pytest.mark.parametrize("name, option", [("bench_orders", "--twin-runs"), ("bench_orders", "--repeat"),
+                                          ("bench_render", "--repeat"), ("bench_renderer_costs", "--rounds")])
+@pytest.mark.parametrize("typed", ["0", "-2", "x"])
+def test_counts_below_one_are_refused_before_any_work(name, option, typed):
+    """A count of runs or rounds below 1 would leave nothing to take the least of: argparse refuses it
+    (exit status 2) with a line naming the option and what was typed, before any table is built."""
+    result = subprocess.run([sys.executable, f"bench/{name}.py", option, typed, "--no-readme"], cwd=ROOT,
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2
+    assert f"argument {option}: must be an integer >= 1, got '{typed}'" in result.stderr.splitlines()[-1]
