@@ -102,13 +102,18 @@ def best_of(function, repeat):
 
 
 def write_readme_section(name: str, markdown: str, readme: pathlib.Path = README):
-    """Replace the README section between the bench markers of ``name`` (which must exist)."""
+    """Replace the README section between the bench markers of ``name`` (which must exist), atomically
+    (:func:`clsky._files.atomic_write`: a uniquely named temporary renamed over the README, so that an
+    interrupted benchmark or two writing at once never leave it half written)."""
+    from clsky._files import atomic_write
+
     text = readme.read_text()
     begin, end = f"<!-- bench:{name} -->", f"<!-- /bench:{name} -->"
     pattern = re.compile(re.escape(begin) + ".*?" + re.escape(end), re.S)
     if not pattern.search(text):
         raise SystemExit(f"README.md has no {begin} ... {end} section")
-    readme.write_text(pattern.sub(lambda _: f"{begin}\n{markdown.strip()}\n{end}", text))
+    with atomic_write(readme, overwrite=True) as temporary:
+        pathlib.Path(temporary).write_text(pattern.sub(lambda _: f"{begin}\n{markdown.strip()}\n{end}", text))
 
 
 def timed_with_cpu(function):

@@ -217,3 +217,21 @@ def test_counts_below_one_are_refused_before_any_work(name, option, typed):
                             capture_output=True, text=True, timeout=120)
     assert result.returncode == 2
     assert f"argument {option}: must be an integer >= 1, got '{typed}'" in result.stderr.splitlines()[-1]
+
+
+def test_readme_section_is_replaced_atomically(tmp_path):
+    """write_readme_section replaces one section's text, leaves the rest and no temporary behind, and
+    refuses a README without the section before writing anything."""
+    sys.path.insert(0, str(BENCH))
+    try:
+        import _report
+    finally:
+        sys.path.remove(str(BENCH))
+    readme = tmp_path / "README.md"
+    readme.write_text("head\n<!-- bench:x -->\nold\n<!-- /bench:x -->\ntail\n")
+    _report.write_readme_section("x", "| new |\n", readme)
+    assert readme.read_text() == "head\n<!-- bench:x -->\n| new |\n<!-- /bench:x -->\ntail\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["README.md"]
+    with pytest.raises(SystemExit, match="README.md has no <!-- bench:y -->"):
+        _report.write_readme_section("y", "| other |", readme)
+    assert readme.read_text() == "head\n<!-- bench:x -->\n| new |\n<!-- /bench:x -->\ntail\n"
