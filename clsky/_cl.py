@@ -304,6 +304,11 @@ _program_cache: dict = {}
 _program_cache_lock = threading.Lock()
 
 
+def compiler_output_wanted() -> bool:
+    """Whether the user asked for the compilers' logs (``PYOPENCL_COMPILER_OUTPUT`` set and not empty)."""
+    return bool(os.environ.get("PYOPENCL_COMPILER_OUTPUT"))
+
+
 @contextlib.contextmanager
 def quiet_compiler_output():
     """Within: PyOpenCL's warnings about a *successful* build's log are not shown, unless
@@ -312,9 +317,29 @@ def quiet_compiler_output():
     logs every build ("Compilation started", ...), also of PyOpenCL's own array kernels. A failed build
     still raises. Used around clsky's builds and by the command line around the whole command."""
     with warnings.catch_warnings():
-        if not os.environ.get("PYOPENCL_COMPILER_OUTPUT"):
+        if not compiler_output_wanted():
             warnings.simplefilter("ignore", cl.CompilerWarning)
         yield
+
+
+#: The OpenCL build option that inhibits all warning messages (OpenCL 1.0 onwards, section 5.8.4.5 of
+#: the 3.0 specification). PoCL's clang writes its diagnostics' count ("176 warnings generated.")
+#: straight to the process's standard error, past Python's warning filters: on a CPU without AVX-512
+#: every program that calls a builtin on a double8 warns that the argument "changes the ABI" (a note
+#: about calling conventions, not about our code; the machine code is the same with or without it),
+#: and a first ``clsky animate`` printed six such lines between its plan and its progress bars.
+#: :func:`build_program` passes it unless :func:`compiler_output_wanted`. It changes no binary: the
+#: warnings are diagnostics only.
+NO_WARNINGS = "-w"
+
+
+def _compiler_options(options) -> list[str]:
+    """The options handed to the OpenCL compiler: ``options`` plus :data:`NO_WARNINGS` unless the
+    compiler's output was asked for."""
+    options = list(options)
+    if not compiler_output_wanted() and NO_WARNINGS not in options:
+        options.append(NO_WARNINGS)
+    return options
 
 
 def build_program(context, sources, options=()):
@@ -334,7 +359,7 @@ def build_program(context, sources, options=()):
     names = [s.label if isinstance(s, Source) else s for s in sources]
     try:
         with quiet_compiler_output():
-            program = cl.Program(context, "".join(parts)).build(options=list(options))
+            program = cl.Program(context, "".join(parts)).build(options=_compiler_options(options))
     except cl.Error as error:
         device = context.devices[0]
         raise KernelBuildError(f"building {names} with options {list(options)} on {device.name!r} "
