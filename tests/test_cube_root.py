@@ -86,27 +86,36 @@ def arguments():
     return np.concatenate([uniform, spread, ends, np.zeros((-len(ends)) % 8)])
 
 
-def test_cube_root_is_within_3_ulp_of_numpy(cube_roots):
+#: NumPy's own cube root is not correctly rounded where it is the C library's: on an AMD EPYC without
+#: AVX-512 (glibc's cbrt; with AVX-512 NumPy takes its SIMD routine), 3.16 ulp from the exact root at most
+#: over these arguments, and 5 ulp from the kernel's (2026-12-06). Bound on |kernel - NumPy|: the kernel's
+#: 3 ulp plus NumPy's, rounded up to 4.
+NUMPY_CBRT_ULP = 4.0
+
+
+def test_cube_root_is_within_3_ulp_of_the_exact_root(cube_roots):
     """Three Halley steps from a seed within 3.3 % cube the error three times (3.3e-2 -> ~1e-5 ->
-    ~1e-15 -> rounding): what is left is the last step's rounding, a few ulp. Bound: 3 ulp of
-    numpy's root, as measured over these arguments (2^20 + 2^18 values; 2.9 ulp at most from the exact
-    root, against an 80-bit reference); both overloads (double, double8)."""
+    ~1e-15 -> rounding): what is left is the last step's rounding, a few ulp. Bound: 3 ulp of the exact
+    root (long double's cube root refined by one Newton step, a 64-bit mantissa), as measured over these
+    arguments (2^20 + 2^18 values; 2.9 ulp at most); both overloads (double, double8). Against NumPy's
+    root too (the only reference where long double is double), within 3 + NUMPY_CBRT_ULP."""
     x = arguments()
     expected = np.cbrt(x)
     ulp = np.spacing(np.abs(expected))
     roots = cube_roots(x)[:2]
     for name, root in zip(("double", "double8"), roots):
         error = np.abs(root - expected) / ulp
-        assert error.max() <= 3.0, f"{name}: {error.max():.0f} ulp at x = {x[np.argmax(error)]!r}"
+        worst = x[np.argmax(error)]
+        assert error.max() <= 3.0 + NUMPY_CBRT_ULP, f"{name}: {error.max():.0f} ulp from NumPy's at x = {worst!r}"
     if np.finfo(np.longdouble).nmant < 63:
         return                                 # no extended precision here (long double is double)
-    # against the exact root: long double's cube root refined by one Newton step (64-bit mantissa)
     wide = x.astype(np.longdouble)
     exact = np.cbrt(wide)
     exact -= (exact * exact * exact - wide) / (3 * exact * exact + (exact == 0))
     for name, root in zip(("double", "double8"), roots):
         error = np.abs(root.astype(np.longdouble) - exact) / ulp
-        assert error.max() <= 3.0, f"{name}: {float(error.max()):.2f} ulp from the exact root"
+        worst = x[np.argmax(error)]
+        assert error.max() <= 3.0, f"{name}: {float(error.max()):.2f} ulp from the exact root at x = {worst!r}"
 
 
 def test_cube_root_is_exact_at_the_table_ends_and_keeps_signs(cube_roots):
