@@ -25,6 +25,26 @@ from clsky.single import SingleScatteringEngine
 from clsky.transmittance import TransmittanceEngine
 
 
+# Workers (pytest-xdist) -----------------------------------------------------------------------------------
+
+#: Host memory a worker may take at its peak [bytes], for the number of workers ``-n auto`` starts: the
+#: largest process of a default-suite run on 2026-12-06 (a worker, or a command a test started) peaked at
+#: 3.1 GB resident (``/usr/bin/time -v``); 4 GiB leaves a quarter more.
+WORKER_MEMORY = 4 * 2**30
+
+
+def pytest_xdist_auto_num_workers(config):
+    """``-n auto`` (pyproject's addopts): one worker per core this process may use (clsky._cl.host_cores:
+    affinity and cgroup quota), no more than the available memory holds at WORKER_MEMORY each, at least 1.
+    On a GPU all workers share the device."""
+    from clsky._cl import host_cores
+    from clsky.resources import host_available_bytes
+
+    available = host_available_bytes()
+    by_memory = host_cores() if available is None else max(1, available // WORKER_MEMORY)
+    return max(1, min(host_cores(), by_memory))
+
+
 # The CI's time budget --------------------------------------------------------------------------------
 
 #: Environment variable: a Unix time after which no test starts. .ci/run sets it for the slow tests so

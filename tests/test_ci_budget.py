@@ -1,6 +1,7 @@
 """The CI's time budget (tests/conftest.py, ``CLSKY_TEST_DEADLINE``, set by .ci/run for the slow tests):
 past the deadline no test starts, and each is reported as skipped with the reason; a malformed value
-stops the run before any test. Each case runs pytest on one quick test in a child process."""
+stops the run before any test. Each case runs pytest on one quick test in a child process, in one
+process as .ci/run runs the slow set (-n 0: the deadline's order needs one)."""
 
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 def run_pytest(deadline):
     environment = {**os.environ, "CLSKY_TEST_DEADLINE": deadline}
-    return subprocess.run([sys.executable, "-m", "pytest", "-q", "-rs", "-p", "no:cacheprovider", TARGET],
+    return subprocess.run([sys.executable, "-m", "pytest", "-q", "-rs", "-n", "0", "-p", "no:cacheprovider", TARGET],
                           cwd=ROOT, env=environment, capture_output=True, text=True, timeout=120)
 
 
@@ -38,7 +39,7 @@ def test_a_malformed_deadline_is_a_usage_error():
 def test_under_a_deadline_the_physics_checks_run_first():
     """With the deadline set, the twilight Monte Carlo checks and the main job come first in the slow set."""
     environment = {**os.environ, "CLSKY_TEST_DEADLINE": str(time.time() + 3600)}
-    result = subprocess.run([sys.executable, "-m", "pytest", "-q", "-m", "slow", "--collect-only", "-p",
+    result = subprocess.run([sys.executable, "-m", "pytest", "-q", "-m", "slow", "-n", "0", "--collect-only", "-p",
                              "no:cacheprovider"], cwd=ROOT, env=environment, capture_output=True, text=True,
                             timeout=120)
     files = [line.split("::")[0] for line in result.stdout.splitlines() if "::" in line]
