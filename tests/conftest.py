@@ -25,7 +25,7 @@ from clsky.single import SingleScatteringEngine
 from clsky.transmittance import TransmittanceEngine
 
 
-# Workers (pytest-xdist) -----------------------------------------------------------------------------------
+# Workers (pytest-xdist) ----------------------------------------------------------------------------
 
 #: Host memory a worker may take at its peak [bytes], for the number of workers ``-n auto`` starts: the
 #: largest process of a default-suite run on 2026-12-06 (a worker, or a command a test started) peaked at
