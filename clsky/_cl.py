@@ -336,10 +336,7 @@ NO_WARNINGS = "-w"
 def _compiler_options(options) -> list[str]:
     """The options handed to the OpenCL compiler: ``options`` plus :data:`NO_WARNINGS` unless the
     compiler's output was asked for."""
-    options = list(options)
-    if not compiler_output_wanted() and NO_WARNINGS not in options:
-        options.append(NO_WARNINGS)
-    return options
+    return list(options) if compiler_output_wanted() else [*options, NO_WARNINGS]
 
 
 def build_program(context, sources, options=()):

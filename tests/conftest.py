@@ -40,9 +40,8 @@ def pytest_xdist_auto_num_workers(config):
     from clsky._cl import host_cores
     from clsky.resources import host_available_bytes
 
-    available = host_available_bytes()
-    by_memory = host_cores() if available is None else max(1, available // WORKER_MEMORY)
-    return max(1, min(host_cores(), by_memory))
+    cores, available = host_cores(), host_available_bytes()
+    return cores if available is None else max(1, min(cores, available // WORKER_MEMORY))
 
 
 # The CI's time budget --------------------------------------------------------------------------------
