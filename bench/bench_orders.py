@@ -9,8 +9,11 @@ planned table within 4 s, the full default table 10x or more faster than its Num
    scene (``plan_animation`` -> ``clsky.planner.plan_scene``, as ``clsky animate`` plans it). Each twice:
    *first build*, in a fresh Python process after ``import clsky`` (the kernels come from the warm
    PyOpenCL / PoCL disk caches, which a warm-up process fills first; the in-process caches, the compiled
-   programs and the gather matrices, are empty), and *repeated build*, the best of ``--repeat`` builds
-   after one in the same process.
+   programs and the gather matrices, are empty), the least of ``--fresh-runs`` such processes; and
+   *repeated build*, the least of ``--repeat`` builds after one in the same process. The two tables take
+   their turns (a fresh process of each, then the next round; a repeated build of each, then the next
+   round): measured one after the other, each caught a state of the machine of its own, and the physical
+   table's repeated build moved by 26 % between two runs of 2026-12-06 (docs/speed-log.md).
 2. **OpenCL against the NumPy twins**: ``clsky.orders.compute_orders`` on the full default table
    (32 x 256 x 32), ``backend="opencl"`` (best of ``--twin-runs`` batches of ``--repeat`` after a
    warm-up) against ``backend="numpy"`` (best of ``--twin-runs``), the two in turn: a batch, a twin run,
@@ -25,9 +28,9 @@ also has the machine's exp() rate read just before and just after it (bench/_rep
 about 900 instead of 1500-1700 M per CPU-second in the machine's slow state, where CPU times run up to a
 third higher.
 
-Usage: python bench/bench_orders.py [--repeat N] [--twin-runs N] [--no-readme] [--smoke]
+Usage: python bench/bench_orders.py [--repeat N] [--fresh-runs N] [--twin-runs N] [--no-readme] [--smoke]
 
-``--smoke``: 8 x 32 x 8 tables (the planned one too), one repetition, one twin run, print only
+``--smoke``: 8 x 32 x 8 tables (the planned one too), one repetition, one fresh process, one twin run, print only
 (bench/_report.py).
 """
 
@@ -42,7 +45,8 @@ import sys
 import numpy as np
 
 from _report import (SMOKE, add_output_arguments, best_timing, exp_reading, load_average, load_note, machine,
-                     parse_arguments, positive_integer, state_note, timed_with_cpu, write_readme_section)
+                     parse_arguments, positive_integer, state_note, timed_in_turn, timed_with_cpu,
+                     write_readme_section)
 
 import clsky
 from clsky import ground
@@ -109,42 +113,51 @@ def shares_at_sun_nodes(result, settings, atmosphere):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeat", type=positive_integer, default=3, help="repeated OpenCL builds (a batch)")
+    parser.add_argument("--repeat", type=positive_integer, default=3,
+                        help="repeated OpenCL builds of each table (rounds, in turn), and of the full table (a batch)")
+    parser.add_argument("--fresh-runs", type=positive_integer, default=2,
+                        help="fresh processes timing each table's first build (rounds, in turn)")
     parser.add_argument("--twin-runs", type=positive_integer, default=2,
                         help="runs of the NumPy twins, each after a batch of OpenCL runs (in turn)")
     add_output_arguments(parser)
     args = parse_arguments(parser)
     size = SMOKE.table if args.smoke else clsky.TableSettings().size
     if args.smoke:
-        args.repeat, args.twin_runs = SMOKE.repeat, 1
+        args.repeat, args.fresh_runs, args.twin_runs = SMOKE.repeat, 1, 1
     start_load = load_average()
     stamp = f"measured {datetime.date.today()} on {machine()} (load average {start_load:.2f} at the start)"
 
     builds = [f"Table builds (`ScatteringTable.build`: single scattering, every order until 1e-4, the table), {stamp}. "
               "*First build*: in a fresh Python process, timed after `import clsky`, with the PyOpenCL / PoCL "
               "disk caches warm (a warm-up process ran first) and the in-process caches (compiled programs, "
-              f"gather matrices) empty. *Repeated*: the least of {args.repeat} builds after one in the same "
-              "process. Wall and process CPU time (all threads) [s]; load: the highest 1-minute load average "
-              "seen after the builds of the row; exp(): the machine's double8 exp() rate read before and after "
-              "the row [M per CPU-second] (about 900 in its slow state, 1500-1700 in its fast one).", "",
+              f"gather matrices) empty: the least of {args.fresh_runs} such processes. *Repeated*: the least of "
+              f"{args.repeat} builds after one in the same process. The tables take turns (a build of each, then "
+              "the next round), so that both see the same mix of the machine's states. Wall and process CPU time "
+              "(all threads) [s]; load: the highest 1-minute load average seen after a round; exp(): the "
+              "machine's double8 exp() rate read before and after the table builds [M per CPU-second] (about 900 "
+              "in its slow state, 1500-1700 in its fast one).", "",
               "| table | W x H x D | orders | first build: wall | CPU | repeated: wall | CPU | load | exp() |",
               "|---|---|---:|---:|---:|---:|---:|---:|---|"]
     cases = build_cases(args.smoke)
     fresh_process_build(*cases[0][1:])                                        # warm-up: fills the disk caches
-    highest, readings = start_load, []
-    for label, atmosphere, settings in cases:
-        before = exp_reading()
-        first = fresh_process_build(atmosphere, settings)
-        first_load = load_average()
-        clsky.ScatteringTable.build(atmosphere, settings)                    # warm-up in this process
-        table, wall, cpu, load = best_timing(lambda: clsky.ScatteringTable.build(atmosphere, settings), args.repeat)
-        after = exp_reading()
-        readings += [before, after]
-        builds.append(f"| {label} | {' x '.join(map(str, settings.size))} | {table.orders_record['orders']} | "
-                      f"{first['wall']:.2f} | {first['cpu']:.2f} | {wall:.2f} | {cpu:.2f} | "
-                      f"{max(first_load, load):.2f} | {before:.0f} / {after:.0f} |")
-        highest = max(highest, first_load, load)
-        print(builds[-1], f"(import clsky: {first['import_wall']:.2f} s wall)", flush=True)
+    before, loads = exp_reading(), [start_load]
+    firsts = [[] for _ in cases]
+    for _ in range(args.fresh_runs):
+        for runs, (_, atmosphere, settings) in zip(firsts, cases):
+            runs.append(fresh_process_build(atmosphere, settings))
+        loads.append(load_average())
+    builders = [lambda atmosphere=atmosphere, settings=settings: clsky.ScatteringTable.build(atmosphere, settings)
+                for _, atmosphere, settings in cases]
+    repeated = timed_in_turn(builders, args.repeat, after_round=lambda: loads.append(load_average()))
+    after = exp_reading()
+    readings, highest = [before, after], max(loads)
+    for (label, atmosphere, settings), runs, timed in zip(cases, firsts, repeated):
+        first_wall, first_cpu = min(run["wall"] for run in runs), min(run["cpu"] for run in runs)
+        wall, cpu = min(w for w, _ in timed), min(c for _, c in timed)
+        builds.append(f"| {label} | {' x '.join(map(str, settings.size))} | {runs[0]['orders']} | "
+                      f"{first_wall:.2f} | {first_cpu:.2f} | {wall:.2f} | {cpu:.2f} | {highest:.2f} | "
+                      f"{before:.0f} / {after:.0f} |")
+        print(builds[-1], f"(import clsky: {min(run['import_wall'] for run in runs):.2f} s wall)", flush=True)
 
     timing = [f"Full default table ({' x '.join(map(str, size))}, float64, default settings: orders until 1e-4), "
               f"`clsky.orders.compute_orders` with `backend=\"opencl\"` (the least of {args.twin_runs} x "

@@ -208,7 +208,8 @@ def test_memory_bench_honours_the_atmosphere_options():
 
 
 @pytest.mark.parametrize("name, option", [("bench_orders", "--twin-runs"), ("bench_orders", "--repeat"),
-                                          ("bench_render", "--repeat"), ("bench_renderer_costs", "--rounds")])
+                                          ("bench_orders", "--fresh-runs"), ("bench_render", "--repeat"),
+                                          ("bench_renderer_costs", "--rounds")])
 @pytest.mark.parametrize("typed", ["0", "-2", "x"])
 def test_counts_below_one_are_refused_before_any_work(name, option, typed):
     """A count of runs or rounds below 1 would leave nothing to take the least of: argparse refuses it
