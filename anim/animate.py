@@ -53,7 +53,7 @@ from .cameras import camera_from_name
 from .exr import PRECISIONS
 
 __all__ = ["AnimationConfig", "AnimationResult", "METHODS", "LOOKUP_NAMES", "lookup_of", "comparison", "quality",
-           "plan_animation", "build_table", "make_renderer",
+           "plan_animation", "PlannedAnimation", "planned_animation", "build_table", "make_renderer",
            "make_table", "renderer_of", "FrameOutputs", "frame_outputs", "exposure_reference",
            "spectral_frame_to_linear_srgb", "three_wavelength_frame_to_linear_srgb", "frame_units",
            "THREE_WAVELENGTH_CONVERSION",
@@ -453,6 +453,31 @@ def plan_animation(config: AnimationConfig, positions, directions, valid, ctx=No
         return None
     return plan_scene(_scene(config, positions, directions, valid), config.atmosphere, config.mode, ctx=ctx,
                       ray_march=config.method not in ("lut", "lut4d"))
+
+
+@dataclasses.dataclass(frozen=True)
+class PlannedAnimation:
+    """What an animation's frames are made from before any table: its sun positions
+    (:func:`sun_positions`), its camera, the camera's pixel directions (H, W, 3) and valid mask (H, W), and
+    its scene plan (:func:`plan_animation`; None with an explicit ``table_size``)."""
+
+    positions: list
+    camera: object
+    directions: np.ndarray
+    valid: np.ndarray
+    plan: Plan | None
+
+
+def planned_animation(config: AnimationConfig, positions=None, ctx=None) -> PlannedAnimation:
+    """The animation's sun positions (``positions`` if given, else :func:`sun_positions`), camera and scene
+    plan, as :func:`render_animation` makes them: the one place where the camera and the plan are made from
+    a configuration, so that a benchmark or a test of "the default animation's table" plans what
+    ``clsky animate`` renders."""
+    positions = sun_positions(config) if positions is None else positions
+    camera = _camera(config)
+    directions, valid = camera.directions()
+    return PlannedAnimation(positions, camera, directions, valid,
+                            plan_animation(config, positions, directions, valid, ctx=ctx))
 
 
 def _scene(config: AnimationConfig, positions, directions, valid) -> Scene:
@@ -952,9 +977,8 @@ def _render_animation(config, ctx, progress, report, farm) -> AnimationResult:
         workers = check_animation_memory(config, positions, device)
     else:
         check_memory(memory_estimate(config, positions, 1, device), device=device)
-    camera = _camera(config)
-    directions, valid = camera.directions()
-    plan = plan_animation(config, positions, directions, valid, ctx=ctx)
+    planned = planned_animation(config, positions, ctx=ctx)
+    camera, directions, valid, plan = planned.camera, planned.directions, planned.valid, planned.plan
     if plan is not None and report is not None:
         report(plan.describe())
     lookup = lookup_of(config, plan)

@@ -257,8 +257,8 @@ def run_render(args):
     import pathlib
 
     from . import scene, writers
-    from .animate import (LOOKUP_NAMES, _camera, comparison, display, display_frames, lookup_of, make_renderer,
-                          plan_animation, render_frame)
+    from .animate import (LOOKUP_NAMES, comparison, display, display_frames, lookup_of, make_renderer,
+                          planned_animation, render_frame)
     from .cameras import sun_direction
     from .sunpath import SunPosition
 
@@ -287,9 +287,8 @@ def run_render(args):
         raise clsky_cli.UsageError(str(error)) from None
     position = SunPosition(90.0 - args.sun_elevation, args.sun_azimuth)
     _check_memory(args, config, [position])
-    camera = _camera(config)
-    directions, valid = camera.directions()
-    plan = plan_animation(config, [position], directions, valid)
+    planned = planned_animation(config, [position])
+    camera, directions, valid, plan = planned.camera, planned.directions, planned.valid, planned.plan
     if plan is not None:
         print(plan.describe())
     renderer, table = make_renderer(config, plan)          # the frame reads data and gathered only

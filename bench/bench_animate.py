@@ -149,9 +149,8 @@ def host_half(options, thread_counts, jobs=HOST_HALF_JOBS):
     user and system time (nothing else runs in it meanwhile)."""
     animate = clsky.anim.animate
     config = AnimationConfig(**options)
-    positions = animate.sun_positions(config)
-    directions, valid = animate._camera(config).directions()
-    plan = animate.plan_animation(config, positions, directions, valid)
+    planned = animate.planned_animation(config)
+    positions, directions, valid, plan = planned.positions, planned.directions, planned.valid, planned.plan
     renderer, table = animate.make_renderer(config, plan)
     lookup = animate.lookup_of(config, plan)
     prepared = renderer.prepare(directions, valid)

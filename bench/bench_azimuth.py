@@ -51,8 +51,8 @@ def cost(args):
     from clsky.render import SkyRenderer
 
     config = animate.AnimationConfig(size=SMOKE.frame) if args.smoke else animate.AnimationConfig()
-    directions, valid = animate._camera(config).directions()
-    plan = animate.plan_animation(config, animate.sun_positions(config), directions, valid)
+    planned = animate.planned_animation(config)
+    directions, valid, plan = planned.directions, planned.valid, planned.plan
     rows, highest, start_load = [], load_average(), load_average()
     for harmonics in (plan.table.azimuth_harmonics, 0):
         settings = plan.table.replace(azimuth_harmonics=harmonics)

@@ -32,8 +32,8 @@ import numpy as np
 from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
 
 from clsky.anim import metrics, writers
-from clsky.anim.animate import (AnimationConfig, _camera, display, display_frames, make_renderer, plan_animation,
-                          ray_settings, render_frame)
+from clsky.anim.animate import (AnimationConfig, display, display_frames, make_renderer, planned_animation,
+                                ray_settings, render_frame)
 from clsky.anim.display import Display
 from clsky.render import SkyRenderer
 from clsky.anim.cameras import sun_direction
@@ -75,16 +75,13 @@ def render_sky(fields, size, smoke):
     """(HDR ray-marched frame, directions, valid, build seconds, table, config, relative frame) of one
     sky; the relative frame (three wavelengths only, else None) is the same table rendered with the
     preset's incident light I_I, as before issue 10."""
-    config = AnimationConfig(size=size, method="raymarch", dither=False, **fields)
+    config = AnimationConfig(size=size, method="raymarch", dither=False, table_size=SMOKE.table if smoke else None,
+                             **fields)
     position = SunPosition(90.0 - SUN_ELEVATION_DEG, SUN_AZIMUTH_DEG)
-    directions, valid = _camera(config).directions()
     start = time.perf_counter()
-    if smoke:
-        config = AnimationConfig(size=size, method="raymarch", dither=False, table_size=SMOKE.table, **fields)
-        plan = None
-    else:
-        plan = plan_animation(config, [position], directions, valid)
-    renderer, table = make_renderer(config, plan)
+    planned = planned_animation(config, [position])                 # no plan with the smoke's table size
+    directions, valid = planned.directions, planned.valid
+    renderer, table = make_renderer(config, planned.plan)
     seconds = time.perf_counter() - start
     sun = sun_direction(90.0 - SUN_ELEVATION_DEG, SUN_AZIMUTH_DEG)
     hdr = render_frame(renderer, renderer.prepare(directions, valid), sun, config)["raymarch"]

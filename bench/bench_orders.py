@@ -86,8 +86,7 @@ def build_cases(smoke):
     physical = clsky.preset("physical")
     default = ground.default_settings(physical)
     config = animate.AnimationConfig(size=SMOKE.frame) if smoke else animate.AnimationConfig()
-    directions, valid = animate._camera(config).directions()
-    plan = animate.plan_animation(config, animate.sun_positions(config), directions, valid)
+    plan = animate.planned_animation(config).plan
     planned = plan.table
     if smoke:
         default, planned = default.replace(size=SMOKE.table), planned.replace(size=SMOKE.table)
@@ -115,7 +114,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=positive_integer, default=3,
                         help="repeated OpenCL builds of each table (rounds, in turn), and of the full table (a batch)")
-    parser.add_argument("--fresh-runs", type=positive_integer, default=2,
+    parser.add_argument("--fresh-runs", type=positive_integer, default=3,
                         help="fresh processes timing each table's first build (rounds, in turn)")
     parser.add_argument("--twin-runs", type=positive_integer, default=2,
                         help="runs of the NumPy twins, each after a batch of OpenCL runs (in turn)")

@@ -189,8 +189,7 @@ def run(args, reference_name):
     # The default animation's plan (exactly as `clsky animate` makes it) against the full table of the
     # same quality, side by side.
     config = animate.AnimationConfig(size=SMOKE.frame) if args.smoke else animate.AnimationConfig()
-    directions, camera_valid = animate._camera(config).directions()
-    plan = animate.plan_animation(config, animate.sun_positions(config), directions, camera_valid)
+    plan = animate.planned_animation(config).plan
     planned, planned_build, planned_cpu = built(plan.atmosphere, plan.table, repeat=3, smoke=args.smoke)
     full, full_build, full_cpu = built(plan.atmosphere, plan.full_table, repeat=3, smoke=args.smoke)
     plan_load = load_average()

@@ -50,14 +50,10 @@ def renderers(config, sides):
     """({method: render(prepared) -> frame}, {side: (prepared directions, marched pixels)}, the 4D
     table's (wall, CPU) build [s], the plan's table): the default scene's renderers, as ``clsky animate``
     makes them, and the 4D table of ``--method lut4d`` for the same scene."""
-    plan = None
-    if config.table_size is None:
-        directions, valid = animate._camera(config).directions()
-        plan = animate.plan_animation(config, animate.sun_positions(config), directions, valid)
+    plan = animate.planned_animation(config).plan
     renderer, table = animate.make_renderer(config, plan)
     config4d = dataclasses.replace(config, method="lut4d")
-    plan4d = None if plan is None else animate.plan_animation(config4d, animate.sun_positions(config4d),
-                                                              directions, valid)
+    plan4d = animate.planned_animation(config4d).plan
     table4d, wall4d, cpu4d = timed_with_cpu(lambda: animate.make_table(config4d, plan4d))
     renderer4d = animate.renderer_of(config4d, table4d)
     sun = sun_direction(90.0 - SUN_ELEVATION_DEG, SUN_AZIMUTH_DEG)

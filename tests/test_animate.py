@@ -169,8 +169,7 @@ def test_planned_compare_uses_the_plans_lookup_the_sky_view_map(tmp_path, cl_con
     is the map, the closest lookup, either way (lookup_of). Its frame is the first panel, labelled, and
     its metrics are the sky-view map's against the ray march, rendered here independently of the
     animation."""
-    from clsky.anim.animate import (_camera, lookup_of, make_renderer, plan_animation, sun_positions,
-                                    three_wavelength_frame_to_linear_srgb)
+    from clsky.anim.animate import lookup_of, make_renderer, planned_animation, three_wavelength_frame_to_linear_srgb
     from clsky import skyview
 
     config = AnimationConfig(frames=2, size=24, quality="draft", start_elevation_deg=-4.0, max_elevation_deg=5.0,
@@ -183,10 +182,11 @@ def test_planned_compare_uses_the_plans_lookup_the_sky_view_map(tmp_path, cl_con
     assert len(record["temporal"]["table_jumps"]) == 2 and "sky-view map against the ray march" in result.summary
 
     # the same frame rendered directly: the sky-view map of the plan's table against its ray march
-    positions = sun_positions(config)
-    directions, valid = _camera(config).directions()
-    plan = plan_animation(config, positions, directions, valid, ctx=cl_context)
+    planned = planned_animation(config, ctx=cl_context)
+    positions, directions, valid, plan = planned.positions, planned.directions, planned.valid, planned.plan
     assert lookup_of(config, plan) == "skyview"
+    # the plan the animation recorded is the one planned_animation makes (the same work, bit for bit)
+    assert (record["plan"]["quality"], record["plan"]["work_fraction"]) == (plan.level.name, plan.work_fraction)
     renderer, _ = make_renderer(config, plan, ctx=cl_context)
     prepared = renderer.prepare(directions, valid)
     sun = positions[0].direction
@@ -465,13 +465,33 @@ def test_suns_per_ray_march_launch_write_the_same_bytes(tmp_path, cl_context, mo
     assert outputs[4] == outputs[1]
 
 
-def test_frames_rendered_takes_the_suns_in_order(cl_context):
-    """frames_rendered's function renders the suns in their order, once each: another sun raises."""
-    from clsky.anim.animate import frames_rendered, lookup_of, make_renderer, sun_positions, _camera
+def test_planned_animation_plans_the_configured_camera_and_suns():
+    """planned_animation: the configuration's sun positions (or those given, passed through), its camera's
+    pixel directions and valid mask, and no plan with an explicit table_size."""
+    from clsky.anim.animate import planned_animation, sun_positions
+    from clsky.anim.cameras import FisheyeCamera
+    from clsky.anim.sunpath import SunPosition
 
     config = AnimationConfig(frames=3, **TINY)
-    positions = sun_positions(config)
-    directions, valid = _camera(config).directions()
+    planned = planned_animation(config)
+    assert planned.plan is None
+    assert [(p.zenith_deg, p.azimuth_deg) for p in planned.positions] == \
+        [(p.zenith_deg, p.azimuth_deg) for p in sun_positions(config)]
+    directions, valid = FisheyeCamera(TINY["size"]).directions()
+    assert (planned.camera.width, planned.camera.height) == (TINY["size"], TINY["size"])
+    np.testing.assert_array_equal(planned.valid, valid)
+    np.testing.assert_array_equal(planned.directions[valid], directions[valid])
+    given = [SunPosition(80.0, 180.0)]
+    assert planned_animation(config, given).positions is given
+
+
+def test_frames_rendered_takes_the_suns_in_order(cl_context):
+    """frames_rendered's function renders the suns in their order, once each: another sun raises."""
+    from clsky.anim.animate import frames_rendered, lookup_of, make_renderer, planned_animation
+
+    config = AnimationConfig(frames=3, **TINY)
+    planned = planned_animation(config)
+    positions, directions, valid = planned.positions, planned.directions, planned.valid
     renderer, _ = make_renderer(config, None, ctx=cl_context)
     with renderer:
         render = frames_rendered(renderer, renderer.prepare(directions, valid), config, lookup_of(config), positions)

@@ -21,6 +21,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from clsky import ScatteringTable, TableSettings, reference
+from clsky._cl import Source, build_program
 from clsky.export4d import GLSL_SNIPPET, export_texture, texture_volumes
 from clsky.mapping import cos_azimuth, scatter_cos
 
@@ -90,7 +91,7 @@ def test_glsl_lookup_matches_the_python_lookup(table, tmp_path, cl_context):
     binary, header = export_texture(table, tmp_path / "sky")
     meta = json.loads(header.read_text())
     volumes = np.fromfile(binary, dtype="<f4").reshape(3, -1, 4).astype(np.float64)
-    program = cl.Program(cl_context, PRELUDE + SNIPPET + KERNEL).build()
+    program = build_program(cl_context, [Source("the exported GLSL snippet as OpenCL C", PRELUDE + SNIPPET + KERNEL)])
     kernel = program.run
     queue = cl.CommandQueue(cl_context)
     rng = np.random.default_rng(5)
