@@ -197,8 +197,9 @@ def exp_reading() -> float:
     """One reading of the machine's state: ``double8`` exp() per CPU-second [M/s] on clsky's device
     (bench/_bound.py, one run of about 0.1 s).
 
-    On the 2-core virtual machine it reads 1500-1700 M in a fast state and about 900 M in a slow one,
-    which lasts seconds to minutes and takes the ray march about a third more CPU for the same frame
+    On the 2-core virtual machines it reads 1500-1700 M in a fast state and about 900 M in a slow one
+    (the AMD EPYC with AVX-512; the one without it 540-618 and 326-360 M), which lasts seconds to
+    minutes and takes the ray march about a third more CPU for the same frame
     (README "This machine runs at two speeds"): readings before and after a row tell which state it
     ran in, where the load average does not."""
     global _EXP_CONTEXT

@@ -243,8 +243,9 @@ def main():
              f"comparison, with the other choice of threads (one where the default is more, else two), and "
              f"with the frames one after the other, run one after the "
              f"other after a discarded 3-frame run (kernels compiled and cached); exp(): the "
-             f"machine's double8 exp() rate read before and after the run [M per CPU-second] (about 900 in its "
-             f"slow state, 1500-1700 in its fast one).{load_note(highest)}{state_note(readings)}", "",
+             f"machine's double8 exp() rate read before and after the run [M per CPU-second] (its slow state "
+             f"reads a half to two thirds of its fast one: README \"This machine runs at two speeds\")."
+             f"{load_note(highest)}{state_note(readings)}", "",
              "| run | frames | wall [s] | CPU [s] | CPU / wall | load before | load after | exp() |",
              "|---|---|---:|---:|---:|---:|---:|---|",
              *(f"| `{shown}` | {label} | {wall:.1f} | {cpu:.1f} | "

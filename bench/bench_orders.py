@@ -25,8 +25,8 @@ planned table within 4 s, the full default table 10x or more faster than its Num
 Every timing has its wall time, this process' CPU time (all threads: PoCL's workers included) and the
 load average; a load above the core count is warned about (the wall times are then inflated). Each row
 also has the machine's exp() rate read just before and just after it (bench/_report.py, exp_reading):
-about 900 instead of 1500-1700 M per CPU-second in the machine's slow state, where CPU times run up to a
-third higher.
+in the machine's slow state a half to two thirds of the fast state's reading (1500-1700 M per CPU-second
+on the AMD EPYC with AVX-512, 540-618 on the one without), where CPU times run up to a third higher.
 
 Usage: python bench/bench_orders.py [--repeat N] [--fresh-runs N] [--twin-runs N] [--no-readme] [--smoke]
 
@@ -133,8 +133,8 @@ def main():
               f"{args.repeat} builds after one in the same process. The tables take turns (a build of each, then "
               "the next round), so that both see the same mix of the machine's states. Wall and process CPU time "
               "(all threads) [s]; load: the highest 1-minute load average seen after a round; exp(): the "
-              "machine's double8 exp() rate read before and after the table builds [M per CPU-second] (about 900 "
-              "in its slow state, 1500-1700 in its fast one).", "",
+              "machine's double8 exp() rate read before and after the table builds [M per CPU-second] (its slow state "
+              "reads a half to two thirds of its fast one: README \"This machine runs at two speeds\").", "",
               "| table | W x H x D | orders | first build: wall | CPU | repeated: wall | CPU | load | exp() |",
               "|---|---|---:|---:|---:|---:|---:|---:|---|"]
     cases = build_cases(args.smoke)

@@ -60,8 +60,9 @@ def march_beside_bound(march, count):
     ``count`` frames (:func:`_report.exp_reading`).
 
     Why pairs: on this virtual machine the CPU time of the same work is not steady. For seconds at a
-    time the double8 exp() kernel runs at about 900 M per CPU-second instead of 1500-1700 (only while
-    both of PoCL's workers run: with one, 30 readings stayed within 1499-1596), and the ray march
+    time the double8 exp() kernel runs at about 900 M per CPU-second instead of 1500-1700 on the AMD EPYC
+    with AVX-512, about 330 instead of 540-618 on the one without (only while both of PoCL's workers run:
+    with one, 30 readings of the first stayed within 1499-1596), and the ray march
     takes about a third more CPU then (README "Speed"). A frame and the reading just after it share
     the machine's state."""
     pairs = []
