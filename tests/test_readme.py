@@ -278,4 +278,5 @@ def test_readme_python_examples_run(tmp_path, monkeypatch):
     assert namespace["table"].settings == namespace["plan"].table     # the last block's planned table
     assert np.isfinite(namespace["lookup"]).all() and np.isfinite(namespace["reference"]).all()
     assert namespace["result"].rows and len(namespace["result"].rows) == 3
+    assert len(namespace["planned"].positions) == 3 and namespace["planned"].plan is not None
     assert (tmp_path / "sky.mp4").is_file() and (tmp_path / "sky.bin").is_file()
