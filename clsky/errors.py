@@ -60,6 +60,10 @@ def is_integer(value) -> bool:
     return isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))
 
 
+#: How the checks below begin what is valid for an optional parameter (None valid too).
+_OPTIONAL = "None or "
+
+
 def as_real_array(name, value, valid="real numbers"):
     """``value`` as a float64 array if it holds real numbers (ints or floats, Python's or NumPy's);
     ParameterError naming ``name`` otherwise (strings, objects, complex values, bools)."""
@@ -104,7 +108,7 @@ def check_integer(name, value, low, high, index=None, optional=False):
     if optional and value is None:
         return None
     if not is_integer(value) or not low <= value <= high:
-        raise ParameterError(name, ("None or " if optional else "") + f"an integer in [{low}, {high}]", value, index)
+        raise ParameterError(name, (_OPTIONAL if optional else "") + f"an integer in [{low}, {high}]", value, index)
     return int(value)
 
 
@@ -145,7 +149,7 @@ def check_real(name, value, low=-math.inf, high=math.inf, low_open=False, unit="
             or not value <= high):
         bounded = (low, high) != (-math.inf, math.inf)
         valid = f"a number in {'(' if low_open else '['}{low:g}, {high:g}]{unit}" if bounded else f"a finite number{unit}"
-        raise ParameterError(name, ("None or " if optional else "") + valid, value)
+        raise ParameterError(name, (_OPTIONAL if optional else "") + valid, value)
     return float(value)
 
 
@@ -167,7 +171,7 @@ def check_choice(name, value, choices, optional=False):
     if optional and value is None:
         return None
     if not isinstance(value, str) or value not in choices:
-        raise ParameterError(name, ("None or " if optional else "") + f"one of {list(choices)}", value)
+        raise ParameterError(name, (_OPTIONAL if optional else "") + f"one of {list(choices)}", value)
     return value
 
 
@@ -208,11 +212,15 @@ class ParameterError(ValueError):
 
     def __init__(self, field, valid, value, index=None):
         self.field, self.valid, self.value, self.index = field, valid, value, index
-        super().__init__(self.reworded(field if index is None else f"{field}[{index}]"))
+        super().__init__(f"{field if index is None else f'{field}[{index}]'} must be {valid}, got {short(value)}")
 
     def reworded(self, name: str) -> str:
-        """The message with ``name`` (e.g. a command-line option) in place of the parameter's name."""
-        return f"{name} must be {self.valid}, got {short(self.value)}"
+        """The message with ``name``, what the user typed (a command-line option, a scene file's key), in
+        place of the parameter's name. An optional parameter's "None or " is left out there: None is what
+        leaving the option or key out gives, not a value one can type."""
+        valid = self.valid[len(_OPTIONAL):] if self.valid.startswith(_OPTIONAL) else self.valid
+        return f"{name} must be {valid}, got {short(self.value)}"
+
 
 
 class NumericalError(ArithmeticError):

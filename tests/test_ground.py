@@ -404,7 +404,7 @@ def test_animation_config_ground_albedo(tmp_path, capsys):
     assert AnimationConfig(ground_albedo=0.2).atmosphere == PHYSICAL.replace(ground_albedo=0.2)
     with pytest.raises(ValueError, match="ground_albedo"):
         AnimationConfig(ground_albedo=0.2, mode="atmosphere-plus")
-    for value, expected in (("1.5", "--ground-albedo must be None or a number in [0, 1], got 1.5"), ("nan", "--ground-albedo")):
+    for value, expected in (("1.5", "--ground-albedo must be a number in [0, 1], got 1.5"), ("nan", "--ground-albedo")):
         capsys.readouterr()
         status = anim_main(["render", "--ground-albedo", value, "-o", str(tmp_path / "x.png")])
         error = capsys.readouterr().err

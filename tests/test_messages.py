@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from clsky.errors import ParameterError, short
+from clsky.errors import ParameterError, check_integer, short
 from clsky.settings import TableSettings
 
 
@@ -102,6 +102,23 @@ def test_parameter_error_carries_field_and_index():
     assert (caught.value.field, caught.value.index) == ("size", 1)
     assert str(caught.value) == "size[1] must be an integer in [2, 4096], got 1"
     assert caught.value.reworded("--size H") == "--size H must be an integer in [2, 4096], got 1"
+
+
+def test_optional_parameter_reworded_for_the_user_leaves_none_out():
+    """None is what leaving an option or scene key out gives: the API's message offers it, the typed
+    name's does not."""
+    with pytest.raises(ParameterError) as caught:
+        check_integer("samples", 0, 2, 4096, optional=True)
+    assert str(caught.value) == "samples must be None or an integer in [2, 4096], got 0"
+    assert caught.value.reworded("--samples") == "--samples must be an integer in [2, 4096], got 0"
+
+
+@pytest.mark.parametrize("command,args,expected", [
+    ("render", ["--samples", "0"], "clsky: error: --samples must be an integer in [2, 4096], got 0"),
+    ("animate", ["--ground-albedo", "2"], "clsky: error: --ground-albedo must be a number in [0, 1], got 2"),
+])
+def test_optional_options_messages_offer_what_can_be_typed(tmp_path, command, args, expected):
+    assert one_line_error(clsky(command, *args, cwd=tmp_path)) == expected
 
 
 UNWRITABLE = "/proc/clsky-unwritable"       # not even root can create a directory there

@@ -150,7 +150,7 @@ def test_the_command_line_wins_and_says_so(tmp_path, capsys, monkeypatch):
                                         "camera, size, fov_deg, heading_deg, pitch_deg, altitude, method"),
     ("animate", "[lens]\nzoom = 2\n", "s.toml: unknown section [lens]"),
     ("animate", "size = 16\n", "s.toml: size = 16 is outside a section (keys go under [camera], [sky], [sun], [display], [output])"),
-    ("animate", "[sky]\nground_albedo = 1.5\n", "s.toml: sky.ground_albedo must be None or a number in [0, 1], got 1.5"),
+    ("animate", "[sky]\nground_albedo = 1.5\n", "s.toml: sky.ground_albedo must be a number in [0, 1], got 1.5"),
     ("animate", '[sky]\npreset = "venus"\n', "s.toml: sky.preset must be one of"),
     ("animate", "[sky]\ntable_size = [8, 1, 8]\n", "s.toml: sky.table_size[1] must be"),
     ("animate", "[sky]\ntable_size = [8, 32]\n", "s.toml: sky.table_size must be a list of 3 integers"),
