@@ -195,6 +195,32 @@ def _config(args):
         raise clsky_cli.UsageError(clsky_cli.option_message(error, scene.field_options(args.scene_parser))) from None
 
 
+#: The options of each sun path (their dests): the sweep's, and the real positions' but --location.
+SWEEP_OPTIONS = ("frames", "start_elevation", "max_elevation")
+REAL_POSITION_OPTIONS = ("date", "hours", "step_minutes")
+
+
+def _check_sun_path_options(args):
+    """UsageError for a sun-path option typed on the command line that the animation's sun path would
+    ignore: the sweep's (--frames, --start-elevation, --max-elevation) with real positions (--location,
+    typed or the scene's), or the real positions' (--date, --hours, --step-minutes) without them. A scene
+    file may hold both paths' keys (``--print-scene`` writes them all): only options typed are refused."""
+    given = getattr(args, "given_options", {}) or {}
+    real = args.location is not None
+    typed = [given[dest] for dest in (SWEEP_OPTIONS if real else REAL_POSITION_OPTIONS) if dest in given]
+    if not typed:
+        return
+    if real:
+        from . import scene
+
+        location = scene.source_of(args, "location") or "--location"
+        raise clsky_cli.UsageError(
+            f"{typed[0]} sets the sweep, which real sun positions ({location}) replace: their frames are every "
+            f"--step-minutes from --hours START to END")
+    raise clsky_cli.UsageError(f"{typed[0]} sets real sun positions: give --location LAT LON too (the sweep "
+                               f"takes --frames, --start-elevation and --max-elevation)")
+
+
 def _printed_scene(args, config, **extra):
     """With --print-scene: the TOML scene of the command line, printed (True); else False."""
     from . import scene
@@ -238,6 +264,7 @@ def run_animate(args):
     farm = clsky_cli.farm_of(args)               # --workers / --scheduler: checked, started after the checks
     if _printed_scene(args, config):
         return 0
+    _check_sun_path_options(args)
     try:                                         # the MP4, <stem>_frames/, <stem>_metrics.csv/.json
         check_outputs(config, option=scene.source_of(args, "output") or "--output")
     except (OSError, ValueError, ImportError) as error:

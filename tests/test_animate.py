@@ -11,6 +11,7 @@ from __future__ import annotations
 import csv
 import datetime
 import json
+import pathlib
 import subprocess
 import sys
 
@@ -252,6 +253,32 @@ def test_cli_bad_values_one_line_exit_2(tmp_path, command, args, named):
     assert len(lines) == 1, result.stderr
     assert lines[0].startswith("clsky: error:") and named in lines[0], lines[0]
     assert list(tmp_path.iterdir()) == []
+
+
+DUSK_SCENE = pathlib.Path(__file__).resolve().parents[1] / "examples" / "dusk.toml"
+
+
+@pytest.mark.parametrize("args,expected", [
+    (["--frames", "2", "--location", "45", "5"],
+     "clsky: error: --frames sets the sweep, which real sun positions (--location) replace: their frames are "
+     "every --step-minutes from --hours START to END"),
+    (["--location", "45", "5", "--start-elevation", "-3"], "clsky: error: --start-elevation sets the sweep"),
+    (["--scene", str(DUSK_SCENE), "--max-elevation", "5"],
+     f"clsky: error: --max-elevation sets the sweep, which real sun positions ({DUSK_SCENE}: sun.location) "
+     "replace"),
+    (["--hours", "5", "6"], "clsky: error: --hours sets real sun positions: give --location LAT LON too (the "
+                            "sweep takes --frames, --start-elevation and --max-elevation)"),
+    (["--date", "2026-06-21"], "clsky: error: --date sets real sun positions"),
+    (["--step-minutes", "5"], "clsky: error: --step-minutes sets real sun positions"),
+], ids=lambda value: " ".join(value) if isinstance(value, list) else None)
+def test_cli_refuses_options_of_the_sun_path_not_taken(tmp_path, args, expected):
+    """An option of the sweep with real positions (or the reverse) would be ignored: it is refused, in one
+    line naming the option, before any work (the scene file's own keys of both paths are not)."""
+    result = clsky("animate", "--progress", "none", *args, cwd=tmp_path)
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert lines[-1].startswith(expected), lines
+    assert all(line.startswith("clsky: ") for line in lines) and list(tmp_path.iterdir()) == []
 
 
 def test_cli_refuses_existing_output_without_force(tmp_path):

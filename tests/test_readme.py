@@ -93,11 +93,12 @@ def reduced(argv, scheduler=None):
     if command in ("animate", "render"):
         extra = ["--size", "32", "--progress", "none"] if command == "animate" else ["--size", "32"]
         if command == "animate":
-            extra += ["--frames", "3"]
             if "--location" in argv:                # sunrise in Munich on 21 June: about 03:15 UTC
                 extra += ["--hours", "2.5", "4.5", "--step-minutes", "60"]
             elif "location" in sun:                 # the scene's time range, in two steps
                 extra += ["--step-minutes", str((sun["end_hour"] - sun["start_hour"]) * 60.0 / 2)]
+            else:                                   # the sweep (real positions refuse --frames)
+                extra += ["--frames", "3"]
         if not {"--quality", "--error-budget", "--table-size"} & set(argv):
             extra += ["--quality", "draft"]
     elif command == "table":
