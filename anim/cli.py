@@ -198,27 +198,56 @@ def _config(args):
 #: The options of each sun path (their dests): the sweep's, and the real positions' but --location.
 SWEEP_OPTIONS = ("frames", "start_elevation", "max_elevation")
 REAL_POSITION_OPTIONS = ("date", "hours", "step_minutes")
+#: The methods whose frames have no ray march (--samples unused) and those without the sky-view map
+#: (--skyview-size unused; 'compare' reads it where the scene plan picks it).
+METHODS_WITHOUT_RAY_MARCH = ("lut", "lut4d")
+METHODS_WITHOUT_SKYVIEW = ("lut", "raymarch", "lut4d", "compare4d")
 
 
-def _check_sun_path_options(args):
-    """UsageError for a sun-path option typed on the command line that the animation's sun path would
-    ignore: the sweep's (--frames, --start-elevation, --max-elevation) with real positions (--location,
-    typed or the scene's), or the real positions' (--date, --hours, --step-minutes) without them. A scene
-    file may hold both paths' keys (``--print-scene`` writes them all): only options typed are refused."""
+def _unused_options(args):
+    """[(dest, why)]: the options of this command line that its frames would not use (the camera's that
+    its --camera does not take, the ray march's and the sky-view map's where --method renders neither, the
+    budget where a quality level is named, the sun path's not taken), each with why, for a message that
+    begins with the option."""
+    from . import scene
+
+    def where(dest, option):
+        return scene.source_of(args, dest) or option
+
+    camera, method = args.camera, args.method
+    unused = []
+    if camera != "perspective":
+        unused += [(dest, f"sets the perspective camera's view, not the {camera}'s (--camera perspective)")
+                   for dest in ("fov", "pitch")]
+    if camera == "equirectangular":
+        unused.append(("heading", "turns the fisheye and the perspective camera: the equirectangular panorama's "
+                                  "columns are fixed azimuths, north at its left edge"))
+    if method in METHODS_WITHOUT_RAY_MARCH:
+        unused.append(("samples", f"sets the ray march, which method '{method}' does not render"))
+    if method in METHODS_WITHOUT_SKYVIEW:
+        unused.append(("skyview_size", f"sets the sky-view map, which method '{method}' does not read"))
+    if args.quality is not None:
+        unused.append(("error_budget", f"picks a quality level, and {where('quality', '--quality')} names one "
+                                       f"({args.quality}): give one of them"))
+    if hasattr(args, "location"):                               # animate's sun path
+        if args.location is not None:
+            unused += [(dest, f"sets the sweep, which real sun positions ({where('location', '--location')}) "
+                              f"replace: their frames are every --step-minutes from --hours START to END")
+                       for dest in SWEEP_OPTIONS]
+        else:
+            unused += [(dest, "sets real sun positions: give --location LAT LON too (the sweep takes --frames, "
+                              "--start-elevation and --max-elevation)") for dest in REAL_POSITION_OPTIONS]
+    return unused
+
+
+def _check_options_used(args):
+    """UsageError (exit 2) for an option typed on the command line that the frames would not use
+    (:func:`_unused_options`): refused, not ignored. A scene file's keys are not refused: a scene holds
+    every key (``--print-scene`` writes them all, both sun paths' among them)."""
     given = getattr(args, "given_options", {}) or {}
-    real = args.location is not None
-    typed = [given[dest] for dest in (SWEEP_OPTIONS if real else REAL_POSITION_OPTIONS) if dest in given]
-    if not typed:
-        return
-    if real:
-        from . import scene
-
-        location = scene.source_of(args, "location") or "--location"
-        raise clsky_cli.UsageError(
-            f"{typed[0]} sets the sweep, which real sun positions ({location}) replace: their frames are every "
-            f"--step-minutes from --hours START to END")
-    raise clsky_cli.UsageError(f"{typed[0]} sets real sun positions: give --location LAT LON too (the sweep "
-                               f"takes --frames, --start-elevation and --max-elevation)")
+    for dest, why in _unused_options(args):
+        if dest in given:
+            raise clsky_cli.UsageError(f"{given[dest]} {why}")
 
 
 def _printed_scene(args, config, **extra):
@@ -264,7 +293,7 @@ def run_animate(args):
     farm = clsky_cli.farm_of(args)               # --workers / --scheduler: checked, started after the checks
     if _printed_scene(args, config):
         return 0
-    _check_sun_path_options(args)
+    _check_options_used(args)
     try:                                         # the MP4, <stem>_frames/, <stem>_metrics.csv/.json
         check_outputs(config, option=scene.source_of(args, "output") or "--output")
     except (OSError, ValueError, ImportError) as error:
@@ -307,6 +336,7 @@ def run_render(args):
     extra = {"sun_elevation_deg": args.sun_elevation, "sun_azimuth_deg": args.sun_azimuth, "output": args.output}
     if _printed_scene(args, config, **extra):
         return 0
+    _check_options_used(args)
     clsky_cli.check_outputs([(name("output", "--output"), output)], args.force)
     try:
         writers.require_pillow()

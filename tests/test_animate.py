@@ -274,7 +274,42 @@ DUSK_SCENE = pathlib.Path(__file__).resolve().parents[1] / "examples" / "dusk.to
 def test_cli_refuses_options_of_the_sun_path_not_taken(tmp_path, args, expected):
     """An option of the sweep with real positions (or the reverse) would be ignored: it is refused, in one
     line naming the option, before any work (the scene file's own keys of both paths are not)."""
-    result = clsky("animate", "--progress", "none", *args, cwd=tmp_path)
+    _refused(tmp_path, ["animate", "--progress", "none", *args], expected)
+
+
+@pytest.mark.parametrize("args,expected", [
+    (["render", "--fov", "30"], "--fov sets the perspective camera's view, not the fisheye's (--camera perspective)"),
+    (["animate", "--camera", "equirectangular", "--pitch", "0"],
+     "--pitch sets the perspective camera's view, not the equirectangular's"),
+    (["render", "--camera", "equirectangular", "--heading", "90"], "--heading turns the fisheye and the perspective "
+     "camera: the equirectangular panorama's columns are fixed azimuths, north at its left edge"),
+    (["animate", "--method", "lut", "--samples", "64"], "--samples sets the ray march, which method 'lut' does not render"),
+    (["render", "--method", "lut4d", "--samples", "64"], "--samples sets the ray march, which method 'lut4d'"),
+    (["animate", "--method", "raymarch", "--skyview-size", "32", "64"],
+     "--skyview-size sets the sky-view map, which method 'raymarch' does not read"),
+    (["render", "--quality", "draft", "--error-budget", "0.5"],
+     "--error-budget picks a quality level, and --quality names one (draft): give one of them"),
+], ids=lambda value: " ".join(value) if isinstance(value, list) else None)
+def test_cli_refuses_options_the_frames_would_not_use(tmp_path, args, expected):
+    """Each option that the command line's camera, method or quality level leaves unused is refused rather
+    than ignored: one line naming it and why, exit 2, nothing written."""
+    _refused(tmp_path, args if args[0] == "render" else [*args, "--progress", "none"], "clsky: error: " + expected)
+
+
+def test_cli_takes_the_options_its_frames_use(tmp_path):
+    """The same options where they are used: the perspective camera's view, the sky-view map's size and
+    the ray march's samples with --method skyview (its map is ray-marched), --quality alone."""
+    result = clsky("render", "--size", "16", "--camera", "perspective", "--fov", "30", "--pitch", "5", "--heading",
+                   "10", "--method", "skyview", "--skyview-size", "8", "16", "--samples", "8", "--quality", "draft",
+                   "-o", "one.png", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert (tmp_path / "one.png").is_file()
+
+
+def _refused(tmp_path, args, expected):
+    """`clsky ARGS` exits 2 with its last stderr line beginning with ``expected`` (an earlier line may say
+    that an option overrides the scene's), and writes nothing."""
+    result = clsky(*args, cwd=tmp_path)
     assert result.returncode == 2, result.stderr
     lines = result.stderr.strip().splitlines()
     assert lines[-1].startswith(expected), lines
