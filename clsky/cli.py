@@ -327,9 +327,33 @@ def table_settings(args, atmosphere):
         settings = _table_settings(args, atmosphere)
         check_ground_mode(atmosphere, settings.mode, "" if getattr(args, "ground_albedo", None) is not None
                           else f"the {args.preset} preset's ground")
-        return settings
     except ParameterError as error:
         raise UsageError(option_message(error, TABLE_OPTION_NAMES)) from None
+    _check_table_options_used(args, settings)
+    return settings
+
+
+def _check_table_options_used(args, settings):
+    """UsageError for a table option given that the table would not use, rather than ignoring it: the 4d
+    table's azimuth axis on another parameterization, the stopping rule of --orders auto with a count K,
+    and the higher orders' quadratures with single scattering only. (The table options' defaults are
+    None: a value is one typed, on the command line or a --sweep line.)"""
+    unused = []
+    if settings.parameterization != "4d":
+        unused.append(("azimuth_size", "--azimuth-size", "sets the 4d table's azimuth axis: give --parameterization 4d"))
+    if settings.orders != "auto":
+        unused += [(dest, option, f"sets when --orders auto stops, and --orders {settings.orders} computes "
+                                  f"{settings.orders} orders")
+                   for dest, option in (("order_tolerance", "--order-tolerance"), ("max_orders", "--max-orders"))]
+    if settings.orders == 1:
+        unused += [(dest, option, "sets the higher orders, which --orders 1 (single scattering only) does not "
+                                  "compute")
+                   for dest, option in (("multiple_view_steps", "--multiple-view-steps"),
+                                        ("gather_steps", "--gather-steps"),
+                                        ("azimuth_harmonics", "--azimuth-harmonics"))]
+    for dest, option, why in unused:
+        if getattr(args, dest, None) is not None:
+            raise UsageError(f"{option} {why}")
 
 
 def _table_settings(args, atmosphere):
@@ -444,12 +468,21 @@ def run_table(args):
     return 0
 
 
+def orders_phrase(settings, record) -> str:
+    """What a table's orders were: '7 orders, converged' (or 'not converged') for --orders auto, and for
+    a count K the orders asked for, which no convergence test judged ('single scattering only' for 1)."""
+    count = record["orders"]
+    if settings.orders == "auto":
+        return f"{count} orders, {'converged' if record['converged'] else 'not converged'}"
+    return "single scattering only" if count == 1 else f"{count} orders as asked (--orders {count})"
+
+
 def report_table(args, table, output, seconds):
     """The summary line of a table written to ``output`` (and a warning if its orders did not converge)."""
     settings, record = table.settings, table.orders_record
     width, height, depth = settings.size
     print(f"table {width}x{height}x{depth} {settings.dtype} ({args.preset}, mode {settings.mode}, "
-          f"{record['orders']} orders, {'converged' if record['converged'] else 'not converged'}; "
+          f"{orders_phrase(settings, record)}; "
           f"{table.metadata['device']}): built in {table.metadata['build_seconds']:.2f} s, "
           f"total {seconds:.2f} s -> {output}")
     if settings.orders == "auto" and not record["converged"]:

@@ -36,6 +36,38 @@ def test_table_writes_a_loadable_file_and_raw_export(tmp_path):
     assert np.isfinite(table.data).all() and (table.data >= 0).all()
 
 
+@pytest.mark.parametrize("orders,expected", [
+    ("1", "single scattering only"),
+    ("3", "3 orders as asked (--orders 3)"),
+    ("auto", " orders, converged;"),
+])
+def test_table_summary_says_how_many_orders_and_why(tmp_path, orders, expected):
+    """A count of orders is what was asked for, not a failure to converge: only --orders auto says
+    whether its stopping rule was met."""
+    result = clsky("table", "--size", "4", "16", "4", "--orders", orders, "--progress", "none", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert expected in result.stdout and "not converged" not in result.stdout, result.stdout
+
+
+@pytest.mark.parametrize("args,expected", [
+    (["--azimuth-size", "8"], "--azimuth-size sets the 4d table's azimuth axis: give --parameterization 4d"),
+    (["--orders", "3", "--order-tolerance", "1e-3"],
+     "--order-tolerance sets when --orders auto stops, and --orders 3 computes 3 orders"),
+    (["--orders", "2", "--max-orders", "5"], "--max-orders sets when --orders auto stops, and --orders 2 computes"),
+    (["--orders", "1", "--gather-steps", "64", "32"],
+     "--gather-steps sets the higher orders, which --orders 1 (single scattering only) does not compute"),
+    (["--orders", "1", "--multiple-view-steps", "10"], "--multiple-view-steps sets the higher orders"),
+    (["--orders", "1", "--mode", "physical", "--azimuth-harmonics", "2"], "--azimuth-harmonics sets the higher orders"),
+])
+def test_table_refuses_options_it_would_not_use(tmp_path, args, expected):
+    """An option the table would ignore is refused in one line naming it and why, before any work."""
+    result = clsky("table", "--progress", "none", *args, cwd=tmp_path)
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("clsky: error: " + expected), result.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_table_with_quality_and_sun_elevations(tmp_path):
     """--quality starts from a level's settings (draft: 16 x 128, 15 view steps), --sun-elevations plans
     the sun axis for that path (10 to 30 deg, plus the margins of a ray march from the ground: gamma =
