@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import os
 import signal
 import sys
 import threading
@@ -421,6 +422,9 @@ def run_devices(args):
               f"fp64 {'yes' if d['fp64'] else 'no'}]\n    platform: {d['platform']} "
               f"({d['platform_version']}), {d['device_version']}")
     print("(*: the device clsky uses; choose another with PYOPENCL_CTX)")
+    if not any(d["chosen"] for d in devices):       # only where PYOPENCL_CTX names none of them
+        raise UsageError(f"PYOPENCL_CTX={os.environ.get('PYOPENCL_CTX', '')!r} selects none of the devices above: "
+                         f"unset it (clsky then picks one), or give PLATFORM:DEVICE by their order (0:0 the first)")
     return 0
 
 

@@ -21,6 +21,21 @@ def test_devices_lists_the_chosen_device(tmp_path):
     assert "fp64 yes" in chosen[0]
 
 
+def test_devices_says_when_pyopencl_ctx_selects_none(tmp_path):
+    """With a PYOPENCL_CTX that matches no device the listing has no '*': the devices are listed (what to
+    choose from), then one line says so, exit 2, as every other command refuses to run with it."""
+    import os
+
+    env = dict(os.environ, PYOPENCL_CTX="no-such-platform")
+    result = subprocess.run([sys.executable, "-m", "clsky", "devices"], cwd=tmp_path, env=env, capture_output=True,
+                            text=True)
+    assert result.returncode == 2
+    assert "fp64" in result.stdout and not any(line.startswith("* ") for line in result.stdout.splitlines())
+    assert result.stderr.strip().splitlines() == [
+        "clsky: error: PYOPENCL_CTX='no-such-platform' selects none of the devices above: unset it (clsky then picks "
+        "one), or give PLATFORM:DEVICE by their order (0:0 the first)"]
+
+
 def test_table_writes_a_loadable_file_and_raw_export(tmp_path):
     result = clsky("table", "--preset", "physical", "--size", "8", "16", "6", "-o", "sky.npz", "--raw", "sky",
                    "--progress", "none", cwd=tmp_path)
