@@ -391,8 +391,8 @@ def _hdr(name, value):
 
 
 def _output(name, value):
-    if not isinstance(value, (str, pathlib.PurePath)) or not str(value).endswith(".mp4"):
-        raise ParameterError(name, "a path ending in .mp4", value)
+    if not isinstance(value, (str, pathlib.PurePath)) or pathlib.PurePath(value).suffix != ".mp4":
+        raise ParameterError(name, "a path ending in .mp4 after a file name (NAME.mp4)", value)
     return value
 
 

@@ -310,7 +310,7 @@ def run_animate(args):
 
 
 def run_render(args):
-    import pathlib
+    from clsky._files import check_suffix
 
     from . import scene, writers
     from .animate import (LOOKUP_NAMES, comparison, display, display_frames, lookup_of, make_renderer,
@@ -329,9 +329,10 @@ def run_render(args):
     if not math.isfinite(args.sun_azimuth):
         raise clsky_cli.UsageError(f"{name('sun_azimuth_deg', '--sun-azimuth')} must be a finite number of degrees, "
                                    f"got {short(args.sun_azimuth)}")
-    output = pathlib.Path(args.output)
-    if output.suffix != ".png":
-        raise clsky_cli.UsageError(f"{name('output', '--output')} must end in .png, got {args.output!r}")
+    try:
+        output = check_suffix(args.output, ".png", name("output", "--output"))
+    except ValueError as error:
+        raise clsky_cli.UsageError(str(error)) from None
     config = _config(args)
     extra = {"sun_elevation_deg": args.sun_elevation, "sun_azimuth_deg": args.sun_azimuth, "output": args.output}
     if _printed_scene(args, config, **extra):

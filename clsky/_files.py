@@ -32,7 +32,8 @@ import signal
 import tempfile
 import threading
 
-__all__ = ["check_output", "check_output_directory", "atomic_write", "StagedWrites", "temporary_prefix"]
+__all__ = ["check_output", "check_output_directory", "atomic_write", "StagedWrites", "temporary_prefix",
+           "check_suffix"]
 
 #: Random characters of a temporary's name between its prefix and suffix (as tempfile.mkstemp's).
 _RANDOM_CHARACTERS = 8
@@ -127,6 +128,23 @@ def _check_parent(directory, option, create=False, probe=True):
         raise NotADirectoryError(f"{_label(option)}{directory} is not a directory")
     if probe:
         _probe_directory(directory, option)
+
+
+def check_suffix(path, suffix: str, name: str = "path") -> pathlib.Path:
+    """``path`` as a Path if it names a file NAME``suffix`` (a name before the suffix: pathlib's own reading,
+    for which '.png' is a hidden file without a suffix); ValueError naming ``name`` otherwise.
+
+    >>> check_suffix("sky.png", ".png")
+    PosixPath('sky.png')
+    >>> check_suffix(".png", ".png", "--output")
+    Traceback (most recent call last):
+    ...
+    ValueError: --output must end in .png after a file name (NAME.png), got '.png'
+    """
+    result = pathlib.Path(path)
+    if result.suffix != suffix:
+        raise ValueError(f"{name} must end in {suffix} after a file name (NAME{suffix}), got {str(path)!r}")
+    return result
 
 
 def check_output(path, force=False, option=None, suffix=None, probe=True):

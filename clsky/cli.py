@@ -18,7 +18,7 @@ import threading
 import time
 
 from . import __version__
-from ._files import INTERRUPT_SIGNALS
+from ._files import INTERRUPT_SIGNALS, check_suffix
 from .errors import short
 
 EXIT_USAGE = 2
@@ -451,9 +451,10 @@ def run_table(args):
         return run_sweep(args)
     atmosphere = table_atmosphere(args)
     settings = table_settings(args, atmosphere)
-    output = pathlib.Path(args.output)
-    if output.suffix != ".npz":
-        raise UsageError(f"--output must end in .npz, got {args.output!r}")
+    try:
+        output = check_suffix(args.output, ".npz", "--output")
+    except ValueError as error:
+        raise UsageError(str(error)) from None
     raw = [("--raw", pathlib.Path(args.raw).with_suffix(s)) for s in (".bin", ".json")] if args.raw else []
     check_outputs([("--output", output)] + raw, args.force)
     _check_table_memory(args, settings)

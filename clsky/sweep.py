@@ -25,6 +25,7 @@ import pathlib
 import shlex
 import time
 
+from ._files import check_suffix
 from .cli import (UsageError, check_outputs, farm_of, progress_bar, report_table, running_farm, table_atmosphere,
                   table_settings, _check_table_memory)
 
@@ -92,10 +93,8 @@ def sweep_jobs(args) -> list[SweepJob]:
         try:
             atmosphere = table_atmosphere(line)
             settings = table_settings(line, atmosphere)
-            output = pathlib.Path(line.output)
-            if output.suffix != ".npz":
-                raise UsageError(f"--output must end in .npz, got {line.output!r}")
-        except UsageError as error:
+            output = check_suffix(line.output, ".npz", "--output")
+        except (UsageError, ValueError) as error:
             raise UsageError(error if args.sweep is None else f"{source}: {error}") from None
         jobs.append(SweepJob(source, line, atmosphere, settings, output, line.raw))
     _check_jobs(args, jobs)

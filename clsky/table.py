@@ -59,7 +59,7 @@ from typing import Callable
 import numpy as np
 
 from . import __version__
-from ._files import StagedWrites, atomic_write, check_output
+from ._files import StagedWrites, atomic_write, check_output, check_suffix
 from .atmosphere import AtmosphereParameters, preset
 from .errors import short
 from .lookup import check_queries
@@ -438,9 +438,7 @@ class ScatteringTable:
         IsADirectoryError, FileNotFoundError, NotADirectoryError, PermissionError
             ``path`` is a directory, or its directory is missing or not writable.
         """
-        path = pathlib.Path(path)
-        if path.suffix != ".npz":
-            raise ValueError(f"path must end in .npz, got {str(path)!r}")
+        path = check_suffix(path, ".npz")
         members = self._file_members()
         with atomic_write(path, overwrite, staging=staging) as temporary:
             with open(temporary, "wb") as stream:

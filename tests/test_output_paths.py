@@ -289,6 +289,20 @@ def test_cli_animate_checks_the_mp4_frames_and_metrics_first(tmp_path):
     assert listing(tmp_path) == ["a_frames", "b_metrics.json", "c.mp4"]
 
 
+@pytest.mark.parametrize("command,output", [("animate", ".mp4"), ("render", ".png"), ("table", ".npz"),
+                                            ("render", "dir/.png")])
+def test_cli_refuses_an_output_named_by_its_suffix_alone(tmp_path, command, output):
+    """'-o .png' names a hidden file without a suffix (pathlib's reading; animate took '.mp4' and wrote
+    '.mp4_frames/'): refused, naming the NAME it lacks, before any work."""
+    (tmp_path / "dir").mkdir()
+    args = {"animate": ANIMATE, "render": ("render", "--size", "16"), "table": ("table", *SLOW_TABLE)}[command]
+    extension = output[output.index("."):]
+    result = clsky(*args, "-o", output, cwd=tmp_path)
+    assert_usage_error(result, "--output must", f"in {extension} after a file name (NAME{extension}), "
+                                               f"got {output!r}")
+    assert listing(tmp_path) == ["dir"] and listing(tmp_path / "dir") == []
+
+
 def test_cli_animate_refuses_old_frames_without_force(tmp_path):
     (tmp_path / "sky_frames").mkdir()
     (tmp_path / "sky_frames" / "frame_00007.png").write_bytes(b"old")
