@@ -222,7 +222,6 @@ class ParameterError(ValueError):
         return f"{name} must be {valid}, got {short(self.value)}"
 
 
-
 class NumericalError(ArithmeticError):
     """A computation gave non-finite values (NaN or infinity) where the inputs were valid: the result
     is refused rather than returned or saved."""
