@@ -77,7 +77,7 @@ def rayleigh_scattering_coefficient(refractive_index, number_density, wavelength
     Examples
     --------
     >>> rayleigh_scattering_coefficient(1.0003, 2.545e25, [650, 510, 475]).round(10)
-    array([6.554e-06, 1.7293e-05, 2.2982e-05])
+    array([6.55410e-06, 1.72935e-05, 2.29821e-05])
     """
     wavelength_m = np.asarray(wavelengths_nm, dtype=np.float64) * 1e-9
     n2m1 = refractive_index**2 - 1.0
