@@ -76,9 +76,13 @@ def _digest(arrays: dict) -> np.ndarray:
 
 def _from_colour_science() -> dict:
     """The constants, from an import of colour-science, labelled with the imported package's version
-    (``colour.__version__``)."""
-    import colour
-    from colour.models import oklab
+    (``colour.__version__``). Its import sets NumPy's printing to 1.13's for the whole process
+    (``np.set_printoptions(legacy="1.13")`` in colour/__init__.py, 0.4.x): it is imported inside
+    ``np.printoptions()``, which puts back the caller's options, so that using clsky does not change how
+    the user's arrays print."""
+    with np.printoptions():
+        import colour
+        from colour.models import oklab
 
     cmfs = colour.MSDS_CMFS[CMFS_NAME]
     names = sorted(colour.CHROMATIC_ADAPTATION_TRANSFORMS)

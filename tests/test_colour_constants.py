@@ -221,3 +221,15 @@ def test_white_balance_is_colour_sciences_von_kries_bit_for_bit(transform):
 def test_an_unknown_transform_is_refused_with_the_valid_names():
     with pytest.raises(ParameterError, match=r"transform must be one of .*CAT02.*, got 'CAT99'"):
         white_balance_matrix([1.0, 1.0, 1.0], transform="CAT99")
+
+
+def test_importing_colour_science_leaves_numpys_printing_as_it_was(tmp_path):
+    """colour-science's import sets NumPy's printing to 1.13's for the whole process; clsky's import of it
+    (a first run, an empty cache) must not change how the user's arrays print."""
+    script = ("import sys, numpy as np; from clsky import colour_constants;"
+              "before = repr(np.array([1.0, 2.5])); colour_constants.cie_1931_cmfs();"
+              "print('colour' in sys.modules, np.get_printoptions()['legacy'], before == repr(np.array([1.0, 2.5])))")
+    env = dict(os.environ, CLSKY_CACHE_DIR=str(tmp_path))
+    run = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split() == ["True", "False", "True"], run.stdout
