@@ -22,8 +22,8 @@ What the plan decides, and why:
 * **Resolution and orders** come from the quality level the budget asks for
   (:func:`clsky.quality.level_for_budget`).
 * **Higher orders** are dropped when a pilot (a small table on the planned sun range, ray-marched on a
-  coarse fisheye at the path's lowest, highest and horizon suns) shows that they add less than half the
-  budget, or when the scene does not want them. The pilot's share is kept on disk for the next plan of
+  coarse fisheye over the cameras' view elevations at the path's lowest, highest and horizon suns) shows
+  that they add less than half the budget, or when the scene does not want them. The pilot's share is kept on disk for the next plan of
   the same scene on the same device and code (:func:`pilot_share`).
 * **Mie** is dropped (its scattering set to 0: the Mie channels hold zeros) only when the scene does
   not want it; an atmosphere without Mie has nothing to drop.
@@ -338,7 +338,10 @@ def _pilot_settings(table):
 def _higher_orders_share(atmosphere, table, scene, ctx=None):
     """Largest share of the higher orders in ray-marched pixels (95th percentile over a 24 x 24 fisheye
     from the lowest observer) at the path's lowest, highest and horizon suns, from a pilot table
-    (:func:`_pilot_settings`, the plan's view nodes)."""
+    (:func:`_pilot_settings`, the plan's view nodes). The fisheye spans the elevations the scene's cameras
+    see (``scene.view_elevations_deg``; the default 0 to 90, the upper hemisphere, with its radius
+    linear in elevation): a pilot of the sky alone found no light above the atmosphere (0 %, from where a
+    camera sees the Earth below) and dropped the higher orders there."""
     from .render import SkyRenderer
     from .table import ScatteringTable
 
@@ -352,7 +355,8 @@ def _higher_orders_share(atmosphere, table, scene, ctx=None):
     y, x = (np.mgrid[0:n, 0:n] + 0.5) / n * 2.0 - 1.0
     radius = np.hypot(x, y)
     inside = radius < 1.0
-    elevation = (1.0 - radius[inside]) * math.pi / 2.0
+    lowest, highest = np.radians(scene.view_elevations_deg)
+    elevation = highest - radius[inside] * (highest - lowest)
     azimuth = np.arctan2(x[inside], y[inside])
     directions = np.stack([np.cos(elevation) * np.sin(azimuth), np.cos(elevation) * np.cos(azimuth),
                            np.sin(elevation)], axis=-1)
@@ -387,9 +391,9 @@ def pilot_share(atmosphere: AtmosphereParameters, table: TableSettings, scene: S
     under the key of everything it is computed from: the code (:func:`clsky._cache.source_digest`),
     NumPy's version, the device (name, vendor, versions of device, driver and platform), the kernels' form
     (``clsky._cl.VECTOR_WIDTH``, ``CUBE_ROOT``), the atmosphere, the pilot's table and ray settings, the
-    path's sun elevations and lowest altitude. A file is read only when its key is the whole key and its
-    share a finite number in [-1, 1] (JSON keeps a float's every bit); anything else is computed again
-    and rewritten. Without a cache directory, or where it cannot be written, the pilot runs every time.
+    path's sun elevations, the cameras' view elevations and the lowest altitude. A file is read only
+    when its key is the whole key and its share a finite number in [-1, 1] (JSON keeps a float's every
+    bit); anything else is computed again and rewritten. Without a cache directory, or where it cannot be written, the pilot runs every time.
     A process-wide setting added later that changes the pilot's values must join the key."""
     pilot, ray = _pilot_settings(table)
     device = (ctx if ctx is not None else _cl.make_context()).devices[0]
@@ -399,6 +403,7 @@ def pilot_share(atmosphere: AtmosphereParameters, table: TableSettings, scene: S
            "kernels": {"vector_width": _cl.VECTOR_WIDTH, "cube_root": _cl.CUBE_ROOT},
            "atmosphere": repr(atmosphere), "pilot": repr(pilot), "ray": repr(ray),
            "sun_elevations_deg": [float(e) for e in scene.sun_elevations_deg],
+           "view_elevations_deg": [float(e) for e in scene.view_elevations_deg],
            "altitude_m": float(scene.altitudes_m[0])}
     text = json.dumps(key, sort_keys=True)
     directory = cache_directory("pilot-shares")

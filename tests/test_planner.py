@@ -194,6 +194,23 @@ def test_higher_orders_are_dropped_when_the_pilot_finds_them_negligible(cl_conte
     assert plan_scene(Scene((20.0, 60.0), error_budget=0.1), ctx=cl_context).table.orders == "auto"
 
 
+def test_the_pilot_looks_where_the_cameras_look(cl_context):
+    """From 200 km, above the atmosphere, cameras looking down see the Earth lit through it: the higher orders
+    are a fifth of that light and are kept. The pilot marched the upper hemisphere whatever the cameras saw,
+    found only the sun there (a share of 0) and dropped them (a draft frame's table lookup then read 46 % off
+    the ray march, and both lacked the higher orders)."""
+    from clsky import planner
+
+    down = Scene((10.0, 10.0), altitudes_m=(2e5, 2e5), view_elevations_deg=(-88.0, -23.0), error_budget=0.1)
+    physical = clsky.preset("physical")
+    plan = plan_scene(down, ctx=cl_context)
+    share = planner._higher_orders_share(physical, plan.table, down, ctx=cl_context)
+    assert 0.1 < share < 0.5, share                   # measured 0.21 (2026-12-06)
+    assert plan.table.orders == "auto"
+    sky = Scene((10.0, 10.0), altitudes_m=(2e5, 2e5), error_budget=0.1)     # the upper hemisphere: no air to see
+    assert planner._higher_orders_share(physical, plan.table, sky, ctx=cl_context) == 0.0
+
+
 # 4. Planned table against the full table --------------------------------------------------------------
 
 def _ray_marched(table, level, size=24):
@@ -391,7 +408,8 @@ def test_pilot_share_key_holds_every_input(cl_context, tmp_path, monkeypatch):
     monkeypatch.setenv("CLSKY_CACHE_DIR", str(tmp_path))
     runs = _counted_pilot(monkeypatch, share=0.25)
     assert plan() == 0                                                # the first scene's file, read
-    assert len(list((tmp_path / "pilot-shares").iterdir())) == 8
+    assert plan(Scene((20.0, 60.0), view_elevations_deg=(-30.0, 60.0), error_budget=0.1)) == 1   # other views
+    assert len(list((tmp_path / "pilot-shares").iterdir())) == 9
 
 
 @pytest.mark.parametrize("content", [b"", b"\xff\xfe not UTF-8", b"[1, 2]", b'{"share": 0.25}',
