@@ -23,8 +23,8 @@ What the plan decides, and why:
   (:func:`clsky.quality.level_for_budget`).
 * **Higher orders** are dropped when a pilot (a small table on the planned sun range, ray-marched on a
   coarse fisheye over the cameras' view elevations at the path's lowest, highest and horizon suns) shows
-  that they add less than half the budget, or when the scene does not want them. The pilot's share is kept on disk for the next plan of
-  the same scene on the same device and code (:func:`pilot_share`).
+  that they add less than half the budget, or when the scene does not want them. The pilot's share is
+  kept on disk for the next plan of the same scene on the same device and code (:func:`pilot_share`).
 * **Mie** is dropped (its scattering set to 0: the Mie channels hold zeros) only when the scene does
   not want it; an atmosphere without Mie has nothing to drop.
 * **Renderer** (:mod:`clsky.renderer_choice`): the cheapest of the table lookup, the per-frame sky-view
@@ -393,8 +393,9 @@ def pilot_share(atmosphere: AtmosphereParameters, table: TableSettings, scene: S
     (``clsky._cl.VECTOR_WIDTH``, ``CUBE_ROOT``), the atmosphere, the pilot's table and ray settings, the
     path's sun elevations, the cameras' view elevations and the lowest altitude. A file is read only
     when its key is the whole key and its share a finite number in [-1, 1] (JSON keeps a float's every
-    bit); anything else is computed again and rewritten. Without a cache directory, or where it cannot be written, the pilot runs every time.
-    A process-wide setting added later that changes the pilot's values must join the key."""
+    bit); anything else is computed again and rewritten. Without a cache directory, or where it cannot be
+    written, the pilot runs every time. A process-wide setting added later that changes the pilot's values
+    must join the key."""
     pilot, ray = _pilot_settings(table)
     device = (ctx if ctx is not None else _cl.make_context()).devices[0]
     key = {"format": PILOT_FORMAT, "clsky": source_digest(), "numpy": np.__version__,
