@@ -27,10 +27,16 @@ from clsky.errors import short
 from clsky.errors import check_real
 from .cameras import sun_direction
 
-__all__ = ["SunPosition", "sweep", "real_positions", "MAX_POSITIONS"]
+__all__ = ["SunPosition", "sweep", "real_positions", "MAX_POSITIONS", "DELTA_T_YEARS"]
 
 #: Largest number of positions :func:`real_positions` computes in one call.
 MAX_POSITIONS = 100_000
+
+#: The years (UTC) :func:`real_positions` computes: where pvlib estimates Delta T = TT - UT1
+#: (``pvlib.spa.calculate_deltat``, NASA's polynomials for -1999 to 3000; outside them it warns that
+#: its values "are not intended to be used"), within the SPA's own range (-2000 to 6000). Python's
+#: datetimes begin with the year 1.
+DELTA_T_YEARS = (-1999, 3000)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -176,7 +182,8 @@ def real_positions(latitude_deg, longitude_deg, start, end, step_minutes=5.0, al
     longitude_deg : float
         Observer longitude [deg], east positive, in [-180, 180].
     start, end : datetime.datetime
-        First and last instants, timezone-aware, end > start. The positions are at
+        First and last instants, timezone-aware, end > start, both in the years 1 to 3000 in UTC
+        (:data:`DELTA_T_YEARS`). The positions are at
         ``start + k step`` (absolute time: daylight-saving changes neither skip nor repeat a step)
         for every k with ``start + k step <= end``; ``end`` is included when it falls on a step.
         Times keep the timezone of ``start``.
@@ -193,17 +200,17 @@ def real_positions(latitude_deg, longitude_deg, start, end, step_minutes=5.0, al
     Raises
     ------
     ValueError
-        Naming the parameter and its valid range, for naive datetimes, or when more than
-        :data:`MAX_POSITIONS` (100000) positions would be computed.
+        Naming the parameter and its valid range, for naive datetimes, instants after the year 3000,
+        or when more than :data:`MAX_POSITIONS` (100000) positions would be computed.
     ImportError
         If pvlib is not installed (``pip install pvlib``).
 
     Notes
     -----
     Computed by pvlib's NumPy implementation of NREL's Solar Position Algorithm (SPA) [1]_ [2]_,
-    uncertainty +-0.0003 deg over the years -2000 to 6000: ``pvlib.solarposition.get_solarposition(
+    uncertainty +-0.0003 deg over the years -2000 to 6000 given Delta T: ``pvlib.solarposition.get_solarposition(
     times, latitude, longitude, altitude, method='nrel_numpy', delta_t=None)``, ``delta_t = TT - UT1``
-    being estimated from each date (``pvlib.spa.calculate_deltat``). The 'zenith' and 'azimuth'
+    being estimated from each date (``pvlib.spa.calculate_deltat``), for the years -1999 to 3000 only. The 'zenith' and 'azimuth'
     columns are used (geometric), not 'apparent_zenith' (refracted).
 
     References
@@ -235,6 +242,14 @@ def real_positions(latitude_deg, longitude_deg, start, end, step_minutes=5.0, al
     # Convert to UTC before subtracting: two datetimes sharing one tzinfo object subtract as wall
     # clocks in Python, which is wrong across a daylight-saving change.
     utc = datetime.timezone.utc
+    for name, value in (("start", start), ("end", end)):
+        try:
+            year = value.astimezone(utc).year
+        except OverflowError:           # in UTC before the year 1 (or after 9999): outside too
+            year = None
+        if year is None or year > DELTA_T_YEARS[1]:
+            raise ValueError(f"{name} must fall in the years 1 to {DELTA_T_YEARS[1]} in UTC (pvlib estimates Delta T "
+                             f"= TT - UT1 for {DELTA_T_YEARS[0]} to {DELTA_T_YEARS[1]}), got {value.isoformat()}")
     duration_us = (end.astimezone(utc) - start.astimezone(utc)) / datetime.timedelta(microseconds=1)
     if duration_us <= 0.0:
         raise ValueError(f"end must be after start, got start={start.isoformat()}, "

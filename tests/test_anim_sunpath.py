@@ -6,6 +6,7 @@ import dataclasses
 import datetime
 import math
 import sys
+import warnings
 import zoneinfo
 
 import numpy as np
@@ -234,6 +235,14 @@ def test_real_positions_invalid_parameters():
         (dict(step_minutes=math.nan), "step_minutes"),
         (dict(end=start), "end"), (dict(end=start - datetime.timedelta(minutes=1)), "end"),
         (dict(altitude_m=math.nan), "altitude_m"),
+        # pvlib's Delta T is known to the year 3000 (UTC); before the year 1 in UTC astimezone overflows
+        (dict(end=datetime.datetime(3001, 1, 1, tzinfo=UTC)), "end must fall in the years 1 to 3000 in UTC"),
+        (dict(end=datetime.datetime(3000, 12, 31, 23, tzinfo=datetime.timezone(-datetime.timedelta(hours=2)))),
+         "end must fall in the years 1 to 3000"),
+        (dict(start=datetime.datetime(1, 1, 1, tzinfo=datetime.timezone(datetime.timedelta(hours=5)))),
+         "start must fall in the years 1 to 3000"),
+        (dict(start=datetime.datetime(9999, 12, 31, tzinfo=UTC), end=datetime.datetime(9999, 12, 31, 1, tzinfo=UTC)),
+         "start must fall"),
         # 1 year at 1 s steps: refused before anything is computed.
         (dict(end=start + datetime.timedelta(days=365), step_minutes=1 / 60), str(MAX_POSITIONS)),
     ]
@@ -241,6 +250,19 @@ def test_real_positions_invalid_parameters():
         kwargs = dict(latitude_deg=48.0, longitude_deg=11.6, start=start, end=end) | overrides
         with pytest.raises(ValueError, match=parameter):
             real_positions(**kwargs)
+
+
+def test_real_positions_at_the_ends_of_the_years_they_take():
+    """The years 1 and 3000 (UTC) are computed without pvlib's warning that its Delta T "is unknown" (an
+    error under pytest's filter in this test); the sun is where an equinox puts it: near the zenith at
+    noon on the equator (within 2.5 deg: the equinox's date drifts by a day or two over the centuries)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for year in (1, 3000):
+            noon = datetime.datetime(year, 3, 20, 12, tzinfo=UTC)
+            path = real_positions(0.0, 0.0, noon - datetime.timedelta(hours=1), noon, step_minutes=60.0)
+            assert path[1].elevation_deg == pytest.approx(90.0, abs=2.5), year
+            assert path[0].elevation_deg == pytest.approx(75.0, abs=2.5), year
 
 
 def test_real_positions_without_pvlib_says_how_to_install_it(monkeypatch):

@@ -94,6 +94,15 @@ def test_animation_config_date():
     for bad in ("01/01/2026", 20260101, "2026-13-01"):
         with pytest.raises(ValueError, match="^date must be"):
             AnimationConfig(date=bad)
+    # real positions need pvlib's Delta T (the years -1999 to 3000); the sweep reads no date
+    for date, end_hour in (("9999-12-31", 24.0), ("3001-01-01", 1.0), ("3000-12-31", 24.0), ("3000-12-30", 48.0)):
+        with pytest.raises(ParameterError, match="^date must be a day whose frames, to .* h UTC, fall in the years 1 "
+                                                 "to 3000") as caught:
+            AnimationConfig(location=(45.0, 5.0), date=date, end_hour=end_hour)
+        assert caught.value.value == date
+    assert AnimationConfig(location=(45.0, 5.0), date="3000-12-31", end_hour=23.5).date.year == 3000
+    assert AnimationConfig(location=(45.0, 5.0), date="0001-01-01").date.year == 1
+    assert AnimationConfig(date="9999-12-31").date.year == 9999
 
 
 def test_animation_config_tuple_fields():

@@ -60,6 +60,10 @@ def test_table_errors_name_the_option(tmp_path, args, named):
     (["--error-budget", "nan"], "--error-budget must be"),
     (["--preset", "venus"], "--preset must be"),
     (["--location", "45", "5", "--step-minutes", "0.001"], "--step-minutes must be"),
+    # the last day datetime can hold: its end overflowed (a traceback); past 3000 pvlib's Delta T is unknown
+    (["--location", "45", "5", "--date", "9999-12-31"], "--date must be a day whose frames, to 24 h UTC, fall in "
+                                                        "the years 1 to 3000"),
+    (["--location", "45", "5", "--date", "3000-12-31", "--hours", "0", "24.5"], "--date must be"),
     (["--max-elevation", "-10"], "--max-elevation must be at least the start elevation"),
 ])
 def test_animate_errors_name_the_option(tmp_path, args, named):
