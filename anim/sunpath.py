@@ -208,9 +208,10 @@ def real_positions(latitude_deg, longitude_deg, start, end, step_minutes=5.0, al
     Notes
     -----
     Computed by pvlib's NumPy implementation of NREL's Solar Position Algorithm (SPA) [1]_ [2]_,
-    uncertainty +-0.0003 deg over the years -2000 to 6000 given Delta T: ``pvlib.solarposition.get_solarposition(
-    times, latitude, longitude, altitude, method='nrel_numpy', delta_t=None)``, ``delta_t = TT - UT1``
-    being estimated from each date (``pvlib.spa.calculate_deltat``), for the years -1999 to 3000 only. The 'zenith' and 'azimuth'
+    uncertainty +-0.0003 deg over the years -2000 to 6000 given Delta T:
+    ``pvlib.solarposition.get_solarposition(times, latitude, longitude, altitude, method='nrel_numpy',
+    delta_t=None)``, ``delta_t = TT - UT1`` being estimated from each date
+    (``pvlib.spa.calculate_deltat``, for the years -1999 to 3000 only). The 'zenith' and 'azimuth'
     columns are used (geometric), not 'apparent_zenith' (refracted).
 
     References
