@@ -265,8 +265,9 @@ class AnimationConfig:
         if self.end_hour <= self.start_hour:
             raise ParameterError("end_hour", f"after the start hour ({self.start_hour:g})", self.end_hour)
         if self.location is not None and self.date is not None:
+            midnight = datetime.datetime(self.date.year, self.date.month, self.date.day)
             last_year = self.date.year if self.date.year > sunpath.DELTA_T_YEARS[1] else (
-                datetime.datetime(self.date.year, self.date.month, self.date.day) + datetime.timedelta(hours=self.end_hour)).year
+                midnight + datetime.timedelta(hours=self.end_hour)).year
             if last_year > sunpath.DELTA_T_YEARS[1]:
                 raise ParameterError("date", f"a day whose frames, to {self.end_hour:g} h UTC, fall in the years 1 to "
                                      f"{sunpath.DELTA_T_YEARS[1]} (pvlib estimates Delta T = TT - UT1 for "
