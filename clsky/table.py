@@ -651,18 +651,43 @@ def _read_members(path) -> dict:
         raise FileNotFoundError(f"{path} does not exist")
     if not path.is_file():
         raise TableFormatError(f"{path} is not a clsky table file (not a regular file)")
+    what = _not_an_archive(path)
+    if what:
+        raise TableFormatError(f"{path} is not a clsky table file ({what})")
     try:
         archive = np.load(path, allow_pickle=False)
     except _READ_ERRORS as error:
         raise TableFormatError(f"{path} is not a clsky table file (not a readable .npz archive: "
                                f"{_describe_error(error)})") from error
-    if not isinstance(archive, np.lib.npyio.NpzFile):
-        raise TableFormatError(f"{path} is not a clsky table file (a single .npy array, not an .npz archive)")
     try:
         with archive:
             return {name: archive[name] for name in archive.files}
     except _READ_ERRORS as error:
         raise TableFormatError(f"{path} is damaged (reading its members: {_describe_error(error)})") from error
+
+
+#: The first bytes of a zip archive (an .npz): a member's local header, or the end record of an empty one.
+_ZIP_MAGICS = (b"PK\x03\x04", b"PK\x05\x06")
+#: The first bytes of a single NumPy array (.npy).
+_NPY_MAGIC = b"\x93NUMPY"
+
+
+def _not_an_archive(path) -> str | None:
+    """What the file at ``path`` is, judged by its first bytes, when it is not a zip archive; None when it
+    may be one. Without it, numpy took any other file for a pickle and told the user that it "contains
+    pickled (object) data" they could "load unsafely" (a text file, random bytes)."""
+    try:
+        with open(path, "rb") as stream:
+            head = stream.read(len(_NPY_MAGIC))
+    except OSError as error:
+        return f"not readable: {_describe_error(error)}"
+    if not head:
+        return "an empty file"
+    if head.startswith(_ZIP_MAGICS):
+        return None
+    if head == _NPY_MAGIC:
+        return "a single .npy array, not an .npz archive"
+    return "not an .npz archive: its first bytes are not a zip archive's"
 
 
 def _format_version(contents) -> int:

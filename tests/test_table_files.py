@@ -151,7 +151,17 @@ def test_checksum_covers_dtype_shape_and_bytes():
 def test_empty_file(tmp_path):
     path = tmp_path / "empty.npz"
     path.write_bytes(b"")
-    refused(path, "not a clsky table file")
+    refused(path, "not a clsky table file (an empty file)")
+
+
+@pytest.mark.parametrize("content", [b"x", b"hello world\n", bytes(range(256)) * 8])
+def test_file_that_is_no_archive_is_not_called_a_pickle(tmp_path, content):
+    """numpy took any file that is neither a zip nor an .npy for a pickle: 'This file contains pickled
+    (object) data. If you trust the file you can load it unsafely', advice no table file needs."""
+    path = tmp_path / "text.npz"
+    path.write_bytes(content)
+    message = refused(path, "not an .npz archive: its first bytes are not a zip archive's")
+    assert "pickle" not in message and "unsafe" not in message
 
 
 @pytest.mark.parametrize("fraction", [0.0001, 0.003, 0.1, 0.5, 0.9, 0.999])
