@@ -432,7 +432,8 @@ def atomic_write(path, overwrite=False, suffix=None, staging=None):
         yield temporary
     except OSError as error:                     # e.g. a full disk: name the target, not the temporary
         _discard_staged(writes, own, temporary)
-        if temporary is None or error.errno is None or error.filename not in (str(temporary), temporary):
+        # a write to an open file (a full disk: ENOSPC) names no file; the block writes the temporary
+        if temporary is None or error.errno is None or error.filename not in (str(temporary), temporary, None):
             raise
         raise type(error)(f"cannot write {path}: {error.strerror.lower()}") from error
     except BaseException:

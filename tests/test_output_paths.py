@@ -343,6 +343,15 @@ def test_a_write_error_names_the_target(tmp_path):
     assert listing(tmp_path) == []
 
 
+def test_a_full_disk_on_an_open_file_names_the_target(tmp_path):
+    """A real full disk fails a write() to the open temporary: its OSError names no file (clsky render on a
+    full tmpfs said only '[Errno 28] No space left on device')."""
+    with pytest.raises(OSError, match=r"^cannot write .*sky\.png: no space left on device$"):
+        with atomic_write(tmp_path / "sky.png") as temporary, open(temporary, "wb"):
+            raise OSError(28, "No space left on device")
+    assert listing(tmp_path) == []
+
+
 def test_a_rename_failing_midway_is_reported_and_leaves_no_temporary(tmp_path, monkeypatch):
     """Documented in StagedWrites: the files renamed so far are new, the others keep their old
     contents, no temporary is left, and the error says which is which."""
