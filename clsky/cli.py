@@ -343,8 +343,8 @@ def _check_table_options_used(args, settings):
     if settings.parameterization != "4d":
         unused.append(("azimuth_size", "--azimuth-size", "sets the 4d table's azimuth axis: give --parameterization 4d"))
     if settings.orders != "auto":
-        unused += [(dest, option, f"sets when --orders auto stops, and --orders {settings.orders} computes "
-                                  f"{settings.orders} orders")
+        count = "single scattering only" if settings.orders == 1 else f"{settings.orders} orders"
+        unused += [(dest, option, f"sets when --orders auto stops, and --orders {settings.orders} computes {count}")
                    for dest, option in (("order_tolerance", "--order-tolerance"), ("max_orders", "--max-orders"))]
     if settings.orders == 1:
         unused += [(dest, option, "sets the higher orders, which --orders 1 (single scattering only) does not "

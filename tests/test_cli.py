@@ -69,6 +69,8 @@ def test_table_summary_says_how_many_orders_and_why(tmp_path, orders, expected):
     (["--orders", "3", "--order-tolerance", "1e-3"],
      "--order-tolerance sets when --orders auto stops, and --orders 3 computes 3 orders"),
     (["--orders", "2", "--max-orders", "5"], "--max-orders sets when --orders auto stops, and --orders 2 computes"),
+    (["--orders", "1", "--max-orders", "5"],        # it said '--orders 1 computes 1 orders'
+     "--max-orders sets when --orders auto stops, and --orders 1 computes single scattering only"),
     (["--orders", "1", "--gather-steps", "64", "32"],
      "--gather-steps sets the higher orders, which --orders 1 (single scattering only) does not compute"),
     (["--orders", "1", "--multiple-view-steps", "10"], "--multiple-view-steps sets the higher orders"),
