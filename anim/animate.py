@@ -35,7 +35,7 @@ import numpy as np
 import clsky
 from clsky._cl import host_blas_single_threaded, host_cores, packed_reads
 from clsky._files import StagedWrites, check_output
-from clsky.errors import ParameterError, check_choice, check_integer, check_real, is_real_number
+from clsky.errors import ParameterError, check_choice, check_integer, check_real, counted, is_real_number
 from clsky.ground import check_ground_mode
 from clsky.planner import Plan, Scene, azimuth_harmonics, plan_scene, sun_axis, view_sampling
 from clsky.quality import QUALITY_LEVELS, QualityLevel, level_for_budget, quality_level
@@ -1019,7 +1019,7 @@ def _render_animation(config, ctx, progress, report, farm) -> AnimationResult:
                     f"95th-percentile error {100 * worst['p95_rel']:.1f} %, mean Delta E {worst['mean_delta_e']:.2f}; "
                     f"worst temporal jumps at frames {temporal['worst_frames'][:3]}")
     if removed:
-        summary += f"; deleted {len(removed)} stale frame files of an earlier run"
+        summary += f"; deleted {counted(len(removed), 'stale frame file')} of an earlier run"
     summary += f" -> {config.output_path}"
     return AnimationResult(rows, temporal, paths, seconds, summary, removed)
 

@@ -14,7 +14,7 @@ import numbers
 
 import numpy as np
 
-__all__ = ["ParameterError", "NumericalError", "short", "is_real_number", "is_integer", "as_real_array",
+__all__ = ["ParameterError", "NumericalError", "short", "counted", "is_real_number", "is_integer", "as_real_array",
            "check_integer", "check_real", "check_choice",
            "require_extra"]
 
@@ -48,6 +48,17 @@ def short(value) -> str:
         return f"({items})" if isinstance(value, tuple) else f"[{items}]"
     text = repr(value)
     return text if len(text) <= _MAX_ECHO else text[:_MAX_ECHO - 3] + "..."
+
+
+def counted(count: int, noun: str) -> str:
+    """``count`` and ``noun``, plural unless the count is one, for a message or summary.
+
+    Examples
+    --------
+    >>> counted(1, "order"), counted(7, "order"), counted(0, "stale frame file")
+    ('1 order', '7 orders', '0 stale frame files')
+    """
+    return f"{count} {noun}{'s' * (count != 1)}"
 
 
 def is_real_number(value) -> bool:

@@ -20,6 +20,7 @@ import pathlib
 
 import numpy as np
 
+from .errors import counted
 from .table import TableFormatError
 
 __all__ = ["describe"]
@@ -91,6 +92,11 @@ def _json_member(path, document, key, kind):
     return value
 
 
+def _orders_text(count) -> str:
+    """A metrics file's count of orders as words: '1 order', '7 orders' (as recorded where not an integer)."""
+    return counted(count, "order") if isinstance(count, int) and not isinstance(count, bool) else f"{count} orders"
+
+
 def _metrics(path):
     try:
         document = json.loads(path.read_text(encoding="utf-8"))
@@ -108,7 +114,7 @@ def _metrics(path):
     scene = _json_member(path, document, "scene", str)
     items = [("kind", "animation metrics (JSON)"), ("frames", len(frames)),
              ("clsky version", document.get("clsky_version", "- (older clsky)")),
-             ("table", f"{' x '.join(map(str, size))} ({settings.get('mode')}, {orders.get('orders')} orders)"),
+             ("table", f"{' x '.join(map(str, size))} ({settings.get('mode')}, {_orders_text(orders.get('orders'))})"),
              ("frame units", table.get("frame_units", "-"))]
     if scene is not None:
         items += _scene_lines(scene)

@@ -36,6 +36,7 @@ import pathlib
 
 import numpy as np
 
+from .errors import counted
 from .settings import TableSettings
 
 __all__ = ["InsufficientMemoryError", "Allocation", "Phase", "MemoryEstimate", "MemoryLimits",
@@ -646,7 +647,7 @@ def estimate_spectral_table_memory(settings: TableSettings, batches: int, packed
                                                                            "float64"))
         phases.append(Phase(f"last batch: {phase.name}", (built if batches > 1 else ()) + kept + own))
     width, height, depth = settings.size
-    return MemoryEstimate(f"{batches} tables {width} x {height} x {depth} ({settings.mode}, {settings.dtype})",
+    return MemoryEstimate(f"{counted(batches, 'table')} {width} x {height} x {depth} ({settings.mode}, {settings.dtype})",
                           tuple(phases))
 
 
@@ -671,7 +672,7 @@ def estimate_animation_memory(settings: TableSettings, image_shape, method="comp
                                     device_conversion=device_conversion)
     width, height = image_shape
     w, h, d = settings.size
-    tables = f"table {w} x {h} x {d}" if batches is None else f"{batches} tables {w} x {h} x {d}"
+    tables = f"table {w} x {h} x {d}" if batches is None else f"{counted(batches, 'table')} {w} x {h} x {d}"
     return MemoryEstimate(f"the animation ({width} x {height} frames, {tables})", build.phases + render.phases)
 
 
