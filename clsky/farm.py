@@ -33,7 +33,7 @@ import signal
 import threading
 import uuid
 
-from .errors import ParameterError, check_integer
+from .errors import ParameterError, check_integer, counted
 
 __all__ = ["Farm", "FarmError", "INSTALL_HINT", "MAX_LOCAL_WORKERS", "require_dask", "check_workers",
            "check_scheduler", "build_table_task"]
@@ -204,8 +204,7 @@ class Farm:
         where = "an embedded Dask LocalCluster" if self.scheduler is None else f"the Dask cluster at {self.scheduler}"
         wait = "; the tasks wait for one to join" if not workers else ""
         count, threads = len(workers), sum(workers.values())
-        return (f"farm: {where}, {count} worker{'s' * (count != 1)}, {threads} thread{'s' * (threads != 1)}"
-                f"{wait}")
+        return f"farm: {where}, {counted(count, 'worker')}, {counted(threads, 'thread')}{wait}"
 
     def _require_client(self):
         if self.client is None:
