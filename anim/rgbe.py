@@ -41,7 +41,7 @@ import numpy as np
 import clsky
 from clsky._files import atomic_write
 
-__all__ = ["encode_rgbe", "decode_rgbe", "write_rgbe", "read_rgbe", "save_rgbe"]
+__all__ = ["encode_rgbe", "decode_rgbe", "write_rgbe", "read_rgbe", "read_rgbe_header", "save_rgbe"]
 
 #: Widths the run-length encoded scan lines can hold.
 _RLE_WIDTHS = range(8, 0x8000)
@@ -150,23 +150,42 @@ def write_rgbe(path, rgb, attributes=None, force=False, staging=None):
     return path
 
 
+#: Most bytes of a Radiance header (its text and resolution line) :func:`read_rgbe_header` reads.
+_MAX_HEADER = 1 << 16
+
+
+def _parse_header(data, path):
+    """(height, width, header {NAME: text}, offset of the pixels) from the bytes ``data`` that begin a
+    Radiance picture; ValueError naming ``path`` without the signature or a ``-Y H +X W`` resolution line."""
+    if not data.startswith(b"#?"):
+        raise ValueError(f"{path}: not a Radiance picture (no '#?' signature)")
+    end = data.find(b"\n\n")
+    newline = data.find(b"\n", end + 2) if end >= 0 else -1
+    match = None if newline < 0 else re.fullmatch(rb"-Y (\d{1,9}) \+X (\d{1,9})", data[end + 2:newline])
+    if match is None:
+        raise ValueError(f"{path}: no '-Y H +X W' resolution line")
+    head = data[:end].decode("ascii", "replace").split("\n")[1:]
+    header = dict(line.split("=", 1) for line in head if "=" in line and not line.startswith("#"))
+    header = {name: value.strip() for name, value in header.items()}
+    return int(match.group(1)), int(match.group(2)), header, newline + 1
+
+
+def read_rgbe_header(path):
+    """(height, width, header {NAME: text}) of the Radiance picture at ``path``, from its first 64 KiB
+    alone (``clsky info``); ValueError as :func:`read_rgbe`."""
+    with open(path, "rb") as stream:
+        data = stream.read(_MAX_HEADER)
+    height, width, header, _ = _parse_header(data, path)
+    return height, width, header
+
+
 def read_rgbe(path):
     """(pixels (H, W, 3) float64, header {NAME: text}) of a Radiance file with a ``-Y H +X W``
     resolution line, its scan lines flat or in the new run-length format (runs and literals); the old
     run-length format is not read. ValueError for a file without the signature or resolution line."""
     data = pathlib.Path(path).read_bytes()
-    if not data.startswith(b"#?"):
-        raise ValueError(f"{path}: not a Radiance picture (no '#?' signature)")
-    end = data.find(b"\n\n")
-    head = data[:end].decode("ascii", "replace").split("\n")[1:]
-    newline = data.find(b"\n", end + 2)
-    match = re.fullmatch(r"-Y (\d+) \+X (\d+)", data[end + 2:newline].decode("ascii", "replace"))
-    if end < 0 or newline < 0 or match is None:
-        raise ValueError(f"{path}: no '-Y H +X W' resolution line")
-    header = dict(line.split("=", 1) for line in head if "=" in line and not line.startswith("#"))
-    header = {name: value.strip() for name, value in header.items()}
-    height, width = int(match.group(1)), int(match.group(2))
-    body = memoryview(data)[newline + 1:]
+    height, width, header, offset = _parse_header(data, path)
+    body = memoryview(data)[offset:]
     rgbe = np.empty((height, width, 4), np.uint8)
     at = 0
     for row in range(height):

@@ -401,8 +401,8 @@ def build_parser(extensions=()):
     table = commands.add_parser("table", help="compute a scattering table and save it")
     _add_table_arguments(table)
     table.set_defaults(table_parser=table)          # clsky/sweep.py parses the --sweep lines with it
-    info = commands.add_parser("info", help="describe a table file (.npz) or an output (PNG, EXR, metrics JSON)")
-    info.add_argument("file", help="a .npz table, a PNG or EXR frame, or a <stem>_metrics.json")
+    info = commands.add_parser("info", help="describe a table file (.npz) or an output (PNG, EXR, HDR, metrics JSON)")
+    info.add_argument("file", help="a .npz table, a PNG, EXR or HDR frame, or a <stem>_metrics.json")
     handlers = dict(COMMANDS)
     for register in extensions:
         handlers.update(register(commands))

@@ -8,6 +8,8 @@
 - A metrics JSON (``<stem>_metrics.json``): the version, the scene, the frames and the table's units.
 - An EXR frame (``clsky animate --hdr exr``): its size, channels and header (units, orientation of an
   environment map, the scene and clsky's version), read with the OpenEXR bindings.
+- A Radiance HDR frame (``--hdr hdr``): its size and header lines (the EXR header's attributes but the
+  scene), read from its first 64 KiB (:func:`clsky.anim.rgbe.read_rgbe_header`).
 
 A damaged or foreign file is a :class:`clsky.table.TableFormatError` (a ValueError) naming the file:
 one line and exit status 2 on the command line.
@@ -149,18 +151,32 @@ def _exr(path):
     return _block(f"{path}:", items)
 
 
-READERS = {".npz": _table, ".png": _png, ".json": _metrics, ".exr": _exr}
+def _hdr(path):
+    from .anim.rgbe import read_rgbe_header
+
+    try:
+        height, width, header = read_rgbe_header(path)
+    except (ValueError, OSError) as error:
+        raise TableFormatError(f"{path}: not a readable Radiance HDR file "
+                               f"({str(error).removeprefix(f'{path}: ')})") from None
+    items = [("kind", "Radiance RGBE image"), ("size", f"{width} x {height} pixels"),
+             ("clsky version", header.get("clskyVersion", "- (not written by clsky)"))]
+    items += [(name, header[name]) for name in sorted(header) if name != "clskyVersion"]
+    return _block(f"{path}:", items)
+
+
+READERS = {".npz": _table, ".png": _png, ".json": _metrics, ".exr": _exr, ".hdr": _hdr}
 
 
 def describe(path) -> str:
-    """A readable block of text describing ``path``: a table (.npz), a PNG, a metrics JSON or an EXR frame.
+    """A readable block of text describing ``path``: a table (.npz), a PNG, a metrics JSON, an EXR or HDR frame.
 
     Raises
     ------
     FileNotFoundError
         ``path`` does not exist.
     ValueError
-        Its suffix is none of :data:`READERS`' (``.npz``, ``.png``, ``.json``, ``.exr``).
+        Its suffix is none of :data:`READERS`' (``.npz``, ``.png``, ``.json``, ``.exr``, ``.hdr``).
     TableFormatError
         A damaged or foreign file (message names the file).
     ImportError

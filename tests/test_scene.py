@@ -311,8 +311,29 @@ def test_exr_frames_carry_the_scene_and_info_reads_them(tmp_path, capsys, monkey
     assert f"clsky: error: {broken}: not a readable EXR file" in one_line_error(*run(capsys, "info", broken)[::2])
 
 
+def test_info_reads_a_radiance_hdr_frames_header(tmp_path, capsys):
+    """--hdr hdr frames: clsky info prints the size and header lines (it read none before); a file
+    without the signature or the resolution line is one line."""
+    from clsky.anim.rgbe import write_rgbe
+
+    frame = tmp_path / "frame.hdr"
+    write_rgbe(frame, np.full((12, 20, 3), 0.5), {"clskyVersion": clsky.__version__, "sunElevationDeg": -4.0,
+                                                  "radianceUnits": "linear sRGB [cd/m^2]"})
+    status, out, _ = run(capsys, "info", frame)
+    assert status == 0, out
+    assert "Radiance RGBE image" in out and "20 x 12 pixels" in out and "32-bit_rle_rgbe" in out
+    assert re.search(rf"\n  clsky version +{re.escape(clsky.__version__)}\n", out), out
+    assert re.search(r"\n  sunElevationDeg +-4\.0\n", out) and "linear sRGB [cd/m^2]" in out, out
+    for name, content, message in (("text.hdr", b"hello", "no '#?' signature"),
+                                    ("cut.hdr", frame.read_bytes()[:40], "no '-Y H +X W' resolution line"),
+                                    ("empty.hdr", b"", "no '#?' signature")):
+        (tmp_path / name).write_bytes(content)
+        line = one_line_error(*run(capsys, "info", tmp_path / name)[::2])
+        assert line.startswith(f"clsky: error: {tmp_path / name}: not a readable Radiance HDR file") and message in line
+
+
 def test_info_refuses_other_files(tmp_path, capsys):
-    assert "clsky info reads .npz, .png, .json, .exr files" in one_line_error(*run(capsys, "info", tmp_path / "x.toml")[::2])
+    assert "clsky info reads .npz, .png, .json, .exr, .hdr files" in one_line_error(*run(capsys, "info", tmp_path / "x.toml")[::2])
     assert "no such file" in one_line_error(*run(capsys, "info", tmp_path / "x.npz")[::2])
     (tmp_path / "x.png").write_bytes(b"not a png")
     assert "not a readable PNG" in one_line_error(*run(capsys, "info", tmp_path / "x.png")[::2])
