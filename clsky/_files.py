@@ -33,7 +33,7 @@ import tempfile
 import threading
 
 __all__ = ["check_output", "check_output_directory", "atomic_write", "StagedWrites", "temporary_prefix",
-           "check_suffix"]
+           "check_suffix", "binary_and_header"]
 
 #: Random characters of a temporary's name between its prefix and suffix (as tempfile.mkstemp's).
 _RANDOM_CHARACTERS = 8
@@ -145,6 +145,30 @@ def check_suffix(path, suffix: str, name: str = "path") -> pathlib.Path:
     if result.suffix != suffix:
         raise ValueError(f"{name} must end in {suffix} after a file name (NAME{suffix}), got {str(path)!r}")
     return result
+
+
+def binary_and_header(name, parameter: str = "path") -> tuple[pathlib.Path, pathlib.Path]:
+    """The pair ``NAME.bin`` and ``NAME.json`` an export writes for ``name`` (``export_raw``,
+    ``export_texture``, ``clsky table --raw NAME``): a trailing ``.bin`` or ``.json`` typed with the name is
+    one of the pair's own suffixes and is not doubled; any other dot belongs to the name (``sky.v2`` gives
+    ``sky.v2.bin``, where pathlib's ``with_suffix`` gave ``sky.bin``). ValueError naming ``parameter`` for a
+    name without a file name (empty, a directory's, or a suffix alone: ``.json`` wrote hidden
+    ``.json.bin`` and ``.json.json``).
+
+    >>> binary_and_header("out/sky.json")
+    (PosixPath('out/sky.bin'), PosixPath('out/sky.json'))
+    >>> binary_and_header("sky.v2")
+    (PosixPath('sky.v2.bin'), PosixPath('sky.v2.json'))
+    """
+    text = os.fspath(name) if isinstance(name, (str, os.PathLike)) else name
+    if not isinstance(text, str):
+        raise ValueError(f"{parameter} must be a file name (NAME gives NAME.bin and NAME.json), got {text!r}")
+    path = pathlib.Path(text)
+    stem = path.name[:-len(path.suffix)] if path.suffix in (".bin", ".json") else path.name
+    if not stem or stem in (".", "..", ".bin", ".json") or text.endswith(("/", os.sep)):
+        raise ValueError(f"{parameter} must be a file name (NAME gives NAME.bin and NAME.json), got {text!r}")
+    base = path.with_name(stem)
+    return base.with_name(stem + ".bin"), base.with_name(stem + ".json")
 
 
 def check_output(path, force=False, option=None, suffix=None, probe=True):

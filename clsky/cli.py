@@ -18,7 +18,7 @@ import threading
 import time
 
 from . import __version__
-from ._files import INTERRUPT_SIGNALS, check_suffix
+from ._files import INTERRUPT_SIGNALS, binary_and_header, check_suffix
 from .errors import short
 
 EXIT_USAGE = 2
@@ -194,7 +194,8 @@ def _add_table_arguments(parser):
     numerics.add_argument("--fast-math", action="store_true", help="build kernels with -cl-fast-relaxed-math")
     output = parser.add_argument_group("output")
     output.add_argument("-o", "--output", default="table.npz", help="table file (.npz, default: %(default)s)")
-    output.add_argument("--raw", metavar="NAME", help="also export NAME.bin (float32) + NAME.json for GPU engines")
+    output.add_argument("--raw", metavar="NAME", help="also export NAME.bin (float32) + NAME.json for GPU engines "
+                                                      "(NAME.bin or NAME.json names the same pair)")
     output.add_argument("--force", action="store_true", help="overwrite existing output files")
     output.add_argument("--progress", default="leave", choices=["display", "leave", "none"])
     output.add_argument("--sweep", metavar="FILE",
@@ -440,8 +441,6 @@ def _check_table_memory(args, settings):
 
 
 def run_table(args):
-    import pathlib
-
     from ._files import StagedWrites
     from .table import ScatteringTable
 
@@ -453,9 +452,9 @@ def run_table(args):
     settings = table_settings(args, atmosphere)
     try:
         output = check_suffix(args.output, ".npz", "--output")
+        raw = [] if args.raw is None else [("--raw", path) for path in binary_and_header(args.raw, "--raw")]
     except ValueError as error:
         raise UsageError(str(error)) from None
-    raw = [("--raw", pathlib.Path(args.raw).with_suffix(s)) for s in (".bin", ".json")] if args.raw else []
     check_outputs([("--output", output)] + raw, args.force)
     _check_table_memory(args, settings)
     progress, close = progress_bar(args.progress)
@@ -467,7 +466,7 @@ def run_table(args):
         close()
     with StagedWrites() as staging:                # the table and its raw export land together
         table.save(output, overwrite=args.force, staging=staging)
-        if args.raw:
+        if args.raw is not None:
             table.export_raw(args.raw, overwrite=args.force, staging=staging)
     report_table(args, table, output, time.perf_counter() - start)
     return 0
@@ -483,13 +482,15 @@ def orders_phrase(settings, record) -> str:
 
 
 def report_table(args, table, output, seconds):
-    """The summary line of a table written to ``output`` (and a warning if its orders did not converge)."""
+    """The summary line of a table written to ``output`` and its raw export (and a warning if its orders did
+    not converge)."""
     settings, record = table.settings, table.orders_record
     width, height, depth = settings.size
     print(f"table {width}x{height}x{depth} {settings.dtype} ({args.preset}, mode {settings.mode}, "
           f"{orders_phrase(settings, record)}; "
           f"{table.metadata['device']}): built in {table.metadata['build_seconds']:.2f} s, "
-          f"total {seconds:.2f} s -> {output}")
+          f"total {seconds:.2f} s -> {output}"
+          + ("" if getattr(args, "raw", None) is None else ", " + ", ".join(map(str, binary_and_header(args.raw)))))
     if settings.orders == "auto" and not record["converged"]:
         print(f"clsky: warning: {record['reason']}", file=sys.stderr)
 

@@ -15,11 +15,10 @@ from __future__ import annotations
 
 import contextlib
 import json
-import pathlib
 
 import numpy as np
 
-from ._files import StagedWrites, atomic_write, check_output
+from ._files import StagedWrites, atomic_write, binary_and_header, check_output
 
 __all__ = ["texture_volumes", "export_texture", "texture_header", "GLSL_SNIPPET"]
 
@@ -62,14 +61,13 @@ def texture_header(table, binary_name) -> dict:
 
 
 def export_texture(table, path, overwrite=False, staging=None):
-    """Write ``<path>.bin`` (:func:`texture_volumes`, float32) and ``<path>.json`` (:func:`texture_header`)
-    of a 4D table (``parameterization='4d'`` with higher orders); both checked first, landing together."""
+    """Write ``<path>.bin`` (:func:`texture_volumes`, float32) and ``<path>.json`` (:func:`texture_header`;
+    the pair's names as :func:`clsky._files.binary_and_header`) of a 4D table (``parameterization='4d'`` with higher orders); both checked first, landing together."""
     if not table.settings.is_4d:
         raise ValueError("export_texture needs a 4D table (parameterization '4d'); export_raw writes a 3D one")
     table.validate()
     volumes = texture_volumes(table.data)
-    path = pathlib.Path(path)
-    binary, header = path.with_suffix(".bin"), path.with_suffix(".json")
+    binary, header = binary_and_header(path)
     for target in (binary, header):
         check_output(target, force=overwrite)
     with contextlib.ExitStack() as stack:

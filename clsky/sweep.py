@@ -25,7 +25,7 @@ import pathlib
 import shlex
 import time
 
-from ._files import check_suffix
+from ._files import binary_and_header, check_suffix
 from .cli import (UsageError, check_outputs, farm_of, progress_bar, report_table, running_farm, table_atmosphere,
                   table_settings, _check_table_memory)
 
@@ -94,6 +94,8 @@ def sweep_jobs(args) -> list[SweepJob]:
             atmosphere = table_atmosphere(line)
             settings = table_settings(line, atmosphere)
             output = check_suffix(line.output, ".npz", "--output")
+            if line.raw is not None:
+                binary_and_header(line.raw, "--raw")
         except (UsageError, ValueError) as error:
             raise UsageError(error if args.sweep is None else f"{source}: {error}") from None
         jobs.append(SweepJob(source, line, atmosphere, settings, output, line.raw))
@@ -106,8 +108,8 @@ def _check_jobs(args, jobs):
     seen = {}
     for job in jobs:
         targets = [("--output", job.output)]
-        if job.raw:
-            targets += [("--raw", pathlib.Path(job.raw).with_suffix(s)) for s in (".bin", ".json")]
+        if job.raw is not None:
+            targets += [("--raw", path) for path in binary_and_header(job.raw)]
         for option, path in targets:
             where = option if args.sweep is None else f"{job.source}: {option}"
             other = seen.setdefault(path.resolve(), job.source)
@@ -136,7 +138,7 @@ def run_sweep(args):
                 else (build_table_task(*task) for task in tasks)
             for done, (job, table) in enumerate(zip(jobs, tables), start=1):
                 table.save(job.output, overwrite=job.args.force, staging=staging)
-                if job.raw:
+                if job.raw is not None:
                     table.export_raw(job.raw, overwrite=job.args.force, staging=staging)
                 report_table(job.args, table, job.output, time.perf_counter() - start)
                 del table

@@ -59,7 +59,7 @@ from typing import Callable
 import numpy as np
 
 from . import __version__
-from ._files import StagedWrites, atomic_write, check_output, check_suffix
+from ._files import StagedWrites, atomic_write, binary_and_header, check_output, check_suffix
 from .atmosphere import AtmosphereParameters, preset
 from .errors import short
 from .lookup import check_queries
@@ -515,7 +515,8 @@ class ScatteringTable:
         return export_texture(self, path, overwrite, staging)
 
     def export_raw(self, path, overwrite=False, staging=None):
-        """Write ``<path>.bin`` (float32 values) and ``<path>.json`` (layout header) for GPU engines.
+        """Write ``<path>.bin`` (float32 values) and ``<path>.json`` (layout header) for GPU engines
+        (:func:`clsky._files.binary_and_header`: ``sky``, ``sky.bin`` and ``sky.json`` name the same pair).
 
         A table whose higher orders carry azimuth harmonics (``settings.azimuth_harmonics`` = M > 0,
         :mod:`clsky.azimuth`) also exports them: its ``multiple_*`` channels hold their azimuth average
@@ -528,8 +529,7 @@ class ScatteringTable:
         ``staging``, when that set commits); existing files are kept unless ``overwrite``.
         """
         self.validate()
-        path = pathlib.Path(path)
-        binary, header = path.with_suffix(".bin"), path.with_suffix(".json")
+        binary, header = binary_and_header(path)
         for target in (binary, header):
             check_output(target, force=overwrite)
         width, height, depth = self.settings.size

@@ -248,6 +248,10 @@ def test_cli_table_outputs_checked_before_the_build(tmp_path):
         (["-o", "t.npz", "--raw", "missing/raw"], ["--raw", "missing"]),
         (["-o", "t.npz", "--raw", "raw", "--force"], ["--raw", "raw.json is a directory"]),
         (["-o", "t.npz", "--raw", "r" * (NAME_MAX - 3)], ["--raw", "bytes long"]),
+        # names without a file name: '' exported nothing, silently; '.json' wrote hidden .json.bin, .json.json
+        (["-o", "t.npz", "--raw", ""], ["--raw must be a file name (NAME gives NAME.bin and NAME.json), got ''"]),
+        (["-o", "t.npz", "--raw", ".json"], ["--raw must be a file name", "got '.json'"]),
+        (["-o", "t.npz", "--raw", "folder.npz/"], ["--raw must be a file name"]),
     ]
     if SYS_READ_ONLY:
         cases.append((["-o", "/sys/t.npz"], ["--output", "cannot create a file in directory /sys"]))
@@ -255,6 +259,27 @@ def test_cli_table_outputs_checked_before_the_build(tmp_path):
         result = clsky("table", *SLOW_TABLE, "--progress", "none", *args, cwd=tmp_path)
         assert_usage_error(result, *named)
     assert listing(tmp_path) == ["file", "folder.npz", "raw.json"]     # no t.npz without its raw export
+
+
+def test_raw_export_names(tmp_path, tiny_table):
+    """NAME.bin and NAME.json: a typed .bin or .json is the pair's own suffix, any other dot belongs to
+    the name (pathlib's with_suffix wrote sky.bin for 'sky.v2'); the command line's summary names them."""
+    from clsky._files import binary_and_header
+
+    assert binary_and_header(tmp_path / "sky.json") == (tmp_path / "sky.bin", tmp_path / "sky.json")
+    assert binary_and_header("h2.5km") == (pathlib.Path("h2.5km.bin"), pathlib.Path("h2.5km.json"))
+    for bad in ("", ".bin", "..", "out/", 3):
+        with pytest.raises(ValueError, match="^path must be a file name"):
+            binary_and_header(bad)
+    assert tiny_table.export_raw(tmp_path / "sky.bin") == (tmp_path / "sky.bin", tmp_path / "sky.json")
+    assert tiny_table.export_raw(tmp_path / "sky.v2") == (tmp_path / "sky.v2.bin", tmp_path / "sky.v2.json")
+    with pytest.raises(ValueError, match="^path must be a file name"):
+        tiny_table.export_raw(tmp_path / ".json")
+    assert listing(tmp_path) == ["sky.bin", "sky.json", "sky.v2.bin", "sky.v2.json"]
+    result = clsky("table", "--size", "4", "8", "4", "--orders", "1", "--progress", "none", "-o", "t.npz", "--raw",
+                   "dusk.v2", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.rstrip().endswith("-> t.npz, dusk.v2.bin, dusk.v2.json"), result.stdout
 
 
 def test_cli_table_into_an_immutable_directory(immutable_directory):
