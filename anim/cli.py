@@ -367,19 +367,18 @@ def run_render(args):
 
 
 def run_bench(args):
-    import pathlib
-
-    from clsky._files import StagedWrites
+    from clsky._files import StagedWrites, check_suffix
 
     from . import accuracy, accuracy_plot, writers
 
     if not 16 <= args.size <= 2048:
         raise clsky_cli.UsageError(f"--size must be an integer in [16, 2048], got {short(args.size)}")
-    targets = {"--output": pathlib.Path(args.output), "--plot": pathlib.Path(args.plot),
-               "--elevation-plot": pathlib.Path(args.elevation_plot or accuracy_plot.elevation_plot_path(args.plot))}
-    for option, suffix in (("--output", ".csv"), ("--plot", ".png"), ("--elevation-plot", ".png")):
-        if targets[option].suffix != suffix:
-            raise clsky_cli.UsageError(f"{option} must end in {suffix}, got {str(targets[option])!r}")
+    elevation_plot = args.elevation_plot or str(accuracy_plot.elevation_plot_path(args.plot))
+    try:
+        targets = {option: check_suffix(path, suffix, option) for option, path, suffix in (
+            ("--output", args.output, ".csv"), ("--plot", args.plot, ".png"), ("--elevation-plot", elevation_plot, ".png"))}
+    except ValueError as error:
+        raise clsky_cli.UsageError(str(error)) from None
     if targets["--elevation-plot"].resolve() == targets["--plot"].resolve():
         raise clsky_cli.UsageError(f"--elevation-plot must differ from --plot, got {str(targets['--plot'])!r} twice")
     clsky_cli.check_outputs(targets.items(), args.force)

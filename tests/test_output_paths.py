@@ -346,6 +346,10 @@ def test_cli_render_and_bench_check_their_outputs(tmp_path):
     result = clsky("bench", "accuracy", "--size", "16", "--progress", "none", "-o", "folder.png.csv", "--plot",
                    "folder.png", "--force", cwd=tmp_path)
     assert_usage_error(result, "--plot", "folder.png is a directory")
+    for option, name, suffix in (("--plot", ".png", ".png"), ("--output", ".csv", ".csv"),
+                                 ("--elevation-plot", "e.csv", ".png")):
+        result = clsky("bench", "accuracy", "--size", "16", "--progress", "none", option, name, cwd=tmp_path)
+        assert_usage_error(result, f"{option} must end in {suffix} after a file name (NAME{suffix}), got '{name}'")
     assert listing(tmp_path) == ["folder.png"]
 
 
