@@ -467,8 +467,13 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         raise ValueError(f"atmosphere must be AtmosphereParameters or a preset name, got {atmosphere!r}")
     level = quality_level(scene.quality) if scene.quality else level_for_budget(scene.error_budget)
     budget = level.budget if scene.quality else scene.error_budget
-    decisions = [("quality", level.name, f"promises {100 * level.budget:g} % or better"
-                  + ("" if scene.quality else f"; the fastest level within {100 * budget:g} %"))]
+    if scene.quality:
+        why = ""
+    elif level.budget <= budget:
+        why = f"; the fastest level within {100 * budget:g} %"
+    else:                                   # below every level's promise: the most accurate one, said so
+        why = f"; no level promises {100 * budget:g} %: the most accurate one"
+    decisions = [("quality", level.name, f"promises {100 * level.budget:g} % or better{why}")]
 
     if "mie" in scene.components or atmosphere.mie_scattering == 0.0:
         decisions.append(("Mie", "kept" if atmosphere.mie_scattering > 0 else "none",

@@ -117,7 +117,8 @@ def quality_level(name: str) -> QualityLevel:
 
 
 def level_for_budget(budget: float) -> QualityLevel:
-    """The fastest level whose promised error fits ``budget`` (a relative error in (0, 1])."""
+    """The fastest level whose promised error fits ``budget`` (a relative error in (0, 1]); the reference
+    level, the most accurate, where none does (the scene plan says so)."""
     if not is_real_number(budget) or not 0.0 < budget <= 1.0:
         raise ParameterError("error_budget", "a relative error in (0, 1]", budget)
     fitting = [level for level in QUALITY_LEVELS.values() if level.budget <= budget]

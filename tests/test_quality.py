@@ -31,6 +31,19 @@ def test_budget_picks_the_fastest_level_within_it(budget, name):
     assert level_for_budget(budget).name == name
 
 
+def test_a_budget_no_level_promises_is_said_so_in_the_plan():
+    """Below the reference level's 0.05 % the plan takes that level and says that it does not promise the
+    budget (it said 'the fastest level within 1e-07 %')."""
+    from clsky.planner import Scene, plan_scene
+
+    def quality_line(budget):
+        return plan_scene(Scene(sun_elevations_deg=(20.0, 30.0), error_budget=budget)).describe().splitlines()[1]
+
+    assert quality_line(1e-9).split() == ["quality", "reference", "(promises", "0.05", "%", "or", "better;", "no",
+                                          "level", "promises", "1e-07", "%:", "the", "most", "accurate", "one)"]
+    assert quality_line(5e-4).endswith("(promises 0.05 % or better; the fastest level within 0.05 %)")
+
+
 @pytest.mark.parametrize("budget", [0.0, -0.1, 1.5, float("nan"), "1%", None, True])
 def test_bad_budgets_and_names_are_refused(budget):
     with pytest.raises(ValueError, match="error_budget"):
