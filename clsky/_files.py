@@ -167,8 +167,7 @@ def binary_and_header(name, parameter: str = "path") -> tuple[pathlib.Path, path
     stem = path.name[:-len(path.suffix)] if path.suffix in (".bin", ".json") else path.name
     if not stem or stem in (".", "..", ".bin", ".json") or text.endswith(("/", os.sep)):
         raise ValueError(f"{parameter} must be a file name (NAME gives NAME.bin and NAME.json), got {text!r}")
-    base = path.with_name(stem)
-    return base.with_name(stem + ".bin"), base.with_name(stem + ".json")
+    return path.with_name(stem + ".bin"), path.with_name(stem + ".json")
 
 
 def check_output(path, force=False, option=None, suffix=None, probe=True):
