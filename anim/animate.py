@@ -265,13 +265,11 @@ class AnimationConfig:
         if self.end_hour <= self.start_hour:
             raise ParameterError("end_hour", f"after the start hour ({self.start_hour:g})", self.end_hour)
         if self.location is not None and self.date is not None:
-            midnight = datetime.datetime(self.date.year, self.date.month, self.date.day)
-            last_year = self.date.year if self.date.year > sunpath.DELTA_T_YEARS[1] else (
-                midnight + datetime.timedelta(hours=self.end_hour)).year
-            if last_year > sunpath.DELTA_T_YEARS[1]:
+            midnight, last = datetime.datetime(self.date.year, self.date.month, self.date.day), sunpath.DELTA_T_YEARS[1]
+            if self.date.year > last or (midnight + datetime.timedelta(hours=self.end_hour)).year > last:
                 raise ParameterError("date", f"a day whose frames, to {self.end_hour:g} h UTC, fall in the years 1 to "
-                                     f"{sunpath.DELTA_T_YEARS[1]} (pvlib estimates Delta T = TT - UT1 for "
-                                     f"{sunpath.DELTA_T_YEARS[0]} to {sunpath.DELTA_T_YEARS[1]})", self.date.isoformat())
+                                     f"{last} (pvlib estimates Delta T = TT - UT1 for {sunpath.DELTA_T_YEARS[0]} "
+                                     f"to {last})", self.date.isoformat())
         if self.location is not None:
             least = (self.end_hour - self.start_hour) * 60.0 / (sunpath.MAX_POSITIONS - 1)
             if self.step_minutes < least:

@@ -490,7 +490,7 @@ def report_table(args, table, output, seconds):
           f"{orders_phrase(settings, record)}; "
           f"{table.metadata['device']}): built in {table.metadata['build_seconds']:.2f} s, "
           f"total {seconds:.2f} s -> {output}"
-          + ("" if getattr(args, "raw", None) is None else ", " + ", ".join(map(str, binary_and_header(args.raw)))))
+          + ("" if args.raw is None else ", " + ", ".join(map(str, binary_and_header(args.raw)))))
     if settings.orders == "auto" and not record["converged"]:
         print(f"clsky: warning: {record['reason']}", file=sys.stderr)
 

@@ -62,7 +62,8 @@ def texture_header(table, binary_name) -> dict:
 
 def export_texture(table, path, overwrite=False, staging=None):
     """Write ``<path>.bin`` (:func:`texture_volumes`, float32) and ``<path>.json`` (:func:`texture_header`;
-    the pair's names as :func:`clsky._files.binary_and_header`) of a 4D table (``parameterization='4d'`` with higher orders); both checked first, landing together."""
+    the pair's names as :func:`clsky._files.binary_and_header`) of a 4D table (``parameterization='4d'``
+    with higher orders); both checked first, landing together."""
     if not table.settings.is_4d:
         raise ValueError("export_texture needs a 4D table (parameterization '4d'); export_raw writes a 3D one")
     table.validate()
