@@ -477,6 +477,35 @@ def default_vector_width(device) -> int:
     return 1 if device.type & cl.device_type.GPU else 8
 
 
+#: The work-group of the launches with one work-item a cell, row, chunk or query (add_into, combine_nodes,
+#: pack_channels, the stopping test's running_sum and order_ratios, lookup, lookup4d, optical_depth), fixed.
+#: Left to PoCL (local size None), every new global size got a divisor of it, up to 4096, as its local
+#: size, and PoCL compiles a kernel object per local size (0.03-0.07 s each, once per machine): a new table
+#: size cost its user a few of them, the default suite on an empty kernel cache 437 of its 1004 objects
+#: (docs/speed-log.md); a prime count got work-groups of one item. 256, side by side on the default
+#: animation's planned table (this AMD EPYC, 8 rounds): add_into, combine_nodes and pack_channels as fast
+#: as with PoCL's 4096 (within the machine's noise, 10 %), the stopping test's 416 chunks 11-13 ms on both
+#: cores against 16-20 ms in PoCL's one work-group. :func:`launch_size` shrinks it where a kernel allows
+#: less (a GPU).
+LINEAR_WORK_GROUP = (256,)
+
+
+def launch_size(kernel, device, counts, group) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """Global and local sizes of a launch of ``kernel`` on ``device`` over ``counts`` work-items per axis
+    in work-groups of ``group`` (a tuple of the same length): the group, its largest axis halved (rounded
+    up) until it fits the kernel's work-group size on the device, and each count rounded up to a multiple
+    of it. The kernels return for work-items beyond their counts. A fixed group compiles one kernel object
+    per program on PoCL, whatever the counts (:data:`LINEAR_WORK_GROUP`)."""
+    if len(counts) != len(group) or min(group) < 1:
+        raise ValueError(f"counts and group must be of one length, group >= 1; got {counts} and {group}")
+    largest = kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, device)
+    local = list(group)
+    while np.prod(local) > largest:
+        axis = int(np.argmax(local))
+        local[axis] = -(-local[axis] // 2)
+    return tuple(-(-max(int(n), 1) // g) * g for n, g in zip(counts, local)), tuple(local)
+
+
 #: How a padded device table's rows of 8 values come to the host when only 3 or 6 of them are wanted (the
 #: orders' nodes and the gathered sum, :mod:`clsky.azimuth`): None (the default) for each device's own
 #: (:func:`rectangular_reads`); True, rectangular reads (clEnqueueReadBufferRect, rows of 3 or 6 values
@@ -659,6 +688,11 @@ class Engine:
     def real8(self, values):
         """``values`` (8 numbers) as the kernels' ``real8``."""
         return np.array(tuple(values), dtype=self.dtype).view(real_vector_dtype(self.dtype, 8)).reshape(())
+
+    def _linear_size(self, kernel, items):
+        """Global and local sizes of a launch of ``kernel`` over ``items`` work-items in work-groups of
+        :data:`LINEAR_WORK_GROUP` (:func:`launch_size`)."""
+        return launch_size(kernel, self.device, (items,), LINEAR_WORK_GROUP)
 
     def _record(self, label, event):
         if self.profile:

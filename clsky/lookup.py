@@ -148,9 +148,11 @@ class TableLookupEngine(_cl.Engine):
             check_kernel_buffer(kernel, name, query_d, n, self.dtype)
         check_kernel_buffer(kernel, "radiance", radiance_d, 3 * max(n, 1), self.dtype)
         if n:
-            event = self.kernels[kernel](
-                self.queue, (n,), None, atmosphere_d, table_d.data, *(np.int32(size) for size in sizes),
-                np.int32(MAPPINGS[mapping]), self.real2(sun_w_range(mapping, sun_cos_range)), np.int32(n),
-                *(q.data for q in queries_d), radiance_d.data)
+            launch = self.kernels[kernel]
+            event = launch(
+                self.queue, *self._linear_size(launch, n), atmosphere_d, table_d.data,
+                *(np.int32(size) for size in sizes), np.int32(MAPPINGS[mapping]),
+                self.real2(sun_w_range(mapping, sun_cos_range)), np.int32(n), *(q.data for q in queries_d),
+                radiance_d.data)
             self._record(kernel, event)
         return radiance_d.get()[:n].reshape(shape + (3,)).astype(np.float64)

@@ -46,6 +46,13 @@ SPECIES = ("rayleigh", "mie")
 #: Rows and cells of the gather computed per work-item (-DGATHER_ROWS, -DGATHER_CELLS of kernels/multiple.cl).
 GATHER_ROWS = 4
 GATHER_CELLS = 4
+#: Work-group of the gather (cell blocks, row blocks, sun nodes): PoCL's own choice for the default
+#: animation's planned table (32 x 128 x 208: 8 x 32 x 208 work-items), fixed so that any table size
+#: compiles one kernel object (:data:`clsky._cl.LINEAR_WORK_GROUP`). Side by side in one process, 12
+#: rounds, this AMD EPYC: as fast as PoCL's choices within the machine's noise (about 10 %) for that
+#: table and the full default one (8 x 64 x 8 there); nor did 15 other shapes, 16 to 4096 work-items,
+#: beat it beyond the noise (docs/speed-log.md).
+GATHER_WORK_GROUP = (8, 8, 1)
 #: Sun nodes per scatter work-item (-DSCATTER_SUN_NODES): a view ray's geometry, densities and
 #: transmittances do not depend on the sun, so one work-item marches a ray once for this many sun nodes
 #: (8: 12 % less CPU than 4 for the scatter reading one harmonic, 4 % for three, on PoCL; 16 gained 5 %
@@ -350,8 +357,10 @@ class MultipleScatteringEngine(_cl.Engine):
         else:
             self._check_out(out, table_d.shape, node)
         per_node = matrices.ndim == 4
-        event = self._featureless_kernels()["gather"](
-            self.queue, (-(-width // GATHER_CELLS), -(-height // GATHER_ROWS), depth), None, matrices_d.data,
+        kernel = self._featureless_kernels()["gather"]
+        groups = (-(-width // GATHER_CELLS), -(-height // GATHER_ROWS), depth)
+        event = kernel(
+            self.queue, *_cl.launch_size(kernel, self.device, groups, GATHER_WORK_GROUP), matrices_d.data,
             np.int32(matrices.size // 2), np.int32(height * height if per_node else 0), table_d.data,
             out.data, np.uint64(node * table_d.size), np.int32(accumulate), np.int32(width), np.int32(height),
             np.int32(depth))
@@ -418,9 +427,9 @@ class MultipleScatteringEngine(_cl.Engine):
                              f"{nodes.shape}, {weights.shape} and {out.shape}")
         weights_d = weights if isinstance(weights, cla.Array) else cla.to_device(self.queue, weights,
                                                                                  allocator=self.allocator)
-        event = self._featureless_kernels()["combine_nodes"](
-            self.queue, (cells,), None, nodes.data, weights_d.data, np.int32(weights.size), np.uint64(cells),
-            self.real(1.0), self.real(0.0), out.data)
+        kernel = self._featureless_kernels()["combine_nodes"]
+        event = kernel(self.queue, *self._linear_size(kernel, cells), nodes.data, weights_d.data,
+                       np.int32(weights.size), np.uint64(cells), self.real(1.0), self.real(0.0), out.data)
         self._record("combine_nodes", event)
         return out
 
@@ -435,8 +444,9 @@ class MultipleScatteringEngine(_cl.Engine):
             raise ValueError(f"padded (..., 8) and out (..., channels) must agree, 1 <= channels <= 8, in "
                              f"{self.dtype}, C-contiguous; got {padded.shape} {padded.dtype}, {out.shape} {out.dtype}")
         rows = padded.size // 8
-        event = self._featureless_kernels()["pack_channels"](self.queue, (rows,), None, padded.data,
-                                                             np.uint64(rows), np.int32(channels), out.data)
+        kernel = self._featureless_kernels()["pack_channels"]
+        event = kernel(self.queue, *self._linear_size(kernel, rows), padded.data, np.uint64(rows), np.int32(channels),
+                       out.data)
         self._record("pack_channels", event)
         return event
 
@@ -453,7 +463,8 @@ class MultipleScatteringEngine(_cl.Engine):
             raise ValueError(f"slabs must be in [1, N] for stacks (N, D, H, W, 8), got {slabs} for {total.shape}")
         scale = np.ones(8) if scale is None else np.concatenate([scale, scale, [0.0, 0.0]])
         cells = (total.size if slabs is None else total.size // total.shape[0] * slabs) // 8
-        event = self._featureless_kernels()["add_into"](self.queue, (cells,), None, total.data, addend.data,
-                                                        np.uint64(cells), self.real(1.0), self.real8(scale))
+        kernel = self._featureless_kernels()["add_into"]
+        event = kernel(self.queue, *self._linear_size(kernel, cells), total.data, addend.data, np.uint64(cells),
+                       self.real(1.0), self.real8(scale))
         self._record("add_into", event)
         return total

@@ -270,7 +270,7 @@ class SkyRenderer:
             check_kernel_buffer(name, argument, array_d, count, self.engine.dtype)
         check_kernel_buffer(name, "valid", directions.valid, n, np.uint8)
         kernel = self.engine.kernels_with(self._defines + ([f"-DRAY_SUNS={batch}"] if batch > 1 else []))[name]
-        global_size, local_size = self._work_size(n)
+        global_size, local_size = self._work_size(kernel, n)
         # the frames of each launch copied out, so that none holds its launch's download (padded suns included)
         frames = np.empty((len(suns),) + shape + (3,)) if len(suns) > 1 else None
         for start in range(0, len(suns), batch):
@@ -303,14 +303,15 @@ class SkyRenderer:
             raise ValueError("valid must be given to prepare(), not with prepared directions")
         return directions
 
-    def _work_size(self, n):
-        """Global and local sizes of a launch over ``n`` pixels, ``vector_width`` a work-item: an explicit
-        work-group size (left to PoCL, a large frame got work-groups whose private arrays, the ray march's
-        per-lane sums and ground values, overflowed its worker threads' stacks: segmentation fault at 256 x
-        256 with a ground); the kernels return for items beyond n."""
-        items = -(-n // self.engine.vector_width)
-        local = min(RENDER_WORK_GROUP, items)
-        return (-(-items // local) * local,), (local,)
+    def _work_size(self, kernel, n):
+        """Global and local sizes of a launch of ``kernel`` over ``n`` pixels, ``vector_width`` a work-item:
+        an explicit work-group size (left to PoCL, a large frame got work-groups whose private arrays, the
+        ray march's per-lane sums and ground values, overflowed its worker threads' stacks: segmentation
+        fault at 256 x 256 with a ground), the same for every frame size (one kernel object per program on
+        PoCL; a small frame's launch padded to it, :func:`clsky._cl.launch_size`); the kernels return for
+        items beyond n."""
+        return _cl.launch_size(kernel, self.engine.device, (-(-n // self.engine.vector_width),),
+                               (RENDER_WORK_GROUP,))
 
     def _check_sun_covered(self, sun):
         """A table planned for a scene covers its sun path only (``sun_cos_range``): refuse a sun outside
@@ -510,8 +511,8 @@ class SkyRenderer:
                 check_kernel_buffer("view_zenith_angles", "directions", directions.array, 3 * n, self.engine.dtype)
                 # from the program the sky-view lookup launches (the atmosphere's features: the same code
                 # for this kernel, which reads none of them), not a plain program built for it alone
-                self.engine.kernels_with(self._defines)["view_zenith_angles"](
-                    self.queue, *self._work_size(n), np.int32(n), directions.array.data, angles.data)
+                kernel = self.engine.kernels_with(self._defines)["view_zenith_angles"]
+                kernel(self.queue, *self._work_size(kernel, n), np.int32(n), directions.array.data, angles.data)
             angles = directions.derived.setdefault("view_zenith", angles)
         return angles
 

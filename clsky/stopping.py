@@ -152,9 +152,11 @@ class DeviceStoppingTest(_cl.Engine):
                              f"{order.dtype} {order.shape}")
         if ratio is not None and not self._have_previous:
             raise ValueError("a geometric ratio needs the order before (keep_previous=True and an order added)")
-        cells, chunk, items = np.uint64(self.cells), np.uint32(CHUNK_CELLS), (self.items,)
-        self._record("running_sum", self.kernels["running_sum"](
-            self.queue, items, None, order.data, self.running.data, cells, chunk, self._maxima.data))
+        cells, chunk = np.uint64(self.cells), np.uint32(CHUNK_CELLS)
+        running_sum, order_ratios = self.kernels["running_sum"], self.kernels["order_ratios"]
+        self._record("running_sum", running_sum(
+            self.queue, *self._linear_size(running_sum, self.items), order.data, self.running.data, cells, chunk,
+            self._maxima.data))
         self._record("bright_threshold", self.kernels["bright_threshold"](
             self.queue, (1,), None, self._maxima.data, np.uint32(self.items), np.float64(BRIGHT_FRACTION),
             self._threshold.data))
@@ -164,10 +166,10 @@ class DeviceStoppingTest(_cl.Engine):
             r = np.asarray(ratio, dtype=np.float64)
             squared_complement = (1.0 - r) ** 2        # as relative_addition
         previous = self.previous if self.previous is not None else self.running      # not read without `keep`
-        self._record("order_ratios", self.kernels["order_ratios"](
-            self.queue, items, None, order.data, self.running.data, previous.data, cells, chunk,
-            self._threshold.data, self.real4(r), self.real4(squared_complement), np.int32(ratio is not None),
-            np.int32(self.keep_previous), self._ratios.data))
+        self._record("order_ratios", order_ratios(
+            self.queue, *self._linear_size(order_ratios, self.items), order.data, self.running.data, previous.data,
+            cells, chunk, self._threshold.data, self.real4(r), self.real4(squared_complement),
+            np.int32(ratio is not None), np.int32(self.keep_previous), self._ratios.data))
         self._pending = (cl.enqueue_copy(self.queue, self._host_ratios, self._ratios.data, is_blocking=False),
                          ratio is not None)
         self._have_previous = self.keep_previous

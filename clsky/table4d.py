@@ -132,13 +132,12 @@ class Table4DEngine(_cl.Engine):
         check_kernel_buffer("table4d_cells", "gathered", gathered_d, gathered_source_reals(grid, harmonics), self.dtype)
         check_kernel_buffer("table4d_cells", "sun_table", sun_table_d, tw * th * column_channels(atmosphere),
                             self.dtype)
-        items = -(-n // self.vector_width)
-        local = min(WORK_GROUP, items)
+        work_size = _cl.launch_size(kernel, self.device, (-(-n // self.vector_width),), (WORK_GROUP,))
         for a in range(settings.azimuth_size):
             cells = np.ascontiguousarray(np.stack(node_rays(atmosphere, settings, a), axis=1), dtype=self.dtype)
             cells_d = cla.to_device(self.queue, cells)
             check_kernel_buffer("table4d_cells", "cells", cells_d, 4 * n, self.dtype)
-            event = kernel(self.queue, (-(-items // local) * local,), (local,), atmosphere_d, gathered_d.data,
+            event = kernel(self.queue, *work_size, atmosphere_d, gathered_d.data,
                            np.int32(width), np.int32(height), np.int32(depth), np.int32(MAPPINGS[settings.mapping]),
                            self.real2(settings.sun_w_range), np.int32(has_multiple), sun_table_d.data, np.int32(tw),
                            np.int32(th), ground_d.data, np.int32(n), cells_d.data, np.int32(channels), out_d.data)

@@ -56,6 +56,10 @@ def azimuth_defines(settings, interleaved=False):
 #: orders (:func:`upload_gathered_source` of None): a valid buffer that the kernels do not read.
 NO_GATHERED_GRID = (2, 2, 2)
 
+#: Work-group of ``transmittance_table`` (columns, rows): PoCL's own choice for the default 64 x 256 table,
+#: fixed so that any table size compiles one kernel object (:data:`clsky._cl.LINEAR_WORK_GROUP`).
+TABLE_WORK_GROUP = (64, 64)
+
 
 def upload_gathered_source(queue, gathered, dtype):
     """A table's gathered source (``ScatteringTable.gathered``: (D, H, W, 6), or with M azimuth harmonics
@@ -154,8 +158,9 @@ class TransmittanceEngine(_cl.Engine):
         tau_d = cla.empty(self.queue, (max(n, 1), 3), self.dtype)
         atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
         if n:
-            event = self.kernels_with(_atmosphere_cl.feature_defines(atmosphere))["optical_depth"](self.queue, (n,), None, atmosphere_d, np.int32(n),
-                                                  *(a.data for a in inputs), tau_d.data)
+            kernel = self.kernels_with(_atmosphere_cl.feature_defines(atmosphere))["optical_depth"]
+            event = kernel(self.queue, *self._linear_size(kernel, n), atmosphere_d, np.int32(n),
+                           *(a.data for a in inputs), tau_d.data)
             self._record("optical_depth", event)
         return tau_d.get()[:n].reshape(shape + (3,)).astype(np.float64)
 
@@ -173,7 +178,8 @@ class TransmittanceEngine(_cl.Engine):
         tw, th = (check_integer(f"size[{i}]", v, 2, 4096) for i, v in enumerate(size))
         table_d = cla.empty(self.queue, (th, tw, column_channels(atmosphere)), self.dtype)
         atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
-        event = self.kernels_with(_atmosphere_cl.feature_defines(atmosphere))["transmittance_table"](self.queue, (tw, th), None, atmosphere_d,
-                                                    np.int32(tw), np.int32(th), table_d.data)
+        kernel = self.kernels_with(_atmosphere_cl.feature_defines(atmosphere))["transmittance_table"]
+        event = kernel(self.queue, *_cl.launch_size(kernel, self.device, (tw, th), TABLE_WORK_GROUP), atmosphere_d,
+                       np.int32(tw), np.int32(th), table_d.data)
         self._record("transmittance_table", event)
         return table_d if queue_only else table_d.get()
