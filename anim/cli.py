@@ -135,7 +135,7 @@ def register(commands):
                         help="pixel type of the EXR frames: float (32-bit, default) or half (16-bit; values above "
                              "65504, the sun's disc, are clipped to it and counted in the header)")
     output.add_argument("--force", action="store_true", help="overwrite existing outputs")
-    output.add_argument("--progress", default="leave", choices=["display", "leave", "none"])
+    clsky_cli.add_progress_argument(output)
     clsky_cli.add_farm_arguments(animate)
 
     render = commands.add_parser("render", help="render one frame (PNG)")
@@ -165,7 +165,7 @@ def register(commands):
     accuracy.add_argument("--quick", action="store_true",
                           help="default settings, two ray marches and a 32 x 64 sky-view map only (a smoke run)")
     accuracy.add_argument("--force", action="store_true", help="overwrite existing outputs")
-    accuracy.add_argument("--progress", default="leave", choices=["display", "leave", "none"])
+    clsky_cli.add_progress_argument(accuracy)
     return {"animate": run_animate, "render": run_render, "bench": run_bench}
 
 

@@ -95,11 +95,27 @@ class _Parser(argparse.ArgumentParser):
 
 STAGE_LABELS = {"single": ("single scattering", "slab"), "orders": ("scattering orders", "order"),
                 "frames": ("frames", "frame"), "tables": ("tables", "table")}
+#: --progress's choices; "auto", the default, is "leave" where stderr is a terminal and "none" elsewhere.
+PROGRESS_MODES = ("auto", "display", "leave", "none")
+#: The bar of a stage whose total is unknown (the orders, iterated to convergence): how many, and since when
+#: (tqdm's own form, "6order [00:00, 470.20order/s]", ran the count into its unit).
+COUNTING_BAR = "{desc}: {n_fmt} [{elapsed}]"
+
+
+def add_progress_argument(group):
+    """The --progress option of the commands that show progress bars (table, animate, bench accuracy)."""
+    group.add_argument("--progress", default="auto", choices=PROGRESS_MODES,
+                       help="progress bars on stderr: leave (each stage's bar stays), display (cleared when "
+                            "done), none; auto (default): leave on a terminal, none in a pipe or log file")
 
 
 def progress_bar(mode):
     """A tqdm-driven ``progress(stage, done, total)`` callable (or None) and its closer; one bar per
-    stage, on stderr. The orders' total is unknown when they iterate to convergence: the bar counts."""
+    stage, on stderr (``mode``: one of :data:`PROGRESS_MODES`), made at the stage's first report (its rate
+    counts the steps after that one: a bar that began at the first frame's end said 26379 frame/s). The
+    orders' total is unknown when they iterate to convergence: their bar counts them."""
+    if mode == "auto":
+        mode = "leave" if sys.stderr.isatty() else "none"
     if mode == "none":
         return None, lambda: None
     from tqdm import tqdm
@@ -111,8 +127,10 @@ def progress_bar(mode):
             for bar in bars.values():
                 bar.close()
             label, unit = STAGE_LABELS.get(stage, (stage, "step"))
-            bars[stage] = tqdm(desc=label, unit=unit, leave=(mode == "leave"), file=sys.stderr, dynamic_ncols=True,
-                               total=None if stage == "orders" else total)
+            counting = stage == "orders"
+            bars[stage] = tqdm(desc=label, unit=" " + unit, leave=(mode == "leave"), file=sys.stderr,
+                               dynamic_ncols=True, total=None if counting else total, initial=done,
+                               bar_format=COUNTING_BAR if counting else None)
         bar = bars[stage]
         bar.n = done
         bar.refresh()
@@ -197,7 +215,7 @@ def _add_table_arguments(parser):
     output.add_argument("--raw", metavar="NAME", help="also export NAME.bin (float32) + NAME.json for GPU engines "
                                                       "(NAME.bin or NAME.json names the same pair)")
     output.add_argument("--force", action="store_true", help="overwrite existing output files")
-    output.add_argument("--progress", default="leave", choices=["display", "leave", "none"])
+    add_progress_argument(output)
     output.add_argument("--sweep", metavar="FILE",
                         help="one table per line of FILE: each line holds table options (at least -o), which "
                              "win over the command line's (README 'Frame farms (Dask)'); the files land together")
