@@ -518,7 +518,7 @@ def run_info(args):
 
     try:
         print(describe(args.file))
-    except (FileNotFoundError, ImportError) as error:   # ImportError: the PNG/EXR readers without [anim]
+    except (FileNotFoundError, IsADirectoryError, ImportError) as error:   # ImportError: PNG/EXR without [anim]
         raise UsageError(str(error)) from None
     return 0
 

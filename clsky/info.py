@@ -174,7 +174,9 @@ def describe(path) -> str:
     Raises
     ------
     FileNotFoundError
-        ``path`` does not exist.
+        ``path`` does not exist, or is no regular file (a FIFO, a device).
+    IsADirectoryError
+        ``path`` is a directory.
     ValueError
         Its suffix is none of :data:`READERS`' (``.npz``, ``.png``, ``.json``, ``.exr``, ``.hdr``).
     TableFormatError
@@ -183,9 +185,11 @@ def describe(path) -> str:
         A PNG without Pillow, an EXR file without the OpenEXR bindings (the ``anim`` extra), saying so.
     """
     path = pathlib.Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(f"{path}: a directory, not a file: clsky info reads {', '.join(READERS)} files")
     reader = READERS.get(path.suffix.lower())
     if reader is None:
         raise ValueError(f"{path}: clsky info reads {', '.join(READERS)} files, got {path.suffix or 'no suffix'!r}")
     if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such file")
+        raise FileNotFoundError(f"{path}: no such file" if not path.exists() else f"{path}: not a regular file")
     return reader(path)

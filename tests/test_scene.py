@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import datetime
 import json
+import os
 import pathlib
 import re
 import sys
@@ -335,6 +336,13 @@ def test_info_reads_a_radiance_hdr_frames_header(tmp_path, capsys):
 def test_info_refuses_other_files(tmp_path, capsys):
     assert "clsky info reads .npz, .png, .json, .exr, .hdr files" in one_line_error(*run(capsys, "info", tmp_path / "x.toml")[::2])
     assert "no such file" in one_line_error(*run(capsys, "info", tmp_path / "x.npz")[::2])
+    for name in ("frames", "sky.npz"):                  # a directory, named like a table or not: not "no such file"
+        (tmp_path / name).mkdir()
+        assert one_line_error(*run(capsys, "info", tmp_path / name)[::2]) == (
+            f"clsky: error: {tmp_path / name}: a directory, not a file: clsky info reads .npz, .png, .json, .exr, "
+            ".hdr files")
+    os.mkfifo(tmp_path / "pipe.npz")                    # read, it would wait for a writer for ever
+    assert one_line_error(*run(capsys, "info", tmp_path / "pipe.npz")[::2]).endswith("pipe.npz: not a regular file")
     (tmp_path / "x.png").write_bytes(b"not a png")
     assert "not a readable PNG" in one_line_error(*run(capsys, "info", tmp_path / "x.png")[::2])
     (tmp_path / "x.json").write_text("{}")
