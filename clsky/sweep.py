@@ -54,9 +54,10 @@ def read_sweep(path) -> list[tuple[int, list[str]]]:
     path = pathlib.Path(path)
     try:
         text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as error:
-        raise UsageError(f"--sweep: cannot read {path} ({error.__class__.__name__}: "
-                         f"{getattr(error, 'strerror', None) or error})") from None
+    except OSError as error:                            # as --scene's (anim/scene.py)
+        raise UsageError(f"--sweep: cannot read {path}: {error.strerror or error}") from None
+    except UnicodeDecodeError:
+        raise UsageError(f"--sweep {path}: not a text file (not UTF-8 text)") from None
     lines = []
     for number, line in enumerate(text.splitlines(), start=1):
         try:

@@ -252,6 +252,18 @@ def test_a_bad_sweep_line_is_one_line_before_any_work(line, message, tmp_path, c
     assert sorted(p.name for p in tmp_path.iterdir()) == ["weather.txt"]
 
 
+@pytest.mark.parametrize("make, message", [
+    (lambda path: None, "--sweep: cannot read weather.txt: No such file or directory"),
+    (lambda path: path.mkdir(), "--sweep: cannot read weather.txt: Is a directory"),
+    (lambda path: path.write_bytes(b"-o \xff.npz\n"), "--sweep weather.txt: not a text file (not UTF-8 text)"),
+])
+def test_an_unreadable_sweep_file_is_one_line(make, message, tmp_path, capsys):
+    make(tmp_path / "weather.txt")
+    with inside(tmp_path):
+        assert main(["table", "--sweep", "weather.txt", *SWEEP_OPTIONS]) == 2
+    assert capsys.readouterr().err == f"clsky: error: {message}\n"
+
+
 def test_a_failed_sweep_leaves_no_table(tmp_path, monkeypatch, capsys):
     """The second table's build fails: the first, already built, does not land either (one set)."""
     import clsky.farm
