@@ -63,8 +63,12 @@ def check_render_table(table):
     Raises
     ------
     ValueError
-        (:class:`~clsky.table.TableFormatError`) naming the array and what is wrong.
+        ``table`` is no ScatteringTable, or (:class:`~clsky.table.TableFormatError`) naming the array and
+        what is wrong.
     """
+    if not isinstance(table, ScatteringTable):
+        raise ValueError(f"table must be a ScatteringTable (ScatteringTable.build or .load), got {short(table)} "
+                         f"({type(table).__name__})")
     table.validate()
     if table.settings.is_4d:
         from .lookup4d import check_table4d_data
@@ -192,6 +196,9 @@ class SkyRenderer:
     def __init__(self, table: ScatteringTable, ray_settings: TableSettings | None = None, ctx=None,
                  fast_math=False):
         check_render_table(table)
+        if ray_settings is not None and not isinstance(ray_settings, TableSettings):
+            raise ValueError(f"ray_settings must be a TableSettings or None (the ray march's defaults), got "
+                             f"{short(ray_settings)} ({type(ray_settings).__name__})")
         self.table = table
         self.ray_settings = ray_settings or RAYMARCH_DEFAULTS.replace(dtype=table.settings.dtype)
         check_memory(estimate_render_memory(table.settings, (0, 0), ray_settings=self.ray_settings,

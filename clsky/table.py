@@ -60,7 +60,7 @@ import numpy as np
 
 from . import __version__
 from ._files import StagedWrites, atomic_write, binary_and_header, check_output, check_suffix
-from .atmosphere import AtmosphereParameters, preset
+from .atmosphere import PRESETS, AtmosphereParameters, preset
 from .errors import short
 from .lookup import check_queries
 from .settings import TableSettings
@@ -287,7 +287,7 @@ class ScatteringTable:
     @classmethod
     def build(cls, atmosphere: AtmosphereParameters | str = "atmosphere-plus",
               settings: TableSettings | None = None, backend="opencl", ctx=None, fast_math=False,
-              progress: Callable[[int, int], None] | None = None) -> "ScatteringTable":
+              progress: Callable[[str, int, int], None] | None = None) -> "ScatteringTable":
         """Compute the table: single scattering, then the orders ``settings`` asks for.
 
         Parameters
@@ -304,6 +304,8 @@ class ScatteringTable:
 
         Raises
         ------
+        ValueError
+            An argument of the wrong type (naming it), or a backend that is none of ``BACKENDS``.
         InsufficientMemoryError
             Before any work, when the build needs more memory than the host or device has
             (:func:`clsky.resources.check_memory`).
@@ -318,10 +320,19 @@ class ScatteringTable:
         """
         if isinstance(atmosphere, str):
             atmosphere = preset(atmosphere)
+        if not isinstance(atmosphere, AtmosphereParameters):
+            raise ValueError(f"atmosphere must be an AtmosphereParameters or a preset name {list(PRESETS)}, got "
+                             f"{short(atmosphere)} ({type(atmosphere).__name__})")
         if settings is None:
             from .ground import default_settings
 
             settings = default_settings(atmosphere)
+        if not isinstance(settings, TableSettings):
+            raise ValueError(f"settings must be a TableSettings or None (the atmosphere's default), got "
+                             f"{short(settings)} ({type(settings).__name__})")
+        if progress is not None and not callable(progress):
+            raise ValueError(f"progress must be None or a callable progress(stage, done, total), got "
+                             f"{short(progress)} ({type(progress).__name__})")
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
         if settings.is_4d:

@@ -2,6 +2,7 @@
 wherever it takes numbers."""
 
 import datetime
+import re
 
 import numpy as np
 import pytest
@@ -133,3 +134,31 @@ def test_table_settings_and_scene_take_numpy_and_refuse_strings():
         Scene(sun_elevations_deg=("1", "2"))
     with pytest.raises(ValueError, match="^order_tolerance must be"):
         TableSettings(order_tolerance="0.1")
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (("physical", "x"), "settings must be a TableSettings or None (the atmosphere's default), got 'x' (str)"),
+    ((42,), "atmosphere must be an AtmosphereParameters or a preset name ['atmosphere-plus', 'physical'], "
+            "got 42 (int)"),
+    ((None,), "atmosphere must be an AtmosphereParameters or a preset name"),
+    (("physical", None, "numpy", None, False, 3), "progress must be None or a callable progress(stage, done, total), "
+                                                   "got 3 (int)"),
+])
+def test_build_refuses_wrong_types_naming_the_parameter(arguments, message):
+    """Before: AttributeError ('str' object has no attribute 'is_4d') deep in the build."""
+    with pytest.raises(ValueError, match=re.escape(message)):
+        ScatteringTable.build(*arguments)
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (("x",), "table must be a ScatteringTable (ScatteringTable.build or .load), got 'x' (str)"),
+    ((None,), "table must be a ScatteringTable"),
+    (("table", "y"), "ray_settings must be a TableSettings or None (the ray march's defaults), got 'y' (str)"),
+])
+def test_renderer_refuses_wrong_types_naming_the_parameter(table, arguments, message):
+    """Before: AttributeError ('str' object has no attribute 'validate'), before any device work."""
+    from clsky.render import SkyRenderer
+
+    arguments = tuple(table if argument == "table" else argument for argument in arguments)
+    with pytest.raises(ValueError, match=re.escape(message)):
+        SkyRenderer(*arguments)
