@@ -492,14 +492,15 @@ LINEAR_WORK_GROUP = (256,)
 
 def launch_size(kernel, device, counts, group) -> tuple[tuple[int, ...], tuple[int, ...]]:
     """Global and local sizes of a launch of ``kernel`` on ``device`` over ``counts`` work-items per axis
-    in work-groups of ``group`` (a tuple of the same length): the group, its largest axis halved (rounded
-    up) until it fits the kernel's work-group size on the device, and each count rounded up to a multiple
-    of it. The kernels return for work-items beyond their counts. A fixed group compiles one kernel object
+    in work-groups of ``group`` (a tuple of the same length): the group, each axis at most the device's
+    (``max_work_item_sizes``: 64 along the third on NVIDIA's) and its largest axis halved (rounded up)
+    until it fits the kernel's work-group size on the device, and each count rounded up to a multiple of
+    it. The kernels return for work-items beyond their counts. A fixed group compiles one kernel object
     per program on PoCL, whatever the counts (:data:`LINEAR_WORK_GROUP`)."""
     if len(counts) != len(group) or min(group) < 1:
         raise ValueError(f"counts and group must be of one length, group >= 1; got {counts} and {group}")
     largest = kernel.get_work_group_info(cl.kernel_work_group_info.WORK_GROUP_SIZE, device)
-    local = list(group)
+    local = [min(size, most) for size, most in zip(group, device.max_work_item_sizes)]
     while np.prod(local) > largest:
         axis = int(np.argmax(local))
         local[axis] = -(-local[axis] // 2)

@@ -32,24 +32,31 @@ class FakeKernel:
         return self.largest
 
 
+class FakeDevice:
+    """A device whose work-groups may be at most 1024 x 1024 x 64 work-items along their axes (NVIDIA's)."""
+
+    max_work_item_sizes = [1024, 1024, 64]
+
+
 @pytest.mark.parametrize("counts, group, largest, expected", [
     ((1000,), (256,), 4096, ((1024,), (256,))),             # rounded up to a multiple of the group
     ((1024,), (256,), 4096, ((1024,), (256,))),             # already a multiple
     ((0,), (256,), 4096, ((256,), (256,))),                 # no item: one group, whose items all return
     ((3,), (256,), 4096, ((256,), (256,))),
-    ((5000,), (4096,), 1024, ((5120,), (1024,))),           # a GPU's limit: halved until it fits
+    ((5000,), (4096,), 512, ((5120,), (512,))),             # a kernel's limit: halved until it fits
     ((64, 256), (64, 64), 256, ((64, 256), (16, 16))),      # the largest axis halved first, in turn
     ((8, 32, 208), (8, 8, 1), 4096, ((8, 32, 208), (8, 8, 1))),
     ((3, 5, 7), (8, 8, 1), 4096, ((8, 8, 7), (8, 8, 1))),
+    ((8, 8, 300), (1, 8, 256), 4096, ((8, 8, 320), (1, 8, 64))),    # the device's third axis: at most 64
 ])
 def test_launch_size_rounds_counts_up_and_fits_the_kernel(counts, group, largest, expected):
-    assert _cl.launch_size(FakeKernel(largest), None, counts, group) == expected
+    assert _cl.launch_size(FakeKernel(largest), FakeDevice(), counts, group) == expected
 
 
 @pytest.mark.parametrize("counts, group", [((10,), (8, 8)), ((10, 10), (0, 8))])
 def test_launch_size_refuses_a_bad_group(counts, group):
     with pytest.raises(ValueError, match="counts and group must be of one length"):
-        _cl.launch_size(FakeKernel(4096), None, counts, group)
+        _cl.launch_size(FakeKernel(4096), FakeDevice(), counts, group)
 
 
 class Recorded:
