@@ -480,13 +480,13 @@ def default_vector_width(device) -> int:
 #: The work-group of the launches with one work-item a cell, row, chunk or query (add_into, combine_nodes,
 #: pack_channels, the stopping test's running_sum and order_ratios, lookup, lookup4d, optical_depth), fixed.
 #: Left to PoCL (local size None), every new global size got a divisor of it, up to 4096, as its local
-#: size, and PoCL compiles a kernel object per local size (0.03-0.07 s each, once per machine): a new table
-#: size cost its user a few of them, the default suite on an empty kernel cache 437 of its 1004 objects
-#: (docs/speed-log.md); a prime count got work-groups of one item. 256, side by side on the default
-#: animation's planned table (this AMD EPYC, 8 rounds): add_into, combine_nodes and pack_channels as fast
-#: as with PoCL's 4096 (within the machine's noise, 10 %), the stopping test's 416 chunks 11-13 ms on both
-#: cores against 16-20 ms in PoCL's one work-group. :func:`launch_size` shrinks it where a kernel allows
-#: less (a GPU).
+#: size, and PoCL compiles a kernel object per local size (0.03-0.07 s each, once per machine): a new
+#: table size cost its user a few of them, and the default suite on an empty kernel cache compiled 877
+#: objects where it now compiles 519 (docs/speed-log.md); a prime count got work-groups of one item. 256,
+#: side by side on the default animation's planned table (this AMD EPYC, 8 rounds): add_into,
+#: combine_nodes and pack_channels as fast as with PoCL's 4096 (within the machine's noise, 10 %), the
+#: stopping test's 416 chunks 11-13 ms on both cores against 16-20 ms in PoCL's one work-group.
+#: :func:`launch_size` shrinks it where a kernel allows less (a GPU).
 LINEAR_WORK_GROUP = (256,)
 
 

@@ -48,8 +48,8 @@ GATHER_ROWS = 4
 GATHER_CELLS = 4
 #: Work-group of the gather (cell blocks, row blocks, sun nodes): PoCL's own choice for the default
 #: animation's planned table (32 x 128 x 208: 8 x 32 x 208 work-items), fixed so that any table size
-#: compiles one kernel object (:data:`clsky._cl.LINEAR_WORK_GROUP`). Side by side in one process, 12
-#: rounds, this AMD EPYC: as fast as PoCL's choices within the machine's noise (about 10 %) for that
+#: compiles one kernel object (:data:`clsky._cl.LINEAR_WORK_GROUP`). Side by side in one process, 5 to
+#: 12 rounds, this AMD EPYC: as fast as PoCL's choices within the machine's noise (about 10 %) for that
 #: table and the full default one (8 x 64 x 8 there); nor did 15 other shapes, 16 to 4096 work-items,
 #: beat it beyond the noise (docs/speed-log.md).
 GATHER_WORK_GROUP = (8, 8, 1)
