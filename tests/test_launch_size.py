@@ -80,8 +80,8 @@ def recording(kernels, launches):
         kernels[name] = Recorded(name, kernel, launches)
 
 
-# Cell counts: a multiple of the group, a prime, one past a multiple of 4096 (PoCL's own choices were the
-# counts' divisors: 4096, 1 and 1 work-items).
+# Cell counts: a multiple of the group, a prime, one past a multiple of 4096 (PoCL's own local sizes were
+# the largest divisors up to 4096: 256, 1009 and 1, as 12289 is prime).
 SHAPES = [(4, 8, 8), (1, 1, 1009), (1, 1, 3 * 4096 + 1)]
 
 
