@@ -102,8 +102,9 @@ class PowerLawEngine(_cl.Engine):
         check_kernel_buffer(kernel, "xyz", xyz_d, flat.size, np.float64)
         items = stride // self.vector_width
         step_inner, step_outer = colorimetry.POWER_LAW_TABLE_STEPS
-        self._record(kernel, self.kernels[kernel](
-            self.queue, (-(-items // WORK_GROUP) * WORK_GROUP,), (WORK_GROUP,), rows_d.data, np.int32(stride),
+        launch = self.kernels[kernel]
+        self._record(kernel, launch(
+            self.queue, *_cl.launch_size(launch, self.device, (items,), (WORK_GROUP,)), rows_d.data, np.int32(stride),
             np.int32(n_lit), pixels_d.data, *(table.data for table in tables), np.int32(n_inner), np.int32(n_outer),
             np.float64(step_inner), np.float64(step_outer), np.float64(delta_0), np.float64(delta_1),
             np.float64(colorimetry.POWER_LAW_MAX_EXPONENT), np.int32(flat.shape[0]), xyz_d.data))

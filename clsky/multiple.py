@@ -264,11 +264,10 @@ def first_gather_matrices(atmosphere, settings):
     return {pair: first_gather_matrix(atmosphere, settings, pair) for pair in DIRECT_PAIRS + CROSSED_PAIRS}
 
 
-def _scatter_global_size(width, height, depth, vector_width):
-    """The scatter kernel's global size: ``vector_width`` cells, one view row and SCATTER_SUN_NODES sun nodes
-    per work-item, each axis rounded up to a multiple of SCATTER_WORK_GROUP."""
-    items = (-(-width // vector_width), height, -(-depth // SCATTER_SUN_NODES))
-    return tuple(-(-n // group) * group for n, group in zip(items, SCATTER_WORK_GROUP))
+def _scatter_items(width, height, depth, vector_width):
+    """The scatter kernel's work-items per axis: ``vector_width`` cells, one view row and SCATTER_SUN_NODES
+    sun nodes per work-item (the launch rounds each axis up to SCATTER_WORK_GROUP, :func:`clsky._cl.launch_size`)."""
+    return -(-width // vector_width), height, -(-depth // SCATTER_SUN_NODES)
 
 
 class MultipleScatteringEngine(_cl.Engine):
@@ -399,8 +398,10 @@ class MultipleScatteringEngine(_cl.Engine):
         else:
             self._check_out(out, (depth, height, width, 8), node)
         atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
-        event = self.kernels_with(_atmosphere_cl.feature_defines(atmosphere))["scatter"](
-            self.queue, _scatter_global_size(width, height, depth, self.vector_width), SCATTER_WORK_GROUP,
+        kernel = self.kernels_with(_atmosphere_cl.feature_defines(atmosphere))["scatter"]
+        event = kernel(
+            self.queue, *_cl.launch_size(kernel, self.device, _scatter_items(width, height, depth, self.vector_width),
+                                         SCATTER_WORK_GROUP),
             atmosphere_d, np.int32(width),
             np.int32(height), np.int32(depth), np.int32(MAPPINGS[self.settings.mapping]),
             self.real2(self.settings.sun_w_range), np.int32(bool(combine_species)), self.real(cos_azimuth),

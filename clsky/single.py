@@ -100,9 +100,8 @@ class SingleScatteringEngine(_cl.Engine):
         slabs = range(0, depth, SLAB_LAYERS)
         for done, z_offset in enumerate(slabs, start=1):
             slab = min(SLAB_LAYERS, depth - z_offset)
-            global_size = (-(-width // self.vector_width), -(-height // SINGLE_WORK_GROUP[1]) * SINGLE_WORK_GROUP[1],
-                           -(-slab // self.sun_nodes))
-            event = kernel(self.queue, global_size, SINGLE_WORK_GROUP, atmosphere_d,
+            items = (-(-width // self.vector_width), height, -(-slab // self.sun_nodes))
+            event = kernel(self.queue, *_cl.launch_size(kernel, self.device, items, SINGLE_WORK_GROUP), atmosphere_d,
                            np.int32(width), np.int32(height), np.int32(depth), np.int32(z_offset),
                            np.int32(z_offset + slab), np.int32(MAPPINGS[settings.mapping]),
                            self.real2(settings.sun_w_range),
