@@ -36,8 +36,10 @@ try:
 except ImportError as error:  # pragma: no cover - exercised only on broken installs
     raise ImportError("clsky needs pyopencl: pip install pyopencl (and an OpenCL driver, see README)") from error
 
+from .errors import check_instance
+
 __all__ = ["KernelBuildError", "NoDeviceError", "Source", "Engine", "memory_pool", "upload_padded", "list_devices",
-           "default_device", "make_context", "real_vector_dtype", "check_dtype", "INSTALL_HINT", "pocl_cache_problem",
+           "default_device", "make_context", "check_context", "check_flag", "real_vector_dtype", "check_dtype", "INSTALL_HINT", "pocl_cache_problem",
            "no_device_hint", "host_blas_single_threaded", "host_cores", "quiet_compiler_output"]
 
 INSTALL_HINT = ("install a CPU OpenCL driver: as root `apt-get install pocl-opencl-icd` (fast PoCL 3.1), "
@@ -231,6 +233,18 @@ def default_device():
 
 
 _shared_contexts: dict = {}
+
+
+def check_context(ctx):
+    """``ctx`` if it is None (clsky's shared context, :func:`make_context`) or a pyopencl.Context;
+    ValueError naming ``ctx`` otherwise (an engine or a memory check would end in AttributeError)."""
+    return check_instance("ctx", ctx, cl.Context, "None (clsky's device) or a pyopencl.Context", optional=True)
+
+
+def check_flag(name, value):
+    """``value`` as a bool if it is one (Python's or NumPy's); ValueError naming ``name`` otherwise: a
+    string such as ``'no'`` would be true."""
+    return bool(check_instance(name, value, (bool, np.bool_), "True or False"))
 
 
 def make_context(dtype=np.float64):
@@ -611,12 +625,12 @@ class Engine:
             raise ValueError(f"clsky._cl.CUBE_ROOT must be one of {CUBE_ROOTS}, got {CUBE_ROOT!r}")
         self.cube_root = CUBE_ROOT
         if queue is not None:
-            ctx = queue.context
-        self.ctx = ctx if ctx is not None else make_context(self.dtype)
+            ctx = check_instance("queue", queue, cl.CommandQueue, "None or a pyopencl.CommandQueue").context
+        self.ctx = check_context(ctx) if ctx is not None else make_context(self.dtype)
         self.device = self.ctx.devices[0]
         check_dtype(self.device, self.dtype)
         self.vector_width = VECTOR_WIDTH if VECTOR_WIDTH is not None else default_vector_width(self.device)
-        self.fast_math = bool(fast_math)
+        self.fast_math = check_flag("fast_math", fast_math)
         if queue is None:
             properties = cl.command_queue_properties.PROFILING_ENABLE if profile else 0
             queue = cl.CommandQueue(self.ctx, properties=properties)

@@ -33,7 +33,7 @@ import tempfile
 import threading
 
 __all__ = ["check_output", "check_output_directory", "atomic_write", "StagedWrites", "temporary_prefix",
-           "check_suffix", "binary_and_header"]
+           "check_suffix", "binary_and_header", "as_path"]
 
 #: Random characters of a temporary's name between its prefix and suffix (as tempfile.mkstemp's).
 _RANDOM_CHARACTERS = 8
@@ -69,8 +69,12 @@ def _label(option):
     return f"{option}: " if option else ""
 
 
+#: How to overwrite, for the library's callers: the writers' ``force``, the table's save and exports' ``overwrite``.
+_API_FORCE_HINT = "pass force=True (a table's save and exports: overwrite=True), or --force on the command line"
+
+
 def _force_hint(option):
-    return "use --force to overwrite it" if option else "use force=True, or --force on the command line"
+    return "use --force to overwrite it" if option else _API_FORCE_HINT
 
 
 def temporary_prefix(path, suffix):
@@ -130,6 +134,28 @@ def _check_parent(directory, option, create=False, probe=True):
         _probe_directory(directory, option)
 
 
+def as_path(value, name: str = "path") -> pathlib.Path:
+    """``value`` (a str or os.PathLike) as a Path; ValueError naming ``name`` for anything else (None, a
+    number, bytes) and for a NUL character, which no file name may hold (the OS would refuse it only
+    when the file is opened, after the work).
+
+    >>> as_path("sky.png")
+    PosixPath('sky.png')
+    >>> as_path(None, "--output")
+    Traceback (most recent call last):
+    ...
+    ValueError: --output must be a file path (a str or os.PathLike), got None (NoneType)
+    """
+    if not isinstance(value, (str, os.PathLike)):
+        raise ValueError(f"{name} must be a file path (a str or os.PathLike), got {value!r:.60} ({type(value).__name__})")
+    text = os.fspath(value)
+    if not isinstance(text, str):
+        raise ValueError(f"{name} must be a file path as text, got {text!r:.60} ({type(text).__name__})")
+    if "\0" in text:
+        raise ValueError(f"{name} must not hold a NUL character, got {text!r:.60}")
+    return pathlib.Path(text)
+
+
 def check_suffix(path, suffix: str, name: str = "path") -> pathlib.Path:
     """``path`` as a Path if it names a file NAME``suffix`` (a name before the suffix: pathlib's own reading,
     for which '.png' is a hidden file without a suffix); ValueError naming ``name`` otherwise.
@@ -141,7 +167,7 @@ def check_suffix(path, suffix: str, name: str = "path") -> pathlib.Path:
     ...
     ValueError: --output must end in .png after a file name (NAME.png), got '.png'
     """
-    result = pathlib.Path(path)
+    result = as_path(path, name)
     if result.suffix != suffix:
         raise ValueError(f"{name} must end in {suffix} after a file name (NAME{suffix}), got {str(path)!r}")
     return result
@@ -207,7 +233,7 @@ def check_output(path, force=False, option=None, suffix=None, probe=True):
         A name longer than the file system's NAME_MAX, or a path (with its temporary name) longer
         than PATH_MAX.
     """
-    path = pathlib.Path(path)
+    path = as_path(path, option or "path")
     suffix = path.suffix if suffix is None else suffix
     _check_names(path, option, suffix)
     if path.is_dir():
@@ -290,14 +316,12 @@ def _place(temporary, target, overwrite):
     try:
         os.link(temporary, target)
     except FileExistsError:
-        raise FileExistsError(f"{target} exists (it appeared during the run); "
-                              f"use force=True, or --force on the command line") from None
+        raise FileExistsError(f"{target} exists (it appeared during the run); {_API_FORCE_HINT}") from None
     except OSError as error:
         if error.errno not in (errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.EXDEV, errno.EMLINK):
             raise
         if os.path.lexists(target):
-            raise FileExistsError(f"{target} exists (it appeared during the run); "
-                                  f"use force=True, or --force on the command line") from None
+            raise FileExistsError(f"{target} exists (it appeared during the run); {_API_FORCE_HINT}") from None
         os.replace(temporary, target)
         return
     os.unlink(temporary)
@@ -447,6 +471,8 @@ def atomic_write(path, overwrite=False, suffix=None, staging=None):
     one, and the last rename wins. An exception in the block (KeyboardInterrupt included) deletes
     the temporary and leaves ``path`` as it was.
     """
+    if staging is not None and not isinstance(staging, StagedWrites):
+        raise ValueError(f"staging must be None or a StagedWrites, got {staging!r:.60} ({type(staging).__name__})")
     own = StagedWrites() if staging is None else None
     writes = staging or own
     temporary = None

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ParameterError, is_real_number
+from .errors import ParameterError, is_finite_real, is_real_number, short
 from .ozone import DOBSON_UNIT, cross_section_serdyuchenko2014
 
 __all__ = [
@@ -86,6 +86,10 @@ def rayleigh_scattering_coefficient(refractive_index, number_density, wavelength
 
 _is_real_number = is_real_number
 
+#: Largest refractive index :meth:`AtmosphereParameters.from_refractive_index` takes (air's is 1.0003; a gas
+#: far beyond would exceed the optical-depth limit anyway, and n^2 would overflow long before 1e200).
+MAX_REFRACTIVE_INDEX = 10.0
+
 #: Supported ranges (float64; see :class:`AtmosphereParameters`, Notes).
 PLANET_RADIUS_RANGE = (1e3, 1e10)
 ATMOSPHERE_HEIGHT_RANGE = (1.0, 1e10)
@@ -123,7 +127,10 @@ def _as_rgb(name: str, value) -> tuple[float, float, float]:
     items = tuple(value) if isinstance(value, (tuple, list, np.ndarray)) else None
     if items is None or len(items) != 3 or not all(_is_real_number(v) for v in items):
         raise ParameterError(name, "3 real numbers (r, g, b)", value)
-    return tuple(float(v) for v in items)
+    try:
+        return tuple(float(v) for v in items)
+    except OverflowError:                           # an integer beyond float's range (10**400)
+        raise ParameterError(name, "3 finite real numbers (r, g, b)", value) from None
 
 
 def _column(scale_height, atmosphere_height):
@@ -235,7 +242,10 @@ class AtmosphereParameters:
             value = getattr(self, name)
             if not _is_real_number(value):
                 raise ParameterError(name, "a real number", value)
-            object.__setattr__(self, name, float(value))
+            try:
+                object.__setattr__(self, name, float(value))
+            except OverflowError:                   # an integer beyond float's range (10**400)
+                raise ParameterError(name, "a finite real number", value) from None
 
         def check(name, ok, valid_range):
             values = np.atleast_1d(getattr(self, name))
@@ -270,6 +280,13 @@ class AtmosphereParameters:
               f"in [0, {MAX_ANGSTROM_EXPONENT:g}]")
         check("mie_reference_wavelength", lambda v: v > 0, "finite and > 0 nm")
         check("ground_albedo", lambda v: (v >= 0) & (v <= 1), "in [0, 1]")
+        with np.errstate(over="ignore"):
+            angstrom = (np.array(self.wavelengths) / self.mie_reference_wavelength) ** -self.mie_angstrom_exponent
+        if not np.all(np.isfinite(angstrom)):      # 0 * inf would make a Mie coefficient NaN
+            raise ParameterError("wavelengths", f"such that the Angstrom law's factor (wavelength / "
+                                                f"mie_reference_wavelength) ** -mie_angstrom_exponent is finite "
+                                                f"(mie_reference_wavelength {self.mie_reference_wavelength:g} nm, "
+                                                f"exponent {self.mie_angstrom_exponent:g})", self.wavelengths)
         self._check_optical_depth()
         if not isinstance(self.rayleigh_phase, str) or self.rayleigh_phase not in RAYLEIGH_PHASE_METHODS:
             raise ParameterError("rayleigh_phase", f"one of {sorted(RAYLEIGH_PHASE_METHODS)}", self.rayleigh_phase)
@@ -283,7 +300,7 @@ class AtmosphereParameters:
         mie = self.mie_extinction_channels * _column(self.mie_scale_height, self.atmosphere_height)
         ozone = np.array(self.ozone_cross_section) * self.ozone_column_du * DOBSON_UNIT   # the whole tent's column
         depth = float(np.max(rayleigh + mie + ozone))
-        if depth > MAX_VERTICAL_OPTICAL_DEPTH:
+        if not depth <= MAX_VERTICAL_OPTICAL_DEPTH:     # NaN too
             largest = max((np.max(ozone), "ozone_column_du"), (np.max(mie), "mie_scattering"),
                           (np.max(rayleigh), "rayleigh_scattering"))
             name = largest[1]
@@ -372,10 +389,10 @@ class AtmosphereParameters:
             ``number_density`` (> 0 1/m^3) or ``wavelengths`` (3 numbers > 0 nm), or any field.
         """
         for name, value in (("refractive_index", refractive_index), ("number_density", number_density)):
-            if not _is_real_number(value) or not math.isfinite(value):
+            if not is_finite_real(value):
                 raise ParameterError(name, "a finite real number", value)
-        if refractive_index < 1.0:
-            raise ParameterError("refractive_index", "a real number >= 1", refractive_index)
+        if not 1.0 <= refractive_index <= MAX_REFRACTIVE_INDEX:
+            raise ParameterError("refractive_index", f"a real number in [1, {MAX_REFRACTIVE_INDEX:g}]", refractive_index)
         if number_density <= 0.0:
             raise ParameterError("number_density", "a finite number > 0 1/m^3", number_density)
         wavelengths = _as_rgb("wavelengths", wavelengths)
@@ -408,6 +425,8 @@ class AtmosphereParameters:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "AtmosphereParameters":
         """Inverse of :meth:`to_dict`; unknown fields raise ValueError."""
+        if not isinstance(data, dict):
+            raise ValueError(f"an atmosphere's fields must be a dict, got {short(data)} ({type(data).__name__})")
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = set(data) - known
         if unknown:
@@ -430,7 +449,6 @@ PRESETS = {
 
 def preset(name: str) -> AtmosphereParameters:
     """The preset called ``name``; ValueError lists the valid names."""
-    try:
-        return PRESETS[name]
-    except KeyError:
-        raise ValueError(f"preset must be one of {sorted(PRESETS)}, got {name!r}") from None
+    if not isinstance(name, str) or name not in PRESETS:
+        raise ValueError(f"preset must be one of {sorted(PRESETS)}, got {name!r}")
+    return PRESETS[name]

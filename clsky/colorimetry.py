@@ -69,6 +69,7 @@ import functools
 import numpy as np
 
 from . import colour_constants
+from .errors import as_real_array
 from .solar import solar_irradiance_astm_g173
 
 __all__ = ["MAX_LUMINOUS_EFFICACY", "SRGB_PRIMARIES_XY", "D65_WHITE_XY", "SRGB_TO_XYZ", "XYZ_TO_SRGB",
@@ -212,7 +213,10 @@ def linear_srgb_to_xyz(rgb):
 
 def luminance(xyz):
     """Y of XYZ (..., 3) [cd/m^2 for XYZ from radiance]."""
-    return np.asarray(xyz, dtype=np.float64)[..., 1]
+    xyz = as_real_array("xyz", xyz, "real numbers X, Y, Z on a last axis of 3")
+    if xyz.shape[-1:] != (3,):
+        raise ValueError(f"xyz must be real numbers X, Y, Z on a last axis of 3, got shape {xyz.shape}")
+    return xyz[..., 1]
 
 
 def _solar_interpolation_matrix(wavelengths):
@@ -263,7 +267,7 @@ def _solar_power_law_xyz(radiance, wavelengths):
     segment = np.clip(np.searchsorted(lam, grid) - 1, 0, 1)                # which pair of samples
     for start in range(0, flat.shape[0], _POWER_LAW_BLOCK):
         block = slice(start, start + _POWER_LAW_BLOCK)
-        lit = top[block, 0] > 0
+        lit = POWER_LAW_FLOOR * top[block, 0] > 0         # > 0 and its floor too (not subnormal to 0)
         log_r = np.log(np.maximum(ratio[block][lit], POWER_LAW_FLOOR * top[block][lit]))
         exponents = np.diff(log_r, axis=1) / np.diff(log_lam)[None, :]                # (m, 2)
         outside = (grid < lam[0]) | (grid > lam[-1])
@@ -346,7 +350,7 @@ def _interpolate(columns, x, step, half):
 def _lit_ratios(radiance, wavelengths):
     """The power law's inputs: (lam, the wavelengths ascending; flat, radiance as (n, 3); ratio, each
     channel's L / E_sun(lambda) in ascending wavelength (3 arrays of n); lit, the pixels whose largest ratio
-    is positive; floor, POWER_LAW_FLOOR times that largest ratio, lit pixels only). Shared by
+    is positive with a positive floor (one below about 5e-312 is taken as black: XYZ 0); floor, POWER_LAW_FLOOR times that largest ratio, lit pixels only). Shared by
     :func:`_solar_power_law_tabulated_xyz` and its device form (:mod:`clsky.colorimetry_cl`)."""
     order = np.argsort(wavelengths)
     lam = wavelengths[order]
@@ -354,8 +358,9 @@ def _lit_ratios(radiance, wavelengths):
     sun = solar_irradiance_astm_g173(lam)
     ratio = [flat[:, channel] / sun[k] for k, channel in enumerate(order)]
     top = np.maximum(np.maximum(ratio[0], ratio[1]), ratio[2])
-    lit = top > 0
-    return lam, flat, ratio, lit, POWER_LAW_FLOOR * top[lit]
+    floor = POWER_LAW_FLOOR * top
+    lit = floor > 0     # the largest ratio > 0, and its floor too: below about 5e-312 it is 0, whose log is -inf
+    return lam, flat, ratio, lit, floor[lit]
 
 
 def _solar_power_law_tabulated_xyz(radiance, wavelengths):
@@ -394,8 +399,21 @@ THREE_WAVELENGTH_METHODS = {"solar_power_law": _solar_power_law_xyz,
 LINEAR_METHODS = ("solar_interpolation", "bruneton2017")
 
 
+def _three_radiances(radiance):
+    """``radiance`` (..., 3) as float64 if every value is finite and >= 0; ParameterError naming ``radiance``
+    otherwise (the power law would take NaN for black and clamp a negative channel, silently)."""
+    valid = "finite radiances >= 0 at three wavelengths (a last axis of 3)"
+    array = as_real_array("radiance", radiance, valid)
+    if array.shape[-1:] != (3,):
+        raise ValueError(f"radiance must be {valid}, got shape {array.shape}")
+    if array.size and not (array.min() >= 0.0 and array.max() < np.inf):       # NaN fails the first
+        bad = int(np.count_nonzero(~(np.isfinite(array) & (array >= 0.0))))
+        raise ValueError(f"radiance must be {valid}, got {bad} NaN, infinite or negative values")
+    return array
+
+
 def _three(wavelengths, method, methods):
-    if method not in methods:
+    if not isinstance(method, str) or method not in methods:
         raise ValueError(f"method must be one of {sorted(methods)}, got {method!r}")
     values = np.asarray(wavelengths, dtype=np.float64)
     if values.shape != (3,) or len(set(values.tolist())) != 3:
@@ -428,8 +446,9 @@ def three_wavelength_to_xyz(radiance, wavelengths, method=DEFAULT_THREE_WAVELENG
     ``solar_power_law_tabulated`` runs on its device (:mod:`clsky.colorimetry_cl`: the same values, bit for
     bit, in about half the CPU time on the 2-core machine); the other methods ignore it."""
     values = _three(wavelengths, method, THREE_WAVELENGTH_METHODS)
+    radiance = _three_radiances(radiance)
     if method in LINEAR_METHODS:
-        return np.asarray(radiance, dtype=np.float64) @ THREE_WAVELENGTH_METHODS[method](values).T
+        return radiance @ THREE_WAVELENGTH_METHODS[method](values).T
     if ctx is not None and method == "solar_power_law_tabulated":
         from .colorimetry_cl import solar_power_law_xyz
 

@@ -14,8 +14,8 @@ import numbers
 
 import numpy as np
 
-__all__ = ["ParameterError", "NumericalError", "short", "counted", "is_real_number", "is_integer", "as_real_array",
-           "check_integer", "check_real", "check_choice",
+__all__ = ["ParameterError", "NumericalError", "short", "counted", "is_real_number", "is_finite_real",
+           "is_integer", "as_real_array", "check_integer", "check_real", "check_choice", "check_instance",
            "require_extra"]
 
 #: Longest text of a value echoed in a message.
@@ -23,13 +23,15 @@ _MAX_ECHO = 60
 
 
 def short(value) -> str:
-    """``value`` as a short text for a message: numbers with at most 6 significant digits (a
-    300-digit integer prints as ``1e+300``), other values by ``repr``, cut to 60 characters.
+    """``value`` as a short text for a message: numbers with at most 6 significant digits where that is
+    the number itself (a 300-digit integer prints as ``1e+300``), else every digit it takes (a value just
+    outside a range must not print as its bound: ``1.0000001``, not ``1``), other values by ``repr``, cut
+    to 60 characters.
 
     Examples
     --------
-    >>> short(10**300), short(4096), short(0.1 + 0.2), short("a")
-    ('1e+300', '4096', '0.3', "'a'")
+    >>> short(10**300), short(4096), short(0.25), short(1.0000001), short(0.1 + 0.2), short("a")
+    ('1e+300', '4096', '0.25', '1.0000001', '0.30000000000000004', "'a'")
     """
     if isinstance(value, (bool, np.bool_)):
         return repr(bool(value))
@@ -42,7 +44,9 @@ def short(value) -> str:
         except OverflowError:                   # beyond float: its order of magnitude
             return f"{'-' if value < 0 else ''}1e+{int(abs(value).bit_length() * math.log10(2))}"
     if isinstance(value, numbers.Real):
-        return f"{float(value):g}"
+        text = f"{float(value):g}"
+        exact = not math.isfinite(value) or float(text) == float(value)
+        return text if exact else str(value)      # a float's or NumPy float's shortest exact digits
     if isinstance(value, (tuple, list)) and len(value) <= 8:
         items = ", ".join(short(v) for v in value)
         return f"({items})" if isinstance(value, tuple) else f"[{items}]"
@@ -64,6 +68,17 @@ def counted(count: int, noun: str) -> str:
 def is_real_number(value) -> bool:
     """A real number: Python's or NumPy's int or float, not a bool, a string or a complex."""
     return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
+def is_finite_real(value) -> bool:
+    """A real number (:func:`is_real_number`) that is finite: an integer too large for a float (``10**400``)
+    is not, nor NaN or an infinity."""
+    if not is_real_number(value):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:                       # an int beyond float's range
+        return False
 
 
 def is_integer(value) -> bool:
@@ -119,7 +134,8 @@ def check_integer(name, value, low, high, index=None, optional=False):
     if optional and value is None:
         return None
     if not is_integer(value) or not low <= value <= high:
-        raise ParameterError(name, (_OPTIONAL if optional else "") + f"an integer in [{low}, {high}]", value, index)
+        raise ParameterError(name, (_OPTIONAL if optional else "") + f"an integer in [{low}, {high}]", value, index,
+                             typed=not is_integer(value))
     return int(value)
 
 
@@ -156,7 +172,7 @@ def check_real(name, value, low=-math.inf, high=math.inf, low_open=False, unit="
     """
     if optional and value is None:
         return None
-    if (not is_real_number(value) or not math.isfinite(value) or not (low < value if low_open else low <= value)
+    if (not is_finite_real(value) or not (low < value if low_open else low <= value)
             or not value <= high):
         bounded = (low, high) != (-math.inf, math.inf)
         valid = f"a number in {'(' if low_open else '['}{low:g}, {high:g}]{unit}" if bounded else f"a finite number{unit}"
@@ -184,6 +200,37 @@ def check_choice(name, value, choices, optional=False):
     if not isinstance(value, str) or value not in choices:
         raise ParameterError(name, (_OPTIONAL if optional else "") + f"one of {list(choices)}", value)
     return value
+
+
+def check_instance(name, value, types, valid, optional=False):
+    """``value`` if it is an instance of ``types`` (a class or a tuple of them), or None with ``optional``.
+
+    Parameters
+    ----------
+    name : str
+        The parameter's name, for the message.
+    value : object
+    types : type or tuple of types
+    valid : str
+        What is valid, in words, e.g. ``'a TableSettings (the sky-view map's sizes)'``.
+    optional : bool
+        None is valid too (and returned); ``valid`` should say what None means.
+
+    Raises
+    ------
+    ParameterError
+        ``'{name} must be {valid}, got {value} ({its type})'``.
+
+    Examples
+    --------
+    >>> check_instance("settings", "x", dict, "a dict of settings")
+    Traceback (most recent call last):
+    ...
+    clsky.errors.ParameterError: settings must be a dict of settings, got 'x' (str)
+    """
+    if (optional and value is None) or isinstance(value, types):
+        return value
+    raise ParameterError(name, valid, value, typed=True)
 
 
 def require_extra(module: str, purpose: str, install: str):
@@ -219,18 +266,23 @@ class ParameterError(ValueError):
         What was given (printed short, :func:`short`).
     index : int, optional
         The item of a tuple parameter.
+    typed : bool
+        Name the value's type after it (``got 5 (float)`` where an integer is valid, ``got 'x' (str)``).
     """
 
-    def __init__(self, field, valid, value, index=None):
-        self.field, self.valid, self.value, self.index = field, valid, value, index
-        super().__init__(f"{field if index is None else f'{field}[{index}]'} must be {valid}, got {short(value)}")
+    def __init__(self, field, valid, value, index=None, typed=False):
+        self.field, self.valid, self.value, self.index, self.typed = field, valid, value, index, typed
+        super().__init__(f"{field if index is None else f'{field}[{index}]'} must be {valid}, got {self._given()}")
+
+    def _given(self) -> str:
+        return short(self.value) + (f" ({type(self.value).__name__})" if self.typed else "")
 
     def reworded(self, name: str) -> str:
         """The message with ``name``, what the user typed (a command-line option, a scene file's key), in
         place of the parameter's name. An optional parameter's "None or " is left out there: None is what
         leaving the option or key out gives, not a value one can type."""
         valid = self.valid[len(_OPTIONAL):] if self.valid.startswith(_OPTIONAL) else self.valid
-        return f"{name} must be {valid}, got {short(self.value)}"
+        return f"{name} must be {valid}, got {self._given()}"
 
 
 class NumericalError(ArithmeticError):

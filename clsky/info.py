@@ -18,10 +18,10 @@ one line and exit status 2 on the command line.
 from __future__ import annotations
 
 import json
-import pathlib
 
 import numpy as np
 
+from ._files import as_path
 from .errors import counted
 from .table import TableFormatError
 
@@ -184,7 +184,7 @@ def describe(path) -> str:
     ImportError
         A PNG without Pillow, an EXR file without the OpenEXR bindings (the ``anim`` extra), saying so.
     """
-    path = pathlib.Path(path)
+    path = as_path(path)
     if path.is_dir():
         raise IsADirectoryError(f"{path}: a directory, not a file: clsky info reads {', '.join(READERS)} files")
     reader = READERS.get(path.suffix.lower())

@@ -74,11 +74,12 @@ import numpy as np
 from . import _cl
 from ._cache import cache_directory, source_digest, store
 from .atmosphere import AtmosphereParameters, preset
-from .errors import ParameterError, check_integer, is_real_number
+from .ground import check_ground_mode
+from .errors import ParameterError, check_choice, check_instance, check_integer, is_finite_real
 from .mapping import cos_to_v
 from .quality import QualityLevel, level_for_budget, quality_level
 from .renderer_choice import DEFAULT_PIXELS, LOOKUP_ERROR, choose_renderer, renderer_row
-from .settings import TableSettings
+from .settings import SCATTERING_MODES, TableSettings
 
 __all__ = ["Scene", "Plan", "plan_scene", "sun_margins", "sun_axis", "view_sampling", "azimuth_harmonics",
            "LOOKUP_ERROR", "COMPONENTS", "HARMONICS_BELOW_DEG"]
@@ -91,7 +92,7 @@ def _check_range(name, value, low, high):
     """(low, high) floats from two real numbers (NumPy's too; a list or array) in order in [low, high]."""
     valid = f"two numbers low <= high in [{low:g}, {high:g}]"
     items = tuple(value) if isinstance(value, (tuple, list, np.ndarray)) else ()
-    if len(items) != 2 or not all(is_real_number(v) for v in items):
+    if len(items) != 2 or not all(is_finite_real(v) for v in items):
         raise ParameterError(name, valid, value)
     a, b = (float(v) for v in items)
     if not low <= a <= b <= high:
@@ -137,8 +138,10 @@ class Scene:
         object.__setattr__(self, "altitudes_m", _check_range("altitudes_m", self.altitudes_m, 0.0, 1e8))
         object.__setattr__(self, "view_elevations_deg",
                            _check_range("view_elevations_deg", self.view_elevations_deg, -90.0, 90.0))
-        components = tuple(self.components) if not isinstance(self.components, str) else (self.components,)
-        if not components or any(c not in COMPONENTS for c in components) or "rayleigh" not in components:
+        components = (tuple(self.components) if isinstance(self.components, (tuple, list, set, frozenset))
+                      else (self.components,))
+        if any(not isinstance(c, str) for c in components) or any(c not in COMPONENTS for c in components) \
+                or "rayleigh" not in components:
             raise ValueError(f"components must be a subset of {list(COMPONENTS)} that holds 'rayleigh', "
                              f"got {self.components!r}")
         object.__setattr__(self, "components", components)
@@ -462,9 +465,12 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         True when frames will be ray-marched whatever the budget says (an animation comparing the two
         renderers): the sun axis then keeps the ray march's margins.
     """
+    check_instance("scene", scene, Scene, "a Scene (sun path, altitudes, views, components, error budget)")
     atmosphere = preset(atmosphere) if isinstance(atmosphere, str) else atmosphere
     if not isinstance(atmosphere, AtmosphereParameters):
         raise ValueError(f"atmosphere must be AtmosphereParameters or a preset name, got {atmosphere!r}")
+    check_choice("mode", mode, SCATTERING_MODES)
+    check_ground_mode(atmosphere, mode)     # before the pilot: a plan the build would refuse is no plan
     level = quality_level(scene.quality) if scene.quality else level_for_budget(scene.error_budget)
     budget = level.budget if scene.quality else scene.error_budget
     if scene.quality:

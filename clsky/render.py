@@ -16,7 +16,7 @@ import numpy as np
 import pyopencl.array as cla
 
 from . import _atmosphere_cl, _cl, reference
-from .errors import as_real_array, is_real_number, short
+from .errors import as_real_array, check_instance, is_finite_real, short
 from .ground import padded4
 from .lookup import check_kernel_buffer, check_table_data
 from .resources import check_memory, device_of, estimate_directions_memory, estimate_render_memory
@@ -49,7 +49,7 @@ def check_directions(directions, sun_direction, altitude):
     sun = as_real_array("sun_direction", sun_direction, "a finite unit vector of 3 values")
     if sun.shape != (3,) or not np.all(np.isfinite(sun)) or abs(np.linalg.norm(sun) - 1.0) > 1e-6:
         raise ValueError(f"sun_direction must be a finite unit vector of 3 values, got {short(sun_direction)}")
-    if not (is_real_number(altitude) and np.isfinite(altitude) and 0.0 <= altitude <= 1e9):
+    if not (is_finite_real(altitude) and 0.0 <= altitude <= 1e9):
         raise ValueError(f"altitude must be finite and in [0, 1e9] m, got {short(altitude)}")
     return directions, sun, float(altitude)
 
@@ -66,9 +66,7 @@ def check_render_table(table):
         ``table`` is no ScatteringTable, or (:class:`~clsky.table.TableFormatError`) naming the array and
         what is wrong.
     """
-    if not isinstance(table, ScatteringTable):
-        raise ValueError(f"table must be a ScatteringTable (ScatteringTable.build or .load), got {short(table)} "
-                         f"({type(table).__name__})")
+    check_instance("table", table, ScatteringTable, "a ScatteringTable (ScatteringTable.build or .load)")
     table.validate()
     if table.settings.is_4d:
         from .lookup4d import check_table4d_data
@@ -144,6 +142,27 @@ def ray_march_batch(pixels: int, suns: int) -> int:
     return suns
 
 
+def skyview_settings(settings):
+    """``settings`` for a sky-view map: a :class:`~clsky.skyview.SkyViewSettings`, or its defaults for None;
+    ValueError naming ``settings`` otherwise."""
+    from .skyview import SkyViewSettings
+
+    check_instance("settings", settings, SkyViewSettings, "None (the defaults) or a SkyViewSettings", optional=True)
+    return settings or SkyViewSettings()
+
+
+def _sun_list(sun_directions) -> list:
+    """``sun_directions`` (a sequence of suns) as a non-empty list; ValueError naming it otherwise."""
+    try:
+        suns = list(sun_directions)
+    except TypeError:
+        raise ValueError(f"sun_directions must be a sequence of sun directions of 3 values each, got "
+                         f"{short(sun_directions)} ({type(sun_directions).__name__})") from None
+    if not suns:
+        raise ValueError("sun_directions must hold at least one sun direction")
+    return suns
+
+
 @dataclasses.dataclass(frozen=True)
 class PreparedDirections:
     """A camera's directions on the device (:meth:`SkyRenderer.prepare`), with their shape and mask."""
@@ -196,9 +215,8 @@ class SkyRenderer:
     def __init__(self, table: ScatteringTable, ray_settings: TableSettings | None = None, ctx=None,
                  fast_math=False):
         check_render_table(table)
-        if ray_settings is not None and not isinstance(ray_settings, TableSettings):
-            raise ValueError(f"ray_settings must be a TableSettings or None (the ray march's defaults), got "
-                             f"{short(ray_settings)} ({type(ray_settings).__name__})")
+        check_instance("ray_settings", ray_settings, TableSettings, "a TableSettings or None (the ray march's defaults)",
+                       optional=True)
         self.table = table
         self.ray_settings = ray_settings or RAYMARCH_DEFAULTS.replace(dtype=table.settings.dtype)
         check_memory(estimate_render_memory(table.settings, (0, 0), ray_settings=self.ray_settings,
@@ -419,9 +437,7 @@ class SkyRenderer:
         Each pixel's ray is marched once for several suns (:func:`ray_march_suns`, :func:`ray_march_batch`;
         on CPUs: elsewhere one sun a launch by default): its geometry, densities and view transmittance
         computed once for them (docs/speed-log.md)."""
-        sun_directions = list(sun_directions)
-        if not sun_directions:
-            raise ValueError("sun_directions must hold at least one sun direction")
+        sun_directions = _sun_list(sun_directions)
         if np.ndim(sun_directions[0]) == 0:
             raise ValueError(f"sun_directions must be a sequence of sun directions of 3 values each, got "
                              f"{short(sun_directions)} (for one sun: render_raymarch)")
@@ -462,10 +478,8 @@ class SkyRenderer:
         machine 8-10 against 13-16 CPU-ms a default map, four suns a launch)."""
         from . import skyview
 
-        settings = settings or skyview.SkyViewSettings()
-        sun_directions = list(sun_directions)
-        if not sun_directions:
-            raise ValueError("sun_directions must hold at least one sun direction")
+        settings = skyview_settings(settings)
+        sun_directions = _sun_list(sun_directions)
         checked = [check_directions(np.zeros((0, 3)), sun, altitude) for sun in sun_directions]
         altitude = checked[0][2]
         key = (settings, altitude)
@@ -483,7 +497,7 @@ class SkyRenderer:
         :class:`~clsky.skyview.SkyViewSettings` (map size, azimuth mapping)."""
         from . import skyview
 
-        settings = settings or skyview.SkyViewSettings()
+        settings = skyview_settings(settings)
         _, sun, altitude = check_directions(np.zeros((0, 3)), sun_direction, altitude)
         if sky_map is not None:
             sky_map = np.asarray(sky_map, dtype=np.float64)
@@ -510,6 +524,7 @@ class SkyRenderer:
         result), a device array (pixels,) computed on its first call (kernels/skyview.cl: view_zenith_angles)
         and kept with the directions: the sky-view lookup reads them every frame instead of taking a scalar
         atan2 per pixel (about three quarters of its time on PoCL, docs/speed-log.md)."""
+        check_instance("directions", directions, PreparedDirections, "directions prepared by prepare()")
         angles = directions.derived.get("view_zenith")
         if angles is None:
             n = directions.array.shape[0]

@@ -707,7 +707,7 @@ def device_of(ctx=None, dtype="float64"):
     """The device work on ``ctx`` (default: clsky's shared context, :func:`clsky._cl.make_context`) runs on."""
     from . import _cl
 
-    return (ctx if ctx is not None else _cl.make_context(np.dtype(dtype))).devices[0]
+    return (_cl.check_context(ctx) if ctx is not None else _cl.make_context(np.dtype(dtype))).devices[0]
 
 
 def machine_limits(device=None) -> MemoryLimits:

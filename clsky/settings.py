@@ -6,7 +6,7 @@ import dataclasses
 
 import numpy as np
 
-from .errors import ParameterError, check_choice, check_integer, is_real_number
+from .errors import ParameterError, check_choice, check_integer, is_finite_real, is_real_number, short
 
 __all__ = ["TableSettings", "MAPPINGS", "SAMPLINGS", "SUN_TRANSMITTANCE_METHODS", "MIE_LAYOUTS",
            "SCATTERING_MODES", "PARAMETERIZATIONS"]
@@ -225,7 +225,7 @@ class TableSettings:
             items = tuple(value)
         except TypeError:
             raise error from None
-        if len(items) != 2 or not all(is_real_number(v) for v in items):
+        if len(items) != 2 or not all(is_finite_real(v) for v in items):
             raise error
         low, high = (float(v) for v in items)
         if not -1.0 <= low < high <= 1.0 or high - low < 1e-3:
@@ -274,6 +274,9 @@ class TableSettings:
 
     @classmethod
     def from_dict(cls, data: dict) -> "TableSettings":
+        """Inverse of :meth:`to_dict`; unknown fields raise ValueError."""
+        if not isinstance(data, dict):
+            raise ValueError(f"table settings must be a dict, got {short(data)} ({type(data).__name__})")
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = set(data) - known
         if unknown:

@@ -28,6 +28,7 @@ import functools
 import numpy as np
 
 from ._data import interpolate_bin_centres, read_binned_table
+from .errors import check_instance
 
 __all__ = ["SOLAR_SPECTRUM_FILE", "ABSOLUTE_UNITS", "RELATIVE_UNITS", "solar_spectrum_table",
            "solar_irradiance_astm_g173", "with_solar_spectrum", "radiance_units"]
@@ -93,6 +94,9 @@ def with_solar_spectrum(atmosphere):
     >>> radiance_units(with_solar_spectrum(preset("physical")))
     'W m^-2 sr^-1 nm^-1'
     """
+    from .atmosphere import AtmosphereParameters
+
+    check_instance("atmosphere", atmosphere, AtmosphereParameters, "an AtmosphereParameters")
     return atmosphere.replace(solar_irradiance=tuple(solar_irradiance_astm_g173(atmosphere.wavelengths)),
                               exposure=1.0, spectral_to_rgb=(1.0, 1.0, 1.0))
 

@@ -34,7 +34,7 @@ import time
 import numpy as np
 
 from .atmosphere import AtmosphereParameters, preset, rayleigh_scattering_coefficient
-from .errors import ParameterError, is_integer
+from .errors import ParameterError, check_instance, is_integer
 from .ozone import cross_section_serdyuchenko2014
 from .solar import ABSOLUTE_UNITS, with_solar_spectrum
 
@@ -118,6 +118,7 @@ def batch_atmospheres(base: AtmosphereParameters, wavelengths, refractive_index=
     >>> [a.wavelengths for a in batch_atmospheres(preset("physical"), 4)]
     [(418.75, 536.25, 653.75), (771.25, 771.25, 771.25)]
     """
+    check_instance("base", base, AtmosphereParameters, "an AtmosphereParameters (the batches' other fields)")
     atmospheres = []
     for batch in wavelength_batches(wavelengths):
         beta = rayleigh_scattering_coefficient(refractive_index, number_density, batch)
@@ -231,7 +232,8 @@ class SpectralRenderer:
     def __init__(self, spectral_table: SpectralTable, ray_settings=None, ctx=None, fast_math=False):
         from .render import SkyRenderer
 
-        self.table = spectral_table
+        self.table = check_instance("spectral_table", spectral_table, SpectralTable,
+                                    "a SpectralTable (SpectralTable.build)")
         self.renderers = []
         try:
             for table in spectral_table.tables:

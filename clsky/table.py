@@ -48,7 +48,6 @@ import contextlib
 import dataclasses
 import hashlib
 import json
-import pathlib
 import re
 import time
 import tokenize
@@ -59,9 +58,9 @@ from typing import Callable
 import numpy as np
 
 from . import __version__
-from ._files import StagedWrites, atomic_write, binary_and_header, check_output, check_suffix
+from ._files import StagedWrites, as_path, atomic_write, binary_and_header, check_output, check_suffix
 from .atmosphere import PRESETS, AtmosphereParameters, preset
-from .errors import short
+from .errors import check_instance, short
 from .lookup import check_queries
 from .settings import TableSettings
 from .solar import radiance_units
@@ -320,16 +319,13 @@ class ScatteringTable:
         """
         if isinstance(atmosphere, str):
             atmosphere = preset(atmosphere)
-        if not isinstance(atmosphere, AtmosphereParameters):
-            raise ValueError(f"atmosphere must be an AtmosphereParameters or a preset name {list(PRESETS)}, got "
-                             f"{short(atmosphere)} ({type(atmosphere).__name__})")
+        check_instance("atmosphere", atmosphere, AtmosphereParameters,
+                       f"an AtmosphereParameters or a preset name {list(PRESETS)}")
         if settings is None:
             from .ground import default_settings
 
             settings = default_settings(atmosphere)
-        if not isinstance(settings, TableSettings):
-            raise ValueError(f"settings must be a TableSettings or None (the atmosphere's default), got "
-                             f"{short(settings)} ({type(settings).__name__})")
+        check_instance("settings", settings, TableSettings, "a TableSettings or None (the atmosphere's default)")
         if progress is not None and not callable(progress):
             raise ValueError(f"progress must be None or a callable progress(stage, done, total), got "
                              f"{short(progress)} ({type(progress).__name__})")
@@ -410,6 +406,7 @@ class ScatteringTable:
             raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
         from .lookup import TableLookupEngine
 
+        check_instance("engine", engine, TableLookupEngine, "None or a TableLookupEngine (a 3D table's)", optional=True)
         engine = engine or TableLookupEngine(dtype=self.settings.dtype)
         return engine.radiance(self.atmosphere, self.data, altitude, cos_view, cos_sun, cos_scatter,
                                self.settings.mapping, self.settings.sun_cos_range)
@@ -426,6 +423,8 @@ class ScatteringTable:
             raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
         from .lookup4d import TableLookup4DEngine
 
+        check_instance("engine", engine, TableLookup4DEngine, "None or a TableLookup4DEngine (a 4D table's)",
+                       optional=True)
         engine = engine or TableLookup4DEngine(dtype=self.settings.dtype)
         return engine.radiance(*arguments)
 
@@ -487,7 +486,7 @@ class ScatteringTable:
             truncated archive, wrong version, missing or extra member, checksum, hash, shape, dtype,
             NaN, infinite or negative values); the message names the file and what is wrong.
         """
-        path = pathlib.Path(path)
+        path = as_path(path)
         contents = _read_members(path)
         try:
             return cls._from_members(contents)

@@ -162,3 +162,75 @@ def test_renderer_refuses_wrong_types_naming_the_parameter(table, arguments, mes
     arguments = tuple(table if argument == "table" else argument for argument in arguments)
     with pytest.raises(ValueError, match=re.escape(message)):
         SkyRenderer(*arguments)
+
+
+# Inputs a probe of the API found unchecked (2026-12-07): each ended in AttributeError, TypeError or
+# IndexError deep inside, or was silently taken for something else.
+def _renderer(table):
+    from clsky.render import SkyRenderer
+
+    return SkyRenderer(table)
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda t: _renderer(t).skyview_map((0.0, 0.0, 1.0), settings=(32, 64)),
+     "settings must be None (the defaults) or a SkyViewSettings, got (32, 64) (tuple)"),
+    (lambda t: _renderer(t).render_skyview(np.array([[0.0, 0.0, 1.0]]), (0.0, 0.0, 1.0), settings="x"),
+     "settings must be None (the defaults) or a SkyViewSettings, got 'x' (str)"),
+    (lambda t: _renderer(t).render_raymarch_suns(np.array([[0.0, 0.0, 1.0]]), None),
+     "sun_directions must be a sequence of sun directions of 3 values each, got None (NoneType)"),
+    (lambda t: _renderer(t).skyview_maps(5), "sun_directions must be a sequence of sun directions"),
+    (lambda t: _renderer(t).view_zenith_angles(np.zeros((2, 3))), "directions must be directions prepared by prepare()"),
+    (lambda t: t.radiance(0.0, 0.5, 0.5, 0.5, engine="x"), "engine must be None or a TableLookupEngine"),
+    (lambda t: t.save(None), "path must be a file path (a str or os.PathLike), got None (NoneType)"),
+    (lambda t: t.save("a\0b.npz"), "path must not hold a NUL character"),
+    (lambda t: t.save("x.npz", staging="x"), "staging must be None or a StagedWrites, got 'x' (str)"),
+    (lambda t: ScatteringTable.load(5), "path must be a file path (a str or os.PathLike), got 5 (int)"),
+    (lambda t: ScatteringTable.build(t.atmosphere, t.settings, ctx="x"),
+     "ctx must be None (clsky's device) or a pyopencl.Context, got 'x' (str)"),
+])
+def test_wrong_types_are_named(table, tmp_path, monkeypatch, call, message):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ValueError, match=re.escape(message)):
+        call(table)
+    assert not list(tmp_path.iterdir())                         # nothing written
+
+
+@pytest.mark.parametrize("flag", ["no", 0, None, "False"])
+def test_fast_math_takes_only_a_bool(flag):
+    """``fast_math='no'`` turned fast math on (bool('no') is True), and the table said so in its metadata."""
+    with pytest.raises(ValueError, match=re.escape(f"fast_math must be True or False, got")):
+        ScatteringTable.build("atmosphere-plus", TableSettings(size=(4, 8, 4), orders=1), fast_math=flag)
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: Scene(sun_elevations_deg=(0, 10), components=None), "components must be a subset of"),
+    (lambda: AtmosphereParameters.from_dict(None), "an atmosphere's fields must be a dict, got None (NoneType)"),
+    (lambda: TableSettings.from_dict([1]), "table settings must be a dict, got [1] (list)"),
+    (lambda: __import__("clsky").preset([]), "preset must be one of ['atmosphere-plus', 'physical'], got []"),
+    (lambda: __import__("clsky.solar").solar.with_solar_spectrum(None), "atmosphere must be an AtmosphereParameters"),
+    (lambda: __import__("clsky.spectrum").spectrum.batch_atmospheres(None, 3), "base must be an AtmosphereParameters"),
+    (lambda: __import__("clsky.spectrum").spectrum.SpectralRenderer(None), "spectral_table must be a SpectralTable"),
+    (lambda: __import__("clsky.planner").planner.plan_scene("scene"), "scene must be a Scene"),
+    (lambda: __import__("clsky.planner").planner.plan_scene(Scene(sun_elevations_deg=(0, 10)), mode="x"),
+     "mode must be one of ['atmosphere-plus', 'physical'], got 'x'"),
+])
+def test_more_wrong_types_are_named(call, message):
+    with pytest.raises(ValueError, match=re.escape(message)):
+        call()
+
+
+def test_a_plan_the_build_would_refuse_is_refused_first():
+    """plan_scene(scene, mode='atmosphere-plus') planned the physical preset's reflecting ground (its default
+    atmosphere), a table the build then refused: now the plan refuses it, before the pilot's build."""
+    from clsky.planner import plan_scene
+
+    with pytest.raises(ValueError, match=r"^ground_albedo must be 0 with mode 'atmosphere-plus'"):
+        plan_scene(Scene(sun_elevations_deg=(0, 10), components=("rayleigh", "mie")), mode="atmosphere-plus")
+
+
+def test_angstrom_factor_that_overflows_names_the_wavelengths():
+    """A wavelength of 1e-300 nm with an Angstrom exponent of 4 overflowed to inf, and 0 * inf made the Mie
+    coefficient NaN, which the optical-depth check let through (NaN > 1000 is false)."""
+    with pytest.raises(ValueError, match=r"^wavelengths must be such that the Angstrom law's factor"):
+        AtmosphereParameters(wavelengths=(1e-300, 510, 475), mie_angstrom_exponent=4.0, mie_scattering=0.0)

@@ -95,6 +95,36 @@ def test_no_lit_pixel_gives_zeros(engine):
     assert result.shape == (5, 4, 3) and not result.any()
 
 
+def test_pixels_whose_floor_underflows_are_black_not_nan(engine):
+    """A pixel whose largest channel is below about 5e-12 of the smallest normal double has a power-law floor
+    (1e-12 of that channel) of 0, whose logarithm is -inf: its XYZ was NaN, in the twin and the kernel
+    alike (a valid radiance, >= 0 and finite, such as exp() of a deep shadow's optical depth can give). Now
+    it is black, as an unlit pixel; the least pixel whose floor stays positive keeps its colour."""
+    tiny = np.array([[1e-315, 2e-315, 0.0], [5e-324] * 3, [0.0, 0.0, 0.0], [1e-300, 3e-300, 2e-300], [1.0, 2.0, 3.0]])
+    host = colorimetry._solar_power_law_tabulated_xyz(tiny, np.array(WAVELENGTHS[0]))
+    assert_same_bits(engine.xyz(tiny, WAVELENGTHS[0]), host)
+    plain = colorimetry._solar_power_law_xyz(tiny, np.array(WAVELENGTHS[0]))
+    for xyz in (host, plain):
+        assert np.isfinite(xyz).all() and not xyz[:3].any()
+        assert (xyz[3:] > 0).all()
+
+
+@pytest.mark.parametrize("method", ["solar_power_law", "solar_power_law_tabulated", "solar_interpolation",
+                                    "bruneton2017"])
+@pytest.mark.parametrize("bad", [[np.nan, 1.0, 1.0], [-1.0, 1.0, 1.0], [np.inf, 1.0, 1.0]])
+def test_radiance_that_is_no_radiance_is_refused(cl_context, method, bad):
+    """The power law took NaN for a black pixel, clamped a negative channel to 0 and ended an infinite one in
+    IndexError; the linear methods passed them on. A radiance is finite and >= 0: ValueError naming it."""
+    radiance = np.ones((4, 3))
+    radiance[2] = bad
+    for ctx in (None, cl_context):
+        with pytest.raises(ValueError, match=r"^radiance must be finite radiances >= 0 at three wavelengths .*, got 1 "
+                                             r"NaN, infinite or negative values$"):
+            colorimetry.three_wavelength_to_xyz(radiance, WAVELENGTHS[0], method, ctx=ctx)
+    with pytest.raises(ValueError, match=r"^radiance must be .* got shape \(2,\)$"):
+        colorimetry.three_wavelength_to_xyz([1.0, 1.0], WAVELENGTHS[0], method)
+
+
 def test_an_engine_reused_across_frame_sizes_and_wavelengths(engine):
     """Its buffers grow for a larger frame and serve a smaller one after it; its tables follow the
     wavelengths."""

@@ -4,9 +4,11 @@ kernel cache is what is missing (the command line through a subprocess)."""
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
-from clsky.errors import ParameterError, check_integer, short
+from clsky.atmosphere import AtmosphereParameters
+from clsky.errors import ParameterError, check_integer, check_real, short
 from clsky.settings import TableSettings
 
 
@@ -96,8 +98,39 @@ def test_render_sun_azimuth_names_the_option(tmp_path):
 
 def test_short_numbers():
     assert short(10**300) == "1e+300" and short(-(10**5000)) == "-1e+5000"
-    assert short(0.1 + 0.2) == "0.3" and short(4096) == "4096" and short(float("nan")) == "nan"
+    assert short(0.25) == "0.25" and short(4096) == "4096" and short(float("nan")) == "nan"
     assert len(short("x" * 1000)) <= 60
+
+
+def test_short_numbers_never_print_as_another_number():
+    """A value just outside a range printed with 6 digits read as its bound ("cos_view must be in [-1, 1],
+    got 1" for 1.0000001): a number whose 6 digits are not itself prints every digit it takes."""
+    assert short(1.0000001) == "1.0000001" and short(0.1 + 0.2) == "0.30000000000000004"
+    assert short(np.float32(0.1)) == "0.1"              # float32's own shortest digits, not float64's
+    assert short(1e-300) == "1e-300" and short(float("inf")) == "inf"
+    with pytest.raises(ValueError, match=r"got 1\.0000001$"):
+        check_real("cos_view", 1.0000001, -1.0, 1.0)
+
+
+def test_numbers_too_large_for_a_float_are_refused_by_name():
+    """``10**400`` made float() raise OverflowError inside the checks (an AtmosphereParameters field, a
+    camera's heading, a range's bound): now the parameter's ValueError."""
+    with pytest.raises(ValueError, match=r"heading_deg must be a finite number.*got 1e\+400"):
+        check_real("heading_deg", 10**400)
+    with pytest.raises(ValueError, match=r"planet_radius must be a finite real number, got 1e\+400"):
+        AtmosphereParameters(planet_radius=10**400)
+    with pytest.raises(ValueError, match=r"sun_cos_range must be"):
+        TableSettings(sun_cos_range=(-1, 10**400))
+    with pytest.raises(ValueError, match=r"refractive_index must be a finite real number"):
+        AtmosphereParameters.from_refractive_index(10**400)
+    with pytest.raises(ValueError, match=r"refractive_index must be a real number in \[1, 10\], got 1e\+200"):
+        AtmosphereParameters.from_refractive_index(1e200)
+
+
+def test_an_integer_parameter_given_a_float_says_so():
+    """``size[0] must be an integer ..., got 8`` for 8.0 (a table file's JSON) read as a contradiction."""
+    with pytest.raises(ValueError, match=r"size\[0\] must be an integer in \[2, 4096\], got 8 \(float\)$"):
+        TableSettings(size=(8.0, 16, 8))
 
 
 def test_parameter_error_carries_field_and_index():
