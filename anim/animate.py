@@ -49,7 +49,7 @@ from clsky.resources import InsufficientMemoryError, MemoryEstimate, check_memor
 from . import display as display_pipeline
 from . import pipeline as pipeline_module
 from . import metrics, sunpath, tonemap, writers
-from .cameras import camera_from_name
+from .cameras import FOV_RANGE_DEG, camera_from_name
 from .exr import PRECISIONS
 
 __all__ = ["AnimationConfig", "AnimationResult", "METHODS", "LOOKUP_NAMES", "lookup_of", "comparison", "quality",
@@ -158,7 +158,7 @@ class AnimationConfig:
     start_hour, end_hour, step_minutes : float
         Time range [h, UTC] and step of the real positions.
     fps : float
-        Frames per second of the MP4, in (0, 240].
+        Frames per second of the MP4, in :data:`FPS_RANGE`.
     exposure : float
         Exposure [EV] in [-40, 40] (default 0): frames are scaled by 2^exposure before the tone curve
         (EV 0 is the old multiplier 1; the old ``exposure=x`` is ``log2(x)``). With ``auto_exposure``,
@@ -337,6 +337,11 @@ def _integer(low, high, optional=False):
     return lambda name, value: check_integer(name, value, low, high, optional=optional)
 
 
+#: Frames per second of the MP4: ffmpeg takes the rate as imageio-ffmpeg writes it, with two decimals, so
+#: below 0.005 it read 0 and wrote no video (an empty MP4 replaced the old one before the writer checked).
+FPS_RANGE = (0.01, 240.0)
+
+
 def _real(low, high, unit="", low_open=False, optional=False):
     """The field check ``(name, value) -> float`` of :func:`clsky.errors.check_real` in [low, high]."""
     return lambda name, value: check_real(name, value, low, high, low_open=low_open, unit=unit, optional=optional)
@@ -415,7 +420,7 @@ def _check_table_size(value):
 _FIELD_CHECKS = {
     "frames": _integer(2, 100_000), "size": _integer(16, 8192),
     "camera": _choice(("fisheye", "perspective", "equirectangular")),
-    "fov_deg": _real(0.0, 179.0, " degrees", low_open=True), "heading_deg": _real(-360.0, 720.0, " degrees", optional=True),
+    "fov_deg": _real(*FOV_RANGE_DEG, " degrees"), "heading_deg": _real(-360.0, 720.0, " degrees", optional=True),
     "pitch_deg": _real(-90.0, 90.0, " degrees"), "altitude": _real(0.0, 1e8, " m"), "method": _choice(METHODS),
     "skyview_size": lambda name, value: None if value is None else skyview.check_size(name, value),
     "preset": _choice(tuple(sorted(clsky.PRESETS))), "mode": _choice(("atmosphere-plus", "physical")),
@@ -425,7 +430,7 @@ _FIELD_CHECKS = {
     "quality": _choice(tuple(QUALITY_LEVELS), optional=True),
     "start_elevation_deg": _real(-90.0, 90.0, " degrees"), "max_elevation_deg": _real(-90.0, 90.0, " degrees"),
     "location": _location, "date": _date, "start_hour": _real(0.0, 48.0, " h"), "end_hour": _real(0.0, 48.0, " h"),
-    "step_minutes": _real(0.0, 1440.0, " minutes", low_open=True), "fps": _real(0.0, 240.0, low_open=True),
+    "step_minutes": _real(0.0, 1440.0, " minutes", low_open=True), "fps": _real(*FPS_RANGE),
     "exposure": _real(-40.0, 40.0, " EV"), "tone_map": _choice(tuple(display_pipeline.TONE_CURVES), optional=True),
     "auto_exposure": _optional_flag, "white_balance": _choice(display_pipeline.WHITE_BALANCES, optional=True),
     "dither": _flag, "output": _output, "hdr": _hdr, "hdr_precision": _choice(tuple(PRECISIONS)), "force": _flag,
@@ -858,8 +863,8 @@ def exposure_reference(hdr):
 
 @dataclasses.dataclass
 class FrameOutputs:
-    """What the writer needs of one frame (:func:`frame_outputs`): its index, the 8-bit image (even
-    sizes), its metrics row, the mean luminance of each HDR frame (for the temporal jumps), and the HDR
+    """What the writer needs of one frame (:func:`frame_outputs`): its index, the 8-bit image (any size:
+    the writer pads the MP4's), its metrics row, the mean luminance of each HDR frame (for the temporal jumps), and the HDR
     frame to write (None without ``config.hdr``)."""
 
     index: int
@@ -885,7 +890,7 @@ def frame_outputs(pipeline: display_pipeline.Display, hdr, valid, config: Animat
         name = next(iter(hdr))                   # the one frame rendered
         image, frame_hdr = images[name], hdr[name]
         means = {name: metrics.mean_luminance(frame_hdr[None], valid)[0]}
-    return FrameOutputs(index, _even(image), row, means, frame_hdr if config.hdr else None)
+    return FrameOutputs(index, image, row, means, frame_hdr if config.hdr else None)
 
 
 def comparison(hdr, images, shown, valid):
@@ -938,12 +943,6 @@ def check_outputs(config: AnimationConfig, total_frames: int | None = None, opti
     _frame_writer(config, total_frames or config.frames).check(option)
     for suffix in (".csv", ".json"):
         check_output(config.metrics_path(suffix), config.force, option)
-
-
-def _even(image):
-    """Crop one column/row if needed: H.264 in yuv420p needs even sizes."""
-    height, width = image.shape[:2]
-    return image[: height - height % 2, : width - width % 2]
 
 
 def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str, int, int], None] | None = None,

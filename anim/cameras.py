@@ -218,6 +218,12 @@ class FisheyeCamera(Camera):
         return _direction(zenith, azimuth), valid
 
 
+#: A perspective camera's horizontal field of view [deg]: from a thousandth of a degree (a telescope's
+#: tens of arcseconds; at 5e-324 the focal length divided by zero, and below about 1e-150 the directions
+#: overflowed) to 179.
+FOV_RANGE_DEG = (1e-3, 179.0)
+
+
 @dataclasses.dataclass(frozen=True)
 class PerspectiveCamera(Camera):
     """Pinhole (rectilinear) camera with a level horizon.
@@ -227,7 +233,7 @@ class PerspectiveCamera(Camera):
     width, height : int
         Image size [pixels], integers in [2, 16384].
     fov_deg : float
-        Horizontal field of view [deg], edge to edge of the image, in (0, 179] (default 90).
+        Horizontal field of view [deg], edge to edge of the image, in :data:`FOV_RANGE_DEG` (default 90).
     heading_deg : float
         Azimuth of the optical axis [deg], from north clockwise (90 = east), finite (default 180:
         looking south).
@@ -268,8 +274,7 @@ class PerspectiveCamera(Camera):
     def __post_init__(self):
         object.__setattr__(self, "width", _check_size("width", self.width))
         object.__setattr__(self, "height", _check_size("height", self.height))
-        object.__setattr__(self, "fov_deg", check_real("fov_deg", self.fov_deg, 0.0, 179.0,
-                                                         low_open=True))
+        object.__setattr__(self, "fov_deg", check_real("fov_deg", self.fov_deg, *FOV_RANGE_DEG, unit=" degrees"))
         object.__setattr__(self, "heading_deg",
                            check_real("heading_deg", self.heading_deg))
         object.__setattr__(self, "pitch_deg", check_real("pitch_deg", self.pitch_deg, -90.0, 90.0))

@@ -46,7 +46,7 @@ from clsky.errors import require_extra, short
 
 from .exr import HDR_FORMATS
 
-__all__ = ["FrameWriter", "frame_files", "encode_png", "write_png", "write_json", "write_csv", "MP4_OUTPUT_PARAMS"]
+__all__ = ["FrameWriter", "frame_files", "encode_png", "write_png", "write_json", "write_csv", "MP4_OUTPUT_PARAMS", "even_padded"]
 
 #: ffmpeg output options of the MP4: constant-quality H.264 at CRF 18 (visually lossless for x264),
 #: the RGB -> YUV conversion and the stream tagged as BT.709 (so players decode the colours as they
@@ -303,6 +303,32 @@ def _hdr_saver(hdr_format):
     return lambda file, values, attributes: np.save(file, values)
 
 
+def even_padded(image):
+    """``image`` (H, W, 3) with its last row and/or column repeated where H or W is odd: the MP4's frame
+    (H.264 in yuv420p takes even sizes). The frames were cropped instead, in the PNG files too, where
+    no such limit holds: a 17 x 17 animation's PNG frames lost a row of pixels."""
+    height, width = image.shape[:2]
+    if not (height % 2 or width % 2):
+        return image
+    return np.pad(image, ((0, height % 2), (0, width % 2), (0, 0)), mode="edge")
+
+
+def _check_video(part, target, frames):
+    """OSError unless the MP4 ffmpeg wrote to ``part`` (for ``target``) holds ``frames`` frames: imageio-ffmpeg
+    does not look at ffmpeg's exit status, so an ffmpeg that failed (a frame rate it could not parse, a full
+    disk) left an empty or broken file that would have replaced ``target``. Counting the frames is a stream
+    copy of the file (about 30 ms), no decoding."""
+    import imageio_ffmpeg
+
+    try:
+        counted_frames, _ = imageio_ffmpeg.count_frames_and_secs(str(part))
+    except (RuntimeError, OSError) as error:
+        raise OSError(f"ffmpeg did not write a readable MP4 for {target} ({str(error).splitlines()[0]}); "
+                      f"nothing was replaced") from None
+    if counted_frames != frames:
+        raise OSError(f"ffmpeg wrote {counted_frames} of {frames} frames to the MP4 for {target}; nothing was replaced")
+
+
 class FrameWriter:
     """Context manager storing an animation as PNG frames, HDR frames (EXR or .npy) and/or an MP4.
 
@@ -313,7 +339,8 @@ class FrameWriter:
     mp4_path : str or os.PathLike, optional
         Target MP4 file (its directory must exist); None for no video.
     fps : float
-        Frames per second of the MP4.
+        Frames per second of the MP4. An odd width or height is padded for the MP4 alone
+        (:func:`even_padded`: H.264 in yuv420p needs even ones); the PNG frames keep the frame's size.
     total_frames : int, optional
         Number of frames, if known: sets the zero padding of the names to max(5, its digits) and
         bounds the indices.
@@ -515,6 +542,7 @@ class FrameWriter:
         try:
             if video is not None:
                 video.close()
+                _check_video(self._part, self.mp4_path, len(self._indices))
                 self.paths.append(self.mp4_path)
             elif self.mp4_path is not None:
                 warnings.warn(f"no frame was written: {self.mp4_path} not created", RuntimeWarning,
@@ -543,9 +571,6 @@ class FrameWriter:
 
     # Writing --------------------------------------------------------------------------------------
     def _open_video(self, height, width):
-        if width % 2 or height % 2:
-            raise ValueError(f"MP4 (yuv420p) needs an even width and height, got {width}x{height} "
-                             f"(width x height): crop or pad the frames")
         import imageio.v2 as imageio
         self._part = self._staging.stage(self.mp4_path, self.force, suffix=self._mp4_suffix, last=True)
         self._temporaries.append(self._part)
@@ -632,7 +657,7 @@ class FrameWriter:
             self._hdr_shape = hdr.shape
         written = self._write_files(index, image, hdr, hdr_attributes) if self.directory is not None else []
         if self._video is not None:
-            self._video.append_data(image)
+            self._video.append_data(even_padded(image))
         self._indices.add(index)
         self.paths.extend(written)
         return written

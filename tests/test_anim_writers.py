@@ -13,7 +13,7 @@ import pytest
 from numpy.testing import assert_array_equal
 from PIL import Image
 
-from clsky.anim.writers import FrameWriter, encode_png, write_csv, write_json, write_png
+from clsky.anim.writers import FrameWriter, encode_png, even_padded, write_csv, write_json, write_png
 
 try:
     import imageio.v3 as imageio_v3
@@ -224,11 +224,39 @@ def test_exception_keeps_an_existing_mp4_with_force(tmp_path):
 
 
 @needs_ffmpeg
-def test_odd_size_is_refused_before_writing(tmp_path):
-    with pytest.raises(ValueError, match="63x48"):
-        with FrameWriter(directory=tmp_path / "frames", mp4_path=tmp_path / "sky.mp4") as writer:
-            writer.write(0, _frame(0, width=63))
-    assert _listing(tmp_path) == []
+@pytest.mark.parametrize("fps", [1e-7, 1e-6])
+def test_an_ffmpeg_that_fails_replaces_nothing(tmp_path, fps):
+    """imageio-ffmpeg does not look at ffmpeg's exit status: at 1e-7 frames per second (written as 0.00)
+    ffmpeg refused its input and the empty MP4 replaced a good one, at 1e-6 a broken 261-byte file did,
+    and the run ended as a success. The writer now counts the MP4's frames before it lands: OSError, and
+    the old movie and frames stay. (The command line refuses such rates first: --fps >= 0.01.)"""
+    target = tmp_path / "sky.mp4"
+    target.write_bytes(b"old movie")
+    with pytest.raises(OSError, match=r"for .*sky\.mp4 .*nothing was replaced"):
+        with FrameWriter(directory=tmp_path / "frames", mp4_path=target, fps=fps, force=True) as writer:
+            for index in range(2):
+                writer.write(index, _frame(index))
+    assert target.read_bytes() == b"old movie"
+    assert _listing(tmp_path) == ["sky.mp4"]
+
+
+@needs_ffmpeg
+def test_odd_sizes_keep_their_pngs_and_pad_the_mp4(tmp_path):
+    """H.264 in yuv420p takes even sizes only: the MP4's frames repeat their last column (and row); the PNG
+    frames keep every pixel (they were cropped by a row and a column before, and the HDR frames not)."""
+    import imageio.v2 as imageio
+
+    frames = [_frame(index, width=63)[:47] for index in range(2)]
+    with FrameWriter(directory=tmp_path / "frames", mp4_path=tmp_path / "sky.mp4") as writer:
+        for index, frame in enumerate(frames):
+            writer.write(index, frame)
+    for index, frame in enumerate(frames):
+        np.testing.assert_array_equal(imageio.imread(tmp_path / "frames" / f"frame_{index:05d}.png"), frame)
+    decoded = [np.asarray(image) for image in imageio.mimread(tmp_path / "sky.mp4", format="FFMPEG")]
+    assert [image.shape for image in decoded] == [(48, 64, 3)] * 2
+    padded = even_padded(frames[1])
+    assert padded.shape == (48, 64, 3) and (padded[:47, :63] == frames[1]).all()
+    assert (padded[47] == padded[46]).all() and (padded[:, 63] == padded[:, 62]).all()
 
 
 # The PNG encoder ----------------------------------------------------------------------------------------
