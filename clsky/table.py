@@ -48,6 +48,7 @@ import contextlib
 import dataclasses
 import hashlib
 import json
+import math
 import re
 import time
 import tokenize
@@ -60,7 +61,7 @@ import numpy as np
 from . import __version__
 from ._files import StagedWrites, as_path, atomic_write, binary_and_header, check_output, check_suffix
 from .atmosphere import PRESETS, AtmosphereParameters, preset
-from .errors import check_instance, short
+from .errors import check_instance, is_integer, is_real_number, short
 from .lookup import check_queries
 from .settings import TableSettings
 from .solar import radiance_units
@@ -106,6 +107,13 @@ def array_checksum(array) -> str:
     return digest.hexdigest()
 
 
+#: The largest value a table's arrays may hold [1/sr, per unit of incident light]: radiances per unit
+#: solar irradiance are of order 1 or less in any atmosphere the parameters admit (energy conservation;
+#: a build's coarsest quadratures overestimate by tens), so a larger one can only come from a damaged or
+#: forged file, where a finite 1e39 became infinite in a float32 kernel and 1e307 in a float64 render.
+MAX_TABLE_VALUE = 1e12
+
+
 def check_finite_nonnegative(name, array):
     """TableFormatError unless every value of ``array`` is finite and >= 0 (radiances [1/sr])."""
     _check_values(name, array, nonnegative=True)
@@ -126,13 +134,16 @@ def _check_values(name, array, nonnegative):
     if array.size == 0:
         return
     low, high = array.min(), array.max()
-    if (low >= 0 if nonnegative else low > -np.inf) and high < np.inf:
+    if (low >= 0 if nonnegative else low >= -MAX_TABLE_VALUE) and high <= MAX_TABLE_VALUE:
         return
-    counts = {"NaN": np.isnan(array).sum(), "infinite": np.isinf(array).sum(),
-              "negative": (array < 0).sum() if nonnegative else 0}
+    finite = np.isfinite(array)
+    counts = {"NaN values": np.isnan(array).sum(), "infinite values": np.isinf(array).sum(),
+              "negative values": (array < 0).sum() if nonnegative else 0,
+              f"values beyond {MAX_TABLE_VALUE:g}": (finite & (np.abs(array) > MAX_TABLE_VALUE)).sum()}
     found = " and ".join(f"{int(count)} {kind}" for kind, count in counts.items() if count)
     expected = "finite and >= 0" if nonnegative else "finite"
-    raise TableFormatError(f"{name} holds {found} values (a table's values are {expected})")
+    raise TableFormatError(f"{name} holds {found} (a table's values are {expected}, at most "
+                           f"{MAX_TABLE_VALUE:g} in size)")
 
 
 def check_table_array(name, array, shape, dtypes, check_values=True):
@@ -146,6 +157,16 @@ def check_table_array(name, array, shape, dtypes, check_values=True):
         raise TableFormatError(f"{name} has dtype {array.dtype}, expected {' or '.join(map(str, dtypes))}")
     if check_values:
         check_finite_nonnegative(name, array)
+
+
+def data_shape(settings: TableSettings) -> tuple:
+    """The shape a table's ``data`` has: (D, H, W, C), or (A, D, H, W, C) for the 4D parameterization."""
+    width, height, depth = settings.size
+    if settings.is_4d:
+        from . import table4d
+
+        return table4d.data_shape(settings)
+    return (depth, height, width, settings.channels)
 
 
 def order_channels(settings: TableSettings, k: int) -> int:
@@ -279,7 +300,12 @@ class ScatteringTable:
             check_table_array(f"order_{k}", order, grid + (order_channels(self.settings, k),),
                               ("float32", "float64"), check_values)
         recorded = self.orders_record.get("orders")
-        if self.orders and recorded is not None and recorded != len(self.orders):
+        if recorded is None:            # a table made by hand, without a record
+            return
+        if not is_integer(recorded) or not 1 <= recorded <= limit:
+            raise TableFormatError(f"orders_record's orders must be an integer in [1, {limit}] (the orders computed), "
+                                   f"got {short(recorded)}")
+        if self.orders and recorded != len(self.orders):
             raise TableFormatError(f"orders_record counts {recorded!r} orders, the table keeps {len(self.orders)}")
 
     # Building -------------------------------------------------------------------------------------
@@ -363,12 +389,7 @@ class ScatteringTable:
     @property
     def data_shape(self) -> tuple:
         """The shape ``data`` must have: (D, H, W, C), or (A, D, H, W, C) for the 4D parameterization."""
-        width, height, depth = self.settings.size
-        if self.settings.is_4d:
-            from .table4d import data_shape
-
-            return data_shape(self.settings)
-        return (depth, height, width, self.settings.channels)
+        return data_shape(self.settings)
 
     @property
     def parameters_hash(self) -> str:
@@ -512,9 +533,20 @@ class ScatteringTable:
         stored_hash = contents["parameters_hash"]
         if not _is_text(stored_hash) or parameters_hash(atmosphere, settings) != stored_hash.item():
             raise TableFormatError("parameters hash does not match its parameters (corrupted or edited file)")
+        metadata = _json_member(contents, "metadata")
+        _check_metadata(metadata)
+        record = _json_member(contents, "orders_record")
+        if "orders" not in record:
+            raise TableFormatError("orders_record lacks orders, the count of orders computed")
+        if is_integer(record["orders"]) and ("gathered" in contents) != (record["orders"] != 1):   # else validate's
+            # the ray march adds the gathered source of the orders k >= 2: without it a file of higher orders
+            # renders without them (24 % darker), with it a single-scattering file adds light it lacks (a
+            # table made in memory may drop it: the pilot's single-scattering march does)
+            raise TableFormatError(f"gathered must be present exactly when the table has higher orders: orders_record "
+                                   f"counts {short(record['orders'])} orders, gathered is "
+                                   f"{'present' if 'gathered' in contents else 'missing'}")
         orders = tuple(contents[f"order_{k}"] for k in range(1, order_count + 1))
-        return cls(atmosphere, settings, contents["data"], _json_member(contents, "metadata"), orders,
-                   _json_member(contents, "orders_record"), contents.get("gathered"), contents.get("ground_irradiance"))
+        return cls(atmosphere, settings, contents["data"], metadata, orders, record, contents.get("gathered"), contents.get("ground_irradiance"))
 
     def export_texture(self, path, overwrite=False, staging=None):
         """A 4D table for engines: ``<path>.bin`` (three RGBA float32 3D textures, sun and azimuth packed
@@ -648,7 +680,7 @@ def _describe_error(error) -> str:
 def _describe_member(member) -> str:
     """A short description of a member's value for a message: the scalar itself, else its kind."""
     if isinstance(member, np.ndarray) and member.shape == ():
-        return short(member.item())
+        return short(member.item()) + ("" if member.dtype.kind == "U" else f" ({member.dtype})")
     if isinstance(member, np.ndarray):
         return f"a {member.dtype} array of shape {member.shape}"
     return f"a {type(member).__name__}"
@@ -671,9 +703,67 @@ def _read_members(path) -> dict:
                                f"{_describe_error(error)})") from error
     try:
         with archive:
-            return {name: archive[name] for name in archive.files}
+            _check_names(archive.files, path)
+            sizes = _member_sizes(archive)
+            small = [name for name in archive.files if name not in _ARRAY_MEMBERS and not name.startswith("order_")]
+            for name in small:
+                _check_size(path, name, sizes[name], _MAX_TEXT_BYTES)
+            contents = {name: archive[name] for name in small}
+            limits = _array_limits(contents)
+            for name in sorted(set(archive.files) - set(small)):
+                _check_size(path, name, sizes[name], limits.get(name.split("_")[0], limits["data"]))
+                contents[name] = archive[name]
+            return contents
+    except TableFormatError:
+        raise
     except _READ_ERRORS as error:
         raise TableFormatError(f"{path} is damaged (reading its members: {_describe_error(error)})") from error
+
+
+#: The array members (besides order_1 ... order_K); every other member is a scalar or a JSON text.
+_ARRAY_MEMBERS = ("data", "gathered", "ground_irradiance")
+#: The largest scalar or JSON member read [bytes] (the settings, the atmosphere, the metadata, the orders'
+#: record and the checksums take a few kB).
+_MAX_TEXT_BYTES = 16 * 2**20
+#: What an array member may add to its values' bytes: its .npy header.
+_NPY_HEADER_BYTES = 4096
+
+
+def _member_sizes(archive) -> dict:
+    """Each member's size once inflated [bytes], from the zip archive's directory: known before reading it."""
+    sizes = {}
+    for info in archive.zip.infolist():
+        name = info.filename[:-len(".npy")] if info.filename.endswith(".npy") else info.filename
+        sizes[name] = max(sizes.get(name, 0), info.file_size)
+    return sizes
+
+
+def _check_size(path, name, size, limit):
+    """TableFormatError unless member ``name`` inflates to at most ``limit`` bytes: a 2 MB file of
+    deflated zeros took 2 GB of memory and 12 s before its member was refused (a larger one would
+    exhaust the memory), where the directory tells its size first."""
+    if size > limit:
+        raise TableFormatError(f"{path}: member {name} inflates to {size} bytes, more than the {limit} its table's "
+                               f"settings allow (damaged or forged file)")
+
+
+def _array_limits(contents) -> dict:
+    """The most bytes each kind of array member may take (``data``, ``gathered``, ``order``, ``ground``),
+    from the settings member: twice its float64 values, and a header (a member somewhat off in shape or
+    dtype is read, and the checks after name what is wrong with it); where the settings cannot be read,
+    half the host's available memory for all (those checks name the settings)."""
+    try:
+        settings = TableSettings.from_dict(_json_member(contents, "settings"))
+    except (ValueError, TypeError, KeyError, AttributeError):
+        from .resources import host_available_bytes
+
+        available = host_available_bytes() or 2**40
+        return {"data": available // 2}
+    width, height, depth = settings.size
+    cells = width * height * depth
+    values = {"data": math.prod(data_shape(settings)), "gathered": (settings.azimuth_harmonics + 1) * cells * 6,
+              "order": cells * 6, "ground": depth * 3}
+    return {kind: 2 * 8 * count + _NPY_HEADER_BYTES for kind, count in values.items()}
 
 
 #: The first bytes of a zip archive (an .npz): a member's local header, or the end record of an empty one.
@@ -710,15 +800,36 @@ def _format_version(contents) -> int:
     return int(member)
 
 
+def _order_numbers(names) -> list:
+    """K of every member order_K among ``names``, in order."""
+    return sorted(int(match.group(1)) for match in map(re.compile(r"order_([1-9][0-9]{0,3})").fullmatch, names)
+                  if match)
+
+
+def _unexpected(names) -> list:
+    """The names that are no table member, sorted."""
+    orders = {f"order_{k}" for k in _order_numbers(names)}
+    return sorted(set(names) - set(REQUIRED_MEMBERS) - set(OPTIONAL_MEMBERS) - orders)
+
+
+def _check_names(names, path):
+    """TableFormatError naming ``path`` for members no table has, from the archive's directory before any
+    member is read (a foreign member could inflate to any size)."""
+    if "format_version" not in names:
+        raise TableFormatError(f"{path}: not a clsky table file (no format_version member)")
+    unexpected = _unexpected(names)
+    if unexpected:
+        raise TableFormatError(f"{path}: unexpected members {unexpected}")
+
+
 def _check_membership(contents) -> int:
     """Check that the archive holds the required members, order_1 ... order_K, optionally gathered
     and ground_irradiance, and nothing else; returns K."""
     missing = [name for name in REQUIRED_MEMBERS if name not in contents]
     if missing:
         raise TableFormatError(f"not a clsky table file (missing {missing})")
-    orders = sorted(int(match.group(1)) for match in map(re.compile(r"order_([1-9][0-9]{0,3})").fullmatch, contents)
-                    if match)
-    unexpected = sorted(set(contents) - set(REQUIRED_MEMBERS) - set(OPTIONAL_MEMBERS) - {f"order_{k}" for k in orders})
+    orders = _order_numbers(contents)
+    unexpected = _unexpected(contents)
     if unexpected:
         raise TableFormatError(f"unexpected members {unexpected}")
     if orders != list(range(1, len(orders) + 1)):
@@ -737,6 +848,26 @@ def _verify_checksums(contents):
     if failed:
         raise TableFormatError(f"{', '.join(failed)} do{'es' if len(failed) == 1 else ''} not match "
                                f"the stored checksum (corrupted or edited file)")
+
+
+#: The metadata a build writes that clsky reads back (``clsky info``, the animation's units in its frames'
+#: headers), and what each must be: one line of text, a finite duration, a flag.
+_METADATA_TEXTS = ("clsky_version", "backend", "device", "units")
+
+
+def _check_metadata(metadata):
+    """TableFormatError unless the metadata clsky reads back is what a build writes: a forged file's
+    ``build_seconds`` of [1, 2] ended ``clsky info`` in TypeError, and a version or units with a newline
+    would add lines to its output and to the frames' headers."""
+    for key in _METADATA_TEXTS:
+        value = metadata.get(key, "")
+        if not isinstance(value, str) or len(value) > 200 or not value.isprintable():
+            raise TableFormatError(f"metadata's {key} must be one line of printable text, got {short(value)}")
+    seconds = metadata.get("build_seconds", 0.0)
+    if not is_real_number(seconds) or not 0.0 <= seconds < math.inf:
+        raise TableFormatError(f"metadata's build_seconds must be a number of seconds >= 0, got {short(seconds)}")
+    if not isinstance(metadata.get("fast_math", False), bool):
+        raise TableFormatError(f"metadata's fast_math must be true or false, got {short(metadata['fast_math'])}")
 
 
 def _json_member(contents, name) -> dict:

@@ -472,7 +472,7 @@ def test_renderer_refuses_a_table_changed_after_upload(cl_context, table, monkey
 
 
 def test_renderer_refuses_gathered_added_after_upload(cl_context, table, monkeypatch):
-    copy = bypassed(table, gathered=None)
+    copy = bypassed(table, gathered=None, orders=table.orders[:1], orders_record=table.orders_record | {"orders": 1})
     with SkyRenderer(copy, RAY, ctx=cl_context) as renderer:
         object.__setattr__(copy, "gathered", table.gathered)      # the upload holds a 2 x 2 x 2 stand-in
         forbid_kernels(monkeypatch, renderer.engine)
@@ -561,3 +561,83 @@ def test_check_kernel_buffer(cl_context):
         check_kernel_buffer("kernel", "x", buffer, 7, np.float64)
     with pytest.raises(ValueError, match="indexes 6 float32"):
         check_kernel_buffer("kernel", "x", buffer, 6, np.float32)
+
+
+# A probe of the files clsky reads (2026-12-07) ---------------------------------------------------------
+
+def _with_deflated_member(path, name, nbytes):
+    """Add to the archive at ``path`` a member ``name`` of ``nbytes`` zeros (a float64 array), deflated:
+    a few kB on disk for megabytes once read."""
+    import zipfile
+
+    header = np.lib.format.header_data_from_array_1_0(np.zeros(0))
+    header["shape"] = (nbytes // 8,)
+    with zipfile.ZipFile(path, "a", compression=zipfile.ZIP_DEFLATED) as archive:
+        with archive.open(name + ".npy", "w", force_zip64=True) as stream:
+            np.lib.format.write_array_header_1_0(stream, header)
+            chunk = bytes(2**20)
+            for _ in range(nbytes // len(chunk)):
+                stream.write(chunk)
+
+
+@pytest.mark.parametrize("name", ["zjunk", "gathered"])
+def test_a_member_that_inflates_beyond_its_settings_is_refused_unread(saved, name, monkeypatch):
+    """A 2 MB file whose deflated member held 2 GB of zeros took 2 GB of memory and 12 s before the member
+    was refused. Names come from the archive's directory and sizes with them, before any member is read:
+    a 64 MB member here, where the 4 x 8 x 4 table's gathered sum takes 6 kB."""
+    if name == "gathered":
+        rewrite(saved, drop=("gathered",), recompute_checksums=False)
+    _with_deflated_member(saved, name, 64 * 2**20)
+    assert saved.stat().st_size < 2**20
+    read = []
+    original = np.lib.npyio.NpzFile.__getitem__
+    monkeypatch.setattr(np.lib.npyio.NpzFile, "__getitem__", lambda self, key: read.append(key) or original(self, key))
+    message = refused(saved, "unexpected members ['zjunk']" if name == "zjunk" else "member gathered inflates to")
+    assert name not in read, message
+    if name == "zjunk":
+        assert read == []                               # refused by its name alone
+
+
+@pytest.mark.parametrize("member", ["data", "gathered", "order_2"])
+def test_values_too_large_for_a_table_are_refused(saved, member):
+    """Finite but huge values passed the "finite and >= 0" check and rendered as infinities (1e39 in a float32
+    table's kernels, 1e307 times a phase function in float64): a table's values are at most 1e12."""
+    values = members_of(saved)[member].copy()
+    values[0, 1, 2, 0] = 1e38 if values.dtype == np.float32 else 1e39      # the orders are stored as float32
+    rewrite(saved, **{member: values})
+    refused(saved, member, "1 values beyond 1e+12")
+
+
+def test_a_file_of_higher_orders_needs_its_gathered_source(saved):
+    """Without its gathered sum a file of 3 orders rendered its ray march without them (24 % darker on the
+    probe's physical table of 9 orders): refused."""
+    rewrite(saved, drop=("gathered",))
+    refused(saved, "gathered must be present exactly when the table has higher orders", "counts 3 orders",
+            "gathered is missing")
+
+
+def test_a_single_scattering_file_has_no_gathered_source(saved, table):
+    """A gathered sum added to a single-scattering file made its ray march add light it lacks (+6.5 %)."""
+    rewrite(saved, drop=("order_2", "order_3"), orders_record=json.dumps(table.orders_record | {"orders": 1}))
+    refused(saved, "gathered must be present exactly when the table has higher orders", "gathered is present")
+
+
+@pytest.mark.parametrize("record, what", [({}, "orders_record lacks orders"),
+                                          ({"orders": True}, "orders_record's orders must be an integer"),
+                                          ({"orders": "many"}, "got 'many'")])
+def test_the_record_must_count_its_orders(saved, record, what):
+    rewrite(saved, orders_record=json.dumps(record))
+    refused(saved, what)
+
+
+@pytest.mark.parametrize("metadata, what", [
+    ({"build_seconds": [1, 2]}, "metadata's build_seconds must be a number of seconds >= 0, got [1, 2]"),
+    ({"build_seconds": "fast"}, "build_seconds"), ({"fast_math": "no"}, "metadata's fast_math must be true or false"),
+    ({"clsky_version": "9.9\nFAKE LINE"}, "metadata's clsky_version must be one line of printable text"),
+    ({"units": ["W"]}, "metadata's units must be one line"),
+])
+def test_metadata_that_clsky_reads_back_is_checked(saved, table, metadata, what):
+    """``clsky info`` ended in TypeError on a forged build_seconds of [1, 2], and a version with a newline
+    added a line to its output (the units go into the frames' headers too)."""
+    rewrite(saved, metadata=json.dumps(table.metadata | metadata))
+    refused(saved, what)
