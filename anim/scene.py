@@ -37,6 +37,7 @@ import pathlib
 import sys
 
 import clsky
+from clsky._files import read_user_text
 from clsky.cli import UsageError
 
 if sys.version_info >= (3, 11):
@@ -197,14 +198,15 @@ def load_scene(path, parser):
     """
     path = pathlib.Path(path)
     try:
-        with open(path, "rb") as file:
-            document = tomllib.load(file)
+        document = tomllib.loads(read_user_text(path))
     except OSError as error:
         raise UsageError(f"--scene: cannot read {path}: {error.strerror or error}") from None
     except UnicodeDecodeError:
         raise UsageError(f"--scene {path}: not a TOML file (not UTF-8 text)") from None
     except tomllib.TOMLDecodeError as error:
         raise UsageError(f"--scene {path}: not a valid TOML file: {error}") from None
+    except RecursionError:
+        raise UsageError(f"--scene {path}: not a valid TOML file: nested too deeply") from None
     keys = command_keys(parser)
     every = {key.name for key in SCENE_KEYS}
     values = {}

@@ -29,11 +29,12 @@ import os
 import pathlib
 import secrets
 import signal
+import stat
 import tempfile
 import threading
 
 __all__ = ["check_output", "check_output_directory", "atomic_write", "StagedWrites", "temporary_prefix",
-           "check_suffix", "binary_and_header", "as_path"]
+           "check_suffix", "binary_and_header", "as_path", "read_user_text", "MAX_TEXT_FILE_BYTES"]
 
 #: Random characters of a temporary's name between its prefix and suffix (as tempfile.mkstemp's).
 _RANDOM_CHARACTERS = 8
@@ -154,6 +155,38 @@ def as_path(value, name: str = "path") -> pathlib.Path:
     if "\0" in text:
         raise ValueError(f"{name} must not hold a NUL character, got {text!r:.60}")
     return pathlib.Path(text)
+
+
+#: The largest text file a user hands clsky (a scene, a sweep, a metrics JSON) [bytes]: theirs take kB.
+MAX_TEXT_FILE_BYTES = 64 * 2**20
+
+
+def read_user_text(path, limit: int = MAX_TEXT_FILE_BYTES) -> str:
+    """The UTF-8 text of the file at ``path`` (a leading byte-order mark dropped: editors on Windows write
+    one), for files the user names (a scene, a sweep, a metrics JSON).
+
+    The file is opened without blocking and must be a regular file: a FIFO without a writer blocked
+    ``--scene`` and ``--sweep`` for ever, and ``/dev/zero`` filled the memory.
+
+    Raises
+    ------
+    OSError
+        Unreadable (its ``strerror`` says why), a directory (IsADirectoryError), not a regular file, or
+        larger than ``limit`` bytes (``strerror`` says so).
+    UnicodeDecodeError
+        Not UTF-8 text.
+    """
+    descriptor = os.open(as_path(path), os.O_RDONLY | os.O_NONBLOCK)
+    with open(descriptor, "rb") as stream:
+        mode = os.fstat(descriptor).st_mode
+        if stat.S_ISDIR(mode):
+            raise IsADirectoryError(errno.EISDIR, "Is a directory", str(path))
+        if not stat.S_ISREG(mode):
+            raise OSError(errno.EINVAL, "not a regular file (a FIFO, a device or a socket)", str(path))
+        data = stream.read(limit + 1)
+    if len(data) > limit:
+        raise OSError(errno.EFBIG, f"larger than {limit // 2**20} MiB, no file clsky reads is", str(path))
+    return data.decode("utf-8-sig")
 
 
 def check_suffix(path, suffix: str, name: str = "path") -> pathlib.Path:

@@ -118,9 +118,15 @@ def _valid(arrays: dict, version: str) -> bool:
             and np.array_equal(arrays["digest"], _digest(arrays)))
 
 
+#: The largest constants file read [bytes] (it takes 19 kB).
+_MAX_BYTES = 2**20
+
+
 def _read(path: pathlib.Path, version: str):
     """The arrays of the file at ``path`` if it is a valid set for ``version``, else None."""
     try:
+        if not path.is_file() or path.stat().st_size > _MAX_BYTES:   # a FIFO there blocked np.load for ever
+            return None
         with np.load(path, allow_pickle=False) as data:
             arrays = {name: data[name] for name in data.files}
         return arrays if _valid(arrays, version) else None

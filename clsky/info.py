@@ -4,7 +4,7 @@
   every member's checksum, the parameters hash, shapes, dtypes and values first; then its grid, dtype,
   size in memory and on disk, units, atmosphere, settings, orders record and provenance.
 - A PNG frame: its size and the text chunks clsky writes (clsky_version, the TOML scene;
-  :mod:`clsky.anim.scene`), read with Pillow.
+  :mod:`clsky.anim.scene`), read from the chunks before its image data, which is never decompressed.
 - A metrics JSON (``<stem>_metrics.json``): the version, the scene, the frames and the table's units.
 - An EXR frame (``clsky animate --hdr exr``): its size, channels and header (units, orientation of an
   environment map, the scene and clsky's version), read with the OpenEXR bindings.
@@ -18,10 +18,12 @@ one line and exit status 2 on the command line.
 from __future__ import annotations
 
 import json
+import struct
+import zlib
 
 import numpy as np
 
-from ._files import as_path
+from ._files import as_path, read_user_text
 from .errors import counted
 from .table import TableFormatError
 
@@ -65,19 +67,63 @@ def _table(path):
     return _block(f"{path}:", items)
 
 
+#: A PNG file's first 8 bytes, and the colour types' Pillow modes (PNG specification, 11.2.2).
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+_PNG_MODES = {0: "L", 2: "RGB", 3: "P", 4: "LA", 6: "RGBA"}
+#: The most bytes of chunks read before the image data (clsky's frames hold a few kB of text there).
+_PNG_MAX_HEADER_BYTES = 16 * 2**20
+
+
+def _png_chunks(path):
+    """(type, data) of each chunk of the PNG at ``path`` before its image data (IDAT), each CRC checked;
+    TableFormatError naming the file for anything else."""
+    def damaged(why):
+        return TableFormatError(f"{path}: not a readable PNG ({why})")
+
+    with open(path, "rb") as stream:
+        if stream.read(len(_PNG_SIGNATURE)) != _PNG_SIGNATURE:
+            raise damaged("no PNG signature")
+        total = 0
+        while True:
+            head = stream.read(8)
+            if len(head) < 8:
+                raise damaged("it ends before its image data")
+            length, kind = struct.unpack(">I4s", head)
+            if kind in (b"IDAT", b"IEND"):
+                return
+            total += length
+            if total > _PNG_MAX_HEADER_BYTES:
+                raise damaged(f"more than {_PNG_MAX_HEADER_BYTES // 2**20} MiB of chunks before its image data")
+            data, crc = stream.read(length), stream.read(4)
+            if len(data) < length or len(crc) < 4 or zlib.crc32(kind + data) != struct.unpack(">I", crc)[0]:
+                raise damaged(f"its {kind.decode('latin-1')!r} chunk is damaged")
+            yield kind, data
+
+
 def _png(path):
-    try:
-        from PIL import Image, UnidentifiedImageError
-    except ImportError as error:
-        raise ImportError("describing a PNG needs Pillow: pip install 'clsky[anim]'") from error
-    try:
-        with Image.open(path) as image:
-            image.load()
-            size, mode, text = image.size, image.mode, dict(getattr(image, "text", {}))
-    except (UnidentifiedImageError, OSError, SyntaxError) as error:
-        raise TableFormatError(f"{path}: not a readable PNG ({error})") from None
+    """The size, colour type and clsky's text of a PNG, from its chunks before the image data: nothing is
+    decompressed (clsky's frames put their text there, as iTXt), so a frame of any size costs a few reads,
+    where Pillow decoded the whole image for its text and refused images of over 179 million pixels (a
+    69-byte file that claimed 60000 x 60000 pixels, and clsky's own 8192-pixel composites)."""
+    size = mode = None
+    text = {}
+    for kind, data in _png_chunks(path):
+        if kind == b"IHDR" and len(data) == 13:
+            width, height, _, colour = struct.unpack(">IIBB", data[:10])
+            size, mode = (width, height), _PNG_MODES.get(colour, f"colour type {colour}")
+        elif kind == b"tEXt":
+            keyword, _, value = data.partition(b"\0")
+            text[keyword.decode("latin-1")] = value.decode("latin-1")
+        elif kind == b"iTXt":
+            keyword, _, rest = data.partition(b"\0")
+            if rest[:1] == b"\0":                     # uncompressed (clsky's); language and keyword skipped
+                value = rest[2:].split(b"\0", 2)[-1]
+                text[keyword.decode("latin-1")] = value.decode("utf-8", "replace")
+    if size is None:
+        raise TableFormatError(f"{path}: not a readable PNG (no image header)")
+    version = text.get("clsky_version", "- (not written by clsky)")
     items = [("kind", "PNG image"), ("size", f"{size[0]} x {size[1]} pixels, {mode}"),
-             ("clsky version", text.get("clsky_version", "- (not written by clsky)"))]
+             ("clsky version", version if version.isprintable() else repr(version))]
     if "scene" in text:
         items += _scene_lines(text["scene"])
     return _block(f"{path}:", items)
@@ -99,11 +145,19 @@ def _orders_text(count) -> str:
     return counted(count, "order") if isinstance(count, int) and not isinstance(count, bool) else f"{count} orders"
 
 
+def _first_line(error) -> str:
+    return str(error).splitlines()[0] if str(error) else type(error).__name__
+
+
 def _metrics(path):
     try:
-        document = json.loads(path.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise TableFormatError(f"{path}: not a readable JSON file ({error})") from None
+        document = json.loads(read_user_text(path))
+    except OSError as error:
+        raise TableFormatError(f"{path}: cannot read it ({error.strerror or error})") from None
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as error:
+        raise TableFormatError(f"{path}: not a readable JSON file ({_first_line(error)})") from None
+    except ValueError as error:             # an integer of more digits than Python converts
+        raise TableFormatError(f"{path}: not a readable JSON file ({_first_line(error)})") from None
     if not isinstance(document, dict) or "frames" not in document:
         raise TableFormatError(f"{path}: not an animation's metrics JSON (no 'frames')")
     frames = _json_member(path, document, "frames", list)
@@ -182,7 +236,7 @@ def describe(path) -> str:
     TableFormatError
         A damaged or foreign file (message names the file).
     ImportError
-        A PNG without Pillow, an EXR file without the OpenEXR bindings (the ``anim`` extra), saying so.
+        An EXR file without the OpenEXR bindings (the ``anim`` extra), saying so.
     """
     path = as_path(path)
     if path.is_dir():

@@ -73,6 +73,7 @@ import numpy as np
 
 from . import _cl
 from ._cache import cache_directory, source_digest, store
+from ._files import read_user_text
 from .atmosphere import AtmosphereParameters, preset
 from .ground import check_ground_mode
 from .errors import ParameterError, check_choice, check_instance, check_integer, is_finite_real
@@ -423,8 +424,8 @@ def pilot_share(atmosphere: AtmosphereParameters, table: TableSettings, scene: S
 def _kept_share(path, key):
     """The share kept at ``path`` for exactly ``key``, or None (no file, another key, a damaged file)."""
     try:
-        kept = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError, RecursionError):      # missing, unreadable, not UTF-8, not JSON
+        kept = json.loads(read_user_text(path, limit=2**16))
+    except (OSError, ValueError, RecursionError):      # missing, unreadable, a FIFO, not UTF-8, not JSON
         return None
     if not isinstance(kept, dict) or kept.get("key") != key:
         return None

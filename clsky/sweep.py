@@ -25,7 +25,7 @@ import pathlib
 import shlex
 import time
 
-from ._files import binary_and_header, check_suffix
+from ._files import binary_and_header, check_suffix, read_user_text
 from .cli import (UsageError, check_outputs, farm_of, progress_bar, report_table, running_farm, table_atmosphere,
                   table_settings, _check_table_memory)
 
@@ -53,7 +53,7 @@ def read_sweep(path) -> list[tuple[int, list[str]]]:
     that cannot be read, a line shlex cannot split, or a file without a table line."""
     path = pathlib.Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = read_user_text(path)
     except OSError as error:                            # as --scene's (anim/scene.py)
         raise UsageError(f"--sweep: cannot read {path}: {error.strerror or error}") from None
     except UnicodeDecodeError:

@@ -199,7 +199,7 @@ def test_wrong_types_are_named(table, tmp_path, monkeypatch, call, message):
 @pytest.mark.parametrize("flag", ["no", 0, None, "False"])
 def test_fast_math_takes_only_a_bool(flag):
     """``fast_math='no'`` turned fast math on (bool('no') is True), and the table said so in its metadata."""
-    with pytest.raises(ValueError, match=re.escape(f"fast_math must be True or False, got")):
+    with pytest.raises(ValueError, match=re.escape("fast_math must be True or False, got")):
         ScatteringTable.build("atmosphere-plus", TableSettings(size=(4, 8, 4), orders=1), fast_math=flag)
 
 

@@ -233,3 +233,14 @@ def test_importing_colour_science_leaves_numpys_printing_as_it_was(tmp_path):
     run = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr
     assert run.stdout.split() == ["True", "False", "True"], run.stdout
+
+
+def test_a_fifo_in_the_cache_is_passed_by(tmp_path):
+    """A FIFO where a cache file belongs (the colour constants, a pilot's share) blocked `clsky render` for
+    ever: np.load and read_text waited for a writer. Both readers now take it for a missing file."""
+    from clsky import planner
+
+    fifo = tmp_path / "constants.npz"
+    os.mkfifo(fifo)
+    assert colour_constants._read(fifo, colour_constants.colour_science_version()) is None
+    assert planner._kept_share(fifo, "any key") is None

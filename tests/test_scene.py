@@ -344,7 +344,7 @@ def test_info_refuses_other_files(tmp_path, capsys):
     os.mkfifo(tmp_path / "pipe.npz")                    # read, it would wait for a writer for ever
     assert one_line_error(*run(capsys, "info", tmp_path / "pipe.npz")[::2]).endswith("pipe.npz: not a regular file")
     (tmp_path / "x.png").write_bytes(b"not a png")
-    assert "not a readable PNG" in one_line_error(*run(capsys, "info", tmp_path / "x.png")[::2])
+    assert "not a readable PNG (no PNG signature)" in one_line_error(*run(capsys, "info", tmp_path / "x.png")[::2])
     (tmp_path / "x.json").write_text("{}")
     assert "not an animation's metrics JSON" in one_line_error(*run(capsys, "info", tmp_path / "x.json")[::2])
 
@@ -361,12 +361,76 @@ def test_info_of_a_malformed_metrics_json_is_one_line(tmp_path, capsys, document
     assert line == f"clsky: error: {path}: not an animation's metrics JSON ({message})"
 
 
+def _png_with(chunks):
+    """A PNG file's bytes of ``chunks`` [(type, data)], each with its length and CRC, after the signature."""
+    import struct
+    import zlib
+
+    return b"\x89PNG\r\n\x1a\n" + b"".join(struct.pack(">I", len(data)) + kind + data
+                                          + struct.pack(">I", zlib.crc32(kind + data)) for kind, data in chunks)
+
+
+def test_info_of_a_png_reads_no_image_data(tmp_path, capsys):
+    """``clsky info`` decoded a PNG's whole image for its text: a 69-byte file claiming 60000 x 60000 pixels
+    ended in Pillow's DecompressionBombError (a traceback), and clsky's own composites of 8192-pixel
+    frames (over 179 million pixels) would have too. Its header chunks are read, nothing decompressed."""
+    import struct
+
+    header = struct.pack(">IIBBBBB", 60000, 60000, 8, 2, 0, 0, 0)
+    text = b"clsky_version\0\0\0\0\0" + b"9.9"
+    path = tmp_path / "huge.png"
+    path.write_bytes(_png_with([(b"IHDR", header), (b"iTXt", text), (b"IDAT", b"\x78\x9c")]))
+    status, out, err = run(capsys, "info", path)
+    assert status == 0 and "60000 x 60000 pixels, RGB" in out and "clsky version  9.9" in out, out + err
+    forged = tmp_path / "forged.png"
+    forged.write_bytes(_png_with([(b"IHDR", header), (b"iTXt", b"clsky_version\0\0\0\0\0" + b"9.9\nFAKE LINE"),
+                                  (b"IDAT", b"")]))
+    status, out, _ = run(capsys, "info", forged)
+    assert status == 0 and "FAKE LINE" not in out.splitlines() and "'9.9\\nFAKE LINE'" in out
+    damaged = path.read_bytes()
+    path.write_bytes(damaged[:20] + bytes([damaged[20] ^ 1]) + damaged[21:])          # in the IHDR data
+    assert "not a readable PNG (its 'IHDR' chunk is damaged)" in one_line_error(*run(capsys, "info", path)[::2])
+    path.write_bytes(damaged[:33])
+    assert "not a readable PNG (it ends before its image data)" in one_line_error(*run(capsys, "info", path)[::2])
+
+
+def test_info_of_a_deeply_nested_metrics_json_is_one_line(tmp_path, capsys):
+    """json.loads of [[[...]]] 100 000 deep ended in RecursionError, a traceback."""
+    path = tmp_path / "deep_metrics.json"
+    path.write_text("[" * 100_000 + "]" * 100_000)
+    assert "not a readable JSON file" in one_line_error(*run(capsys, "info", path)[::2])
+
+
+@pytest.mark.parametrize("command", [("render", "--scene"), ("table", "--sweep")])
+def test_scene_and_sweep_files_that_are_no_regular_files_are_one_line(tmp_path, capsys, command):
+    """A FIFO without a writer blocked --scene and --sweep for ever, /dev/zero filled the memory: they are
+    opened without blocking and must be regular files."""
+    fifo = tmp_path / "pipe.txt"
+    os.mkfifo(fifo)
+    for path in (fifo, "/dev/zero"):
+        line = one_line_error(*run(capsys, *command, path)[::2])
+        assert line == f"clsky: error: {command[1]}: cannot read {path}: not a regular file (a FIFO, a device or a socket)"
+
+
+def test_a_scene_with_a_byte_order_mark_and_one_nested_too_deeply(tmp_path, capsys):
+    """A scene saved with a byte-order mark (Windows editors) read "Invalid statement (at line 1, column 1)";
+    a value nested 100 000 deep ended in RecursionError."""
+    bom = tmp_path / "bom.toml"
+    bom.write_bytes(b"\xef\xbb\xbf[output]\noutput = \"x.png\"\n")
+    status, out, err = run(capsys, "render", "--scene", bom, "--print-scene")
+    assert status == 0 and 'output = "x.png"' in out, err
+    deep = tmp_path / "deep.toml"
+    deep.write_text("a = " + "[" * 100_000 + "]" * 100_000 + "\n")
+    assert one_line_error(*run(capsys, "render", "--scene", deep)[::2]) == (
+        f"clsky: error: --scene {deep}: not a valid TOML file: nested too deeply")
+
+
 def test_info_without_the_anim_extra_is_one_line(tmp_path, capsys, monkeypatch):
-    """Describing a PNG or EXR needs Pillow or OpenEXR: without them (None in sys.modules makes their
-    import fail) one line saying how to install them, exit status 2."""
+    """Describing an EXR needs OpenEXR: without it (None in sys.modules makes its import fail) one line
+    saying how to install it, exit status 2. (A PNG's chunks are read without Pillow.)"""
     monkeypatch.setitem(sys.modules, "PIL", None)
     monkeypatch.setitem(sys.modules, "OpenEXR", None)
-    for name, needs in (("x.png", "describing a PNG needs Pillow"), ("x.exr", "describing an EXR file needs")):
+    for name, needs in (("x.exr", "describing an EXR file needs"),):
         (tmp_path / name).write_bytes(b"not an image")
         line = one_line_error(*run(capsys, "info", tmp_path / name)[::2])
         assert line.startswith(f"clsky: error: {needs}") and "pip install 'clsky[anim]'" in line
