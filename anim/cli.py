@@ -294,8 +294,12 @@ def run_animate(args):
     if _printed_scene(args, config):
         return 0
     _check_options_used(args)
+    option = scene.source_of(args, "output") or "--output"
+    clsky_cli.check_not_inputs([(option, path) for path in (config.output_path, config.metrics_path(".csv"),
+                                                            config.metrics_path(".json")) if path is not None],
+                               [("the --scene file", args.scene)])
     try:                                         # the MP4, <stem>_frames/, <stem>_metrics.csv/.json
-        check_outputs(config, option=scene.source_of(args, "output") or "--output")
+        check_outputs(config, option=option)
     except (OSError, ValueError, ImportError) as error:
         raise clsky_cli.UsageError(str(error)) from None
     _check_memory(args, config, sun_positions(config))
@@ -338,6 +342,7 @@ def run_render(args):
     if _printed_scene(args, config, **extra):
         return 0
     _check_options_used(args)
+    clsky_cli.check_not_inputs([(name("output", "--output"), output)], [("the --scene file", args.scene)])
     clsky_cli.check_outputs([(name("output", "--output"), output)], args.force)
     try:
         writers.require_pillow()

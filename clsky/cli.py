@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+import pathlib
 import signal
 import sys
 import threading
@@ -60,6 +61,18 @@ def signals_interrupt():
     finally:
         for number, handler in previous.items():
             signal.signal(number, handler)
+
+
+def check_not_inputs(targets, inputs):
+    """UsageError for an output that is one of the command's input files (``inputs``: (what, path), path None
+    when not given): with --force it replaced the scene or sweep file it was read from."""
+    for what, source in inputs:
+        if source is None:
+            continue
+        source = pathlib.Path(source).resolve()
+        for option, path in targets:
+            if pathlib.Path(path).resolve() == source:
+                raise UsageError(f"{option} {path} is {what} itself: write the output elsewhere")
 
 
 def check_outputs(targets, force):
@@ -211,7 +224,8 @@ def _add_table_arguments(parser):
     numerics.add_argument("--backend", default="opencl", choices=["opencl", "numpy"])
     numerics.add_argument("--fast-math", action="store_true", help="build kernels with -cl-fast-relaxed-math")
     output = parser.add_argument_group("output")
-    output.add_argument("-o", "--output", default="table.npz", help="table file (.npz, default: %(default)s)")
+    output.add_argument("-o", "--output", help=f"table file (.npz, default: {DEFAULT_TABLE_OUTPUT}; with --sweep, "
+                                               f"each line's own)")
     output.add_argument("--raw", metavar="NAME", help="also export NAME.bin (float32) + NAME.json for GPU engines "
                                                       "(NAME.bin or NAME.json names the same pair)")
     output.add_argument("--force", action="store_true", help="overwrite existing output files")
@@ -336,6 +350,10 @@ def option_message(error, options):
     return error.reworded(option)
 
 
+#: The table file `clsky table` writes without -o.
+DEFAULT_TABLE_OUTPUT = "table.npz"
+
+
 def table_settings(args, atmosphere):
     """TableSettings from the table options: the --quality level's (or the defaults), overridden by the
     options given, with the sun axis planned for --sun-elevations. UsageError names the option."""
@@ -374,6 +392,8 @@ def _check_table_options_used(args, settings):
     for dest, option, why in unused:
         if getattr(args, dest, None) is not None:
             raise UsageError(f"{option} {why}")
+    if getattr(args, "fast_math", False) and getattr(args, "backend", "opencl") != "opencl":
+        raise UsageError("--fast-math sets how the OpenCL kernels are built, and --backend numpy runs none")
 
 
 def _table_settings(args, atmosphere):
@@ -469,7 +489,7 @@ def run_table(args):
     atmosphere = table_atmosphere(args)
     settings = table_settings(args, atmosphere)
     try:
-        output = check_suffix(args.output, ".npz", "--output")
+        output = check_suffix(args.output or DEFAULT_TABLE_OUTPUT, ".npz", "--output")
         raw = [] if args.raw is None else [("--raw", path) for path in binary_and_header(args.raw, "--raw")]
     except ValueError as error:
         raise UsageError(str(error)) from None
@@ -545,6 +565,12 @@ def _main(argv, extensions):
         return _run(argv, extensions)
 
 
+def one_line(message) -> str:
+    """``message`` on one line: the line breaks a path or a file's value may hold, escaped (the brief's one
+    line of error, which a file named 'missing\\nline.npz' broke in two)."""
+    return str(message).replace("\r", "\\r").replace("\n", "\\n")
+
+
 def _run(argv, extensions):
     from ._cl import KernelBuildError, NoDeviceError
     from .errors import NumericalError
@@ -556,13 +582,17 @@ def _run(argv, extensions):
         args = parser.parse_args(argv)
         return handlers[args.command](args)
     except UsageError as error:
-        print(f"clsky: error: {error}", file=sys.stderr)
+        print(f"clsky: error: {one_line(error)}", file=sys.stderr)
         return EXIT_USAGE
     except (ValueError, FileExistsError) as error:
         if verbose:
             raise
-        print(f"clsky: error: {error}", file=sys.stderr)
+        print(f"clsky: error: {one_line(error)}", file=sys.stderr)
         return EXIT_USAGE
+    except BrokenPipeError:             # `clsky info FILE | head -1`: the reader left, as with SIGPIPE's default
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())       # nothing more to flush at exit
+        return 128 + signal.SIGPIPE
     except (NoDeviceError, KernelBuildError, NumericalError, OSError, FarmError) as error:
         if verbose:
             raise

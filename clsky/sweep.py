@@ -26,8 +26,8 @@ import shlex
 import time
 
 from ._files import binary_and_header, check_suffix, read_user_text
-from .cli import (UsageError, check_outputs, farm_of, progress_bar, report_table, running_farm, table_atmosphere,
-                  table_settings, _check_table_memory)
+from .cli import (DEFAULT_TABLE_OUTPUT, UsageError, check_outputs, farm_of, progress_bar, report_table,
+                  running_farm, table_atmosphere, table_settings, _check_table_memory)
 
 __all__ = ["SweepJob", "read_sweep", "sweep_jobs", "run_sweep"]
 
@@ -77,24 +77,17 @@ def sweep_jobs(args) -> list[SweepJob]:
     if args.sweep is None:
         lines = [("the command line", args)]
     else:
-        lines = []
-        for number, words in read_sweep(args.sweep):
-            source = f"{args.sweep} line {number}"
-            refused = [word.split("=")[0] for word in words if word.split("=")[0] in RUN_OPTIONS]
-            if refused:
-                raise UsageError(f"{source}: {refused[0]} belongs to the command line, not to a sweep line")
-            if not any(word in ("-o", "--output") or word.startswith(("-o", "--output=")) for word in words):
-                raise UsageError(f"{source}: -o FILE is missing (each line names its table's file)")
-            try:
-                lines.append((source, args.table_parser.parse_args(words, namespace=copy.copy(args))))
-            except UsageError as error:
-                raise UsageError(f"{source}: {error}") from None
+        if args.output is not None:                 # each line's own -o would replace it: it named nothing
+            raise UsageError(f"-o/--output names the table of a single build; with --sweep each line names its "
+                             f"own (-o {args.output} was given on the command line)")
+        lines = [(f"{args.sweep} line {number}", _sweep_line(args, f"{args.sweep} line {number}", words))
+                 for number, words in read_sweep(args.sweep)]
     jobs = []
     for source, line in lines:
         try:
             atmosphere = table_atmosphere(line)
             settings = table_settings(line, atmosphere)
-            output = check_suffix(line.output, ".npz", "--output")
+            output = check_suffix(line.output or DEFAULT_TABLE_OUTPUT, ".npz", "--output")
             if line.raw is not None:
                 binary_and_header(line.raw, "--raw")
         except (UsageError, ValueError) as error:
@@ -102,6 +95,25 @@ def sweep_jobs(args) -> list[SweepJob]:
         jobs.append(SweepJob(source, line, atmosphere, settings, output, line.raw))
     _check_jobs(args, jobs)
     return jobs
+
+
+def _sweep_line(args, source, words):
+    """The options of one sweep line over the command line's. Options are matched in full: argparse's
+    abbreviations let --work 2 or --prog leave (run options, refused in a line) through as --workers and
+    --progress, silently ignored; and -h in a line printed the help and ended the sweep with status 0."""
+    refused = [word.split("=")[0] for word in words if word.split("=")[0] in RUN_OPTIONS + ("-h", "--help")]
+    if refused:
+        raise UsageError(f"{source}: {refused[0]} belongs to the command line, not to a sweep line")
+    if not any(word in ("-o", "--output") or word.startswith(("-o", "--output=")) for word in words):
+        raise UsageError(f"{source}: -o FILE is missing (each line names its table's file)")
+    parser = args.table_parser
+    parser.allow_abbrev = False
+    try:
+        return parser.parse_args(words, namespace=copy.copy(args))
+    except UsageError as error:
+        raise UsageError(f"{source}: {error}") from None
+    finally:
+        parser.allow_abbrev = True
 
 
 def _check_jobs(args, jobs):
@@ -113,6 +125,8 @@ def _check_jobs(args, jobs):
             targets += [("--raw", path) for path in binary_and_header(job.raw)]
         for option, path in targets:
             where = option if args.sweep is None else f"{job.source}: {option}"
+            if args.sweep is not None and path.resolve() == pathlib.Path(args.sweep).resolve():
+                raise UsageError(f"{where} {path} is the sweep file itself")
             other = seen.setdefault(path.resolve(), job.source)
             if other != job.source:
                 raise UsageError(f"{where} {path} is written by {other} too")

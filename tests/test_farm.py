@@ -242,6 +242,12 @@ def test_a_sweep_on_an_existing_cluster_writes_the_tables_of_single_builds(farm,
     ("--preset physical -o a.npz --raw .bin", "weather.txt line 3: --raw must be a file name (NAME gives NAME.bin "
                                               "and NAME.json), got '.bin'"),
     ("--preset physical -o a.npz --raw clear.json", "weather.txt line 3: --raw clear.bin is written by weather.txt line 2 too"),
+    # argparse's abbreviations let run options through as --workers and --progress, silently ignored
+    ("--preset physical --work 2 -o a.npz", "weather.txt line 3: unrecognized arguments: --work 2"),
+    ("--preset physical --prog leave -o a.npz", "weather.txt line 3: unrecognized arguments: --prog leave"),
+    # -h printed the help and ended the sweep with status 0, building nothing
+    ("--preset physical -o a.npz -h", "weather.txt line 3: -h belongs to the command line"),
+    ("--preset physical -o weather.txt --force", "weather.txt line 3: --output must end in .npz"),
 ])
 def test_a_bad_sweep_line_is_one_line_before_any_work(line, message, tmp_path, capsys):
     (tmp_path / "weather.txt").write_text("# states\n--preset physical -o clear.npz --raw clear\n" + line + "\n")
@@ -250,6 +256,24 @@ def test_a_bad_sweep_line_is_one_line_before_any_work(line, message, tmp_path, c
     error = capsys.readouterr().err
     assert error.startswith("clsky: error: " + message) and error.count("\n") == 1, error
     assert sorted(p.name for p in tmp_path.iterdir()) == ["weather.txt"]
+
+
+def test_a_sweep_refuses_what_it_would_ignore_or_overwrite(tmp_path, capsys):
+    """The command line's -o was dropped without a word (every line names its own); a line whose output was
+    the sweep file itself replaced it with --force."""
+    (tmp_path / "weather.npz").write_text("--preset physical -o weather.npz --force\n")
+    (tmp_path / "weather.txt").write_text("--preset physical -o clear.npz\n")
+    with inside(tmp_path):
+        assert main(["table", "--sweep", "weather.npz", *SWEEP_OPTIONS]) == 2
+        assert capsys.readouterr().err == ("clsky: error: weather.npz line 1: --output weather.npz is the sweep file "
+                                           "itself\n")
+        assert main(["table", "--sweep", "weather.txt", "-o", "x.npz", *SWEEP_OPTIONS]) == 2
+        assert capsys.readouterr().err == ("clsky: error: -o/--output names the table of a single build; with --sweep "
+                                           "each line names its own (-o x.npz was given on the command line)\n")
+        assert main(["table", "--backend", "numpy", "--fast-math", "-o", "n.npz", *SWEEP_OPTIONS]) == 2
+        assert capsys.readouterr().err == ("clsky: error: --fast-math sets how the OpenCL kernels are built, and "
+                                           "--backend numpy runs none\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["weather.npz", "weather.txt"]
 
 
 @pytest.mark.parametrize("make, message", [

@@ -1,6 +1,7 @@
 """Issue 9, class 6: messages name what the user typed, print numbers short, and say when PoCL's
 kernel cache is what is missing (the command line through a subprocess)."""
 
+import pathlib
 import subprocess
 import sys
 
@@ -228,3 +229,20 @@ def test_missing_extra_is_one_line_before_any_work(tmp_path, args, missing, name
     line = one_line_error(clsky(*args, cwd=work, env=_without(tmp_path, missing)))
     assert named in line, line
     assert list(work.iterdir()) == []
+
+
+def test_a_path_with_a_line_break_stays_one_line(tmp_path):
+    """``clsky info $'missing\\nline.npz'`` printed its error on two lines."""
+    line = one_line_error(clsky("info", "missing\nline.npz", cwd=tmp_path))
+    assert line == "clsky: error: missing\\nline.npz: no such file"
+
+
+def test_a_reader_that_leaves_ends_the_output_quietly(tmp_path):
+    """``clsky info FILE | head -1``: a reader that leaves before the output ended it with "clsky: error:
+    [Errno 32] Broken pipe" and status 1. Now nothing is printed, and the status is SIGPIPE's (128 + 13)."""
+    frame = pathlib.Path(__file__).resolve().parents[1] / "docs" / "frame.png"
+    process = subprocess.Popen([sys.executable, "-m", "clsky", "info", str(frame)], cwd=tmp_path,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    process.stdout.close()                                  # the reader is gone before the first line
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 141 and err == b"", err

@@ -460,3 +460,16 @@ def test_the_dusk_scene_reproduces_the_readme_picture(tmp_path, capsys, monkeypa
     for section, values in tomllib.loads(example.read_text()).items():
         for key, value in values.items():
             assert written[section][key] == value, (section, key)
+
+
+@pytest.mark.parametrize("command, output", [("render", "sky.png"), ("animate", "sky_metrics.json")])
+def test_an_output_that_is_the_scene_file_is_refused(tmp_path, capsys, monkeypatch, command, output):
+    """``clsky render --scene sky.png -o sky.png --force`` replaced the scene with the frame it described
+    (an animation's metrics JSON likewise)."""
+    monkeypatch.chdir(tmp_path)
+    scene = tmp_path / output
+    scene.write_text("[output]\n")
+    target = "sky.mp4" if command == "animate" else output
+    line = one_line_error(*run(capsys, command, "--scene", output, "-o", target, "--force", "--size", "16")[::2])
+    assert line.endswith(" is the --scene file itself: write the output elsewhere"), line
+    assert scene.read_text() == "[output]\n" and sorted(p.name for p in tmp_path.iterdir()) == [output]
