@@ -271,7 +271,12 @@ class AnimationConfig:
                                      f"{last} (pvlib estimates Delta T = TT - UT1 for {sunpath.DELTA_T_YEARS[0]} "
                                      f"to {last})", self.date.isoformat())
         if self.location is not None:
-            least = (self.end_hour - self.start_hour) * 60.0 / (sunpath.MAX_POSITIONS - 1)
+            span = (self.end_hour - self.start_hour) * 60.0
+            if self.step_minutes > span:      # one position: "need at least 2 frames" came after the table's build
+                raise ParameterError("step_minutes", f"at most {span:.6g} minutes, the time from {self.start_hour:g} h "
+                                                     f"to {self.end_hour:g} h (an animation takes at least 2 frames)",
+                                     self.step_minutes)
+            least = span / (sunpath.MAX_POSITIONS - 1)
             if self.step_minutes < least:
                 raise ParameterError("step_minutes", f"at least {least:.6g} minutes from {self.start_hour:g} h to "
                                                      f"{self.end_hour:g} h (at most {sunpath.MAX_POSITIONS} positions)",

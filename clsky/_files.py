@@ -154,6 +154,8 @@ def as_path(value, name: str = "path") -> pathlib.Path:
         raise ValueError(f"{name} must be a file path as text, got {text!r:.60} ({type(text).__name__})")
     if "\0" in text:
         raise ValueError(f"{name} must not hold a NUL character, got {text!r:.60}")
+    if not text:                            # pathlib reads '' as '.', the current directory
+        raise ValueError(f"{name} must be a file path, got an empty one")
     return pathlib.Path(text)
 
 

@@ -86,6 +86,11 @@ def rayleigh_scattering_coefficient(refractive_index, number_density, wavelength
 
 _is_real_number = is_real_number
 
+#: Largest incident light I_I per channel (the solar irradiance, 1.5-2 W m^-2 nm^-1 in the visible, times
+#: the exposure and the spectral-to-RGB factor): renders are I_I times radiances per unit irradiance of
+#: order 1, so this keeps every render finite with room to spare, float32's included.
+MAX_INCIDENT_LIGHT = 1e12
+
 #: Largest refractive index :meth:`AtmosphereParameters.from_refractive_index` takes (air's is 1.0003; a gas
 #: far beyond would exceed the optical-depth limit anyway, and n^2 would overflow long before 1e200).
 MAX_REFRACTIVE_INDEX = 10.0
@@ -174,7 +179,8 @@ class AtmosphereParameters:
     solar_irradiance, spectral_to_rgb : tuple of 3 floats
         Factors of the incident light, >= 0.
     exposure : float
-        Exposure factor of the incident light, > 0.
+        Exposure factor of the incident light, > 0; the incident light (the three factors' product) is
+        at most :data:`MAX_INCIDENT_LIGHT` in each channel.
     ozone_column_du : float
         Ozone column [Dobson units, 1 DU = 2.687e20 molecules/m^2], >= 0; 0 (the default) is no ozone,
         and the kernels are then built without it (bit-for-bit the ozone-free program).
@@ -280,6 +286,12 @@ class AtmosphereParameters:
               f"in [0, {MAX_ANGSTROM_EXPONENT:g}]")
         check("mie_reference_wavelength", lambda v: v > 0, "finite and > 0 nm")
         check("ground_albedo", lambda v: (v >= 0) & (v <= 1), "in [0, 1]")
+        with np.errstate(over="ignore"):
+            light = np.array(self.solar_irradiance) * self.exposure * np.array(self.spectral_to_rgb)
+        if not np.all(light <= MAX_INCIDENT_LIGHT):   # 1e300 each rendered infinities from valid parameters
+            raise ParameterError("exposure", f"such that the incident light I_I = solar_irradiance x exposure x "
+                                             f"spectral_to_rgb is at most {MAX_INCIDENT_LIGHT:g} in each channel "
+                                             f"(renders scale with it; here {np.max(light):.3g})", self.exposure)
         with np.errstate(over="ignore"):
             angstrom = (np.array(self.wavelengths) / self.mie_reference_wavelength) ** -self.mie_angstrom_exponent
         if not np.all(np.isfinite(angstrom)):      # 0 * inf would make a Mie coefficient NaN

@@ -59,6 +59,7 @@ from typing import Callable
 import numpy as np
 
 from . import __version__
+from ._cl import check_flag
 from ._files import StagedWrites, as_path, atomic_write, binary_and_header, check_output, check_suffix
 from .atmosphere import PRESETS, AtmosphereParameters, preset
 from .errors import check_instance, is_integer, is_real_number, short
@@ -470,6 +471,7 @@ class ScatteringTable:
             ``path`` is a directory, or its directory is missing or not writable.
         """
         path = check_suffix(path, ".npz")
+        check_flag("overwrite", overwrite)
         members = self._file_members()
         with atomic_write(path, overwrite, staging=staging) as temporary:
             with open(temporary, "wb") as stream:
@@ -571,6 +573,7 @@ class ScatteringTable:
         ``staging``, when that set commits); existing files are kept unless ``overwrite``.
         """
         self.validate()
+        check_flag("overwrite", overwrite)
         binary, header = binary_and_header(path)
         for target in (binary, header):
             check_output(target, force=overwrite)

@@ -186,6 +186,8 @@ def _renderer(table):
     (lambda t: t.save("a\0b.npz"), "path must not hold a NUL character"),
     (lambda t: t.save("x.npz", staging="x"), "staging must be None or a StagedWrites, got 'x' (str)"),
     (lambda t: ScatteringTable.load(5), "path must be a file path (a str or os.PathLike), got 5 (int)"),
+    (lambda t: ScatteringTable.load(""), "path must be a file path, got an empty one"),   # pathlib: '.'
+    (lambda t: t.save("x.npz", overwrite="yes"), "overwrite must be True or False, got 'yes' (str)"),
     (lambda t: ScatteringTable.build(t.atmosphere, t.settings, ctx="x"),
      "ctx must be None (clsky's device) or a pyopencl.Context, got 'x' (str)"),
 ])
@@ -234,3 +236,12 @@ def test_angstrom_factor_that_overflows_names_the_wavelengths():
     coefficient NaN, which the optical-depth check let through (NaN > 1000 is false)."""
     with pytest.raises(ValueError, match=r"^wavelengths must be such that the Angstrom law's factor"):
         AtmosphereParameters(wavelengths=(1e-300, 510, 475), mie_angstrom_exponent=4.0, mie_scattering=0.0)
+
+
+def test_an_incident_light_that_would_render_infinities_is_refused():
+    """An exposure and irradiance of 1e300 each (finite, > 0: valid before) rendered every pixel infinite:
+    the incident light, their product, is at most 1e12 per channel."""
+    with pytest.raises(ValueError, match=r"^exposure must be such that the incident light I_I = .* at most 1e\+12"):
+        AtmosphereParameters(exposure=1e300, solar_irradiance=(1e300, 1e300, 1e300))
+    bright = AtmosphereParameters(exposure=1e6, solar_irradiance=(2.0, 2.0, 2.0))     # far below the bound
+    np.testing.assert_allclose(bright.incident_light, 1e6 * bright.replace(exposure=1.0).incident_light, rtol=1e-15)

@@ -246,3 +246,12 @@ def test_a_reader_that_leaves_ends_the_output_quietly(tmp_path):
     process.stdout.close()                                  # the reader is gone before the first line
     _, err = process.communicate(timeout=120)
     assert process.returncode == 141 and err == b"", err
+
+
+def test_a_time_step_longer_than_the_hours_names_the_option(tmp_path):
+    """--hours 12 12.1 with the default 10-minute step gave one sun position: "need at least 2 frames, got 1",
+    after the table's build and naming no option."""
+    line = one_line_error(clsky("animate", "--location", "45", "7", "--hours", "12", "12.1", "-o", "h.mp4",
+                                cwd=tmp_path))
+    assert line.startswith("clsky: error: --step-minutes must be at most 6 minutes, the time from 12 h to 12.1 h"), line
+    assert list(tmp_path.iterdir()) == []
