@@ -18,10 +18,13 @@ written atomically (:func:`clsky._files.atomic_write`), checked before the drawi
 from __future__ import annotations
 
 import csv
+import io
+import math
 import pathlib
 
 import numpy as np
 
+from clsky._files import read_user_text
 from clsky.errors import require_extra
 
 from .accuracy import SUN_ELEVATIONS, pareto_front
@@ -60,10 +63,14 @@ def require_plotting():
 
 def read_csv(path):
     """The rows of a sweep's CSV (:func:`clsky.anim.writers.write_csv` of :func:`clsky.anim.accuracy.measure`): a list
-    of dicts, numbers as float. Raises ValueError naming the file and column when a number does not parse
-    or a column the plots need (render time, worst and per-elevation errors) is missing."""
-    with open(path, newline="", encoding="utf-8") as stream:
-        rows = list(csv.DictReader(stream))
+    of dicts, numbers as float. Raises ValueError naming the file and column when a number does not parse or
+    is no finite number >= 0 (times, errors: a NaN or a negative time drew a plot of nothing), a column the
+    plots need (render time, worst and per-elevation errors) is missing, or the file is no UTF-8 text."""
+    try:
+        text = read_user_text(path)
+    except UnicodeDecodeError:
+        raise ValueError(f"{path}: not a CSV file (not UTF-8 text)") from None
+    rows = list(csv.DictReader(io.StringIO(text, newline="")))
     needed = {"candidate", "knob", "method", "render_s", "p95_rel"} | {f"p95_rel {n}" for n in SUN_ELEVATIONS}
     missing = sorted(needed - set(rows[0] if rows else ()))
     if missing:
@@ -79,6 +86,8 @@ def read_csv(path):
                 entry[key] = float(value)
             except (TypeError, ValueError):
                 raise ValueError(f"{path}, line {line}: column {key!r} is not a number: {value!r}") from None
+            if not 0.0 <= entry[key] < math.inf:
+                raise ValueError(f"{path}, line {line}: column {key!r} must be a finite number >= 0, got {value!r}")
         parsed.append(entry)
     return parsed
 

@@ -278,6 +278,14 @@ def test_read_csv_names_a_bad_cell(tmp_path):
     path.write_text(",".join(columns) + "\n" + "x,k,lut,fast,0.1,0.1,0.1,0.1,0.1\n")
     with pytest.raises(ValueError, match="line 2: column 'render_s'"):
         read_csv(path)
+    # NaN, infinite and negative numbers drew plots of nothing; non-UTF-8 bytes ended in UnicodeDecodeError
+    for cell in ("nan", "-inf", "1e400", "-1e-3"):
+        path.write_text(",".join(columns) + "\n" + f"x,k,lut,{cell},0.1,0.1,0.1,0.1,0.1\n")
+        with pytest.raises(ValueError, match=f"line 2: column 'render_s' must be a finite number >= 0, got '{cell}'"):
+            read_csv(path)
+    path.write_bytes(b"candidate,\xff\n")
+    with pytest.raises(ValueError, match="sweep.csv: not a CSV file \\(not UTF-8 text\\)"):
+        read_csv(path)
 
 
 def test_a_zero_error_is_named_not_drawn_on_the_log_axes():
