@@ -308,6 +308,9 @@ TABLE_OPTION_NAMES = {
 
 #: AtmosphereParameters fields a command line may set over its preset's (add_atmosphere_overrides).
 ATMOSPHERE_OVERRIDES = ("ground_albedo", "ozone_column_du")
+#: Their ranges (low, high, unit), the same for every command: 1e5 DU is 300 times the Earth's column (the
+#: table's check of the optical depth alone reported 1e308 DU as "here 6.58e+303", in no unit one types).
+ATMOSPHERE_OVERRIDE_RANGES = {"ground_albedo": (0.0, 1.0, ""), "ozone_column_du": (0.0, 1e5, " DU")}
 
 
 def add_atmosphere_overrides(group):
@@ -328,11 +331,14 @@ def table_atmosphere(args):
     """The atmosphere of the table options: the --preset's, with --ground-albedo and --ozone-column if
     given. UsageError names the option of a bad value."""
     from .atmosphere import preset
-    from .errors import ParameterError
+    from .errors import ParameterError, check_real
 
     changes = {field: getattr(args, field) for field in ATMOSPHERE_OVERRIDES
                if getattr(args, field, None) is not None}
     try:
+        for field, value in changes.items():
+            low, high, unit = ATMOSPHERE_OVERRIDE_RANGES[field]
+            check_real(field, value, low, high, unit=unit)
         return preset(args.preset).replace(**changes)
     except ParameterError as error:
         raise UsageError(option_message(error, TABLE_OPTION_NAMES)) from None

@@ -232,7 +232,7 @@ def test_a_sweep_on_an_existing_cluster_writes_the_tables_of_single_builds(farm,
 
 
 @pytest.mark.parametrize("line, message", [
-    ("--preset physical --ground-albedo 2 -o a.npz", "weather.txt line 3: --ground-albedo must be in [0, 1], got 2"),
+    ("--preset physical --ground-albedo 2 -o a.npz", "weather.txt line 3: --ground-albedo must be a number in [0, 1], got 2"),
     ("--preset nowhere -o a.npz", "weather.txt line 3: argument --preset: invalid choice: 'nowhere'"),
     ("--preset physical -o clear.npz", "weather.txt line 3: --output clear.npz is written by weather.txt line 2 too"),
     ("--preset physical -o a.txt", "weather.txt line 3: --output must end in .npz after a file name (NAME.npz), got 'a.txt'"),

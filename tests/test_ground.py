@@ -382,7 +382,7 @@ def test_cli_ground_albedo(tmp_path, capsys):
                  "-o", str(tmp_path / "preset.npz")]) == 0
     default = ScatteringTable.load(tmp_path / "preset.npz")
     assert (default.settings.mode, default.atmosphere.ground_albedo) == ("physical", 0.1)
-    for arguments, expected in ((["--ground-albedo", "1.5", "--mode", "physical"], "--ground-albedo must be in [0, 1]"),
+    for arguments, expected in ((["--ground-albedo", "1.5", "--mode", "physical"], "--ground-albedo must be a number in [0, 1]"),
                                 (["--ground-albedo", "0.2", "--mode", "atmosphere-plus"],
                                  "--ground-albedo must be 0 with mode 'atmosphere-plus'"),
                                 (["--preset", "physical", "--mode", "atmosphere-plus"],

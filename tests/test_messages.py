@@ -255,3 +255,11 @@ def test_a_time_step_longer_than_the_hours_names_the_option(tmp_path):
                                 cwd=tmp_path))
     assert line.startswith("clsky: error: --step-minutes must be at most 6 minutes, the time from 12 h to 12.1 h"), line
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("command", ["table", "render"])
+def test_the_ozone_column_has_one_range_in_every_command(tmp_path, command):
+    """clsky table refused --ozone-column 1e308 through the optical-depth check ("here 6.58e+303", no unit
+    one types), clsky render with its range in DU: both now say the range."""
+    line = one_line_error(clsky(command, "--ozone-column", "1e308", cwd=tmp_path))
+    assert line == "clsky: error: --ozone-column must be a number in [0, 100000] DU, got 1e+308"
