@@ -871,7 +871,8 @@ def exposure_reference(hdr):
 @dataclasses.dataclass
 class FrameOutputs:
     """What the writer needs of one frame (:func:`frame_outputs`): its index, the 8-bit image (any size:
-    the writer pads the MP4's), its metrics row, the mean luminance of each HDR frame (for the temporal jumps), and the HDR
+    the writer pads the MP4's), its metrics row, the mean luminance of each HDR frame (for the temporal
+    jumps), and the HDR
     frame to write (None without ``config.hdr``)."""
 
     index: int

@@ -46,7 +46,8 @@ from clsky.errors import require_extra, short
 
 from .exr import HDR_FORMATS
 
-__all__ = ["FrameWriter", "frame_files", "encode_png", "write_png", "write_json", "write_csv", "MP4_OUTPUT_PARAMS", "even_padded"]
+__all__ = ["FrameWriter", "frame_files", "encode_png", "write_png", "write_json", "write_csv", "MP4_OUTPUT_PARAMS",
+           "even_padded"]
 
 #: ffmpeg output options of the MP4: constant-quality H.264 at CRF 18 (visually lossless for x264),
 #: the RGB -> YUV conversion and the stream tagged as BT.709 (so players decode the colours as they

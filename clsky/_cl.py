@@ -39,8 +39,9 @@ except ImportError as error:  # pragma: no cover - exercised only on broken inst
 from .errors import check_instance
 
 __all__ = ["KernelBuildError", "NoDeviceError", "Source", "Engine", "memory_pool", "upload_padded", "list_devices",
-           "default_device", "make_context", "check_context", "check_flag", "real_vector_dtype", "check_dtype", "INSTALL_HINT", "pocl_cache_problem",
-           "no_device_hint", "host_blas_single_threaded", "host_cores", "quiet_compiler_output"]
+           "default_device", "make_context", "check_context", "check_flag", "real_vector_dtype", "check_dtype",
+           "INSTALL_HINT", "pocl_cache_problem", "no_device_hint", "host_blas_single_threaded", "host_cores",
+           "quiet_compiler_output"]
 
 INSTALL_HINT = ("install a CPU OpenCL driver: as root `apt-get install pocl-opencl-icd` (fast PoCL 3.1), "
                 "or `pip install 'pyopencl[pocl]'` (PoCL pip build)")

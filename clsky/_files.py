@@ -148,7 +148,8 @@ def as_path(value, name: str = "path") -> pathlib.Path:
     ValueError: --output must be a file path (a str or os.PathLike), got None (NoneType)
     """
     if not isinstance(value, (str, os.PathLike)):
-        raise ValueError(f"{name} must be a file path (a str or os.PathLike), got {value!r:.60} ({type(value).__name__})")
+        raise ValueError(f"{name} must be a file path (a str or os.PathLike), got {value!r:.60} "
+                         f"({type(value).__name__})")
     text = os.fspath(value)
     if not isinstance(text, str):
         raise ValueError(f"{name} must be a file path as text, got {text!r:.60} ({type(text).__name__})")

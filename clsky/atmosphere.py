@@ -404,7 +404,8 @@ class AtmosphereParameters:
             if not is_finite_real(value):
                 raise ParameterError(name, "a finite real number", value)
         if not 1.0 <= refractive_index <= MAX_REFRACTIVE_INDEX:
-            raise ParameterError("refractive_index", f"a real number in [1, {MAX_REFRACTIVE_INDEX:g}]", refractive_index)
+            raise ParameterError("refractive_index", f"a real number in [1, {MAX_REFRACTIVE_INDEX:g}]",
+                                 refractive_index)
         if number_density <= 0.0:
             raise ParameterError("number_density", "a finite number > 0 1/m^3", number_density)
         wavelengths = _as_rgb("wavelengths", wavelengths)

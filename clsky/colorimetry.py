@@ -350,7 +350,8 @@ def _interpolate(columns, x, step, half):
 def _lit_ratios(radiance, wavelengths):
     """The power law's inputs: (lam, the wavelengths ascending; flat, radiance as (n, 3); ratio, each
     channel's L / E_sun(lambda) in ascending wavelength (3 arrays of n); lit, the pixels whose largest ratio
-    is positive with a positive floor (one below about 5e-312 is taken as black: XYZ 0); floor, POWER_LAW_FLOOR times that largest ratio, lit pixels only). Shared by
+    is positive with a positive floor (one below about 5e-312 is taken as black: XYZ 0); floor,
+    POWER_LAW_FLOOR times that largest ratio, lit pixels only). Shared by
     :func:`_solar_power_law_tabulated_xyz` and its device form (:mod:`clsky.colorimetry_cl`)."""
     order = np.argsort(wavelengths)
     lam = wavelengths[order]

@@ -151,6 +151,17 @@ def skyview_settings(settings):
     return settings or SkyViewSettings()
 
 
+def _mask(name, value) -> np.ndarray:
+    """``value`` as a bool array if it holds bools, or integers 0 and 1; ValueError naming ``name`` otherwise:
+    as bools, NaN read as True and None as False."""
+    array = np.asarray(value)
+    if array.dtype == bool:
+        return array
+    if array.dtype.kind in "iu" and ((array == 0) | (array == 1)).all():
+        return array.astype(bool)
+    raise ValueError(f"{name} must be a mask of bools (or of 0 and 1), got {short(value)} of dtype {array.dtype}")
+
+
 def _sun_list(sun_directions) -> list:
     """``sun_directions`` (a sequence of suns) as a non-empty list; ValueError naming it otherwise."""
     try:
@@ -215,8 +226,8 @@ class SkyRenderer:
     def __init__(self, table: ScatteringTable, ray_settings: TableSettings | None = None, ctx=None,
                  fast_math=False):
         check_render_table(table)
-        check_instance("ray_settings", ray_settings, TableSettings, "a TableSettings or None (the ray march's defaults)",
-                       optional=True)
+        check_instance("ray_settings", ray_settings, TableSettings,
+                       "a TableSettings or None (the ray march's defaults)", optional=True)
         self.table = table
         self.ray_settings = ray_settings or RAYMARCH_DEFAULTS.replace(dtype=table.settings.dtype)
         check_memory(estimate_render_memory(table.settings, (0, 0), ray_settings=self.ray_settings,
@@ -259,7 +270,7 @@ class SkyRenderer:
         shape = directions.shape[:-1]
         check_memory(estimate_directions_memory(int(np.prod(shape)), self.engine.dtype), device=self.engine.device)
         flat = np.ascontiguousarray(directions.reshape(-1, 3), dtype=self.engine.dtype)
-        mask = np.ones(shape, dtype=bool) if valid is None else np.asarray(valid, dtype=bool)
+        mask = np.ones(shape, dtype=bool) if valid is None else _mask("valid", valid)
         if mask.shape != shape:
             raise ValueError(f"valid must have the directions' shape {shape}, got {mask.shape}")
         return PreparedDirections(cla.to_device(self.queue, flat), shape,

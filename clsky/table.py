@@ -548,7 +548,8 @@ class ScatteringTable:
                                    f"counts {short(record['orders'])} orders, gathered is "
                                    f"{'present' if 'gathered' in contents else 'missing'}")
         orders = tuple(contents[f"order_{k}"] for k in range(1, order_count + 1))
-        return cls(atmosphere, settings, contents["data"], metadata, orders, record, contents.get("gathered"), contents.get("ground_irradiance"))
+        return cls(atmosphere, settings, contents["data"], metadata, orders, record, contents.get("gathered"),
+                   contents.get("ground_irradiance"))
 
     def export_texture(self, path, overwrite=False, staging=None):
         """A 4D table for engines: ``<path>.bin`` (three RGBA float32 3D textures, sun and azimuth packed

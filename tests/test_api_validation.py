@@ -181,6 +181,10 @@ def _renderer(table):
      "sun_directions must be a sequence of sun directions of 3 values each, got None (NoneType)"),
     (lambda t: _renderer(t).skyview_maps(5), "sun_directions must be a sequence of sun directions"),
     (lambda t: _renderer(t).view_zenith_angles(np.zeros((2, 3))), "directions must be directions prepared by prepare()"),
+    (lambda t: _renderer(t).prepare(np.array([[0.0, 0.0, 1.0]] * 2), valid=[np.nan, 1.0]),   # NaN read as True
+     "valid must be a mask of bools (or of 0 and 1)"),
+    (lambda t: _renderer(t).prepare(np.array([[0.0, 0.0, 1.0]] * 2), valid=[None, None]),    # None as False
+     "valid must be a mask of bools (or of 0 and 1)"),
     (lambda t: t.radiance(0.0, 0.5, 0.5, 0.5, engine="x"), "engine must be None or a TableLookupEngine"),
     (lambda t: t.save(None), "path must be a file path (a str or os.PathLike), got None (NoneType)"),
     (lambda t: t.save("a\0b.npz"), "path must not hold a NUL character"),
