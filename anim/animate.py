@@ -656,7 +656,7 @@ def three_wavelength_frame_to_linear_srgb(frame, wavelengths, ctx=None):
     [W m^-2 sr^-1 nm^-1] at three ``wavelengths`` [nm] -> CIE 1931 XYZ (:data:`THREE_WAVELENGTH_CONVERSION`;
     on the device of ``ctx`` when given, the same values) -> linear sRGB (..., 3) [cd/m^2]; negative
     components clipped to 0 (as :func:`spectral_frame_to_linear_srgb`)."""
-    xyz = colorimetry.three_wavelength_to_xyz(frame, wavelengths, THREE_WAVELENGTH_CONVERSION, ctx=ctx)
+    xyz = colorimetry.three_wavelength_frame_to_xyz(frame, wavelengths, THREE_WAVELENGTH_CONVERSION, ctx=ctx)
     return np.maximum(colorimetry.xyz_to_linear_srgb(xyz), 0.0)
 
 

@@ -76,7 +76,7 @@ __all__ = ["MAX_LUMINOUS_EFFICACY", "SRGB_PRIMARIES_XY", "D65_WHITE_XY", "SRGB_T
            "D65_WHITE_XYZ", "rgb_to_xyz_matrix", "CMFS_NAME", "THREE_WAVELENGTH_METHODS", "LINEAR_METHODS",
            "DEFAULT_THREE_WAVELENGTH_METHOD", "colour_matching_functions",
            "band_widths", "spectral_to_xyz", "xyz_to_linear_srgb", "linear_srgb_to_xyz", "luminance",
-           "three_wavelength_to_xyz_matrix", "three_wavelength_to_xyz"]
+           "three_wavelength_to_xyz_matrix", "three_wavelength_to_xyz", "three_wavelength_frame_to_xyz"]
 
 #: K_m, the maximum luminous efficacy of photopic vision [lm/W].
 MAX_LUMINOUS_EFFICACY = 683.0
@@ -445,11 +445,25 @@ def three_wavelength_to_xyz(radiance, wavelengths, method=DEFAULT_THREE_WAVELENG
     """XYZ (..., 3) of radiance (..., 3) [W m^-2 sr^-1 nm^-1] at three wavelengths [nm], by one of
     :data:`THREE_WAVELENGTH_METHODS` (module docstring). With ``ctx`` (a pyopencl.Context),
     ``solar_power_law_tabulated`` runs on its device (:mod:`clsky.colorimetry_cl`: the same values, bit for
-    bit, in about half the CPU time on the 2-core machine); the other methods ignore it."""
+    bit, in about half the CPU time on the 2-core machine); the other methods ignore it.
+
+    Raises
+    ------
+    ValueError
+        ``radiance`` has no last axis of 3, or holds NaN, infinite or negative values (the power law would
+        take NaN for black and clamp a negative channel); an unknown ``method``; ``wavelengths`` not 3
+        distinct numbers.
+    """
+    return three_wavelength_frame_to_xyz(_three_radiances(radiance), wavelengths, method, ctx)
+
+
+def three_wavelength_frame_to_xyz(radiance, wavelengths, method=DEFAULT_THREE_WAVELENGTH_METHOD, ctx=None):
+    """:func:`three_wavelength_to_xyz` of a frame the renderers made, whose values are finite and >= 0 by
+    construction (the kernels' contract, tested at the extremes): the animation's conversion, without the
+    check of every value (two passes over each frame)."""
     values = _three(wavelengths, method, THREE_WAVELENGTH_METHODS)
-    radiance = _three_radiances(radiance)
     if method in LINEAR_METHODS:
-        return radiance @ THREE_WAVELENGTH_METHODS[method](values).T
+        return np.asarray(radiance, dtype=np.float64) @ THREE_WAVELENGTH_METHODS[method](values).T
     if ctx is not None and method == "solar_power_law_tabulated":
         from .colorimetry_cl import solar_power_law_xyz
 
