@@ -815,8 +815,8 @@ def test_table_file_round_trip_keeps_the_harmonics(cl_context, atmosphere, tmp_p
 
 
 def test_table_checks_the_harmonics_finite_of_either_sign(cl_context, atmosphere):
-    """A table's gathered harmonics m >= 1 may be negative but not NaN or infinite (each counted in the
-    error, which names the array); the azimuth average m = 0 must also be >= 0. The harmonics are checked
+    """A table's gathered harmonics m >= 1 may be negative but not NaN, infinite or beyond 1e12 in size (each
+    counted in the error, which names the array); the azimuth average m = 0 must also be >= 0. The harmonics are checked
     by their minimum and maximum (clsky.table.check_finite_signed), no array of their absolute values."""
     from clsky import ScatteringTable
     from clsky.table import TableFormatError
@@ -831,7 +831,9 @@ def test_table_checks_the_harmonics_finite_of_either_sign(cl_context, atmosphere
                                table.orders_record, gathered, None)
 
     assert with_gathered((1, 0, 0, 0, 0), -1.0).gathered[1, 0, 0, 0, 0] == -1.0     # m >= 1: either sign
-    assert with_gathered((2, 3, 2, 1, 5), -1e300).gathered.min() == -1e300
+    assert with_gathered((2, 3, 2, 1, 5), -1e12).gathered.min() == -1e12          # down to the tables' bound
+    with pytest.raises(TableFormatError, match="gathered holds 1 values beyond 1e\\+12"):
+        with_gathered((2, 3, 2, 1, 5), -1e300)
     with pytest.raises(TableFormatError, match="gathered holds 1 NaN values"):
         with_gathered((2, 3, 2, 1, 5), np.nan)
     with pytest.raises(TableFormatError, match="gathered holds 1 infinite values"):
