@@ -401,7 +401,7 @@ LINEAR_METHODS = ("solar_interpolation", "bruneton2017")
 
 
 def _three_radiances(radiance):
-    """``radiance`` (..., 3) as float64 if every value is finite and >= 0; ParameterError naming ``radiance``
+    """``radiance`` (..., 3) as float64 if every value is finite and >= 0; ValueError naming ``radiance``
     otherwise (the power law would take NaN for black and clamp a negative channel, silently)."""
     valid = "finite radiances >= 0 at three wavelengths (a last axis of 3)"
     array = as_real_array("radiance", radiance, valid)

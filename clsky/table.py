@@ -35,7 +35,13 @@ File format (``.npz``, uncompressed: compression saves little on these values an
 :meth:`ScatteringTable.load` refuses with :class:`TableFormatError`, naming the file and what is wrong,
 any file that is not such an archive, has another version (older files: rebuild the table), misses
 or adds a member, fails a checksum or the parameters hash, or holds arrays whose shape, dtype or
-values (:meth:`ScatteringTable.validate`) do not fit its settings.
+values (:meth:`ScatteringTable.validate`: finite, >= 0 but for the harmonics m >= 1, at most
+:data:`MAX_TABLE_VALUE` in size) do not fit its settings. Against a forged file, whose checksums the
+forger recomputes: before any member is read, the archive's directory must list no foreign member and
+no member that inflates beyond twice its settings' float64 values (:func:`_array_limits`; a 2 MB
+file of deflated zeros took 2 GB of memory); ``gathered`` must be present exactly when
+``orders_record`` counts higher orders (without it the ray march drops them); the metadata clsky reads
+back (version, backend, device, units, build seconds, fast_math) must be what a build writes.
 
 Raw export (:meth:`ScatteringTable.export_raw`): ``<name>.bin`` holds little-endian float32 values,
 cell after cell in the order i = x + y W + z W H (x: altitude, y: view zenith, z: sun zenith), C
@@ -506,8 +512,12 @@ class ScatteringTable:
             ``path`` does not exist.
         TableFormatError
             The file is not a clsky table of this version that passes every check (unreadable or
-            truncated archive, wrong version, missing or extra member, checksum, hash, shape, dtype,
-            NaN, infinite or negative values); the message names the file and what is wrong.
+            truncated archive, wrong version, missing or extra member, a member larger than its settings
+            allow, checksum, hash, shape, dtype, NaN, infinite, negative or too large values, a gathered
+            source that does not go with the recorded orders, metadata clsky cannot read back); the
+            message names the file and what is wrong.
+        ValueError
+            ``path`` is no file path (None, a number, bytes, an empty string, a NUL character).
         """
         path = as_path(path)
         contents = _read_members(path)
