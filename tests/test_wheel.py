@@ -9,6 +9,7 @@ import sys
 import textwrap
 import zipfile
 
+import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 
@@ -34,6 +35,13 @@ def build_wheel(tmp_path):
                    check=True, cwd=tmp_path)
     (wheel,) = wheels.glob("clsky-*.whl")
     return wheel
+
+
+@pytest.fixture(scope="module")
+def wheel(tmp_path_factory):
+    """One wheel for both tests (building it took 4-5 s of each)."""
+    return build_wheel(tmp_path_factory.mktemp("wheel"))
+
 
 BUILD_EVERY_PROGRAM = textwrap.dedent("""
     import pathlib, sys
@@ -64,8 +72,7 @@ BUILD_EVERY_PROGRAM = textwrap.dedent("""
 """)
 
 
-def test_wheel_ships_kernels_and_builds_every_program(tmp_path):
-    wheel = build_wheel(tmp_path)
+def test_wheel_ships_kernels_and_builds_every_program(wheel, tmp_path):
     names = zipfile.ZipFile(wheel).namelist()
     kernel_files = sorted(p.name for p in (ROOT / "kernels").glob("*.cl"))
     assert sorted(n.split("/")[-1] for n in names if n.startswith("clsky/kernels/")) == kernel_files
@@ -79,11 +86,10 @@ def test_wheel_ships_kernels_and_builds_every_program(tmp_path):
     assert "built every program" in result.stdout
 
 
-def test_wheel_installs_nothing_but_clsky(tmp_path):
+def test_wheel_installs_nothing_but_clsky(wheel, tmp_path):
     """Issue 13 item 3: the animation package (the repository's top-level anim/) installs as
     clsky.anim; nothing outside the clsky name lands in site-packages (an installed top-level
     ``anim`` could collide with any other package of that generic name)."""
-    wheel = build_wheel(tmp_path)
     top_level = {name.split("/")[0] for name in zipfile.ZipFile(wheel).namelist()}
     assert {name for name in top_level if not name.endswith(".dist-info")} == {"clsky"}
     assert len(top_level) == 2, top_level                     # clsky/ and its one dist-info
