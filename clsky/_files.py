@@ -188,7 +188,7 @@ def read_user_text(path, limit: int = MAX_TEXT_FILE_BYTES) -> str:
             raise OSError(errno.EINVAL, "not a regular file (a FIFO, a device or a socket)", str(path))
         data = stream.read(limit + 1)
     if len(data) > limit:
-        raise OSError(errno.EFBIG, f"larger than {limit // 2**20} MiB, no file clsky reads is", str(path))
+        raise OSError(errno.EFBIG, f"larger than {limit // 2**20} MiB (no file clsky reads is so large)", str(path))
     return data.decode("utf-8-sig")
 
 
