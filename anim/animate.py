@@ -36,7 +36,7 @@ import clsky
 from clsky._cl import host_blas_single_threaded, host_cores, packed_reads
 from clsky._files import StagedWrites, check_output
 from clsky.cli import ATMOSPHERE_OVERRIDE_RANGES
-from clsky.errors import ParameterError, check_choice, check_integer, check_real, counted, is_real_number
+from clsky.errors import ParameterError, check_choice, check_flag, check_integer, check_real, counted, is_real_number
 from clsky.ground import check_ground_mode
 from clsky.planner import Plan, Scene, azimuth_harmonics, plan_scene, sun_axis, view_sampling
 from clsky.quality import QUALITY_LEVELS, QualityLevel, level_for_budget, quality_level
@@ -358,14 +358,8 @@ def _choice(choices, optional=False):
     return lambda name, value: check_choice(name, value, choices, optional=optional)
 
 
-def _flag(name, value):
-    if not isinstance(value, (bool, np.bool_)):
-        raise ParameterError(name, "True or False", value)
-    return bool(value)
-
-
 def _optional_flag(name, value):
-    return None if value is None else _flag(name, value)
+    return None if value is None else check_flag(name, value)
 
 
 def _location(name, value):
@@ -440,7 +434,8 @@ _FIELD_CHECKS = {
     "step_minutes": _real(0.0, 1440.0, " minutes", low_open=True), "fps": _real(*FPS_RANGE),
     "exposure": _real(-40.0, 40.0, " EV"), "tone_map": _choice(tuple(display_pipeline.TONE_CURVES), optional=True),
     "auto_exposure": _optional_flag, "white_balance": _choice(display_pipeline.WHITE_BALANCES, optional=True),
-    "dither": _flag, "output": _output, "hdr": _hdr, "hdr_precision": _choice(tuple(PRECISIONS)), "force": _flag,
+    "dither": check_flag, "output": _output, "hdr": _hdr, "hdr_precision": _choice(tuple(PRECISIONS)),
+    "force": check_flag,
     "wavelengths": _integer(spectrum.MIN_WAVELENGTHS, spectrum.MAX_WAVELENGTHS, optional=True),
 }
 

@@ -36,10 +36,10 @@ try:
 except ImportError as error:  # pragma: no cover - exercised only on broken installs
     raise ImportError("clsky needs pyopencl: pip install pyopencl (and an OpenCL driver, see README)") from error
 
-from .errors import check_instance
+from .errors import check_flag, check_instance
 
 __all__ = ["KernelBuildError", "NoDeviceError", "Source", "Engine", "memory_pool", "upload_padded", "list_devices",
-           "default_device", "make_context", "check_context", "check_flag", "real_vector_dtype", "check_dtype",
+           "default_device", "make_context", "check_context", "real_vector_dtype", "check_dtype",
            "INSTALL_HINT", "pocl_cache_problem", "no_device_hint", "host_blas_single_threaded", "host_cores",
            "quiet_compiler_output"]
 
@@ -240,12 +240,6 @@ def check_context(ctx):
     """``ctx`` if it is None (clsky's shared context, :func:`make_context`) or a pyopencl.Context;
     ValueError naming ``ctx`` otherwise (an engine or a memory check would end in AttributeError)."""
     return check_instance("ctx", ctx, cl.Context, "None (clsky's device) or a pyopencl.Context", optional=True)
-
-
-def check_flag(name, value):
-    """``value`` as a bool if it is one (Python's or NumPy's); ValueError naming ``name`` otherwise: a
-    string such as ``'no'`` would be true."""
-    return bool(check_instance(name, value, (bool, np.bool_), "True or False"))
 
 
 def make_context(dtype=np.float64):

@@ -33,6 +33,8 @@ import stat
 import tempfile
 import threading
 
+from .errors import check_instance
+
 __all__ = ["check_output", "check_output_directory", "atomic_write", "StagedWrites", "temporary_prefix",
            "check_suffix", "binary_and_header", "as_path", "read_user_text", "MAX_TEXT_FILE_BYTES"]
 
@@ -507,8 +509,7 @@ def atomic_write(path, overwrite=False, suffix=None, staging=None):
     one, and the last rename wins. An exception in the block (KeyboardInterrupt included) deletes
     the temporary and leaves ``path`` as it was.
     """
-    if staging is not None and not isinstance(staging, StagedWrites):
-        raise ValueError(f"staging must be None or a StagedWrites, got {staging!r:.60} ({type(staging).__name__})")
+    check_instance("staging", staging, StagedWrites, "None or a StagedWrites", optional=True)
     own = StagedWrites() if staging is None else None
     writes = staging or own
     temporary = None

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ParameterError, is_finite_real, is_real_number, short
+from .errors import ParameterError, check_instance, is_finite_real, is_real_number
 from .ozone import DOBSON_UNIT, cross_section_serdyuchenko2014
 
 __all__ = [
@@ -438,8 +438,7 @@ class AtmosphereParameters:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "AtmosphereParameters":
         """Inverse of :meth:`to_dict`; unknown fields raise ValueError."""
-        if not isinstance(data, dict):
-            raise ValueError(f"an atmosphere's fields must be a dict, got {short(data)} ({type(data).__name__})")
+        check_instance("an atmosphere's fields", data, dict, "a dict")
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = set(data) - known
         if unknown:

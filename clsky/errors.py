@@ -16,7 +16,7 @@ import numpy as np
 
 __all__ = ["ParameterError", "NumericalError", "short", "counted", "is_real_number", "is_finite_real",
            "is_integer", "as_real_array", "check_integer", "check_real", "check_choice", "check_instance",
-           "require_extra"]
+           "check_flag", "require_extra"]
 
 #: Longest text of a value echoed in a message.
 _MAX_ECHO = 60
@@ -231,6 +231,16 @@ def check_instance(name, value, types, valid, optional=False):
     if (optional and value is None) or isinstance(value, types):
         return value
     raise ParameterError(name, valid, value, typed=True)
+
+
+def check_flag(name, value):
+    """``value`` as a bool if it is one (Python's or NumPy's); ParameterError naming ``name`` otherwise: a
+    string such as ``'no'`` would be true.
+
+    >>> check_flag("force", np.True_)
+    True
+    """
+    return bool(check_instance(name, value, (bool, np.bool_), "True or False"))
 
 
 def require_extra(module: str, purpose: str, install: str):

@@ -6,7 +6,7 @@ import dataclasses
 
 import numpy as np
 
-from .errors import ParameterError, check_choice, check_integer, is_finite_real, is_real_number, short
+from .errors import ParameterError, check_choice, check_instance, check_integer, is_finite_real, is_real_number
 
 __all__ = ["TableSettings", "MAPPINGS", "SAMPLINGS", "SUN_TRANSMITTANCE_METHODS", "MIE_LAYOUTS",
            "SCATTERING_MODES", "PARAMETERIZATIONS"]
@@ -275,8 +275,7 @@ class TableSettings:
     @classmethod
     def from_dict(cls, data: dict) -> "TableSettings":
         """Inverse of :meth:`to_dict`; unknown fields raise ValueError."""
-        if not isinstance(data, dict):
-            raise ValueError(f"table settings must be a dict, got {short(data)} ({type(data).__name__})")
+        check_instance("table settings", data, dict, "a dict")
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = set(data) - known
         if unknown:

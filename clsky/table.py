@@ -65,10 +65,9 @@ from typing import Callable
 import numpy as np
 
 from . import __version__
-from ._cl import check_flag
 from ._files import StagedWrites, as_path, atomic_write, binary_and_header, check_output, check_suffix
 from .atmosphere import PRESETS, AtmosphereParameters, preset
-from .errors import check_instance, is_integer, is_real_number, short
+from .errors import check_flag, check_instance, is_integer, is_real_number, short
 from .lookup import check_queries
 from .settings import TableSettings
 from .solar import radiance_units
