@@ -14,9 +14,12 @@ from clsky import montecarlo
 CONVERGED = dict(view_steps=200, multiple_view_steps=None, sun_steps=600, sun_transmittance="table",
                  transmittance_size=(128, 512),
                  sampling="keller_bohn")
-#: (altitude [m], cos view zenith, sun zenith [deg]), sun and view in one vertical plane (azimuth 0)
-CASES = [(0.0, 1.0, 30.0), (0.0, 0.5, 60.0), (0.0, 0.1, 80.0), (0.0, 0.7, 0.0), (5000.0, -0.3, 45.0),
-         (0.0, 0.2, 70.0)]
+#: (altitude [m], cos view zenith, sun zenith [deg]), sun and view in one vertical plane (azimuth 0).
+#: The default suite checks the zenith, the horizon under a low sun and a view down from 5 km; the other
+#: three (2.5-6 s each on two busy cores) run in .ci/run's slow set.
+CASES = [(0.0, 1.0, 30.0), pytest.param(0.0, 0.5, 60.0, marks=pytest.mark.slow), (0.0, 0.1, 80.0),
+         pytest.param(0.0, 0.7, 0.0, marks=pytest.mark.slow), (5000.0, -0.3, 45.0),
+         pytest.param(0.0, 0.2, 70.0, marks=pytest.mark.slow)]
 
 
 @pytest.fixture(scope="module")
@@ -41,9 +44,12 @@ def test_physical_mode_agrees_with_monte_carlo(physical_table, altitude, cos_vie
 
 # Views from altitude (issue 10, item 6) -------------------------------------------------------------
 
-#: (altitude [m], cos view zenith, cos sun zenith, azimuth [rad]): looking down to the black ground
-ALTITUDE_CASES = [(10e3, -0.3, float(np.cos(np.radians(30.0))), 0.0), (10e3, -0.8, 0.5, 2.0),
-                  (100e3, -0.5, 1.0, 0.0), (100e3, -0.9, float(np.cos(np.radians(45.0))), 0.0)]
+#: (altitude [m], cos view zenith, cos sun zenith, azimuth [rad]): looking down to the black ground.
+#: The default suite checks one view from each altitude; the steeper two run in .ci/run's slow set.
+ALTITUDE_CASES = [(10e3, -0.3, float(np.cos(np.radians(30.0))), 0.0),
+                  pytest.param((10e3, -0.8, 0.5, 2.0), marks=pytest.mark.slow),
+                  (100e3, -0.5, 1.0, 0.0),
+                  pytest.param((100e3, -0.9, float(np.cos(np.radians(45.0))), 0.0), marks=pytest.mark.slow)]
 
 
 @pytest.fixture(scope="module")
