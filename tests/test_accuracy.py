@@ -9,6 +9,8 @@ import pytest
 
 from clsky.anim import accuracy
 
+import forked_cli
+
 
 def test_pareto_front_keeps_only_undominated_rows():
     rows = [{"candidate": name, "render_s": cost, "p95_rel": error}
@@ -85,8 +87,7 @@ def test_measure_on_tiny_frames(stand_in_reference):
                                         (["--elevation-plot", "x.jpg"], "--elevation-plot"),
                                         (["--elevation-plot", "accuracy.png"], "--elevation-plot")])
 def test_bench_accuracy_bad_arguments(tmp_path, args, named):
-    result = subprocess.run([sys.executable, "-m", "clsky.anim", "bench", "accuracy", *args], cwd=tmp_path,
-                            capture_output=True, text=True)
+    result = forked_cli.run("clsky.anim", "bench", "accuracy", *args, cwd=tmp_path)
     assert result.returncode == 2
     assert result.stderr.count("\n") == 1 and named in result.stderr
 

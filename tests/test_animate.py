@@ -12,8 +12,6 @@ import csv
 import datetime
 import json
 import pathlib
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -21,6 +19,8 @@ import pytest
 from clsky import resources
 from clsky.anim import metrics
 from clsky.anim.animate import AnimationConfig, render_animation
+
+import forked_cli
 
 imageio_v3 = pytest.importorskip("imageio.v3")
 
@@ -128,7 +128,7 @@ def test_rerun_without_force_refuses_and_touches_nothing(tmp_path, cl_context):
 # 2. The command line ------------------------------------------------------------------------------
 
 def clsky(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "clsky.anim", *args], cwd=cwd, capture_output=True, text=True)
+    return forked_cli.run("clsky.anim", *args, cwd=cwd)
 
 
 SMALL_ARGS = ("--size", "32", "--table-size", "9", "33", "7")

@@ -17,6 +17,8 @@ import sys
 
 import pytest
 
+import forked_cli
+
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 BENCH = ROOT / "bench"
 
@@ -220,8 +222,7 @@ def test_memory_bench_honours_the_atmosphere_options():
 def test_counts_below_one_are_refused_before_any_work(name, option, typed):
     """A count of runs or rounds below 1 would leave nothing to take the least of: argparse refuses it
     (exit status 2) with a line naming the option and what was typed, before any table is built."""
-    result = subprocess.run([sys.executable, f"bench/{name}.py", option, typed, "--no-readme"], cwd=ROOT,
-                            capture_output=True, text=True, timeout=120)
+    result = forked_cli.run_script(ROOT / "bench" / f"{name}.py", option, typed, "--no-readme", cwd=ROOT, timeout=120)
     assert result.returncode == 2
     assert f"argument {option}: must be an integer >= 1, got '{typed}'" in result.stderr.splitlines()[-1]
 

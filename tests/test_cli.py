@@ -8,9 +8,11 @@ import pytest
 
 from clsky import ScatteringTable
 
+import forked_cli
+
 
 def clsky(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "clsky", *args], cwd=cwd, capture_output=True, text=True)
+    return forked_cli.run("clsky", *args, cwd=cwd)
 
 
 def test_devices_lists_the_chosen_device(tmp_path):

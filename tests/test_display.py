@@ -15,8 +15,6 @@
 from __future__ import annotations
 
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -29,6 +27,7 @@ from clsky.anim.display import (DEFAULT_TONE_MAP, TONE_CURVES, AutoExposure, Dis
                           smoothed_ev, srgb_encode, white_balance_matrix)
 from clsky.errors import ParameterError
 
+import forked_cli
 import pins
 from pins import pinned_for_device
 
@@ -403,8 +402,7 @@ def test_display_refuses_nan_frames_and_exposures():
     (["--exposure", "41"], "--exposure"), (["--exposure", "nan"], "--exposure"),
 ])
 def test_cli_bad_display_options_one_line_exit_2(tmp_path, args, named):
-    result = subprocess.run([sys.executable, "-m", "clsky.anim", "render", *args, "-o", "x.png"], cwd=tmp_path,
-                            capture_output=True, text=True, timeout=120)
+    result = forked_cli.run("clsky.anim", "render", *args, "-o", "x.png", cwd=tmp_path, timeout=120)
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and named in lines[0], result.stderr

@@ -30,6 +30,8 @@ from clsky.anim.cameras import EquirectangularCamera, sun_direction
 from clsky.anim.exr import HALF_MAX, enu_to_envmap, envmap_pixel, frame_attributes, read_exr, write_exr
 from clsky.anim.writers import FrameWriter, frame_files
 
+import forked_cli
+
 OpenEXR = pytest.importorskip("OpenEXR", reason="the OpenEXR bindings (clsky[anim]) are not installed")
 
 TINY = dict(size=16, table_size=(9, 33, 7), camera="equirectangular", method="lut", frames=2)
@@ -451,8 +453,7 @@ def test_cli_hdr_exr_panorama(tmp_path):
     (["--hdr", "hdr", "--hdr-precision", "half"], "--hdr-precision"),
 ], ids=lambda value: " ".join(value) if isinstance(value, list) else value)
 def test_cli_bad_hdr_options_one_line_exit_2(tmp_path, args, named):
-    result = subprocess.run([sys.executable, "-m", "clsky.anim", "animate", *args, "--progress", "none"],
-                            cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    result = forked_cli.run("clsky.anim", "animate", *args, "--progress", "none", cwd=tmp_path, timeout=120)
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1, result.stderr

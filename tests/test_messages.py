@@ -12,6 +12,8 @@ from clsky.atmosphere import AtmosphereParameters
 from clsky.errors import ParameterError, check_integer, check_real, short
 from clsky.settings import TableSettings
 
+import forked_cli
+
 
 ANIMATION_COMMANDS = ("animate", "render", "bench")
 
@@ -19,7 +21,7 @@ ANIMATION_COMMANDS = ("animate", "render", "bench")
 def clsky(*args, cwd, env=None):
     """The ``clsky`` console script: clsky's commands, extended by anim's (``python -m clsky.anim``)."""
     package = "clsky.anim" if args[0] in ANIMATION_COMMANDS else "clsky"
-    return subprocess.run([sys.executable, "-m", package, *args], cwd=cwd, capture_output=True, text=True, env=env)
+    return forked_cli.run(package, *args, cwd=cwd, env=env)
 
 
 def one_line_error(result):

@@ -18,7 +18,6 @@ import dataclasses
 import os
 import pathlib
 import subprocess
-import sys
 import tempfile
 
 import numpy as np
@@ -28,6 +27,7 @@ from clsky import ScatteringTable, TableSettings
 from clsky._files import StagedWrites, atomic_write, check_output, check_output_directory
 from clsky.anim.writers import FrameWriter, write_csv, write_json, write_png
 
+import forked_cli
 from conftest import black_preset
 
 NAME_MAX = os.pathconf(tempfile.gettempdir(), "PC_NAME_MAX")
@@ -65,8 +65,7 @@ def immutable_directory(tmp_path):
 
 
 def clsky(*args, cwd, timeout=60):
-    return subprocess.run([sys.executable, "-m", "clsky.anim", *args], cwd=cwd, capture_output=True, text=True,
-                          timeout=timeout)
+    return forked_cli.run("clsky.anim", *args, cwd=cwd, timeout=timeout)
 
 
 def assert_usage_error(result, *named):

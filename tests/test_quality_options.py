@@ -1,14 +1,13 @@
 """Issue 9, class 9: --quality means its level; options the user did not give never override it."""
 
-import subprocess
-import sys
-
 from clsky import ScatteringTable
 from clsky.quality import QUALITY_LEVELS
 
+import forked_cli
+
 
 def clsky(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "clsky", *args], cwd=cwd, capture_output=True, text=True)
+    return forked_cli.run("clsky", *args, cwd=cwd)
 
 
 SMALL = ("--size", "4", "8", "4", "--orders", "2", "--gather-steps", "8", "4", "--progress", "none")

@@ -221,11 +221,9 @@ def test_animation_config_refuses_a_bad_map_size_naming_the_field():
 @pytest.mark.parametrize("args, named", [(["--skyview-size", "1", "64"], "--skyview-size W"),
                                          (["--skyview-size", "64", "4097"], "--skyview-size H")])
 def test_cli_refuses_a_bad_map_size_one_line_exit_2(tmp_path, args, named):
-    import subprocess
-    import sys
+    import forked_cli
 
-    result = subprocess.run([sys.executable, "-m", "clsky.anim", "animate", "--method", "skyview", *args],
-                            cwd=tmp_path, capture_output=True, text=True)
+    result = forked_cli.run("clsky.anim", "animate", "--method", "skyview", *args, cwd=tmp_path)
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("clsky: error:") and named in lines[0], result.stderr

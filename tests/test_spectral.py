@@ -518,11 +518,10 @@ def test_frame_conversion_is_the_colorimetry():
 
 
 def test_cli_refuses_bad_wavelengths_in_one_line(tmp_path):
-    import subprocess
-    import sys
+    import forked_cli
 
-    result = subprocess.run([sys.executable, "-m", "clsky.anim", "animate", "--wavelengths", "50", "--progress", "none"],
-                            cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    result = forked_cli.run("clsky.anim", "animate", "--wavelengths", "50", "--progress", "none", cwd=tmp_path,
+                            timeout=120)
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "--wavelengths" in lines[0] and "[3, 47]" in lines[0], result.stderr

@@ -1,0 +1,167 @@
+"""``python -m clsky`` and ``python -m clsky.anim`` command lines, each run in a process forked from one
+that has already imported clsky (a fork server, as multiprocessing's ``forkserver`` start method).
+
+The command-line tests run a few hundred short ``clsky`` processes, most of which print one error line
+and exit. A new interpreter spends about 0.7 CPU-s on that, 0.5 s of it importing NumPy, PyOpenCL and
+clsky (``python -X importtime``, 2026-12-07); a child forked from a server that has imported them takes
+0.04 s for the same error line. The child is a new process all the same: its own PID, environment (the
+test's), working directory, standard streams (files: not a terminal, as the pipes of
+``subprocess.run(capture_output=True)``), signal dispositions and exit status, and no OpenCL context
+(the server never creates one; PoCL starts in the child). It runs ``python -m``'s code,
+:func:`runpy.run_module` of the package's ``__main__`` (or :func:`runpy.run_path` of a script), under
+Python's default warning filters, the server's import-time warnings shown again on its stderr; whatever
+ends it (SystemExit, an uncaught exception, the end of the module) ends the interpreter as it ends a
+``python -m`` process: the traceback printed, the threads joined, the ``atexit`` functions run, the
+streams flushed, the exit status set.
+
+What a fork cannot give is a fresh import: a module's import-time work (an environment variable read then)
+happened in the server. So a command is run by a real ``subprocess.run`` instead whenever its
+environment is not the one the server started with (an ``env`` argument, a monkeypatched variable).
+"""
+
+from __future__ import annotations
+
+import atexit
+import json
+import os
+import select
+import signal
+import subprocess
+import sys
+import tempfile
+
+#: The server: imports what every command line imports, then forks one child per request (a JSON line on
+#: stdin: {"package" or "script", "args", "cwd", "environment", "stdout", "stderr"}), answering {"pid"} at
+#: once and {"status"} (``os.waitstatus_to_exitcode``) when the child has ended.
+SERVER = r'''
+import json, os, runpy, sys, warnings
+
+before = dict(os.environ)
+with warnings.catch_warnings(record=True) as import_warnings:   # shown again by each child, as its own
+    # what a command line imports before it parses its arguments (anim's parser imports the animation)
+    import clsky.cli, clsky.anim.cli, clsky.anim.animate, clsky.anim.scene         # noqa: E401, F401
+# the variables those imports set (pyopencl's PYOPENCL_HOME, which PoCL's start needs), as they would in a
+# new process whatever its environment
+set_by_imports = {name: value for name, value in os.environ.items() if before.get(name) != value}
+
+
+def run_child(request):
+    # The child: the request's environment, folder and streams, then python -m PACKAGE (or SCRIPT) ARGS.
+    # Whatever ends it (SystemExit, an uncaught exception, the end of the module: status 0) leaves the
+    # server's loop and ends the interpreter as it ends `python -m` (threads joined, atexit, flush).
+    os.environ.clear()                            # the test's (its PYTEST_CURRENT_TEST, as a subprocess sees)
+    os.environ.update(request["environment"])
+    os.environ.update(set_by_imports)
+    os.chdir(request["cwd"])
+    stdin = os.open(os.devnull, os.O_RDONLY)
+    os.dup2(stdin, 0)
+    for fd, name in ((1, "stdout"), (2, "stderr")):
+        target = os.open(request[name], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        os.dup2(target, fd)
+        os.close(target)
+    for warning in import_warnings:
+        warnings.showwarning(warning.message, warning.category, warning.filename, warning.lineno)
+    if request["script"]:                         # python SCRIPT: the script's folder first on sys.path
+        sys.argv = [request["script"], *request["args"]]
+        sys.path[0] = os.path.dirname(os.path.abspath(request["script"]))
+        runpy.run_path(request["script"], run_name="__main__")
+    else:                                         # python -m PACKAGE: the working directory first
+        sys.argv = [request["package"], *request["args"]]
+        sys.path[0] = os.getcwd()
+        runpy.run_module(request["package"], run_name="__main__", alter_sys=True)
+    sys.exit(0)
+
+
+for line in sys.stdin:
+    request = json.loads(line)
+    pid = os.fork()
+    if pid == 0:
+        run_child(request)                        # never returns: the child ends by an exception
+    print(json.dumps({"pid": pid}), flush=True)
+    _, status = os.waitpid(pid, 0)
+    print(json.dumps({"status": os.waitstatus_to_exitcode(status)}), flush=True)
+'''
+
+
+def _environment():
+    """The environment but for pytest's name of the running test (it changes with every test and no
+    module reads it at import)."""
+    return {name: value for name, value in os.environ.items() if name != "PYTEST_CURRENT_TEST"}
+
+
+class ForkServer:
+    """``run(package, args, cwd, env=None, timeout=None)``: a ``subprocess.CompletedProcess`` of
+    ``python -m package *args`` (text mode), forked from the server or, where the environment differs
+    from the server's (module docstring), from a new interpreter."""
+
+    def __init__(self):
+        self.environment = _environment()
+        self.process = subprocess.Popen([sys.executable, "-c", SERVER], stdin=subprocess.PIPE,
+                                        stdout=subprocess.PIPE, text=True, bufsize=1)
+        self._answers = b""                             # bytes read from the server, not yet a whole line
+
+    def _answer(self, timeout=None):
+        """The server's next JSON line; None if none came within ``timeout`` seconds (None: wait)."""
+        fd = self.process.stdout.fileno()
+        while b"\n" not in self._answers:
+            ready, _, _ = select.select([fd], [], [], timeout)
+            if not ready:
+                return None
+            chunk = os.read(fd, 4096)
+            if not chunk:
+                raise RuntimeError(f"the fork server ended (status {self.process.wait()})")
+            self._answers += chunk
+        line, self._answers = self._answers.split(b"\n", 1)
+        return json.loads(line)
+
+    def run(self, package, args, cwd, env=None, timeout=None, script=None):
+        """``python -m package *args``, or ``python script *args`` where ``script`` (a path) is given."""
+        args = [str(arg) for arg in args]
+        command = [sys.executable, *(["-m", package] if script is None else [os.fspath(script)]), *args]
+        if env is not None or _environment() != self.environment or self.process.poll() is not None:
+            return subprocess.run(command, cwd=cwd, capture_output=True, text=True, env=env, timeout=timeout)
+        with tempfile.TemporaryDirectory(prefix="clsky-forked-") as streams:
+            paths = {name: os.path.join(streams, name) for name in ("stdout", "stderr")}
+            request = {"package": package, "script": script and os.fspath(script), "args": args,
+                       "cwd": os.fspath(cwd), "environment": dict(os.environ), **paths}
+            self.process.stdin.write(json.dumps(request) + "\n")
+            self.process.stdin.flush()
+            pid = self._answer()["pid"]
+            answer = self._answer(timeout)
+            if answer is None:                             # as subprocess.run: kill the child, then raise
+                os.kill(pid, signal.SIGKILL)
+                self._answer()
+                raise subprocess.TimeoutExpired(command, timeout)
+            output = {}
+            for name, path in paths.items():
+                with open(path) as stream:                 # the locale's encoding, as text=True decodes
+                    output[name] = stream.read()
+            status = answer["status"]
+        return subprocess.CompletedProcess(command, status, output["stdout"], output["stderr"])
+
+    def close(self):
+        self.process.stdin.close()
+        self.process.wait(timeout=30)
+        self.process.stdout.close()
+
+
+_server = None
+
+
+def _the_server():
+    global _server
+    if _server is None:
+        _server = ForkServer()
+        atexit.register(_server.close)
+    return _server
+
+
+def run(package, *args, cwd, env=None, timeout=None):
+    """``python -m package *args`` (:meth:`ForkServer.run` on this process' server, started at the first
+    call and closed at exit)."""
+    return _the_server().run(package, args, cwd, env=env, timeout=timeout)
+
+
+def run_script(script, *args, cwd, env=None, timeout=None):
+    """``python script *args``, as :func:`run`."""
+    return _the_server().run(None, args, cwd, env=env, timeout=timeout, script=script)
