@@ -55,6 +55,7 @@ def run_child(request):
     os.chdir(request["cwd"])
     stdin = os.open(os.devnull, os.O_RDONLY)
     os.dup2(stdin, 0)
+    os.close(stdin)
     for fd, name in ((1, "stdout"), (2, "stderr")):
         target = os.open(request[name], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
         os.dup2(target, fd)

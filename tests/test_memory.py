@@ -23,6 +23,7 @@ from clsky import resources
 from clsky.resources import (Allocation, InsufficientMemoryError, MemoryEstimate, MemoryLimits, Phase, check_memory,
                              estimate_table_memory, format_bytes)
 
+import forked_cli
 from conftest import black_preset
 
 SIZE_PATTERN = r"\d+(\.\d+)? (KiB|MiB|GiB|TiB)"
@@ -33,8 +34,7 @@ REFUSAL_SECONDS = 15.0
 
 def run_clsky(*arguments, cwd):
     start = time.perf_counter()
-    result = subprocess.run([sys.executable, "-m", "clsky.anim", *arguments], capture_output=True, text=True, cwd=cwd,
-                            timeout=120)
+    result = forked_cli.run("clsky.anim", *arguments, cwd=cwd, timeout=120)
     return result, time.perf_counter() - start
 
 
