@@ -15,13 +15,20 @@ ends it (SystemExit, an uncaught exception, the end of the module) ends the inte
 streams flushed, the exit status set.
 
 What a fork cannot give is a fresh import: a module's import-time work (an environment variable read then)
-happened in the server. So a command is run by a real ``subprocess.run`` instead whenever its
-environment is not the one the server started with (an ``env`` argument, a monkeypatched variable).
+happened in the server. So a command runs in a new interpreter (``subprocess.run``) whenever its
+environment is not the session's (an ``env`` argument, a monkeypatched variable), and ``python -m clsky``
+is forked from a server that has imported clsky's command line only (a missing import in the core must
+fail as it would). What still differs, and what no test here may rely on: the string hash seed is the
+server's in every child (set iteration orders are fixed for a session), a traceback shows the server's
+and runpy's frames above the command's, and the child's resident memory starts from the server's pages
+(RSS measurements keep their own subprocesses). ``CLSKY_TEST_FORK=0`` runs every command line in a new
+interpreter.
 """
 
 from __future__ import annotations
 
 import atexit
+import contextlib
 import json
 import os
 import select
@@ -38,8 +45,8 @@ import json, os, runpy, sys, warnings
 
 before = dict(os.environ)
 with warnings.catch_warnings(record=True) as import_warnings:   # shown again by each child, as its own
-    # what a command line imports before it parses its arguments (anim's parser imports the animation)
-    import clsky.cli, clsky.anim.cli, clsky.anim.animate, clsky.anim.scene         # noqa: E401, F401
+    for module in sys.argv[1:]:                   # what the command lines import before they parse
+        __import__(module)
 # the variables those imports set (pyopencl's PYOPENCL_HOME, which PoCL's start needs), as they would in a
 # new process whatever its environment
 set_by_imports = {name: value for name, value in os.environ.items() if before.get(name) != value}
@@ -52,7 +59,6 @@ def run_child(request):
     os.environ.clear()                            # the test's (its PYTEST_CURRENT_TEST, as a subprocess sees)
     os.environ.update(request["environment"])
     os.environ.update(set_by_imports)
-    os.chdir(request["cwd"])
     stdin = os.open(os.devnull, os.O_RDONLY)
     os.dup2(stdin, 0)
     os.close(stdin)
@@ -60,6 +66,7 @@ def run_child(request):
         target = os.open(request[name], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
         os.dup2(target, fd)
         os.close(target)
+    os.chdir(request["cwd"])
     for warning in import_warnings:
         warnings.showwarning(warning.message, warning.category, warning.filename, warning.lineno)
     if request["script"]:                         # python SCRIPT: the script's folder first on sys.path
@@ -91,14 +98,11 @@ def _environment():
 
 
 class ForkServer:
-    """``run(package, args, cwd, env=None, timeout=None)``: a ``subprocess.CompletedProcess`` of
-    ``python -m package *args`` (text mode), forked from the server or, where the environment differs
-    from the server's (module docstring), from a new interpreter."""
+    """A server that has imported ``modules`` in ``environment``; :meth:`run` forks a command line from it."""
 
-    def __init__(self):
-        self.environment = _environment()
-        self.process = subprocess.Popen([sys.executable, "-c", SERVER], stdin=subprocess.PIPE,
-                                        stdout=subprocess.PIPE, text=True, bufsize=1)
+    def __init__(self, modules, environment):
+        self.process = subprocess.Popen([sys.executable, "-c", SERVER, *modules], stdin=subprocess.PIPE,
+                                        stdout=subprocess.PIPE, text=True, bufsize=1, env=environment)
         self._answers = b""                             # bytes read from the server, not yet a whole line
 
     def _answer(self, timeout=None):
@@ -115,54 +119,90 @@ class ForkServer:
         line, self._answers = self._answers.split(b"\n", 1)
         return json.loads(line)
 
-    def run(self, package, args, cwd, env=None, timeout=None, script=None):
-        """``python -m package *args``, or ``python script *args`` where ``script`` (a path) is given."""
-        args = [str(arg) for arg in args]
+    def run(self, package, args, cwd, timeout=None, script=None):
+        """A ``subprocess.CompletedProcess`` (text mode) of ``python -m package *args``, or of ``python
+        script *args`` where ``script`` (a path) is given, run in ``cwd``.
+
+        A failure to wait for the child (an interruption, a timeout) kills the child and the server: the
+        next call starts a new server, never reading this call's answers as its own."""
         command = [sys.executable, *(["-m", package] if script is None else [os.fspath(script)]), *args]
-        if env is not None or _environment() != self.environment or self.process.poll() is not None:
-            return subprocess.run(command, cwd=cwd, capture_output=True, text=True, env=env, timeout=timeout)
+        if not os.path.isdir(cwd):                     # as subprocess.run, before any child exists
+            raise FileNotFoundError(2, "No such file or directory", os.fspath(cwd))
+        pid = None
         with tempfile.TemporaryDirectory(prefix="clsky-forked-") as streams:
             paths = {name: os.path.join(streams, name) for name in ("stdout", "stderr")}
             request = {"package": package, "script": script and os.fspath(script), "args": args,
                        "cwd": os.fspath(cwd), "environment": dict(os.environ), **paths}
-            self.process.stdin.write(json.dumps(request) + "\n")
-            self.process.stdin.flush()
-            pid = self._answer()["pid"]
-            answer = self._answer(timeout)
-            if answer is None:                             # as subprocess.run: kill the child, then raise
-                os.kill(pid, signal.SIGKILL)
-                self._answer()
-                raise subprocess.TimeoutExpired(command, timeout)
+            try:
+                self.process.stdin.write(json.dumps(request) + "\n")
+                self.process.stdin.flush()
+                pid = self._answer()["pid"]
+                answer = self._answer(timeout)
+                if answer is None:
+                    raise subprocess.TimeoutExpired(command, timeout)
+            except BaseException:                      # as subprocess.run: the child killed, then raise
+                self.kill(pid)
+                raise
             output = {}
             for name, path in paths.items():
                 with open(path) as stream:                 # the locale's encoding, as text=True decodes
                     output[name] = stream.read()
-            status = answer["status"]
-        return subprocess.CompletedProcess(command, status, output["stdout"], output["stderr"])
+        return subprocess.CompletedProcess(command, answer["status"], output["stdout"], output["stderr"])
+
+    def kill(self, child=None):
+        """Kill ``child`` (a PID) if given, and the server."""
+        for pid in (child, self.process.pid):
+            if pid is not None:
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+        self.process.wait()
 
     def close(self):
-        self.process.stdin.close()
+        with contextlib.suppress(OSError):             # a killed server's pipe
+            self.process.stdin.close()
         self.process.wait(timeout=30)
         self.process.stdout.close()
 
 
-_server = None
+#: Environment variable: 0 runs every command line in a new interpreter (subprocess.run), as before the
+#: fork server; a run now and then shows that no test depends on the fork (the string hash seed, for one,
+#: is the server's in every child instead of a new one in each process).
+FORK_VARIABLE = "CLSKY_TEST_FORK"
+
+#: What each server imports: ``python -m clsky`` only clsky's own command line (its children must not
+#: find the animation's modules imported: a missing import in the core would pass), ``python -m
+#: clsky.anim`` and the bench scripts also the modules that anim's parser imports.
+SERVER_MODULES = {"clsky": ("clsky.cli",), "clsky.anim": ("clsky.cli", "clsky.anim.cli", "clsky.anim.animate",
+                                                           "clsky.anim.scene")}
+_servers = {}
+#: The environment the servers start with: the test session's, as this module is imported (at collection,
+#: before any test monkeypatches a variable). A command run in another environment gets a new interpreter.
+ENVIRONMENT = _environment()
 
 
-def _the_server():
-    global _server
-    if _server is None:
-        _server = ForkServer()
-        atexit.register(_server.close)
-    return _server
+def _run(package, args, cwd, env, timeout, script=None):
+    args = [str(arg) for arg in args]
+    if env is not None or _environment() != ENVIRONMENT or os.environ.get(FORK_VARIABLE, "1") == "0":
+        command = [sys.executable, *(["-m", package] if script is None else [os.fspath(script)]), *args]
+        return subprocess.run(command, cwd=cwd, capture_output=True, text=True, env=env, timeout=timeout)
+    modules = SERVER_MODULES[package or "clsky.anim"]
+    server = _servers.get(modules)
+    if server is None or server.process.poll() is not None:      # the first call, or killed by the last
+        if server is not None:
+            server.close()
+        server = _servers[modules] = ForkServer(modules, ENVIRONMENT)
+        atexit.register(server.close)
+    return server.run(package, args, cwd, timeout=timeout, script=script)
 
 
 def run(package, *args, cwd, env=None, timeout=None):
-    """``python -m package *args`` (:meth:`ForkServer.run` on this process' server, started at the first
-    call and closed at exit)."""
-    return _the_server().run(package, args, cwd, env=env, timeout=timeout)
+    """``python -m package *args`` (``package``: clsky or clsky.anim), forked from this process' server for
+    the package (started at the first call, closed at exit); ``env`` given, a new interpreter."""
+    return _run(package, args, cwd, env, timeout)
 
 
 def run_script(script, *args, cwd, env=None, timeout=None):
-    """``python script *args``, as :func:`run`."""
-    return _the_server().run(None, args, cwd, env=env, timeout=timeout, script=script)
+    """``python script *args`` (a bench script), as :func:`run`."""
+    return _run(None, args, cwd, env, timeout, script=script)
