@@ -64,6 +64,7 @@ def _deadline():
 
 def pytest_configure(config):
     _deadline()                                  # a malformed value stops the run before any test
+    _one_blas_thread()
     if not os.environ.get("CLSKY_CACHE_DIR"):
         # clsky's disk cache (clsky/_cache.py: colour-science's constants) of this session alone, for it
         # and every process it starts: the tests neither depend on what earlier runs left in
@@ -71,6 +72,23 @@ def pytest_configure(config):
         directory = tempfile.mkdtemp(prefix="clsky-test-cache-")
         os.environ["CLSKY_CACHE_DIR"] = directory
         config.add_cleanup(lambda: shutil.rmtree(directory, ignore_errors=True))
+
+
+def _one_blas_thread():
+    """NumPy's and SciPy's BLAS on one thread in this test process (``threadpoolctl``; the commands the
+    tests start keep their own). The default suite runs one worker per core and is CPU-bound (about 1100
+    CPU-s on two cores): a BLAS call that spreads over two threads only takes the other worker's core,
+    and OpenBLAS's threads spin while they wait. The Monte Carlo, orders and twilight tests took 72-76
+    CPU-s with BLAS's two threads and 59-60 with one, in the same wall time (-n 0, 2026-12-07). BLAS
+    splits a product's rows and columns among its threads, not the sums, so no value changes
+    (clsky._cl.host_blas_single_threaded); the tests of clsky's own limit set two threads around them."""
+    import importlib
+
+    from threadpoolctl import threadpool_limits
+
+    importlib.import_module("scipy.linalg")      # loads SciPy's BLAS, so that the limit reaches it too
+
+    threadpool_limits(limits=1, user_api="blas")
 
 
 #: Under a deadline these run first (in this order, the rest after them in their usual order): the

@@ -415,22 +415,25 @@ def _record_blas_threads(monkeypatch):
 
 def test_frame_loop_runs_host_blas_on_one_thread(tmp_path, cl_context, monkeypatch):
     """The frame loop's host matrix products run on one BLAS thread: PoCL's workers own the cores
-    (docs/speed-log.md); the limit is lifted after the animation."""
-    from threadpoolctl import threadpool_info
+    (docs/speed-log.md); the limit is lifted after the animation. Run with two BLAS threads (the test
+    session keeps one: tests/conftest.py)."""
+    from threadpoolctl import threadpool_info, threadpool_limits
 
     def threads():       # by library: the animation may load another BLAS (SciPy's) on the way
         return {info["filepath"]: info["num_threads"] for info in threadpool_info() if info["user_api"] == "blas"}
 
-    before = threads()
-    seen = _record_blas_threads(monkeypatch)
-    render_animation(AnimationConfig(frames=2, output=str(tmp_path / "sky.mp4"), **TINY), ctx=cl_context)
-    assert seen == [{1}, {1}], seen
-    after = threads()
-    assert {path: after[path] for path in before} == before
+    with threadpool_limits(limits=2, user_api="blas"):
+        before = threads()
+        assert set(before.values()) == {2}, before
+        seen = _record_blas_threads(monkeypatch)
+        render_animation(AnimationConfig(frames=2, output=str(tmp_path / "sky.mp4"), **TINY), ctx=cl_context)
+        assert seen == [{1}, {1}], seen
+        after = threads()
+        assert {path: after[path] for path in before} == before
 
 
 @pytest.mark.slow
-def test_one_blas_thread_gives_the_same_bytes_as_two(tmp_path, cl_context, monkeypatch):
+def test_one_blas_thread_gives_the_same_bytes_as_two(tmp_path, cl_context, monkeypatch, request):
     """The frames and metrics of the frame loop on one BLAS thread are byte for byte those of the same
     animation with BLAS on two threads (BLAS splits rows among threads, not the three-term sums).
     256 x 256 frames: the products' (N, 3) @ (3, 3) sizes (N ~ 51 000 valid pixels for Delta E,
@@ -443,6 +446,8 @@ def test_one_blas_thread_gives_the_same_bytes_as_two(tmp_path, cl_context, monke
 
     seen = _record_blas_threads(monkeypatch)
     outputs = {}
+    limits = threadpool_limits(limits=2, user_api="blas")      # the session's one thread (tests/conftest.py)
+    request.addfinalizer(limits.restore_original_limits)
     for name in ("one thread", "two threads"):
         if name == "two threads":
             monkeypatch.setattr(clsky.anim.animate, "host_blas_single_threaded",
