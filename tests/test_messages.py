@@ -19,7 +19,9 @@ ANIMATION_COMMANDS = ("animate", "render", "bench")
 
 
 def clsky(*args, cwd, env=None):
-    """The ``clsky`` console script: clsky's commands, extended by anim's (``python -m clsky.anim``)."""
+    """``python -m clsky`` (clsky's commands) or ``python -m clsky.anim`` (extended by anim's, as the
+    ``clsky`` console script is), forked from a process that has imported clsky (tests/forked_cli.py; a
+    new interpreter where ``env`` is given)."""
     package = "clsky.anim" if args[0] in ANIMATION_COMMANDS else "clsky"
     return forked_cli.run(package, *args, cwd=cwd, env=env)
 
