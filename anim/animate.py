@@ -35,7 +35,7 @@ import numpy as np
 import clsky
 from clsky._cl import host_blas_single_threaded, host_cores, packed_reads
 from clsky._files import StagedWrites, check_output
-from clsky.cli import ATMOSPHERE_OVERRIDE_RANGES
+from clsky.atmosphere import OVERRIDE_RANGES
 from clsky.errors import ParameterError, check_choice, check_flag, check_integer, check_real, counted, is_real_number
 from clsky.ground import check_ground_mode
 from clsky.planner import Plan, Scene, azimuth_harmonics, plan_scene, sun_axis, view_sampling
@@ -324,9 +324,7 @@ class AnimationConfig:
     @property
     def atmosphere(self) -> clsky.AtmosphereParameters:
         """The preset's atmosphere, with ``ground_albedo`` and ``ozone_column_du`` if given."""
-        from clsky.cli import ATMOSPHERE_OVERRIDES
-
-        changes = {name: getattr(self, name) for name in ATMOSPHERE_OVERRIDES if getattr(self, name) is not None}
+        changes = {name: getattr(self, name) for name in OVERRIDE_RANGES if getattr(self, name) is not None}
         return clsky.preset(self.preset).replace(**changes)
 
     def image_shape(self):
@@ -424,8 +422,8 @@ _FIELD_CHECKS = {
     "pitch_deg": _real(-90.0, 90.0, " degrees"), "altitude": _real(0.0, 1e8, " m"), "method": _choice(METHODS),
     "skyview_size": lambda name, value: None if value is None else skyview.check_size(name, value),
     "preset": _choice(tuple(sorted(clsky.PRESETS))), "mode": _choice(("atmosphere-plus", "physical")),
-    "ground_albedo": _real(*ATMOSPHERE_OVERRIDE_RANGES["ground_albedo"], optional=True),
-    "ozone_column_du": _real(*ATMOSPHERE_OVERRIDE_RANGES["ozone_column_du"], optional=True),
+    "ground_albedo": _real(*OVERRIDE_RANGES["ground_albedo"], optional=True),
+    "ozone_column_du": _real(*OVERRIDE_RANGES["ozone_column_du"], optional=True),
     "samples": _integer(2, 4096, optional=True), "sampling": _choice(SAMPLINGS, optional=True),
     "error_budget": _real(0.0, 1.0, low_open=True),
     "quality": _choice(tuple(QUALITY_LEVELS), optional=True),

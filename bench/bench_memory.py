@@ -28,7 +28,8 @@ import time
 
 from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
 
-from clsky.cli import ATMOSPHERE_OVERRIDES, add_atmosphere_overrides
+from clsky.atmosphere import OVERRIDE_RANGES
+from clsky.cli import add_atmosphere_overrides
 from clsky.resources import BASE_PROCESS_BYTES, device_of, estimate_table_memory, format_bytes
 
 #: Runs the command in argv[1:] and prints its peak RSS [KiB] (ru_maxrss of the only child).
@@ -66,7 +67,7 @@ def cases(reference=False):
 def with_overrides(arguments, args):
     """``arguments`` followed by the --ground-albedo / --ozone-column options given to the benchmark."""
     options = {"ground_albedo": "--ground-albedo", "ozone_column_du": "--ozone-column"}
-    assert set(options) == set(ATMOSPHERE_OVERRIDES)
+    assert set(options) == set(OVERRIDE_RANGES)
     extra = [item for field, option in options.items() if getattr(args, field, None) is not None
              for item in (option, repr(float(getattr(args, field))))]
     return list(arguments) + extra

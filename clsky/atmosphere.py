@@ -126,6 +126,12 @@ GROUND_DEFAULTS = {"ground_albedo": 0.0}
 #: mean of the Earth's surface, 71 % ocean (about 0.06) and 29 % land (0.15 to 0.3).
 EARTH_GROUND_ALBEDO = 0.1
 
+#: The fields a scene may set over its preset's (``clsky table``'s and the animation's --ground-albedo and
+#: --ozone-column, AnimationConfig's fields of the same names), with their ranges (low, high, unit), the
+#: same everywhere: 1e5 DU is 300 times the Earth's column (the table's check of the optical depth alone
+#: reported 1e308 DU as "here 6.58e+303", in no unit one types).
+OVERRIDE_RANGES = {"ground_albedo": (0.0, 1.0, ""), "ozone_column_du": (0.0, 1e5, " DU")}
+
 
 
 def _as_rgb(name: str, value) -> tuple[float, float, float]:

@@ -306,16 +306,9 @@ TABLE_OPTION_NAMES = {
 }
 
 
-#: AtmosphereParameters fields a command line may set over its preset's (add_atmosphere_overrides).
-ATMOSPHERE_OVERRIDES = ("ground_albedo", "ozone_column_du")
-#: Their ranges (low, high, unit), the same for every command: 1e5 DU is 300 times the Earth's column (the
-#: table's check of the optical depth alone reported 1e308 DU as "here 6.58e+303", in no unit one types).
-ATMOSPHERE_OVERRIDE_RANGES = {"ground_albedo": (0.0, 1.0, ""), "ozone_column_du": (0.0, 1e5, " DU")}
-
-
 def add_atmosphere_overrides(group):
-    """--ground-albedo and --ozone-column (fields ATMOSPHERE_OVERRIDES, None when not given), for
-    ``clsky table`` and the animation's commands alike."""
+    """--ground-albedo and --ozone-column (the fields of :data:`clsky.atmosphere.OVERRIDE_RANGES`, None
+    when not given), for ``clsky table`` and the animation's commands alike."""
     from .atmosphere import EARTH_GROUND_ALBEDO
 
     group.add_argument("--ground-albedo", type=float, metavar="A",
@@ -330,14 +323,13 @@ def add_atmosphere_overrides(group):
 def table_atmosphere(args):
     """The atmosphere of the table options: the --preset's, with --ground-albedo and --ozone-column if
     given. UsageError names the option of a bad value."""
-    from .atmosphere import preset
+    from .atmosphere import OVERRIDE_RANGES, preset
     from .errors import ParameterError, check_real
 
-    changes = {field: getattr(args, field) for field in ATMOSPHERE_OVERRIDES
-               if getattr(args, field, None) is not None}
+    changes = {field: getattr(args, field) for field in OVERRIDE_RANGES if getattr(args, field, None) is not None}
     try:
         for field, value in changes.items():
-            low, high, unit = ATMOSPHERE_OVERRIDE_RANGES[field]
+            low, high, unit = OVERRIDE_RANGES[field]
             check_real(field, value, low, high, unit=unit)
         return preset(args.preset).replace(**changes)
     except ParameterError as error:
