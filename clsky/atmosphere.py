@@ -133,7 +133,6 @@ EARTH_GROUND_ALBEDO = 0.1
 OVERRIDE_RANGES = {"ground_albedo": (0.0, 1.0, ""), "ozone_column_du": (0.0, 1e5, " DU")}
 
 
-
 def _as_rgb(name: str, value) -> tuple[float, float, float]:
     items = tuple(value) if isinstance(value, (tuple, list, np.ndarray)) else None
     if items is None or len(items) != 3 or not all(_is_real_number(v) for v in items):

@@ -97,6 +97,11 @@ def _environment():
     return {name: value for name, value in os.environ.items() if name != "PYTEST_CURRENT_TEST"}
 
 
+def _command(package, args, script=None):
+    """The command line of a new interpreter: ``python -m package *args``, or ``python script *args``."""
+    return [sys.executable, *(["-m", package] if script is None else [os.fspath(script)]), *args]
+
+
 class ForkServer:
     """A server that has imported ``modules`` in ``environment``; :meth:`run` forks a command line from it."""
 
@@ -125,7 +130,7 @@ class ForkServer:
 
         A failure to wait for the child (an interruption, a timeout) kills the child and the server: the
         next call starts a new server, never reading this call's answers as its own."""
-        command = [sys.executable, *(["-m", package] if script is None else [os.fspath(script)]), *args]
+        command = _command(package, args, script)
         if not os.path.isdir(cwd):                     # as subprocess.run, before any child exists
             raise FileNotFoundError(2, "No such file or directory", os.fspath(cwd))
         pid = None
@@ -185,8 +190,7 @@ ENVIRONMENT = _environment()
 def _run(package, args, cwd, env, timeout, script=None):
     args = [str(arg) for arg in args]
     if env is not None or _environment() != ENVIRONMENT or os.environ.get(FORK_VARIABLE, "1") == "0":
-        command = [sys.executable, *(["-m", package] if script is None else [os.fspath(script)]), *args]
-        return subprocess.run(command, cwd=cwd, capture_output=True, text=True, env=env, timeout=timeout)
+        return subprocess.run(_command(package, args, script), cwd=cwd, capture_output=True, text=True, env=env, timeout=timeout)
     modules = SERVER_MODULES[package or "clsky.anim"]
     server = _servers.get(modules)
     if server is None or server.process.poll() is not None:      # the first call, or killed by the last

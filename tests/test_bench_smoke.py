@@ -66,15 +66,11 @@ LINES = {
 #: 2026-12-02); spectral 5-7 s; twilight 11 s; dusk 10 s (four skies, two of 15 wavelengths); accuracy 41 s
 #: (the four 'draft' reference tables: 21 s), quality 109 s (the reference and one doubled group); dask 66 s (two
 #: LocalClusters started, at load average 10); animate 15 s (quiet machine, 2026-12-02: two end-to-end runs
-#: and the stage split). Slow (run by .ci/run): accuracy, quality, dusk, dask and animate, so that the default
-#: suite stays within its 10 minutes (it took 10:17 on a quiet machine with animate in it).
-#: Over ~30 s each, and the two longest of the rest (bench_montecarlo 10 s, bench_render 7.5 s in a fresh
-#: clone's run on 2026-12-04, whose default suite took 10:44 in the machine's slow state): slow, so that
-#: the default suite keeps a margin under its 10 minutes; .ci/run's slow set still runs them.
-#: Since 2026-12-07 every smoke run but two is slow: the default suite took 10:44 again on an empty kernel
-#: cache (the AMD EPYC without AVX-512), of which the smoke runs below were 77 s of test time (bench_orders
-#: 12 s, bench_azimuth 8.7, bench_renderer_costs 8.4, the accuracy replot 8.0, the rest 4-6.5 each). The
-#: default suite keeps bench_single and bench_skyview (2 s each), which run the shared _report code.
+#: and the stage split). Every smoke run but two is slow (run by .ci/run after the default suite) since
+#: 2026-12-07: the default suite took 10:44 on an empty kernel cache (the AMD EPYC without AVX-512), of
+#: which the smoke runs were 77 s of test time (bench_orders 12 s, bench_azimuth 8.7, bench_renderer_costs
+#: 8.4, the accuracy replot 8.0, the rest 4-6.5 each). The default suite keeps bench_single and
+#: bench_skyview (2 s each), which run the shared _report code.
 DEFAULT_SMOKE = {"bench_single", "bench_skyview"}
 SLOW = set(HEADERS) - DEFAULT_SMOKE
 
