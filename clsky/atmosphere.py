@@ -98,8 +98,13 @@ MAX_REFRACTIVE_INDEX = 10.0
 #: Supported ranges (float64; see :class:`AtmosphereParameters`, Notes).
 PLANET_RADIUS_RANGE = (1e3, 1e10)
 ATMOSPHERE_HEIGHT_RANGE = (1.0, 1e10)
-#: Least scale height, as a fraction of the atmosphere's height.
+#: Least scale height (and half width of the ozone tent), as a fraction of the atmosphere's height.
 MIN_SCALE_HEIGHT_FRACTION = 1e-4
+#: Largest |g| of the Mie phase: the lobe's width, about 1 - |g| rad, is then 1e-4 rad, far below what
+#: the gather's sphere quadrature resolves (256 x 128 steps: 0.012 rad); beyond it the tables of higher
+#: orders overflowed (g = +0.999999: values of 1e7 where the radiance per unit irradiance is of order 1,
+#: 1e12 at 1 - 1e-9).
+MAX_MIE_G = 0.9999
 #: Largest vertical optical depth (Rayleigh + Mie extinction, per wavelength).
 MAX_VERTICAL_OPTICAL_DEPTH = 1e3
 #: Float32 kernels: the largest planet radius [m], and the least atmosphere height as a fraction of
@@ -174,7 +179,8 @@ class AtmosphereParameters:
     mie_reference_wavelength : float
         lambda_0 [nm], > 0, the wavelength at which ``mie_scattering`` holds (default 550 nm).
     mie_g : float
-        Cornette-Shanks asymmetry in the notes' sign convention, |g| < 1; negative g peaks toward the sun.
+        Cornette-Shanks asymmetry in the notes' sign convention, in [-:data:`MAX_MIE_G`, MAX_MIE_G]
+        ([-0.9999, 0.9999]); negative g peaks toward the sun.
     rayleigh_phase : str
         One of :data:`RAYLEIGH_PHASE_METHODS`.
     mie_phase : str
@@ -190,9 +196,10 @@ class AtmosphereParameters:
         Ozone column [Dobson units, 1 DU = 2.687e20 molecules/m^2], >= 0; 0 (the default) is no ozone,
         and the kernels are then built without it (bit-for-bit the ozone-free program).
     ozone_peak_altitude, ozone_half_width : float
-        The tent profile n_O3(h) = n_max max(0, 1 - |h - peak| / half_width) [m]; half_width > 0 and
-        peak >= half_width (the tent lies above the ground, so its column is n_max half_width). Ozone
-        above the top of the atmosphere is ignored.
+        The tent profile n_O3(h) = n_max max(0, 1 - |h - peak| / half_width) [m]; half_width at least
+        :data:`MIN_SCALE_HEIGHT_FRACTION` of the atmosphere's height (10 m for the Earth's), as the scale
+        heights, and peak >= half_width (the tent lies above the ground, so its column is n_max
+        half_width). Ozone above the top of the atmosphere is ignored.
     ozone_cross_section : tuple of 3 floats
         O3 absorption cross-section sigma at the three wavelengths [m^2], >= 0; defaults to
         Serdyuchenko et al. (2014) at 650, 510, 475 nm (:func:`clsky.ozone.cross_section_serdyuchenko2014`).
@@ -271,19 +278,20 @@ class AtmosphereParameters:
         check("top_radius", lambda v: (v - rp >= low) & (v - rp <= high),
               f"{low:g} to {high:g} m above planet_radius")
         least = MIN_SCALE_HEIGHT_FRACTION * self.atmosphere_height
-        for name in ("rayleigh_scale_height", "mie_scale_height"):
-            check(name, lambda v: v >= least, f">= {least:g} m ({MIN_SCALE_HEIGHT_FRACTION:g} of the "
-                                              f"atmosphere's height: thinner layers fall between the quadrature's nodes)")
+        for name in ("rayleigh_scale_height", "mie_scale_height", "ozone_half_width"):
+            check(name, lambda v: v >= least, f"finite and >= {least:g} m ({MIN_SCALE_HEIGHT_FRACTION:g} of the "
+                                              f"atmosphere's height: thinner layers fall between the "
+                                              f"quadrature's nodes)")
         check("rayleigh_scattering", lambda v: np.all(v >= 0), "finite and >= 0 1/m")
         check("mie_scattering", lambda v: v >= 0, "finite and >= 0 1/m")
         check("mie_extinction_ratio", lambda v: (v > 0) & (v <= 1), "in (0, 1]")
-        check("mie_g", lambda v: np.abs(v) < 1, "in (-1, 1)")
+        check("mie_g", lambda v: np.abs(v) <= MAX_MIE_G,
+              f"in [-{MAX_MIE_G:g}, {MAX_MIE_G:g}] (a narrower lobe is beyond the quadratures)")
         check("wavelengths", lambda v: np.all(v > 0), "finite and > 0 nm")
         check("solar_irradiance", lambda v: np.all(v >= 0), "finite and >= 0")
         check("spectral_to_rgb", lambda v: np.all(v >= 0), "finite and >= 0")
         check("exposure", lambda v: v > 0, "finite and > 0")
         check("ozone_column_du", lambda v: v >= 0, "finite and >= 0 DU")
-        check("ozone_half_width", lambda v: v > 0, "finite and > 0 m")
         check("ozone_peak_altitude", lambda v: v >= self.ozone_half_width,
               f"finite and >= ozone_half_width ({self.ozone_half_width:g} m): the tent must lie above the ground")
         check("ozone_cross_section", lambda v: np.all(v >= 0), "finite and >= 0 m^2")
@@ -318,7 +326,11 @@ class AtmosphereParameters:
         ozone = np.array(self.ozone_cross_section) * self.ozone_column_du * DOBSON_UNIT   # the whole tent's column
         depth = float(np.max(rayleigh + mie + ozone))
         if not depth <= MAX_VERTICAL_OPTICAL_DEPTH:     # NaN too
-            largest = max((np.max(ozone), "ozone_column_du"), (np.max(mie), "mie_scattering"),
+            mie_name = "mie_scattering"    # or the ratio, where the scattering alone stays within the bound
+            if np.max(self.mie_scattering_channels * _column(self.mie_scale_height, self.atmosphere_height)) \
+                    <= MAX_VERTICAL_OPTICAL_DEPTH:
+                mie_name = "mie_extinction_ratio"
+            largest = max((np.max(ozone), "ozone_column_du"), (np.max(mie), mie_name),
                           (np.max(rayleigh), "rayleigh_scattering"))
             name = largest[1]
             raise ParameterError(name, f"small enough for a vertical optical depth <= {MAX_VERTICAL_OPTICAL_DEPTH:g} "

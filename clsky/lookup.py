@@ -9,7 +9,7 @@ import numpy as np
 import pyopencl.array as cla
 
 from . import _atmosphere_cl, _cl
-from .atmosphere import AtmosphereParameters
+from .atmosphere import ATMOSPHERE_HEIGHT_RANGE, AtmosphereParameters
 from .errors import ParameterError, as_real_array, check_choice
 from .mapping import FULL_SUN_RANGE, sun_w_range
 from .settings import MAPPINGS
@@ -17,9 +17,11 @@ from .settings import MAPPINGS
 __all__ = ["TableLookupEngine", "check_queries", "check_table_data", "check_kernel_buffer"]
 
 
-#: Highest observer altitude a lookup takes [m] (as the renderer, clsky/render.py): far beyond it the
-#: squared radii of the entry-point geometry overflow (the NumPy twin gave NaN from 1e155 m).
-MAX_QUERY_ALTITUDE = 1e9
+#: Highest observer altitude a lookup takes [m] (as the renderers, clsky/render.py): the highest top of
+#: a valid atmosphere (:data:`clsky.atmosphere.ATMOSPHERE_HEIGHT_RANGE`), so that every observer inside
+#: one is taken; far beyond it the squared radii of the entry-point geometry overflow (the NumPy twin gave
+#: NaN from 1e155 m).
+MAX_QUERY_ALTITUDE = ATMOSPHERE_HEIGHT_RANGE[1]
 
 
 def check_queries(altitude, cos_view, cos_sun, cos_scatter):
@@ -29,7 +31,8 @@ def check_queries(altitude, cos_view, cos_sun, cos_scatter):
     ------
     ValueError
         (:class:`clsky.errors.ParameterError`) for a query that is not numeric, does not broadcast,
-        or lies outside its range: altitude in [0, 1e9] m, cosines in [-1, 1].
+        or lies outside its range: altitude in [0, 1e10] m (:data:`MAX_QUERY_ALTITUDE`), cosines in
+        [-1, 1].
     """
     names = ("altitude", "cos_view", "cos_sun", "cos_scatter")
     ranges = ((0.0, MAX_QUERY_ALTITUDE), (-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0))

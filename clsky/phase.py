@@ -7,7 +7,7 @@ References
 ----------
 Cornette, W. M. & Shanks, J. G. (1992). Physically reasonable analytic expression for the
 single-scattering phase function. Applied Optics 31(16), 3152, doi:10.1364/AO.31.003152.
-``shared/physics.md`` (sign convention of g: the notes' g = -0.85 with "+2 g c" peaks toward the sun).
+``docs/physics.md`` (sign convention of g: the notes' g = -0.85 with "+2 g c" peaks toward the sun).
 """
 
 from __future__ import annotations
@@ -34,10 +34,19 @@ def mie_cornette_shanks(c, g):
     """Cornette-Shanks 3(1-g^2) / (2(2+g^2)) (1+c^2) / (1+g^2+2gc)^(3/2), notes' sign convention.
 
     With g < 0 (notes: -0.85) the forward lobe points at the sun (c = 1).
+
+    The base 1 + g^2 + 2gc is at least (1 - |g|)^2 (its value at the peak, c = -sign(g)), but it is
+    formed from terms of size ~2: below half that least value it is rounding noise (float32 kernels
+    rounded it to 0 or below with |g| near 1) and replaced by the least value, as in kernels/phase.cl;
+    above, it stays as formed, bit for bit the plain formula (in float64 and |g| <= MAX_MIE_G it always
+    does).
     """
     c = np.asarray(c, dtype=np.float64)
     g2 = g * g
-    return 1.5 * (1.0 - g2) / (2.0 + g2) * (1.0 + c * c) / (1.0 + g2 + 2.0 * g * c) ** 1.5
+    least = (1.0 - abs(g)) ** 2
+    formed = 1.0 + g2 + 2.0 * g * c
+    base = np.where(formed < 0.5 * least, least, formed)
+    return 1.5 * (1.0 - g2) / (2.0 + g2) * (1.0 + c * c) / base ** 1.5
 
 
 #: Mean of each phase function over the sphere, (1 / 4 pi) Integral F d omega, exact: Cornette-Shanks is

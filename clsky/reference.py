@@ -305,20 +305,23 @@ def enter_atmosphere(atmosphere, altitude, cos_view, cos_sun, cos_scatter):
     """Moves observers above the atmosphere to where their view ray enters it.
 
     Returns (altitude, cos_view, cos_sun, inside) with ``inside`` False where the ray misses the
-    atmosphere.
+    atmosphere; a ray that misses keeps its cosines (finite values the caller zeroes). As
+    kernels/geometry.cl, "above" is decided from the altitude: ``r > ra`` missed an altitude an ulp
+    above the top, where Rp + h rounds to Ra.
     """
     ra = atmosphere.top_radius
     r = atmosphere.planet_radius + altitude
-    above = r > ra
-    outside = (r - ra) * (r + ra)
+    above = altitude > atmosphere.atmosphere_height
+    outside = np.maximum((r - ra) * (r + ra), 0.0)
     discriminant = r * cos_view * r * cos_view - outside
     inside = ~above | ((cos_view < 0.0) & (discriminant >= 0.0))
-    with np.errstate(divide="ignore", invalid="ignore"):
+    entered = above & inside         # there the denominator is >= -r cos_view > 0: d is finite
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):   # the rays that miss
         d = outside / (np.sqrt(np.maximum(discriminant, 0.0)) - r * cos_view)
-    return (np.where(above, atmosphere.atmosphere_height, altitude),
-            np.where(above, np.clip((r * cos_view + d) / ra, -1.0, 1.0), cos_view),
-            np.where(above, np.clip((r * cos_sun + d * cos_scatter) / ra, -1.0, 1.0), cos_sun),
-            inside)
+        entry_view = np.clip((r * cos_view + d) / ra, -1.0, 1.0)
+        entry_sun = np.clip((r * cos_sun + d * cos_scatter) / ra, -1.0, 1.0)
+    return (np.where(above, atmosphere.atmosphere_height, altitude), np.where(entered, entry_view, cos_view),
+            np.where(entered, entry_sun, cos_sun), inside)
 
 
 def lookup(atmosphere: AtmosphereParameters, data, altitude, cos_view, cos_sun, cos_scatter,

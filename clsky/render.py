@@ -18,7 +18,7 @@ import pyopencl.array as cla
 from . import _atmosphere_cl, _cl, reference
 from .errors import as_real_array, check_instance, is_finite_real, short
 from .ground import padded4
-from .lookup import check_kernel_buffer, check_table_data
+from .lookup import MAX_QUERY_ALTITUDE, check_kernel_buffer, check_table_data
 from .resources import check_memory, device_of, estimate_directions_memory, estimate_render_memory
 from .settings import MAPPINGS, TableSettings
 from .table import ScatteringTable
@@ -49,8 +49,8 @@ def check_directions(directions, sun_direction, altitude):
     sun = as_real_array("sun_direction", sun_direction, "a finite unit vector of 3 values")
     if sun.shape != (3,) or not np.all(np.isfinite(sun)) or abs(np.linalg.norm(sun) - 1.0) > 1e-6:
         raise ValueError(f"sun_direction must be a finite unit vector of 3 values, got {short(sun_direction)}")
-    if not (is_finite_real(altitude) and 0.0 <= altitude <= 1e9):
-        raise ValueError(f"altitude must be finite and in [0, 1e9] m, got {short(altitude)}")
+    if not (is_finite_real(altitude) and 0.0 <= altitude <= MAX_QUERY_ALTITUDE):
+        raise ValueError(f"altitude must be finite and in [0, {MAX_QUERY_ALTITUDE:g}] m, got {short(altitude)}")
     return directions, sun, float(altitude)
 
 
@@ -351,11 +351,14 @@ class SkyRenderer:
 
     def _check_sun_covered(self, sun):
         """A table planned for a scene covers its sun path only (``sun_cos_range``): refuse a sun outside
-        it rather than return the light of the range's end."""
+        it rather than return the light of the range's end. The zenith cosine is the normalised vector's:
+        a sun direction is taken within 1e-6 of unit length (:func:`check_directions`), and z = 1 + 9e-7
+        is the zenith, not beyond it."""
         low, high = self.table.settings.sun_cos_range
-        if not low - 1e-12 <= sun[2] <= high + 1e-12:
-            raise ValueError(f"sun_direction: its zenith cosine {sun[2]:.6g} is outside the table's "
-                             f"sun_cos_range [{low:.6g}, {high:.6g}] (plan the table for this sun path)")
+        cos_sun = float(np.clip(sun[2] / np.linalg.norm(sun), -1.0, 1.0))
+        if not low - 1e-12 <= cos_sun <= high + 1e-12:
+            raise ValueError(f"sun_direction: its zenith cosine {cos_sun:.9g} is outside the table's "
+                             f"sun_cos_range [{low:.9g}, {high:.9g}] (plan the table for this sun path)")
 
     def render_table(self, directions, sun_direction, altitude=0.0, valid=None):
         """HDR radiance (..., 3) by table lookup; ``directions`` (..., 3) unit vectors (or

@@ -15,7 +15,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from clsky import PRESETS, AtmosphereParameters, TableSettings, preset
-from clsky.atmosphere import EARTH_GROUND_ALBEDO
+from clsky.atmosphere import EARTH_GROUND_ALBEDO, MAX_MIE_G, MIN_SCALE_HEIGHT_FRACTION
 from clsky.atmosphere import MIE_PHASE_METHODS, rayleigh_scattering_coefficient
 
 SCALAR_FIELDS = ("planet_radius", "top_radius", "rayleigh_scale_height", "mie_scale_height",
@@ -48,6 +48,8 @@ def raises_naming(field):
     ("mie_g", -1.0),
     ("mie_g", 1.5),
     ("mie_g", -1.0000001),
+    ("mie_g", 0.99991),
+    ("mie_g", -0.99991),
     ("exposure", 0.0),
     ("exposure", -1.0),
 ])
@@ -69,11 +71,41 @@ def test_out_of_range_rgb_raises_naming_the_field(field, value):
 
 
 def test_valid_edge_values_are_accepted():
-    """Closed ends of the documented ranges: zero scattering, ratio 1, |g| just below 1."""
+    """Closed ends of the documented ranges: zero scattering, ratio 1, |g| = MAX_MIE_G, scale heights and
+    the ozone tent's half width at their least (1e-4 of the atmosphere's height)."""
     atmosphere = AtmosphereParameters(mie_scattering=0.0, rayleigh_scattering=(0.0, 0.0, 0.0),
-                                      mie_extinction_ratio=1.0, mie_g=-0.999999, solar_irradiance=(0, 0, 0))
+                                      mie_extinction_ratio=1.0, mie_g=-MAX_MIE_G, solar_irradiance=(0, 0, 0))
     assert atmosphere.mie_extinction == 0.0
-    assert AtmosphereParameters(mie_g=0.999999).mie_g == 0.999999
+    assert AtmosphereParameters(mie_g=MAX_MIE_G).mie_g == 0.9999
+    least = MIN_SCALE_HEIGHT_FRACTION * atmosphere.atmosphere_height
+    assert least == 10.0
+    thin = preset("physical").replace(mie_scale_height=least, ozone_half_width=least)
+    assert thin.ozone_half_width == least and np.isfinite(thin.ozone_number_density_max)
+
+
+def test_mie_g_beyond_its_range_names_the_range():
+    with pytest.raises(ValueError, match=r"^mie_g must be in \[-0.9999, 0.9999\] \(a narrower lobe is beyond "
+                                         r"the quadratures\), got 0.99999"):
+        AtmosphereParameters(mie_g=0.99999)
+
+
+@pytest.mark.parametrize("field", ["rayleigh_scale_height", "mie_scale_height", "ozone_half_width"])
+def test_layers_thinner_than_the_least_are_refused(field):
+    """A thinner layer falls between the quadrature's nodes (an ozone tent 1e-290 m wide made its peak
+    density infinite and the build fail after its work): refused by name, before any work."""
+    with pytest.raises(ValueError, match=rf"^{field} must be finite and >= 10 m \(0.0001 of the atmosphere's "
+                                         r"height: thinner layers fall between the quadrature's nodes\), got 9.99"):
+        preset("physical").replace(**{field: 9.99})
+
+
+@pytest.mark.parametrize("changes, field", [
+    (dict(mie_extinction_ratio=1e-12), "mie_extinction_ratio"),     # the scattering alone is within the bound
+    (dict(mie_scattering=1.0), "mie_scattering"),
+    (dict(mie_scattering=1.0, mie_extinction_ratio=0.5), "mie_scattering"),
+])
+def test_an_optical_depth_beyond_the_bound_names_the_field_that_makes_it(changes, field):
+    with pytest.raises(ValueError, match=rf"^{field} must be small enough for a vertical optical depth <= 1000"):
+        preset("physical").replace(**changes)
 
 
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])

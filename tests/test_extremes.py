@@ -39,7 +39,7 @@ from scipy import integrate
 
 from clsky.anim.cameras import FisheyeCamera, sun_direction
 from clsky import AtmosphereParameters, ScatteringTable, TableSettings, preset, reference
-from clsky.atmosphere import MIE_PHASE_METHODS, MIN_SCALE_HEIGHT_FRACTION, RAYLEIGH_PHASE_METHODS
+from clsky.atmosphere import MAX_MIE_G, MIE_PHASE_METHODS, MIN_SCALE_HEIGHT_FRACTION, RAYLEIGH_PHASE_METHODS
 from clsky.mapping import grid_coordinates
 from clsky.multiple import gather_matrices
 from clsky.phase import mie_phase, rayleigh_phase
@@ -504,6 +504,39 @@ def test_extreme_g_tables_and_renders_are_finite(renderer_of, mode, case):
             for directions, mask in ((fisheye, valid), (horizon_ring(), None), (sun[None], None)):
                 image = getattr(renderer, method)(directions, sun, 0.0, mask)
                 assert_finite_nonnegative(image, f"{mode} {case} {method} sun {elevation:g} deg")
+
+
+@pytest.mark.parametrize("g", [-MAX_MIE_G, MAX_MIE_G])
+def test_mie_peak_at_the_largest_g_is_finite_in_float32(renderer_of, g):
+    """At |g| = MAX_MIE_G float32's base 1 + g^2 + 2gc cancels at the peak: it rounded to 0 (an infinity)
+    or below (a NaN) before it was kept at its least value (1 - |g|)^2 (kernels/phase.cl). The table's
+    lookups and renders and the ray march, at the sun, away from it and on the horizon, are finite and
+    >= 0, and the peak is larger than anywhere else (a base rounded up makes the float32 peak itself
+    inexact: 2.4e-7 of rounding against (1 - |g|)^2 = 1e-8)."""
+    atmosphere = BASE["atmosphere-plus"].replace(mie_g=g)
+    renderer = renderer_of(atmosphere, TableSettings(size=(3, 9, 5), orders=1, dtype="float32"))
+    sun = np.array([0.6, 0.0, 0.8])
+    views = np.array([sun, -sun, [-0.8, 0.0, 0.6], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
+    peak = sun if g < 0 else -sun                         # the lobe: toward the sun for negative g
+    lookups = renderer.table.radiance(0.0, 0.6, 0.8, [1.0, -1.0, 0.0, 0.5])
+    assert_finite_nonnegative(lookups, f"g={g:g} radiance")
+    assert lookups[0 if g < 0 else 1, 0] == lookups[:, 0].max()
+    for method in METHODS:
+        image = getattr(renderer, method)(views, sun, 0.0)
+        assert_finite_nonnegative(image, f"g={g:g} {method}")
+        if peak[2] > 0:                                   # a sky pixel: the lobe is the brightest
+            assert image[0, 0] == image[:, 0].max(), f"g={g:g} {method}: {image[:, 0]}"
+
+
+@pytest.mark.parametrize("g", [-MAX_MIE_G, MAX_MIE_G, -0.999, 0.85])
+def test_mie_phase_twin_at_its_peak_is_the_closed_form(g):
+    """The twin's peak against the closed form 3 (1 - g^2) / (2 + g^2) / (1 - |g|)^3 (c = -sign(g),
+    1 + c^2 = 2): the rounding of the base, ~2 eps against (1 - |g|)^2, x 1.5 for the power, x 3 for
+    the other roundings: 6e-8 relative at |g| = MAX_MIE_G."""
+    atmosphere = PHYSICAL.replace(mie_g=g)
+    peak = float(mie_phase(atmosphere, -math.copysign(1.0, g)))
+    exact = 3.0 * (1.0 - g * g) / (2.0 + g * g) / (1.0 - abs(g)) ** 3
+    assert_allclose(peak, exact, rtol=3 * 1.5 * 2 * np.finfo(float).eps / (1.0 - abs(g)) ** 2, atol=0)
 
 
 #: The gather's 256 x 128 trapezoid against a Mie peak of angular width ~(1 - |g|) rad: 0.057 deg at

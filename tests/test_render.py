@@ -371,6 +371,17 @@ def test_sun_outside_the_tables_sun_range_is_refused(renderer, method):
         getattr(sky_renderer, method)(GOOD_DIRECTIONS, sun_direction(18.0, SUN_AZIMUTH))
 
 
+@pytest.mark.parametrize("method", METHODS)
+def test_a_sun_taken_as_a_unit_vector_is_inside_the_whole_sun_range(renderer, method):
+    """A sun direction is taken within 1e-6 of unit length: the zenith (0, 0, 1 + 9e-7) and the nadir
+    are inside a whole axis' sun range [-1, 1] (their cosines are those of the normalised vector), not
+    refused as "cosine 1 outside [-1, 1]"."""
+    sky_renderer = renderer("physical")
+    for sun in ((0.0, 0.0, 1.0 + 9e-7), (0.0, 0.0, -1.0 - 9e-7)):
+        image = getattr(sky_renderer, method)(GOOD_DIRECTIONS, np.array(sun))
+        assert np.isfinite(image).all() and (image >= 0).all()
+
+
 def test_prepare_rejects_non_unit_directions(renderer):
     with pytest.raises(ValueError, match="directions"):
         renderer("single-only").prepare(2.0 * GOOD_DIRECTIONS)
