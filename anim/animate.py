@@ -24,7 +24,6 @@ import contextlib
 import dataclasses
 import datetime
 import functools
-import math
 import pathlib
 import threading
 import time
@@ -366,7 +365,7 @@ def _location(name, value):
         return None
     valid = "None or (latitude in [-90, 90], longitude in [-180, 180]) degrees"
     items = tuple(value) if isinstance(value, (tuple, list, np.ndarray)) else ()
-    if (len(items) != 2 or not all(is_real_number(v) and math.isfinite(v) for v in items)
+    if (len(items) != 2 or not all(is_real_number(v) for v in items)      # NaN, inf and 10**400 fail the ranges
             or not (-90 <= items[0] <= 90 and -180 <= items[1] <= 180)):
         raise ParameterError(name, valid, value)
     return float(items[0]), float(items[1])

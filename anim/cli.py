@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import math
 import sys
 
 from clsky import cli as clsky_cli
@@ -141,8 +140,9 @@ def register(commands):
     render = commands.add_parser("render", help="render one frame (PNG)")
     _add_scene_arguments(render, frames=False)
     sun = render.add_argument_group("sun")
-    sun.add_argument("--sun-elevation", type=float, default=10.0, help="[deg] (default: 10)")
-    sun.add_argument("--sun-azimuth", type=float, default=180.0, help="[deg from north] (default: 180, south)")
+    sun.add_argument("--sun-elevation", type=float, default=10.0, help="[deg], in [-90, 90] (default: 10)")
+    sun.add_argument("--sun-azimuth", type=float, default=180.0,
+                     help="[deg from north], in [-360, 720] (default: 180, south)")
     out = render.add_argument_group("output")
     out.add_argument("-o", "--output", default="sky.png", help="PNG file (default: sky.png)")
     out.add_argument("--force", action="store_true", help="overwrite an existing file")
@@ -330,8 +330,8 @@ def run_render(args):
     if not -90.0 <= args.sun_elevation <= 90.0:
         raise clsky_cli.UsageError(f"{name('sun_elevation_deg', '--sun-elevation')} must be in [-90, 90] degrees, "
                                    f"got {short(args.sun_elevation)}")
-    if not math.isfinite(args.sun_azimuth):
-        raise clsky_cli.UsageError(f"{name('sun_azimuth_deg', '--sun-azimuth')} must be a finite number of degrees, "
+    if not -360.0 <= args.sun_azimuth <= 720.0:          # --heading's range: 1e308 deg kept no precision
+        raise clsky_cli.UsageError(f"{name('sun_azimuth_deg', '--sun-azimuth')} must be in [-360, 720] degrees, "
                                    f"got {short(args.sun_azimuth)}")
     try:
         output = check_suffix(args.output, ".png", name("output", "--output"))

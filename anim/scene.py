@@ -37,7 +37,8 @@ import pathlib
 import sys
 
 import clsky
-from clsky._files import read_user_text
+from clsky._files import as_path, read_user_text
+from clsky.errors import short
 from clsky.cli import UsageError
 
 if sys.version_info >= (3, 11):
@@ -164,8 +165,8 @@ def field_options(parser):
 
 def _type_error(path, key, action, value):
     """None, or what ``value`` of TOML should have been for the option ``action`` of ``key``."""
-    def is_number(v):
-        return isinstance(v, (int, float)) and not isinstance(v, bool)
+    def is_number(v):          # TOML integers have any size: one beyond float's range is no number here
+        return isinstance(v, float) or (isinstance(v, int) and not isinstance(v, bool) and _fits_float(v))
 
     if _is_flag(action):
         return None if isinstance(value, bool) else "true or false"
@@ -177,14 +178,35 @@ def _type_error(path, key, action, value):
         item = "integers" if action.type is int else "numbers"
         ok = isinstance(value, list) and len(value) == want and all(
             (isinstance(v, int) and not isinstance(v, bool)) if action.type is int else is_number(v) for v in value)
-        return None if ok else f"a list of {want} {item}"
+        return None if ok else f"a list of {want} {item}" + _beyond_float(value)
     if action.type is int:
         return None if isinstance(value, int) and not isinstance(value, bool) else "an integer"
     if action.type is float:
-        return None if is_number(value) else "a number"
+        return None if is_number(value) else "a number" + _beyond_float(value)
     if action.choices is not None:
         return None if isinstance(value, str) else f"a string, one of {', '.join(map(str, action.choices))}"
     return None if isinstance(value, str) else "a string"
+
+
+def _fits_float(value: int) -> bool:
+    try:
+        float(value)
+    except OverflowError:
+        return False
+    return True
+
+
+def _beyond_float(value):
+    """' (...)' where ``value`` (a number or a list) holds an integer too large for a float, else ''."""
+    numbers = value if isinstance(value, list) else [value]
+    if any(isinstance(v, int) and not isinstance(v, bool) and not _fits_float(v) for v in numbers):
+        return " (of at most about 1.8e308 in size)"
+    return ""
+
+
+def _shown_value(value):
+    """``value`` for a message: as TOML, but integers too large for a float in short form (1e+400)."""
+    return short(value) if _beyond_float(value) else _toml_value(value)
 
 
 def load_scene(path, parser):
@@ -196,14 +218,17 @@ def load_scene(path, parser):
         One line naming the file: unreadable, not TOML, an unknown section or key (or one of the other
         command), or a value of the wrong type (ranges are AnimationConfig's, see :func:`apply_scene`).
     """
-    path = pathlib.Path(path)
+    try:
+        path = as_path(path, "--scene")         # '' is no file name (pathlib reads it as '.')
+    except ValueError as error:
+        raise UsageError(str(error)) from None
     try:
         document = tomllib.loads(read_user_text(path))
     except OSError as error:
         raise UsageError(f"--scene: cannot read {path}: {error.strerror or error}") from None
     except UnicodeDecodeError:
         raise UsageError(f"--scene {path}: not a TOML file (not UTF-8 text)") from None
-    except tomllib.TOMLDecodeError as error:
+    except ValueError as error:        # TOMLDecodeError, or an integer of more than 4300 digits
         raise UsageError(f"--scene {path}: not a valid TOML file: {error}") from None
     except RecursionError:
         raise UsageError(f"--scene {path}: not a valid TOML file: nested too deeply") from None
@@ -229,7 +254,7 @@ def load_scene(path, parser):
             key, action = keys[full]
             expected = _type_error(path, key, action, value)
             if expected is not None:
-                raise UsageError(f"{path}: {full} must be {expected}, got {_toml_value(value)}")
+                raise UsageError(f"{path}: {full} must be {expected}, got {_shown_value(value)}")
             values[full] = value
     return values
 

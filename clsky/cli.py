@@ -63,6 +63,22 @@ def signals_interrupt():
             signal.signal(number, handler)
 
 
+@contextlib.contextmanager
+def written_since_checked(targets):
+    """Within the block, the FileExistsError of an output that :func:`check_outputs` found absent before the
+    work (without --force) but that exists when it is written, another run on the same output having
+    written it meanwhile, is a UsageError naming the option (``targets``: (option, path)), not the
+    library's hint of ``force=True``."""
+    try:
+        yield
+    except FileExistsError as error:
+        for option, path in targets:
+            if os.path.lexists(path):
+                raise UsageError(f"{option} {path} exists: another process wrote it during this run; use --force "
+                                 f"to overwrite it") from None
+        raise error
+
+
 def check_not_inputs(targets, inputs):
     """UsageError for an output that is one of the command's input files (``inputs``: (what, path), path None
     when not given): with --force it replaced the scene or sweep file it was read from."""
@@ -487,11 +503,12 @@ def run_table(args):
     atmosphere = table_atmosphere(args)
     settings = table_settings(args, atmosphere)
     try:
-        output = check_suffix(args.output or DEFAULT_TABLE_OUTPUT, ".npz", "--output")
+        output = check_suffix(DEFAULT_TABLE_OUTPUT if args.output is None else args.output, ".npz", "--output")
         raw = [] if args.raw is None else [("--raw", path) for path in binary_and_header(args.raw, "--raw")]
     except ValueError as error:
         raise UsageError(str(error)) from None
-    check_outputs([("--output", output)] + raw, args.force)
+    targets = [("--output", output)] + raw
+    check_outputs(targets, args.force)
     _check_table_memory(args, settings)
     progress, close = progress_bar(args.progress)
     start = time.perf_counter()
@@ -500,7 +517,7 @@ def run_table(args):
                                       fast_math=args.fast_math, progress=progress)
     finally:
         close()
-    with StagedWrites() as staging:                # the table and its raw export land together
+    with written_since_checked(targets), StagedWrites() as staging:    # the table and its raw export land together
         table.save(output, overwrite=args.force, staging=staging)
         if args.raw is not None:
             table.export_raw(args.raw, overwrite=args.force, staging=staging)
@@ -535,9 +552,13 @@ def run_info(args):
     from .info import describe
 
     try:
-        print(describe(args.file))
-    except (FileNotFoundError, IsADirectoryError, ImportError) as error:   # ImportError: PNG/EXR without [anim]
+        text = describe(args.file)
+    except ImportError as error:                  # a PNG or EXR without the [anim] extra
         raise UsageError(str(error)) from None
+    except OSError as error:                      # describe's own, or the system's (a name too long)
+        raise UsageError(str(error) if error.errno is None else
+                         f"{error.filename or args.file}: cannot be read ({error.strerror})") from None
+    print(text)                                   # a reader that leaves: _run's BrokenPipeError
     return 0
 
 

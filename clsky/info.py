@@ -7,7 +7,8 @@
   :mod:`clsky.anim.scene`), read from the chunks before its image data, which is never decompressed.
 - A metrics JSON (``<stem>_metrics.json``): the version, the scene, the frames and the table's units.
 - An EXR frame (``clsky animate --hdr exr``): its size, channels and header (units, orientation of an
-  environment map, the scene and clsky's version), read with the OpenEXR bindings.
+  environment map, the scene and clsky's version), the header alone read with the OpenEXR bindings (the
+  pixels are not decoded, so damaged pixels go unnoticed here).
 - A Radiance HDR frame (``--hdr hdr``): its size and header lines (the EXR header's attributes but the
   scene), read from its first 64 KiB (:func:`clsky.anim.rgbe.read_rgbe_header`).
 
@@ -182,12 +183,16 @@ def _exr(path):
         import OpenEXR
     except ImportError as error:
         raise ImportError("describing an EXR file needs the OpenEXR bindings: pip install 'clsky[anim]'") from error
-    try:
-        with OpenEXR.File(str(path)) as exr:
-            header, channels = dict(exr.header()), sorted(exr.channels())
+    try:                            # the header alone: damaged pixels are not info's to decode
+        with OpenEXR.File(str(path), header_only=True) as exr:
+            header = dict(exr.header())
+        channels = [channel.name for channel in header.get("channels", [])]
     except Exception as error:  # noqa: BLE001  (the bindings raise RuntimeError and others for a bad file)
         raise TableFormatError(f"{path}: not a readable EXR file ({str(error).splitlines()[0] if str(error) else error})") \
             from None
+    for name in ("clskyVersion", "scene"):          # clsky writes both as strings
+        if name in header and not isinstance(header[name], str):
+            raise TableFormatError(f"{path}: not a readable EXR file (its {name} attribute is no string: damaged)")
     window = header.get("dataWindow")
     items = [("kind", "OpenEXR image"),
              ("size", "-" if window is None else f"{window[1][0] - window[0][0] + 1} x {window[1][1] - window[0][1] + 1}"
@@ -196,13 +201,24 @@ def _exr(path):
     for name in sorted(header):
         if name in ("clskyVersion", "scene", "dataWindow", "displayWindow", "channels"):
             continue
-        value = header[name]
-        if not isinstance(value, str) and np.ndim(value) == 1 and np.issubdtype(np.asarray(value).dtype, np.number):
-            value = " ".join(f"{v:g}" for v in np.asarray(value).tolist())
-        items.append((name, value))
+        items.append((name, _exr_value(header[name])))
     if "scene" in header:
         items += _scene_lines(header["scene"])
     return _block(f"{path}:", items)
+
+
+def _exr_value(value):
+    """A header attribute's value as text: numbers and vectors as numbers, the bindings' enums by name, and
+    an attribute of a type the bindings do not read (another tool's, or a damaged type name) by that alone:
+    its raw bytes are no text."""
+    if isinstance(value, (str, int, float)):
+        return value
+    if isinstance(value, (tuple, list, np.ndarray)) and np.ndim(value) == 1 \
+            and np.issubdtype(np.asarray(value).dtype, np.number):
+        return " ".join(f"{v:g}" for v in np.asarray(value).tolist())
+    if type(value).__name__ == "OpaqueAttribute":
+        return "- (an attribute of a type the OpenEXR bindings do not read)"
+    return str(value)
 
 
 def _hdr(path):

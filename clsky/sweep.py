@@ -27,7 +27,7 @@ import time
 
 from ._files import binary_and_header, check_suffix, read_user_text
 from .cli import (DEFAULT_TABLE_OUTPUT, UsageError, check_outputs, farm_of, progress_bar, report_table,
-                  running_farm, table_atmosphere, table_settings, _check_table_memory)
+                  running_farm, table_atmosphere, table_settings, written_since_checked, _check_table_memory)
 
 __all__ = ["SweepJob", "read_sweep", "sweep_jobs", "run_sweep"]
 
@@ -87,7 +87,7 @@ def sweep_jobs(args) -> list[SweepJob]:
         try:
             atmosphere = table_atmosphere(line)
             settings = table_settings(line, atmosphere)
-            output = check_suffix(line.output or DEFAULT_TABLE_OUTPUT, ".npz", "--output")
+            output = check_suffix(DEFAULT_TABLE_OUTPUT if line.output is None else line.output, ".npz", "--output")
             if line.raw is not None:
                 binary_and_header(line.raw, "--raw")
         except (UsageError, ValueError) as error:
@@ -120,11 +120,7 @@ def _check_jobs(args, jobs):
     """Outputs (distinct, writable) and memory of every job, before any work."""
     seen = {}
     for job in jobs:
-        targets = [("--output", job.output)]
-        if job.raw is not None:
-            targets += [("--raw", path) for path in binary_and_header(job.raw)]
-        for option, path in targets:
-            where = option if args.sweep is None else f"{job.source}: {option}"
+        for where, path in _job_targets(args, job):
             if args.sweep is not None and path.resolve() == pathlib.Path(args.sweep).resolve():
                 raise UsageError(f"{where} {path} is the sweep file itself")
             other = seen.setdefault(path.resolve(), job.source)
@@ -137,6 +133,14 @@ def _check_jobs(args, jobs):
             raise UsageError(error if args.sweep is None else f"{job.source}: {error}") from None
 
 
+def _job_targets(args, job):
+    """(the option as messages name it, path) of each output of ``job``; with --sweep, after its line."""
+    targets = [("--output", job.output)]
+    if job.raw is not None:
+        targets += [("--raw", path) for path in binary_and_header(job.raw)]
+    return [(option if args.sweep is None else f"{job.source}: {option}", path) for option, path in targets]
+
+
 def run_sweep(args):
     """``clsky table --sweep`` (or ``--workers`` / ``--scheduler``): module docstring."""
     from ._files import StagedWrites
@@ -147,7 +151,7 @@ def run_sweep(args):
     start = time.perf_counter()
     progress, close = progress_bar(args.progress)
     try:
-        with running_farm(farm), StagedWrites() as staging:
+        with running_farm(farm), written_since_checked([target for job in jobs for target in _job_targets(args, job)]), StagedWrites() as staging:
             tasks = [(job.atmosphere, job.settings, job.args.backend, job.args.fast_math) for job in jobs]
             tables = farm.map_ordered(build_table_task, tasks, label="clsky-table") if farm is not None \
                 else (build_table_task(*task) for task in tasks)

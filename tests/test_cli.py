@@ -127,6 +127,34 @@ def test_table_refuses_to_overwrite_without_force(tmp_path):
     assert result.returncode == 0, result.stderr
 
 
+@pytest.mark.parametrize("sweep", [False, True], ids=["single", "sweep"])
+def test_an_output_another_run_wrote_meanwhile_is_refused_by_option(tmp_path, monkeypatch, capsys, sweep):
+    """Two runs on one output without --force both pass the check before the work; the one that writes
+    second is refused in one line naming the option (it gave the library's "pass force=True" hint), and
+    the other run's file is kept."""
+    from clsky import cli
+
+    build = ScatteringTable.build
+
+    def build_while_another_run_writes(*args, **kwargs):
+        table = build(*args, **kwargs)
+        (tmp_path / "sky.bin").write_bytes(b"the other run's")
+        return table
+
+    monkeypatch.setattr(ScatteringTable, "build", build_while_another_run_writes)
+    monkeypatch.chdir(tmp_path)
+    words = ["--size", "8", "8", "4", "--orders", "1", "-o", "sky.npz", "--raw", "sky"]
+    if sweep:
+        (tmp_path / "lines.txt").write_text(" ".join(words) + "\n")
+        words = ["--sweep", "lines.txt"]
+    assert cli.main(["table", "--progress", "none", *words]) == 2
+    where = "lines.txt line 1: " if sweep else ""
+    assert capsys.readouterr().err == (f"clsky: error: {where}--raw sky.bin exists: another process wrote it during "
+                                       f"this run; use --force to overwrite it\n")
+    assert sorted(path.name for path in tmp_path.iterdir()) == sorted(["sky.bin"] + (["lines.txt"] if sweep else []))
+    assert (tmp_path / "sky.bin").read_bytes() == b"the other run's"
+
+
 @pytest.mark.parametrize("args,named", [
     (["--size", "1", "16", "6"], "--size W"),
     (["--size", "8", "16"], "--size"),
@@ -134,6 +162,7 @@ def test_table_refuses_to_overwrite_without_force(tmp_path):
     (["--preset", "venus"], "--preset"),
     (["--dtype", "float16"], "--dtype"),
     (["-o", "sky.txt"], "--output"),
+    (["-o", ""], "--output must be a file path, got an empty one"),      # it wrote table.npz
     (["-o", "missing/sky.npz"], "directory"),
     (["--transmittance-size", "1", "8"], "--transmittance-size TW"),
     (["--quality", "best"], "--quality"),

@@ -239,6 +239,7 @@ def test_a_sweep_on_an_existing_cluster_writes_the_tables_of_single_builds(farm,
     ("--preset physical --workers 2 -o a.npz", "weather.txt line 3: --workers belongs to the command line"),
     ("--preset physical -o 'a.npz", "weather.txt line 3: No closing quotation"),
     ("--preset physical --ground-albedo 0.3", "weather.txt line 3: -o FILE is missing"),
+    ("--preset physical -o ''", "weather.txt line 3: --output must be a file path, got an empty one"),   # table.npz
     ("--preset physical -o a.npz --raw .bin", "weather.txt line 3: --raw must be a file name (NAME gives NAME.bin "
                                               "and NAME.json), got '.bin'"),
     ("--preset physical -o a.npz --raw clear.json", "weather.txt line 3: --raw clear.bin is written by weather.txt line 2 too"),

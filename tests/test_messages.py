@@ -8,6 +8,7 @@ import sys
 import numpy as np
 import pytest
 
+from clsky.anim.animate import AnimationConfig
 from clsky.atmosphere import AtmosphereParameters
 from clsky.errors import ParameterError, check_integer, check_real, short
 from clsky.settings import TableSettings
@@ -96,9 +97,11 @@ def test_numbers_in_messages_are_short(tmp_path, command, args):
     assert len(line) < 200 and "1e+300" in line, line
 
 
-def test_render_sun_azimuth_names_the_option(tmp_path):
-    line = one_line_error(clsky("render", "--sun-azimuth", "nan", cwd=tmp_path))
-    assert "--sun-azimuth must be" in line, line
+@pytest.mark.parametrize("value, shown", [("nan", "nan"), ("1e308", "1e+308"), ("-361", "-361")])
+def test_render_sun_azimuth_names_the_option_and_its_range(tmp_path, value, shown):
+    """--heading's range, [-360, 720] degrees: 1e308 rendered, though its radians kept no precision."""
+    line = one_line_error(clsky("render", "--sun-azimuth", value, cwd=tmp_path))
+    assert line == f"clsky: error: --sun-azimuth must be in [-360, 720] degrees, got {shown}", line
 
 
 def test_short_numbers():
@@ -130,6 +133,8 @@ def test_numbers_too_large_for_a_float_are_refused_by_name():
         AtmosphereParameters.from_refractive_index(10**400)
     with pytest.raises(ValueError, match=r"refractive_index must be a real number in \[1, 10\], got 1e\+200"):
         AtmosphereParameters.from_refractive_index(1e200)
+    with pytest.raises(ValueError, match=r"location must be None or \(latitude in \[-90, 90\].*got \(1e\+400, 0\)"):
+        AnimationConfig(location=(10**400, 0))
 
 
 def test_an_integer_parameter_given_a_float_says_so():

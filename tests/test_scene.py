@@ -162,6 +162,15 @@ def test_the_command_line_wins_and_says_so(tmp_path, capsys, monkeypatch):
     ("animate", "[display]\ndither = 1\n", "s.toml: display.dither must be true or false, got 1"),
     ("animate", '[output]\noutput = "sky.avi"\n', "s.toml: output.output must be a path ending in .mp4"),
     ("animate", "[camera\n", "--scene s.toml: not a valid TOML file"),
+    # TOML integers have any size: one beyond float's range, for a number, was an OverflowError traceback
+    ("render", f"[display]\nexposure = {'9' * 400}\n",
+     "s.toml: display.exposure must be a number (of at most about 1.8e308 in size), got 1e+400"),
+    ("animate", f"[sun]\nstart_hour = -{'9' * 400}\n",
+     "s.toml: sun.start_hour must be a number (of at most about 1.8e308 in size), got -1e+400"),
+    ("animate", f"[sun]\nlocation = [{'9' * 400}, 0]\n",
+     "s.toml: sun.location must be a list of 2 numbers (of at most about 1.8e308 in size), got [1e+400, 0]"),
+    ("animate", f"[camera]\nsize = {'9' * 400}\n", "s.toml: camera.size must be an integer in [16, 8192], got 1e+400"),
+    ("animate", f"[display]\nexposure = {'9' * 5000}\n", "--scene s.toml: not a valid TOML file: Exceeds the limit"),
     ("render", "[sun]\nsun_elevation_deg = 100.0\n", "s.toml: sun.sun_elevation_deg must be in [-90, 90] degrees, got 100"),
     ("render", "[sun]\nframes = 3\n", "s.toml: unknown key sun.frames (a key of clsky animate only)"),
     ("render", '[output]\noutput = "sky.jpg"\n', "s.toml: output.output must end in .png"),
@@ -183,6 +192,8 @@ def test_a_missing_scene_is_one_line(tmp_path, capsys, monkeypatch):
     assert list(tmp_path.iterdir()) == []
     status, _, err = run(capsys, "animate", "--scene", tmp_path)
     assert f"--scene: cannot read {tmp_path}: Is a directory" in one_line_error(status, err)
+    status, _, err = run(capsys, "animate", "--scene", "")        # pathlib's '.': "cannot read ."
+    assert one_line_error(status, err) == "clsky: error: --scene must be a file path, got an empty one"
     (tmp_path / "binary.toml").write_bytes(b"\xff\xfe[camera]")
     status, _, err = run(capsys, "render", "--scene", "binary.toml")
     assert "--scene binary.toml: not a TOML file (not UTF-8 text)" in one_line_error(status, err)
@@ -302,7 +313,7 @@ def test_exr_frames_carry_the_scene_and_info_reads_them(tmp_path, capsys, monkey
     exr = tmp_path / "sky_frames" / "frame_00001.exr"
     status, out, _ = run(capsys, "info", exr)
     assert status == 0, out
-    assert "OpenEXR image" in out and "16 x 16 pixels, channels RGB" in out
+    assert "OpenEXR image" in out and "16 x 16 pixels, channels B, G, R" in out
     assert re.search(rf"\n  clsky version +{re.escape(clsky.__version__)}\n", out), out
     assert "size = 16" in out and 'hdr = "exr"' in out and "radianceUnits" in out
     with Image.open(tmp_path / "sky_frames" / "frame_00001.png") as image:
@@ -310,6 +321,41 @@ def test_exr_frames_carry_the_scene_and_info_reads_them(tmp_path, capsys, monkey
     broken = tmp_path / "broken.exr"
     broken.write_bytes(exr.read_bytes()[:100])
     assert f"clsky: error: {broken}: not a readable EXR file" in one_line_error(*run(capsys, "info", broken)[::2])
+
+
+def test_info_reads_an_exr_header_alone_and_refuses_damaged_attribute_types(tmp_path, capfd):
+    """clsky info reads an EXR's header only: damaged pixels print nothing of the OpenEXR library's (it
+    decoded every pixel, and printed three lines to stderr and a warning to stdout); a scene or
+    clskyVersion attribute whose type name is damaged (the bindings return an opaque attribute) is a
+    damaged file, one TableFormatError naming it (a traceback, or a message without the file, before);
+    another tool's attribute of a type the bindings do not read is shown as such."""
+    pytest.importorskip("OpenEXR")
+    from clsky.anim.exr import write_exr
+    from clsky.info import describe
+    from clsky.table import TableFormatError
+
+    good = write_exr(tmp_path / "good.exr", np.ones((4, 6, 3)),
+                     attributes={"clskyVersion": clsky.__version__, "scene": "[camera]\nsize = 4\n", "note": "x"})
+    data = good.read_bytes()
+
+    def damaged(name, position, value):
+        copy = bytearray(data)
+        copy[position] = value
+        (tmp_path / name).write_bytes(bytes(copy))
+        return tmp_path / name
+
+    pixels = damaged("pixels.exr", len(data) - 20, data[-20] ^ 0xFF)
+    text = describe(pixels)
+    assert "6 x 4 pixels, channels B, G, R" in text and "size = 4" in text
+    assert capfd.readouterr() == ("", "")
+    for attribute in ("scene", "clskyVersion"):
+        at = data.find(attribute.encode() + b"\0string\0") + len(attribute) + 1
+        with pytest.raises(TableFormatError, match=rf"^{re.escape(str(tmp_path))}/{attribute}.exr: not a readable "
+                                                   rf"EXR file \(its {attribute} attribute is no string: damaged\)$"):
+            describe(damaged(f"{attribute}.exr", at, 0x97))
+    other = data.find(b"note\0string\0") + len("note") + 1             # "xtring": a type the bindings lack
+    assert "\n  note                - (an attribute of a type the OpenEXR bindings do not read)\n" in \
+        describe(damaged("other.exr", other, ord("x")))
 
 
 def test_info_reads_a_radiance_hdr_frames_header(tmp_path, capsys):
@@ -341,6 +387,8 @@ def test_info_refuses_other_files(tmp_path, capsys):
         assert one_line_error(*run(capsys, "info", tmp_path / name)[::2]) == (
             f"clsky: error: {tmp_path / name}: a directory, not a file: clsky info reads .npz, .png, .json, .exr, "
             ".hdr files")
+    long = tmp_path / ("e" * 300 + ".npz")               # an OSError of the system's: [Errno 36], exit 1
+    assert one_line_error(*run(capsys, "info", long)[::2]) == f"clsky: error: {long}: cannot be read (File name too long)"
     os.mkfifo(tmp_path / "pipe.npz")                    # read, it would wait for a writer for ever
     assert one_line_error(*run(capsys, "info", tmp_path / "pipe.npz")[::2]).endswith("pipe.npz: not a regular file")
     (tmp_path / "x.png").write_bytes(b"not a png")
