@@ -199,7 +199,7 @@ def _config(args):
 SWEEP_OPTIONS = ("frames", "start_elevation", "max_elevation")
 REAL_POSITION_OPTIONS = ("date", "hours", "step_minutes")
 #: The methods whose frames have no ray march (--samples unused) and those without the sky-view map
-#: (--skyview-size unused; 'compare' reads it where the scene plan picks it).
+#: (--skyview-size unused; 'compare' reads it where the scene plan picks it, never with --table-size).
 METHODS_WITHOUT_RAY_MARCH = ("lut", "lut4d")
 METHODS_WITHOUT_SKYVIEW = ("lut", "raymarch", "lut4d", "compare4d")
 
@@ -226,6 +226,10 @@ def _unused_options(args):
         unused.append(("samples", f"sets the ray march, which method '{method}' does not render"))
     if method in METHODS_WITHOUT_SKYVIEW:
         unused.append(("skyview_size", f"sets the sky-view map, which method '{method}' does not read"))
+    elif method == "compare" and args.table_size is not None:
+        unused.append(("skyview_size", f"sets the sky-view map, which method 'compare' does not read with "
+                                       f"{where('table_size', '--table-size')}: without a scene plan it compares "
+                                       f"the ray march with the 3D table lookup"))
     if args.quality is not None:
         unused.append(("error_budget", f"picks a quality level, and {where('quality', '--quality')} names one "
                                        f"({args.quality}): give one of them"))

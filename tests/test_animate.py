@@ -287,6 +287,9 @@ def test_cli_refuses_options_of_the_sun_path_not_taken(tmp_path, args, expected)
     (["render", "--method", "lut4d", "--samples", "64"], "--samples sets the ray march, which method 'lut4d'"),
     (["animate", "--method", "raymarch", "--skyview-size", "32", "64"],
      "--skyview-size sets the sky-view map, which method 'raymarch' does not read"),
+    (["render", "--table-size", "8", "16", "8", "--skyview-size", "32", "64"],
+     "--skyview-size sets the sky-view map, which method 'compare' does not read with --table-size: without a "
+     "scene plan it compares the ray march with the 3D table lookup"),
     (["render", "--quality", "draft", "--error-budget", "0.5"],
      "--error-budget picks a quality level, and --quality names one (draft): give one of them"),
 ], ids=lambda value: " ".join(value) if isinstance(value, list) else None)
