@@ -103,28 +103,32 @@ class AnimationConfig:
     Parameters
     ----------
     frames : int
-        Number of frames, in [2, 100000] (sweep) (ignored with ``location``: the time range decides).
+        Number of frames, in [2, 100000] (sweep; default 120) (ignored with ``location``: the time range
+        decides).
     size : int
-        Image height [pixels] in [16, 8192]; the width follows from the camera (square fisheye,
-        2:1 panorama, 16:9 perspective).
+        Image height [pixels] in [16, 8192] (default 512); the width follows from the camera (square
+        fisheye, 2:1 panorama, 16:9 perspective).
     camera : {'fisheye', 'perspective', 'equirectangular'}
+        Default 'fisheye'.
     fov_deg, heading_deg, pitch_deg : float
-        Perspective camera: horizontal field of view, azimuth of the optical axis (clockwise from
-        north; default 180, south), elevation. Fisheye: heading_deg is the azimuth at the top of the
-        image (default 0, north up, east on the left as in all-sky photographs).
+        Perspective camera: horizontal field of view in :data:`clsky.anim.cameras.FOV_RANGE_DEG`
+        (default 90), azimuth of the optical axis (clockwise from north, in [-360, 720]; default 180,
+        south), elevation in [-90, 90] (default 10). Fisheye: heading_deg is the azimuth at the top of
+        the image (default 0, north up, east on the left as in all-sky photographs).
     altitude : float
-        Observer altitude [m], >= 0 (above 100 km: seen from space).
+        Observer altitude [m], in [0, 1e8] (default 0; above 100 km: seen from space).
     method : {'compare', 'lut', 'raymarch', 'lut4d', 'compare4d', 'skyview'}
         The frames: a lookup against the ray march ('compare': the best lookup for the budget, the
         scene plan's, :func:`lookup_of`; the 3D table lookup without a plan), either alone; the 4D
         methods look up the 4D table (parameterization '4d', clsky/table4d.py: mode 'physical', at least
         :data:`LUT4D_HARMONICS` azimuth harmonics) instead of the 3D one; 'skyview' reads a per-frame
-        sky-view map (:mod:`clsky.skyview`).
+        sky-view map (:mod:`clsky.skyview`). Default 'compare'.
     skyview_size : (W, H) or None
-        Size of the per-frame sky-view map of ``method='skyview'`` (:class:`clsky.skyview.SkyViewSettings`):
+        Size of the per-frame sky-view map of ``method='skyview'``, and of 'compare' where the scene plan
+        picks the map (:class:`clsky.skyview.SkyViewSettings`):
         W azimuth columns in [2, 4096], H rows in [4, 4096]; None (default): :data:`clsky.skyview.DEFAULT_SIZE`.
     preset : str
-        Atmosphere preset (:data:`clsky.PRESETS`).
+        Atmosphere preset (:data:`clsky.PRESETS`; default 'physical').
     ground_albedo : float or None
         Albedo of a Lambertian ground in [0, 1] instead of the preset's (None: the preset's, 0.1 for
         physical, 0 for atmosphere-plus); > 0 needs mode 'physical'.
@@ -132,7 +136,7 @@ class AnimationConfig:
         Ozone column [Dobson units] in [0, 1e5] instead of the preset's (None: the preset's, 300 for
         physical, 0 for atmosphere-plus); 0 removes ozone (``clsky animate --ozone-column 0``).
     mode : {'atmosphere-plus', 'physical'}
-        Scheme of the table's higher orders.
+        Scheme of the table's higher orders (default 'physical', unlike :class:`clsky.TableSettings`).
     error_budget : float
         Relative error allowed in the frames, in (0, 1] (default 0.01): the scene plan
         (:mod:`clsky.planner`) picks the fastest quality level within it.
@@ -149,16 +153,18 @@ class AnimationConfig:
         'ground_end' above the ground, Keller & Bohn's (the quality levels') on it (README, "Views
         from altitude").
     start_elevation_deg, max_elevation_deg : float
-        Sweep: sun elevation before sunrise / after sunset, and at its highest.
+        Sweep: sun elevation [deg] before sunrise / after sunset (default -6), and at its highest (default
+        60), each in [-90, 90], the highest at least the start.
     location : (latitude_deg, longitude_deg) or None
         Real sun positions (pvlib NREL SPA) instead of the sweep.
     date : datetime.date, str or None
         Day of the real positions (default today), from ``start_hour`` to ``end_hour`` UTC; an ISO
         string 'YYYY-MM-DD' is converted on creation (a datetime gives its date).
     start_hour, end_hour, step_minutes : float
-        Time range [h, UTC] and step of the real positions.
+        Time range [h, UTC] of the real positions, each in [0, 48], the end after the start (default 0 to
+        24), and their step [minutes] in (0, 1440] (default 10), at most the range.
     fps : float
-        Frames per second of the MP4, in :data:`FPS_RANGE`.
+        Frames per second of the MP4, in :data:`FPS_RANGE` (default 30).
     exposure : float
         Exposure [EV] in [-40, 40] (default 0): frames are scaled by 2^exposure before the tone curve
         (EV 0 is the old multiplier 1; the old ``exposure=x`` is ``log2(x)``). With ``auto_exposure``,
@@ -189,10 +195,10 @@ class AnimationConfig:
         absolute units (:mod:`clsky.spectrum`: batches of three, lit by the solar spectrum), each
         frame converted spectral -> CIE XYZ -> linear sRGB [cd/m^2] (:func:`spectral_frame_to_linear_srgb`).
         Absolute frames are thousands of times brighter than the notes' relative ones by day: hence
-        auto-exposure by default (or an EV near -12 by day).
+        auto-exposure by default (or an EV near -13 by day).
     hdr : {None, 'exr', 'hdr', 'npy'} or bool
         Also write each frame's HDR values beside the PNGs: the ray march's frame (with
-        ``method='compare'``, the reference the lookup is compared with) or the lookup's. 'exr': an
+        ``method='compare'`` or 'compare4d', the reference the lookup is compared with) or the lookup's. 'exr': an
         OpenEXR image per frame with its units, the clsky version and the sun in the header (an
         equirectangular panorama is tagged as a latitude-longitude environment map:
         :mod:`clsky.anim.exr`); 'hdr': a Radiance RGBE image with the same header lines (:mod:`clsky.anim.rgbe`,
@@ -283,7 +289,7 @@ class AnimationConfig:
                                      self.step_minutes)
         object.__setattr__(self, "table_size", _check_table_size(self.table_size))
         if self.lookup4d and (self.mode != "physical" or self.wavelengths is not None):
-            raise ParameterError("method", "'compare', 'lut' or 'raymarch' with mode 'atmosphere-plus' or "
+            raise ParameterError("method", "'compare', 'lut', 'raymarch' or 'skyview' with mode 'atmosphere-plus' or "
                                  "wavelengths (the 4D table needs mode 'physical' and three wavelengths)", self.method)
         if self.tone_map is None:
             object.__setattr__(self, "tone_map", "atmosphere-plus" if self.preset == "atmosphere-plus"

@@ -30,13 +30,15 @@ def _add_scene_arguments(parser, frames=True):
 
     scene = parser.add_argument_group("scene")
     scene.add_argument("--camera", default="fisheye", choices=["fisheye", "perspective", "equirectangular"])
-    scene.add_argument("--size", type=int, default=512, help="image height in pixels (default: 512)")
-    scene.add_argument("--fov", type=float, default=90.0, help="perspective: horizontal field of view [deg]")
+    scene.add_argument("--size", type=int, default=512, help="image height in pixels, in [16, 8192] (default: 512)")
+    scene.add_argument("--fov", type=float, default=90.0,
+                       help="perspective: horizontal field of view [deg], in [0.001, 179] (default: 90)")
     scene.add_argument("--heading", type=float, default=None,
                        help="perspective: azimuth of the view [deg from north] (default: 180, south); "
                             "fisheye: azimuth at the top (default: 0, north)")
-    scene.add_argument("--pitch", type=float, default=10.0, help="perspective: elevation of the view [deg]")
-    scene.add_argument("--altitude", type=float, default=0.0, help="observer altitude [m] (default: 0)")
+    scene.add_argument("--pitch", type=float, default=10.0,
+                       help="perspective: elevation of the view [deg], in [-90, 90] (default: 10)")
+    scene.add_argument("--altitude", type=float, default=0.0, help="observer altitude [m], in [0, 1e8] (default: 0)")
     scene.add_argument("--method", default="compare", choices=list(METHODS),
                        help="table lookup, ray march, or a lookup and the ray march compared (default: "
                             "the plan's lookup for the budget, the sky-view map or the table; with "
@@ -44,7 +46,8 @@ def _add_scene_arguments(parser, frames=True):
                             "up the 4D table (altitude, view, sun, azimuth) instead of the 3D one; skyview reads "
                             "a small map ray-marched per frame")
     scene.add_argument("--skyview-size", nargs=2, type=int, metavar=("W", "H"),
-                       help="--method skyview: the map's azimuth columns and rows (default: 64 128)")
+                       help="--method skyview, and compare where the plan reads the map: the map's azimuth columns in "
+                            "[2, 4096] and rows in [4, 4096] (default: 64 128)")
     sky = parser.add_argument_group("sky")
     sky.add_argument("--preset", help="atmosphere preset (default: physical)")
     sky.add_argument("--mode", choices=["atmosphere-plus", "physical"],
@@ -67,16 +70,18 @@ def _add_scene_arguments(parser, frames=True):
                           "shown as r, g, b in the notes' units for --preset atmosphere-plus)")
     if frames:
         sun = parser.add_argument_group("sun path")
-        sun.add_argument("--frames", type=int, default=120, help="frames of the sweep (default: 120)")
+        sun.add_argument("--frames", type=int, default=120, help="frames of the sweep, in [2, 100000] (default: 120)")
         sun.add_argument("--start-elevation", type=float, default=-6.0,
-                         help="sun elevation before sunrise and after sunset [deg] (default: -6)")
-        sun.add_argument("--max-elevation", type=float, default=60.0, help="highest sun elevation [deg]")
+                         help="sun elevation before sunrise and after sunset [deg], in [-90, 90] (default: -6)")
+        sun.add_argument("--max-elevation", type=float, default=60.0,
+                         help="highest sun elevation [deg], in [--start-elevation, 90] (default: 60)")
         sun.add_argument("--location", nargs=2, type=float, metavar=("LAT", "LON"),
                          help="real sun positions (NREL SPA) at this latitude and longitude [deg]")
         sun.add_argument("--date", type=_date, help="day of the real positions, YYYY-MM-DD (default: today)")
         sun.add_argument("--hours", nargs=2, type=float, metavar=("START", "END"), default=[0.0, 24.0],
-                         help="time range of the real positions [h, UTC]")
-        sun.add_argument("--step-minutes", type=float, default=10.0)
+                         help="time range of the real positions [h, UTC], each in [0, 48] (default: 0 24)")
+        sun.add_argument("--step-minutes", type=float, default=10.0,
+                         help="time between the real positions' frames [min], in (0, 1440] (default: 10)")
 
 
 def _add_display_arguments(parser):
@@ -87,9 +92,9 @@ def _add_display_arguments(parser):
                          help=f"tone curve (default: atmosphere-plus, the notes' curve, for --preset atmosphere-plus; "
                               f"{DEFAULT_TONE_MAP} otherwise)")
     display.add_argument("--exposure", type=float, default=0.0, metavar="EV",
-                         help="exposure in EV: frames are scaled by 2^EV (default: 0, the frames' own values; the old "
-                              "multiplier x is log2(x); about -12 shows a day sky in cd/m^2); with auto-exposure, "
-                              "a compensation")
+                         help="exposure in EV, in [-40, 40]: frames are scaled by 2^EV (default: 0, the frames' "
+                              "own values; the old multiplier x is log2(x); about -13 shows a day sky in cd/m^2); "
+                              "with auto-exposure, a compensation")
     display.add_argument("--auto-exposure", action=argparse.BooleanOptionalAction,
                          help="meter each frame's log-average luminance to a key of 0.36 (a stop above mid-grey), "
                               "smoothed over the frames (default: on for frames in cd/m^2, every preset but "
@@ -122,14 +127,15 @@ def register(commands):
     output = animate.add_argument_group("output")
     output.add_argument("-o", "--output", default="sky.mp4",
                         help="MP4 file; frames go to <stem>_frames/, metrics to <stem>_metrics.csv/.json")
-    output.add_argument("--fps", type=float, default=30.0)
+    output.add_argument("--fps", type=float, default=30.0,
+                        help="frames per second of the MP4, in [0.01, 240] (default: 30)")
     output.add_argument("--no-dither", action="store_true", help="do not dither the 8-bit frames")
     formats = [name for name in HDR_FORMATS if name is not None]
     output.add_argument("--hdr", nargs="?", const="npy", choices=formats, metavar="{" + ",".join(formats) + "}",
-                        help="also write HDR frames: the ray march's (with --method compare) or the lookup's; exr: "
-                             "OpenEXR with units, version and sun in the header, a latitude-longitude environment "
-                             "map for --camera equirectangular (docs/exr.md); hdr: Radiance RGBE, the same header "
-                             "(8-bit mantissas); npy (the default of a bare --hdr): float32 NumPy arrays")
+                        help="also write HDR frames: the ray march's (with --method compare or compare4d) or the "
+                             "lookup's; exr: OpenEXR with units, version and sun in the header, a latitude-longitude "
+                             "environment map for --camera equirectangular (docs/exr.md); hdr: Radiance RGBE, the "
+                             "same header (8-bit mantissas); npy (the default of a bare --hdr): float32 NumPy arrays")
     output.add_argument("--hdr-precision", choices=list(PRECISIONS), default="float",
                         help="pixel type of the EXR frames: float (32-bit, default) or half (16-bit; values above "
                              "65504, the sun's disc, are clipped to it and counted in the header)")
@@ -153,7 +159,8 @@ def register(commands):
     kinds = bench.add_subparsers(dest="bench", required=True, parser_class=clsky_cli._Parser)
     accuracy = kinds.add_parser("accuracy", help="what each numerical knob costs and buys (CSV, Pareto plot, "
                                                  "error per sun elevation)")
-    accuracy.add_argument("--size", type=int, default=128, help="fisheye frames of SIZE x SIZE (default: 128)")
+    accuracy.add_argument("--size", type=int, default=128,
+                          help="fisheye frames of SIZE x SIZE, in [16, 2048] (default: 128)")
     accuracy.add_argument("-o", "--output", default="accuracy.csv", help="CSV of the candidates (default: %(default)s)")
     accuracy.add_argument("--plot", default="accuracy.png", help="Pareto plot, PNG (default: %(default)s)")
     accuracy.add_argument("--elevation-plot", metavar="PNG",

@@ -333,9 +333,10 @@ class AutoExposure:
         Fraction of the difference between the metered and the current EV corrected per frame, in
         (0, 1] (1: no smoothing).
     max_step_ev : float
-        Most the EV changes from one frame to the next [EV], > 0.
+        Most the EV changes from one frame to the next [EV], in (0, 40] (default 2).
     min_ev, max_ev : float
-        Range of the metered EV [EV] (a black frame meters at ``max_ev``).
+        Range of the metered EV [EV], each in [-60, 60], ``max_ev`` at least ``min_ev`` (default -20 and
+        20; a black frame meters at ``max_ev``).
     """
 
     key: float = 0.36

@@ -1,6 +1,6 @@
 """Tone mapping: HDR radiance to display values and 8-bit pixels.
 
-The tone map is the one of ``shared/physics.md`` (Atmosphere Plus): an exponential exposure curve
+The tone map is the one of ``docs/physics.md`` (Atmosphere Plus): an exponential exposure curve
 followed by a pure power-law gamma of 2.2,
 
     display = (1 - exp(-exposure * hdr)) ** (1 / 2.2),
@@ -67,7 +67,7 @@ def tone_map(hdr, exposure=1.0):
 
     Notes
     -----
-    display = (1 - exp(-exposure hdr))^(1/2.2) (shared/physics.md), computed as
+    display = (1 - exp(-exposure hdr))^(1/2.2) (docs/physics.md), computed as
     ``(-expm1(-exposure hdr)) ** (1/2.2)`` so that faint twilight values keep full relative
     precision. The curve is monotonic; display = 0 only for hdr = 0.
 

@@ -37,30 +37,36 @@ _WRAPPER = ("import resource, subprocess, sys; code = subprocess.run(sys.argv[1:
             "stderr=subprocess.DEVNULL).returncode; "
             "print(code, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)")
 
-TABLE_ARGS = ["table", "--preset", "physical", "--mode", "physical", "--sun-elevations", "-6", "60",
-              "--progress", "none", "--force"]
+#: The tables' command line: the default animation's sun path on the physical preset.
+TABLE_ARGS = ["table", "--preset", "physical", "--mode", "physical", "--sun-elevations", "-6", "60"]
+#: What every measured command line gets beyond the row's (which a reader types without them).
+QUIET = ["--progress", "none", "--force"]
+
+
+def typed(arguments, words=""):
+    """A row's description: its command line as a reader types it, then ``words``."""
+    return f"`clsky {' '.join(arguments)}`" + (f" ({words})" if words else "")
 
 
 def smoke_cases():
     """The cases of a ``--smoke`` run: one small table, one small animation (bench/_report.py)."""
     size = [str(n) for n in SMOKE.table]
-    return [("table smoke", f"`clsky table --quality draft --size {' '.join(size)}`",
-             TABLE_ARGS + ["--quality", "draft", "--size", *size]),
-            ("frames smoke", f"`clsky animate --frames 2 --size {SMOKE.frame}`",
-             ["animate", "--frames", "2", "--size", str(SMOKE.frame), "--quality", "draft", "--table-size", *size,
-              "--progress", "none", "--force"])]
+    table = TABLE_ARGS + ["--quality", "draft", "--size", *size]
+    frames = ["animate", "--frames", "2", "--size", str(SMOKE.frame), "--quality", "draft", "--table-size", *size]
+    return [("table smoke", typed(table), table), ("frames smoke", typed(frames), frames)]
 
 
 def cases(reference=False):
-    """(name, description, clsky arguments without the output) of each measurement."""
+    """(name, description, clsky arguments without the output and :data:`QUIET`) of each measurement."""
     levels = ["draft", "default", "high"] + (["reference"] if reference else [])
-    rows = [("animation", "`clsky animate` (defaults: 120 frames 512 x 512, compare, default quality)",
-             ["animate", "--progress", "none", "--force"])]
-    rows += [(f"table {level}", f"`clsky table --quality {level}` (physical, sun -6 to 60 deg)",
-              TABLE_ARGS + ["--quality", level]) for level in levels]
-    rows += [(f"frames {size}", f"`clsky animate --frames 2 --size {size}` (draft, table 16 x 64 x 16)",
-              ["animate", "--frames", "2", "--size", str(size), "--quality", "draft", "--table-size", "16", "64",
-               "16", "--progress", "none", "--force"]) for size in (256, 1024)]
+    rows = [("animation", typed(["animate"], "defaults: 120 frames 512 x 512, compare, default quality"),
+             ["animate"])]
+    rows += [(f"table {level}", typed(TABLE_ARGS + ["--quality", level]), TABLE_ARGS + ["--quality", level])
+             for level in levels]
+    for size in (256, 1024):
+        frames = ["animate", "--frames", "2", "--size", str(size), "--quality", "draft", "--table-size", "16", "64",
+                  "16"]
+        rows.append((f"frames {size}", typed(frames), frames))
     return rows
 
 
@@ -122,11 +128,11 @@ def main():
 
 def measure(args, directory):
     """Run the selected cases with their outputs in ``directory``; print (and write) the table."""
-    selected = [(name, description, with_overrides(arguments, args))
+    selected = [(name, description, with_overrides(arguments, args) + QUIET)
                 for name, description, arguments in (smoke_cases() if args.smoke else cases(args.reference))
                 if not args.only or name in args.only]
     overridden = with_overrides([], args)
-    peak_rss(with_overrides(["table", "--size", "8", "16", "8", "--progress", "none", "--force"], args),
+    peak_rss(with_overrides(["table", "--size", "8", "16", "8"], args) + QUIET,
              os.path.join(directory, "warm.npz"))
     lines = [f"Peak resident memory (`ru_maxrss` of the whole process) measured {datetime.date.today()} on "
              f"{machine()}, load average {os.getloadavg()[0]:.1f} at the start (a machine shared with other "

@@ -31,6 +31,8 @@ CASES = [(0.0, 1.0, 30.0), (0.0, 0.5, 60.0), (0.0, 0.1, 80.0), (0.0, 0.7, 0.0), 
 CONVERGED = dict(view_steps=200, multiple_view_steps=None, sun_steps=600, sun_transmittance="table",
                  transmittance_size=(128, 512),
                  sampling="keller_bohn")
+#: The "default" rows' quadrature: TableSettings' own.
+DEFAULT = clsky.TableSettings()
 
 
 def compare(table, atmosphere, photons):
@@ -55,8 +57,9 @@ def main():
 
     lines = [f"Monte Carlo: {args.photons} paths per channel and case; measured {datetime.date.today()} on "
              f"{machine()}. Deviation = table / MC - 1 per channel (r, g, b) [%], and in units of the MC "
-             f"standard error. Converged quadrature: {CONVERGED}; default: 30 + 30 uniform trapezoid "
-             f"steps. Every table: {' x '.join(map(str, size))}, orders until 1e-4.", "",
+             f"standard error. Converged quadrature: {CONVERGED}; default: TableSettings(), "
+             f"{DEFAULT.view_steps} + {DEFAULT.sun_steps} {DEFAULT.sampling} trapezoid steps. Every table: "
+             f"{' x '.join(map(str, size))}, orders until 1e-4.", "",
              "| mode (preset) | quadrature | altitude [m] | cos view | sun zenith [deg] | deviation [%] | "
              "deviation [SE] |", "|---|---|---:|---:|---:|---|---|"]
     for mode in ("physical", "atmosphere-plus"):

@@ -8,7 +8,7 @@ runtime caches them (PoCL, NVIDIA) or PyOpenCL does (the others).
 Device choice (:func:`default_device`): ``PYOPENCL_CTX`` if set; else a GPU; else Intel's CPU OpenCL
 runtime when it is registered (an opt-in, ``scripts/intel_opencl.sh``: the same frames as PoCL, the ray
 march 1.4-1.5x faster on the development machine, README "Speed"); else the fastest PoCL build (PoCL
-3.1+ vectorises about 4-5x better than the 3.0-rc2 pip build, see ``shared/pocl.md``); else any CPU
+3.1+ vectorises about 4-5x better than the 3.0-rc2 pip build, README on scripts/setup.sh); else any CPU
 device.
 """
 

@@ -21,7 +21,7 @@ References
 ----------
 Elek, O. (2009). Rendering parametrizable planetary atmospheres with multiple scattering in real time.
 Proc. CESCG. Nishita, T. et al. (1993). Display of the earth taking into account atmospheric
-scattering. SIGGRAPH '93, doi:10.1145/166117.166140. ``shared/physics.md`` (constants and the notes'
+scattering. SIGGRAPH '93, doi:10.1145/166117.166140. ``docs/physics.md`` (constants and the notes'
 typos: N_R = 2.545e25 m^-3, not 2.454e25).
 """
 
@@ -186,7 +186,11 @@ class AtmosphereParameters:
     mie_phase : str
         One of :data:`MIE_PHASE_METHODS`.
     wavelengths : tuple of 3 floats
-        The r, g, b wavelengths [nm], > 0 (documentation of beta_R; not used by the kernels).
+        The r, g, b wavelengths [nm], > 0. beta_R is given, not derived from them
+        (:meth:`from_refractive_index` derives it); they set the Mie coefficient per channel when
+        ``mie_angstrom_exponent`` is not 0 (:attr:`mie_scattering_channels`), the solar spectrum's
+        irradiance (:func:`clsky.solar.with_solar_spectrum`), and the conversion of absolute frames to
+        CIE XYZ (:func:`clsky.anim.animate.three_wavelength_frame_to_linear_srgb`).
     solar_irradiance, spectral_to_rgb : tuple of 3 floats
         Factors of the incident light, >= 0.
     exposure : float

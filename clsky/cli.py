@@ -1,4 +1,4 @@
-"""Command line: ``clsky devices`` and ``clsky table``.
+"""Command line: ``clsky devices``, ``clsky info`` and ``clsky table``.
 
 Thin by design: parse, build the configuration objects, call the library, write. Bad arguments give
 one line on stderr and exit status 2; ``--verbose`` shows tracebacks of unexpected errors. Every output
@@ -195,7 +195,7 @@ def _add_table_arguments(parser):
     grid = parser.add_argument_group("table")
     grid.add_argument("--quality", choices=list(QUALITY_LEVELS),
                       help="start from a named quality level's settings (clsky/quality.py); the options "
-                           "below override them")
+                           "below override them (the defaults they state are those without --quality)")
     grid.add_argument("--size", nargs=3, type=int, metavar=("W", "H", "D"),
                       help="nodes along altitude, view zenith, sun zenith (default: 32 256 32)")
     grid.add_argument("--sun-elevations", nargs=2, type=float, metavar=("LOW", "HIGH"),
@@ -325,15 +325,17 @@ TABLE_OPTION_NAMES = {
 def add_atmosphere_overrides(group):
     """--ground-albedo and --ozone-column (the fields of :data:`clsky.atmosphere.OVERRIDE_RANGES`, None
     when not given), for ``clsky table`` and the animation's commands alike."""
-    from .atmosphere import EARTH_GROUND_ALBEDO
+    from .atmosphere import EARTH_GROUND_ALBEDO, OVERRIDE_RANGES
 
+    low, high, _ = OVERRIDE_RANGES["ground_albedo"]
     group.add_argument("--ground-albedo", type=float, metavar="A",
-                       help=f"albedo of a Lambertian ground in [0, 1] (default: the preset's, "
+                       help=f"albedo of a Lambertian ground in [{low:g}, {high:g}] (default: the preset's, "
                             f"{EARTH_GROUND_ALBEDO:g} for physical, the Earth's mean, 0 for atmosphere-plus; "
-                            f"> 0 needs --mode physical)")
+                            f"> 0 is the physical mode's, the default mode then; --mode atmosphere-plus refuses it)")
+    low, high, unit = OVERRIDE_RANGES["ozone_column_du"]
     group.add_argument("--ozone-column", type=float, metavar="DU", dest="ozone_column_du",
-                       help="ozone column in Dobson units, >= 0, in Bruneton 2017's tent (10 to 40 km) "
-                            "(default: the preset's, 300 for physical, 0 for atmosphere-plus)")
+                       help=f"ozone column in Dobson units, in [{low:g}, {high:g}]{unit}, in Bruneton 2017's tent "
+                            f"(10 to 40 km) (default: the preset's, 300 for physical, 0 for atmosphere-plus)")
 
 
 def table_atmosphere(args):

@@ -13,9 +13,9 @@ per unit incident light, comparable with ``table radiance / atmosphere.incident_
 
 This module deliberately shares no code with the table computation (it imports nothing from
 ``clsky``): ray-sphere intersections, phase functions, phase sampling and transmittance are written
-here again, from ``shared/physics.md``, so that it is an independent check of the physics.
+here again, from ``docs/physics.md``, so that it is an independent check of the physics.
 
-Conventions (``shared/physics.md``)
+Conventions (``docs/physics.md``)
 -----------------------------------
 * Observer P0 = (0, 0, Rp + altitude); zenith = +z. V is the view direction (from the observer
   outward); radiance measured along V arrives travelling along -V. Sun points at the sun.

@@ -1,6 +1,6 @@
 """Ozone: an absorbing species with a tent-shaped density profile and tabulated cross-sections.
 
-Ozone absorbs and does not scatter: it adds to the extinction only (``shared/physics.md``),
+Ozone absorbs and does not scatter: it adds to the extinction only (``docs/physics.md``),
 
     beta_O3^e(h, lambda) = sigma(lambda) n_O3(h),   n_O3(h) = n_max f(h),
     f(h) = max(0, 1 - |h - h_peak| / w)                                   (Bruneton 2017's tent)

@@ -8,20 +8,21 @@ accuracy"); ``tests/test_quality.py`` checks each level at a reduced size.
 
 What sets a level apart (measured, README):
 
-* The ray march's samples per ray set the error by day: 16 samples 2.4 %, 32 samples 0.6 %,
-  48 samples 0.3 %, 96 samples 0.1 %.
-* The higher orders come from the table, and in twilight they are most of the light. Their error is
-  set by the spacing of the sun axis' nodes in texture coordinate w (mapping.cl): over the default
-  TableSettings' whole axis of 32 nodes (0.032 apart) the ray march is 5 to 7 % off in civil twilight
-  (sun 4 deg down). Trial levels measured at 32 x 32 were 12.6 % off there at 0.03 (draft's other
-  settings), 1.3 % at 0.01 (default's) and 0.17 % at 0.004 (high's, with 96 samples): the error falls
-  about as the spacing to the power 2.2. So a level fixes that spacing (:attr:`QualityLevel.sun_node_spacing`)
-  rather than the node count: the planner (:mod:`clsky.planner`) spreads as many nodes as it needs
-  over the sun angles a scene reaches. Against the reference with azimuth harmonics (2026-12-02, 64 x 64
-  frames) the default level's former 0.006 gave 1.07 % in civil twilight, over its promise; the other
-  counts barely move it (96 samples 0.91 %, table steps 60 / 60 1.14 %, order tolerance 1e-5 1.07 %,
-  transmittance 128 x 512 1.10 %), 1.5 times the sun nodes 0.62 %: hence 0.004, for about 1.5 times
-  the table build (the default animation's plan: 42.9 against 28.8 s wall).
+* The ray march's samples per ray set the error by day: 16 samples 2.5 %, 32 samples 0.7 %,
+  48 samples 0.4 %, 96 samples 0.2 % (README "Speed versus accuracy", against the reference level).
+* The higher orders come from the table, and in twilight they are most of the light. Their error is set
+  by the spacing of the sun axis' nodes in texture coordinate w (mapping.cl): over the default
+  TableSettings' whole axis of 32 nodes (0.032 apart) the ray march is 11 to 13 % off in civil twilight
+  (sun 4 deg down; README "Speed versus accuracy"). Trial levels measured at 32 x 32 were 12.6 % off
+  there at 0.03 (draft's other settings), 1.3 % at 0.01 (default's) and 0.17 % at 0.004 (high's, with 96
+  samples): the error falls about as the spacing to the power 2.2. So a level fixes that spacing
+  (:attr:`QualityLevel.sun_node_spacing`) rather than the node count: the planner (:mod:`clsky.planner`)
+  spreads as many nodes as it needs over the sun angles a scene reaches. Against the reference with
+  azimuth harmonics (2026-12-02, 64 x 64 frames) the default level's former 0.006 gave 1.07 % in civil
+  twilight, over its promise; the other counts barely move it (96 samples 0.91 %, table steps 60 / 60
+  1.14 %, order tolerance 1e-5 1.07 %, transmittance 128 x 512 1.10 %), 1.5 times the sun nodes 0.62 %:
+  hence 0.004, for about 1.5 times the table build (the default animation's plan: 42.9 against 28.8 s
+  wall).
 * The table's view axis barely matters to the ray march, which reads only the higher orders' gathered
   source from it, a smooth function of the view cosine: doubling the reference's (with the gather's
   steps) changes its frames by 0.010-0.019 %. The default level's 128 view nodes instead of 256 (since
@@ -34,7 +35,7 @@ What sets a level apart (measured, README):
   sunset and +134 % at -6 deg against the Monte Carlo, M = 2 within its noise (README, "Twilight
   against Monte Carlo"), so a reference without them measured convergence, not truth.
 * A table lookup cannot meet these budgets below golden hour whatever its size (the 3D table has no
-  azimuth: 38 % at sunset, hundreds of % in twilight): the levels are for the ray march, and the
+  azimuth: 36 % at sunset, about 1000 % in civil twilight): the levels are for the ray march, and the
   planner allows the lookup alone only where its measured error fits the budget.
 """
 

@@ -1,6 +1,6 @@
 """Independent reference for single scattering along one view ray: adaptive quadrature, no clsky code.
 
-Computes the tables' factored single-scattering quantity (``shared/physics.md``, "Scattering equations")
+Computes the tables' factored single-scattering quantity (``docs/physics.md``, "Scattering equations")
 
     Ibar_s^(1)(lambda) = beta_s(lambda) / (4 pi) Integral_{Pa}^{Pb} rho_s(h(P)) T(Pc, P) T(P, Pa) ds,
 

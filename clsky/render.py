@@ -212,9 +212,20 @@ class SkyRenderer:
         Its atmosphere, data and (for the ray march's higher orders) gathered in-scatter sum.
     ray_settings : TableSettings, optional
         Quadrature of the ray march (view_steps = samples per ray, sun_steps, sampling,
-        sun_transmittance, transmittance_size, dtype); defaults to :data:`RAYMARCH_DEFAULTS`.
+        sun_transmittance, transmittance_size, dtype); defaults to :data:`RAYMARCH_DEFAULTS` with the
+        table's dtype.
     ctx, fast_math
         See :class:`clsky._cl.Engine`.
+
+    The render methods share their conventions: ``directions`` are unit view vectors (..., 3) from the
+    observer in the local (east, north, up) frame, or :meth:`prepare`'s result; ``sun_direction`` the
+    unit vector toward the sun in the same frame; ``altitude`` the observer's height above the ground
+    [m], in [0, 1e10] (above the atmosphere's top, rays enter it from space); ``valid`` an optional
+    mask (invalid pixels are 0). They return float64 radiance (..., 3) at the table's three
+    wavelengths, in the table's units (``table.metadata["units"]``, :func:`clsky.solar.radiance_units`):
+    W m^-2 sr^-1 nm^-1 for an atmosphere lit by the solar spectrum (:func:`clsky.solar.with_solar_spectrum`,
+    as the animations' absolute frames are), else relative: the incident light I_I per sr (both presets
+    as they are). A sun outside the table's ``sun_cos_range`` is refused (``ValueError``).
 
     Raises
     ------

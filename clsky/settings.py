@@ -63,7 +63,7 @@ class TableSettings:
         Read the sun's column densities from a 2D table of ``transmittance_size`` nodes (default), or
         re-march every sun ray. The table is 5x faster for single scattering and, at the default
         sizes, as accurate: against a converged table, rendered radiance differs by 0.39 % (median)
-        either way (README, "Defaults").
+        either way (README, "Physics": "Defaults chosen by measurement").
     transmittance_size : (TW, TH)
         Nodes of that 2D table along altitude and zenith cosine, each in [2, 4096].
     mie_layout : {'per-wavelength', 'notes'}
@@ -111,7 +111,8 @@ class TableSettings:
     multiple_view_steps : int or None
         Trapezoid steps along the view ray when scattering the orders k >= 2, in [1, 4096]; None
         uses ``view_steps``. The higher orders are smooth and dim: 20 (default) instead of 30 makes
-        each order a third cheaper for a median error of 0.48 % instead of 0.39 % (README, "Defaults").
+        each order a third cheaper for a median error of 0.48 % instead of 0.39 % (README, "Physics":
+        "Defaults chosen by measurement").
     source_stride : int
         1 (default) or 2: the view nodes per lookup of the higher orders' source (the gathered table)
         in every integral of it along a view ray: a table's scatter of the orders (kernels/multiple.cl)

@@ -47,7 +47,7 @@ SPECTRAL_RANGE = (360.0, 830.0)
 MIN_WAVELENGTHS, MAX_WAVELENGTHS = 3, 47
 #: Wavelengths the shipped ozone and solar bins cover (their first and last bin centres) [nm].
 DATA_RANGE = (365.0, 835.0)
-#: The refractive index and number density the batches' beta_R follow (shared/physics.md).
+#: The refractive index and number density the batches' beta_R follow (docs/physics.md).
 REFRACTIVE_INDEX, NUMBER_DENSITY = 1.0003, 2.545e25
 
 

@@ -324,7 +324,10 @@ class ScatteringTable:
         Parameters
         ----------
         atmosphere : AtmosphereParameters or preset name
+            Default: the 'atmosphere-plus' preset.
         settings : TableSettings, optional
+            Default: :func:`clsky.ground.default_settings` of ``atmosphere``, TableSettings' defaults with
+            mode 'physical' for a reflecting ground (which the atmosphere-plus mode refuses).
         backend : {'opencl', 'numpy'}
             OpenCL kernels, or their NumPy twins (:mod:`clsky.reference`).
         ctx : pyopencl.Context, optional
@@ -419,6 +422,14 @@ class ScatteringTable:
             Reused across calls to avoid rebuilding (OpenCL backend); a
             :class:`~clsky.lookup4d.TableLookup4DEngine` for a 4D table, whose lookup is quadrilinear
             in (altitude, view, sun, azimuth) (:mod:`clsky.table4d`).
+
+        Returns
+        -------
+        numpy.ndarray
+            float64 radiance of shape (..., 3) (the arguments broadcast together; (3,) for scalars) at the
+            table's three wavelengths, the incident light and phase functions applied, in the table's
+            units (``metadata["units"]``: relative to I_I per sr, or W m^-2 sr^-1 nm^-1 for an atmosphere
+            lit by the solar spectrum).
         """
         self.validate(check_values=False)    # the kernel indexes data by the settings' size
         check_queries(altitude, cos_view, cos_sun, cos_scatter)

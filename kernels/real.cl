@@ -29,8 +29,8 @@ typedef float8 real8;
 #define PI_REAL R(3.14159265358979323846)
 
 /* realv: the type the geometry and column helpers compute in. -DVECTOR_WIDTH=8 makes every work-item
- * handle 8 cells at once in real8 arithmetic, which PoCL maps onto AVX-512 (see shared/pocl.md: it
- * does not vectorise the scalar loops across work-items by itself). maskv holds comparison results
+ * handle 8 cells at once in real8 arithmetic, which PoCL maps onto AVX-512, or two AVX2 registers (it
+ * does not vectorise the scalar loops across work-items by itself: docs/speed-log.md). maskv holds comparison results
  * (-1 true in vectors, 1 true in scalars); select() accepts both. */
 #ifndef VECTOR_WIDTH
 #define VECTOR_WIDTH 1

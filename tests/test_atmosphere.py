@@ -1,6 +1,6 @@
 """Validation, presets, derived constants and identity of AtmosphereParameters and TableSettings.
 
-Published values come from ``shared/physics.md`` (constants of the Atmosphere Plus notes).
+Published values come from ``docs/physics.md`` (constants of the Atmosphere Plus notes).
 """
 
 from __future__ import annotations
