@@ -30,6 +30,10 @@ __all__ = [
 ]
 
 _TINY = np.finfo(np.float64).tiny
+#: A node's sun cosine this close below its horizon's is lit: ties of exact arithmetic, where the sun ray
+#: grazes the ground, decided by the limit of the rays just above, not by rounding noise (kernels/view_ray.cl,
+#: SHADOW_TIE, 8 float64 ulps of 1 in either precision).
+SHADOW_TIE = 8.0 * np.finfo(np.float64).eps
 #: Upper bound on the elements of one chunk's largest temporary (cells x view nodes x sun nodes).
 CHUNK_ELEMENTS = 2**22
 
@@ -249,8 +253,9 @@ class _ViewRays:
 
 def _sun_columns(atmosphere, settings, h, mu_sun, sun_table):
     """Column densities toward the sun from altitudes h along sun cosines mu_sun (``sun_column`` of
-    ``kernels/view_ray.cl``): from ``sun_table`` or re-marched; returns (columns, lit)."""
-    lit = mu_sun >= horizon_cos(h, atmosphere.planet_radius)
+    ``kernels/view_ray.cl``): from ``sun_table`` or re-marched; returns (columns, lit). A sun cosine within
+    :data:`SHADOW_TIE` of the horizon's is lit (``sun_lit``)."""
+    lit = mu_sun >= horizon_cos(h, atmosphere.planet_radius) - SHADOW_TIE
     if sun_table is None:
         sun_length = np.where(lit, distance_to_top(h, mu_sun, atmosphere.planet_radius, atmosphere.top_radius), 0.0)
         return column_density(atmosphere, h, mu_sun, sun_length, settings.sun_steps, settings.sampling), lit

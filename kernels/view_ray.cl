@@ -99,10 +99,16 @@ inline sun_table_altitude_t sun_altitude(__constant const atmosphere_t *atm, con
 
 /* The mask of the lanes whose node (`at`: sun_altitude of its altitude) the sun of zenith cosine mu_sun
  * lights: not in the planet's shadow, decided from the local horizon (sun_column's test; a ray node whose
- * lanes are all unlit skips the sun's columns). */
+ * lanes are all unlit skips the sun's columns). A tie is lit: a sun cosine within SHADOW_TIE of the
+ * horizon's, where the sun ray grazes the ground (the horizontal view away from a sun exactly on the
+ * horizon: every node's, in exact arithmetic), the limit of the rays just above it; the sign of the
+ * rounding noise decided such nodes, 11 % of that pixel, and differently in the twin. SHADOW_TIE is 8
+ * float64 ulps of 1 in either precision: float32 rounds the cosines by ~1e-7, and 8 of its ulps lit
+ * nodes truly in the shadow (8 % of a pixel against the float64 twin); its ties stay its rounding's. */
+#define SHADOW_TIE R(1.7763568394002505e-15)
 inline maskv sun_lit(const sun_table_altitude_t *at, const realv mu_sun)
 {
-    return isgreaterequal(mu_sun, at->mu_h);
+    return isgreaterequal(mu_sun, at->mu_h - SHADOW_TIE);
 }
 
 /* Column densities *sun [m] from a node at altitude h (`at`: sun_altitude of h) toward the sun (zenith
