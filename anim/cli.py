@@ -81,7 +81,8 @@ def _add_scene_arguments(parser, frames=True):
         sun.add_argument("--hours", nargs=2, type=float, metavar=("START", "END"), default=[0.0, 24.0],
                          help="time range of the real positions [h, UTC], each in [0, 48] (default: 0 24)")
         sun.add_argument("--step-minutes", type=float, default=10.0,
-                         help="time between the real positions' frames [min], in (0, 1440] (default: 10)")
+                         help="time between the real positions' frames [min], in (0, 1440] and at most the "
+                              "--hours range, for at most 100000 frames (default: 10)")
 
 
 def _add_display_arguments(parser):

@@ -229,7 +229,8 @@ def load_scene(path, parser):
     except UnicodeDecodeError:
         raise UsageError(f"--scene {path}: not a TOML file (not UTF-8 text)") from None
     except ValueError as error:        # TOMLDecodeError, or an integer of more than 4300 digits
-        raise UsageError(f"--scene {path}: not a valid TOML file: {error}") from None
+        why = "a number of more than 4300 digits" if "integer string conversion" in str(error) else error
+        raise UsageError(f"--scene {path}: not a valid TOML file: {why}") from None
     except RecursionError:
         raise UsageError(f"--scene {path}: not a valid TOML file: nested too deeply") from None
     keys = command_keys(parser)

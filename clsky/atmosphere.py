@@ -200,9 +200,9 @@ class AtmosphereParameters:
         Ozone column [Dobson units, 1 DU = 2.687e20 molecules/m^2], >= 0; 0 (the default) is no ozone,
         and the kernels are then built without it (bit-for-bit the ozone-free program).
     ozone_peak_altitude, ozone_half_width : float
-        The tent profile n_O3(h) = n_max max(0, 1 - |h - peak| / half_width) [m]; half_width at least
-        :data:`MIN_SCALE_HEIGHT_FRACTION` of the atmosphere's height (10 m for the Earth's), as the scale
-        heights, and peak >= half_width (the tent lies above the ground, so its column is n_max
+        The tent profile n_O3(h) = n_max max(0, 1 - |h - peak| / half_width) [m]; half_width > 0, and
+        with ozone at least :data:`MIN_SCALE_HEIGHT_FRACTION` of the atmosphere's height (10 m for the
+        Earth's), as the scale heights; peak >= half_width (the tent lies above the ground, so its column is n_max
         half_width). Ozone above the top of the atmosphere is ignored.
     ozone_cross_section : tuple of 3 floats
         O3 absorption cross-section sigma at the three wavelengths [m^2], >= 0; defaults to
@@ -282,10 +282,14 @@ class AtmosphereParameters:
         check("top_radius", lambda v: (v - rp >= low) & (v - rp <= high),
               f"{low:g} to {high:g} m above planet_radius")
         least = MIN_SCALE_HEIGHT_FRACTION * self.atmosphere_height
-        for name in ("rayleigh_scale_height", "mie_scale_height", "ozone_half_width"):
+        layers = ["rayleigh_scale_height", "mie_scale_height"]
+        if self.ozone_column_du > 0:            # without ozone, the tent may be as thin as it likes
+            layers.append("ozone_half_width")
+        for name in layers:
             check(name, lambda v: v >= least, f"finite and >= {least:g} m ({MIN_SCALE_HEIGHT_FRACTION:g} of the "
                                               f"atmosphere's height: thinner layers fall between the "
                                               f"quadrature's nodes)")
+        check("ozone_half_width", lambda v: v > 0, "finite and > 0 m")
         check("rayleigh_scattering", lambda v: np.all(v >= 0), "finite and >= 0 1/m")
         check("mie_scattering", lambda v: v >= 0, "finite and >= 0 1/m")
         check("mie_extinction_ratio", lambda v: (v > 0) & (v <= 1), "in (0, 1]")
@@ -330,16 +334,17 @@ class AtmosphereParameters:
         ozone = np.array(self.ozone_cross_section) * self.ozone_column_du * DOBSON_UNIT   # the whole tent's column
         depth = float(np.max(rayleigh + mie + ozone))
         if not depth <= MAX_VERTICAL_OPTICAL_DEPTH:     # NaN too
-            mie_name = "mie_scattering"    # or the ratio, where the scattering alone stays within the bound
-            if np.max(self.mie_scattering_channels * _column(self.mie_scale_height, self.atmosphere_height)) \
-                    <= MAX_VERTICAL_OPTICAL_DEPTH:
-                mie_name = "mie_extinction_ratio"
-            largest = max((np.max(ozone), "ozone_column_du"), (np.max(mie), mie_name),
-                          (np.max(rayleigh), "rayleigh_scattering"))
-            name = largest[1]
-            raise ParameterError(name, f"small enough for a vertical optical depth <= {MAX_VERTICAL_OPTICAL_DEPTH:g} "
-                                       f"(the range the quadratures are tested for; here {depth:.3g})",
-                                 getattr(self, name))
+            why = f"a vertical optical depth <= {MAX_VERTICAL_OPTICAL_DEPTH:g} (the range the quadratures are " \
+                  f"tested for; here {depth:.3g})"
+            name = max((np.max(ozone), "ozone_column_du"), (np.max(mie), "mie_scattering"),
+                       (np.max(rayleigh), "rayleigh_scattering"))[1]
+            scattering = self.mie_scattering_channels * _column(self.mie_scale_height, self.atmosphere_height)
+            room = MAX_VERTICAL_OPTICAL_DEPTH - rayleigh - ozone       # what Mie's extinction may take
+            if name == "mie_scattering" and np.all(scattering <= room):    # a larger ratio would do
+                least = float(np.max(scattering / room))
+                raise ParameterError("mie_extinction_ratio", f"at least {least:.3g} for {why}",
+                                     self.mie_extinction_ratio)
+            raise ParameterError(name, f"small enough for {why}", getattr(self, name))
 
     def check_dtype(self, dtype):
         """ParameterError if the kernels of ``dtype`` cannot resolve this atmosphere: float32 needs a

@@ -64,19 +64,26 @@ def signals_interrupt():
 
 
 @contextlib.contextmanager
-def written_since_checked(targets):
-    """Within the block, the FileExistsError of an output that :func:`check_outputs` found absent before the
-    work (without --force) but that exists when it is written, another run on the same output having
-    written it meanwhile, is a UsageError naming the option (``targets``: (option, path)), not the
-    library's hint of ``force=True``."""
+def written_since_checked(targets, staging, force):
+    """Within the block, which ends by committing ``staging`` (:class:`clsky._files.StagedWrites`): the
+    FileExistsError of an output that :func:`check_outputs` found absent before the work (without
+    ``force``) but that exists when it is put in place, another run on the same output having written it
+    meanwhile, is a UsageError naming its option (``targets``: (option, path)) rather than the library's
+    hint of ``force=True``, and the files this run put in place before it."""
     try:
         yield
-    except FileExistsError as error:
+    except FileExistsError:
+        if force:
+            raise
+        ours = {os.path.abspath(path) for path in staging.committed}
         for option, path in targets:
-            if os.path.lexists(path):
+            if os.path.lexists(path) and os.path.abspath(path) not in ours:
+                placed = ""
+                if staging.committed:
+                    placed = f"; this run's files already in place: {', '.join(map(str, staging.committed))}"
                 raise UsageError(f"{option} {path} exists: another process wrote it during this run; use --force "
-                                 f"to overwrite it") from None
-        raise error
+                                 f"to overwrite it{placed}") from None
+        raise
 
 
 def check_not_inputs(targets, inputs):
@@ -519,7 +526,8 @@ def run_table(args):
                                       fast_math=args.fast_math, progress=progress)
     finally:
         close()
-    with written_since_checked(targets), StagedWrites() as staging:    # the table and its raw export land together
+    staging = StagedWrites()                      # the table and its raw export land together
+    with written_since_checked(targets, staging, args.force), staging:
         table.save(output, overwrite=args.force, staging=staging)
         if args.raw is not None:
             table.export_raw(args.raw, overwrite=args.force, staging=staging)

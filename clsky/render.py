@@ -225,7 +225,9 @@ class SkyRenderer:
     wavelengths, in the table's units (``table.metadata["units"]``, :func:`clsky.solar.radiance_units`):
     W m^-2 sr^-1 nm^-1 for an atmosphere lit by the solar spectrum (:func:`clsky.solar.with_solar_spectrum`,
     as the animations' absolute frames are), else relative: the incident light I_I per sr (both presets
-    as they are). A sun outside the table's ``sun_cos_range`` is refused (``ValueError``).
+    as they are). A sun outside the table's ``sun_cos_range`` is refused (``ValueError``) where the frame
+    reads the table's sun axis: the lookups, and the ray march and sky-view map of a table with higher
+    orders.
 
     Raises
     ------

@@ -151,7 +151,9 @@ def run_sweep(args):
     start = time.perf_counter()
     progress, close = progress_bar(args.progress)
     try:
-        with running_farm(farm), written_since_checked([target for job in jobs for target in _job_targets(args, job)]), StagedWrites() as staging:
+        unforced = [target for job in jobs if not job.args.force for target in _job_targets(args, job)]
+        staging = StagedWrites()
+        with running_farm(farm), written_since_checked(unforced, staging, force=False), staging:
             tasks = [(job.atmosphere, job.settings, job.args.backend, job.args.fast_math) for job in jobs]
             tables = farm.map_ordered(build_table_task, tasks, label="clsky-table") if farm is not None \
                 else (build_table_task(*task) for task in tasks)

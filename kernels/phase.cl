@@ -15,7 +15,7 @@ inline real phase_rayleigh(__constant const atmosphere_t *atm, const real c)
 /* The base 1 + g^2 + 2gc is at least (1 - |g|)^2, its value at the peak (c = -sign(g)), but it is formed
  * from terms of size ~2: in float32 with |g| near 1 its rounding took it to 0 or below (an infinity or a
  * NaN). Below half that least value it is rounding noise and replaced by the least value; above, it
- * stays as formed, bit for bit (an ulp below the least is common at c = +-1: 1.9e-15 for g = -0.85). */
+ * stays as formed, bit for bit (a few ulps below the least is common at c = +-1: 1.9e-15 relative for g = -0.85). */
 inline real phase_mie(__constant const atmosphere_t *atm, const real c)
 {
     const real g = atm->mie_g;

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Set up clsky on a fresh machine: a virtual environment in .venv with clsky and its extras, and a CPU
 # OpenCL driver. As root with apt-get, installs Debian's PoCL 3.1 (about 4-5x faster than the pip
-# build, see shared/pocl.md); otherwise, or if that fails, falls back to the PoCL pip build.
+# build, measured: README, its setup paragraph); otherwise, or if that fails, falls back to the PoCL pip build.
 # Prints which OpenCL device clsky will use. Safe to run again.
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -98,13 +98,29 @@ def test_layers_thinner_than_the_least_are_refused(field):
         preset("physical").replace(**{field: 9.99})
 
 
-@pytest.mark.parametrize("changes, field", [
-    (dict(mie_extinction_ratio=1e-12), "mie_extinction_ratio"),     # the scattering alone is within the bound
-    (dict(mie_scattering=1.0), "mie_scattering"),
-    (dict(mie_scattering=1.0, mie_extinction_ratio=0.5), "mie_scattering"),
+def test_without_ozone_the_tent_may_be_thinner():
+    """The tent's least width is ozone's: an atmosphere without ozone (a 1e9 m high one whose least layer
+    is 1e5 m) keeps the preset's tent of 15 km."""
+    tall = preset("atmosphere-plus").replace(top_radius=6_371_000.0 + 1e9, rayleigh_scale_height=1e6,
+                                             mie_scale_height=1e6)
+    assert tall.ozone_column_du == 0.0 and tall.ozone_half_width == 15e3
+    with pytest.raises(ValueError, match=r"^ozone_half_width must be finite and >= 100000 m"):
+        tall.replace(ozone_column_du=300.0, ozone_peak_altitude=2e5)
+
+
+@pytest.mark.parametrize("changes, message", [
+    # Mie's scattering alone (2e-6 1/m over its 1200 m scale height: 2.4e-3) would fit: the ratio is to blame
+    (dict(mie_extinction_ratio=1e-12), r"mie_extinction_ratio must be at least 2.4e-06 for a vertical optical "
+                                       r"depth <= 1000 \(the range the quadratures are tested for; here 2.4e\+09\)"),
+    (dict(mie_scattering=1.0), "mie_scattering must be small enough for a vertical optical depth <= 1000"),
+    (dict(mie_scattering=1.0, mie_extinction_ratio=0.5), "mie_scattering must be small enough"),
+    (dict(rayleigh_scattering=(1.0, 1.0, 1.0)), "rayleigh_scattering must be small enough"),
 ])
-def test_an_optical_depth_beyond_the_bound_names_the_field_that_makes_it(changes, field):
-    with pytest.raises(ValueError, match=rf"^{field} must be small enough for a vertical optical depth <= 1000"):
+def test_an_optical_depth_beyond_the_bound_names_the_field_that_makes_it(changes, message):
+    """The field whose column is the largest, and for Mie the extinction ratio where the scattering alone
+    fits: a ratio too small is refused with its least value, not as too large (it was named mie_scattering
+    first, then "small enough")."""
+    with pytest.raises(ValueError, match=rf"^{message}"):
         preset("physical").replace(**changes)
 
 

@@ -128,20 +128,34 @@ def test_table_refuses_to_overwrite_without_force(tmp_path):
 
 
 @pytest.mark.parametrize("sweep", [False, True], ids=["single", "sweep"])
-def test_an_output_another_run_wrote_meanwhile_is_refused_by_option(tmp_path, monkeypatch, capsys, sweep):
+@pytest.mark.parametrize("when", ["build", "commit"])
+def test_an_output_another_run_wrote_meanwhile_is_refused_by_option(tmp_path, monkeypatch, capsys, sweep, when):
     """Two runs on one output without --force both pass the check before the work; the one that writes
-    second is refused in one line naming the option (it gave the library's "pass force=True" hint), and
-    the other run's file is kept."""
-    from clsky import cli
+    second is refused in one line naming the option of the file the other run wrote (it gave the
+    library's "pass force=True" hint), and the other run's file is kept. Written during the build, the
+    other run's sky.json is found when this run stages its files (none lands); written as this run puts
+    its files in place (sky.npz, sky.bin, then sky.json), it finds two of them in place already, which
+    the message names, and which are not the files to blame."""
+    from clsky import _files, cli
 
-    build = ScatteringTable.build
+    def the_other_run_writes():
+        (tmp_path / "sky.json").write_bytes(b"the other run's")
 
-    def build_while_another_run_writes(*args, **kwargs):
+    build, commit = ScatteringTable.build, _files.StagedWrites.commit
+
+    def build_then_the_other_run_writes(*args, **kwargs):
         table = build(*args, **kwargs)
-        (tmp_path / "sky.bin").write_bytes(b"the other run's")
+        the_other_run_writes()
         return table
 
-    monkeypatch.setattr(ScatteringTable, "build", build_while_another_run_writes)
+    def the_other_run_writes_then_commit(self):
+        the_other_run_writes()
+        return commit(self)
+
+    if when == "build":
+        monkeypatch.setattr(ScatteringTable, "build", build_then_the_other_run_writes)
+    else:
+        monkeypatch.setattr(_files.StagedWrites, "commit", the_other_run_writes_then_commit)
     monkeypatch.chdir(tmp_path)
     words = ["--size", "8", "8", "4", "--orders", "1", "-o", "sky.npz", "--raw", "sky"]
     if sweep:
@@ -149,10 +163,12 @@ def test_an_output_another_run_wrote_meanwhile_is_refused_by_option(tmp_path, mo
         words = ["--sweep", "lines.txt"]
     assert cli.main(["table", "--progress", "none", *words]) == 2
     where = "lines.txt line 1: " if sweep else ""
-    assert capsys.readouterr().err == (f"clsky: error: {where}--raw sky.bin exists: another process wrote it during "
-                                       f"this run; use --force to overwrite it\n")
-    assert sorted(path.name for path in tmp_path.iterdir()) == sorted(["sky.bin"] + (["lines.txt"] if sweep else []))
-    assert (tmp_path / "sky.bin").read_bytes() == b"the other run's"
+    placed = "; this run's files already in place: sky.npz, sky.bin" if when == "commit" else ""
+    assert capsys.readouterr().err == (f"clsky: error: {where}--raw sky.json exists: another process wrote it "
+                                       f"during this run; use --force to overwrite it{placed}\n")
+    expected = {"sky.json"} | ({"sky.npz", "sky.bin"} if placed else set()) | ({"lines.txt"} if sweep else set())
+    assert {path.name for path in tmp_path.iterdir()} == expected
+    assert (tmp_path / "sky.json").read_bytes() == b"the other run's"
 
 
 @pytest.mark.parametrize("args,named", [

@@ -42,7 +42,7 @@ from clsky import AtmosphereParameters, ScatteringTable, TableSettings, preset, 
 from clsky.atmosphere import MAX_MIE_G, MIE_PHASE_METHODS, MIN_SCALE_HEIGHT_FRACTION, RAYLEIGH_PHASE_METHODS
 from clsky.mapping import grid_coordinates
 from clsky.multiple import gather_matrices
-from clsky.phase import mie_phase, rayleigh_phase
+from clsky.phase import mie_cornette_shanks, mie_phase, rayleigh_phase
 from clsky.render import SUN_ANGULAR_RADIUS_DEG, SkyRenderer
 
 from conftest import black_preset, require_dtype
@@ -531,12 +531,27 @@ def test_mie_peak_at_the_largest_g_is_finite_in_float32(renderer_of, g):
 @pytest.mark.parametrize("g", [-MAX_MIE_G, MAX_MIE_G, -0.999, 0.85])
 def test_mie_phase_twin_at_its_peak_is_the_closed_form(g):
     """The twin's peak against the closed form 3 (1 - g^2) / (2 + g^2) / (1 - |g|)^3 (c = -sign(g),
-    1 + c^2 = 2): the rounding of the base, ~2 eps against (1 - |g|)^2, x 1.5 for the power, x 3 for
-    the other roundings: 6e-8 relative at |g| = MAX_MIE_G."""
+    1 + c^2 = 2): the rounding of the base, ~2 eps against (1 - |g|)^2, x 1.5 for the power, x 3 to
+    spare: 2e-7 relative at |g| = MAX_MIE_G (measured 6e-9)."""
     atmosphere = PHYSICAL.replace(mie_g=g)
     peak = float(mie_phase(atmosphere, -math.copysign(1.0, g)))
     exact = 3.0 * (1.0 - g * g) / (2.0 + g * g) / (1.0 - abs(g)) ** 3
     assert_allclose(peak, exact, rtol=3 * 1.5 * 2 * np.finfo(float).eps / (1.0 - abs(g)) ** 2, atol=0)
+
+
+@pytest.mark.parametrize("g", [-(1.0 - 3e-9), 1.0 - 3e-9])
+def test_the_mie_base_below_half_its_least_is_its_least(g):
+    """Beyond MAX_MIE_G (which AtmosphereParameters refuses; the function takes any g) float64 forms the
+    base of |g| = 1 - 3e-9 as 0 at the peak (an infinity): it is replaced by its least value
+    (1 - |g|)^2, which gives the closed form's peak within 2.2e-7: 1 - |g| carries up to half an ulp of 1,
+    3.7e-8 of 3e-9, and the peak goes as (1 - |g|)^-2, so 7.4e-8, three times to spare. Elsewhere the
+    formula is as formed (bit for bit, c = 0)."""
+    c = np.array([-math.copysign(1.0, g), 0.0])
+    peak, side = mie_cornette_shanks(c, g)
+    exact = 3.0 * (1.0 - g * g) / (2.0 + g * g) / (1.0 - abs(g)) ** 3
+    assert np.isfinite(peak)
+    assert_allclose(peak, exact, rtol=1.5 * 2 * np.finfo(float).eps / (1.0 - abs(g)), atol=0)
+    assert side == 1.5 * (1.0 - g * g) / (2.0 + g * g) / (1.0 + g * g) ** 1.5
 
 
 #: The gather's 256 x 128 trapezoid against a Mie peak of angular width ~(1 - |g|) rad: 0.057 deg at
@@ -556,8 +571,8 @@ GATHER_CASES = [
 def test_mie_gather_conserves_energy(g):
     """Applied to a uniform radiance field, the gather gives Integral F_M d omega = 4 pi (the phase
     averages to 1). Bound: 1 % (measured 0.9994 to 1.0000 at g = -0.85, 0.9949 to 1.0030 at g = -0.95).
-    physics.md gives [-0.75, -0.999] as the typical range of g and AtmosphereParameters accepts any
-    |g| < 1, so the quadrature should follow the peak, or the library should refuse such g."""
+    physics.md gives [-0.75, -0.999] as the typical range of g and AtmosphereParameters accepts |g| up
+    to MAX_MIE_G = 0.9999, so the quadrature must follow the peak over that range."""
     matrix = gather_matrices(PHYSICAL.replace(mie_g=g), SMALL)["mie"]
     row_sums = matrix.sum(axis=1) / (4.0 * math.pi)
     logger.info("g=%g: gather row sums / 4 pi in [%.4f, %.4f]", g, row_sums.min(), row_sums.max())

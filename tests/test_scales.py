@@ -138,6 +138,24 @@ def test_twin_and_kernel_agree_up_to_the_highest_altitude(cl_context):
     reference.enter_atmosphere(PHYSICAL, MAX_QUERY_ALTITUDE, -1.0, 0.5, -0.5)
 
 
+def test_twin_and_kernel_agree_on_views_from_above_that_graze_or_miss_the_top(cl_context):
+    """From above the top, a horizontal view (it misses the atmosphere) with a scattering cosine of 0 gave
+    the twin d = inf times 0, NaN (render_raymarch: an IndexError), where the kernel gives 0; and an
+    altitude an ulp above the top, which Rp + h rounds back to Ra, was inside for the twin (r > Ra is
+    false) and above for the kernel (h > Ha): a horizontal view's value there against 0. Both now give 0,
+    and agree below the top (rtol and atol as above)."""
+    table = build(PHYSICAL)
+    top = PHYSICAL.atmosphere_height
+    for altitude in (top + 1.0, 1e7, np.nextafter(top, np.inf)):
+        for cos_view, cos_scatter in ((0.0, 0.0), (-0.0, 0.5), (0.0, -1.0)):
+            kernel = table.radiance(altitude, cos_view, 0.5, cos_scatter)
+            twin = table.radiance(altitude, cos_view, 0.5, cos_scatter, backend="numpy")
+            assert np.array_equal(kernel, np.zeros(3)) and np.array_equal(twin, np.zeros(3)), (altitude, cos_view)
+    kernel = table.radiance(top, -0.0, 0.5, 0.5)
+    np.testing.assert_allclose(kernel, table.radiance(top, -0.0, 0.5, 0.5, backend="numpy"), rtol=1e-9, atol=1e-12)
+    assert kernel.min() > 0.0                            # at the top itself the horizontal view sees the table
+
+
 def test_a_build_whose_order_turns_nan_raises_instead_of_converging(monkeypatch):
     """Whatever makes an order non-finite, the build stops: no table, no 'converged' record."""
     scatter = reference.scatter

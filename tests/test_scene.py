@@ -170,7 +170,7 @@ def test_the_command_line_wins_and_says_so(tmp_path, capsys, monkeypatch):
     ("animate", f"[sun]\nlocation = [{'9' * 400}, 0]\n",
      "s.toml: sun.location must be a list of 2 numbers (of at most about 1.8e308 in size), got [1e+400, 0]"),
     ("animate", f"[camera]\nsize = {'9' * 400}\n", "s.toml: camera.size must be an integer in [16, 8192], got 1e+400"),
-    ("animate", f"[display]\nexposure = {'9' * 5000}\n", "--scene s.toml: not a valid TOML file: Exceeds the limit"),
+    ("animate", f"[display]\nexposure = {'9' * 5000}\n", "--scene s.toml: not a valid TOML file: a number of more than 4300 digits"),
     ("render", "[sun]\nsun_elevation_deg = 100.0\n", "s.toml: sun.sun_elevation_deg must be in [-90, 90] degrees, got 100"),
     ("render", "[sun]\nframes = 3\n", "s.toml: unknown key sun.frames (a key of clsky animate only)"),
     ("render", '[output]\noutput = "sky.jpg"\n', "s.toml: output.output must end in .png"),
@@ -388,7 +388,8 @@ def test_info_refuses_other_files(tmp_path, capsys):
             f"clsky: error: {tmp_path / name}: a directory, not a file: clsky info reads .npz, .png, .json, .exr, "
             ".hdr files")
     long = tmp_path / ("e" * 300 + ".npz")               # an OSError of the system's: [Errno 36], exit 1
-    assert one_line_error(*run(capsys, "info", long)[::2]) == f"clsky: error: {long}: cannot be read (File name too long)"
+    assert one_line_error(*run(capsys, "info", long)[::2]) == \
+        f"clsky: error: {long}: cannot be read (File name too long)"
     os.mkfifo(tmp_path / "pipe.npz")                    # read, it would wait for a writer for ever
     assert one_line_error(*run(capsys, "info", tmp_path / "pipe.npz")[::2]).endswith("pipe.npz: not a regular file")
     (tmp_path / "x.png").write_bytes(b"not a png")
