@@ -32,10 +32,11 @@ from typing import Callable
 import numpy as np
 
 import clsky
-from clsky._cl import host_blas_single_threaded, host_cores, packed_reads
+from clsky._cl import check_context, host_blas_single_threaded, host_cores, packed_reads
 from clsky._files import StagedWrites, check_output
 from clsky.atmosphere import OVERRIDE_RANGES
-from clsky.errors import ParameterError, check_choice, check_flag, check_integer, check_real, counted, is_real_number
+from clsky.errors import (ParameterError, check_choice, check_flag, check_instance, check_integer, check_real, counted,
+                          is_real_number)
 from clsky.ground import check_ground_mode
 from clsky.planner import Plan, Scene, azimuth_harmonics, plan_scene, sun_axis, view_sampling
 from clsky.quality import QUALITY_LEVELS, QualityLevel, level_for_budget, quality_level
@@ -488,7 +489,8 @@ def planned_animation(config: AnimationConfig, positions=None, ctx=None) -> Plan
     """The animation's sun positions (``positions`` if given, else :func:`sun_positions`), camera and scene
     plan, as :func:`render_animation` makes them: the one place where the camera and the plan are made from
     a configuration, so that a benchmark or a test of "the default animation's table" plans what
-    ``clsky animate`` renders."""
+    ``clsky animate`` renders. ValueError naming an argument of the wrong kind, before any work."""
+    check_arguments(config, ctx=ctx, positions=positions)
     positions = sun_positions(config) if positions is None else positions
     camera = _camera(config)
     directions, valid = camera.directions()
@@ -946,7 +948,9 @@ def check_outputs(config: AnimationConfig, total_frames: int | None = None, opti
     FileExistsError, IsADirectoryError, FileNotFoundError, NotADirectoryError, PermissionError, ValueError
         See :func:`clsky._files.check_output`; nothing is written.
     """
-    _frame_writer(config, total_frames or config.frames).check(option)
+    check_instance("config", config, AnimationConfig, "an AnimationConfig")
+    total_frames = check_integer("total_frames", total_frames, 1, writers.MAX_FRAMES, optional=True)
+    _frame_writer(config, config.frames if total_frames is None else total_frames).check(option)
     for suffix in (".csv", ".json"):
         check_output(config.metrics_path(suffix), config.force, option)
 
@@ -974,8 +978,28 @@ def render_animation(config: AnimationConfig, ctx=None, progress: Callable[[str,
     and the display set-up's host products and the closing metrics, each spun about 0.1 s on the cores PoCL
     renders on (perf: about 0.2 CPU-s of the default animation; docs/speed-log.md).
     """
+    check_arguments(config, ctx=ctx, progress=progress, report=report, farm=farm)
     with host_blas_single_threaded():
         return _render_animation(config, ctx, progress, report, farm)
+
+
+def check_arguments(config, ctx=None, positions=None, progress=None, report=None, farm=None):
+    """ValueError (:class:`clsky.errors.ParameterError`) naming the argument of :func:`render_animation`
+    or :func:`planned_animation` that is of the wrong kind, before any work (a dict for ``config`` was an
+    AttributeError, ``farm='x'`` one after the table's build, ``report=5`` a TypeError after the plan)."""
+    from clsky.farm import Farm
+
+    check_instance("config", config, AnimationConfig, "an AnimationConfig")
+    check_context(ctx)
+    for name, function in (("progress", progress), ("report", report)):
+        if function is not None and not callable(function):
+            raise ParameterError(name, "None or a callable", function)
+    check_instance("farm", farm, Farm, "None or a started clsky.farm.Farm", optional=True)
+    if positions is not None:
+        items = list(positions) if isinstance(positions, (list, tuple)) else None
+        if not items or not all(isinstance(item, sunpath.SunPosition) for item in items):
+            raise ParameterError("positions", "None or a non-empty list of clsky.anim.sunpath.SunPosition",
+                                 positions)
 
 
 def _render_animation(config, ctx, progress, report, farm) -> AnimationResult:

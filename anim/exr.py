@@ -62,13 +62,12 @@ Examples
 from __future__ import annotations
 
 import math
-import pathlib
 
 import numpy as np
 
 import clsky
-from clsky._files import atomic_write
-from clsky.errors import require_extra
+from clsky._files import as_path, atomic_write, output_target
+from clsky.errors import require_extra, short
 
 __all__ = ["HDR_FORMATS", "PRECISIONS", "HALF_MAX", "ENVMAP_ORIENTATION", "write_exr", "read_exr", "exr_pixels",
            "save_exr", "frame_attributes", "enu_to_envmap", "envmap_pixel", "require_openexr"]
@@ -178,14 +177,20 @@ def exr_pixels(rgb, precision="float"):
     or float16), and the number of pixels with a channel above :data:`HALF_MAX` clipped to it with
     'half' (0 with 'float'). A sky's half-float file can hold everything but the sun's disc (I_I / 6.8e-5
     sr, 3e5 in relative units, 1e9 cd/m^2): those few pixels are clipped rather than made infinite.
-    ValueError for a bad shape or precision, and NaN or infinite values."""
-    if precision not in PRECISIONS:
+    ValueError for a bad shape, precision or kind of number, NaN or infinite values, and with 'float'
+    values beyond float32's range (3.4e38: infinite once stored)."""
+    if not isinstance(precision, str) or precision not in PRECISIONS:
         raise ValueError(f"precision must be one of {list(PRECISIONS)}, got {precision!r}")
     rgb = np.asarray(rgb)
+    if rgb.dtype.kind not in "biuf":                 # strings, objects; complex values lost their imaginary part
+        raise ValueError(f"rgb must hold real numbers, got an array of {rgb.dtype}")
     if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.shape[0] < 1 or rgb.shape[1] < 1:
         raise ValueError(f"rgb must have shape (H, W, 3), got {rgb.shape}")
     if not np.isfinite(rgb).all():
         raise ValueError("rgb holds NaN or infinite values: an EXR frame holds finite values only")
+    if precision == "float" and np.abs(rgb).max() > np.finfo(np.float32).max:
+        raise ValueError(f"rgb holds values beyond float32's range ({np.finfo(np.float32).max:.3g}), "
+                         f"infinite once stored: {short(np.abs(rgb).max())}")
     clipped = 0
     if precision == "half":
         over = np.abs(rgb) > HALF_MAX
@@ -228,11 +233,11 @@ def write_exr(path, rgb, precision="float", attributes=None, force=False, stagin
     FileExistsError, IsADirectoryError, FileNotFoundError, NotADirectoryError, PermissionError
         As :func:`clsky.anim.writers.write_png`.
     """
+    path, force = output_target(path, force)
     require_openexr()
     pixels, clipped = exr_pixels(rgb, precision)
     if precision == "half":
         attributes = {**(attributes or {}), "halfClippedPixels": clipped}
-    path = pathlib.Path(path)
     with atomic_write(path, overwrite=force, suffix=".exr", staging=staging) as temporary:
         save_exr(temporary, pixels, attributes)
     return path
@@ -257,12 +262,22 @@ def read_exr(path):
 
     Raises
     ------
+    FileNotFoundError
+        No such file.
     ValueError
-        The file has no R, G, B channels.
+        Not a readable EXR file (the bindings' RuntimeError, named), or one without R, G, B channels.
     """
     OpenEXR = require_openexr()
-    with OpenEXR.File(str(path)) as exr:
-        channels, header = exr.channels(), dict(exr.header())
-        if "RGB" not in channels:
-            raise ValueError(f"{path}: no R, G, B channels (has {sorted(channels)})")
-        return np.array(channels["RGB"].pixels), header
+    path = as_path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file" if not path.exists() else f"{path}: not a regular file")
+    try:
+        with OpenEXR.File(str(path)) as exr:
+            channels, header = exr.channels(), dict(exr.header())
+            pixels = channels["RGB"].pixels if "RGB" in channels else None
+    except Exception as error:  # noqa: BLE001  (the bindings raise RuntimeError and others for a bad file)
+        raise ValueError(f"{path}: not a readable EXR file ({str(error).splitlines()[0] if str(error) else error})") \
+            from None
+    if pixels is None:
+        raise ValueError(f"{path}: no R, G, B channels (has {sorted(channels)})")
+    return np.array(pixels), header

@@ -39,7 +39,7 @@ import re
 import numpy as np
 
 import clsky
-from clsky._files import atomic_write
+from clsky._files import as_path, atomic_write, output_target
 
 __all__ = ["encode_rgbe", "decode_rgbe", "write_rgbe", "read_rgbe", "read_rgbe_header", "save_rgbe"]
 
@@ -107,6 +107,8 @@ def save_rgbe(file, rgbe, attributes=None):
             continue
         if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", name):
             raise ValueError(f"attribute names must be identifiers, got {name!r}")
+        if name in ("FORMAT", "SOFTWARE"):                 # a second line of the file's own would win on reading
+            raise ValueError(f"attribute name {name!r} is the file's own header line")
         lines.append(f"{name}= {_header_value(value)}")
     head = ("\n".join(lines) + f"\n\n-Y {height} +X {width}\n").encode("ascii", "replace")
     if width in _RLE_WIDTHS:
@@ -143,8 +145,8 @@ def write_rgbe(path, rgb, attributes=None, force=False, staging=None):
     FileExistsError, IsADirectoryError, FileNotFoundError, NotADirectoryError, PermissionError
         As :func:`clsky.anim.writers.write_png`.
     """
+    path, force = output_target(path, force)
     rgbe = encode_rgbe(rgb)                              # refuse bad values before the temporary exists
-    path = pathlib.Path(path)
     with atomic_write(path, overwrite=force, suffix=".hdr", staging=staging) as temporary:
         save_rgbe(temporary, rgbe, attributes)
     return path
@@ -182,11 +184,28 @@ def read_rgbe_header(path):
 def read_rgbe(path):
     """(pixels (H, W, 3) float64, header {NAME: text}) of a Radiance file with a ``-Y H +X W``
     resolution line, its scan lines flat or in the new run-length format (runs and literals); the old
-    run-length format is not read. ValueError for a file without the signature or resolution line."""
-    data = pathlib.Path(path).read_bytes()
+    run-length format is not read. ValueError naming the file for one without the signature or resolution
+    line, whose resolution its bytes cannot hold, or whose scan lines are damaged (cut short, runs past
+    the line's end)."""
+    data = as_path(path).read_bytes()
     height, width, header, offset = _parse_header(data, path)
     body = memoryview(data)[offset:]
+    # the fewest bytes a scan line takes: 4 of header and 4 runs of 127 pixels in 2 bytes, or 4 a pixel flat
+    least = height * (4 + 8 * -(-width // 127) if width in _RLE_WIDTHS else 4 * width)
+    if len(body) < least:
+        raise ValueError(f"{path}: its {height} x {width} pixels need at least {least} bytes, it holds {len(body)}")
     rgbe = np.empty((height, width, 4), np.uint8)
+    try:
+        _decode_scanlines(body, rgbe)
+    except (IndexError, ValueError) as error:
+        raise ValueError(f"{path}: damaged pixel data ({error})") from None
+    return decode_rgbe(rgbe), header
+
+
+def _decode_scanlines(body, rgbe):
+    """Fill ``rgbe`` (H, W, 4) from the scan lines in ``body``; IndexError or ValueError where they are
+    damaged."""
+    height, width = rgbe.shape[:2]
     at = 0
     for row in range(height):
         if width in _RLE_WIDTHS and bytes(body[at:at + 2]) == b"\x02\x02" and body[at + 2] < 128:
@@ -195,13 +214,17 @@ def read_rgbe(path):
                 column = 0
                 while column < width:
                     count = body[at]
+                    length = count - 128 if count > 128 else count      # a run, or a literal of count bytes
+                    if length == 0 or column + length > width:
+                        raise ValueError(f"scan line {row}: a run of {length} at column {column} of {width}")
                     if count > 128:                      # a run: one byte repeated count - 128 times
-                        rgbe[row, column:column + count - 128, component] = body[at + 1]
-                        column, at = column + count - 128, at + 2
+                        rgbe[row, column:column + length, component] = body[at + 1]
+                        at += 2
                     else:
-                        rgbe[row, column:column + count, component] = np.frombuffer(body[at + 1:at + 1 + count], np.uint8)
-                        column, at = column + count, at + 1 + count
+                        literal = np.frombuffer(body[at + 1:at + 1 + length], np.uint8)
+                        rgbe[row, column:column + length, component] = literal
+                        at += 1 + length
+                    column += length
         else:
             rgbe[row] = np.frombuffer(body[at:at + 4 * width], np.uint8).reshape(width, 4)
             at += 4 * width
-    return decode_rgbe(rgbe), header

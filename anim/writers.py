@@ -41,8 +41,8 @@ import zlib
 
 import numpy as np
 
-from clsky._files import StagedWrites, atomic_write, check_output, check_output_directory
-from clsky.errors import require_extra, short
+from clsky._files import StagedWrites, as_path, atomic_write, check_output, check_output_directory, output_target
+from clsky.errors import check_flag, check_integer, check_real, require_extra
 
 from .exr import HDR_FORMATS
 
@@ -78,6 +78,11 @@ def _exists_error(path, option=None):
         return FileExistsError(f"{option}: {path} exists; use --force to overwrite it")
     return FileExistsError(f"{path} exists (use force=True, or --force on the command line)")
 
+
+#: The most frames a :class:`FrameWriter` names (frame_<index> with up to 9 digits), and its highest frame rate
+#: [1/s] (ffmpeg refused 1e300 only when the video closed).
+MAX_FRAMES = 10**9
+MAX_FPS = 1000.0
 
 #: Deflate level of the PNG files (:func:`encode_png`): 2, in ISA-L's levels 0-3 and zlib's 0-9 alike.
 PNG_COMPRESS_LEVEL = 2
@@ -204,8 +209,8 @@ def write_png(path, image_u8, force=False, staging=None, text=None):
     TypeError, ValueError
         Not uint8, or an unsupported shape; a name too long for the file system.
     """
+    path, force = output_target(path, force)
     data = encode_png(image_u8, text)          # checks the image (and the keywords) before any file
-    path = pathlib.Path(path)
     with atomic_write(path, overwrite=force, suffix=".png", staging=staging) as temporary:
         pathlib.Path(temporary).write_bytes(data)
     return path
@@ -232,8 +237,8 @@ def write_json(path, obj, force=False, staging=None):
     -------
     pathlib.Path
     """
+    path, force = output_target(path, force)
     text = json.dumps(obj, indent=2, allow_nan=False, default=_json_default) + "\n"
-    path = pathlib.Path(path)
     with atomic_write(path, overwrite=force, suffix=".json", staging=staging) as temporary:
         temporary.write_text(text, encoding="utf-8")
     return path
@@ -264,6 +269,7 @@ def write_csv(path, rows, force=False, fieldnames=None, staging=None):
     OSError, ValueError
         The path, checked as in :func:`write_png`.
     """
+    path, force = output_target(path, force)
     rows = list(rows)
     if fieldnames is None:
         if not rows:
@@ -275,7 +281,6 @@ def write_csv(path, rows, force=False, fieldnames=None, staging=None):
     for row in rows:
         writer.writerow({key: (value.item() if isinstance(value, np.generic) else value)
                          for key, value in row.items()})
-    path = pathlib.Path(path)
     with atomic_write(path, overwrite=force, suffix=".csv", staging=staging) as temporary:
         temporary.write_text(buffer.getvalue(), encoding="utf-8", newline="")
     return path
@@ -340,11 +345,11 @@ class FrameWriter:
     mp4_path : str or os.PathLike, optional
         Target MP4 file (its directory must exist); None for no video.
     fps : float
-        Frames per second of the MP4. An odd width or height is padded for the MP4 alone
+        Frames per second of the MP4, in (0, :data:`MAX_FPS`]. An odd width or height is padded for the MP4 alone
         (:func:`even_padded`: H.264 in yuv420p needs even ones); the PNG frames keep the frame's size.
     total_frames : int, optional
-        Number of frames, if known: sets the zero padding of the names to max(5, its digits) and
-        bounds the indices.
+        Number of frames, if known, in [1, :data:`MAX_FRAMES`]: sets the zero padding of the names to
+        max(5, its digits) and bounds the indices.
     hdr : {None, 'exr', 'hdr', 'npy'}
         Also store each frame's HDR values in ``directory``: 'exr', an OpenEXR image
         ``<prefix>_<index>.exr`` (:func:`clsky.anim.exr.write_exr`, with the header attributes given to
@@ -396,9 +401,9 @@ class FrameWriter:
       included) deletes every temporary, and the frame directory if this writer created it and it
       is empty: the outputs of an earlier run stay as they were, never mixed with new ones.
     - MP4: H.264, yuv420p, :data:`MP4_OUTPUT_PARAMS`. yuv420p halves the chroma resolution, so width
-      and height must be even: an odd size raises ValueError at the first frame, before anything of
-      that frame is written (crop or pad the frames yourself; padding silently here would make the
-      video differ from the PNGs). A block that writes no frame creates no MP4 (with a warning).
+      and height must be even: an odd size is padded for the MP4 alone (:func:`even_padded`, the last
+      row or column repeated), the PNG frames keep every pixel. A block that writes no frame creates no
+      MP4 (with a warning).
     - Two writers of the same outputs at once (``force``) each rename their own complete files: the
       MP4 is always one writer's whole video, and the last rename wins per file (the frames may
       then mix both runs). A writer that fails removes the frame directory it created only if it
@@ -436,22 +441,17 @@ class FrameWriter:
             raise ValueError(f"hdr_precision must be one of {list(PRECISIONS)}, got {hdr_precision!r}")
         if hdr_precision != "float" and hdr != "exr":
             raise ValueError(f"hdr_precision {hdr_precision!r} needs hdr='exr' (.npy frames are float32)")
-        fps = float(fps)
-        if not (np.isfinite(fps) and fps > 0):
-            raise ValueError(f"fps must be finite and > 0, got {short(fps)}")
-        if total_frames is not None:
-            if int(total_frames) != total_frames or total_frames < 1:
-                raise ValueError(f"total_frames must be a positive integer, got {short(total_frames)}")
-            total_frames = int(total_frames)
-        if not prefix or os.sep in prefix or (os.altsep and os.altsep in prefix):
+        fps = check_real("fps", fps, 0.0, MAX_FPS, low_open=True)
+        total_frames = check_integer("total_frames", total_frames, 1, MAX_FRAMES, optional=True)
+        if not isinstance(prefix, str) or not prefix or os.sep in prefix or (os.altsep and os.altsep in prefix):
             raise ValueError(f"prefix must be a non-empty file name part, got {prefix!r}")
-        self.directory = None if directory is None else pathlib.Path(directory)
-        self.mp4_path = None if mp4_path is None else pathlib.Path(mp4_path)
+        self.directory = None if directory is None else as_path(directory, "directory")
+        self.mp4_path = None if mp4_path is None else as_path(mp4_path, "mp4_path")
         self.fps = fps
         self.total_frames = total_frames
         self.hdr = hdr
         self.hdr_precision = hdr_precision
-        self.force = bool(force)
+        self.force = check_flag("force", force)
         self.prefix = prefix
         self.text = dict(text or {})
         self.width = max(5, len(str(total_frames))) if total_frames else 5
@@ -504,6 +504,10 @@ class FrameWriter:
             check_output_directory(self.directory, option, names=[self.frame_path(last, suffix).name
                                                                   for suffix in (".png", ".npy", ".exr", ".hdr")])
             existing = frame_files(self.directory, self.prefix)
+            folders = [path for path in existing if path.is_dir()]
+            if folders:          # with force, the run's frame there failed after the table, a stale one after the rest
+                raise IsADirectoryError(f"{option + ': ' if option else ''}{folders[0]} is a directory named as a "
+                                        f"frame: neither a frame to replace nor one to delete; move it")
             if existing and not self.force:
                 raise _exists_error(existing[0], option)
             require_pillow()
@@ -625,11 +629,7 @@ class FrameWriter:
         """
         if self._state != "open":
             raise RuntimeError("use FrameWriter.write inside its with statement")
-        if isinstance(index, bool) or int(index) != index or index < 0:
-            raise ValueError(f"index must be an integer >= 0, got {short(index)}")
-        index = int(index)
-        if self.total_frames is not None and index >= self.total_frames:
-            raise ValueError(f"index {short(index)} out of range for total_frames={short(self.total_frames)}")
+        index = check_integer("index", index, 0, MAX_FRAMES - 1 if self.total_frames is None else self.total_frames - 1)
         if index in self._indices:
             raise ValueError(f"frame {index} was already written")
         image = _check_image("display_u8", display_u8)
@@ -638,9 +638,16 @@ class FrameWriter:
         if self.hdr is not None:
             if hdr is None:
                 raise ValueError(f"this FrameWriter stores HDR frames (hdr={self.hdr!r}): pass hdr=")
-            hdr = np.asarray(hdr, dtype=np.float32)
-            if hdr.ndim != 3 or hdr.shape[2] != 3:
-                raise ValueError(f"hdr must have shape (H, W, 3), got {hdr.shape}")
+            hdr = np.asarray(hdr)
+            if hdr.dtype.kind not in "biuf":
+                raise ValueError(f"hdr must hold real numbers, got an array of {hdr.dtype}")
+            with np.errstate(over="ignore"):
+                hdr = hdr.astype(np.float32)
+            if hdr.ndim != 3 or hdr.shape[2] != 3 or hdr.size == 0:
+                raise ValueError(f"hdr must have shape (H, W, 3), H and W >= 1, got {hdr.shape}")
+            if not np.isfinite(hdr).all():          # NaN, infinity, or beyond float32's range (3.4e38)
+                raise ValueError(f"frame {index}: hdr holds NaN, infinite values or values beyond float32's range "
+                                 f"(3.4e38)")
             if self.hdr == "exr":
                 from .exr import exr_pixels
                 hdr, clipped = exr_pixels(hdr, self.hdr_precision)

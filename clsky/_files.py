@@ -33,7 +33,7 @@ import stat
 import tempfile
 import threading
 
-from .errors import check_instance
+from .errors import check_flag, check_instance
 
 __all__ = ["check_output", "check_output_directory", "atomic_write", "StagedWrites", "temporary_prefix",
            "check_suffix", "binary_and_header", "as_path", "read_user_text", "MAX_TEXT_FILE_BYTES"]
@@ -412,7 +412,7 @@ class StagedWrites:
         ``suffix`` is the temporary's suffix (default: the target's; writers that pick a format
         from the file name need it).
         """
-        path = pathlib.Path(path)
+        path, overwrite = output_target(path, overwrite, flag="overwrite")
         suffix = path.suffix if suffix is None else suffix
         check_output(path, force=overwrite, suffix=suffix, probe=False)
         prefix = temporary_prefix(path, suffix)
@@ -481,6 +481,13 @@ class StagedWrites:
                 path.unlink(missing_ok=True)
             self._removals = []
         return list(self.committed)
+
+
+def output_target(path, force, name="path", flag="force"):
+    """(``path`` as a Path, ``force`` as a bool), or ValueError naming ``name`` or ``flag``: a path that is
+    None, a number or bytes, an empty one (pathlib's '.'), or a flag that is no bool (``force='no'`` was
+    true, and replaced the file)."""
+    return as_path(path, name), check_flag(flag, force)
 
 
 @contextlib.contextmanager

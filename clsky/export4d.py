@@ -19,6 +19,7 @@ import json
 import numpy as np
 
 from ._files import StagedWrites, atomic_write, binary_and_header, check_output
+from .errors import check_flag
 
 __all__ = ["texture_volumes", "export_texture", "texture_header", "GLSL_SNIPPET"]
 
@@ -66,6 +67,7 @@ def export_texture(table, path, overwrite=False, staging=None):
     with higher orders); both checked first, landing together."""
     if not table.settings.is_4d:
         raise ValueError("export_texture needs a 4D table (parameterization '4d'); export_raw writes a 3D one")
+    overwrite = check_flag("overwrite", overwrite)
     table.validate()
     volumes = texture_volumes(table.data)
     binary, header = binary_and_header(path)

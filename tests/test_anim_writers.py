@@ -136,14 +136,85 @@ def test_frame_index_checks(tmp_path):
         writer.write(0, _frame(0))
         with pytest.raises(ValueError, match="already written"):
             writer.write(0, _frame(0))
-        with pytest.raises(ValueError, match="out of range"):
+        with pytest.raises(ValueError, match=r"^index must be an integer in \[0, 1\], got 2$"):
             writer.write(2, _frame(0))
+        for index in (None, float("nan"), np.array([1]), True):          # TypeErrors, or a bool taken as 1
+            with pytest.raises(ValueError, match=r"^index must be an integer"):
+                writer.write(index, _frame(0))
         with pytest.raises(ValueError, match="shape"):
             writer.write(1, _frame(0, height=50))
         with pytest.raises(TypeError, match="uint8"):
             writer.write(1, _frame(0).astype(float))
     with pytest.raises(RuntimeError, match="with"):
         writer.write(1, _frame(1))
+
+
+@pytest.mark.parametrize("write", ["png", "json", "csv", "exr", "hdr", "frames"])
+def test_writers_refuse_a_force_that_is_no_bool(tmp_path, write):
+    """force="no" was true: it replaced the file (and a FrameWriter deleted an earlier run's frames as
+    stale). Every writer now takes a bool only, checked before anything is written."""
+    from clsky.anim.exr import write_exr
+    from clsky.anim.rgbe import write_rgbe
+
+    target = tmp_path / f"old.{write}"
+    target.write_bytes(b"precious")
+    writers = {"png": lambda force: write_png(target, _frame(0), force=force),
+               "json": lambda force: write_json(target, {"a": 1}, force=force),
+               "csv": lambda force: write_csv(target, [{"a": 1}], force=force),
+               "exr": lambda force: write_exr(target, np.ones((2, 2, 3)), force=force),
+               "hdr": lambda force: write_rgbe(target, np.ones((2, 2, 3)), force=force),
+               "frames": lambda force: FrameWriter(directory=tmp_path, force=force)}
+    if write == "exr":
+        pytest.importorskip("OpenEXR")
+    for force in ("no", "False", 1, None):
+        with pytest.raises(ValueError, match=r"^force must be True or False, got "):
+            writers[write](force)
+    assert target.read_bytes() == b"precious"
+
+
+@pytest.mark.parametrize("path, message", [
+    (None, r"^path must be a file path \(a str or os.PathLike\), got None"),
+    (5, r"^path must be a file path"),
+    (b"x.png", r"^path must be a file path"),
+    ("", r"^path must be a file path, got an empty one"),
+])
+def test_writers_refuse_paths_that_are_none(tmp_path, monkeypatch, path, message):
+    """A path of None, a number or bytes was pathlib's TypeError, and '' was the current directory (a
+    FrameWriter wrote its frames there; its directory=None is no directory, and mp4_path=None no MP4)."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ValueError, match=message):
+        write_png(path, _frame(0))
+    if path is not None:
+        with pytest.raises(ValueError, match=message.replace("path", "directory", 1)):
+            FrameWriter(directory=path)
+        with pytest.raises(ValueError, match=message.replace("path", "mp4_path", 1)):
+            FrameWriter(mp4_path=path)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_frame_name_that_is_a_directory_is_refused_before_the_work(tmp_path):
+    """With force, a directory named as one of this run's frames failed at that frame (after the table),
+    and one named as a stale frame after every new file had landed: both are refused by check()."""
+    for name in ("frame_00000.png", "frame_00009.png"):
+        directory = tmp_path / name.split(".")[0]
+        (directory / name).mkdir(parents=True)
+        with pytest.raises(IsADirectoryError, match=rf"^--output: .*{name} is a directory named as a frame"):
+            FrameWriter(directory=directory, total_frames=2, force=True).check("--output")
+        assert sorted(path.name for path in directory.iterdir()) == [name]
+
+
+def test_hdr_frames_must_be_finite_float32_values(tmp_path):
+    """hdr='npy' frames took NaN, infinities and an empty frame; values beyond float32's range became
+    infinities in any format. All are refused before the frame is written."""
+    with FrameWriter(directory=tmp_path / "f", hdr="npy") as writer:
+        for hdr, message in ((np.full((2, 2, 3), np.nan), "NaN, infinite values"),
+                             (np.full((2, 2, 3), 1e39), "beyond float32's range"),
+                             (np.zeros((0, 0, 3)), r"H and W >= 1"),
+                             (np.full((2, 2, 3), "a"), "real numbers")):
+            with pytest.raises(ValueError, match=message):
+                writer.write(0, _frame(0), hdr=hdr)
+        writer.write(0, _frame(0), hdr=np.ones((2, 2, 3)))
+    assert _listing(tmp_path / "f") == ["frame_00000.npy", "frame_00000.png"]
 
 
 # MP4 --------------------------------------------------------------------------------------------------

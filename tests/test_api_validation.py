@@ -226,6 +226,36 @@ def test_more_wrong_types_are_named(call, message):
         call()
 
 
+@pytest.mark.parametrize("arguments, message", [
+    (dict(config={"frames": 2}), "config must be an AnimationConfig, got {'frames': 2} (dict)"),
+    (dict(farm="x"), "farm must be None or a started clsky.farm.Farm, got 'x' (str)"),
+    (dict(report=5), "report must be None or a callable, got 5"),
+    (dict(progress="bar"), "progress must be None or a callable, got 'bar'"),
+    (dict(ctx="x"), "ctx must be None (clsky's device) or a pyopencl.Context, got 'x' (str)"),
+])
+def test_render_animation_refuses_wrong_arguments_before_any_work(tmp_path, arguments, message):
+    """A dict for the configuration was an AttributeError, farm='x' an AttributeError after the table's
+    build (3.6 s), report=5 a TypeError after the scene plan; each is refused first, nothing written."""
+    from clsky.anim.animate import render_animation
+
+    config = AnimationConfig(frames=2, size=16, quality="draft", output=str(tmp_path / "x.mp4"))
+    with pytest.raises(ValueError, match=re.escape(message)):
+        render_animation(**{"config": config, **arguments})
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (dict(positions=[]), "positions must be None or a non-empty list of clsky.anim.sunpath.SunPosition, got []"),
+    (dict(positions=[1, 2]), "positions must be None or a non-empty list"),
+    (dict(ctx="x"), "ctx must be None"),
+])
+def test_planned_animation_refuses_wrong_arguments(arguments, message):
+    from clsky.anim.animate import planned_animation
+
+    with pytest.raises(ValueError, match=re.escape(message)):
+        planned_animation(AnimationConfig(frames=2, size=16, quality="draft"), **arguments)
+
+
 def test_a_plan_the_build_would_refuse_is_refused_first():
     """plan_scene(scene, mode='atmosphere-plus') planned the physical preset's reflecting ground (its default
     atmosphere), a table the build then refused: now the plan refuses it, before the pilot's build."""

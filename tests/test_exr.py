@@ -79,7 +79,10 @@ def test_half_round_trip_within_its_rounding(tmp_path):
 
 
 @pytest.mark.parametrize("bad,match", [(np.full((2, 2, 3), np.nan), "NaN"), (np.full((2, 2, 3), np.inf), "NaN"),
-                                       (np.zeros((2, 2)), "shape"), (np.zeros((2, 2, 4)), "shape")])
+                                       (np.zeros((2, 2)), "shape"), (np.zeros((2, 2, 4)), "shape"),
+                                       # stored as float32, 1e39 was an infinity in the file
+                                       (np.full((2, 2, 3), 1e39), "beyond float32's range"),
+                                       (np.full((2, 2, 3), 1 + 1j), "real numbers")])
 def test_bad_pixels_are_refused_before_writing(tmp_path, bad, match):
     with pytest.raises(ValueError, match=match):
         write_exr(tmp_path / "x.exr", bad)
@@ -522,6 +525,41 @@ def test_rgbe_refuses_what_it_cannot_hold(tmp_path, bad):
 
     with pytest.raises(ValueError):
         write_rgbe(tmp_path / "x.hdr", bad)
+    assert _listing(tmp_path) == []
+
+
+def test_damaged_or_missing_hdr_files_are_refused_by_name(tmp_path):
+    """read_rgbe raised IndexError (a cut run-length scan line), a broadcast error (a run past the line's
+    end) or a MemoryError of 3.5 EiB (a resolution line of 999999999 x 999999999 in 40 bytes), and
+    read_exr the bindings' RuntimeError for a foreign or missing file: each is now a ValueError naming
+    the file (FileNotFoundError for a missing one)."""
+    from clsky.anim.rgbe import read_rgbe, write_rgbe
+
+    write_rgbe(tmp_path / "good.hdr", np.ones((2, 16, 3)))
+    data = (tmp_path / "good.hdr").read_bytes()
+    body = data.index(b"+X 16\n") + 6
+    damaged = {"cut.hdr": data[:body + 9],
+               "run.hdr": data[:body + 4] + bytes([128 + 100]) + data[body + 5:],    # a run of 100 in 16
+               "huge.hdr": b"#?RADIANCE\n\n-Y 999999999 +X 999999999\n"}
+    for name, content in damaged.items():
+        (tmp_path / name).write_bytes(content)
+        with pytest.raises(ValueError, match=rf"^{tmp_path / name}: "):
+            read_rgbe(tmp_path / name)
+    pytest.importorskip("OpenEXR")
+    (tmp_path / "junk.exr").write_bytes(b"v/1\x01junk")
+    with pytest.raises(ValueError, match=rf"^{tmp_path / 'junk.exr'}: not a readable EXR file"):
+        read_exr(tmp_path / "junk.exr")
+    with pytest.raises(FileNotFoundError, match="no such file"):
+        read_exr(tmp_path / "missing.exr")
+
+
+def test_rgbe_refuses_an_attribute_named_as_its_own_header_lines(tmp_path):
+    """An attribute FORMAT (or SOFTWARE) added a second line of that name, which won on reading."""
+    from clsky.anim.rgbe import write_rgbe
+
+    for name in ("FORMAT", "SOFTWARE"):
+        with pytest.raises(ValueError, match=f"attribute name '{name}' is the file's own header line"):
+            write_rgbe(tmp_path / "x.hdr", np.ones((2, 8, 3)), attributes={name: "x"})
     assert _listing(tmp_path) == []
 
 
