@@ -61,6 +61,15 @@ def _direction(zenith_rad, azimuth_rad):
                                         np.cos(zenith_rad)), axis=-1)
 
 
+def _angles(name, value):
+    """``value`` as a float64 array of real numbers, ValueError naming ``name`` otherwise (a string's was
+    NumPy's message, 10**400 an OverflowError, a complex number a TypeError, a bool was taken as 1 deg)."""
+    array = np.asarray(value)
+    if array.dtype.kind not in "iuf":           # bool, str, complex, and 10**400's object array
+        raise ValueError(f"{name} must be a real number of degrees or an array of them, got {short(value)}")
+    return array.astype(np.float64)
+
+
 def sun_direction(zenith_deg, azimuth_deg):
     """Unit vector toward the sun in the local East-North-Up frame.
 
@@ -93,8 +102,8 @@ def sun_direction(zenith_deg, azimuth_deg):
     >>> [round(float(c), 12) for c in sun_direction(60.0, 180.0)]      # 30 deg high, due south
     [0.0, -0.866025403784, 0.5]
     """
-    zenith = np.asarray(zenith_deg, dtype=np.float64)
-    azimuth = np.asarray(azimuth_deg, dtype=np.float64)
+    zenith, azimuth = (_angles(name, value) for name, value in (("zenith_deg", zenith_deg),
+                                                                 ("azimuth_deg", azimuth_deg)))
     if not np.all(np.isfinite(zenith)):
         raise ValueError(f"zenith_deg must be finite, got {short(zenith_deg)}")
     if not np.all(np.isfinite(azimuth)):

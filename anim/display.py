@@ -376,6 +376,9 @@ def meter_ev(luminance, key=0.36, min_ev=-20.0, max_ev=20.0):
     the sun disc. floor = 1e-3 P99(Y) (:data:`METER_FLOOR_FRACTION`) keeps black ground from pulling
     it to 0.
     """
+    check_real("key", key, 0.0, 1.0, low_open=True)          # NaN gave NaN, 0 a math domain error
+    check_real("min_ev", min_ev, -60.0, 60.0)
+    check_real("max_ev", max_ev, min_ev, 60.0)
     y = np.asarray(luminance, dtype=np.float64).ravel()
     if y.size == 0:
         raise ValueError("luminance is empty: no pixel to meter")
@@ -390,7 +393,9 @@ def meter_ev(luminance, key=0.36, min_ev=-20.0, max_ev=20.0):
 
 def smoothed_ev(previous, metered, smoothing=0.5, max_step_ev=2.0):
     """The next frame's EV: previous + clip(smoothing (metered - previous), +-max_step_ev); the first
-    frame (``previous`` None) takes the metered EV."""
+    frame (``previous`` None) takes the metered EV; ValueError for a value that is no finite number."""
+    check_real("metered", metered)
+    check_real("previous", previous, optional=True)
     if previous is None:
         return float(metered)
     step = float(np.clip(smoothing * (metered - previous), -max_step_ev, max_step_ev))

@@ -76,7 +76,7 @@ from ._cache import cache_directory, source_digest, store
 from ._files import read_user_text
 from .atmosphere import AtmosphereParameters, preset
 from .ground import check_ground_mode
-from .errors import ParameterError, check_choice, check_instance, check_integer, is_finite_real
+from .errors import ParameterError, check_choice, check_flag, check_instance, check_integer, is_finite_real
 from .mapping import cos_to_v
 from .quality import QualityLevel, level_for_budget, quality_level
 from .renderer_choice import DEFAULT_PIXELS, LOOKUP_ERROR, choose_renderer, renderer_row
@@ -167,7 +167,8 @@ class Plan:
         The table to build: the level's, on the planned sun range.
     ray : TableSettings or None
         The ray march's quadrature (of the ray march, or of the sky-view map's nodes), or None when the
-        table lookup alone meets the budget.
+        table lookup alone meets the budget and no ray march was asked for (``plan_scene(...,
+        ray_march=True)`` keeps it, with ``renderer`` 'lut' still the cheapest renderer within the budget).
     decisions : tuple of (topic, decision, reason)
     renderer : str
         The cheapest renderer that meets the budget (:func:`clsky.renderer_choice.choose_renderer`), a
@@ -471,6 +472,8 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     if not isinstance(atmosphere, AtmosphereParameters):
         raise ValueError(f"atmosphere must be AtmosphereParameters or a preset name, got {atmosphere!r}")
     check_choice("mode", mode, SCATTERING_MODES)
+    _cl.check_context(ctx)
+    ray_march = ray_march is not None and check_flag("ray_march", ray_march)     # 'no' was true
     check_ground_mode(atmosphere, mode)     # before the pilot: a plan the build would refuse is no plan
     level = quality_level(scene.quality) if scene.quality else level_for_budget(scene.error_budget)
     budget = level.budget if scene.quality else scene.error_budget

@@ -39,6 +39,8 @@ import dataclasses
 
 import numpy as np
 
+from .errors import ParameterError, check_choice, check_integer, check_real
+
 __all__ = ["RendererRow", "RENDERERS", "DEFAULT_PIXELS", "LOOKUP4D_ERROR", "RAY_MARCH_ERROR", "LOOKUP_ERROR",
            "renderer_row", "choose_renderer", "error_over"]
 
@@ -157,7 +159,8 @@ def error_over(error, low, high):
 
 
 def renderer_row(method, rows=RENDERERS) -> RendererRow:
-    """The row of ``rows`` whose ``--method`` name is ``method``."""
+    """The row of ``rows`` whose ``--method`` name is ``method`` (ParameterError for a name of none)."""
+    check_choice("method", method, [row.method for row in rows])
     return next(row for row in rows if row.method == method)
 
 
@@ -167,8 +170,20 @@ def choose_renderer(sun_elevations_deg, budget, level="default", rows=RENDERERS,
     the ray march of quality level ``level`` (a name of :data:`RAY_MARCH_ERROR`); the 'raymarch' row
     when none fits. The cost of ``frames`` frames of ``pixels`` rendered pixels each
     (:meth:`RendererRow.cost_cpu_s`) decides; with ``frames=None`` (the frame count unknown) the rows
-    with a build of their own are left out (module docstring) and the cost of one frame decides."""
-    low, high = sun_elevations_deg
+    with a build of their own are left out (module docstring) and the cost of one frame decides.
+    ValueError naming an argument that is no such value: the path's elevations in [-90, 90], low <=
+    high; the budget in (0, 1]; frames and pixels at least 1 (a negative count made the dearest row
+    cheapest)."""
+    path = tuple(sun_elevations_deg) if isinstance(sun_elevations_deg, (tuple, list, np.ndarray)) else ()
+    if len(path) != 2:
+        raise ParameterError("sun_elevations_deg", "(low, high) [deg]", sun_elevations_deg)
+    low, high = (check_real(f"sun_elevations_deg[{i}]", value, -90.0, 90.0) for i, value in enumerate(path))
+    if high < low:
+        raise ParameterError("sun_elevations_deg", "(low, high) with low <= high", sun_elevations_deg)
+    check_real("budget", budget, 0.0, 1.0, low_open=True)
+    check_choice("level", level, list(RAY_MARCH_ERROR))
+    check_integer("frames", frames, 1, 10**9, optional=True)
+    check_integer("pixels", pixels, 1, 2**31 - 1)
     march = error_over(RAY_MARCH_ERROR[level], low, high)
     estimates = {row.method: error_over(row.error, low, high) + (march if row.on_ray_march else 0.0)
                  for row in rows}

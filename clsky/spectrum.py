@@ -175,6 +175,7 @@ class SpectralTable:
         from .table import ScatteringTable
 
         base = preset(atmosphere) if isinstance(atmosphere, str) else atmosphere
+        check_instance("atmosphere", base, AtmosphereParameters, "an AtmosphereParameters or a preset name")
         values = check_wavelengths(wavelengths)
         atmospheres = batch_atmospheres(base, values)
         start, cpu = time.perf_counter(), time.process_time()
@@ -265,6 +266,12 @@ class SpectralRenderer:
     def render_table(self, directions, sun_direction, altitude=0.0, valid=None):
         """Spectral radiance (..., N) by table lookup (:meth:`clsky.render.SkyRenderer.render_table`)."""
         return self._render("render_table", directions, sun_direction, altitude, valid)
+
+    def render_lut4d(self, directions, sun_direction, altitude=0.0, valid=None):
+        """Spectral radiance (..., N) by lookup in 4D tables (``parameterization='4d'``;
+        :meth:`clsky.render.SkyRenderer.render_lut4d`): a 4D SpectralTable built, but only its ray march
+        and sky-view map rendered, and render_table pointed here."""
+        return self._render("render_lut4d", directions, sun_direction, altitude, valid)
 
     def render_raymarch(self, directions, sun_direction, altitude=0.0, valid=None):
         """Spectral radiance (..., N) by ray march (:meth:`clsky.render.SkyRenderer.render_raymarch`)."""

@@ -30,7 +30,7 @@ import numpy as np
 
 from . import montecarlo
 from .atmosphere import AtmosphereParameters, preset
-from .errors import ParameterError, is_real_number
+from .errors import ParameterError, check_real, is_real_number
 from .planner import Scene, plan_scene
 from .render import SkyRenderer
 from .table import ScatteringTable
@@ -75,6 +75,8 @@ def sun_direction(elevation_deg: float) -> np.ndarray:
 
 def view_directions(views=None) -> np.ndarray:
     """(n, 3) unit view vectors of ``views`` (names of :data:`VIEWS`, all by default), sun at azimuth 0."""
+    if isinstance(views, str):                  # one name: list("zenith") was six views of one letter each
+        raise ParameterError("views", f"None or a list of names of {list(VIEWS)}", views)
     names = list(VIEWS) if views is None else list(views)
     out = np.empty((len(names), 3))
     for i, name in enumerate(names):
@@ -185,8 +187,11 @@ def ray_march(atmosphere, sun_elevation_deg, views=None, *, quality="default", s
     the higher orders (the planner's table with ``orders=1``, no gathered light), so the ray march
     returns its single scattering alone, with the same ray quadrature. ``azimuth_harmonics`` (an
     integer in [0, 64]) replaces the planned table's ``azimuth_harmonics`` (the higher orders' azimuth
-    harmonics, :mod:`clsky.azimuth`); None keeps the planner's.
+    harmonics, :mod:`clsky.azimuth`); None keeps the planner's. The views and the sun are checked before
+    the plan and the table (a bad view name came after 11 s of both).
     """
+    directions = view_directions(views)
+    check_real("sun_elevation_deg", sun_elevation_deg, -90.0, 90.0, unit=" deg")
     components = ("rayleigh", "mie") if single else ("rayleigh", "mie", "multiple")
     plan = plan_scene(Scene((sun_elevation_deg, sun_elevation_deg), components=components, quality=quality),
                       atmosphere, ctx=ctx, ray_march=True)
@@ -195,7 +200,7 @@ def ray_march(atmosphere, sun_elevation_deg, views=None, *, quality="default", s
         settings = settings.replace(azimuth_harmonics=azimuth_harmonics)
     table = ScatteringTable.build(plan.atmosphere, settings, ctx=ctx)
     with SkyRenderer(table, plan.ray, ctx=ctx) as renderer:
-        radiance = renderer.render_raymarch(view_directions(views), sun_direction(sun_elevation_deg), 0.0)
+        radiance = renderer.render_raymarch(directions, sun_direction(sun_elevation_deg), 0.0)
     return radiance / plan.atmosphere.incident_light, settings
 
 

@@ -338,3 +338,12 @@ def test_camera_from_name():
         camera_from_name("perspective", 64, 32, fov_deg=200.0)
     with pytest.raises(TypeError):
         camera_from_name("equirectangular", 64, 32, fov_deg=90.0)
+
+
+@pytest.mark.parametrize("angle", ["abc", 10**400, 1j, True])
+def test_sun_direction_refuses_what_is_no_angle(angle):
+    """A string gave NumPy's message, 10**400 an OverflowError, 1j a TypeError, and True was 1 deg."""
+    with pytest.raises(ValueError, match=r"^zenith_deg must be a real number of degrees or an array of them"):
+        sun_direction(angle, 0.0)
+    with pytest.raises(ValueError, match=r"^azimuth_deg must be a real number of degrees"):
+        sun_direction(30.0, angle)

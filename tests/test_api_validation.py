@@ -220,6 +220,17 @@ def test_fast_math_takes_only_a_bool(flag):
     (lambda: __import__("clsky.planner").planner.plan_scene("scene"), "scene must be a Scene"),
     (lambda: __import__("clsky.planner").planner.plan_scene(Scene(sun_elevations_deg=(0, 10)), mode="x"),
      "mode must be one of ['atmosphere-plus', 'physical'], got 'x'"),
+    # twilight.ray_march checked its views after 11 s of planning and building, and named Scene's field
+    (lambda: __import__("clsky.twilight").twilight.ray_march(None, -4.0, views=["zenith", "nope"]),
+     "view must be one of ['zenith', 'toward', 'across', 'away'], got 'nope'"),
+    (lambda: __import__("clsky.twilight").twilight.ray_march(None, -4.0, views="zenith"),
+     "views must be None or a list of names of"),
+    (lambda: __import__("clsky.twilight").twilight.ray_march(None, 95.0),
+     "sun_elevation_deg must be a number in [-90, 90]"),
+    (lambda: __import__("clsky.planner").planner.plan_scene(Scene(sun_elevations_deg=(40, 60)), ray_march="no"),
+     "ray_march must be True or False, got 'no' (str)"),                  # was true
+    (lambda: __import__("clsky.planner").planner.plan_scene(Scene(sun_elevations_deg=(40, 60)), ctx="gpu"),
+     "ctx must be None (clsky's device) or a pyopencl.Context"),          # was an AttributeError
 ])
 def test_more_wrong_types_are_named(call, message):
     with pytest.raises(ValueError, match=re.escape(message)):

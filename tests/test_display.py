@@ -578,3 +578,19 @@ def test_encode_and_linear_are_the_two_calls_bit_for_bit(curve, white_balance):
         encoded, linear = pipeline.encode_and_linear(frame, ev)
         assert encoded.tobytes() == pipeline.encode(frame, ev).tobytes()
         assert linear.tobytes() == pipeline.linear(frame, ev).tobytes()
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (dict(key=math.nan), r"^key must be a number in \(0, 1\], got nan"),           # returned NaN
+    (dict(key=0), r"^key must be a number in \(0, 1\], got 0"),                     # a math domain error
+    (dict(min_ev=5, max_ev=-5), r"^max_ev must be a number in \[5, 60\], got -5"),   # returned -5
+])
+def test_meter_ev_refuses_what_cannot_be_metered(arguments, message):
+    with pytest.raises(ValueError, match=message):
+        meter_ev(np.ones(4), **arguments)
+
+
+def test_smoothed_ev_refuses_a_non_finite_ev():
+    with pytest.raises(ValueError, match=r"^metered must be a finite number, got nan"):
+        smoothed_ev(0.0, math.nan)                                                   # returned NaN
+    assert smoothed_ev(None, 3.0) == 3.0 and smoothed_ev(0.0, 10.0) == 2.0           # max_step_ev 2

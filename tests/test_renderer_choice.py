@@ -186,3 +186,22 @@ def test_a_plan_of_tiny_frames_marches_every_pixel(cl_context):
     march, skyview = row("raymarch").frame_cpu_ms(tiny), row("skyview").frame_cpu_ms(tiny)
     assert reason.endswith(f"; the sky-view map's 0.86 % fits, but it costs more a frame of {tiny} pixels "
                            f"({skyview:.3g} against {march:.3g} CPU-ms, measured)")
+
+
+@pytest.mark.parametrize("arguments, message", [
+    (dict(level="bogus"), r"^level must be one of \['draft', 'default', 'high', 'reference'\], got 'bogus'"),
+    (dict(sun_elevations_deg=(math.nan, 10.0)), r"^sun_elevations_deg\[0\] must be a number in \[-90, 90\], got nan"),
+    (dict(sun_elevations_deg=(10.0, -6.0)), r"^sun_elevations_deg must be \(low, high\) with low <= high"),
+    (dict(sun_elevations_deg=5.0), r"^sun_elevations_deg must be \(low, high\) \[deg\], got 5"),
+    (dict(budget=-1), r"^budget must be a number in \(0, 1\], got -1"),
+    (dict(budget="0.1"), r"^budget must be a number in \(0, 1\]"),
+    (dict(frames=-5), r"^frames must be None or an integer in \[1, 1000000000\], got -5"),
+    (dict(pixels=-10**9), r"^pixels must be an integer in \[1, 2147483647\]"),
+])
+def test_choose_renderer_refuses_what_it_cannot_rank(arguments, message):
+    """Public and in the README: a bad level was a KeyError, a NaN sun chose the ray march with a NaN
+    estimate, a negative count of frames or pixels made the dearest row the cheapest."""
+    with pytest.raises(ValueError, match=message):
+        choose_renderer(**{"sun_elevations_deg": (0.0, 10.0), "budget": 0.01, **arguments})
+    with pytest.raises(ValueError, match=r"^method must be one of \['lut', 'skyview', 'lut4d', 'raymarch'\]"):
+        renderer_row("nope")                                         # was StopIteration

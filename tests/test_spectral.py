@@ -554,3 +554,26 @@ def test_ground_with_angstrom_matches_the_twins(cl_context):
                                          cl_table.gathered, cl_table.settings, True, cl_table.ground_irradiance)
     assert_twin(image, expected, "render_raymarch", "ray march with ground")
     assert not np.allclose(cl_table.ground_irradiance[:, 0], cl_table.ground_irradiance[:, 2])
+
+
+def test_a_4d_spectral_table_renders_by_lookup():
+    """A 4D SpectralTable built, but its renderer had no render_lut4d (render_table's refusal pointed to
+    it): each batch's 4D lookup, assembled like the other methods, is the batch SkyRenderer's bit for
+    bit, finite and >= 0."""
+    from clsky.anim.cameras import FisheyeCamera
+    from clsky.render import SkyRenderer
+
+    settings = TableSettings(size=(4, 8, 6), gather_theta_steps=8, gather_phi_steps=8, view_steps=8, sun_steps=8,
+                             transmittance_size=(8, 16), multiple_view_steps=6, mode="physical", orders=2,
+                             parameterization="4d", azimuth_size=3, azimuth_harmonics=1)
+    table = spectrum.SpectralTable.build("physical", 4, settings)
+    directions, valid = FisheyeCamera(16).directions()
+    sun = np.array([0.0, math.cos(0.1), math.sin(0.1)])
+    with spectrum.SpectralRenderer(table) as renderer:
+        frame = renderer.render_lut4d(directions, sun, 0.0, valid)
+    assert frame.shape == (16, 16, 4) and np.isfinite(frame).all() and frame.min() >= 0.0 and frame[valid].max() > 0
+    batches = []
+    for batch in table.tables:
+        with SkyRenderer(batch) as sky:
+            batches.append(sky.render_lut4d(directions, sun, 0.0, valid))
+    assert np.array_equal(frame, table.assemble(batches))
