@@ -67,7 +67,7 @@ import numpy as np
 
 import clsky
 from clsky._files import as_path, atomic_write, output_target
-from clsky.errors import require_extra, short
+from clsky.errors import check_real, require_extra, short
 
 __all__ = ["HDR_FORMATS", "PRECISIONS", "HALF_MAX", "ENVMAP_ORIENTATION", "write_exr", "read_exr", "exr_pixels",
            "save_exr", "frame_attributes", "enu_to_envmap", "envmap_pixel", "require_openexr"]
@@ -150,7 +150,8 @@ def frame_attributes(units, camera, width, height, sun_zenith_deg, sun_azimuth_d
         ``'latlong'`` (:func:`save_exr` stores it as ``OpenEXR.ENVMAP_LATLONG``), so that the
         attributes need no OpenEXR (the Radiance frames of :mod:`clsky.anim.rgbe` take them as text).
     """
-    zenith, azimuth = math.radians(sun_zenith_deg), math.radians(sun_azimuth_deg)
+    zenith = math.radians(check_real("sun_zenith_deg", sun_zenith_deg, -180.0, 180.0))    # NaN made the sun NaN
+    azimuth = math.radians(check_real("sun_azimuth_deg", sun_azimuth_deg, -360.0, 720.0))
     sun = np.array([math.sin(zenith) * math.sin(azimuth), math.sin(zenith) * math.cos(azimuth), math.cos(zenith)])
     attributes = {
         "software": f"clsky {clsky.__version__}", "clskyVersion": clsky.__version__,

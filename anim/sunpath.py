@@ -24,13 +24,17 @@ import numpy as np
 
 from clsky.errors import short
 
-from clsky.errors import check_real
+from clsky.errors import check_integer, check_real
 from .cameras import sun_direction
 
 __all__ = ["SunPosition", "sweep", "real_positions", "MAX_POSITIONS", "DELTA_T_YEARS"]
 
 #: Largest number of positions :func:`real_positions` computes in one call.
 MAX_POSITIONS = 100_000
+#: Observer altitudes above sea level real_positions takes [m] (an animation's altitude reaches 1e8 m).
+ALTITUDE_RANGE_M = (-1e4, 1e8)
+#: The largest time step [min]: the span of the years pvlib's Delta T covers (5000 years).
+MAX_STEP_MINUTES = 5000 * 366 * 24 * 60.0
 
 #: The years (UTC) :func:`real_positions` computes: where pvlib estimates Delta T = TT - UT1
 #: (``pvlib.spa.calculate_deltat``, NASA's polynomials for -1999 to 3000; outside them it warns that
@@ -102,7 +106,7 @@ def sweep(frames=120, start_elevation_deg=-6.0, max_elevation_deg=60.0, end_elev
     Parameters
     ----------
     frames : int
-        Number of positions, an integer >= 2 (default 120).
+        Number of positions, an integer in [2, :data:`MAX_POSITIONS`] (default 120).
     start_elevation_deg : float
         Elevation of the first position [deg], in [-90, 90] (default -6: civil twilight).
     max_elevation_deg : float
@@ -111,7 +115,8 @@ def sweep(frames=120, start_elevation_deg=-6.0, max_elevation_deg=60.0, end_elev
         Elevation of the last position [deg], in [-90, 90] (default None: the start elevation).
     rise_azimuth_deg, set_azimuth_deg : float
         Azimuths of the first and last positions [deg], from north clockwise (defaults 90 and 270:
-        east to west through south). Finite; set < rise sweeps counter-clockwise.
+        east to west through south). Each in [-360, 720], a camera heading's range; set < rise sweeps
+        counter-clockwise.
 
     Returns
     -------
@@ -143,9 +148,7 @@ def sweep(frames=120, start_elevation_deg=-6.0, max_elevation_deg=60.0, end_elev
     >>> [p.elevation_deg for p in path], [p.azimuth_deg for p in path]
     ([-6.0, 45.0, 0.0], [90.0, 180.0, 270.0])
     """
-    if isinstance(frames, (bool, np.bool_)) or not isinstance(frames, (int, np.integer)) \
-            or frames < 2:
-        raise ValueError(f"frames must be an integer >= 2, got {short(frames)}")
+    frames = check_integer("frames", frames, 2, MAX_POSITIONS)         # 10**400 asked NumPy for as many
     start = check_real("start_elevation_deg", start_elevation_deg, -90.0, 90.0)
     peak = check_real("max_elevation_deg", max_elevation_deg, -90.0, 90.0)
     end = start if end_elevation_deg is None else check_real("end_elevation_deg",
@@ -153,8 +156,9 @@ def sweep(frames=120, start_elevation_deg=-6.0, max_elevation_deg=60.0, end_elev
     if peak < start or peak < end:
         raise ValueError(f"max_elevation_deg must be >= start_elevation_deg ({short(start)}) and "
                          f"end_elevation_deg ({short(end)}), got {short(peak)}")
-    rise = check_real("rise_azimuth_deg", rise_azimuth_deg)
-    set_ = check_real("set_azimuth_deg", set_azimuth_deg)
+    # a camera heading's range: +-1.7e308 made set - rise infinite, and the azimuths NaN
+    rise = check_real("rise_azimuth_deg", rise_azimuth_deg, -360.0, 720.0)
+    set_ = check_real("set_azimuth_deg", set_azimuth_deg, -360.0, 720.0)
 
     s = np.arange(int(frames), dtype=np.float64) / (int(frames) - 1)
     elevation = _elevation_arc(s, start, peak, end)
@@ -188,9 +192,9 @@ def real_positions(latitude_deg, longitude_deg, start, end, step_minutes=5.0, al
         for every k with ``start + k step <= end``; ``end`` is included when it falls on a step.
         Times keep the timezone of ``start``.
     step_minutes : float
-        Time step [min], > 0 (default 5).
+        Time step [min], in (0, :data:`MAX_STEP_MINUTES`] (default 5).
     altitude_m : float
-        Observer altitude above sea level [m], finite (default 0).
+        Observer altitude above sea level [m], in :data:`ALTITUDE_RANGE_M` (default 0).
 
     Returns
     -------
@@ -234,12 +238,11 @@ def real_positions(latitude_deg, longitude_deg, start, end, step_minutes=5.0, al
     """
     latitude = check_real("latitude_deg", latitude_deg, -90.0, 90.0)
     longitude = check_real("longitude_deg", longitude_deg, -180.0, 180.0)
-    altitude = check_real("altitude_m", altitude_m)
+    altitude = check_real("altitude_m", altitude_m, *ALTITUDE_RANGE_M)           # 1e300: pvlib's OverflowError
     start = _check_aware("start", start)
     end = _check_aware("end", end)
-    step = check_real("step_minutes", step_minutes)
-    if step <= 0.0:
-        raise ValueError(f"step_minutes must be > 0, got {short(step_minutes)}")
+    # (0, the years' span]: 1e308 minutes was an infinite step in microseconds, and NaN positions
+    step = check_real("step_minutes", step_minutes, 0.0, MAX_STEP_MINUTES, low_open=True)
     # Convert to UTC before subtracting: two datetimes sharing one tzinfo object subtract as wall
     # clocks in Python, which is wrong across a daylight-saving change.
     utc = datetime.timezone.utc
@@ -257,10 +260,12 @@ def real_positions(latitude_deg, longitude_deg, start, end, step_minutes=5.0, al
                          f"end={end.isoformat()}")
     step_us = step * 60e6
     # 1e-9: a duration that is a whole number of steps up to float rounding includes end.
-    steps = math.floor(duration_us / step_us + 1e-9)
-    if steps + 1 > MAX_POSITIONS:
+    count = duration_us / step_us + 1e-9
+    if not count + 1 <= MAX_POSITIONS:              # 5e-324 minutes: an infinite count, floor's OverflowError
         raise ValueError(f"at most {MAX_POSITIONS} positions: (end - start) / step_minutes + 1 = "
-                         f"{steps + 1}; use a larger step_minutes or a shorter interval")
+                         f"{math.floor(count) + 1 if math.isfinite(count) else count}; use a larger "
+                         f"step_minutes or a shorter interval")
+    steps = math.floor(count)
 
     try:
         import pandas as pd

@@ -32,6 +32,7 @@ import csv
 import importlib
 import io
 import json
+import math
 import os
 import pathlib
 import re
@@ -279,8 +280,11 @@ def write_csv(path, rows, force=False, fieldnames=None, staging=None):
     writer = csv.DictWriter(buffer, fieldnames=list(fieldnames), lineterminator="\n")
     writer.writeheader()
     for row in rows:
-        writer.writerow({key: (value.item() if isinstance(value, np.generic) else value)
-                         for key, value in row.items()})
+        row = {key: (value.item() if isinstance(value, np.generic) else value) for key, value in row.items()}
+        for key, value in row.items():          # as write_json: no NaN or infinity in an output
+            if isinstance(value, float) and not math.isfinite(value):
+                raise ValueError(f"rows hold a value that is not finite ({key} = {value}): nothing is written")
+        writer.writerow(row)
     with atomic_write(path, overwrite=force, suffix=".csv", staging=staging) as temporary:
         temporary.write_text(buffer.getvalue(), encoding="utf-8", newline="")
     return path

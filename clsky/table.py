@@ -656,6 +656,11 @@ class ScatteringTable:
                              "(clsky/azimuth.py); the multiple_* channels above are the azimuth "
                              "average of the orders k >= 2 (harmonic 0 of their radiance)"),
             }
+        try:                        # strict JSON, before any file: a NaN in the metadata was written as NaN
+            text = json.dumps(description, indent=2, allow_nan=False) + "\n"
+        except ValueError:
+            raise ValueError("the raw export's header would hold NaN or infinite values (the table's metadata "
+                             "or orders record): its JSON is strict") from None
         with contextlib.ExitStack() as stack:
             if staging is None:
                 staging = stack.enter_context(StagedWrites())
@@ -667,7 +672,7 @@ class ScatteringTable:
                 else:
                     self.data.astype("<f4").tofile(temporary)
             with atomic_write(header, overwrite, staging=staging) as temporary:
-                temporary.write_text(json.dumps(description, indent=2) + "\n")
+                temporary.write_text(text)
         return binary, header
 
 

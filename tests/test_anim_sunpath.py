@@ -120,6 +120,9 @@ def test_sweep_other_azimuths_wrap_into_0_360():
      "max_elevation_deg"),
     (dict(rise_azimuth_deg=math.inf), "rise_azimuth_deg"),
     (dict(set_azimuth_deg=math.nan), "set_azimuth_deg"),
+    # a probe's: NumPy's "Maximum allowed size exceeded", and NaN azimuths blamed on azimuth_deg
+    (dict(frames=10**400), r"frames must be an integer in \[2, 100000\], got 1e\+400"),
+    (dict(rise_azimuth_deg=-1.7e308, set_azimuth_deg=1.7e308), r"rise_azimuth_deg must be a number in \[-360, 720\]"),
 ])
 def test_sweep_invalid_parameters(kwargs, parameter):
     with pytest.raises(ValueError, match=parameter):
@@ -245,6 +248,10 @@ def test_real_positions_invalid_parameters():
          "start must fall"),
         # 1 year at 1 s steps: refused before anything is computed.
         (dict(end=start + datetime.timedelta(days=365), step_minutes=1 / 60), str(MAX_POSITIONS)),
+        # a probe's: floor's OverflowError, NaN positions blamed on zenith_deg, pvlib's OverflowError
+        (dict(step_minutes=5e-324), str(MAX_POSITIONS)),
+        (dict(step_minutes=1e308), r"step_minutes must be a number in \(0, 2.6352e\+09\]"),
+        (dict(altitude_m=1e300), r"altitude_m must be a number in \[-10000, 1e\+08\]"),
     ]
     for overrides, parameter in cases:
         kwargs = dict(latitude_deg=48.0, longitude_deg=11.6, start=start, end=end) | overrides

@@ -192,6 +192,14 @@ def test_writers_refuse_paths_that_are_none(tmp_path, monkeypatch, path, message
     assert list(tmp_path.iterdir()) == []
 
 
+def test_write_csv_refuses_values_that_are_not_finite(tmp_path):
+    """write_csv wrote "nan" where write_json, of the same metrics, refuses it."""
+    for value in (float("nan"), np.float64(np.inf)):
+        with pytest.raises(ValueError, match=r"^rows hold a value that is not finite \(a = (nan|inf)\)"):
+            write_csv(tmp_path / "m.csv", [{"a": 1.0}, {"a": value}])
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_frame_name_that_is_a_directory_is_refused_before_the_work(tmp_path):
     """With force, a directory named as one of this run's frames failed at that frame (after the table),
     and one named as a stale frame after every new file had landed: both are refused by check()."""

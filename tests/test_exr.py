@@ -118,6 +118,14 @@ def test_existing_file_is_refused_without_force(tmp_path):
     assert_array_equal(read_exr(tmp_path / "a.exr")[0], np.ones((2, 2, 3), np.float32))
 
 
+def test_header_attributes_refuse_a_sun_that_is_no_angle():
+    """A NaN sun angle gave a sun direction of NaN in every frame's header."""
+    with pytest.raises(ValueError, match=r"^sun_zenith_deg must be a number in \[-180, 180\], got nan"):
+        frame_attributes("u", "fisheye", 4, 4, float("nan"), 0.0)
+    with pytest.raises(ValueError, match=r"^sun_azimuth_deg must be a number in \[-360, 720\]"):
+        frame_attributes("u", "fisheye", 4, 4, 30.0, 1e308)
+
+
 def test_header_attributes():
     pano = frame_attributes("linear sRGB [cd/m^2] (spectral radiance -> CIE 1931 XYZ -> sRGB)", "equirectangular",
                             64, 32, 60.0, 135.0, altitude_m=250.0)

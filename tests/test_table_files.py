@@ -390,6 +390,14 @@ def test_save_refuses_a_table_edited_in_place(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_export_raw_refuses_a_header_that_is_no_strict_json(table, tmp_path):
+    """A NaN in the table's metadata went into the raw export's header as NaN (not JSON); refused first."""
+    odd = dataclasses.replace(table, metadata={**table.metadata, "note": float("nan")})
+    with pytest.raises(ValueError, match=r"^the raw export's header would hold NaN or infinite values"):
+        odd.export_raw(tmp_path / "sky")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_build_refuses_a_table_with_nan(monkeypatch):
     """A build whose numbers went wrong (e.g. an absurd planet) raises instead of returning NaN."""
     import clsky.orders
