@@ -994,7 +994,7 @@ def check_arguments(config, ctx=None, positions=None, progress=None, report=None
     for name, function in (("progress", progress), ("report", report)):
         if function is not None and not callable(function):
             raise ParameterError(name, "None or a callable", function)
-    check_instance("farm", farm, Farm, "None or a started clsky.farm.Farm", optional=True)
+    check_instance("farm", farm, Farm, "None or a clsky.farm.Farm (started)", optional=True)
     if positions is not None:
         items = list(positions) if isinstance(positions, (list, tuple)) else None
         if not items or not all(isinstance(item, sunpath.SunPosition) for item in items):

@@ -34,7 +34,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from clsky.errors import short
+from clsky.errors import as_real_array, short
 
 from clsky.errors import check_integer, check_real
 
@@ -59,15 +59,6 @@ def _direction(zenith_rad, azimuth_rad):
     return np.stack(np.broadcast_arrays(sin_zenith * np.sin(azimuth_rad),
                                         sin_zenith * np.cos(azimuth_rad),
                                         np.cos(zenith_rad)), axis=-1)
-
-
-def _angles(name, value):
-    """``value`` as a float64 array of real numbers, ValueError naming ``name`` otherwise (a string's was
-    NumPy's message, 10**400 an OverflowError, a complex number a TypeError, a bool was taken as 1 deg)."""
-    array = np.asarray(value)
-    if array.dtype.kind not in "iuf":           # bool, str, complex, and 10**400's object array
-        raise ValueError(f"{name} must be a real number of degrees or an array of them, got {short(value)}")
-    return array.astype(np.float64)
 
 
 def sun_direction(zenith_deg, azimuth_deg):
@@ -102,8 +93,9 @@ def sun_direction(zenith_deg, azimuth_deg):
     >>> [round(float(c), 12) for c in sun_direction(60.0, 180.0)]      # 30 deg high, due south
     [0.0, -0.866025403784, 0.5]
     """
-    zenith, azimuth = (_angles(name, value) for name, value in (("zenith_deg", zenith_deg),
-                                                                 ("azimuth_deg", azimuth_deg)))
+    # a string was NumPy's message, 10**400 an OverflowError, 1j a TypeError, and True was 1 deg
+    zenith, azimuth = (as_real_array(name, value, "a real number of degrees or an array of them")
+                       for name, value in (("zenith_deg", zenith_deg), ("azimuth_deg", azimuth_deg)))
     if not np.all(np.isfinite(zenith)):
         raise ValueError(f"zenith_deg must be finite, got {short(zenith_deg)}")
     if not np.all(np.isfinite(azimuth)):

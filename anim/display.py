@@ -361,9 +361,9 @@ def meter_ev(luminance, key=0.36, min_ev=-20.0, max_ev=20.0):
     luminance : array_like
         Y of the pixels that count [frame units, >= 0].
     key : float
-        Target display-linear luminance [-].
+        Target display-linear luminance [-], in (0, 1].
     min_ev, max_ev : float
-        Clamp of the result [EV].
+        Clamp of the result [EV], each in [-60, 60], ``max_ev`` at least ``min_ev``.
 
     Returns
     -------
@@ -393,9 +393,18 @@ def meter_ev(luminance, key=0.36, min_ev=-20.0, max_ev=20.0):
 
 def smoothed_ev(previous, metered, smoothing=0.5, max_step_ev=2.0):
     """The next frame's EV: previous + clip(smoothing (metered - previous), +-max_step_ev); the first
-    frame (``previous`` None) takes the metered EV; ValueError for a value that is no finite number."""
+    frame (``previous`` None) takes the metered EV.
+
+    Raises
+    ------
+    ValueError
+        An EV that is no finite number, ``smoothing`` outside (0, 1] or ``max_step_ev`` outside (0, 40]
+        (:class:`AutoExposure`'s ranges: a NaN passed on, a negative step moved the wrong way).
+    """
     check_real("metered", metered)
     check_real("previous", previous, optional=True)
+    check_real("smoothing", smoothing, 0.0, 1.0, low_open=True)
+    check_real("max_step_ev", max_step_ev, 0.0, 40.0, low_open=True)
     if previous is None:
         return float(metered)
     step = float(np.clip(smoothing * (metered - previous), -max_step_ev, max_step_ev))

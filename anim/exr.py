@@ -67,7 +67,7 @@ import numpy as np
 
 import clsky
 from clsky._files import as_path, atomic_write, output_target
-from clsky.errors import check_real, require_extra, short
+from clsky.errors import as_real_array, check_real, require_extra, short
 
 __all__ = ["HDR_FORMATS", "PRECISIONS", "HALF_MAX", "ENVMAP_ORIENTATION", "write_exr", "read_exr", "exr_pixels",
            "save_exr", "frame_attributes", "enu_to_envmap", "envmap_pixel", "require_openexr"]
@@ -137,11 +137,17 @@ def frame_attributes(units, camera, width, height, sun_zenith_deg, sun_azimuth_d
     width, height : int
         Image size [pixels].
     sun_zenith_deg, sun_azimuth_deg : float
-        The sun's zenith angle and azimuth (from north, clockwise) [deg].
+        The sun's zenith angle in [0, 180] and azimuth (from north, clockwise; any finite) [deg].
     altitude_m : float
-        Observer altitude [m].
+        Observer altitude [m], finite and >= 0.
     wavelengths_nm : sequence of 3 float, optional
-        The wavelengths of the R, G, B channels, for frames at the table's three wavelengths.
+        The wavelengths of the R, G, B channels [nm], finite and > 0, for frames at the table's three
+        wavelengths.
+
+    Raises
+    ------
+    ValueError
+        A value out of its range (a NaN gave every header a NaN sun).
 
     Returns
     -------
@@ -150,8 +156,9 @@ def frame_attributes(units, camera, width, height, sun_zenith_deg, sun_azimuth_d
         ``'latlong'`` (:func:`save_exr` stores it as ``OpenEXR.ENVMAP_LATLONG``), so that the
         attributes need no OpenEXR (the Radiance frames of :mod:`clsky.anim.rgbe` take them as text).
     """
-    zenith = math.radians(check_real("sun_zenith_deg", sun_zenith_deg, -180.0, 180.0))    # NaN made the sun NaN
-    azimuth = math.radians(check_real("sun_azimuth_deg", sun_azimuth_deg, -360.0, 720.0))
+    zenith = math.radians(check_real("sun_zenith_deg", sun_zenith_deg, 0.0, 180.0))      # NaN made the sun NaN
+    azimuth = math.radians(check_real("sun_azimuth_deg", sun_azimuth_deg))             # any finite, as SunPosition
+    check_real("altitude_m", altitude_m, 0.0)
     sun = np.array([math.sin(zenith) * math.sin(azimuth), math.sin(zenith) * math.cos(azimuth), math.cos(zenith)])
     attributes = {
         "software": f"clsky {clsky.__version__}", "clskyVersion": clsky.__version__,
@@ -164,7 +171,10 @@ def frame_attributes(units, camera, width, height, sun_zenith_deg, sun_azimuth_d
         attributes["whiteLuminance"] = 1.0
         attributes["chromaticities"] = REC709_CHROMATICITIES
     if wavelengths_nm is not None:
-        attributes["channelWavelengthsNm"] = np.asarray(wavelengths_nm, dtype=np.float32).reshape(3)
+        wavelengths = as_real_array("wavelengths_nm", wavelengths_nm, "3 wavelengths [nm], finite and > 0")
+        if wavelengths.shape != (3,) or not (np.isfinite(wavelengths).all() and (wavelengths > 0).all()):
+            raise ValueError(f"wavelengths_nm must be 3 wavelengths [nm], finite and > 0, got {short(wavelengths_nm)}")
+        attributes["channelWavelengthsNm"] = wavelengths.astype(np.float32)
     if camera == "equirectangular":
         attributes["envmap"] = "latlong"
         attributes["envmapOrientation"] = ENVMAP_ORIENTATION
@@ -263,19 +273,23 @@ def read_exr(path):
 
     Raises
     ------
-    FileNotFoundError
-        No such file.
+    FileNotFoundError, IsADirectoryError
+        No such file, or a directory.
     ValueError
         Not a readable EXR file (the bindings' RuntimeError, named), or one without R, G, B channels.
     """
     OpenEXR = require_openexr()
     path = as_path(path)
+    if path.is_dir():
+        raise IsADirectoryError(f"{path}: a directory, not an EXR file")
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file" if not path.exists() else f"{path}: not a regular file")
     try:
         with OpenEXR.File(str(path)) as exr:
             channels, header = exr.channels(), dict(exr.header())
             pixels = channels["RGB"].pixels if "RGB" in channels else None
+    except MemoryError:
+        raise
     except Exception as error:  # noqa: BLE001  (the bindings raise RuntimeError and others for a bad file)
         raise ValueError(f"{path}: not a readable EXR file ({str(error).splitlines()[0] if str(error) else error})") \
             from None

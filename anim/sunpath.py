@@ -31,7 +31,7 @@ __all__ = ["SunPosition", "sweep", "real_positions", "MAX_POSITIONS", "DELTA_T_Y
 
 #: Largest number of positions :func:`real_positions` computes in one call.
 MAX_POSITIONS = 100_000
-#: Observer altitudes above sea level real_positions takes [m] (an animation's altitude reaches 1e8 m).
+#: Observer altitudes above sea level real_positions takes [m] (an animation's own, 0 to 1e8 m, with room below).
 ALTITUDE_RANGE_M = (-1e4, 1e8)
 #: The largest time step [min]: the span of the years pvlib's Delta T covers (5000 years).
 MAX_STEP_MINUTES = 5000 * 366 * 24 * 60.0

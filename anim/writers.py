@@ -266,7 +266,8 @@ def write_csv(path, rows, force=False, fieldnames=None, staging=None):
     Raises
     ------
     ValueError
-        No rows and no ``fieldnames``, or a row with a key not in ``fieldnames``.
+        No rows and no ``fieldnames``, a row with a key not in ``fieldnames``, or a NaN or infinite
+        value (as :func:`write_json` refuses; nothing is written).
     OSError, ValueError
         The path, checked as in :func:`write_png`.
     """

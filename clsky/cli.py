@@ -389,6 +389,12 @@ def table_settings(args, atmosphere):
         check_ground_mode(atmosphere, settings.mode, "" if getattr(args, "ground_albedo", None) is not None
                           else f"the {args.preset} preset's ground")
     except ParameterError as error:
+        if (error.field == "azimuth_harmonics" and getattr(args, "azimuth_harmonics", None) is None
+                and getattr(args, "gather_steps", None) is not None):     # the level's or planner's M: PHI is typed
+            harmonics = error.value
+            raise UsageError(f"--gather-steps PHI must be at least twice the azimuth harmonics (M = {harmonics}, "
+                             f"the --quality level's or the scene planner's), {2 * harmonics}, got "
+                             f"{args.gather_steps[1]}") from None
         raise UsageError(option_message(error, TABLE_OPTION_NAMES)) from None
     _check_table_options_used(args, settings)
     return settings

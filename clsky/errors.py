@@ -15,8 +15,8 @@ import numbers
 import numpy as np
 
 __all__ = ["ParameterError", "NumericalError", "short", "counted", "is_real_number", "is_finite_real",
-           "is_integer", "as_real_array", "check_integer", "check_real", "check_choice", "check_instance",
-           "check_flag", "require_extra"]
+           "is_integer", "as_real_array", "check_range", "check_integer", "check_real", "check_choice",
+           "check_instance", "check_flag", "require_extra"]
 
 #: Longest text of a value echoed in a message.
 _MAX_ECHO = 60
@@ -100,6 +100,19 @@ def as_real_array(name, value, valid="real numbers"):
         return array.astype(np.float64)
     except (TypeError, ValueError):
         raise ParameterError(name, valid, value) from None
+
+
+def check_range(name, value, low, high):
+    """(a, b) floats from two real numbers (NumPy's too; a tuple, list or array) with low <= a <= b <= high:
+    a range of values, such as a sun path's elevations; ParameterError naming ``name`` otherwise."""
+    valid = f"two numbers low <= high in [{low:g}, {high:g}]"
+    items = tuple(value) if isinstance(value, (tuple, list, np.ndarray)) else ()
+    if len(items) != 2 or not all(is_finite_real(v) for v in items):
+        raise ParameterError(name, valid, value)
+    a, b = (float(v) for v in items)
+    if not low <= a <= b <= high:
+        raise ParameterError(name, valid, value)
+    return a, b
 
 
 def check_integer(name, value, low, high, index=None, optional=False):

@@ -76,7 +76,7 @@ from ._cache import cache_directory, source_digest, store
 from ._files import read_user_text
 from .atmosphere import AtmosphereParameters, preset
 from .ground import check_ground_mode
-from .errors import ParameterError, check_choice, check_flag, check_instance, check_integer, is_finite_real
+from .errors import check_choice, check_flag, check_instance, check_integer, check_range
 from .mapping import cos_to_v
 from .quality import QualityLevel, level_for_budget, quality_level
 from .renderer_choice import DEFAULT_PIXELS, LOOKUP_ERROR, choose_renderer, renderer_row
@@ -87,18 +87,6 @@ __all__ = ["Scene", "Plan", "plan_scene", "sun_margins", "sun_axis", "view_sampl
 
 #: Light components a scene may want.
 COMPONENTS = ("rayleigh", "mie", "multiple")
-
-
-def _check_range(name, value, low, high):
-    """(low, high) floats from two real numbers (NumPy's too; a list or array) in order in [low, high]."""
-    valid = f"two numbers low <= high in [{low:g}, {high:g}]"
-    items = tuple(value) if isinstance(value, (tuple, list, np.ndarray)) else ()
-    if len(items) != 2 or not all(is_finite_real(v) for v in items):
-        raise ParameterError(name, valid, value)
-    a, b = (float(v) for v in items)
-    if not low <= a <= b <= high:
-        raise ParameterError(name, valid, value)
-    return a, b
 
 
 @dataclasses.dataclass(frozen=True)
@@ -134,11 +122,11 @@ class Scene:
     pixels: int = DEFAULT_PIXELS
 
     def __post_init__(self):
-        object.__setattr__(self, "sun_elevations_deg", _check_range("sun_elevations_deg", self.sun_elevations_deg,
+        object.__setattr__(self, "sun_elevations_deg", check_range("sun_elevations_deg", self.sun_elevations_deg,
                                                                     -90.0, 90.0))
-        object.__setattr__(self, "altitudes_m", _check_range("altitudes_m", self.altitudes_m, 0.0, 1e8))
+        object.__setattr__(self, "altitudes_m", check_range("altitudes_m", self.altitudes_m, 0.0, 1e8))
         object.__setattr__(self, "view_elevations_deg",
-                           _check_range("view_elevations_deg", self.view_elevations_deg, -90.0, 90.0))
+                           check_range("view_elevations_deg", self.view_elevations_deg, -90.0, 90.0))
         components = (tuple(self.components) if isinstance(self.components, (tuple, list, set, frozenset))
                       else (self.components,))
         if any(not isinstance(c, str) for c in components) or any(c not in COMPONENTS for c in components) \
@@ -235,7 +223,7 @@ def view_sampling(altitudes_m) -> tuple:
     (str, str)
         The ``TableSettings.sampling`` name and the reason, as :meth:`Plan.describe` prints it.
     """
-    low, high = _check_range("altitudes_m", altitudes_m, 0.0, 1e8)
+    low, high = check_range("altitudes_m", altitudes_m, 0.0, 1e8)
     if high > 0.0:
         return "ground_end", (f"an observer at {high:g} m: rays that hit the ground get nodes at their ground "
                               "end, where the haze is (Keller & Bohn's are 4.6 % off from 10 km, 291 % from 100 km)")
@@ -257,7 +245,7 @@ def azimuth_harmonics(level: QualityLevel, sun_elevations_deg, mode="physical") 
     sun); else ``level.twilight_harmonics`` when the lowest sun is below :data:`HARMONICS_BELOW_DEG`
     and the scheme is 'physical' (the harmonics need it); else 0, the azimuth average.
     """
-    low, _ = _check_range("sun_elevations_deg", sun_elevations_deg, -90.0, 90.0)
+    low, _ = check_range("sun_elevations_deg", sun_elevations_deg, -90.0, 90.0)
     if mode != "physical":
         return 0, f"the {mode} scheme has no azimuth harmonics"
     if level.table.azimuth_harmonics:

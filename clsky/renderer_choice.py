@@ -39,7 +39,7 @@ import dataclasses
 
 import numpy as np
 
-from .errors import ParameterError, check_choice, check_integer, check_real
+from .errors import check_choice, check_integer, check_range, check_real
 
 __all__ = ["RendererRow", "RENDERERS", "DEFAULT_PIXELS", "LOOKUP4D_ERROR", "RAY_MARCH_ERROR", "LOOKUP_ERROR",
            "renderer_row", "choose_renderer", "error_over"]
@@ -174,12 +174,7 @@ def choose_renderer(sun_elevations_deg, budget, level="default", rows=RENDERERS,
     ValueError naming an argument that is no such value: the path's elevations in [-90, 90], low <=
     high; the budget in (0, 1]; frames and pixels at least 1 (a negative count made the dearest row
     cheapest)."""
-    path = tuple(sun_elevations_deg) if isinstance(sun_elevations_deg, (tuple, list, np.ndarray)) else ()
-    if len(path) != 2:
-        raise ParameterError("sun_elevations_deg", "(low, high) [deg]", sun_elevations_deg)
-    low, high = (check_real(f"sun_elevations_deg[{i}]", value, -90.0, 90.0) for i, value in enumerate(path))
-    if high < low:
-        raise ParameterError("sun_elevations_deg", "(low, high) with low <= high", sun_elevations_deg)
+    low, high = check_range("sun_elevations_deg", sun_elevations_deg, -90.0, 90.0)
     check_real("budget", budget, 0.0, 1.0, low_open=True)
     check_choice("level", level, list(RAY_MARCH_ERROR))
     check_integer("frames", frames, 1, 10**9, optional=True)

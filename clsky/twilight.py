@@ -30,9 +30,11 @@ import numpy as np
 
 from . import montecarlo
 from .atmosphere import AtmosphereParameters, preset
-from .errors import ParameterError, check_real, is_real_number
+from .errors import ParameterError, check_integer, is_real_number
 from .planner import Scene, plan_scene
+from .quality import quality_level
 from .render import SkyRenderer
+from .settings import MAX_AZIMUTH_HARMONICS
 from .table import ScatteringTable
 
 __all__ = ["SUN_ELEVATIONS_DEG", "VIEW_ELEVATION_DEG", "VIEWS", "Pooled", "black_ground_without_ozone",
@@ -186,12 +188,16 @@ def ray_march(atmosphere, sun_elevation_deg, views=None, *, quality="default", s
     the level ``quality`` (an all-sky fisheye from the ground). ``single=True`` plans the scene without
     the higher orders (the planner's table with ``orders=1``, no gathered light), so the ray march
     returns its single scattering alone, with the same ray quadrature. ``azimuth_harmonics`` (an
-    integer in [0, 64]) replaces the planned table's ``azimuth_harmonics`` (the higher orders' azimuth
-    harmonics, :mod:`clsky.azimuth`); None keeps the planner's. The views and the sun are checked before
+    integer in [0, 64], at most half the level's gather Phi steps: 16 at 'draft') replaces the planned
+    table's ``azimuth_harmonics`` (the higher orders' azimuth harmonics, :mod:`clsky.azimuth`); None
+    keeps the planner's. The views and the sun are checked before
     the plan and the table (a bad view name came after 11 s of both).
     """
     directions = view_directions(views)
-    check_real("sun_elevation_deg", sun_elevation_deg, -90.0, 90.0, unit=" deg")
+    _check_sun(sun_elevation_deg)
+    if azimuth_harmonics is not None:            # the table's limit (TableSettings) before the plan's pilot
+        most = min(MAX_AZIMUTH_HARMONICS, quality_level(quality).table.gather_phi_steps // 2)
+        check_integer("azimuth_harmonics", azimuth_harmonics, 0, most)
     components = ("rayleigh", "mie") if single else ("rayleigh", "mie", "multiple")
     plan = plan_scene(Scene((sun_elevation_deg, sun_elevation_deg), components=components, quality=quality),
                       atmosphere, ctx=ctx, ray_march=True)

@@ -226,7 +226,9 @@ def test_fast_math_takes_only_a_bool(flag):
     (lambda: __import__("clsky.twilight").twilight.ray_march(None, -4.0, views="zenith"),
      "views must be None or a list of names of"),
     (lambda: __import__("clsky.twilight").twilight.ray_march(None, 95.0),
-     "sun_elevation_deg must be a number in [-90, 90]"),
+     "sun_elevation_deg must be a sun elevation in [-90, 90] deg, got 95"),
+    (lambda: __import__("clsky.twilight").twilight.ray_march(None, -4.0, quality="draft", azimuth_harmonics=17),
+     "azimuth_harmonics must be an integer in [0, 16], got 17"),                # after the plan's pilot
     (lambda: __import__("clsky.planner").planner.plan_scene(Scene(sun_elevations_deg=(40, 60)), ray_march="no"),
      "ray_march must be True or False, got 'no' (str)"),                  # was true
     (lambda: __import__("clsky.planner").planner.plan_scene(Scene(sun_elevations_deg=(40, 60)), ctx="gpu"),
@@ -239,7 +241,7 @@ def test_more_wrong_types_are_named(call, message):
 
 @pytest.mark.parametrize("arguments, message", [
     (dict(config={"frames": 2}), "config must be an AnimationConfig, got {'frames': 2} (dict)"),
-    (dict(farm="x"), "farm must be None or a started clsky.farm.Farm, got 'x' (str)"),
+    (dict(farm="x"), "farm must be None or a clsky.farm.Farm (started), got 'x' (str)"),
     (dict(report=5), "report must be None or a callable, got 5"),
     (dict(progress="bar"), "progress must be None or a callable, got 'bar'"),
     (dict(ctx="x"), "ctx must be None (clsky's device) or a pyopencl.Context, got 'x' (str)"),

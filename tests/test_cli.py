@@ -179,6 +179,10 @@ def test_an_output_another_run_wrote_meanwhile_is_refused_by_option(tmp_path, mo
     (["--dtype", "float16"], "--dtype"),
     (["-o", "sky.txt"], "--output"),
     (["-o", ""], "--output must be a file path, got an empty one"),      # it wrote table.npz
+    # the level's M = 2 against the PHI typed: not "--azimuth-harmonics", which was not typed
+    (["--quality", "reference", "--gather-steps", "64", "3"],
+     "--gather-steps PHI must be at least twice the azimuth harmonics (M = 2, the --quality level's or the scene "
+     "planner's), 4, got 3"),
     (["-o", "missing/sky.npz"], "directory"),
     (["--transmittance-size", "1", "8"], "--transmittance-size TW"),
     (["--quality", "best"], "--quality"),

@@ -593,4 +593,8 @@ def test_meter_ev_refuses_what_cannot_be_metered(arguments, message):
 def test_smoothed_ev_refuses_a_non_finite_ev():
     with pytest.raises(ValueError, match=r"^metered must be a finite number, got nan"):
         smoothed_ev(0.0, math.nan)                                                   # returned NaN
+    for arguments, message in ((dict(smoothing=math.nan), r"^smoothing must be a number in \(0, 1\]"),
+                               (dict(max_step_ev=-3.0), r"^max_step_ev must be a number in \(0, 40\]")):
+        with pytest.raises(ValueError, match=message):                              # NaN, or a step back
+            smoothed_ev(0.0, 1.0, **arguments)
     assert smoothed_ev(None, 3.0) == 3.0 and smoothed_ev(0.0, 10.0) == 2.0           # max_step_ev 2

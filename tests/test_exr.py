@@ -119,11 +119,17 @@ def test_existing_file_is_refused_without_force(tmp_path):
 
 
 def test_header_attributes_refuse_a_sun_that_is_no_angle():
-    """A NaN sun angle gave a sun direction of NaN in every frame's header."""
-    with pytest.raises(ValueError, match=r"^sun_zenith_deg must be a number in \[-180, 180\], got nan"):
+    """A NaN sun angle gave a sun direction of NaN in every frame's header (a NaN altitude or wavelength
+    went in as such); any finite azimuth is a SunPosition's."""
+    with pytest.raises(ValueError, match=r"^sun_zenith_deg must be a number in \[0, 180\], got nan"):
         frame_attributes("u", "fisheye", 4, 4, float("nan"), 0.0)
-    with pytest.raises(ValueError, match=r"^sun_azimuth_deg must be a number in \[-360, 720\]"):
-        frame_attributes("u", "fisheye", 4, 4, 30.0, 1e308)
+    with pytest.raises(ValueError, match=r"^sun_azimuth_deg must be a finite number, got inf"):
+        frame_attributes("u", "fisheye", 4, 4, 30.0, math.inf)
+    with pytest.raises(ValueError, match=r"^altitude_m must be a number in \[0, inf\], got nan"):
+        frame_attributes("u", "fisheye", 4, 4, 30.0, 0.0, altitude_m=math.nan)
+    with pytest.raises(ValueError, match=r"^wavelengths_nm must be 3 wavelengths \[nm\], finite and > 0"):
+        frame_attributes("u", "fisheye", 4, 4, 30.0, 0.0, wavelengths_nm=(650.0, math.nan, 475.0))
+    assert frame_attributes("u", "fisheye", 4, 4, 30.0, 800.0)["sunAzimuthDeg"] == 80.0
 
 
 def test_header_attributes():

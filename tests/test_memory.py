@@ -20,6 +20,7 @@ import pytest
 
 import clsky
 from clsky import resources
+from clsky.farm import Farm
 from clsky.resources import (Allocation, InsufficientMemoryError, MemoryEstimate, MemoryLimits, Phase, check_memory,
                              estimate_table_memory, format_bytes)
 
@@ -450,7 +451,7 @@ def test_packed_reads_count_on_the_device(monkeypatch, tmp_path):
         with pytest.raises(InsufficientMemoryError):
             animate.check_animation_memory(config, positions, device)
         with pytest.raises(InsufficientMemoryError):
-            animate.render_animation(farm_config, farm=object())          # the farm's check, before any work
+            animate.render_animation(farm_config, farm=Farm.__new__(Farm))  # the farm's check, before any work
         monkeypatch.setattr(resources, "device_of", lambda ctx, dtype: device)
         monkeypatch.setattr(resources, "check_memory", check)
         with pytest.raises(InsufficientMemoryError):
