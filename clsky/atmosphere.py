@@ -202,8 +202,8 @@ class AtmosphereParameters:
     ozone_peak_altitude, ozone_half_width : float
         The tent profile n_O3(h) = n_max max(0, 1 - |h - peak| / half_width) [m]; half_width > 0, and
         with ozone at least :data:`MIN_SCALE_HEIGHT_FRACTION` of the atmosphere's height (10 m for the
-        Earth's), as the scale heights; peak >= half_width (the tent lies above the ground, so its column is n_max
-        half_width). Ozone above the top of the atmosphere is ignored.
+        Earth's), as the scale heights; peak >= half_width (the tent lies above the ground, so its column
+        is n_max half_width). Ozone above the top of the atmosphere is ignored.
     ozone_cross_section : tuple of 3 floats
         O3 absorption cross-section sigma at the three wavelengths [m^2], >= 0; defaults to
         Serdyuchenko et al. (2014) at 650, 510, 475 nm (:func:`clsky.ozone.cross_section_serdyuchenko2014`).

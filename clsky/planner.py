@@ -123,7 +123,7 @@ class Scene:
 
     def __post_init__(self):
         object.__setattr__(self, "sun_elevations_deg", check_range("sun_elevations_deg", self.sun_elevations_deg,
-                                                                    -90.0, 90.0))
+                                                                   -90.0, 90.0))
         object.__setattr__(self, "altitudes_m", check_range("altitudes_m", self.altitudes_m, 0.0, 1e8))
         object.__setattr__(self, "view_elevations_deg",
                            check_range("view_elevations_deg", self.view_elevations_deg, -90.0, 90.0))
