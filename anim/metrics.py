@@ -28,7 +28,7 @@ import dataclasses
 import numpy as np
 
 from clsky import colorimetry
-from clsky.errors import short
+from clsky.errors import check_integer, check_real, short
 
 from .pixels import set_valid_pixels, valid_pixels
 from .tonemap import GAMMA, luminance, tone_map
@@ -409,10 +409,12 @@ def display_floor(exposure=1.0):
     Solves (1 - exp(-exposure x))^(1/2.2) = 0.5 / 255: x = -ln(1 - (0.5/255)^2.2) / exposure,
     about 1.1e-6 at exposure 1. Changes between values below it are invisible on an 8-bit display.
     """
-    exposure = float(exposure)
-    if not (np.isfinite(exposure) and exposure > 0):
-        raise ValueError(f"exposure must be finite and > 0, got {short(exposure)}")
-    return float(-np.log1p(-(0.5 / 255.0) ** GAMMA) / exposure)
+    exposure = check_real("exposure", exposure, 0.0, low_open=True)
+    with np.errstate(over="ignore"):
+        floor = float(-np.log1p(-(0.5 / 255.0) ** GAMMA) / exposure)
+    if not np.isfinite(floor):                 # 1e-320: an infinite floor, and every jump 0
+        raise ValueError(f"exposure must be large enough for a finite floor, got {short(exposure)}")
+    return floor
 
 
 def _as_frames(name, frames, valid):
@@ -462,8 +464,7 @@ def relative_jumps(means, floor):
         raise ValueError(f"means must be one value per frame, shape (N,), got {means.shape}")
     if not np.isfinite(means).all() or (means < 0).any():
         raise ValueError("means contains NaN, infinite or negative values")
-    if not floor > 0:
-        raise ValueError(f"floor must be > 0, got {short(floor)}")
+    floor = check_real("floor", floor, 0.0, low_open=True)
     jumps = np.zeros_like(means)
     jumps[1:] = np.abs(np.diff(means)) / np.maximum(np.maximum(means[1:], means[:-1]), floor)
     return jumps
@@ -551,6 +552,7 @@ def temporal_jumps(table, raymarch, valid=None, floor=None, exposure=1.0, per_pi
     >>> temporal_jumps(table, reference)["worst_frames"][0]
     5
     """
+    worst = check_integer("worst", worst, 0, 10**9)           # -1 and 2.5 were taken, None a TypeError
     table = np.asarray(table, dtype=np.float64)
     raymarch = np.asarray(raymarch, dtype=np.float64)
     if table.shape != raymarch.shape:
@@ -560,7 +562,7 @@ def temporal_jumps(table, raymarch, valid=None, floor=None, exposure=1.0, per_pi
                          f"got shape {table.shape}")
     if len(table) < 2:
         raise ValueError(f"need at least 2 frames, got {len(table)}")
-    floor = display_floor(exposure) if floor is None else float(floor)
+    floor = display_floor(exposure) if floor is None else check_real("floor", floor, 0.0, low_open=True)
     if per_pixel:
         if table.ndim != 4:
             raise ValueError("per_pixel=True needs the frames (N, H, W, 3), not per-frame means")

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from clsky.errors import short
+from clsky.errors import check_flag, check_integer, short
 
 __all__ = ["GAMMA", "REC709_LUMINANCE_WEIGHTS", "tone_map", "dither_noise", "to_uint8", "luminance"]
 
@@ -122,7 +122,8 @@ def to_uint8(display, dither=False, seed=0, noise=None):
     Raises
     ------
     ValueError
-        If ``display`` contains NaN.
+        If ``display`` contains NaN, ``dither`` is no bool, or (with ``dither``) ``seed`` is neither an
+        integer >= 0 nor a Generator.
 
     Notes
     -----
@@ -151,6 +152,8 @@ def to_uint8(display, dither=False, seed=0, noise=None):
     >>> abs(float(to_uint8(flat, dither=True).mean()) - 100.3) < 0.05
     True
     """
+    if check_flag("dither", dither) and noise is None and not isinstance(seed, np.random.Generator):
+        check_integer("seed", seed, 0, 2**63 - 1)    # 'no' dithered; NaN or -1 was NumPy's SeedSequence error
     display = np.asarray(display, dtype=np.float64)
     if np.isnan(display).any():
         raise ValueError(f"display contains NaN ({int(np.isnan(display).sum())} values)")

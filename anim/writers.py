@@ -43,7 +43,7 @@ import zlib
 import numpy as np
 
 from clsky._files import StagedWrites, as_path, atomic_write, check_output, check_output_directory, output_target
-from clsky.errors import check_flag, check_integer, check_real, require_extra
+from clsky.errors import check_flag, check_integer, check_real, require_extra, short
 
 from .exr import HDR_FORMATS
 
@@ -157,6 +157,8 @@ def encode_png(image_u8, text=None):
     height, width = image.shape[:2]
     channels = 1 if image.ndim == 2 else image.shape[2]
     chunks = [_png_chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, _PNG_COLOUR_TYPES[channels], 0, 0, 0))]
+    if text is not None and not (isinstance(text, dict) and all(isinstance(k, str) for k in text)):
+        raise ValueError(f"text must be None or a dict of PNG text chunks {{keyword: text}}, got {short(text)}")
     chunks += [_png_chunk(b"iTXt", _itxt(keyword, value)) for keyword, value in (text or {}).items()]
     rows = image.reshape(height, width * channels)
     filtered = np.empty((height, 1 + width * channels), dtype=np.uint8)
@@ -272,7 +274,11 @@ def write_csv(path, rows, force=False, fieldnames=None, staging=None):
         The path, checked as in :func:`write_png`.
     """
     path, force = output_target(path, force)
+    if isinstance(rows, (str, bytes, dict)) or not hasattr(rows, "__iter__"):
+        raise ValueError(f"rows must be a sequence of dicts, got {short(rows)}")
     rows = list(rows)
+    if not all(isinstance(row, dict) for row in rows):
+        raise ValueError("rows must be a sequence of dicts (one a line), got items that are not dicts")
     if fieldnames is None:
         if not rows:
             raise ValueError("rows is empty: give fieldnames to write a header-only CSV")

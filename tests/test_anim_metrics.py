@@ -12,6 +12,7 @@ from clsky.anim.metrics import (BLACK_FRAME_FLOOR, D65_WHITE_XYZ, INVALID_COLOUR
                           compare_frames, composite, delta_e_cie76, display_floor, display_to_lab,
                           error_image, frame_changes, frame_comparison, linear_srgb_to_xyz, mean_luminance,
                           relative_error_map, temporal_jumps, xyz_to_lab)
+from clsky.anim import metrics, tonemap
 from clsky.anim.tonemap import dither_noise, luminance, to_uint8, tone_map
 
 
@@ -397,3 +398,18 @@ def test_compare_frames_takes_the_display_values_of_whole_frames():
     assert by_frames == by_callable and by_frames["mean_delta_e"] > 0
     with pytest.raises(ValueError, match="display must be"):
         compare_frames(reference, np.abs(test), valid, display=(display(reference)[:3], display(np.abs(test))))
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: metrics.display_floor(1e-320), r"^exposure must be large enough for a finite floor"),   # inf: no jump
+    (lambda: metrics.relative_jumps([1.0, 2.0], None), r"^floor must be a number in \(0, inf\], got None"),
+    (lambda: metrics.temporal_jumps(np.ones(3), np.ones(3), worst=-1), r"^worst must be an integer in \[0, "),
+    (lambda: metrics.temporal_jumps(np.ones(3), np.ones(3), worst=2.5), r"^worst must be an integer in \[0, "),
+    (lambda: tonemap.to_uint8(np.zeros(4), dither="no"), r"^dither must be True or False, got 'no'"),   # dithered
+    (lambda: tonemap.to_uint8(np.zeros(4), dither=True, seed=-1), r"^seed must be an integer in \[0, "),
+])
+def test_metric_and_quantiser_arguments_are_refused_by_name(call, message):
+    """A probe's: an infinite floor made every jump 0, worst=-1 and 2.5 were taken, dither='no' dithered,
+    and a seed of -1 was NumPy's SeedSequence error."""
+    with pytest.raises(ValueError, match=message):
+        call()

@@ -192,6 +192,19 @@ def test_writers_refuse_paths_that_are_none(tmp_path, monkeypatch, path, message
     assert list(tmp_path.iterdir()) == []
 
 
+def test_write_png_text_and_write_csv_rows_of_the_wrong_kind_are_refused(tmp_path):
+    """A list or a string for the PNG text was an AttributeError, None or lists for the CSV rows a
+    TypeError or AttributeError."""
+    for text in (["a"], "abc", {1: "x"}):
+        with pytest.raises(ValueError, match=r"^text must be None or a dict of PNG text chunks"):
+            write_png(tmp_path / "a.png", _frame(0), text=text)
+    for rows, message in ((None, r"^rows must be a sequence of dicts, got None"),
+                          ([[1, 2]], r"^rows must be a sequence of dicts \(one a line\)")):
+        with pytest.raises(ValueError, match=message):
+            write_csv(tmp_path / "m.csv", rows)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_write_csv_refuses_values_that_are_not_finite(tmp_path):
     """write_csv wrote "nan" where write_json, of the same metrics, refuses it."""
     for value in (float("nan"), np.float64(np.inf)):
