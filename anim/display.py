@@ -503,6 +503,9 @@ class Display:
         if self.auto_exposure is None:
             return None
         rgb = self.linear_srgb(frame)
+        if valid is not None and np.shape(valid) != rgb.shape[:2]:      # NumPy's IndexError otherwise
+            raise ValueError(f"valid must be a mask of the frame's shape {rgb.shape[:2]}, got shape "
+                             f"{np.shape(valid)}")
         pixels = valid_pixels(rgb, valid) if valid is not None else rgb.reshape(-1, 3)
         a = self.auto_exposure
         return meter_ev(np.maximum(_luminance(pixels), 0.0), a.key, a.min_ev, a.max_ev) + self.exposure_ev

@@ -598,3 +598,11 @@ def test_smoothed_ev_refuses_a_non_finite_ev():
         with pytest.raises(ValueError, match=message):                              # NaN, or a step back
             smoothed_ev(0.0, 1.0, **arguments)
     assert smoothed_ev(None, 3.0) == 3.0 and smoothed_ev(0.0, 10.0) == 2.0           # max_step_ev 2
+
+
+def test_metered_ev_refuses_a_mask_of_another_shape():
+    """A mask of another shape than the frame's was NumPy's IndexError."""
+    display = Display(auto_exposure=AutoExposure())
+    with pytest.raises(ValueError, match=r"^valid must be a mask of the frame's shape \(4, 4\), got shape \(3, 3\)"):
+        display.metered_ev(np.ones((4, 4, 3)), np.ones((3, 3), dtype=bool))
+    assert math.isfinite(display.metered_ev(np.ones((4, 4, 3)), np.ones((4, 4), dtype=bool)))
