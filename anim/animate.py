@@ -50,7 +50,7 @@ from clsky.resources import InsufficientMemoryError, MemoryEstimate, check_memor
 from . import display as display_pipeline
 from . import pipeline as pipeline_module
 from . import metrics, sunpath, tonemap, writers
-from .cameras import FOV_RANGE_DEG, camera_from_name
+from .cameras import AZIMUTH_RANGE_DEG, FOV_RANGE_DEG, camera_from_name
 from .exr import PRECISIONS
 
 __all__ = ["AnimationConfig", "AnimationResult", "METHODS", "LOOKUP_NAMES", "lookup_of", "comparison", "quality",
@@ -424,7 +424,7 @@ def _check_table_size(value):
 _FIELD_CHECKS = {
     "frames": _integer(2, 100_000), "size": _integer(16, 8192),
     "camera": _choice(("fisheye", "perspective", "equirectangular")),
-    "fov_deg": _real(*FOV_RANGE_DEG, " degrees"), "heading_deg": _real(-360.0, 720.0, " degrees", optional=True),
+    "fov_deg": _real(*FOV_RANGE_DEG, " degrees"), "heading_deg": _real(*AZIMUTH_RANGE_DEG, " degrees", optional=True),
     "pitch_deg": _real(-90.0, 90.0, " degrees"), "altitude": _real(0.0, 1e8, " m"), "method": _choice(METHODS),
     "skyview_size": lambda name, value: None if value is None else skyview.check_size(name, value),
     "preset": _choice(tuple(sorted(clsky.PRESETS))), "mode": _choice(("atmosphere-plus", "physical")),

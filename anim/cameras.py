@@ -223,6 +223,9 @@ class FisheyeCamera(Camera):
 #: tens of arcseconds; at 5e-324 the focal length divided by zero, and below about 1e-150 the directions
 #: overflowed) to 179.
 FOV_RANGE_DEG = (1e-3, 179.0)
+#: A heading or a sun's azimuth as typed [deg, clockwise from north]: a turn either way of the usual
+#: [0, 360) (1e308 deg was taken and kept no precision in radians).
+AZIMUTH_RANGE_DEG = (-360.0, 720.0)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -331,7 +331,7 @@ def run_render(args):
     from . import scene, writers
     from .animate import (LOOKUP_NAMES, comparison, display, display_frames, lookup_of, make_renderer,
                           planned_animation, render_frame)
-    from .cameras import sun_direction
+    from .cameras import AZIMUTH_RANGE_DEG, sun_direction
     from .sunpath import SunPosition
 
     scene.apply_scene(args, args.scene_parser)
@@ -342,9 +342,10 @@ def run_render(args):
     if not -90.0 <= args.sun_elevation <= 90.0:
         raise clsky_cli.UsageError(f"{name('sun_elevation_deg', '--sun-elevation')} must be in [-90, 90] degrees, "
                                    f"got {short(args.sun_elevation)}")
-    if not -360.0 <= args.sun_azimuth <= 720.0:          # --heading's range: 1e308 deg kept no precision
-        raise clsky_cli.UsageError(f"{name('sun_azimuth_deg', '--sun-azimuth')} must be in [-360, 720] degrees, "
-                                   f"got {short(args.sun_azimuth)}")
+    low, high = AZIMUTH_RANGE_DEG                       # --heading's range
+    if not low <= args.sun_azimuth <= high:
+        raise clsky_cli.UsageError(f"{name('sun_azimuth_deg', '--sun-azimuth')} must be in [{low:g}, {high:g}] "
+                                   f"degrees, got {short(args.sun_azimuth)}")
     try:
         output = check_suffix(args.output, ".png", name("output", "--output"))
     except ValueError as error:

@@ -38,7 +38,7 @@ import sys
 
 import clsky
 from clsky._files import as_path, read_user_text
-from clsky.errors import short
+from clsky.errors import is_finite_real, is_integer, short
 from clsky.cli import UsageError
 
 if sys.version_info >= (3, 11):
@@ -166,7 +166,7 @@ def field_options(parser):
 def _type_error(path, key, action, value):
     """None, or what ``value`` of TOML should have been for the option ``action`` of ``key``."""
     def is_number(v):          # TOML integers have any size: one beyond float's range is no number here
-        return isinstance(v, float) or (isinstance(v, int) and not isinstance(v, bool) and _fits_float(v))
+        return isinstance(v, float) or (is_integer(v) and is_finite_real(v))
 
     if _is_flag(action):
         return None if isinstance(value, bool) else "true or false"
@@ -188,18 +188,10 @@ def _type_error(path, key, action, value):
     return None if isinstance(value, str) else "a string"
 
 
-def _fits_float(value: int) -> bool:
-    try:
-        float(value)
-    except OverflowError:
-        return False
-    return True
-
-
 def _beyond_float(value):
     """' (...)' where ``value`` (a number or a list) holds an integer too large for a float, else ''."""
     numbers = value if isinstance(value, list) else [value]
-    if any(isinstance(v, int) and not isinstance(v, bool) and not _fits_float(v) for v in numbers):
+    if any(is_integer(v) and not is_finite_real(v) for v in numbers):
         return " (of at most about 1.8e308 in size)"
     return ""
 

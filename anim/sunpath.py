@@ -25,7 +25,7 @@ import numpy as np
 from clsky.errors import short
 
 from clsky.errors import check_integer, check_real
-from .cameras import sun_direction
+from .cameras import AZIMUTH_RANGE_DEG, sun_direction
 
 __all__ = ["SunPosition", "sweep", "real_positions", "MAX_POSITIONS", "DELTA_T_YEARS"]
 
@@ -157,8 +157,8 @@ def sweep(frames=120, start_elevation_deg=-6.0, max_elevation_deg=60.0, end_elev
         raise ValueError(f"max_elevation_deg must be >= start_elevation_deg ({short(start)}) and "
                          f"end_elevation_deg ({short(end)}), got {short(peak)}")
     # a camera heading's range: +-1.7e308 made set - rise infinite, and the azimuths NaN
-    rise = check_real("rise_azimuth_deg", rise_azimuth_deg, -360.0, 720.0)
-    set_ = check_real("set_azimuth_deg", set_azimuth_deg, -360.0, 720.0)
+    rise = check_real("rise_azimuth_deg", rise_azimuth_deg, *AZIMUTH_RANGE_DEG)
+    set_ = check_real("set_azimuth_deg", set_azimuth_deg, *AZIMUTH_RANGE_DEG)
 
     s = np.arange(int(frames), dtype=np.float64) / (int(frames) - 1)
     elevation = _elevation_arc(s, start, peak, end)

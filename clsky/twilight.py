@@ -30,11 +30,10 @@ import numpy as np
 
 from . import montecarlo
 from .atmosphere import AtmosphereParameters, preset
-from .errors import ParameterError, check_integer, is_real_number
+from .errors import ParameterError, is_real_number
 from .planner import Scene, plan_scene
 from .quality import quality_level
 from .render import SkyRenderer
-from .settings import MAX_AZIMUTH_HARMONICS
 from .table import ScatteringTable
 
 __all__ = ["SUN_ELEVATIONS_DEG", "VIEW_ELEVATION_DEG", "VIEWS", "Pooled", "black_ground_without_ozone",
@@ -195,9 +194,8 @@ def ray_march(atmosphere, sun_elevation_deg, views=None, *, quality="default", s
     """
     directions = view_directions(views)
     _check_sun(sun_elevation_deg)
-    if azimuth_harmonics is not None:            # the table's limit (TableSettings) before the plan's pilot
-        most = min(MAX_AZIMUTH_HARMONICS, quality_level(quality).table.gather_phi_steps // 2)
-        check_integer("azimuth_harmonics", azimuth_harmonics, 0, most)
+    if azimuth_harmonics is not None:            # TableSettings' own check of them, before the plan's pilot
+        quality_level(quality).table.replace(mode="physical", azimuth_harmonics=azimuth_harmonics)
     components = ("rayleigh", "mie") if single else ("rayleigh", "mie", "multiple")
     plan = plan_scene(Scene((sun_elevation_deg, sun_elevation_deg), components=components, quality=quality),
                       atmosphere, ctx=ctx, ray_march=True)

@@ -228,7 +228,8 @@ def test_fast_math_takes_only_a_bool(flag):
     (lambda: __import__("clsky.twilight").twilight.ray_march(None, 95.0),
      "sun_elevation_deg must be a sun elevation in [-90, 90] deg, got 95"),
     (lambda: __import__("clsky.twilight").twilight.ray_march(None, -4.0, quality="draft", azimuth_harmonics=17),
-     "azimuth_harmonics must be an integer in [0, 16], got 17"),                # after the plan's pilot
+     "azimuth_harmonics must be at most gather_phi_steps / 2 = 16 (each harmonic sampled twice a period by the "
+     "gather), got 17"),                # after the plan's pilot
     (lambda: __import__("clsky.planner").planner.plan_scene(Scene(sun_elevations_deg=(40, 60)), ray_march="no"),
      "ray_march must be True or False, got 'no' (str)"),                  # was true
     (lambda: __import__("clsky.planner").planner.plan_scene(Scene(sun_elevations_deg=(40, 60)), ctx="gpu"),
