@@ -47,6 +47,11 @@ RELATIVE_FLOOR_FRACTION = 1e-3
 #: and large enough that |Y_test - Y_ref| / floor stays finite in float64.
 BLACK_FRAME_FLOOR = 1e-30
 
+#: Largest HDR value [HDR units] a compared frame may hold: squares and sums of a frame's values stay
+#: finite in float64 up to about 1e154 a value; 1e100 leaves room for any pixel count and is far above
+#: any sky (the sun's disc is about 1.6e9 cd/m^2). Beyond it the metrics were NaN (an RMSE of inf / inf).
+MAX_HDR_VALUE = 1e100
+
 
 # Colour science -------------------------------------------------------------------------------------
 
@@ -173,7 +178,8 @@ def _check_valid(valid, shape):
 
 
 def _checked_values(name, frames, valid):
-    """``frames`` (..., H, W, 3) with its valid pixels checked (finite, >= 0), invalid ones zeroed.
+    """``frames`` (..., H, W, 3) with its valid pixels checked (finite, >= 0, at most
+    :data:`MAX_HDR_VALUE`), invalid ones zeroed.
 
     Invalid pixels may hold anything (NaN outside a fisheye circle, say): they never count.
     """
@@ -187,6 +193,9 @@ def _checked_values(name, frames, valid):
                          f"on valid pixels")
     if low < 0:
         raise ValueError(f"{name} contains negative values on valid pixels (minimum {low:.6g})")
+    if high > MAX_HDR_VALUE:
+        raise ValueError(f"{name} contains values above {MAX_HDR_VALUE:g} on valid pixels (maximum {high:.6g}): "
+                         f"their squares overflow the metrics")
     return checked
 
 

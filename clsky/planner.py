@@ -430,6 +430,19 @@ def _percent(fraction) -> str:
     return f"{100 * fraction:.0f}" if fraction >= 10.0 else f"{100 * fraction:.3g}"
 
 
+def _at_lowest_sun(low) -> str:
+    """'at the lowest sun, ``low`` deg' for a plan's reasons, saying so where the table lookup's error was not
+    measured that low or that high (:data:`clsky.renderer_choice.LOOKUP_ERROR`: the estimate then is the
+    nearest measured sun's, :func:`clsky.renderer_choice.error_over`)."""
+    measured = [elevation for elevation, _ in LOOKUP_ERROR]
+    beyond = ""
+    if low < min(measured):
+        beyond = f" (as measured at {min(measured):g} deg, the lowest measured)"
+    elif low > max(measured):
+        beyond = f" (as measured at {max(measured):g} deg, the highest measured)"
+    return f"at the lowest sun, {low:g} deg{beyond}"
+
+
 def _costlier(method, chosen, pixels) -> str:
     """Why the plan passed over the renderer ``method`` for ``chosen`` (a
     :class:`clsky.renderer_choice.RendererRow`) although both fit the budget: their measured costs a frame
@@ -489,13 +502,13 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     ray = level.ray
     if chosen.method == "lut" and ray_march:
         decisions.append(("renderer", march,
-                          f"asked for; the table lookup alone would do: {_percent(lookup_error)} % at the lowest sun"))
+                          f"asked for; the table lookup alone would do: {_percent(lookup_error)} % {_at_lowest_sun(low)}"))
     elif chosen.method == "lut":
         ray = None
-        decisions.append(("renderer", "table lookup", f"its error at the lowest sun, "
-                          f"{low:g} deg, is {_percent(lookup_error)} % (measured)"))
+        decisions.append(("renderer", "table lookup", f"its error {_at_lowest_sun(low)}, is "
+                          f"{_percent(lookup_error)} % (measured)"))
     elif chosen.method == "raymarch":
-        reason = f"the table lookup's {_percent(lookup_error)} % at the lowest sun, {low:g} deg, exceeds the budget"
+        reason = f"the table lookup's {_percent(lookup_error)} % {_at_lowest_sun(low)}, exceeds the budget"
         if estimates["skyview"] <= budget:              # tiny frames: marching every pixel costs less than the map
             reason += (f"; the sky-view map's {100 * estimates['skyview']:.2g} % fits, but "
                        + _costlier("skyview", chosen, scene.pixels))
@@ -504,8 +517,8 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         would = (f"the {chosen.description}'s {100 * estimate:.2g} % (estimated: the ray march's + its own, "
                  f"measured) fits; " + ("so does the table lookup, but " + _costlier("lut", chosen, scene.pixels)
                                         if lookup_error <= budget else
-                                        f"the table lookup's {_percent(lookup_error)} % at the lowest sun, {low:g} "
-                                        f"deg, exceeds the budget"))
+                                        f"the table lookup's {_percent(lookup_error)} % {_at_lowest_sun(low)}, "
+                                        f"exceeds the budget"))
         decisions.append(("renderer", march, f"asked for; {would}") if ray_march
                          else ("renderer", f"{chosen.description} (--method {chosen.method}), {march} at its nodes",
                                would))
@@ -537,7 +550,7 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     w_low, w_high = table.sun_w_range
     decisions.append(("sun axis", f"elevations {elevations[0]:.1f} to {elevations[1]:.1f} deg, "
                       f"{table.size[2]} nodes ({100 * (w_high - w_low):.2g} % of the axis)",
-                      f"the path's {scene.sun_elevations_deg[0]:.1f} to {scene.sun_elevations_deg[1]:.1f} deg "
+                      f"the path's {scene.sun_elevations_deg[0]:g} to {scene.sun_elevations_deg[1]:g} deg "
                       f"+ {margins[1]:.1f} deg above and {margins[0]:.1f} deg below for curvature and orders"))
     whole_because = {"altitude": "view rays cross every altitude", "view": "the gather integrates every direction"}
     if table.orders == 1:

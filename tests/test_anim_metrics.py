@@ -230,7 +230,9 @@ def test_compare_frames_rejects_bad_input():
 @pytest.mark.parametrize("value, message", [(np.nan, "test contains 1 NaN or infinite values on valid pixels"),
                                             (np.inf, "test contains 1 NaN or infinite values on valid pixels"),
                                             (-np.inf, "test contains 1 NaN or infinite values on valid pixels"),
-                                            (-0.25, r"test contains negative values on valid pixels \(minimum -0.25\)")])
+                                            (-0.25, r"test contains negative values on valid pixels \(minimum -0.25\)"),
+                                            (1e308, r"test contains values above 1e\+100 on valid pixels \(maximum "
+                                                    r"1e\+308\): their squares overflow the metrics")])
 def test_bad_values_count_on_valid_pixels_only(value, message):
     """One bad value on a valid pixel is refused with its count or the minimum; the same value on an
     invalid pixel (outside the image circle) is zeroed and never counts."""
@@ -244,6 +246,21 @@ def test_bad_values_count_on_valid_pixels_only(value, message):
     outside = frame.copy()
     outside[0, 0, 1] = value
     assert compare_frames(frame, outside, valid=valid)["p95_rel"] == compare_frames(frame, frame, valid=valid)["p95_rel"]
+
+
+def test_largest_allowed_values_give_finite_metrics():
+    """Frames at MAX_HDR_VALUE (1e100) everywhere give finite metrics, equal to those of the same frames
+    scaled to 1 where the metrics are scale-free; at 1e308 the RMSE was NaN (inf / inf) before the limit."""
+    from clsky.anim.metrics import MAX_HDR_VALUE
+
+    reference, test = _sky(), _sky() * 1.1
+    scale = MAX_HDR_VALUE / max(reference.max(), test.max())
+    big = compare_frames(reference * scale, test * scale)
+    small = compare_frames(reference, test)
+    assert all(np.isfinite(value) for value in big.values() if isinstance(value, float))
+    for name in ("rmse_relative", "median_rel", "p95_rel", "max_rel"):
+        # each a ratio of sums or of values that the scale multiplies alike: equal to rounding (1e-12)
+        assert big[name] == pytest.approx(small[name], rel=1e-12)
 
 
 # Colour science -------------------------------------------------------------------------------------

@@ -139,6 +139,20 @@ def test_the_default_animation_plan(cl_context):
         assert f"  {topic} " in text
 
 
+@pytest.mark.parametrize("path, lookup, sun_path", [
+    ((-6.0, 60.0), "at the lowest sun, -6 deg (as measured at -4 deg, the lowest measured)", "the path's -6 to 60 deg"),
+    ((89.99, 90.0), "at the lowest sun, 89.99 deg (as measured at 45 deg, the highest measured)",
+     "the path's 89.99 to 90 deg"),
+    ((8.0, 30.0), "at the lowest sun, 8 deg,", "the path's 8 to 30 deg")])
+def test_the_plan_names_the_sun_path_as_given_and_where_the_lookup_error_was_measured(cl_context, path, lookup,
+                                                                                      sun_path):
+    """Plan.describe() printed a path of 89.99 to 90 deg as '90.0 to 90.0', and quoted the lookup's error at -4
+    deg, the lowest measured (LOOKUP_ERROR), as that of a lower sun: now the path as given, and where the
+    estimate comes from when the sun is beyond the measured elevations."""
+    text = plan_scene(Scene(path), ctx=cl_context).describe()
+    assert lookup in text and sun_path in text
+
+
 def test_a_day_scene_with_a_loose_budget_needs_the_lookup_only(cl_context):
     plan = plan_scene(Scene((20.0, 60.0), error_budget=0.1), ctx=cl_context)
     assert plan.level.name == "draft" and plan.ray is None
