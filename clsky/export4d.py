@@ -69,10 +69,10 @@ def export_texture(table, path, overwrite=False, staging=None):
         raise ValueError("export_texture needs a 4D table (parameterization '4d'); export_raw writes a 3D one")
     overwrite = check_flag("overwrite", overwrite)
     table.validate()
-    volumes = texture_volumes(table.data)
     binary, header = binary_and_header(path)
-    for target in (binary, header):
+    for target in (binary, header):      # before the volumes: two copies of the table (400 MB for 16 x 128 x 128 x 16)
         check_output(target, force=overwrite)
+    volumes = texture_volumes(table.data)
     with contextlib.ExitStack() as stack:
         if staging is None:
             staging = stack.enter_context(StagedWrites())

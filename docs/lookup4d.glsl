@@ -95,7 +95,12 @@ vec3 radiance4d(sampler3D t0, sampler3D t1, sampler3D t2, vec4 size, int mapping
     }
     float f_r = modified_rayleigh == 1 ? 0.8 * (1.4 + 0.5 * c * c) : 0.75 * (1.0 + c * c);
     float g2 = mie_g * mie_g;
-    float base = 1.0 + g2 + 2.0 * mie_g * c;
+    // the base 1 + g^2 + 2gc is at least (1 - |g|)^2, but formed from terms of size ~2 it rounds to 0 or below
+    // in float32 for |g| near 1 (an infinity or a NaN at the peak): below half its least value it is rounding
+    // noise and replaced by the least value (as clsky's kernels/phase.cl)
+    float least = min((1.0 - mie_g) * (1.0 - mie_g), (1.0 + mie_g) * (1.0 + mie_g));
+    float formed = 1.0 + g2 + 2.0 * mie_g * c;
+    float base = formed < 0.5 * least ? least : formed;
     float f_m = 1.5 * (1.0 - g2) / (2.0 + g2) * (1.0 + c * c) / (base * sqrt(base));
     return incident_light * vec3(f_r * ibar0.x + f_m * ibar0.w + ibar1.z,
                                  f_r * ibar0.y + f_m * ibar1.x + ibar1.w,
