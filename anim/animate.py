@@ -192,7 +192,8 @@ class AnimationConfig:
         None (default): the table's three wavelengths; for the atmosphere-plus preset in the notes'
         relative units (I_I), shown as r, g, b; for any other preset lit by the solar spectrum
         (absolute units) and converted to CIE XYZ -> linear sRGB [cd/m^2]
-        (:func:`three_wavelength_frame_to_linear_srgb`). An integer N in [3, 47]: N wavelengths in
+        (:func:`three_wavelength_frame_to_linear_srgb`). An integer N in [12, 47]
+        (:data:`clsky.spectrum.MIN_COLOUR_WAVELENGTHS`: fewer integrate to wrong colours): N wavelengths in
         absolute units (:mod:`clsky.spectrum`: batches of three, lit by the solar spectrum), each
         frame converted spectral -> CIE XYZ -> linear sRGB [cd/m^2] (:func:`spectral_frame_to_linear_srgb`).
         Absolute frames are thousands of times brighter than the notes' relative ones by day: hence
@@ -440,7 +441,7 @@ _FIELD_CHECKS = {
     "auto_exposure": _optional_flag, "white_balance": _choice(display_pipeline.WHITE_BALANCES, optional=True),
     "dither": check_flag, "output": _output, "hdr": _hdr, "hdr_precision": _choice(tuple(PRECISIONS)),
     "force": check_flag,
-    "wavelengths": _integer(spectrum.MIN_WAVELENGTHS, spectrum.MAX_WAVELENGTHS, optional=True),
+    "wavelengths": _integer(spectrum.MIN_COLOUR_WAVELENGTHS, spectrum.MAX_WAVELENGTHS, optional=True),
 }
 
 

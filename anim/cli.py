@@ -65,8 +65,8 @@ def _add_scene_arguments(parser, frames=True):
                           "ground_end above the ground, keller_bohn on it)")
     _add_display_arguments(parser)
     sky.add_argument("--wavelengths", type=int, metavar="N",
-                     help="N wavelengths in [3, 47] in absolute units, frames converted spectral -> XYZ -> "
-                          "linear sRGB [cd/m^2] (default: the table's three, converted the same way in cd/m^2; "
+                     help="N wavelengths in [12, 47] (fewer integrate to wrong colours) in absolute units, "
+                          "frames converted spectral -> XYZ -> linear sRGB [cd/m^2] (default: the table's three, converted the same way in cd/m^2; "
                           "shown as r, g, b in the notes' units for --preset atmosphere-plus)")
     if frames:
         sun = parser.add_argument_group("sun path")

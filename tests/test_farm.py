@@ -144,11 +144,11 @@ def test_the_plans_sky_view_lookup_on_the_farm_is_bit_for_bit(farm, tmp_path):
     assert rows.count("sky-view map") == 2
 
 
-@pytest.mark.slow        # 15 s at load average 13: two spectral tables of two batches, and their frames
+@pytest.mark.slow        # 15 s at load average 13 with 6 wavelengths: two spectral tables of four batches now
 def test_spectral_frames_on_the_farm_are_bit_for_bit(farm, tmp_path):
     """With --wavelengths the payload is one table file per batch of three (anim/farm.py), reassembled
     into the SpectralTable on each worker: the frames are still the single-process run's."""
-    assert_two_frames_match(dict(TINY, frames=2, size=16, hdr=None, wavelengths=6), farm, tmp_path)
+    assert_two_frames_match(dict(TINY, frames=2, size=16, hdr=None, wavelengths=12), farm, tmp_path)
 
 
 def test_a_worker_killed_mid_run_costs_only_its_frames(farm, single_run, tmp_path):

@@ -59,7 +59,7 @@ def one_line_error(status, err):
 EVERY_OPTION = ["--camera", "perspective", "--size", "20", "--fov", "60", "--heading", "200", "--pitch", "5",
                 "--altitude", "100", "--method", "raymarch", "--preset", "physical", "--mode", "physical",
                 "--ground-albedo", "0.3", "--ozone-column", "250", "--error-budget", "0.05", "--quality", "draft",
-                "--table-size", "8", "32", "8", "--samples", "20", "--sampling", "ground_end", "--wavelengths", "6",
+                "--table-size", "8", "32", "8", "--samples", "20", "--sampling", "ground_end", "--wavelengths", "12",
                 "--location", "48.1", "11.6", "--date", "2026-06-21", "--hours", "2.5", "4.5",
                 "--step-minutes", "30", "--frames", "7", "--start-elevation", "-4", "--max-elevation", "50",
                 "--tone-map", "atmosphere-plus", "--exposure", "1.5", "--auto-exposure", "--white-balance", "sun",
@@ -99,7 +99,7 @@ def test_print_scene_round_trip(tmp_path, capsys, monkeypatch):
                                "pitch_deg": 5.0, "altitude": 100.0, "method": "raymarch"}
     assert scene["sky"] == {"preset": "physical", "mode": "physical", "ground_albedo": 0.3, "ozone_column_du": 250.0,
                             "error_budget": 0.05, "quality": "draft", "table_size": [8, 32, 8], "samples": 20,
-                            "sampling": "ground_end", "wavelengths": 6}
+                            "sampling": "ground_end", "wavelengths": 12}
     assert scene["sun"] == {"frames": 7, "start_elevation_deg": -4.0, "max_elevation_deg": 50.0,
                             "location": [48.1, 11.6], "date": datetime.date(2026, 6, 21), "start_hour": 2.5,
                             "end_hour": 4.5, "step_minutes": 30.0}

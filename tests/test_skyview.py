@@ -329,24 +329,24 @@ def test_an_animations_batched_maps_give_each_frame_its_own(cl_context, monkeypa
 
 def test_spectral_renderer_reads_one_map_per_batch(cl_context):
     """SpectralRenderer.render_skyview: each batch's SkyRenderer.render_skyview with the same settings,
-    assembled (6 wavelengths: two batches of three); a spectral animation's frames (frames_rendered) are
+    assembled (12 wavelengths, the least an animation takes: four batches of three); a spectral animation's frames (frames_rendered) are
     those, and a map computed elsewhere is refused (sky_map)."""
     from clsky.spectrum import SpectralRenderer, SpectralTable
 
-    table = SpectralTable.build("physical", 6, SMALL.replace(size=(8, 32, 8)), ctx=cl_context, keep_orders=False)
+    table = SpectralTable.build("physical", 12, SMALL.replace(size=(8, 32, 8)), ctx=cl_context, keep_orders=False)
     with SpectralRenderer(table, RAY, ctx=cl_context) as spectral:
         directions, valid = FisheyeCamera(16).directions()
         sun = sun_direction(70.0, 40.0)
         settings = skyview.SkyViewSettings((8, 12))
         actual = spectral.render_skyview(spectral.prepare(directions, valid), sun, 0.0, settings=settings)
         batches = [r.render_skyview(directions, sun, 0.0, valid, settings=settings) for r in spectral.renderers]
-        assert actual.shape == (16, 16, 6)
+        assert actual.shape == (16, 16, 12)
         assert_array_equal(actual, np.concatenate(batches, axis=-1))
         assert actual[valid].min() > 0.0
         # a spectral animation's frames (frames_rendered: no batched maps for a spectral renderer)
         from clsky.anim import animate
 
-        config = animate.AnimationConfig(method="skyview", skyview_size=(8, 12), wavelengths=6, frames=2)
+        config = animate.AnimationConfig(method="skyview", skyview_size=(8, 12), wavelengths=12, frames=2)
         positions = [animate.sunpath.SunPosition(20.0, 40.0), animate.sunpath.SunPosition(30.0, 40.0)]
         prepared = spectral.prepare(directions, valid)
         render = animate.frames_rendered(spectral, prepared, config, "skyview", positions)

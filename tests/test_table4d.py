@@ -326,7 +326,7 @@ def test_animation_4d_methods():
     _, settings = _base(config, None)
     assert settings.is_4d and settings.size == (16, 128, 20) and settings.azimuth_harmonics == LUT4D_HARMONICS
     assert not AnimationConfig(method="lut").lookup4d and not AnimationConfig(method="lut4d").compares
-    for bad in (dict(mode="atmosphere-plus", preset="atmosphere-plus"), dict(wavelengths=6)):
+    for bad in (dict(mode="atmosphere-plus", preset="atmosphere-plus"), dict(wavelengths=12)):
         with pytest.raises(ParameterError) as error:
             AnimationConfig(method="lut4d", **bad)
         assert error.value.field == "method"
