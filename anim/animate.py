@@ -293,6 +293,12 @@ class AnimationConfig:
         if self.lookup4d and (self.mode != "physical" or self.wavelengths is not None):
             raise ParameterError("method", "'compare', 'lut', 'raymarch' or 'skyview' with mode 'atmosphere-plus' or "
                                  "wavelengths (the 4D table needs mode 'physical' and three wavelengths)", self.method)
+        if self.lookup4d and self.table_size is not None:     # a grid asked for is built as asked, or refused
+            width, height, _ = self.table_size
+            if width > LUT4D_MAX_SIZE[0] or height > LUT4D_MAX_SIZE[1] or height % 2 or height < 4:
+                raise ParameterError("table_size", f"W <= {LUT4D_MAX_SIZE[0]} altitude nodes and an even number H in "
+                                                   f"[4, {LUT4D_MAX_SIZE[1]}] of view nodes with method "
+                                                   f"{self.method!r} (the 4D table)", self.table_size)
         if self.tone_map is None:
             object.__setattr__(self, "tone_map", "atmosphere-plus" if self.preset == "atmosphere-plus"
                                else display_pipeline.DEFAULT_TONE_MAP)
@@ -601,7 +607,8 @@ def _base(config: AnimationConfig, plan: Plan | None):
 def _with_lookup(settings: clsky.TableSettings, config: AnimationConfig) -> clsky.TableSettings:
     """``settings`` as the 4D table for the 4D methods (:data:`LUT4D_HARMONICS` azimuth harmonics when
     the level has none; at most :data:`LUT4D_MAX_SIZE` altitude and view nodes, an even number of the
-    latter), else unchanged. The table's higher orders are computed on that grid too."""
+    latter: a plan's grid reduced to that, a ``table_size`` already within it, AnimationConfig refusing
+    any other), else unchanged. The table's higher orders are computed on that grid too."""
     if not config.lookup4d:
         return settings
     width = min(settings.size[0], LUT4D_MAX_SIZE[0])

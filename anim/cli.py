@@ -58,7 +58,8 @@ def _add_scene_arguments(parser, frames=True):
                           "(default: 0.01)")
     sky.add_argument("--quality", choices=list(QUALITY_LEVELS), help="a named quality level instead of the budget's")
     sky.add_argument("--table-size", nargs=3, type=int, metavar=("W", "H", "D"),
-                     help="a full table of this grid instead of the scene plan's")
+                     help="a full table of this grid instead of the scene plan's (with lut4d and compare4d: "
+                          "W <= 16, H even in [4, 128])")
     sky.add_argument("--samples", type=int, help="ray-march samples per ray (default: the quality level's)")
     sky.add_argument("--sampling", choices=list(SAMPLINGS),
                      help="node placement along rays, table and ray march (default: the scene planner's, "

@@ -21,7 +21,7 @@ from .ground import padded4
 from .lookup import MAX_QUERY_ALTITUDE, check_kernel_buffer, check_table_data
 from .resources import check_memory, device_of, estimate_directions_memory, estimate_render_memory
 from .settings import MAPPINGS, TableSettings
-from .table import ScatteringTable
+from .table import MAX_TABLE_VALUE, ScatteringTable
 from .transmittance import COMMON_SOURCES, NO_GATHERED_GRID, TransmittanceEngine, azimuth_defines, column_channels, \
     gathered_source_reals, quadrature_defines, upload_gathered_source
 
@@ -527,11 +527,20 @@ class SkyRenderer:
         settings = skyview_settings(settings)
         _, sun, altitude = check_directions(np.zeros((0, 3)), sun_direction, altitude)
         if sky_map is not None:
-            sky_map = np.asarray(sky_map, dtype=np.float64)
             expected = (settings.size[1], settings.size[0], 3)
-            if sky_map.shape != expected or not np.isfinite(sky_map).all() or (sky_map < 0).any():
-                raise ValueError(f"sky_map must be a finite, non-negative sky-view map of shape {expected} "
-                                 f"(skyview_maps), got shape {sky_map.shape}")
+            try:
+                sky_map = np.asarray(sky_map, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise ValueError(f"sky_map must be a sky-view map of shape {expected} (skyview_maps), got "
+                                 f"{type(sky_map).__name__} {short(sky_map)}") from None
+            # bounded as a table's values are (MAX_TABLE_VALUE): 1e39 was finite in float64 and infinite in a
+            # float32 renderer's map, and every pixel NaN
+            if (sky_map.shape != expected or not np.isfinite(sky_map).all() or (sky_map < 0).any()
+                    or (sky_map > MAX_TABLE_VALUE).any()):
+                raise ValueError(f"sky_map must be a sky-view map of shape {expected} (skyview_maps) with finite "
+                                 f"values in [0, {MAX_TABLE_VALUE:g}], got shape {sky_map.shape}"
+                                 + (f", values in [{sky_map.min():.6g}, {sky_map.max():.6g}]"
+                                    if sky_map.shape == expected else ""))
         directions = self._prepared(directions, valid)      # the angles are kept with prepared directions
         if sky_map is None:
             sky_map = self.skyview_map(sun, altitude, settings)

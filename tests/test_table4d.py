@@ -317,14 +317,21 @@ def test_save_load_round_trip(table4d, tmp_path):
 
 def test_animation_4d_methods():
     """--method lut4d / compare4d: the table is the 4D one (physical, >= 2 harmonics, at most 16 x 128
-    altitude and view nodes, an even view count); refused, naming 'method', with the atmosphere-plus
-    mode or with wavelengths."""
-    from clsky.anim.animate import LUT4D_HARMONICS, AnimationConfig, _base
+    altitude and view nodes, an even view count: a plan's grid reduced to that, a table_size asked for
+    built as asked or refused, naming it: 32 x 255 was silently built as 16 x 128); refused, naming
+    'method', with the atmosphere-plus mode or with wavelengths."""
+    from clsky.anim.animate import LUT4D_HARMONICS, AnimationConfig, _base, _with_lookup
 
-    config = AnimationConfig(method="compare4d", quality="default", table_size=(32, 255, 20))
+    config = AnimationConfig(method="compare4d", quality="default", table_size=(16, 128, 20))
     assert config.compares and config.lookup4d
     _, settings = _base(config, None)
     assert settings.is_4d and settings.size == (16, 128, 20) and settings.azimuth_harmonics == LUT4D_HARMONICS
+    planned = _with_lookup(TableSettings(size=(32, 255, 20), mode="physical"), config)      # a plan's grid
+    assert planned.is_4d and planned.size == (16, 128, 20)
+    for size in ((32, 128, 20), (16, 130, 20), (8, 31, 8), (8, 2, 8)):
+        with pytest.raises(ParameterError, match=r"^table_size must be W <= 16 altitude nodes and an even number H "
+                                                 r"in \[4, 128\] of view nodes with method 'compare4d'"):
+            AnimationConfig(method="compare4d", table_size=size)
     assert not AnimationConfig(method="lut").lookup4d and not AnimationConfig(method="lut4d").compares
     for bad in (dict(mode="atmosphere-plus", preset="atmosphere-plus"), dict(wavelengths=12)):
         with pytest.raises(ParameterError) as error:
