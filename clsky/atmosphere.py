@@ -42,6 +42,7 @@ __all__ = [
     "AtmosphereParameters",
     "PRESETS",
     "preset",
+    "as_atmosphere",
     "rayleigh_scattering_coefficient",
     "RAYLEIGH_PHASE_METHODS",
     "MIE_PHASE_METHODS",
@@ -490,3 +491,12 @@ def preset(name: str) -> AtmosphereParameters:
     if not isinstance(name, str) or name not in PRESETS:
         raise ValueError(f"preset must be one of {sorted(PRESETS)}, got {name!r}")
     return PRESETS[name]
+
+
+def as_atmosphere(atmosphere, name="atmosphere") -> AtmosphereParameters:
+    """``atmosphere`` as :class:`AtmosphereParameters`: a preset's name (:func:`preset`) or parameters;
+    ValueError (:class:`~clsky.errors.ParameterError`) naming ``name`` for anything else."""
+    if isinstance(atmosphere, str):
+        return preset(atmosphere)
+    return check_instance(name, atmosphere, AtmosphereParameters,
+                          f"an AtmosphereParameters or a preset name {sorted(PRESETS)}")

@@ -71,7 +71,6 @@ import math
 
 import numpy as np
 
-
 __all__ = [
     "DEFAULT_MAX_ORDERS",
     "MonteCarloResult",
@@ -95,6 +94,9 @@ __all__ = [
 
 #: Scattering-order cap used when ``max_orders`` is None (truncation reported by :func:`simulate`).
 DEFAULT_MAX_ORDERS = 64
+#: Largest ``max_orders`` and ``photons`` (paths per channel) :func:`simulate` takes: far beyond any use
+#: (the tracer's orders die out long before; 1e10 paths would take days and 240 GB of path state).
+MAX_ORDERS_LIMIT, MAX_PHOTONS = 1_000_000, 10**10
 #: Gauss-Legendre nodes per leg of the sun-ray optical depth (error < 1e-9 relative, see tests).
 QUADRATURE_NODES = 20
 #: Integrate a species' density only up to K scale heights above the lowest point of a leg
@@ -621,6 +623,45 @@ def _sun_transmittance(r, mu, channel, rp, ra, beta_r, beta_me, scale_heights, b
     return t_sun
 
 
+# Argument checks: the messages of clsky.errors' checks ('{name} must be ..., got {value}'), written here
+# because the tracer imports nothing from clsky (it shares no code with what it checks).
+
+def _check_real(name, value, low=-math.inf, high=math.inf, low_open=False, unit=""):
+    """``value`` as a float if it is a finite real number (not a bool or a string) in [low, high] (or
+    (low, high] with ``low_open``); ValueError naming ``name`` otherwise."""
+    real = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+    if real and math.isfinite(value) and (low < value if low_open else low <= value) and value <= high:
+        return float(value)
+    bounds = "a finite number" if math.isinf(low) and math.isinf(high) else \
+        f"a number in {'(' if low_open else '['}{low:g}, {high:g}]"
+    shown = f"{value:g}" if real else f"{value!r:.40} ({type(value).__name__})"
+    raise ValueError(f"{name} must be {bounds}{unit}, got {shown}")
+
+
+def _check_integer(name, value, low, high, optional=False):
+    """``value`` as an int if it is an integer (not a bool) in [low, high], or None with ``optional``;
+    ValueError naming ``name`` otherwise."""
+    if optional and value is None:
+        return None
+    integer = isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+    if integer and low <= value <= high:
+        return int(value)
+    shown = str(value) if integer else f"{value!r:.40} ({type(value).__name__})"
+    raise ValueError(f"{name} must be {'None or ' if optional else ''}an integer in [{low}, {high}], got {shown}")
+
+
+def _checked_observer(atmosphere, altitude, cos_view, cos_sun, azimuth):
+    """(altitude, V, Sun) after checking the geometry: the altitude in [0, Ha] m, the cosines in [-1, 1],
+    the azimuth a finite number [rad]. A NaN cosine or azimuth gave NaN radiance (a NaN view cosine a
+    silent 0), a view cosine of 5 was taken as 1."""
+    top = float(atmosphere.top_radius) - float(atmosphere.planet_radius)
+    altitude = _check_real("altitude", altitude, 0.0, top, unit=" m")
+    cos_view = _check_real("cos_view", cos_view, -1.0, 1.0)
+    cos_sun = _check_real("cos_sun", cos_sun, -1.0, 1.0)
+    azimuth = _check_real("azimuth", azimuth, unit=" (radians)")
+    return (altitude,) + _observer_frame(cos_view, cos_sun, azimuth)
+
+
 def _observer_frame(cos_view, cos_sun, azimuth):
     """V and Sun in the canonical frame (zenith +z, V in the x-z plane)."""
     cv = float(np.clip(cos_view, -1.0, 1.0))
@@ -663,25 +704,28 @@ def simulate(atmosphere, altitude, cos_view, cos_sun, azimuth=0.0, *, photons=20
     Returns
     -------
     MonteCarloResult
+
+    Raises
+    ------
+    ValueError
+        (:class:`~clsky.errors.ParameterError`) naming an argument outside its range: the altitude in
+        [0, Ha] m, the cosines in [-1, 1], a finite azimuth, integer photons in [2, :data:`MAX_PHOTONS`],
+        max_orders in [1, :data:`MAX_ORDERS_LIMIT`] or None, seed >= 0, chunk >= 1.
     """
-    altitude = float(altitude)
     rp = float(atmosphere.planet_radius)
     ra = float(atmosphere.top_radius)
-    if not (0.0 <= altitude <= ra - rp):
-        raise ValueError(f"altitude must be in [0, {ra - rp:g}] m, got {float(altitude):g}")
+    altitude, view, sun = _checked_observer(atmosphere, altitude, cos_view, cos_sun, azimuth)
+    # integers as integers: 2.7 photons ran as 2, max_orders=True as 1
+    max_orders = _check_integer("max_orders", max_orders, 1, MAX_ORDERS_LIMIT, optional=True)
     if single_only:
         max_orders = 1
     if max_orders is None:
         max_orders = DEFAULT_MAX_ORDERS
-    max_orders = int(max_orders)
-    if max_orders < 1:
-        raise ValueError(f"max_orders must be >= 1, got {max_orders!r:.40}")
-    photons = int(photons)
-    if photons < 2:
-        raise ValueError("photons must be >= 2")
+    photons = _check_integer("photons", photons, 2, MAX_PHOTONS)
+    seed = _check_integer("seed", seed, 0, 2**64 - 1)
+    chunk = _check_integer("chunk", chunk, 1, 2**31 - 1)
 
     rng = np.random.default_rng(seed)
-    view, sun = _observer_frame(cos_view, cos_sun, azimuth)
     beta_r = np.asarray(atmosphere.rayleigh_scattering, dtype=np.float64)
     beta_ms = _mie_scattering(atmosphere)          # per channel
     beta_me = _mie_extinction(atmosphere)
@@ -913,12 +957,15 @@ def single_scattering(atmosphere, altitude, cos_view, cos_sun, azimuth=0.0, *, s
     Raises
     ------
     ValueError
-        If the view ray hits the ground (the ground's reflection is not integrated here).
+        If the view ray hits the ground (the ground's reflection is not integrated here), or naming an
+        argument outside its range (as :func:`simulate`; step in (0, Ha] m, nodes in [1, 1000]).
     """
     rp = float(atmosphere.planet_radius)
     ra = float(atmosphere.top_radius)
-    r0 = rp + float(altitude)
-    view, sun = _observer_frame(cos_view, cos_sun, azimuth)
+    altitude, view, sun = _checked_observer(atmosphere, altitude, cos_view, cos_sun, azimuth)
+    step = _check_real("step", step, 0.0, ra - rp, low_open=True, unit=" m")
+    nodes = _check_integer("nodes", nodes, 1, 1000)
+    r0 = rp + altitude
     if np.isfinite(ray_sphere_entry(np.array([r0]), np.array([view[2]]), rp)[0]):
         raise ValueError("single_scattering integrates rays that reach the top: the view ray hits the ground")
     length = float(ray_sphere_exit(np.array([r0]), np.array([view[2]]), ra)[0])

@@ -74,7 +74,7 @@ import numpy as np
 from . import _cl
 from ._cache import cache_directory, source_digest, store
 from ._files import read_user_text
-from .atmosphere import AtmosphereParameters, preset
+from .atmosphere import AtmosphereParameters, as_atmosphere
 from .ground import check_ground_mode
 from .errors import check_choice, check_flag, check_instance, check_integer, check_range
 from .mapping import cos_to_v
@@ -469,9 +469,7 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         renderers): the sun axis then keeps the ray march's margins.
     """
     check_instance("scene", scene, Scene, "a Scene (sun path, altitudes, views, components, error budget)")
-    atmosphere = preset(atmosphere) if isinstance(atmosphere, str) else atmosphere
-    if not isinstance(atmosphere, AtmosphereParameters):
-        raise ValueError(f"atmosphere must be AtmosphereParameters or a preset name, got {atmosphere!r}")
+    atmosphere = as_atmosphere(atmosphere)
     check_choice("mode", mode, SCATTERING_MODES)
     _cl.check_context(ctx)
     ray_march = ray_march is not None and check_flag("ray_march", ray_march)     # 'no' was true

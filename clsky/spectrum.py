@@ -33,7 +33,7 @@ import time
 
 import numpy as np
 
-from .atmosphere import AtmosphereParameters, preset, rayleigh_scattering_coefficient
+from .atmosphere import AtmosphereParameters, as_atmosphere, rayleigh_scattering_coefficient
 from .errors import ParameterError, check_instance, is_integer
 from .ozone import cross_section_serdyuchenko2014
 from .solar import ABSOLUTE_UNITS, with_solar_spectrum
@@ -182,8 +182,7 @@ class SpectralTable:
         from .multiple import keeping_first_gather_stacks
         from .table import ScatteringTable
 
-        base = preset(atmosphere) if isinstance(atmosphere, str) else atmosphere
-        check_instance("atmosphere", base, AtmosphereParameters, "an AtmosphereParameters or a preset name")
+        base = as_atmosphere(atmosphere)
         values = check_wavelengths(wavelengths)
         atmospheres = batch_atmospheres(base, values)
         start, cpu = time.perf_counter(), time.process_time()

@@ -66,7 +66,7 @@ import numpy as np
 
 from . import __version__
 from ._files import StagedWrites, as_path, atomic_write, binary_and_header, check_output, check_suffix
-from .atmosphere import PRESETS, AtmosphereParameters, preset
+from .atmosphere import AtmosphereParameters, as_atmosphere
 from .errors import check_flag, check_instance, is_integer, is_real_number, short
 from .lookup import check_queries
 from .settings import TableSettings
@@ -352,10 +352,7 @@ class ScatteringTable:
         >>> table.orders_record["converged"]
         True
         """
-        if isinstance(atmosphere, str):
-            atmosphere = preset(atmosphere)
-        check_instance("atmosphere", atmosphere, AtmosphereParameters,
-                       f"an AtmosphereParameters or a preset name {list(PRESETS)}")
+        atmosphere = as_atmosphere(atmosphere)
         if settings is None:
             from .ground import default_settings
 

@@ -29,8 +29,8 @@ import math
 import numpy as np
 
 from . import montecarlo
-from .atmosphere import AtmosphereParameters, preset
-from .errors import ParameterError, is_real_number
+from .atmosphere import AtmosphereParameters, as_atmosphere
+from .errors import ParameterError, check_integer, is_real_number
 from .planner import Scene, plan_scene
 from .quality import quality_level
 from .render import SkyRenderer
@@ -52,8 +52,7 @@ VIEWS = {"zenith": (90.0, 0.0), "toward": (VIEW_ELEVATION_DEG, 0.0), "across": (
 def black_ground_without_ozone(atmosphere="physical") -> AtmosphereParameters:
     """The atmosphere of issue 11's measured excess: ``atmosphere`` (a preset name or parameters)
     with no ozone and a black ground (every other field unchanged)."""
-    atmosphere = preset(atmosphere) if isinstance(atmosphere, str) else atmosphere
-    return atmosphere.replace(ozone_column_du=0.0, ground_albedo=0.0)
+    return as_atmosphere(atmosphere).replace(ozone_column_du=0.0, ground_albedo=0.0)
 
 
 def _check_view(view):
@@ -125,7 +124,8 @@ def monte_carlo(atmosphere, sun_elevation_deg, view, *, target=0.01, batch=200_0
 
     Parameters
     ----------
-    atmosphere : AtmosphereParameters
+    atmosphere : AtmosphereParameters or str
+        The atmosphere, or a preset's name.
     sun_elevation_deg : float
         Sun elevation [deg].
     view : str
@@ -133,7 +133,7 @@ def monte_carlo(atmosphere, sun_elevation_deg, view, *, target=0.01, batch=200_0
     target : float
         Relative standard error to reach in every channel (0.01: 1 %).
     batch : int
-        Paths per channel and batch (memory: about 1 kB per path alive).
+        Paths per channel and batch (memory: about 1 kB per path alive), at most ``max_photons``.
     max_photons : int
         Most paths per channel.
     seed : int
@@ -144,17 +144,20 @@ def monte_carlo(atmosphere, sun_elevation_deg, view, *, target=0.01, batch=200_0
     Raises
     ------
     ValueError
-        (:class:`~clsky.errors.ParameterError`) naming view, sun_elevation_deg, target, batch or
-        max_photons when outside its valid range.
+        (:class:`~clsky.errors.ParameterError`) naming atmosphere, view, sun_elevation_deg, target,
+        batch, max_photons, seed or max_orders when outside its valid range.
     """
+    atmosphere = as_atmosphere(atmosphere)
     elevation, azimuth = _check_view(view)
     cos_view = math.sin(math.radians(elevation))
     cos_sun = math.sin(math.radians(_check_sun(sun_elevation_deg)))
     if not is_real_number(target) or not 0.0 <= target < 1.0:
         raise ParameterError("target", "a relative standard error in [0, 1)", target)
-    for name, value in (("batch", batch), ("max_photons", max_photons)):
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 2:
-            raise ParameterError(name, "an integer >= 2", value)
+    max_photons = check_integer("max_photons", max_photons, 2, montecarlo.MAX_PHOTONS)
+    # a first batch larger than the cap spent more paths than it (100 for max_photons = 10)
+    batch = check_integer("batch", batch, 2, max_photons)
+    seed = check_integer("seed", seed, 0, 2**63)
+    max_orders = check_integer("max_orders", max_orders, 1, montecarlo.MAX_ORDERS_LIMIT, optional=True)
     means, variances, truncated = [], [], []
     while True:
         result = montecarlo.simulate(atmosphere, 0.0, cos_view, cos_sun, math.radians(azimuth), photons=batch,

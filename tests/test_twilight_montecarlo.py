@@ -66,11 +66,28 @@ def test_single_scattering_quadrature_is_converged(atmosphere):
     (lambda a: twilight.single_scattering(a, 95.0, "zenith"), "sun_elevation_deg"),
     (lambda a: twilight.monte_carlo(a, 5.0, "zenith", target=1.5), "target"),
     (lambda a: twilight.monte_carlo(a, 5.0, "zenith", batch=1), "batch"),
+    # a first batch above the cap spent more paths than it (100 for max_photons = 10)
+    (lambda a: twilight.monte_carlo(a, 5.0, "zenith", batch=100, max_photons=10), "batch"),
+    (lambda a: twilight.monte_carlo(a, 5.0, "zenith", seed=-5), "seed"),
+    (lambda a: twilight.monte_carlo(a, 5.0, "zenith", max_orders=0), "max_orders"),
+    (lambda a: twilight.monte_carlo(3, 5.0, "zenith"), "atmosphere"),                  # an AttributeError
+    (lambda a: twilight.black_ground_without_ozone(3), "atmosphere"),
     (lambda a: twilight.view_directions(["zenith", "up"]), "view"),
 ])
 def test_bad_input_names_the_parameter(atmosphere, call, name):
     with pytest.raises(ValueError, match=f"^{name} must be"):
         call(atmosphere)
+
+
+def test_monte_carlo_takes_a_preset_name(atmosphere):
+    """monte_carlo, like black_ground_without_ozone, takes a preset's name (it failed with an
+    AttributeError): the same paths as with the preset's parameters."""
+    from clsky import preset
+
+    by_name = twilight.monte_carlo("physical", 5.0, "zenith", batch=20, max_photons=20)
+    by_value = twilight.monte_carlo(preset("physical"), 5.0, "zenith", batch=20, max_photons=20)
+    assert by_name.photons == by_value.photons == 20
+    np.testing.assert_array_equal(by_name.radiance, by_value.radiance)
 
 
 def test_single_scattering_quadrature_rejects_rays_into_the_ground(atmosphere):
