@@ -33,7 +33,7 @@ import signal
 import threading
 import uuid
 
-from .errors import ParameterError, check_integer, counted
+from .errors import ParameterError, check_integer, counted, short
 
 __all__ = ["Farm", "FarmError", "INSTALL_HINT", "MAX_LOCAL_WORKERS", "require_dask", "check_workers",
            "check_scheduler", "build_table_task"]
@@ -49,8 +49,10 @@ MAX_LOCAL_WORKERS = 256
 #: address, and a port.
 _ADDRESS = re.compile(r"(tcp|tls)://([A-Za-z0-9](?:[A-Za-z0-9.-]*[A-Za-z0-9])?|\[[0-9A-Fa-f:.]+\]):([0-9]{1,5})")
 
-#: Seconds to wait for an existing scheduler to answer.
+#: Seconds to wait for an existing scheduler to answer, and more seconds for distributed to give up
+#: before the farm gives up on it (:meth:`Farm._connect`).
 CONNECT_TIMEOUT_S = 10
+CONNECT_GRACE_S = 2
 
 
 #: Dask's nanny starts its workers with glibc's MALLOC_TRIM_THRESHOLD_=65536 (to hand freed memory back to
@@ -154,16 +156,47 @@ class Farm:
                                              preload=[__name__])
                 self.client = Client(self._cluster)
             else:
-                try:
-                    self.client = Client(self.scheduler, timeout=CONNECT_TIMEOUT_S)
-                except (OSError, TimeoutError) as error:
-                    raise ConnectionError(f"no Dask scheduler answered at {self.scheduler} within "
-                                          f"{CONNECT_TIMEOUT_S} s ({type(error).__name__})") from None
+                self.client = self._connect(Client)
             self._check_versions()
         except BaseException:
             self.close()
             raise
         return self
+
+    def _connect(self, client_type):
+        """A client of the scheduler at ``scheduler``, or ConnectionError within about
+        :data:`CONNECT_TIMEOUT_S`. distributed's own timeout bounds a refused connection and an unknown
+        host, not a peer that accepts the connection and never speaks Dask's protocol (an HTTP server,
+        Dask's dashboard port given for its scheduler's): its Client waited there forever. So the client
+        is made on a daemon thread, waited for :data:`CONNECT_TIMEOUT_S` + :data:`CONNECT_GRACE_S`, and
+        abandoned after it (its thread and IO loop are daemons: they end with the process)."""
+        outcome = {}
+
+        def attempt():
+            try:
+                outcome["client"] = client_type(self.scheduler, timeout=CONNECT_TIMEOUT_S)
+            except BaseException as error:          # handed to the caller's thread
+                outcome["error"] = error
+
+        thread = threading.Thread(target=attempt, name="clsky-farm-connect", daemon=True)
+        thread.start()
+        thread.join(CONNECT_TIMEOUT_S + CONNECT_GRACE_S)
+        if thread.is_alive():
+            raise ConnectionError(f"no Dask scheduler answered at {self.scheduler} within {CONNECT_TIMEOUT_S} s "
+                                  f"(something accepted the connection but did not answer as a Dask scheduler: "
+                                  f"the dashboard's port, or another server?)")
+        error = outcome.get("error")
+        if isinstance(error, (OSError, TimeoutError)):
+            raise ConnectionError(f"no Dask scheduler answered at {self.scheduler} within "
+                                  f"{CONNECT_TIMEOUT_S} s ({type(error).__name__})") from None
+        if isinstance(error, TypeError) and self.scheduler.startswith("tls://"):
+            # distributed's TypeError where no TLS context is configured (clsky passes no security=)
+            raise ConnectionError(f"{self.scheduler} needs Dask's TLS configuration (distributed.comm.tls: the "
+                                  f"CA file and this client's certificate and key), and none is set "
+                                  f"({short(str(error))})") from None
+        if error is not None:
+            raise error
+        return outcome["client"]
 
     def _check_versions(self):
         """FarmError unless every worker has this clsky: a worker without it cannot even read its tasks

@@ -344,6 +344,52 @@ def test_a_scheduler_that_does_not_answer_is_one_line(tmp_path, capsys, monkeypa
     assert error.count("\n") == 1 and list(tmp_path.iterdir()) == []
 
 
+@pytest.fixture
+def silent_listener():
+    """The port of a TCP listener that accepts connections and never answers (as an HTTP server on Dask's
+    dashboard port, or any other server, does to Dask's protocol)."""
+    import socket
+
+    with socket.socket() as listener:
+        listener.bind(("127.0.0.1", 0))
+        listener.listen()
+        yield listener.getsockname()[1]
+
+
+def test_a_listener_that_is_no_scheduler_is_one_line_within_the_timeout(tmp_path, capsys, monkeypatch,
+                                                                        silent_listener):
+    """distributed's Client waited forever on a peer that accepted the connection and never spoke
+    (measured: still waiting after 90 s, where the README promises one line after 10 s): the farm gives up
+    after CONNECT_TIMEOUT_S + CONNECT_GRACE_S (here 1 + 2 s), its abandoned client's threads daemons."""
+    import clsky.farm
+
+    monkeypatch.setattr(clsky.farm, "CONNECT_TIMEOUT_S", 1)
+    start = time.perf_counter()
+    with inside(tmp_path):
+        assert main(["table", "--size", "8", "32", "8", "--progress", "none", "-o", "sky.npz",
+                     "--scheduler", f"tcp://127.0.0.1:{silent_listener}"]) == 2
+    # 3 s of waiting; 20 s bounds a loaded machine's start of the command, and the hang it replaces
+    assert time.perf_counter() - start < 20
+    error = capsys.readouterr().err
+    assert error.startswith(f"clsky: error: --scheduler: no Dask scheduler answered at tcp://127.0.0.1:"
+                            f"{silent_listener} within 1 s (something accepted the connection")
+    assert error.count("\n") == 1 and list(tmp_path.iterdir()) == []
+
+
+def test_tls_without_dask_tls_configuration_is_one_line(tmp_path, capsys):
+    """A tls:// address needs Dask's TLS configuration (clsky passes no security=): without it, distributed
+    raised a TypeError and clsky printed its 58-line traceback."""
+    import dask
+
+    with inside(tmp_path), dask.config.set({"distributed.comm.tls.ca-file": None,
+                                            "distributed.comm.tls.client.cert": None}):
+        assert main(["table", "--size", "8", "32", "8", "--progress", "none", "-o", "sky.npz",
+                     "--scheduler", "tls://127.0.0.1:1"]) == 2
+    error = capsys.readouterr().err
+    assert error.startswith("clsky: error: --scheduler: tls://127.0.0.1:1 needs Dask's TLS configuration")
+    assert error.count("\n") == 1 and list(tmp_path.iterdir()) == []
+
+
 @pytest.mark.parametrize("option", ["--workers", "--scheduler"])
 def test_without_dask_the_option_says_how_to_install_it(option, tmp_path):
     """Dask hidden from the import system (``sys.modules['distributed'] = None``), as if not installed."""
