@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import os
 import pathlib
 import platform
@@ -58,16 +59,53 @@ def add_output_arguments(parser: argparse.ArgumentParser):
     return parser
 
 
-def positive_integer(text: str) -> int:
-    """An argparse type: an integer >= 1 (a count of runs or rounds), else argparse's one-line error naming
-    the option and what was typed."""
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}")
-    return value
+def integer_in(low: int, high: int):
+    """An argparse type: an integer in [low, high], else argparse's one-line error naming the option and
+    what was typed (exit status 2, before any work)."""
+    def integer(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = None
+        if value is None or not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"must be an integer in [{low}, {high}], got {text!r}")
+        return value
+    return integer
+
+
+def real_in(low: float, high: float, high_open=False):
+    """An argparse type: a finite number in [low, high] (or [low, high) with ``high_open``), else argparse's
+    one-line error naming the option and what was typed."""
+    def real(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not (low <= value < high if high_open else low <= value <= high):
+            raise argparse.ArgumentTypeError(f"must be a number in [{low:g}, {high:g}{')' if high_open else ']'}, "
+                                             f"got {text!r}")
+        return value
+    return real
+
+
+def listed(item_type):
+    """An argparse type: a comma-separated list of ``item_type`` values (at least one), each checked by it."""
+    def items(text: str) -> list:
+        values = [item_type(item) for item in text.split(",")]
+        return values
+    return items
+
+
+#: An argparse type: a count of runs, rounds or repetitions (at least 1: a count of 0 measured nothing, and
+#: wrote empty tables or inf into README.md).
+positive_integer = integer_in(1, 10**6)
+#: Argparse types of the options shared by several benchmarks, with the API's ranges: frame sides [px], a
+#: sweep's frames, a table's node counts, Monte Carlo paths per channel, a relative standard error to reach.
+frame_side = integer_in(16, 8192)
+frame_count = integer_in(2, 100_000)
+table_nodes = integer_in(2, 4096)
+photon_count = integer_in(2, 10**10)
+standard_error = real_in(0.0, 1.0, high_open=True)
 
 
 def parse_arguments(parser: argparse.ArgumentParser, argv=None):

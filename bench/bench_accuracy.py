@@ -35,6 +35,7 @@ import tempfile
 import numpy as np
 
 from _report import SMOKE, add_output_arguments, load_average, load_note, machine, parse_arguments, write_readme_section
+from _report import integer_in
 
 import clsky
 from clsky.anim import accuracy, accuracy_plot, writers
@@ -48,7 +49,7 @@ SMOKE_CANDIDATES = ("default", "H / 2", "ray march 16 samples", "sky-view 16 x 3
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--size", type=int, default=128)
+    parser.add_argument("--size", type=integer_in(16, 2048), default=128)
     parser.add_argument("--reference-cache", type=pathlib.Path)
     parser.add_argument("--docs", type=pathlib.Path, metavar="DIR",
                         help="write accuracy.csv and the two plots into DIR (default: docs/ when writing the "

@@ -50,6 +50,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 from _report import SMOKE, add_output_arguments, children_cpu, exp_reading, load_average, load_note, machine, \
     parse_arguments, state_note, write_readme_section
+from _report import frame_count, frame_side
 
 import clsky.anim.animate
 from clsky.anim.animate import AnimationConfig, render_animation
@@ -179,9 +180,9 @@ def host_half(options, thread_counts, jobs=HOST_HALF_JOBS):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--frames", type=int, default=120, help="frames of the end-to-end run (default 120)")
-    parser.add_argument("--size", type=int, default=512, help="frame size [px] (default 512)")
-    parser.add_argument("--stage-frames", type=int, default=None,
+    parser.add_argument("--frames", type=frame_count, default=120, help="frames of the end-to-end run (default 120)")
+    parser.add_argument("--size", type=frame_side, default=512, help="frame size [px] (default 512)")
+    parser.add_argument("--stage-frames", type=frame_count, default=None,
                         help="frames of the stage split (default: --frames, the same animation)")
     add_output_arguments(parser)
     args = parse_arguments(parser)

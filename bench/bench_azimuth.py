@@ -31,9 +31,12 @@ import numpy as np
 
 from _report import (SMOKE, add_output_arguments, load_average, load_note, machine, parse_arguments,
                      timed_with_cpu, write_readme_section)
+from _report import integer_in, listed, photon_count, real_in, standard_error
 from bench_twilight import BATCH, cells, summary
 
 from clsky import twilight
+from clsky.quality import QUALITY_LEVELS
+from clsky.settings import MAX_AZIMUTH_HARMONICS
 
 
 def p95(deviations):
@@ -89,11 +92,12 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cost", action="store_true",
                         help="measure the cost of the harmonics in the default clsky animate instead")
-    parser.add_argument("--harmonics", default="0,2", help="comma-separated azimuth_harmonics to compare")
-    parser.add_argument("--quality", default="default", help="quality level of the ray march (clsky/quality.py)")
-    parser.add_argument("--target", type=float, default=0.02, help="relative standard error per channel to reach")
-    parser.add_argument("--max-photons", type=int, default=40_000_000, help="most paths per channel and case")
-    parser.add_argument("--elevations", default=",".join(f"{e:g}" for e in twilight.SUN_ELEVATIONS_DEG),
+    parser.add_argument("--harmonics", type=listed(integer_in(0, MAX_AZIMUTH_HARMONICS)), default="0,2", help="comma-separated azimuth_harmonics to compare")
+    parser.add_argument("--quality", default="default", choices=list(QUALITY_LEVELS), help="quality level of the ray march (clsky/quality.py)")
+    parser.add_argument("--target", type=standard_error, default=0.02, help="relative standard error per channel to reach")
+    parser.add_argument("--max-photons", type=photon_count, default=40_000_000, help="most paths per channel and case")
+    parser.add_argument("--elevations", type=listed(real_in(-90.0, 90.0)),
+                        default=",".join(f"{e:g}" for e in twilight.SUN_ELEVATIONS_DEG),
                         help="comma-separated sun elevations [deg]")
     add_output_arguments(parser)
     args = parse_arguments(parser)
@@ -103,9 +107,8 @@ def main():
         if not args.no_readme:
             write_readme_section("twilight-cost", markdown)
         return
-    harmonics = [int(m) for m in args.harmonics.split(",")]
-    elevations = [float(e) for e in args.elevations.split(",")]
-    batch = BATCH
+    harmonics, elevations = args.harmonics, args.elevations
+    batch = min(BATCH, args.max_photons)             # a first batch above the cap is refused (twilight.monte_carlo)
     if args.smoke:
         args.quality, elevations, harmonics = SMOKE.reference_level, [-6.0], [0, 1]
         batch = args.max_photons = SMOKE.photons

@@ -36,9 +36,11 @@ import tempfile
 import time
 
 from _report import SMOKE, add_output_arguments, load_average, machine, parse_arguments, write_readme_section
+from _report import frame_count, frame_side, positive_integer
 
 from clsky.anim.animate import AnimationConfig, render_animation
 from clsky.farm import Farm
+from clsky.quality import QUALITY_LEVELS
 
 #: The runs of a repetition: (label, workers or None for this process).
 RUNS = (("here (no farm)", None), ("farm, 1 worker", 1), ("farm, 2 workers", 2))
@@ -125,10 +127,10 @@ def tables(results, frames):
 
 def main(argv=None):
     parser = add_output_arguments(argparse.ArgumentParser(description=__doc__.splitlines()[0]))
-    parser.add_argument("--frames", type=int, default=48, help="frames of the animation (default: 48)")
-    parser.add_argument("--size", type=int, default=256, help="image height [px] (default: 256)")
-    parser.add_argument("--quality", default="default", help="quality level (default: default)")
-    parser.add_argument("--repeat", type=int, default=2, help="repetitions of the three runs (default: 2)")
+    parser.add_argument("--frames", type=frame_count, default=48, help="frames of the animation (default: 48)")
+    parser.add_argument("--size", type=frame_side, default=256, help="image height [px] (default: 256)")
+    parser.add_argument("--quality", default="default", choices=list(QUALITY_LEVELS), help="quality level (default: default)")
+    parser.add_argument("--repeat", type=positive_integer, default=2, help="repetitions of the three runs (default: 2)")
     args = parse_arguments(parser, argv)
     if args.smoke:
         options = dict(frames=SMOKE.animation_frames, size=SMOKE.frame, table_size=SMOKE.table, quality="draft")

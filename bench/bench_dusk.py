@@ -30,6 +30,7 @@ import time
 import numpy as np
 
 from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
+from _report import frame_side
 
 from clsky.anim import metrics, writers
 from clsky.anim.animate import (AnimationConfig, display, display_frames, make_renderer, planned_animation,
@@ -94,7 +95,7 @@ def render_sky(fields, size, smoke):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--size", type=int, default=128, help="fisheye side [px] (default: 128)")
+    parser.add_argument("--size", type=frame_side, default=128, help="fisheye side [px] (default: 128)")
     add_output_arguments(parser)
     args = parse_arguments(parser)
     size = SMOKE.frame if args.smoke else args.size

@@ -29,6 +29,7 @@ import numpy as np
 
 from _report import SMOKE, add_output_arguments, best_of, load_average, machine, parse_arguments, \
     timed_with_cpu, write_readme_section
+from _report import frame_side, integer_in, positive_integer, table_nodes
 
 import clsky
 from clsky.anim import metrics
@@ -56,15 +57,15 @@ def three_d(table):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--size", type=int, nargs=3, default=LOOKUP4D_SIZE, metavar=("W", "H", "D"),
+    parser.add_argument("--size", type=table_nodes, nargs=3, default=LOOKUP4D_SIZE, metavar=("W", "H", "D"),
                         help="nodes along altitude, view (even), sun (default: 16 128 128)")
-    parser.add_argument("--azimuth-size", type=int, default=LOOKUP4D_AZIMUTHS, help="azimuth nodes (default 16)")
-    parser.add_argument("--azimuth-sweep", type=int, nargs="*", default=(4, 8, 32),
+    parser.add_argument("--azimuth-size", type=integer_in(2, 1024), default=LOOKUP4D_AZIMUTHS, help="azimuth nodes (default 16)")
+    parser.add_argument("--azimuth-sweep", type=integer_in(2, 1024), nargs="*", default=(4, 8, 32),
                         help="other azimuth node counts to measure (default: 4 8 32)")
-    parser.add_argument("--sun-sweep", type=int, nargs="*", default=(32, 64),
+    parser.add_argument("--sun-sweep", type=table_nodes, nargs="*", default=(32, 64),
                         help="other sun node counts to measure (default: 32 64)")
-    parser.add_argument("--frame", type=int, default=256, help="side of the error frames [px] (default 256)")
-    parser.add_argument("--repeat", type=int, default=5, help="timing repetitions of the 1024^2 frame")
+    parser.add_argument("--frame", type=frame_side, default=256, help="side of the error frames [px] (default 256)")
+    parser.add_argument("--repeat", type=positive_integer, default=5, help="timing repetitions of the 1024^2 frame")
     add_output_arguments(parser)
     args = parse_arguments(parser)
     speed_side, level = 1024, "reference"

@@ -19,6 +19,7 @@ import datetime
 import numpy as np
 
 from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
+from _report import photon_count
 
 import clsky
 from clsky import montecarlo
@@ -48,7 +49,7 @@ def compare(table, atmosphere, photons):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--photons", type=int, default=200_000, help="paths per channel and case")
+    parser.add_argument("--photons", type=photon_count, default=200_000, help="paths per channel and case")
     add_output_arguments(parser)
     args = parse_arguments(parser)
     size = SMOKE.table if args.smoke else clsky.TableSettings().size

@@ -38,6 +38,7 @@ import tempfile
 import numpy as np
 from _report import (SMOKE, add_output_arguments, best_timing, load_average, load_note, machine,
                      parse_arguments, timed_with_cpu, write_readme_section)
+from _report import integer_in
 
 import clsky
 from clsky.anim import accuracy, animate, metrics, writers
@@ -84,7 +85,7 @@ def percent(values):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--size", type=int, default=64)
+    parser.add_argument("--size", type=integer_in(16, 2048), default=64)
     parser.add_argument("--groups", nargs="*", choices=list(accuracy.REFERENCE_GROUPS),
                         help="default: all (with --smoke: ray march)")
     parser.add_argument("--reference-cache", type=pathlib.Path)

@@ -48,7 +48,9 @@ import numpy as np
 
 from _report import SMOKE, add_output_arguments, best_of, children_cpu, load_average, load_note, machine, \
     parse_arguments, write_readme_section
+from _report import positive_integer
 
+from clsky._cl import VECTOR_WIDTHS
 from clsky._files import temporary_prefix
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
@@ -204,10 +206,10 @@ def main():
     parser.add_argument("--vendors", type=pathlib.Path, default=None,
                         help="OpenCL vendors directory listing the devices (default .intel-opencl/vendors when "
                              "scripts/intel_opencl.sh wrote it, else the system's registry)")
-    parser.add_argument("--vector-widths", type=int, nargs="+", default=[8], metavar="W",
+    parser.add_argument("--vector-widths", type=int, choices=VECTOR_WIDTHS, nargs="+", default=[8], metavar="W",
                         help="the kernels' vector widths to measure on each device (1 and/or 8; default 8)")
-    parser.add_argument("--rounds", type=int, default=2, help="rounds of the configurations, alternating (default 2)")
-    parser.add_argument("--repeat", type=int, default=5, help="timed frames per render (default 5)")
+    parser.add_argument("--rounds", type=positive_integer, default=2, help="rounds of the configurations, alternating (default 2)")
+    parser.add_argument("--repeat", type=positive_integer, default=5, help="timed frames per render (default 5)")
     parser.add_argument("--keep-outputs", type=pathlib.Path, default=None, metavar="DIR",
                         help="keep each configuration's first-round animation in DIR/<configuration index>/")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)

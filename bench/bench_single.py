@@ -21,6 +21,7 @@ import datetime
 
 from _report import (SMOKE, add_output_arguments, best_timing, load_average, load_note, machine,
                      parse_arguments, write_readme_section)
+from _report import positive_integer
 
 from clsky import TableSettings, preset, reference
 from clsky._cl import describe_device
@@ -29,8 +30,8 @@ from clsky.single import SingleScatteringEngine
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeat", type=int, default=10, help="OpenCL repetitions after a warm-up (default 10)")
-    parser.add_argument("--twin-repeat", type=int, default=2, help="NumPy twin repetitions (default 2)")
+    parser.add_argument("--repeat", type=positive_integer, default=10, help="OpenCL repetitions after a warm-up (default 10)")
+    parser.add_argument("--twin-repeat", type=positive_integer, default=2, help="NumPy twin repetitions (default 2)")
     add_output_arguments(parser)
     args = parse_arguments(parser)
     size = SMOKE.table if args.smoke else TableSettings().size

@@ -22,6 +22,7 @@ import numpy as np
 
 from _report import SMOKE, add_output_arguments, load_average, machine, parse_arguments, timed_with_cpu, \
     write_readme_section
+from _report import positive_integer
 
 import clsky
 from clsky import skyview
@@ -44,7 +45,7 @@ def best(function, repeat):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--repeat", type=positive_integer, default=3)
     add_output_arguments(parser)
     args = parse_arguments(parser)
     frame_sizes, map_sizes, settings = (512, 1024), MAP_SIZES, clsky.TableSettings(mode="physical")

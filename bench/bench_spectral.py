@@ -33,6 +33,7 @@ import time
 import numpy as np
 
 from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
+from _report import frame_side, integer_in, table_nodes
 
 import clsky
 from clsky.anim.cameras import FisheyeCamera, sun_direction
@@ -40,6 +41,7 @@ from clsky import colorimetry, spectrum
 from clsky._cl import describe_device, make_context
 from clsky.render import SkyRenderer
 from clsky.solar import with_solar_spectrum
+from clsky.spectrum import MAX_WAVELENGTHS, MIN_COLOUR_WAVELENGTHS
 
 SUN_ZENITHS = (65.0, 88.0, 94.0)
 #: Sun zeniths of the twilight zenith's colour (93 deg: the dusk of issue 10, the sun 3 deg down).
@@ -81,9 +83,10 @@ def timed(function):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--size", type=int, nargs=3, default=list(clsky.TableSettings().size), metavar=("W", "H", "D"))
-    parser.add_argument("--frame", type=int, default=96, help="fisheye side [px]")
-    parser.add_argument("--spectral", type=int, default=15, help="N of the spectral mode")
+    parser.add_argument("--size", type=table_nodes, nargs=3, default=list(clsky.TableSettings().size), metavar=("W", "H", "D"))
+    parser.add_argument("--frame", type=frame_side, default=96, help="fisheye side [px]")
+    parser.add_argument("--spectral", type=integer_in(MIN_COLOUR_WAVELENGTHS, MAX_WAVELENGTHS), default=15,
+                        help="N of the spectral mode")
     add_output_arguments(parser)
     args = parse_arguments(parser)
     reference_count = spectrum.MAX_WAVELENGTHS

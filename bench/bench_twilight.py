@@ -27,9 +27,12 @@ import time
 import numpy as np
 
 from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
+from _report import integer_in, photon_count, standard_error
 
 import clsky
 from clsky import twilight
+from clsky.quality import QUALITY_LEVELS
+from clsky.settings import MAX_AZIMUTH_HARMONICS
 
 #: Issue 11's measured excess (signed mean over the sky, worst view), black ground, no ozone.
 ISSUE_EXCESS = {5.0: "+1.0 % (3.5 %)", 2.0: "+2.4 % (6.7 %)", 0.0: "+4.7 % (13 %)", -2.0: "+13 % (57 %)",
@@ -60,16 +63,17 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--atmosphere", choices=("black", "physical"), default="black",
                         help="black: physical preset, no ozone, black ground (issue 11's case); physical: the preset")
-    parser.add_argument("--quality", default="default", help="quality level of the ray march (clsky/quality.py)")
-    parser.add_argument("--azimuth-harmonics", type=int, metavar="M",
+    parser.add_argument("--quality", default="default", choices=list(QUALITY_LEVELS), help="quality level of the ray march (clsky/quality.py)")
+    parser.add_argument("--azimuth-harmonics", type=integer_in(0, MAX_AZIMUTH_HARMONICS), metavar="M",
                         help="the tables' azimuth_harmonics (clsky/azimuth.py) instead of the scene planner's "
                              "(2 below +30 deg since 2026-12-02; 0 reproduces the azimuth average of issue 11)")
-    parser.add_argument("--target", type=float, default=0.01, help="relative standard error per channel to reach")
-    parser.add_argument("--max-photons", type=int, default=40_000_000, help="most paths per channel and case")
+    parser.add_argument("--target", type=standard_error, default=0.01, help="relative standard error per channel to reach")
+    parser.add_argument("--max-photons", type=photon_count, default=40_000_000, help="most paths per channel and case")
     add_output_arguments(parser)
     args = parse_arguments(parser)
     elevations = twilight.SUN_ELEVATIONS_DEG
-    batch, single_max = BATCH, SINGLE_MAX_PHOTONS
+    # a first batch above the cap is refused (twilight.monte_carlo)
+    batch, single_max = min(BATCH, args.max_photons), SINGLE_MAX_PHOTONS
     if args.smoke:
         args.quality, elevations = SMOKE.reference_level, (5.0, -6.0)
         batch = single_max = args.max_photons = SMOKE.photons

@@ -22,6 +22,7 @@ import numpy as np
 
 from _report import (SMOKE, add_output_arguments, load_average, load_note, machine, parse_arguments,
                      timed_with_cpu, write_readme_section)
+from _report import positive_integer
 
 from clsky import ScatteringTable, TableSettings, preset, reference
 from clsky._cl import describe_device
@@ -127,7 +128,7 @@ def cost_rows(size, frame, repeat):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeat", type=int, default=3, help="timing repetitions")
+    parser.add_argument("--repeat", type=positive_integer, default=3, help="timing repetitions")
     add_output_arguments(parser)
     args = parse_arguments(parser)
     size, frame = (SMOKE.table, SMOKE.frame) if args.smoke else (TableSettings().size, 256)

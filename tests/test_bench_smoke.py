@@ -239,3 +239,25 @@ def test_readme_section_is_replaced_atomically(tmp_path):
     with pytest.raises(SystemExit, match="README.md has no <!-- bench:y -->"):
         _report.write_readme_section("y", "| other |", readme)
     assert readme.read_text() == "head\n<!-- bench:x -->\n| new |\n<!-- /bench:x -->\ntail\n"
+
+
+@pytest.mark.parametrize("name, options, message", [
+    # counts of 0 measured nothing and wrote empty tables (bench_dask, bench_runtimes) or inf (bench_view_nodes)
+    # into README.md, exit status 0
+    ("bench_dask", ["--repeat", "0"], "argument --repeat: must be an integer in [1, 1000000], got '0'"),
+    ("bench_runtimes", ["--rounds", "0"], "argument --rounds: must be an integer in [1, 1000000], got '0'"),
+    ("bench_view_nodes", ["--repeat", "0"], "argument --repeat: must be an integer in [1, 1000000], got '0'"),
+    # tracebacks naming the API's parameter, some after seconds of work
+    ("bench_twilight", ["--target", "5"], "argument --target: must be a number in [0, 1), got '5'"),
+    ("bench_spectral", ["--spectral", "5"], "argument --spectral: must be an integer in [12, 47], got '5'"),
+    ("bench_azimuth", ["--elevations", "5,100"], "argument --elevations: must be a number in [-90, 90], got '100'"),
+])
+def test_a_bad_option_is_one_line_before_any_work(name, options, message):
+    """A bench script's bad option is argparse's one line naming it and its range, exit status 2, before any
+    work, and README.md is left as it was."""
+    before = snapshot()
+    result = subprocess.run([sys.executable, f"bench/{name}.py", *options], cwd=ROOT, capture_output=True,
+                            text=True, timeout=120)
+    assert result.returncode == 2 and result.stdout == "", result.stdout + result.stderr
+    assert result.stderr.strip().splitlines()[-1] == f"{name}.py: error: {message}"
+    assert snapshot() == before
