@@ -476,7 +476,7 @@ def plan_animation(config: AnimationConfig, positions, directions, valid, ctx=No
     if config.table_size is not None:
         return None
     return plan_scene(_scene(config, positions, directions, valid), config.atmosphere, config.mode, ctx=ctx,
-                      ray_march=config.method not in ("lut", "lut4d"))
+                      ray_march=config.method not in ("lut", "lut4d"), samples=config.samples)
 
 
 @dataclasses.dataclass(frozen=True)

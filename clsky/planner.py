@@ -452,7 +452,7 @@ def _costlier(method, chosen, pixels) -> str:
             f"{chosen.frame_cpu_ms(pixels):.3g} CPU-ms, measured)")
 
 
-def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, ray_march=None) -> Plan:
+def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, ray_march=None, samples=None) -> Plan:
     """The least table (and ray march) that renders ``scene`` within its error budget.
 
     Parameters
@@ -467,12 +467,17 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     ray_march : bool, optional
         True when frames will be ray-marched whatever the budget says (an animation comparing the two
         renderers): the sun axis then keeps the ray march's margins.
+    samples : int, optional
+        The ray march's samples per ray when the caller sets them (``clsky animate --samples``), in [2,
+        4096], instead of the quality level's: the plan's ray march and its printed line say so (its
+        error estimates stay those measured with the level's samples).
     """
     check_instance("scene", scene, Scene, "a Scene (sun path, altitudes, views, components, error budget)")
     atmosphere = as_atmosphere(atmosphere)
     check_choice("mode", mode, SCATTERING_MODES)
     _cl.check_context(ctx)
     ray_march = ray_march is not None and check_flag("ray_march", ray_march)     # 'no' was true
+    samples = check_integer("samples", samples, 2, 4096, optional=True)
     check_ground_mode(atmosphere, mode)     # before the pilot: a plan the build would refuse is no plan
     level = quality_level(scene.quality) if scene.quality else level_for_budget(scene.error_budget)
     budget = level.budget if scene.quality else scene.error_budget
@@ -496,8 +501,9 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     table = level.table.replace(mode=mode, sampling=sampling, azimuth_harmonics=harmonics)
     chosen, estimate, estimates = choose_renderer(scene.sun_elevations_deg, budget, level.name, pixels=scene.pixels)
     lookup_error, low = estimates["lut"], scene.sun_elevations_deg[0]
-    march = f"ray march, {level.ray.view_steps} samples per ray"
-    ray = level.ray
+    ray = level.ray if samples is None else level.ray.replace(view_steps=samples)
+    march = f"ray march, {ray.view_steps} samples per ray" + (
+        "" if samples is None else f" (asked for; the {level.name} level's {level.ray.view_steps})")
     if chosen.method == "lut" and ray_march:
         decisions.append(("renderer", march,
                           f"asked for; the table lookup alone would do: {_percent(lookup_error)} % {_at_lowest_sun(low)}"))

@@ -153,6 +153,17 @@ def test_the_plan_names_the_sun_path_as_given_and_where_the_lookup_error_was_mea
     assert lookup in text and sun_path in text
 
 
+def test_the_plan_says_the_samples_asked_for(cl_context):
+    """clsky animate --samples 8 printed the level's '48 samples per ray' while its frames took 8: the plan's
+    ray march and its line carry the samples asked for; out of [2, 4096] they are refused by name."""
+    plan = plan_scene(Scene((-6.0, 60.0)), ctx=cl_context, samples=8)
+    assert plan.ray.view_steps == 8
+    assert "ray march, 8 samples per ray (asked for; the default level's 48)" in plan.describe()
+    assert plan_scene(Scene((-6.0, 60.0)), ctx=cl_context).ray.view_steps == 48
+    with pytest.raises(ValueError, match=r"^samples must be None or an integer in \[2, 4096\], got 1$"):
+        plan_scene(Scene((-6.0, 60.0)), ctx=cl_context, samples=1)
+
+
 def test_a_day_scene_with_a_loose_budget_needs_the_lookup_only(cl_context):
     plan = plan_scene(Scene((20.0, 60.0), error_budget=0.1), ctx=cl_context)
     assert plan.level.name == "draft" and plan.ray is None
