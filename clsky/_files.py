@@ -206,9 +206,16 @@ def check_suffix(path, suffix: str, name: str = "path") -> pathlib.Path:
     ValueError: --output must end in .png after a file name (NAME.png), got '.png'
     """
     result = as_path(path, name)
-    if result.suffix != suffix:
+    if result.suffix != suffix or _names_a_directory(path):
         raise ValueError(f"{name} must end in {suffix} after a file name (NAME{suffix}), got {str(path)!r}")
     return result
+
+
+def _names_a_directory(path) -> bool:
+    """Whether ``path`` (as typed) ends in a path separator: a directory's name, whatever pathlib makes of it
+    (it drops the separator: ``-o x.png/`` wrote the file x.png)."""
+    text = os.fspath(path)
+    return isinstance(text, str) and text.endswith(tuple(filter(None, (os.sep, os.altsep))))
 
 
 def binary_and_header(name, parameter: str = "path") -> tuple[pathlib.Path, pathlib.Path]:
@@ -271,11 +278,12 @@ def check_output(path, force=False, option=None, suffix=None, probe=True):
         A name longer than the file system's NAME_MAX, or a path (with its temporary name) longer
         than PATH_MAX.
     """
-    path = as_path(path, option or "path")
+    typed, path = path, as_path(path, option or "path")
     suffix = path.suffix if suffix is None else suffix
     _check_names(path, option, suffix)
-    if path.is_dir():
-        raise IsADirectoryError(f"{_label(option)}{path} is a directory")
+    if path.is_dir() or _names_a_directory(typed):
+        raise IsADirectoryError(f"{_label(option)}{typed} is a directory" if path.is_dir() else
+                                f"{_label(option)}{typed} names a directory (its trailing '/'), not a file")
     if os.path.lexists(path) and not force:
         raise FileExistsError(f"{_label(option)}{path} exists; {_force_hint(option)}")
     _check_parent(path.parent, option, probe=probe)

@@ -108,6 +108,14 @@ def test_check_output_refuses_what_cannot_be_written(tmp_path):
     assert listing(tmp_path) == ["file", "folder.png", "old.png"]     # the probe leaves nothing
 
 
+def test_check_output_refuses_a_name_that_ends_in_a_separator(tmp_path):
+    """'x.npz/' names a directory, not the file x.npz that pathlib reads it as."""
+    with pytest.raises(IsADirectoryError, match=r"^--raw: .*x\.npz/ names a directory \(its trailing '/'\), not a "
+                                                r"file$"):
+        check_output(f"{tmp_path}/x.npz/", option="--raw")
+    assert check_output(tmp_path / "x.npz") == tmp_path / "x.npz"
+
+
 def test_check_output_directory(tmp_path):
     (tmp_path / "file").write_bytes(b"")
     check_output_directory(tmp_path / "new" / "deeper")       # created later with parents=True
@@ -314,13 +322,14 @@ def test_cli_animate_checks_the_mp4_frames_and_metrics_first(tmp_path):
 
 
 @pytest.mark.parametrize("command,output", [("animate", ".mp4"), ("render", ".png"), ("table", ".npz"),
-                                            ("render", "dir/.png")])
+                                            ("render", "dir/.png"), ("render", "x.png/"), ("table", "t.npz/")])
 def test_cli_refuses_an_output_named_by_its_suffix_alone(tmp_path, command, output):
     """'-o .png' names a hidden file without a suffix (pathlib's reading; animate took '.mp4' and wrote
-    '.mp4_frames/'): refused, naming the NAME it lacks, before any work."""
+    '.mp4_frames/'), and 'x.png/' a directory (pathlib drops the '/': the file x.png was written): refused,
+    naming the NAME it lacks, before any work."""
     (tmp_path / "dir").mkdir()
     args = {"animate": ANIMATE, "render": ("render", "--size", "16"), "table": ("table", *SLOW_TABLE)}[command]
-    extension = output[output.index("."):]
+    extension = output[output.index("."):].rstrip("/")
     result = clsky(*args, "-o", output, cwd=tmp_path)
     assert_usage_error(result, "--output must", f"in {extension} after a file name (NAME{extension}), "
                                                f"got {output!r}")
