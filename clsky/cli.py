@@ -551,17 +551,27 @@ def orders_phrase(settings, record) -> str:
 
 
 def report_table(args, table, output, seconds):
-    """The summary line of a table written to ``output`` and its raw export (and a warning if its orders did
-    not converge)."""
-    settings, record = table.settings, table.orders_record
+    """Print the summary line of a table written to ``output`` and its raw export (and a warning if its orders
+    did not converge)."""
+    print(table_summary(args, table, output, seconds))
+    warn_unconverged(table)
+
+
+def table_summary(args, table, output, seconds) -> str:
+    """The summary line of a table written (or, in a sweep, to be written) to ``output`` and its raw export."""
+    settings = table.settings
     width, height, depth = settings.size
-    print(f"table {width}x{height}x{depth} {settings.dtype} ({args.preset}, mode {settings.mode}, "
-          f"{orders_phrase(settings, record)}; "
-          f"{table.metadata['device']}): built in {table.metadata['build_seconds']:.2f} s, "
-          f"total {seconds:.2f} s -> {output}"
-          + ("" if args.raw is None else ", " + ", ".join(map(str, binary_and_header(args.raw)))))
-    if settings.orders == "auto" and not record["converged"]:
-        print(f"clsky: warning: {record['reason']}", file=sys.stderr)
+    return (f"table {width}x{height}x{depth} {settings.dtype} ({args.preset}, mode {settings.mode}, "
+            f"{orders_phrase(settings, table.orders_record)}; "
+            f"{table.metadata['device']}): built in {table.metadata['build_seconds']:.2f} s, "
+            f"total {seconds:.2f} s -> {output}"
+            + ("" if args.raw is None else ", " + ", ".join(map(str, binary_and_header(args.raw)))))
+
+
+def warn_unconverged(table):
+    """A warning on stderr if the table's orders did not converge."""
+    if table.settings.orders == "auto" and not table.orders_record["converged"]:
+        print(f"clsky: warning: {table.orders_record['reason']}", file=sys.stderr)
 
 
 def run_info(args):

@@ -164,8 +164,11 @@ def test_an_output_another_run_wrote_meanwhile_is_refused_by_option(tmp_path, mo
     assert cli.main(["table", "--progress", "none", *words]) == 2
     where = "lines.txt line 1: " if sweep else ""
     placed = "; this run's files already in place: sky.npz, sky.bin" if when == "commit" else ""
-    assert capsys.readouterr().err == (f"clsky: error: {where}--raw sky.json exists: another process wrote it "
-                                       f"during this run; use --force to overwrite it{placed}\n")
+    printed = capsys.readouterr()
+    assert printed.err == (f"clsky: error: {where}--raw sky.json exists: another process wrote it "
+                           f"during this run; use --force to overwrite it{placed}\n")
+    # no summary line says '-> sky.npz' for a table that was not written (a sweep printed them as it built)
+    assert "->" not in printed.out
     expected = {"sky.json"} | ({"sky.npz", "sky.bin"} if placed else set()) | ({"lines.txt"} if sweep else set())
     assert {path.name for path in tmp_path.iterdir()} == expected
     assert (tmp_path / "sky.json").read_bytes() == b"the other run's"
