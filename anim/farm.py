@@ -36,7 +36,7 @@ import threading
 
 import numpy as np
 
-from clsky.farm import Farm, result_of, translate_errors
+from clsky.farm import Farm, check_window, result_of, translate_errors
 
 try:                                                      # the plugin needs Dask; the module imports without it
     from distributed import WorkerPlugin as _WorkerPlugin
@@ -187,7 +187,10 @@ def animation_frames(farm: Farm, config, table, positions, lookup, window=None):
     order, rendered by the workers (module docstring), with the lookup ``lookup`` (the client's
     :func:`clsky.anim.animate.lookup_of`); ``pipeline_of()`` returns the client's display pipeline, which
     smooths the auto-exposure. At most ``window`` frames are in flight (default: twice the workers'
-    threads, at least 4), so that a long or large animation holds a bounded number of HDR frames."""
+    threads, at least 4), so that a long or large animation holds a bounded number of HDR frames;
+    ValueError naming ``window`` unless it is None or an integer in [1, :data:`clsky.farm.MAX_WINDOW`]."""
+    window = check_window(window)
+
     def frames(pipeline_of):
         pipeline = pipeline_of()
         client = farm.client

@@ -144,6 +144,11 @@ class Farm:
         # Dask's nanny writes its workers' variables (OMP_NUM_THREADS=1, ...) into this process's environment
         # before it spawns them: they are undone when the farm closes
         self._stack.callback(_restore_environment, dict(os.environ))
+        # what a FarmError reports in one line is not logged before it (for the farm's lifetime)
+        reported = ReportedAsFarmErrorFilter()
+        for name in reported.LOGGERS:
+            logging.getLogger(name).addFilter(reported)
+            self._stack.callback(logging.getLogger(name).removeFilter, reported)
         # spawn, never fork, for the farm's lifetime: the nanny restarts a lost worker with it too
         self._stack.enter_context(dask.config.set({"distributed.worker.multiprocessing-method": "spawn",
                                                    MALLOC_TRIM_KEY: None}))
@@ -256,10 +261,16 @@ class Farm:
         Each task's key is ``'{label}-{token}-{index}'``. A lost worker's tasks are rerun elsewhere;
         an exception raised by ``function`` is raised here; :class:`FarmError` when Dask gives up on a
         task (it killed too many workers) or the cluster goes away. The tasks left are cancelled when
-        the iteration stops early.
+        the iteration stops early. ValueError naming ``window`` unless it is None or an integer in [1,
+        :data:`MAX_WINDOW`], before any task is submitted (a negative one raised IndexError midway, 0 was
+        the default).
         """
         client = self._require_client()
-        window = window or 2 * self.threads
+        window = check_window(window) or 2 * self.threads
+        return self._in_order(client, function, arguments, label, window)
+
+    def _in_order(self, client, function, arguments, label, window):
+        """The generator of :meth:`map_ordered`."""
         token = self.new_token()
         pending = []
         try:
@@ -274,6 +285,15 @@ class Farm:
             if pending:
                 with contextlib.suppress(Exception):
                     client.cancel(pending)
+
+
+#: The most tasks a farm keeps in flight at the caller's request (each task's result is held until its turn).
+MAX_WINDOW = 100_000
+
+
+def check_window(window):
+    """``window`` (tasks in flight) as an int in [1, :data:`MAX_WINDOW`], or None; ValueError naming it."""
+    return check_integer("window", window, 1, MAX_WINDOW, optional=True)
 
 
 def installed_version() -> str:
@@ -330,6 +350,22 @@ def dask_setup(worker):
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     logging.getLogger("distributed.worker").addFilter(ClosingWorkerConnectionFilter(worker))
+
+
+class ReportedAsFarmErrorFilter(logging.Filter):
+    """Drops the client process's Dask log records that say what a :class:`FarmError` then says in its one
+    line (:func:`translate_errors`): the scheduler's "Task ... marked as failed because N workers died" (an
+    embedded cluster's scheduler runs in this process) and the client's "Failed to reconnect to scheduler
+    after ... seconds". They came on stderr before clsky's line, past the cluster's ``silence_logs``
+    (ERROR). Every other record passes."""
+
+    #: the start of each dropped record's format string (distributed 2026.8: scheduler.py, client.py)
+    REPORTED = ("Task %s marked as failed because %d workers died", "Failed to reconnect to scheduler after")
+    #: the loggers the filter is attached to while a farm runs
+    LOGGERS = ("distributed.scheduler", "distributed.client")
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not (isinstance(record.msg, str) and record.msg.startswith(self.REPORTED))
 
 
 class ClosingWorkerConnectionFilter(logging.Filter):

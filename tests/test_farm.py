@@ -187,6 +187,38 @@ def test_workers_of_another_clsky_are_refused_at_the_start(farm, monkeypatch):
         Farm(scheduler=farm.client.scheduler.address).start()
 
 
+def test_a_bad_window_is_refused_before_any_task(farm):
+    """map_ordered's and animation_frames' window (tasks or frames in flight): a negative one raised
+    IndexError after its tasks were submitted, 0, 2.5 and True were taken silently."""
+    from clsky.anim.farm import animation_frames
+
+    for window in (-5, 0, 2.5, "x", True):
+        with pytest.raises(ValueError, match=r"^window must be None or an integer in \[1, 100000\], got "):
+            farm.map_ordered(pow, [(2, 2)], window=window)
+        with pytest.raises(ValueError, match=r"^window must be None or an integer in \[1, 100000\], got "):
+            animation_frames(farm, None, None, [], None, window=window)
+    assert list(farm.map_ordered(pow, [(2, 2), (3, 2), (4, 2)], window=1)) == [4, 9, 16]
+
+
+def test_what_a_farm_error_reports_is_not_logged_before_it(farm):
+    """Dask's scheduler (in this process for an embedded cluster) and client logged, at ERROR, what the
+    FarmError then said in its one line ("4 workers died", "Failed to reconnect"): filtered while the farm
+    runs, every other record kept."""
+    import logging
+
+    from clsky.farm import ReportedAsFarmErrorFilter
+
+    def record(message, *args):
+        return logging.LogRecord("distributed.scheduler", logging.ERROR, "scheduler.py", 1, message, args, None)
+
+    reported = ReportedAsFarmErrorFilter()
+    assert not reported.filter(record("Task %s marked as failed because %d workers died", "clsky-render-x-1", 4))
+    assert not reported.filter(record("Failed to reconnect to scheduler after %.2f seconds, closing client", 10.0))
+    assert reported.filter(record("Task %s marked as failed because it timed out waiting", "x"))
+    for name in ReportedAsFarmErrorFilter.LOGGERS:
+        assert any(isinstance(f, ReportedAsFarmErrorFilter) for f in logging.getLogger(name).filters)
+
+
 def test_the_shipped_table_is_checked_as_a_table_file():
     """What workers receive (anim/farm.py: the table file's bytes) is read back the same, and a damaged
     payload is refused by the table file's own checks (here: the archive's CRC of the data member), not
