@@ -557,6 +557,7 @@ class ScatteringTable:
         record = _json_member(contents, "orders_record")
         if "orders" not in record:
             raise TableFormatError("orders_record lacks orders, the count of orders computed")
+        _check_orders_record(record)
         if is_integer(record["orders"]) and ("gathered" in contents) != (record["orders"] != 1):   # else validate's
             # the ray march adds the gathered source of the orders k >= 2: without it a file of higher orders
             # renders without them (24 % darker), with it a single-scattering file adds light it lacks (a
@@ -886,14 +887,28 @@ def _check_metadata(metadata):
     ``build_seconds`` of [1, 2] ended ``clsky info`` in TypeError, and a version or units with a newline
     would add lines to its output and to the frames' headers."""
     for key in _METADATA_TEXTS:
-        value = metadata.get(key, "")
-        if not isinstance(value, str) or len(value) > 200 or not value.isprintable():
-            raise TableFormatError(f"metadata's {key} must be one line of printable text, got {short(value)}")
+        _check_one_line(f"metadata's {key}", metadata.get(key, ""), 200)
     seconds = metadata.get("build_seconds", 0.0)
     if not is_real_number(seconds) or not 0.0 <= seconds < math.inf:
         raise TableFormatError(f"metadata's build_seconds must be a number of seconds >= 0, got {short(seconds)}")
     if not isinstance(metadata.get("fast_math", False), bool):
         raise TableFormatError(f"metadata's fast_math must be true or false, got {short(metadata['fast_math'])}")
+
+
+def _check_one_line(name, value, limit):
+    """TableFormatError unless ``value`` is one line of at most ``limit`` printable characters."""
+    if not isinstance(value, str) or len(value) > limit or not value.isprintable():
+        raise TableFormatError(f"{name} must be one line of printable text, got {short(value)}")
+
+
+def _check_orders_record(record):
+    """TableFormatError unless what clsky prints of the orders record (``clsky info``, ``clsky table``'s
+    warning) is what a build writes: a forged reason with a newline or a terminal's escape codes was printed
+    as it was, and a "converged" of "no" printed "converged"."""
+    if "reason" in record:
+        _check_one_line("orders_record's reason", record["reason"], 1000)
+    if not isinstance(record.get("converged", False), bool):
+        raise TableFormatError(f"orders_record's converged must be true or false, got {short(record['converged'])}")
 
 
 def _json_member(contents, name) -> dict:

@@ -649,3 +649,15 @@ def test_metadata_that_clsky_reads_back_is_checked(saved, table, metadata, what)
     added a line to its output (the units go into the frames' headers too)."""
     rewrite(saved, metadata=json.dumps(table.metadata | metadata))
     refused(saved, what)
+
+
+@pytest.mark.parametrize("record, what", [
+    ({"reason": "line1\nline2 \x1b[31mRED\x1b[0m"}, "orders_record's reason must be one line of printable text"),
+    ({"reason": 7}, "orders_record's reason must be one line of printable text, got 7"),
+    ({"converged": "no"}, "orders_record's converged must be true or false, got 'no'"),
+])
+def test_the_orders_record_that_clsky_prints_is_checked(saved, table, record, what):
+    """``clsky info`` printed a forged reason's newline and escape codes as they were, and "converged" for
+    a converged of "no"."""
+    rewrite(saved, orders_record=json.dumps(table.orders_record | record))
+    refused(saved, what)
