@@ -383,11 +383,14 @@ def table_settings(args, atmosphere):
     from .errors import ParameterError
 
     from .ground import check_ground_mode
+    from .table4d import check_atmosphere
 
     try:
         settings = _table_settings(args, atmosphere)
         check_ground_mode(atmosphere, settings.mode, "" if getattr(args, "ground_albedo", None) is not None
                           else f"the {args.preset} preset's ground")
+        if settings.is_4d:              # here, not at the build: named as an option, a sweep's line too
+            check_atmosphere(atmosphere, settings)
     except ParameterError as error:
         if (error.field == "azimuth_harmonics" and getattr(args, "azimuth_harmonics", None) is None
                 and getattr(args, "gather_steps", None) is not None):     # the level's or planner's M: PHI is typed

@@ -191,6 +191,9 @@ def test_an_output_another_run_wrote_meanwhile_is_refused_by_option(tmp_path, mo
     (["--quality", "best"], "--quality"),
     (["--sun-elevations", "30", "10"], "--sun-elevations"),
     (["--sun-elevations", "-100", "10"], "--sun-elevations"),
+    # a check of the build's, which named the API's 'orders' (and, on a --sweep line, lost the line's prefix)
+    (["--parameterization", "4d", "--preset", "physical", "--orders", "1", "--size", "8", "32", "8"],
+     "clsky: error: --orders must be more than 1 for a reflecting ground"),
 ])
 def test_bad_arguments_one_line_exit_2(tmp_path, args, named):
     result = clsky("table", "--progress", "none", *args, cwd=tmp_path)
