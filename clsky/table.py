@@ -641,18 +641,26 @@ class ScatteringTable:
                                        "interpolated quadrilinearly, never across the horizon (y = H/2-1 to H/2)")
         harmonics = self.settings.azimuth_harmonics if self.gathered is not None else 0
         if harmonics:
+            # a 4D table's higher orders come from the orders of the 3D table of its W x H x D (clsky/table4d.py)
+            nodes, multiple = (
+                ("x, y, z: the nodes of the 3D grid of the same W x H x D (mapping_formulas[mapping]: the 3D view "
+                 "mapping, not view_4d)",
+                 "the multiple_* channels above are these harmonics' light integrated along each 4D node's own ray "
+                 "(at its azimuth), not an azimuth average") if self.settings.is_4d else
+                ("x, y, z: the table's nodes",
+                 "the multiple_* channels above are the azimuth average of the orders k >= 2 (harmonic 0 of their "
+                 "radiance)"))
             description["azimuth_harmonics"] = {
                 "M": harmonics,
                 "offset_values": int(self.data.size),
                 "shape": {"harmonics": harmonics + 1, "D": depth, "H": height, "W": width, "channels": 6},
                 "layout": ("values[offset_values + (((m*D + z)*H + y)*W + x) * 6 + c]; m: harmonic 0..M, "
-                           "x, y, z: the table's nodes, c: Rayleigh r, g, b, Mie r, g, b"),
+                           f"{nodes}, c: Rayleigh r, g, b, Mie r, g, b"),
                 "quantity": ("G_m: cosine harmonics of the gathered in-scatter source of the orders k >= 2 "
                              "(phase applied, in units of I_I), summed over the orders"),
                 "radiance": ("along a view ray: I_I * sum_s beta_s / (4 pi) * Integral rho_s T "
                              "max(0, sum_m G_m,s cos(m phi)) ds, phi the local view-sun azimuth "
-                             "(clsky/azimuth.py); the multiple_* channels above are the azimuth "
-                             "average of the orders k >= 2 (harmonic 0 of their radiance)"),
+                             f"(clsky/azimuth.py); {multiple}"),
             }
         try:                        # strict JSON, before any file: a NaN in the metadata was written as NaN
             text = json.dumps(description, indent=2, allow_nan=False) + "\n"

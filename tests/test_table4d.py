@@ -386,3 +386,18 @@ def test_cli_builds_and_describes_a_4d_table(tmp_path):
     bad = subprocess.run(run + ["table", "--parameterization", "4d", "--size", "6", "8", "6", "-o",
                                 str(tmp_path / "u.npz")], capture_output=True, text=True)
     assert bad.returncode == 2 and "--parameterization" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_raw_export_of_a_4d_table_says_what_its_channels_and_harmonics_are(table4d, tmp_path):
+    """The raw header of a 4D table with harmonics described it as a 3D table's: multiple_* channels "the
+    azimuth average" (they vary by ~1000x across the azimuth axis of a dusk table) and the harmonics on "the
+    table's nodes" (they lie on the 3D grid, its view mapping not view_4d)."""
+    import json
+
+    _, header = table4d.export_raw(tmp_path / "sky")
+    block = json.loads(header.read_text())["azimuth_harmonics"]
+    assert "the nodes of the 3D grid of the same W x H x D" in block["layout"]
+    assert "integrated along each 4D node's own ray" in block["radiance"]
+    assert "are the azimuth average" not in block["radiance"]
+    multiple = table4d.data[..., 6:9]
+    assert np.ptp(multiple, axis=0).max() > 0          # they do vary with the azimuth
