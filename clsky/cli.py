@@ -563,8 +563,8 @@ def report_table(args, table, output, seconds):
 def table_summary(args, table, output, seconds) -> str:
     """The summary line of a table written (or, in a sweep, to be written) to ``output`` and its raw export."""
     settings = table.settings
-    width, height, depth = settings.size
-    return (f"table {width}x{height}x{depth} {settings.dtype} ({args.preset}, mode {settings.mode}, "
+    grid = "x".join(map(str, settings.size + ((settings.azimuth_size,) if settings.is_4d else ())))
+    return (f"table {grid} {settings.dtype} ({args.preset}, mode {settings.mode}, "
             f"{orders_phrase(settings, table.orders_record)}; "
             f"{table.metadata['device']}): built in {table.metadata['build_seconds']:.2f} s, "
             f"total {seconds:.2f} s -> {output}"

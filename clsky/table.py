@@ -152,13 +152,19 @@ def _check_values(name, array, nonnegative):
                            f"{MAX_TABLE_VALUE:g} in size)")
 
 
-def check_table_array(name, array, shape, dtypes, check_values=True):
-    """Check one of a table's arrays: a NumPy array of ``shape``, a dtype in ``dtypes``, and (when
-    ``check_values``) finite non-negative values; TableFormatError names ``name`` and what is wrong."""
+#: The axes of a table's arrays by their count, for the messages: 4D data, grids, the ground's irradiance.
+_AXES = {5: "(A, D, H, W, C)", 4: "(D, H, W, C)", 2: "(D, C)"}
+
+
+def check_table_array(name, array, shape, dtypes, check_values=True, axes=None):
+    """Check one of a table's arrays: a NumPy array of ``shape`` (whose axes ``axes`` names, default by their
+    count), a dtype in ``dtypes``, and (when ``check_values``) finite non-negative values; TableFormatError
+    names ``name`` and what is wrong."""
     if not isinstance(array, np.ndarray):
         raise TableFormatError(f"{name} must be a NumPy array, got {type(array).__name__}")
     if array.shape != tuple(shape):
-        raise TableFormatError(f"{name} has shape {array.shape}, the settings need {tuple(shape)} (D, H, W, C)")
+        raise TableFormatError(f"{name} has shape {array.shape}, the settings need {tuple(shape)} "
+                               f"{axes or _AXES.get(len(shape), '')}".rstrip())
     if array.dtype not in [np.dtype(d) for d in dtypes]:
         raise TableFormatError(f"{name} has dtype {array.dtype}, expected {' or '.join(map(str, dtypes))}")
     if check_values:
@@ -282,7 +288,8 @@ class ScatteringTable:
         if self.gathered is not None:
             harmonics = self.settings.azimuth_harmonics
             if harmonics:   # M + 1 cosine harmonics: m >= 1 may be negative (clsky/azimuth.py)
-                check_table_array("gathered", self.gathered, (harmonics + 1,) + grid + (6,), full_precision, False)
+                check_table_array("gathered", self.gathered, (harmonics + 1,) + grid + (6,), full_precision, False,
+                                  axes="(M + 1, D, H, W, C)")
                 if check_values:
                     check_finite_nonnegative("gathered", self.gathered[0])
                     check_finite_signed("gathered", self.gathered[1:])

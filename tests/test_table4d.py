@@ -378,6 +378,7 @@ def test_cli_builds_and_describes_a_4d_table(tmp_path):
                                  "--sun-steps", "8", "--gather-steps", "16", "16", "--progress", "none",
                                  "-o", str(output), "--raw", str(tmp_path / "raw")], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith("table 6x8x6x5 float64 ")          # the azimuth axis too (it said 6x8x6)
     assert ScatteringTable.load(output).data.shape == (5, 6, 8, 6, 9)
     header = json.loads((tmp_path / "raw.json").read_text())
     assert header["size"]["A"] == 5 and (tmp_path / "raw.bin").stat().st_size == 5 * 6 * 8 * 6 * 9 * 4
@@ -401,3 +402,17 @@ def test_raw_export_of_a_4d_table_says_what_its_channels_and_harmonics_are(table
     assert "are the azimuth average" not in block["radiance"]
     multiple = table4d.data[..., 6:9]
     assert np.ptp(multiple, axis=0).max() > 0          # they do vary with the azimuth
+
+
+def test_shape_messages_name_the_4d_axes(table4d):
+    """A 5-axis array's shape error labelled its axes '(D, H, W, C)'."""
+    import dataclasses
+
+    from clsky.table import TableFormatError
+
+    with pytest.raises(TableFormatError, match=r"data has shape .*, the settings need \(5, 6, 8, 6, 9\) "
+                                               r"\(A, D, H, W, C\)$"):
+        dataclasses.replace(table4d, data=table4d.data[..., :6]).validate()
+    with pytest.raises(TableFormatError, match=r"gathered has shape \(6, 8, 6, 6\), the settings need "
+                                               r"\(3, 6, 8, 6, 6\) \(M \+ 1, D, H, W, C\)$"):
+        dataclasses.replace(table4d, gathered=table4d.gathered[0]).validate()
