@@ -12,7 +12,7 @@ from . import _atmosphere_cl, _cl
 from .atmosphere import ATMOSPHERE_HEIGHT_RANGE, AtmosphereParameters
 from .errors import ParameterError, as_real_array, check_choice
 from .mapping import FULL_SUN_RANGE, sun_w_range
-from .settings import MAPPINGS
+from .settings import MAPPINGS, check_sun_cos_range
 
 __all__ = ["TableLookupEngine", "check_queries", "check_table_data", "check_kernel_buffer"]
 
@@ -59,6 +59,35 @@ TABLE_CHANNELS = (6, 4, 9, 7)
 MAX_KERNEL_VALUES = 2**31 - 1
 
 
+#: The largest value a table's arrays may hold [1/sr, per unit of incident light]: radiances per unit
+#: solar irradiance are of order 1 or less in any atmosphere the parameters admit (energy conservation;
+#: a build's coarsest quadratures overestimate by tens), so a larger one can only come from a damaged or
+#: forged file, where a finite 1e39 became infinite in a float32 kernel and 1e307 in a float64 render.
+MAX_TABLE_VALUE = 1e12
+
+
+def check_table_values(name, array, nonnegative=True, error=ValueError):
+    """``error`` naming ``name`` unless every value of ``array`` is finite, at most :data:`MAX_TABLE_VALUE` in
+    size and, with ``nonnegative``, >= 0: a table's values (:func:`clsky.table.check_finite_nonnegative`,
+    the lookup engines' data). By the array's minimum and maximum only (NaN propagates through both), no
+    array of their own: ``np.abs`` of the default animation's harmonics, checked as non-negative before,
+    took 82 MB of memory, which cost 0.04-0.54 s of one core at the end of the table's build where the
+    machine had not handed such memory out lately (docs/speed-log.md), against 0.02 s for the reductions.
+    The values are counted only for the error."""
+    if array.size == 0:
+        return
+    low, high = array.min(), array.max()
+    if (low >= 0 if nonnegative else low >= -MAX_TABLE_VALUE) and high <= MAX_TABLE_VALUE:
+        return
+    finite = np.isfinite(array)
+    counts = {"NaN values": np.isnan(array).sum(), "infinite values": np.isinf(array).sum(),
+              "negative values": (array < 0).sum() if nonnegative else 0,
+              f"values beyond {MAX_TABLE_VALUE:g}": (finite & (np.abs(array) > MAX_TABLE_VALUE)).sum()}
+    found = " and ".join(f"{int(count)} {kind}" for kind, count in counts.items() if count)
+    expected = "finite and >= 0" if nonnegative else "finite"
+    raise error(f"{name} holds {found} (a table's values are {expected}, at most {MAX_TABLE_VALUE:g} in size)")
+
+
 def check_table_data(data):
     """The (D, H, W, C) array of a table, C in :data:`TABLE_CHANNELS`, each axis >= 2, real numbers,
     fewer than 2**31 values (the kernels' int indices); ValueError otherwise."""
@@ -71,6 +100,17 @@ def check_table_data(data):
     if data.size > MAX_KERNEL_VALUES:
         raise ValueError(f"table data must have at most {MAX_KERNEL_VALUES} values, got {data.size}")
     return data
+
+
+def check_lookup(data, queries, sun_cos_range, check_shape=check_table_data):
+    """(data, queries, sun_cos_range) of a lookup, checked as the engines and their NumPy twins
+    (:func:`clsky.reference.lookup`, ``lookup4d``) check them: the table's shape (``check_shape``) and
+    values (:func:`check_table_values`: infinite data gave NaN radiance, negated data negative radiance),
+    the queries (:func:`check_queries`) and the sun axis' range
+    (:func:`clsky.settings.check_sun_cos_range`)."""
+    data = check_shape(data)
+    check_table_values("data", data)
+    return data, check_queries(*queries), check_sun_cos_range(sun_cos_range)
 
 
 def check_kernel_buffer(kernel, name, array_d, count, dtype):
@@ -131,16 +171,15 @@ class TableLookupEngine(_cl.Engine):
         numpy.ndarray, broadcast shape + (3,)
             Radiance r, g, b (HDR, before exposure tone mapping).
         """
-        data = check_table_data(data)
+        data, queries, sun_cos_range = check_lookup(data, (altitude, cos_view, cos_sun, cos_scatter), sun_cos_range)
         depth, height, width, channels = data.shape
-        return self._lookup("lookup", atmosphere, data, (width, height, depth, channels),
-                            (altitude, cos_view, cos_sun, cos_scatter), mapping, sun_cos_range)
+        return self._lookup("lookup", atmosphere, data, (width, height, depth, channels), queries, mapping,
+                            sun_cos_range)
 
     def _lookup(self, kernel, atmosphere, data, sizes, queries, mapping, sun_cos_range):
         """Launch ``kernel`` (``lookup`` or ``lookup4d``) on checked ``data`` whose node counts ``sizes``
         come first in the kernel's arguments, for the queries (altitude, cos_view, cos_sun, cos_scatter)."""
         check_choice("mapping", mapping, MAPPINGS)
-        queries = check_queries(*queries)
         shape, n = queries[0].shape, queries[0].size
         table_d = cla.to_device(self.queue, np.ascontiguousarray(data, dtype=self.dtype))
         queries_d = [cla.to_device(self.queue, np.ascontiguousarray(q.ravel(), dtype=self.dtype)) for q in queries]

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from .atmosphere import AtmosphereParameters
-from .lookup import TableLookupEngine
+from .lookup import TableLookupEngine, check_lookup
 from .mapping import FULL_SUN_RANGE
 
 __all__ = ["TableLookup4DEngine", "check_table4d_data"]
@@ -58,7 +58,8 @@ class TableLookup4DEngine(TableLookupEngine):
         numpy.ndarray, broadcast shape + (3,)
             Radiance r, g, b (HDR).
         """
-        data = check_table4d_data(data)
+        data, queries, sun_cos_range = check_lookup(data, (altitude, cos_view, cos_sun, cos_scatter), sun_cos_range,
+                                                    check_table4d_data)
         azimuths, depth, height, width, channels = data.shape
-        return self._lookup("lookup4d", atmosphere, data, (width, height, depth, azimuths, channels),
-                            (altitude, cos_view, cos_sun, cos_scatter), mapping, sun_cos_range)
+        return self._lookup("lookup4d", atmosphere, data, (width, height, depth, azimuths, channels), queries,
+                            mapping, sun_cos_range)

@@ -18,10 +18,10 @@ import pyopencl.array as cla
 from . import _atmosphere_cl, _cl, reference
 from .errors import as_real_array, check_instance, is_finite_real, short
 from .ground import padded4
-from .lookup import MAX_QUERY_ALTITUDE, check_kernel_buffer, check_table_data
+from .lookup import MAX_QUERY_ALTITUDE, MAX_TABLE_VALUE, check_kernel_buffer, check_table_data
 from .resources import check_memory, device_of, estimate_directions_memory, estimate_render_memory
 from .settings import MAPPINGS, TableSettings
-from .table import MAX_TABLE_VALUE, ScatteringTable
+from .table import ScatteringTable
 from .transmittance import COMMON_SOURCES, NO_GATHERED_GRID, TransmittanceEngine, azimuth_defines, column_channels, \
     gathered_source_reals, quadrature_defines, upload_gathered_source
 

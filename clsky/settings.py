@@ -46,6 +46,20 @@ def _ordered(value):
     return None
 
 
+def check_sun_cos_range(value, name="sun_cos_range"):
+    """``value`` as (low, high), the sun cosines a table's sun axis covers: two cosines -1 <= low < high <= 1,
+    at least 1e-3 apart; ParameterError naming ``name`` otherwise (TableSettings, and the lookup engines,
+    which took a reversed, NaN or out-of-range one and returned 1e-12 where their NumPy twin gave NaN)."""
+    error = ParameterError(name, "two cosines -1 <= low < high <= 1, high - low >= 1e-3", value)
+    items = _ordered(value)
+    if items is None or len(items) != 2 or not all(is_finite_real(v) for v in items):
+        raise error
+    low, high = (float(v) for v in items)
+    if not -1.0 <= low < high <= 1.0 or high - low < 1e-3:
+        raise error
+    return low, high
+
+
 @dataclasses.dataclass(frozen=True)
 class TableSettings:
     """How a scattering table is discretised and computed.
@@ -235,14 +249,7 @@ class TableSettings:
 
     @staticmethod
     def _check_sun_cos_range(value):
-        error = ParameterError("sun_cos_range", "two cosines -1 <= low < high <= 1, high - low >= 1e-3", value)
-        items = _ordered(value)
-        if items is None or len(items) != 2 or not all(is_finite_real(v) for v in items):
-            raise error
-        low, high = (float(v) for v in items)
-        if not -1.0 <= low < high <= 1.0 or high - low < 1e-3:
-            raise error
-        return low, high
+        return check_sun_cos_range(value)
 
     @property
     def sun_w_range(self) -> tuple:

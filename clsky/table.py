@@ -36,7 +36,7 @@ File format (``.npz``, uncompressed: compression saves little on these values an
 any file that is not such an archive, has another version (older files: rebuild the table), misses
 or adds a member, fails a checksum or the parameters hash, or holds arrays whose shape, dtype or
 values (:meth:`ScatteringTable.validate`: finite, >= 0 but for the harmonics m >= 1, at most
-:data:`MAX_TABLE_VALUE` in size) do not fit its settings. Against a forged file, whose checksums the
+:data:`clsky.lookup.MAX_TABLE_VALUE` in size) do not fit its settings. Against a forged file, whose checksums the
 forger recomputes: before any member is read, the archive's directory must list no foreign member and
 no member that inflates beyond twice its settings' float64 values (:func:`_array_limits`; a 2 MB
 file of deflated zeros took 2 GB of memory); ``gathered`` must be present exactly when
@@ -68,7 +68,7 @@ from . import __version__
 from ._files import StagedWrites, as_path, atomic_write, binary_and_header, check_output, check_suffix
 from .atmosphere import AtmosphereParameters, as_atmosphere
 from .errors import check_flag, check_instance, is_integer, is_real_number, short
-from .lookup import check_queries
+from .lookup import check_queries, check_table_values
 from .settings import TableSettings
 from .solar import radiance_units
 
@@ -113,43 +113,18 @@ def array_checksum(array) -> str:
     return digest.hexdigest()
 
 
-#: The largest value a table's arrays may hold [1/sr, per unit of incident light]: radiances per unit
-#: solar irradiance are of order 1 or less in any atmosphere the parameters admit (energy conservation;
-#: a build's coarsest quadratures overestimate by tens), so a larger one can only come from a damaged or
-#: forged file, where a finite 1e39 became infinite in a float32 kernel and 1e307 in a float64 render.
-MAX_TABLE_VALUE = 1e12
 
 
 def check_finite_nonnegative(name, array):
-    """TableFormatError unless every value of ``array`` is finite and >= 0 (radiances [1/sr])."""
-    _check_values(name, array, nonnegative=True)
+    """TableFormatError unless every value of ``array`` is finite and >= 0 (radiances [1/sr]), at most
+    :data:`clsky.lookup.MAX_TABLE_VALUE` (:func:`clsky.lookup.check_table_values`)."""
+    check_table_values(name, array, nonnegative=True, error=TableFormatError)
 
 
 def check_finite_signed(name, array):
     """TableFormatError unless every value of ``array`` is finite, of either sign (the azimuth harmonics
-    m >= 1 of a gathered table)."""
-    _check_values(name, array, nonnegative=False)
-
-
-def _check_values(name, array, nonnegative):
-    """The two checks above by the array's minimum and maximum only (NaN propagates through both), no
-    array of their own: ``np.abs`` of the default animation's harmonics, checked as non-negative before,
-    took 82 MB of memory, which cost 0.04-0.54 s of one core at the end of the table's build where the
-    machine had not handed such memory out lately (docs/speed-log.md), against 0.02 s for the reductions.
-    The values are counted only for the error."""
-    if array.size == 0:
-        return
-    low, high = array.min(), array.max()
-    if (low >= 0 if nonnegative else low >= -MAX_TABLE_VALUE) and high <= MAX_TABLE_VALUE:
-        return
-    finite = np.isfinite(array)
-    counts = {"NaN values": np.isnan(array).sum(), "infinite values": np.isinf(array).sum(),
-              "negative values": (array < 0).sum() if nonnegative else 0,
-              f"values beyond {MAX_TABLE_VALUE:g}": (finite & (np.abs(array) > MAX_TABLE_VALUE)).sum()}
-    found = " and ".join(f"{int(count)} {kind}" for kind, count in counts.items() if count)
-    expected = "finite and >= 0" if nonnegative else "finite"
-    raise TableFormatError(f"{name} holds {found} (a table's values are {expected}, at most "
-                           f"{MAX_TABLE_VALUE:g} in size)")
+    m >= 1 of a gathered table), at most :data:`clsky.lookup.MAX_TABLE_VALUE` in size."""
+    check_table_values(name, array, nonnegative=False, error=TableFormatError)
 
 
 #: The axes of a table's arrays by their count, for the messages: 4D data, grids, the ground's irradiance.

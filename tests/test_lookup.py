@@ -119,3 +119,41 @@ def test_invalid_queries_name_the_parameter(table, name, value):
 def test_bad_table_shape_is_refused(lookup_engines):
     with pytest.raises(ValueError, match="shape"):
         lookup_engines["float64"].radiance(black_preset("physical"), np.zeros((4, 4, 4, 5)), 0, 0, 0, 0)
+
+
+def _lookups(four_d):
+    """The two engines' radiance and their NumPy twins, for a 3D or 4D table's data."""
+    from clsky.lookup4d import TableLookup4DEngine
+
+    engine = TableLookup4DEngine() if four_d else TableLookupEngine()
+    return [engine.radiance, reference.lookup4d if four_d else reference.lookup]
+
+
+@pytest.mark.parametrize("four_d", [False, True], ids=["3d", "4d"])
+@pytest.mark.parametrize("change, message", [
+    (dict(sun_cos_range=(0.2, 0.2)), r"^sun_cos_range must be two cosines -1 <= low < high <= 1"),
+    (dict(sun_cos_range=(0.5, 0.2)), r"^sun_cos_range must be two cosines"),        # reversed: accepted
+    (dict(sun_cos_range=(-5, 5)), r"^sun_cos_range must be two cosines"),            # beyond [-1, 1]: accepted
+    (dict(sun_cos_range=(np.nan, 1)), r"^sun_cos_range must be two cosines"),        # 1e-12 and NaN
+    (dict(sun_cos_range="ab"), r"^sun_cos_range must be two cosines"),               # numpy's message
+    (dict(data=np.inf), r"^data holds \d+ infinite values"),                          # NaN radiance
+    (dict(data=-1.0), r"^data holds \d+ negative values"),                            # negative radiance
+    (dict(cos_view=np.nan), r"^cos_view must be finite and in \[-1, 1\], got nan"),   # twin: NaN radiance
+])
+def test_lookups_and_their_twins_refuse_what_a_table_cannot_be(four_d, change, message):
+    """The lookup engines and their NumPy twins took any sun_cos_range (equal, reversed, NaN, beyond [-1, 1]:
+    the engine returned 1e-12 where the twin gave NaN) and any data (infinite data gave NaN radiance,
+    negated data negative radiance): both refuse them alike, naming the parameter."""
+    shape = (3, 4, 8, 4, 9) if four_d else (4, 8, 4, 9)
+    arguments = dict(data=np.full(shape, 0.5), altitude=0.0, cos_view=0.5, cos_sun=0.2, cos_scatter=0.5,
+                     sun_cos_range=(-1.0, 1.0))
+    if "data" in change:
+        arguments["data"] = arguments["data"] * change["data"]
+    else:
+        arguments.update(change)
+    atmosphere = black_preset("physical")
+    for radiance in _lookups(four_d):
+        with pytest.raises(ValueError, match=message):
+            radiance(atmosphere, arguments["data"],
+                     *(arguments[k] for k in ("altitude", "cos_view", "cos_sun", "cos_scatter")), "nonlinear",
+                     arguments["sun_cos_range"])
