@@ -32,6 +32,7 @@ import functools
 import numpy as np
 
 from ._data import interpolate_bin_centres, read_binned_table
+from .errors import ParameterError, as_real_array, check_real
 
 __all__ = ["DOBSON_UNIT", "CROSS_SECTION_FILE", "cross_section_table", "cross_section_serdyuchenko2014",
            "tent_profile", "tent_number_density_max"]
@@ -103,8 +104,24 @@ def tent_profile(altitude, peak_altitude=25_000.0, half_width=15_000.0):
     --------
     >>> tent_profile([0.0, 10e3, 17.5e3, 25e3, 40e3]).tolist()
     [0.0, 0.0, 0.5, 1.0, 0.0]
+
+    Raises
+    ------
+    ValueError
+        (:class:`~clsky.errors.ParameterError`) naming a parameter that is not finite, or a half width
+        that is not > 0 (0 gave NaN, a negative one densities far above the peak's).
     """
-    h = np.asarray(altitude, dtype=np.float64)
+    h = as_real_array("altitude", altitude, "finite altitudes [m]")
+    if not np.all(np.isfinite(h)):
+        raise ParameterError("altitude", "finite altitudes [m]", altitude)
+    peak_altitude = check_real("peak_altitude", peak_altitude, unit=" m")
+    half_width = check_real("half_width", half_width, 0.0, low_open=True, unit=" m")
+    return tent(h, peak_altitude, half_width)
+
+
+def tent(h, peak_altitude, half_width):
+    """:func:`tent_profile` of checked arguments (an atmosphere's, whose parameters are checked): the
+    NumPy twins' densities (:func:`clsky.reference.densities`) on their ray nodes."""
     return np.maximum(1.0 - np.abs(h - peak_altitude) / half_width, 0.0)
 
 
@@ -116,5 +133,13 @@ def tent_number_density_max(column_du, half_width=15_000.0):
     --------
     >>> round(tent_number_density_max(300.0) / 1e18, 3)
     5.374
+
+    Raises
+    ------
+    ValueError
+        (:class:`~clsky.errors.ParameterError`) naming a column that is not finite and >= 0 (a negative one
+        gave a negative density) or a half width that is not finite and > 0.
     """
+    column_du = check_real("column_du", column_du, 0.0, unit=" DU")
+    half_width = check_real("half_width", half_width, 0.0, low_open=True, unit=" m")
     return column_du * DOBSON_UNIT / half_width

@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from .atmosphere import AtmosphereParameters
-from .ozone import tent_profile
+from .ozone import tent
 from .mapping import FULL_SUN_RANGE, grid_coordinates
 from .settings import TableSettings
 
@@ -102,7 +102,7 @@ def densities(atmosphere: AtmosphereParameters, h):
     (rho_R, rho_M), plus the ozone tent f_O (:func:`clsky.ozone.tent_profile`) with ozone."""
     species = (np.exp(-h / atmosphere.rayleigh_scale_height), np.exp(-h / atmosphere.mie_scale_height))
     if atmosphere.has_ozone:
-        species += (tent_profile(h, atmosphere.ozone_peak_altitude, atmosphere.ozone_half_width),)
+        species += (tent(h, atmosphere.ozone_peak_altitude, atmosphere.ozone_half_width),)
     return species
 
 

@@ -96,6 +96,22 @@ def test_profile_and_column_are_parameters():
 
 # Cross-sections --------------------------------------------------------------------------------------
 
+@pytest.mark.parametrize("call, message", [
+    (lambda: ozone.tent_profile([25e3, 0.0], half_width=0.0), r"^half_width must be a number in \(0, inf\] m"),
+    (lambda: ozone.tent_profile([25e3, 0.0], half_width=-1.0), r"^half_width must be"),   # 25001 times the peak
+    (lambda: ozone.tent_profile([math.nan]), r"^altitude must be finite altitudes \[m\]"),
+    (lambda: ozone.tent_profile(["a"]), r"^altitude must be finite altitudes \[m\]"),
+    (lambda: ozone.tent_number_density_max(-300.0), r"^column_du must be a number in \[0, inf\] DU"),
+    (lambda: ozone.tent_number_density_max(300.0, half_width=0), r"^half_width must be"),  # ZeroDivisionError
+    (lambda: ozone.tent_number_density_max("300"), r"^column_du must be"),                 # TypeError
+])
+def test_the_tent_refuses_what_no_atmosphere_has(call, message):
+    """The public tent and its peak density took a zero or negative half width (NaN, a density 25001 times
+    the peak's, ZeroDivisionError), a negative column (a negative density) and NaN altitudes."""
+    with pytest.raises(ValueError, match=message):
+        call()
+
+
 def test_cross_sections_of_the_shipped_file():
     """Serdyuchenko et al. 2014 (233 K), 10 nm bins from 360 to 840 nm; at the bin centres the
     interpolation returns the bins; the Chappuis maximum is in [600, 610) nm, about 5e-25 m^2."""
