@@ -655,7 +655,7 @@ def spectral_frame_to_linear_srgb(frame, wavelengths):
     """The frame conversion of spectral animations: spectral radiance (..., N) [W m^-2 sr^-1 nm^-1] ->
     CIE 1931 XYZ -> linear sRGB (..., 3) [cd/m^2] (:mod:`clsky.colorimetry`); negative components of
     colours outside the sRGB gamut are clipped to 0 (the display takes non-negative values)."""
-    rgb = colorimetry.xyz_to_linear_srgb(colorimetry.spectral_to_xyz(frame, wavelengths))
+    rgb = colorimetry.xyz_to_linear_srgb(colorimetry.spectral_frame_to_xyz(frame, wavelengths))
     return np.maximum(rgb, 0.0)
 
 

@@ -75,7 +75,7 @@ from .solar import solar_irradiance_astm_g173
 __all__ = ["MAX_LUMINOUS_EFFICACY", "SRGB_PRIMARIES_XY", "D65_WHITE_XY", "SRGB_TO_XYZ", "XYZ_TO_SRGB",
            "D65_WHITE_XYZ", "rgb_to_xyz_matrix", "CMFS_NAME", "THREE_WAVELENGTH_METHODS", "LINEAR_METHODS",
            "DEFAULT_THREE_WAVELENGTH_METHOD", "colour_matching_functions",
-           "band_widths", "spectral_to_xyz", "xyz_to_linear_srgb", "linear_srgb_to_xyz", "luminance",
+           "band_widths", "spectral_to_xyz", "spectral_frame_to_xyz", "MAX_RADIANCE", "xyz_to_linear_srgb", "linear_srgb_to_xyz", "luminance",
            "three_wavelength_to_xyz_matrix", "three_wavelength_to_xyz", "three_wavelength_frame_to_xyz"]
 
 #: K_m, the maximum luminous efficacy of photopic vision [lm/W].
@@ -125,7 +125,10 @@ for _matrix in (SRGB_TO_XYZ, XYZ_TO_SRGB, D65_WHITE_XYZ):
 
 
 def _wavelengths(wavelengths):
-    values = np.asarray(wavelengths, dtype=np.float64)
+    try:
+        values = np.asarray(wavelengths, dtype=np.float64)
+    except (TypeError, ValueError):
+        values = np.empty(0)
     if values.ndim != 1 or values.size < 1 or not np.all(np.isfinite(values) & (values > 0)):
         raise ValueError(f"wavelengths must be a 1D array of finite numbers > 0 nm, got {wavelengths!r:.80}")
     if values.size > 1 and not np.all(np.diff(values) > 0):
@@ -186,6 +189,15 @@ def spectral_to_xyz(radiance, wavelengths):
     >>> round(float(spectral_to_xyz(np.ones(471), np.arange(360.0, 831.0))[1]))
     72983
     """
+    wavelengths = _wavelengths(wavelengths)
+    radiance = _radiances(radiance, wavelengths.size, "one per wavelength")
+    return spectral_frame_to_xyz(radiance, wavelengths)
+
+
+def spectral_frame_to_xyz(radiance, wavelengths):
+    """:func:`spectral_to_xyz` of a frame the renderers made, whose values are finite and >= 0 by
+    construction (the kernels' contract, tested at the extremes): the spectral animation's conversion,
+    without the check of every value. Any other radiance: :func:`spectral_to_xyz`."""
     wavelengths = _wavelengths(wavelengths)
     radiance = np.asarray(radiance, dtype=np.float64)
     if radiance.shape[-1:] != wavelengths.shape:
@@ -400,23 +412,33 @@ THREE_WAVELENGTH_METHODS = {"solar_power_law": _solar_power_law_xyz,
 LINEAR_METHODS = ("solar_interpolation", "bruneton2017")
 
 
-def _three_radiances(radiance):
-    """``radiance`` (..., 3) as float64 if every value is finite and >= 0; ValueError naming ``radiance``
-    otherwise (the power law would take NaN for black and clamp a negative channel, silently)."""
-    valid = "finite radiances >= 0 at three wavelengths (a last axis of 3)"
+#: The largest spectral radiance the checked conversions take [W m^-2 sr^-1 nm^-1]: far above any sky's (the
+#: sun's disc is about 2e4), far enough below float64's largest that the power law's and the sums'
+#: intermediates stay finite (1e308 gave inf).
+MAX_RADIANCE = 1e100
+
+
+def _radiances(radiance, count, what):
+    """``radiance`` (..., count) as float64 if every value is finite, >= 0 and at most :data:`MAX_RADIANCE`;
+    ValueError naming ``radiance`` otherwise (the power law would take NaN for black and clamp a negative
+    channel, silently; the N-wavelength sum passed NaN and negative values through)."""
+    valid = f"finite radiances in [0, {MAX_RADIANCE:g}], a last axis of {count} ({what})"
     array = as_real_array("radiance", radiance, valid)
-    if array.shape[-1:] != (3,):
+    if array.shape[-1:] != (count,):
         raise ValueError(f"radiance must be {valid}, got shape {array.shape}")
-    if array.size and not (array.min() >= 0.0 and array.max() < np.inf):       # NaN fails the first
-        bad = int(np.count_nonzero(~(np.isfinite(array) & (array >= 0.0))))
-        raise ValueError(f"radiance must be {valid}, got {bad} NaN, infinite or negative values")
+    if array.size and not (array.min() >= 0.0 and array.max() <= MAX_RADIANCE):       # NaN fails the first
+        bad = int(np.count_nonzero(~(np.isfinite(array) & (array >= 0.0) & (array <= MAX_RADIANCE))))
+        raise ValueError(f"radiance must be {valid}, got {bad} NaN, infinite, negative or larger values")
     return array
 
 
 def _three(wavelengths, method, methods):
     if not isinstance(method, str) or method not in methods:
         raise ValueError(f"method must be one of {sorted(methods)}, got {method!r}")
-    values = np.asarray(wavelengths, dtype=np.float64)
+    try:
+        values = np.asarray(wavelengths, dtype=np.float64)
+    except (TypeError, ValueError):
+        values = np.empty(0)
     if values.shape != (3,) or len(set(values.tolist())) != 3:
         raise ValueError(f"wavelengths must be 3 distinct numbers [nm], got {wavelengths!r}")
     return values
@@ -454,14 +476,19 @@ def three_wavelength_to_xyz(radiance, wavelengths, method=DEFAULT_THREE_WAVELENG
         take NaN for black and clamp a negative channel); an unknown ``method``; ``wavelengths`` not 3
         distinct numbers.
     """
-    return three_wavelength_frame_to_xyz(_three_radiances(radiance), wavelengths, method, ctx)
+    return three_wavelength_frame_to_xyz(_radiances(radiance, 3, "three wavelengths"), wavelengths, method, ctx)
 
 
 def three_wavelength_frame_to_xyz(radiance, wavelengths, method=DEFAULT_THREE_WAVELENGTH_METHOD, ctx=None):
     """:func:`three_wavelength_to_xyz` of a frame the renderers made, whose values are finite and >= 0 by
     construction (the kernels' contract, tested at the extremes): the animation's conversion, without the
-    check of every value (two passes over each frame)."""
+    check of every value (two passes over each frame). Any other radiance: :func:`three_wavelength_to_xyz`
+    (here an infinite value ends in an IndexError of the tabulated power law)."""
     values = _three(wavelengths, method, THREE_WAVELENGTH_METHODS)
+    if ctx is not None:                 # named before it is ignored (the linear methods) or used
+        from ._cl import check_context
+
+        check_context(ctx)
     if method in LINEAR_METHODS:
         return np.asarray(radiance, dtype=np.float64) @ THREE_WAVELENGTH_METHODS[method](values).T
     if ctx is not None and method == "solar_power_law_tabulated":

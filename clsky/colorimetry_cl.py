@@ -121,6 +121,7 @@ def solar_power_law_xyz(radiance, wavelengths, ctx):
     the device of ``ctx`` (a pyopencl.Context), the same values bit for bit; this thread's engine for that
     context (made at its first call). A device without double precision (a float32 renderer's) leaves
     the conversion to the host: it is float64."""
+    _cl.check_context(ctx)
     engines = _engines.__dict__.setdefault("by_context", {})
     if ctx.int_ptr not in engines:                    # None: a device without fp64
         engines[ctx.int_ptr] = PowerLawEngine(ctx) if _cl.has_fp64(ctx.devices[0]) else None

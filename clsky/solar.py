@@ -112,6 +112,9 @@ def radiance_units(atmosphere) -> str:
     >>> radiance_units(preset("atmosphere-plus"))
     'relative (incident light I_I per sr)'
     """
+    from .atmosphere import AtmosphereParameters
+
+    check_instance("atmosphere", atmosphere, AtmosphereParameters, "an AtmosphereParameters")
     try:
         expected = solar_irradiance_astm_g173(atmosphere.wavelengths)
     except ValueError:

@@ -111,15 +111,16 @@ def test_pixels_whose_floor_underflows_are_black_not_nan(engine):
 
 @pytest.mark.parametrize("method", ["solar_power_law", "solar_power_law_tabulated", "solar_interpolation",
                                     "bruneton2017"])
-@pytest.mark.parametrize("bad", [[np.nan, 1.0, 1.0], [-1.0, 1.0, 1.0], [np.inf, 1.0, 1.0]])
+@pytest.mark.parametrize("bad", [[np.nan, 1.0, 1.0], [-1.0, 1.0, 1.0], [np.inf, 1.0, 1.0], [1e308, 1.0, 1.0]])
 def test_radiance_that_is_no_radiance_is_refused(cl_context, method, bad):
-    """The power law took NaN for a black pixel, clamped a negative channel to 0 and ended an infinite one in
-    IndexError; the linear methods passed them on. A radiance is finite and >= 0: ValueError naming it."""
+    """The power law took NaN for a black pixel, clamped a negative channel to 0, ended an infinite one in
+    IndexError and overflowed to inf on 1e308; the linear methods passed them on. A radiance is finite, >= 0
+    and at most MAX_RADIANCE (1e100): ValueError naming it."""
     radiance = np.ones((4, 3))
     radiance[2] = bad
     for ctx in (None, cl_context):
-        with pytest.raises(ValueError, match=r"^radiance must be finite radiances >= 0 at three wavelengths .*, got 1 "
-                                             r"NaN, infinite or negative values$"):
+        with pytest.raises(ValueError, match=r"^radiance must be finite radiances in \[0, 1e\+100\], a last axis of 3 "
+                                             r"\(three wavelengths\), got 1 NaN, infinite, negative or larger values$"):
             colorimetry.three_wavelength_to_xyz(radiance, WAVELENGTHS[0], method, ctx=ctx)
     with pytest.raises(ValueError, match=r"^radiance must be .* got shape \(2,\)$"):
         colorimetry.three_wavelength_to_xyz([1.0, 1.0], WAVELENGTHS[0], method)
@@ -191,3 +192,25 @@ def test_a_device_without_double_precision_converts_on_the_host(cl_context, monk
     assert_same_bits(solar_power_law_xyz(radiance, WAVELENGTHS[1], context),
                      colorimetry._solar_power_law_tabulated_xyz(radiance, np.array(WAVELENGTHS[1])))
     assert colorimetry_cl._engines.by_context[context.int_ptr] is None
+
+
+@pytest.mark.parametrize("call, message", [
+    # spectral_to_xyz passed NaN through (NaN XYZ) and took negative radiance
+    (lambda: colorimetry.spectral_to_xyz([np.nan, 1.0, 1.0], [400.0, 500.0, 600.0]),
+     r"^radiance must be finite radiances in \[0, 1e\+100\], a last axis of 3 \(one per wavelength\), got 1 "),
+    (lambda: colorimetry.spectral_to_xyz([-1.0, 1.0, 1.0], [400.0, 500.0, 600.0]), r"^radiance must be finite"),
+    (lambda: colorimetry.spectral_to_xyz("abc", [400.0, 500.0, 600.0]), r"^radiance must be finite"),
+    # numpy's "could not convert string to float", naming nothing
+    (lambda: colorimetry.spectral_to_xyz([1.0, 1.0, 1.0], "abc"), r"^wavelengths must be a 1D array"),
+    (lambda: colorimetry.three_wavelength_to_xyz([1.0, 1.0, 1.0], "abc"), r"^wavelengths must be 3 distinct"),
+    # AttributeErrors
+    (lambda: colorimetry.three_wavelength_to_xyz([1.0, 1.0, 1.0], WAVELENGTHS[0], "solar_power_law_tabulated",
+                                                 ctx="abc"), r"^ctx must be None \(clsky's device\) or a "),
+    (lambda: colorimetry.three_wavelength_to_xyz([1.0, 1.0, 1.0], WAVELENGTHS[0], "solar_interpolation",
+                                                 ctx="abc"), r"^ctx must be None"),
+    (lambda: __import__("clsky.solar").solar.radiance_units("physical"),
+     r"^atmosphere must be an AtmosphereParameters, got 'physical' \(str\)$"),
+])
+def test_the_conversions_name_what_is_wrong(call, message):
+    with pytest.raises(ValueError, match=message):
+        call()
