@@ -228,7 +228,10 @@ class SpectralTable:
 
 class SpectralRenderer:
     """Renders (..., N) spectral radiance [W m^-2 sr^-1 nm^-1] of a :class:`SpectralTable`: one
-    :class:`~clsky.render.SkyRenderer` per batch, with its methods' signatures.
+    :class:`~clsky.render.SkyRenderer` per batch. Its frame methods (``render_table``, ``render_lut4d``,
+    ``render_raymarch``, ``render_skyview``) and ``prepare`` take the SkyRenderer's arguments; the
+    SkyRenderer's helpers of several suns or of one batch's maps (``render_raymarch_suns``, ``skyview_map``,
+    ``skyview_maps``, ``view_zenith_angles``) are not here: a spectral frame is assembled from every batch.
 
     Parameters
     ----------
@@ -280,9 +283,10 @@ class SpectralRenderer:
         and sky-view map rendered, and render_table pointed here."""
         return self._render("render_lut4d", directions, sun_direction, altitude, valid)
 
-    def render_raymarch(self, directions, sun_direction, altitude=0.0, valid=None):
-        """Spectral radiance (..., N) by ray march (:meth:`clsky.render.SkyRenderer.render_raymarch`)."""
-        return self._render("render_raymarch", directions, sun_direction, altitude, valid)
+    def render_raymarch(self, directions, sun_direction, altitude=0.0, valid=None, sun_disc=True):
+        """Spectral radiance (..., N) by ray march (:meth:`clsky.render.SkyRenderer.render_raymarch`; with
+        ``sun_disc``, its sun's disc)."""
+        return self._render("render_raymarch", directions, sun_direction, altitude, valid, sun_disc=sun_disc)
 
     def render_skyview(self, directions, sun_direction, altitude=0.0, valid=None, settings=None, sky_map=None):
         """Spectral radiance (..., N) from per-frame sky-view maps, one per batch

@@ -421,6 +421,8 @@ def test_sun_from_space_is_the_solar_spectrum(small_spectral, cl_context):
     with spectrum.SpectralRenderer(small_spectral, ctx=cl_context) as renderer:
         radiance = renderer.render_raymarch(sun[None], sun, 200e3)[0]
         sky = renderer.render_raymarch(np.array([[1.0, 0.0, 0.0]]), sun, 200e3)[0]
+        # without the sun's disc (as SkyRenderer.render_raymarch takes it; it was a TypeError here): black
+        assert np.all(renderer.render_raymarch(sun[None], sun, 200e3, sun_disc=False) == 0.0)
     expected = solar.solar_irradiance_astm_g173(small_spectral.wavelengths) / omega
     assert radiance.shape == (4,)
     assert_allclose(radiance, expected, rtol=1e-12)
