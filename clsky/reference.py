@@ -121,7 +121,27 @@ def column_density(atmosphere: AtmosphereParameters, altitude, cos_zenith, lengt
     -------
     (C_R, C_M) or, with ozone, (C_R, C_M, C_O) : arrays of the broadcast shape [m]
         C_O is the column of the ozone tent f_O (1 at its peak): the ozone column is n_max C_O.
+
+    Raises
+    ------
+    ValueError
+        As the kernels' entry point (:class:`clsky.transmittance.TransmittanceEngine`) checks them: the
+        segments (:func:`clsky.transmittance.check_segments`: a negative length gave a transmittance of 3.5,
+        a NaN altitude NaN), ``steps`` in [1, 1e6] (0 gave T = 1; the kernels take at most 4096, the twin
+        serves as a finer reference too) and ``sampling`` (an unknown one was taken as uniform).
     """
+    from .errors import check_choice, check_integer
+    from .settings import SAMPLINGS
+    from .transmittance import check_segments
+
+    altitude, cos_zenith, length = check_segments(atmosphere, altitude, cos_zenith, length)
+    steps = check_integer("steps", steps, 1, 1_000_000)
+    sampling = check_choice("sampling", sampling, SAMPLINGS)
+    return _column_density(atmosphere, altitude, cos_zenith, length, steps, sampling)
+
+
+def _column_density(atmosphere, altitude, cos_zenith, length, steps, sampling):
+    """:func:`column_density` of checked segments (the twins' own sun rays and table nodes)."""
     rp = atmosphere.planet_radius
     h0, mu, d = (np.asarray(a, dtype=np.float64)[..., None] for a in (altitude, cos_zenith, length))
     nodes = quadrature_nodes(steps, sampling, power=2)
@@ -175,7 +195,7 @@ def transmittance_table(atmosphere: AtmosphereParameters, size=(64, 256), steps=
     """
     h, mu = transmittance_table_nodes(atmosphere, size)
     length = distance_to_top(h, mu, atmosphere.planet_radius, atmosphere.top_radius)
-    return np.stack(column_density(atmosphere, h, mu, length, steps, sampling), axis=-1)
+    return np.stack(_column_density(atmosphere, h, mu, length, steps, sampling), axis=-1)
 
 
 def column_density_from_table(atmosphere, table, altitude, cos_zenith):
@@ -258,7 +278,7 @@ def _sun_columns(atmosphere, settings, h, mu_sun, sun_table):
     lit = mu_sun >= horizon_cos(h, atmosphere.planet_radius) - SHADOW_TIE
     if sun_table is None:
         sun_length = np.where(lit, distance_to_top(h, mu_sun, atmosphere.planet_radius, atmosphere.top_radius), 0.0)
-        return column_density(atmosphere, h, mu_sun, sun_length, settings.sun_steps, settings.sampling), lit
+        return _column_density(atmosphere, h, mu_sun, sun_length, settings.sun_steps, settings.sampling), lit
     return column_density_from_table(atmosphere, sun_table, h, mu_sun), lit
 
 

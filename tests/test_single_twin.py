@@ -239,3 +239,16 @@ def test_column_density_table_kernel_matches_twin(transmittance_engine, dtype, s
     _, mu = reference.transmittance_table_nodes(atmosphere, size)
     assert np.all(table[:, -1][mu[:, -1] >= 0] == 0.0)
     assert np.all(table[expected == 0.0] == 0.0)
+
+
+@pytest.mark.parametrize("change, message", [
+    (dict(length=-50_000.0), r"^length must be finite and in \[0, "),                  # T was 3.5
+    (dict(altitude=np.nan), r"^altitude must be finite and in \[0, "),                   # T was NaN
+    (dict(steps=0), r"^steps must be an integer in \[1, 1000000\], got 0$"),              # T was 1
+    (dict(sampling="bogus"), r"^sampling must be one of "),                               # taken as uniform
+])
+def test_the_transmittance_twin_checks_its_segments_as_the_kernel_does(change, message):
+    """reference.transmittance (and optical_depth, column_density) took what TransmittanceEngine refuses."""
+    arguments = dict(altitude=0.0, cos_zenith=0.5, length=1000.0, steps=30, sampling="uniform") | change
+    with pytest.raises(ValueError, match=message):
+        reference.transmittance(preset("physical"), **arguments)
