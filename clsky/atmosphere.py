@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ParameterError, check_instance, is_finite_real, is_real_number
+from .errors import ParameterError, as_real_array, check_instance, is_finite_real, is_real_number
 from .ozone import DOBSON_UNIT, cross_section_serdyuchenko2014
 
 __all__ = [
@@ -79,8 +79,25 @@ def rayleigh_scattering_coefficient(refractive_index, number_density, wavelength
     --------
     >>> rayleigh_scattering_coefficient(1.0003, 2.545e25, [650, 510, 475]).round(10)
     array([6.55410e-06, 1.72935e-05, 2.29821e-05])
+
+    Raises
+    ------
+    ValueError
+        (:class:`clsky.errors.ParameterError`) naming ``refractive_index`` (in [1, MAX_REFRACTIVE_INDEX]),
+        ``number_density`` (finite, > 0 1/m^3: a negative one gave negative coefficients) or
+        ``wavelengths_nm`` (finite, > 0: 0 nm gave an infinite coefficient).
     """
-    wavelength_m = np.asarray(wavelengths_nm, dtype=np.float64) * 1e-9
+    for name, value in (("refractive_index", refractive_index), ("number_density", number_density)):
+        if not is_finite_real(value):
+            raise ParameterError(name, "a finite real number", value)
+    if not 1.0 <= refractive_index <= MAX_REFRACTIVE_INDEX:
+        raise ParameterError("refractive_index", f"a real number in [1, {MAX_REFRACTIVE_INDEX:g}]", refractive_index)
+    if number_density <= 0.0:
+        raise ParameterError("number_density", "a finite number > 0 1/m^3", number_density)
+    wavelengths = as_real_array("wavelengths_nm", wavelengths_nm, "finite wavelengths > 0 nm")
+    if not np.all(np.isfinite(wavelengths) & (wavelengths > 0.0)):
+        raise ParameterError("wavelengths_nm", "finite wavelengths > 0 nm", wavelengths_nm)
+    wavelength_m = wavelengths * 1e-9
     n2m1 = refractive_index**2 - 1.0
     return 8.0 * math.pi**3 * n2m1**2 / (3.0 * number_density * wavelength_m**4)
 
@@ -427,14 +444,6 @@ class AtmosphereParameters:
             (:class:`clsky.errors.ParameterError`) naming ``refractive_index`` (a real number >= 1),
             ``number_density`` (> 0 1/m^3) or ``wavelengths`` (3 numbers > 0 nm), or any field.
         """
-        for name, value in (("refractive_index", refractive_index), ("number_density", number_density)):
-            if not is_finite_real(value):
-                raise ParameterError(name, "a finite real number", value)
-        if not 1.0 <= refractive_index <= MAX_REFRACTIVE_INDEX:
-            raise ParameterError("refractive_index", f"a real number in [1, {MAX_REFRACTIVE_INDEX:g}]",
-                                 refractive_index)
-        if number_density <= 0.0:
-            raise ParameterError("number_density", "a finite number > 0 1/m^3", number_density)
         wavelengths = _as_rgb("wavelengths", wavelengths)
         if not all(math.isfinite(w) and w > 0 for w in wavelengths):
             raise ParameterError("wavelengths", "3 finite numbers > 0 nm", wavelengths)

@@ -471,3 +471,27 @@ def test_table_settings_round_trip_and_immutability():
         settings.view_steps = 3
     with raises_naming("view_steps"):
         settings.replace(view_steps=0)
+
+
+@pytest.mark.parametrize("options, message", [
+    (dict(number_density=-2.5e25), r"^number_density must be a finite number > 0 1/m\^3, got -2.5e\+25$"),
+    (dict(number_density=0), r"^number_density must be a finite number > 0"),
+    (dict(refractive_index=float("nan")), r"^refractive_index must be a finite real number, got nan$"),
+    (dict(refractive_index="1.0003"), r"^refractive_index must be a finite real number"),
+])
+def test_spectral_batches_name_the_air_parameters(options, message):
+    """batch_atmospheres named rayleigh_scattering, a field its caller never typed, for a bad refractive index
+    or number density (or raised TypeError): the coefficient's own check names them, as
+    from_refractive_index's did."""
+    from clsky.spectrum import batch_atmospheres
+
+    with pytest.raises(ValueError, match=message):
+        batch_atmospheres(preset("physical"), 12, **options)
+
+
+def test_the_rayleigh_coefficient_refuses_no_wavelength():
+    """0 nm gave an infinite coefficient."""
+    from clsky.atmosphere import rayleigh_scattering_coefficient
+
+    with pytest.raises(ValueError, match=r"^wavelengths_nm must be finite wavelengths > 0 nm"):
+        rayleigh_scattering_coefficient(1.0003, 2.5e25, (0.0, 510.0, 475.0))
