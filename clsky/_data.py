@@ -17,6 +17,8 @@ import pathlib
 
 import numpy as np
 
+from .errors import as_real_array, short
+
 __all__ = ["DataFileError", "read_binned_table", "interpolate_bin_centres", "BIN_COLUMNS"]
 
 #: The first two columns of every binned file: the bin's edges [nm].
@@ -141,8 +143,10 @@ def interpolate_bin_centres(table, wavelengths_nm, what: str):
     """
     low, high, values = table
     centres = 0.5 * (low + high)
-    wavelengths = np.asarray(wavelengths_nm, dtype=np.float64)
-    if not np.all(np.isfinite(wavelengths) & (wavelengths >= centres[0]) & (wavelengths <= centres[-1])):
-        raise ValueError(f"wavelengths must be in [{centres[0]:g}, {centres[-1]:g}] nm for {what}, "
-                         f"got {wavelengths_nm!r}")
+    wavelengths = as_real_array("wavelengths", wavelengths_nm, f"wavelengths [nm] for {what}")
+    outside = ~(np.isfinite(wavelengths) & (wavelengths >= centres[0]) & (wavelengths <= centres[-1]))
+    if np.any(outside):             # the first one outside: a 1 nm grid's whole array filled the message
+        raise ValueError(f"wavelengths must be in [{centres[0]:g}, {centres[-1]:g}] nm for {what}, got "
+                         f"{short(wavelengths[outside].flat[0])} ({int(outside.sum())} of {wavelengths.size} "
+                         f"outside)")
     return np.interp(wavelengths, centres, values)

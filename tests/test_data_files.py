@@ -108,3 +108,6 @@ def test_interpolate_bin_centres_reads_each_bin_at_its_centre():
     for outside in (centres[0] - 0.5, centres[-1] + 0.5, float("nan")):
         with pytest.raises(ValueError, match=r"wavelengths must be in \[365, 835\] nm for the solar spectrum"):
             interpolate_bin_centres(table, [outside], "the solar spectrum")
+    # a 1 nm grid from 360 nm: the first value outside and a count, not the 471 values (a 50-line message)
+    with pytest.raises(ValueError, match=r"for the solar spectrum, got 360 \(5 of 471 outside\)$"):
+        interpolate_bin_centres(table, np.arange(360.0, 831.0), "the solar spectrum")
