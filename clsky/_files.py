@@ -212,10 +212,14 @@ def check_suffix(path, suffix: str, name: str = "path") -> pathlib.Path:
 
 
 def _names_a_directory(path) -> bool:
-    """Whether ``path`` (as typed) ends in a path separator: a directory's name, whatever pathlib makes of it
-    (it drops the separator: ``-o x.png/`` wrote the file x.png)."""
+    """Whether ``path`` (as typed) ends in a path separator, or in ``.`` or ``..`` after one: a directory's
+    name, whatever pathlib makes of it (it drops them: ``-o x.png/`` and ``-o x.png/.`` wrote the file
+    x.png)."""
     text = os.fspath(path)
-    return isinstance(text, str) and text.endswith(tuple(filter(None, (os.sep, os.altsep))))
+    if not isinstance(text, str):
+        return False
+    separators = tuple(filter(None, (os.sep, os.altsep)))
+    return text.endswith(separators) or text.endswith(tuple(s + d for s in separators for d in (".", "..")))
 
 
 def binary_and_header(name, parameter: str = "path") -> tuple[pathlib.Path, pathlib.Path]:
@@ -283,7 +287,8 @@ def check_output(path, force=False, option=None, suffix=None, probe=True):
     _check_names(path, option, suffix)
     if path.is_dir() or _names_a_directory(typed):
         raise IsADirectoryError(f"{_label(option)}{typed} is a directory" if path.is_dir() else
-                                f"{_label(option)}{typed} names a directory (its trailing '/'), not a file")
+                                f"{_label(option)}{typed} names a directory (its trailing '/', '/.' or '/..'), "
+                                f"not a file")
     if os.path.lexists(path) and not force:
         raise FileExistsError(f"{_label(option)}{path} exists; {_force_hint(option)}")
     _check_parent(path.parent, option, probe=probe)

@@ -505,7 +505,9 @@ def preset(name: str) -> AtmosphereParameters:
 def as_atmosphere(atmosphere, name="atmosphere") -> AtmosphereParameters:
     """``atmosphere`` as :class:`AtmosphereParameters`: a preset's name (:func:`preset`) or parameters;
     ValueError (:class:`~clsky.errors.ParameterError`) naming ``name`` for anything else."""
+    valid = f"an AtmosphereParameters or a preset name {sorted(PRESETS)}"
     if isinstance(atmosphere, str):
-        return preset(atmosphere)
-    return check_instance(name, atmosphere, AtmosphereParameters,
-                          f"an AtmosphereParameters or a preset name {sorted(PRESETS)}")
+        if atmosphere not in PRESETS:
+            raise ParameterError(name, valid, atmosphere)
+        return PRESETS[atmosphere]
+    return check_instance(name, atmosphere, AtmosphereParameters, valid)

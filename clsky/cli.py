@@ -556,8 +556,20 @@ def orders_phrase(settings, record) -> str:
 def report_table(args, table, output, seconds):
     """Print the summary line of a table written to ``output`` and its raw export (and a warning if its orders
     did not converge)."""
-    print(table_summary(args, table, output, seconds))
-    warn_unconverged(table)
+    print_report(table_report(args, table, output, seconds))
+
+
+def table_report(args, table, output, seconds) -> tuple:
+    """(summary line, warning or None) of a table written (or, in a sweep, to be written) to ``output``."""
+    return table_summary(args, table, output, seconds), unconverged_warning(table)
+
+
+def print_report(report):
+    """Print a :func:`table_report`: its line on stdout, its warning on stderr."""
+    line, warning = report
+    print(line, flush=True)
+    if warning is not None:
+        print(warning, file=sys.stderr, flush=True)
 
 
 def table_summary(args, table, output, seconds) -> str:
@@ -571,10 +583,11 @@ def table_summary(args, table, output, seconds) -> str:
             + ("" if args.raw is None else ", " + ", ".join(map(str, binary_and_header(args.raw)))))
 
 
-def warn_unconverged(table):
-    """A warning on stderr if the table's orders did not converge."""
+def unconverged_warning(table):
+    """The warning line of a table whose orders did not converge, else None."""
     if table.settings.orders == "auto" and not table.orders_record["converged"]:
-        print(f"clsky: warning: {table.orders_record['reason']}", file=sys.stderr)
+        return f"clsky: warning: {table.orders_record['reason']}"
+    return None
 
 
 def run_info(args):

@@ -174,7 +174,8 @@ def check_real(name, value, low=-math.inf, high=math.inf, low_open=False, unit="
     ------
     ParameterError
         ``'{name} must be [None or ]a number in [low, high]{unit}, got {value}'`` (``a finite number``
-        without bounds); NaN and infinities are refused.
+        without bounds, ``a finite number >= low`` (or ``> low``, ``<= high``) with one); NaN and infinities are
+        refused.
 
     Examples
     --------
@@ -187,8 +188,14 @@ def check_real(name, value, low=-math.inf, high=math.inf, low_open=False, unit="
         return None
     if (not is_finite_real(value) or not (low < value if low_open else low <= value)
             or not value <= high):
-        bounded = (low, high) != (-math.inf, math.inf)
-        valid = f"a number in {'(' if low_open else '['}{low:g}, {high:g}]{unit}" if bounded else f"a finite number{unit}"
+        if math.isinf(low) and math.isinf(high):
+            valid = f"a finite number{unit}"
+        elif math.isinf(high):          # one-sided: "(0, inf]" read as if inf were valid, and it is refused
+            valid = f"a finite number {'>' if low_open else '>='} {low:g}{unit}"
+        elif math.isinf(low):
+            valid = f"a finite number <= {high:g}{unit}"
+        else:
+            valid = f"a number in {'(' if low_open else '['}{low:g}, {high:g}]{unit}"
         raise ParameterError(name, (_OPTIONAL if optional else "") + valid, value)
     return float(value)
 

@@ -174,22 +174,32 @@ class Farm:
         host, not a peer that accepts the connection and never speaks Dask's protocol (an HTTP server,
         Dask's dashboard port given for its scheduler's): its Client waited there forever. So the client
         is made on a daemon thread, waited for :data:`CONNECT_TIMEOUT_S` + :data:`CONNECT_GRACE_S`, and
-        abandoned after it (its thread and IO loop are daemons: they end with the process)."""
-        outcome = {}
+        abandoned after it (its thread and IO loop are daemons: they end with the process); a client made after
+        that is closed at once (it would have stayed open, the process's default Dask client)."""
+        outcome, lock = {"abandoned": False}, threading.Lock()
 
         def attempt():
             try:
-                outcome["client"] = client_type(self.scheduler, timeout=CONNECT_TIMEOUT_S)
+                client = client_type(self.scheduler, timeout=CONNECT_TIMEOUT_S)
             except BaseException as error:          # handed to the caller's thread
                 outcome["error"] = error
+                return
+            with lock:
+                outcome["client"] = client
+                late = outcome["abandoned"]
+            if late:
+                with contextlib.suppress(Exception):
+                    client.close()
 
         thread = threading.Thread(target=attempt, name="clsky-farm-connect", daemon=True)
         thread.start()
         thread.join(CONNECT_TIMEOUT_S + CONNECT_GRACE_S)
-        if thread.is_alive():
+        with lock:
+            outcome["abandoned"] = "client" not in outcome and "error" not in outcome
+        if outcome["abandoned"]:
             raise ConnectionError(f"no Dask scheduler answered at {self.scheduler} within {CONNECT_TIMEOUT_S} s "
-                                  f"(something accepted the connection but did not answer as a Dask scheduler: "
-                                  f"the dashboard's port, or another server?)")
+                                  f"(the connection opened, but no Dask scheduler answered in time: another "
+                                  f"server, such as the dashboard's port, or a scheduler too busy to answer?)")
         error = outcome.get("error")
         if isinstance(error, (OSError, TimeoutError)):
             raise ConnectionError(f"no Dask scheduler answered at {self.scheduler} within "

@@ -35,7 +35,7 @@ class TableLookup4DEngine(TableLookupEngine):
     sources = ("geometry.cl", "mapping.cl", "mapping4d.cl", "phase.cl", "lookup.cl", "lookup4d.cl")
 
     def radiance(self, atmosphere: AtmosphereParameters, data, altitude, cos_view, cos_sun, cos_scatter,
-                 mapping="nonlinear", sun_cos_range=FULL_SUN_RANGE):
+                 mapping="nonlinear", sun_cos_range=FULL_SUN_RANGE, *, table_checked=False):
         """Radiance I = I_I (F_R Ibar_R + F_M Ibar_M + Lbar) for each query.
 
         Parameters
@@ -52,6 +52,8 @@ class TableLookup4DEngine(TableLookupEngine):
             The table's altitude and sun mapping.
         sun_cos_range : (low, high)
             The sun cosines the table's sun axis covers.
+        table_checked : bool
+            ``data`` is a validated table's: its values are not scanned again (:func:`clsky.lookup.check_lookup`).
 
         Returns
         -------
@@ -59,7 +61,7 @@ class TableLookup4DEngine(TableLookupEngine):
             Radiance r, g, b (HDR).
         """
         data, queries, sun_cos_range = check_lookup(data, (altitude, cos_view, cos_sun, cos_scatter), sun_cos_range,
-                                                    check_table4d_data)
+                                                    check_table4d_data, table_checked)
         azimuths, depth, height, width, channels = data.shape
         return self._lookup("lookup4d", atmosphere, data, (width, height, depth, azimuths, channels), queries,
                             mapping, sun_cos_range)

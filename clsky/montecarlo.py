@@ -97,6 +97,8 @@ DEFAULT_MAX_ORDERS = 64
 #: Largest ``max_orders`` and ``photons`` (paths per channel) :func:`simulate` takes: far beyond any use
 #: (the tracer's orders die out long before; 1e10 paths would take days and 240 GB of path state).
 MAX_ORDERS_LIMIT, MAX_PHOTONS = 1_000_000, 10**10
+#: Largest seed :func:`simulate` takes (any 64-bit unsigned integer; None: fresh entropy from the system).
+MAX_SEED = 2**64 - 1
 #: Gauss-Legendre nodes per leg of the sun-ray optical depth (error < 1e-9 relative, see tests).
 QUADRATURE_NODES = 20
 #: Integrate a species' density only up to K scale heights above the lowest point of a leg
@@ -627,27 +629,62 @@ def _sun_transmittance(r, mu, channel, rp, ra, beta_r, beta_me, scale_heights, b
 # because the tracer imports nothing from clsky (it shares no code with what it checks).
 
 def _check_real(name, value, low=-math.inf, high=math.inf, low_open=False, unit=""):
-    """``value`` as a float if it is a finite real number (not a bool or a string) in [low, high] (or
-    (low, high] with ``low_open``); ValueError naming ``name`` otherwise."""
+    """``value`` as a float if it is a finite real number (not a bool or a string; a 0-d array of one
+    too) in [low, high] (or (low, high] with ``low_open``); ValueError naming ``name`` otherwise."""
+    value = _scalar(value)
     real = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
-    if real and math.isfinite(value) and (low < value if low_open else low <= value) and value <= high:
-        return float(value)
-    bounds = "a finite number" if math.isinf(low) and math.isinf(high) else \
-        f"a number in {'(' if low_open else '['}{low:g}, {high:g}]"
-    shown = f"{value:g}" if real else f"{value!r:.40} ({type(value).__name__})"
-    raise ValueError(f"{name} must be {bounds}{unit}, got {shown}")
+    number = _as_float(value) if real else math.nan
+    if math.isfinite(number) and (low < number if low_open else low <= number) and number <= high:
+        return number
+    if math.isinf(low) and math.isinf(high):
+        bounds = "a finite number"
+    elif math.isinf(high):
+        bounds = f"a finite number {'>' if low_open else '>='} {low:g}"
+    else:
+        bounds = f"a number in {'(' if low_open else '['}{low:g}, {high:g}]"
+    raise ValueError(f"{name} must be {bounds}{unit}, got {_shown(value)}")
 
 
 def _check_integer(name, value, low, high, optional=False):
-    """``value`` as an int if it is an integer (not a bool) in [low, high], or None with ``optional``;
-    ValueError naming ``name`` otherwise."""
+    """``value`` as an int if it is an integer (not a bool; a 0-d array of one too) in [low, high], or None
+    with ``optional``; ValueError naming ``name`` otherwise."""
     if optional and value is None:
         return None
+    value = _scalar(value)
     integer = isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
     if integer and low <= value <= high:
         return int(value)
-    shown = str(value) if integer else f"{value!r:.40} ({type(value).__name__})"
+    shown = _shown(value)
+    if isinstance(value, (float, np.floating)):             # a number of the wrong kind: its type too
+        shown += f" ({type(value).__name__})"
     raise ValueError(f"{name} must be {'None or ' if optional else ''}an integer in [{low}, {high}], got {shown}")
+
+
+def _scalar(value):
+    """A 0-d NumPy array's value (``float()`` took them before the checks), anything else as it is."""
+    return value.item() if isinstance(value, np.ndarray) and value.ndim == 0 else value
+
+
+def _as_float(value) -> float:
+    """``float(value)``, or an infinity of its sign for an integer beyond float64 (10**400)."""
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf if value > 0 else -math.inf
+
+
+def _shown(value) -> str:
+    """A value as the messages show it: a number by %g where that is the number itself, else by every
+    digit it takes (1.0000001 is not its bound 1), a huge integer by its order of magnitude, anything
+    else by its repr and type (clsky.errors.short's rule, written here: the tracer imports nothing from
+    clsky)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        return f"{value!r:.40} ({type(value).__name__})"
+    if isinstance(value, (int, np.integer)):
+        digits = str(abs(int(value)))
+        return str(value) if len(digits) < 8 else f"{'-' if value < 0 else ''}{digits[0]}e+{len(digits) - 1}"
+    text = f"{float(value):g}"
+    return text if not math.isfinite(value) or float(text) == float(value) else repr(float(value))
 
 
 def _checked_observer(atmosphere, altitude, cos_view, cos_sun, azimuth):
@@ -708,9 +745,9 @@ def simulate(atmosphere, altitude, cos_view, cos_sun, azimuth=0.0, *, photons=20
     Raises
     ------
     ValueError
-        (:class:`~clsky.errors.ParameterError`) naming an argument outside its range: the altitude in
-        [0, Ha] m, the cosines in [-1, 1], a finite azimuth, integer photons in [2, :data:`MAX_PHOTONS`],
-        max_orders in [1, :data:`MAX_ORDERS_LIMIT`] or None, seed >= 0, chunk >= 1.
+        Naming an argument outside its range: the altitude in [0, Ha] m, the cosines in [-1, 1], a finite
+        azimuth, integer photons in [2, :data:`MAX_PHOTONS`], max_orders in [1, :data:`MAX_ORDERS_LIMIT`] or
+        None, seed in [0, :data:`MAX_SEED`] or None, chunk >= 1 (0-d arrays of them too).
     """
     rp = float(atmosphere.planet_radius)
     ra = float(atmosphere.top_radius)
@@ -722,7 +759,7 @@ def simulate(atmosphere, altitude, cos_view, cos_sun, azimuth=0.0, *, photons=20
     if max_orders is None:
         max_orders = DEFAULT_MAX_ORDERS
     photons = _check_integer("photons", photons, 2, MAX_PHOTONS)
-    seed = _check_integer("seed", seed, 0, 2**64 - 1)
+    seed = _check_integer("seed", seed, 0, MAX_SEED, optional=True)
     chunk = _check_integer("chunk", chunk, 1, 2**31 - 1)
 
     rng = np.random.default_rng(seed)

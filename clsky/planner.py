@@ -76,7 +76,7 @@ from ._cache import cache_directory, source_digest, store
 from ._files import read_user_text
 from .atmosphere import AtmosphereParameters, as_atmosphere
 from .ground import check_ground_mode
-from .errors import check_choice, check_flag, check_instance, check_integer, check_range
+from .errors import check_choice, check_flag, check_instance, check_integer, check_range, short
 from .mapping import cos_to_v
 from .quality import QualityLevel, level_for_budget, quality_level
 from .renderer_choice import DEFAULT_PIXELS, LOOKUP_ERROR, choose_renderer, renderer_row
@@ -440,7 +440,7 @@ def _at_lowest_sun(low) -> str:
         beyond = f" (as measured at {min(measured):g} deg, the lowest measured)"
     elif low > max(measured):
         beyond = f" (as measured at {max(measured):g} deg, the highest measured)"
-    return f"at the lowest sun, {low:g} deg{beyond}"
+    return f"at the lowest sun, {short(low)} deg{beyond}"
 
 
 def _costlier(method, chosen, pixels) -> str:
@@ -554,7 +554,7 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     w_low, w_high = table.sun_w_range
     decisions.append(("sun axis", f"elevations {elevations[0]:.1f} to {elevations[1]:.1f} deg, "
                       f"{table.size[2]} nodes ({100 * (w_high - w_low):.2g} % of the axis)",
-                      f"the path's {scene.sun_elevations_deg[0]:g} to {scene.sun_elevations_deg[1]:g} deg "
+                      f"the path's {short(scene.sun_elevations_deg[0])} to {short(scene.sun_elevations_deg[1])} deg "
                       f"+ {margins[1]:.1f} deg above and {margins[0]:.1f} deg below for curvature and orders"))
     whole_because = {"altitude": "view rays cross every altitude", "view": "the gather integrates every direction"}
     if table.orders == 1:

@@ -350,13 +350,14 @@ def enter_atmosphere(atmosphere, altitude, cos_view, cos_sun, cos_scatter):
 
 
 def lookup(atmosphere: AtmosphereParameters, data, altitude, cos_view, cos_sun, cos_scatter,
-           mapping="nonlinear", sun_cos_range=FULL_SUN_RANGE):
+           mapping="nonlinear", sun_cos_range=FULL_SUN_RANGE, *, table_checked=False):
     """Radiance from a table; twin of ``TableLookupEngine.radiance`` (same parameters, checks and result)."""
     from .lookup import check_lookup
     from .mapping import altitude_to_u, cos_to_sun_t, cos_to_v
     from .phase import mie_phase, rayleigh_phase
 
-    data, queries, sun_cos_range = check_lookup(data, (altitude, cos_view, cos_sun, cos_scatter), sun_cos_range)
+    data, queries, sun_cos_range = check_lookup(data, (altitude, cos_view, cos_sun, cos_scatter), sun_cos_range,
+                                                table_checked=table_checked)
     depth, height, width, channels = data.shape
     altitude, cos_view, cos_sun, cos_scatter = (np.asarray(a, dtype=np.float64) for a in queries)
     nu = np.clip(cos_scatter, -1.0, 1.0)
@@ -434,13 +435,13 @@ def _coordinates4d(atmosphere, shape, h, mu_v, mu_s, nu, mapping, sun_cos_range)
 
 
 def lookup4d(atmosphere: AtmosphereParameters, data, altitude, cos_view, cos_sun, cos_scatter,
-             mapping="nonlinear", sun_cos_range=FULL_SUN_RANGE):
+             mapping="nonlinear", sun_cos_range=FULL_SUN_RANGE, *, table_checked=False):
     """Radiance (..., 3) from a 4D table (A, D, H, W, C); twin of ``TableLookup4DEngine.radiance`` (same checks)."""
     from .lookup import check_lookup
     from .lookup4d import check_table4d_data
 
     data, queries, sun_cos_range = check_lookup(data, (altitude, cos_view, cos_sun, cos_scatter), sun_cos_range,
-                                                check_table4d_data)
+                                                check_table4d_data, table_checked)
     altitude, cos_view, cos_sun, cos_scatter = (np.asarray(a, dtype=np.float64) for a in queries)
     nu = np.clip(cos_scatter, -1.0, 1.0)
     with np.errstate(invalid="ignore"):      # rays that miss the atmosphere from above: discarded

@@ -18,7 +18,7 @@ import pyopencl.array as cla
 from . import _atmosphere_cl, _cl, reference
 from .errors import as_real_array, check_instance, is_finite_real, short
 from .ground import padded4
-from .lookup import MAX_QUERY_ALTITUDE, MAX_TABLE_VALUE, check_kernel_buffer, check_table_data
+from .lookup import MAX_QUERY_ALTITUDE, check_kernel_buffer, check_table_data
 from .resources import check_memory, device_of, estimate_directions_memory, estimate_render_memory
 from .settings import MAPPINGS, TableSettings
 from .table import ScatteringTable
@@ -84,7 +84,9 @@ def sun_disc_radiance(atmosphere, sun_direction, altitude, steps=512):
     when the sun is below the horizon (its ray hits the planet). Omega_sun = 2 pi (1 - cos 0.2665 deg).
     """
     rp, ra = atmosphere.planet_radius, atmosphere.top_radius
-    mu = float(sun_direction[2])
+    # a sun direction is taken within 1e-6 of unit length: its cosine within [-1, 1], as the transmittance
+    # twin requires (a cosine in range keeps its bits)
+    mu = min(1.0, max(-1.0, float(sun_direction[2])))
     h = float(altitude)
     if mu < reference.horizon_cos(h, rp):
         return np.zeros(3)
@@ -533,12 +535,14 @@ class SkyRenderer:
             except (TypeError, ValueError):
                 raise ValueError(f"sky_map must be a sky-view map of shape {expected} (skyview_maps), got "
                                  f"{type(sky_map).__name__} {short(sky_map)}") from None
-            # bounded as a table's values are (MAX_TABLE_VALUE): 1e39 was finite in float64 and infinite in a
-            # float32 renderer's map, and every pixel NaN
+            # within the renderer's real type (a 16th of its largest: the bilinear read and the sun's disc
+            # stay finite): 1e39 was finite in float64 and infinite in a float32 renderer's map, and every pixel
+            # NaN. (A map is radiance with the incident light, up to 1e12, applied: no table's bound.)
+            largest = float(np.finfo(self.engine.dtype).max) / 16
             if (sky_map.shape != expected or not np.isfinite(sky_map).all() or (sky_map < 0).any()
-                    or (sky_map > MAX_TABLE_VALUE).any()):
+                    or (sky_map > largest).any()):
                 raise ValueError(f"sky_map must be a sky-view map of shape {expected} (skyview_maps) with finite "
-                                 f"values in [0, {MAX_TABLE_VALUE:g}], got shape {sky_map.shape}"
+                                 f"values in [0, {largest:.3g}], got shape {sky_map.shape}"
                                  + (f", values in [{sky_map.min():.6g}, {sky_map.max():.6g}]"
                                     if sky_map.shape == expected else ""))
         directions = self._prepared(directions, valid)      # the angles are kept with prepared directions

@@ -229,7 +229,8 @@ class SpectralTable:
 class SpectralRenderer:
     """Renders (..., N) spectral radiance [W m^-2 sr^-1 nm^-1] of a :class:`SpectralTable`: one
     :class:`~clsky.render.SkyRenderer` per batch. Its frame methods (``render_table``, ``render_lut4d``,
-    ``render_raymarch``, ``render_skyview``) and ``prepare`` take the SkyRenderer's arguments; the
+    ``render_raymarch``, ``render_skyview``) and ``prepare`` take the SkyRenderer's arguments (but
+    ``render_skyview``'s ``sky_map``, which must be None: it computes a map per batch itself); the
     SkyRenderer's helpers of several suns or of one batch's maps (``render_raymarch_suns``, ``skyview_map``,
     ``skyview_maps``, ``view_zenith_angles``) are not here: a spectral frame is assembled from every batch.
 

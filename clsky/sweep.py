@@ -26,8 +26,8 @@ import shlex
 import time
 
 from ._files import binary_and_header, check_suffix, read_user_text
-from .cli import (DEFAULT_TABLE_OUTPUT, UsageError, check_outputs, farm_of, progress_bar, table_summary,
-                  running_farm, table_atmosphere, table_settings, warn_unconverged, written_since_checked,
+from .cli import (DEFAULT_TABLE_OUTPUT, UsageError, check_outputs, farm_of, print_report, progress_bar,
+                  running_farm, table_atmosphere, table_report, table_settings, written_since_checked,
                   _check_table_memory)
 
 __all__ = ["SweepJob", "read_sweep", "sweep_jobs", "run_sweep"]
@@ -158,19 +158,21 @@ def run_sweep(args):
             tasks = [(job.atmosphere, job.settings, job.args.backend, job.args.fast_math) for job in jobs]
             tables = farm.map_ordered(build_table_task, tasks, label="clsky-table") if farm is not None \
                 else (build_table_task(*task) for task in tasks)
-            summaries = []      # printed once the files land: a failed or interrupted sweep writes none
+            # printed once the files land, each warning after its table's line: a failed or interrupted sweep
+            # writes none
+            reports = []
             for done, (job, table) in enumerate(zip(jobs, tables), start=1):
                 table.save(job.output, overwrite=job.args.force, staging=staging)
                 if job.raw is not None:
                     table.export_raw(job.raw, overwrite=job.args.force, staging=staging)
-                summaries.append(table_summary(job.args, table, job.output, time.perf_counter() - start))
-                warn_unconverged(table)
+                reports.append(table_report(job.args, table, job.output, time.perf_counter() - start))
                 del table
                 if progress is not None:
                     progress("tables", done, len(jobs))
     finally:
         close()
-    print("\n".join(summaries))
+    for report in reports:
+        print_report(report)
     if len(jobs) > 1:
         print(f"{len(jobs)} tables in {time.perf_counter() - start:.2f} s")
     return 0

@@ -410,7 +410,9 @@ class ScatteringTable:
             units (``metadata["units"]``: relative to I_I per sr, or W m^-2 sr^-1 nm^-1 for an atmosphere
             lit by the solar spectrum).
         """
-        self.validate(check_values=False)    # the kernel indexes data by the settings' size
+        # the kernel indexes data by the settings' size; its values were checked when the table was made (built,
+        # loaded or constructed): the lookups do not scan them again (table_checked)
+        self.validate(check_values=False)
         check_queries(altitude, cos_view, cos_sun, cos_scatter)
         if self.settings.is_4d:
             return self._radiance4d(altitude, cos_view, cos_sun, cos_scatter, backend, engine)
@@ -418,7 +420,7 @@ class ScatteringTable:
             from . import reference
 
             return reference.lookup(self.atmosphere, self.data, altitude, cos_view, cos_sun, cos_scatter,
-                                    self.settings.mapping, self.settings.sun_cos_range)
+                                    self.settings.mapping, self.settings.sun_cos_range, table_checked=True)
         if backend != "opencl":
             raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
         from .lookup import TableLookupEngine
@@ -426,7 +428,7 @@ class ScatteringTable:
         check_instance("engine", engine, TableLookupEngine, "None or a TableLookupEngine (a 3D table's)", optional=True)
         engine = engine or TableLookupEngine(dtype=self.settings.dtype)
         return engine.radiance(self.atmosphere, self.data, altitude, cos_view, cos_sun, cos_scatter,
-                               self.settings.mapping, self.settings.sun_cos_range)
+                               self.settings.mapping, self.settings.sun_cos_range, table_checked=True)
 
     def _radiance4d(self, altitude, cos_view, cos_sun, cos_scatter, backend, engine):
         """:meth:`radiance` of a 4D table (:class:`clsky.lookup4d.TableLookup4DEngine` or its twin)."""
@@ -435,7 +437,7 @@ class ScatteringTable:
         if backend == "numpy":
             from . import reference
 
-            return reference.lookup4d(*arguments)
+            return reference.lookup4d(*arguments, table_checked=True)
         if backend != "opencl":
             raise ValueError(f"backend must be one of {list(BACKENDS)}, got {backend!r}")
         from .lookup4d import TableLookup4DEngine
@@ -443,7 +445,7 @@ class ScatteringTable:
         check_instance("engine", engine, TableLookup4DEngine, "None or a TableLookup4DEngine (a 4D table's)",
                        optional=True)
         engine = engine or TableLookup4DEngine(dtype=self.settings.dtype)
-        return engine.radiance(*arguments)
+        return engine.radiance(*arguments, table_checked=True)
 
     # Files ----------------------------------------------------------------------------------------
     def save(self, path, overwrite=False, staging=None):

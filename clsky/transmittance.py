@@ -11,7 +11,7 @@ import pyopencl.array as cla
 
 from . import _atmosphere_cl, _cl
 from .atmosphere import AtmosphereParameters
-from .errors import as_real_array, check_choice, check_integer
+from .errors import ParameterError, as_real_array, check_choice, check_integer
 from .settings import SAMPLINGS
 
 __all__ = ["TransmittanceEngine", "azimuth_defines", "check_segments", "column_channels", "upload_gathered_source",
@@ -99,8 +99,9 @@ def check_segments(atmosphere, altitude, cos_zenith, length):
               ("cos_zenith", cos_zenith, -1.0, 1.0, ""),
               ("length", length, 0.0, 2 * atmosphere.top_radius, "m"))
     for name, values, low, high, unit in checks:
-        if not np.all(np.isfinite(values) & (values >= low) & (values <= high)):
-            raise ValueError(f"{name} must be finite and in [{low:g}, {high:g}] {unit}".rstrip())
+        inside = np.isfinite(values) & (values >= low) & (values <= high)
+        if not np.all(inside):             # the first value outside, as lookup.check_queries names it
+            raise ParameterError(name, f"finite and in [{low:g}, {high:g}] {unit}".rstrip(), values[~inside].flat[0])
     return altitude, cos_zenith, length
 
 

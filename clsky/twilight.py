@@ -116,7 +116,11 @@ class Pooled:
             return np.where(self.radiance > 0, self.standard_error / self.radiance, np.inf)
 
 
-def monte_carlo(atmosphere, sun_elevation_deg, view, *, target=0.01, batch=200_000, max_photons=40_000_000,
+#: Paths per channel and batch when the caller does not say (at most ``max_photons``).
+DEFAULT_BATCH = 200_000
+
+
+def monte_carlo(atmosphere, sun_elevation_deg, view, *, target=0.01, batch=None, max_photons=40_000_000,
                 seed=0, max_orders=None) -> Pooled:
     """The tracer's radiance for one view, in batches of ``batch`` paths (seeds seed, seed + 1, ...)
     until every channel's relative standard error is at most ``target`` or ``max_photons`` paths per
@@ -132,12 +136,14 @@ def monte_carlo(atmosphere, sun_elevation_deg, view, *, target=0.01, batch=200_0
         A name of :data:`VIEWS`.
     target : float
         Relative standard error to reach in every channel (0.01: 1 %).
-    batch : int
-        Paths per channel and batch (memory: about 1 kB per path alive), at most ``max_photons``.
+    batch : int or None
+        Paths per channel and batch (memory: about 1 kB per path alive), at most ``max_photons``; None:
+        :data:`DEFAULT_BATCH`, or ``max_photons`` where that is fewer.
     max_photons : int
         Most paths per channel.
     seed : int
-        Seed of the first batch.
+        Seed of the first batch (the k-th batch's is seed + k, each at most
+        :data:`clsky.montecarlo.MAX_SEED`).
     max_orders : int or None
         The tracer's order cap (1: single scattering).
 
@@ -155,8 +161,8 @@ def monte_carlo(atmosphere, sun_elevation_deg, view, *, target=0.01, batch=200_0
         raise ParameterError("target", "a relative standard error in [0, 1)", target)
     max_photons = check_integer("max_photons", max_photons, 2, montecarlo.MAX_PHOTONS)
     # a first batch larger than the cap spent more paths than it (100 for max_photons = 10)
-    batch = check_integer("batch", batch, 2, max_photons)
-    seed = check_integer("seed", seed, 0, 2**63)
+    batch = min(DEFAULT_BATCH, max_photons) if batch is None else check_integer("batch", batch, 2, max_photons)
+    seed = check_integer("seed", seed, 0, montecarlo.MAX_SEED - max_photons // batch)
     max_orders = check_integer("max_orders", max_orders, 1, montecarlo.MAX_ORDERS_LIMIT, optional=True)
     means, variances, truncated = [], [], []
     while True:
@@ -175,7 +181,9 @@ def monte_carlo(atmosphere, sun_elevation_deg, view, *, target=0.01, batch=200_0
 
 def single_scattering(atmosphere, sun_elevation_deg, view) -> np.ndarray:
     """The tracer's deterministic single scattering (:func:`clsky.montecarlo.single_scattering`) for
-    one view from the ground, per unit irradiance [1/sr], shape (3,)."""
+    one view from the ground, per unit irradiance [1/sr], shape (3,); ``atmosphere`` parameters or a
+    preset's name."""
+    atmosphere = as_atmosphere(atmosphere)
     elevation, azimuth = _check_view(view)
     return montecarlo.single_scattering(atmosphere, 0.0, math.sin(math.radians(elevation)),
                                         math.sin(math.radians(_check_sun(sun_elevation_deg))),

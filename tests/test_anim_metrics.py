@@ -419,7 +419,7 @@ def test_compare_frames_takes_the_display_values_of_whole_frames():
 
 @pytest.mark.parametrize("call, message", [
     (lambda: metrics.display_floor(1e-320), r"^exposure must be large enough for a finite floor"),   # inf: no jump
-    (lambda: metrics.relative_jumps([1.0, 2.0], None), r"^floor must be a number in \(0, inf\], got None"),
+    (lambda: metrics.relative_jumps([1.0, 2.0], None), r"^floor must be a finite number > 0, got None"),
     (lambda: metrics.temporal_jumps(np.ones(3), np.ones(3), worst=-1), r"^worst must be an integer in \[0, "),
     (lambda: metrics.temporal_jumps(np.ones(3), np.ones(3), worst=2.5), r"^worst must be an integer in \[0, "),
     (lambda: tonemap.to_uint8(np.zeros(4), dither="no"), r"^dither must be True or False, got 'no'"),   # dithered

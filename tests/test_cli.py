@@ -174,6 +174,34 @@ def test_an_output_another_run_wrote_meanwhile_is_refused_by_option(tmp_path, mo
     assert (tmp_path / "sky.json").read_bytes() == b"the other run's"
 
 
+def test_a_refused_sweep_prints_no_line_nor_warning_of_its_tables(tmp_path, monkeypatch, capsys):
+    """A sweep whose files do not land (here the commit finds another run's file) printed its tables'
+    '-> FILE' lines and their orders warnings as it built them; now each table's line and warning come
+    once the files land, and here none."""
+    from clsky import _files, cli
+
+    commit = _files.StagedWrites.commit
+
+    def the_other_run_writes_then_commit(self):
+        (tmp_path / "b.npz").write_bytes(b"the other run's")
+        return commit(self)
+
+    monkeypatch.setattr(_files.StagedWrites, "commit", the_other_run_writes_then_commit)
+    monkeypatch.chdir(tmp_path)
+    line = "--size 8 8 4 --mode physical --max-orders 2 -o {}\n"         # not converged at 2 orders: a warning
+    (tmp_path / "lines.txt").write_text(line.format("a.npz") + line.format("b.npz"))
+    assert cli.main(["table", "--progress", "none", "--sweep", "lines.txt"]) == 2
+    printed = capsys.readouterr()
+    assert printed.out == "" and "warning" not in printed.err and printed.err.count("\n") == 1, printed
+    monkeypatch.setattr(_files.StagedWrites, "commit", commit)
+    for name in ("a.npz", "b.npz"):           # a.npz was put in place before b.npz was found (the message says)
+        (tmp_path / name).unlink(missing_ok=True)
+    assert cli.main(["table", "--progress", "none", "--sweep", "lines.txt"]) == 0
+    printed = capsys.readouterr()
+    assert printed.out.count("-> a.npz") == 1 and printed.out.count("-> b.npz") == 1
+    assert printed.err.count("clsky: warning: ") == 2
+
+
 @pytest.mark.parametrize("args,named", [
     (["--size", "1", "16", "6"], "--size W"),
     (["--size", "8", "16"], "--size"),

@@ -140,9 +140,11 @@ def test_glsl_lookup_in_float32_is_finite_at_the_mie_peak(tmp_path, cl_context, 
     direction (nu = 1) and its opposite included, at the default g and at the limits +-0.9999
     (MAX_MIE_G). Without the guard on the phase's base (as kernels/phase.cl's), 1 + g^2 + 2gc rounded to
     0 at g = -0.9999, nu = 1: inf, and NaN where Ibar_M is 0. Away from the peak (base > 0.1, where the
-    float32 base keeps about 6 digits) the radiance is within 3e-5 of clsky's float64 lookup: the
-    float32 snippet's own rounding through the mapping's cube roots and the quadrilinear sums (measured
-    up to 2.9e-5 at the default g by a probe, 2026-12-07)."""
+    float32 base keeps about 6 digits) the radiance is within 1e-4 of clsky's float64 lookup: the float32
+    snippet's own rounding through the mapping's cube roots and the quadrilinear sums, measured up to
+    2.9e-5 on PoCL (2026-12-07); 1e-4, about 800 float32 ulps, leaves room for another device's FMA
+    contraction and pow's few ulps (OpenCL's single-precision bound) without hiding an error of the
+    snippet's own (a wrong node or weight is off by percents)."""
     atmosphere = AtmosphereParameters(mie_g=mie_g)
     settings = SETTINGS.replace(azimuth_harmonics=0, orders=2)
     table = ScatteringTable.build(atmosphere, settings)
@@ -155,7 +157,7 @@ def test_glsl_lookup_in_float32_is_finite_at_the_mie_peak(tmp_path, cl_context, 
     expected = reference.lookup4d(table.atmosphere, table.data, *queries.T, settings.mapping, settings.sun_cos_range)
     nu = queries[:, 3]
     away = 1.0 + mie_g * mie_g + 2.0 * mie_g * nu > 0.1
-    assert_allclose(got[away], expected[away], rtol=3e-5, atol=1e-6 * np.abs(expected).max())
+    assert_allclose(got[away], expected[away], rtol=1e-4, atol=1e-6 * np.abs(expected).max())
 
 
 def test_export_refuses_a_3d_table(tmp_path):

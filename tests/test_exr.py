@@ -125,7 +125,7 @@ def test_header_attributes_refuse_a_sun_that_is_no_angle():
         frame_attributes("u", "fisheye", 4, 4, float("nan"), 0.0)
     with pytest.raises(ValueError, match=r"^sun_azimuth_deg must be a finite number, got inf"):
         frame_attributes("u", "fisheye", 4, 4, 30.0, math.inf)
-    with pytest.raises(ValueError, match=r"^altitude_m must be a number in \[0, inf\], got nan"):
+    with pytest.raises(ValueError, match=r"^altitude_m must be a finite number >= 0, got nan"):
         frame_attributes("u", "fisheye", 4, 4, 30.0, 0.0, altitude_m=math.nan)
     with pytest.raises(ValueError, match=r"^wavelengths_nm must be 3 wavelengths \[nm\], finite and > 0"):
         frame_attributes("u", "fisheye", 4, 4, 30.0, 0.0, wavelengths_nm=(650.0, math.nan, 475.0))

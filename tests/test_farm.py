@@ -404,8 +404,35 @@ def test_a_listener_that_is_no_scheduler_is_one_line_within_the_timeout(tmp_path
     assert time.perf_counter() - start < 20
     error = capsys.readouterr().err
     assert error.startswith(f"clsky: error: --scheduler: no Dask scheduler answered at tcp://127.0.0.1:"
-                            f"{silent_listener} within 1 s (something accepted the connection")
+                            f"{silent_listener} within 1 s (the connection opened, but no Dask scheduler answered")
     assert error.count("\n") == 1 and list(tmp_path.iterdir()) == []
+
+
+def test_a_client_made_after_the_deadline_is_closed(monkeypatch):
+    """A scheduler that answers after the farm gave up: the client made then is closed at once, not left
+    open as the process's default Dask client (a stand-in client that answers after 2 s, a 0.5 s deadline)."""
+    import threading
+
+    import clsky.farm
+    from clsky.farm import Farm
+
+    made, answered = [], threading.Event()
+
+    class LateClient:
+        def __init__(self, address, timeout):
+            time.sleep(2.0)
+            self.closed = False
+            made.append(self)
+
+        def close(self):
+            self.closed = True
+            answered.set()
+
+    monkeypatch.setattr(clsky.farm, "CONNECT_TIMEOUT_S", 0.5)
+    monkeypatch.setattr(clsky.farm, "CONNECT_GRACE_S", 0.0)
+    with pytest.raises(ConnectionError, match="within 0.5 s"):
+        Farm(scheduler="tcp://127.0.0.1:8786")._connect(LateClient)
+    assert answered.wait(10.0) and len(made) == 1 and made[0].closed
 
 
 def test_tls_without_dask_tls_configuration_is_one_line(tmp_path, capsys):

@@ -157,3 +157,18 @@ def test_lookups_and_their_twins_refuse_what_a_table_cannot_be(four_d, change, m
             radiance(atmosphere, arguments["data"],
                      *(arguments[k] for k in ("altitude", "cos_view", "cos_sun", "cos_scatter")), "nonlinear",
                      arguments["sun_cos_range"])
+
+
+def test_a_validated_tables_lookup_does_not_scan_its_values_again(table, monkeypatch):
+    """ScatteringTable.radiance's table was checked when it was made: its lookups (both backends) pass
+    table_checked and do not scan every value again (39 ms of a 41 ms point query on a 300 MB table); a raw
+    array's lookup does."""
+    import clsky.lookup
+
+    scans = []
+    monkeypatch.setattr(clsky.lookup, "check_table_values", lambda name, array, **_: scans.append(name))
+    for backend in ("opencl", "numpy"):
+        table.radiance(0.0, 0.5, 0.5, 0.5, backend=backend)
+    assert scans == []
+    reference.lookup(table.atmosphere, table.data, 0.0, 0.5, 0.5, 0.5)
+    assert scans == ["data"]

@@ -327,7 +327,7 @@ def test_animation_estimate_drops_the_higher_orders():
     assert np.isfinite(frames.bytes())
 
 
-@pytest.mark.parametrize("wavelengths", [None, 6])
+@pytest.mark.parametrize("wavelengths", [None, 12])
 def test_animation_estimate_holds_the_arrays_its_table_keeps(wavelengths):
     """The renderer phase's host table arrays are those the animation's table holds (data and gathered
     sum; single scattering left with the orders): their bytes equal those of

@@ -471,8 +471,8 @@ def test_seed_reproducibility_and_independence():
     ((0.0, 0.5, 0.5), dict(photons="10"), r"^photons must be an integer in \[2, 10000000000\], got '10' \(str\)$"),
     ((0.0, 0.5, 0.5), dict(max_orders=1.9), r"^max_orders must be None or an integer in \[1, 1000000\], got 1.9 \(float\)$"),
     ((0.0, 0.5, 0.5), dict(max_orders=True), r"^max_orders must be None or an integer in \[1, 1000000\], got True \(bool\)$"),
-    ((0.0, 0.5, 0.5), dict(seed=-1), r"^seed must be an integer in \[0, 18446744073709551615\], got -1$"),
-    ((0.0, 0.5, 0.5), dict(seed=1.5), r"^seed must be an integer in \[0, 18446744073709551615\], got 1.5 \(float\)$"),
+    ((0.0, 0.5, 0.5), dict(seed=-1), r"^seed must be None or an integer in \[0, 18446744073709551615\], got -1$"),
+    ((0.0, 0.5, 0.5), dict(seed=1.5), r"^seed must be None or an integer in \[0, 18446744073709551615\], got 1.5 \(float\)$"),
     ((0.0, 0.5, 0.5), dict(chunk=0), r"^chunk must be an integer in \[1, 2147483647\], got 0$"),
 ])
 def test_simulate_refuses_bad_arguments_by_name(arguments, options, message):
@@ -496,3 +496,20 @@ def test_single_scattering_quadrature_refuses_bad_arguments_by_name(arguments, o
 
     with pytest.raises(ValueError, match=message):
         single_scattering(black_preset("physical"), *arguments, **options)
+
+
+@pytest.mark.parametrize("arguments, message", [
+    ((0.0, 1.0000001, 0.5), r"^cos_view must be a number in \[-1, 1\], got 1.0000001$"),    # printed as its bound 1
+    ((10**400, 0.5, 0.5), r"^altitude must be a number in \[0, 100000\] m, got 1e\+400$"),  # OverflowError
+])
+def test_the_tracers_messages_show_the_value_typed(arguments, message):
+    with pytest.raises(ValueError, match=message):
+        simulate(black_preset("physical"), *arguments, photons=10)
+
+
+def test_the_tracer_takes_0d_arrays_and_a_seed_of_none():
+    """0-d arrays (float() took them before the checks) and seed=None (fresh entropy, as default_rng) stay
+    valid arguments."""
+    atmosphere = black_preset("physical")
+    result = simulate(atmosphere, np.array(0.0), np.array(0.5), 0.5, photons=np.array(10), seed=None)
+    assert np.all(np.isfinite(result.radiance))

@@ -110,8 +110,8 @@ def test_check_output_refuses_what_cannot_be_written(tmp_path):
 
 def test_check_output_refuses_a_name_that_ends_in_a_separator(tmp_path):
     """'x.npz/' names a directory, not the file x.npz that pathlib reads it as."""
-    with pytest.raises(IsADirectoryError, match=r"^--raw: .*x\.npz/ names a directory \(its trailing '/'\), not a "
-                                                r"file$"):
+    with pytest.raises(IsADirectoryError, match=r"^--raw: .*x\.npz/ names a directory \(its trailing '/', '/\.' or "
+                                                r"'/\.\.'\), not a file$"):
         check_output(f"{tmp_path}/x.npz/", option="--raw")
     assert check_output(tmp_path / "x.npz") == tmp_path / "x.npz"
 
@@ -322,14 +322,15 @@ def test_cli_animate_checks_the_mp4_frames_and_metrics_first(tmp_path):
 
 
 @pytest.mark.parametrize("command,output", [("animate", ".mp4"), ("render", ".png"), ("table", ".npz"),
-                                            ("render", "dir/.png"), ("render", "x.png/"), ("table", "t.npz/")])
+                                            ("render", "dir/.png"), ("render", "x.png/"), ("table", "t.npz/"),
+                                            ("render", "x.png/.")])
 def test_cli_refuses_an_output_named_by_its_suffix_alone(tmp_path, command, output):
     """'-o .png' names a hidden file without a suffix (pathlib's reading; animate took '.mp4' and wrote
     '.mp4_frames/'), and 'x.png/' a directory (pathlib drops the '/': the file x.png was written): refused,
     naming the NAME it lacks, before any work."""
     (tmp_path / "dir").mkdir()
     args = {"animate": ANIMATE, "render": ("render", "--size", "16"), "table": ("table", *SLOW_TABLE)}[command]
-    extension = output[output.index("."):].rstrip("/")
+    extension = output[output.index("."):].rstrip("/.")          # '.png' of 'x.png/.' too
     result = clsky(*args, "-o", output, cwd=tmp_path)
     assert_usage_error(result, "--output must", f"in {extension} after a file name (NAME{extension}), "
                                                f"got {output!r}")

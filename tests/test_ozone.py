@@ -97,13 +97,14 @@ def test_profile_and_column_are_parameters():
 # Cross-sections --------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("call, message", [
-    (lambda: ozone.tent_profile([25e3, 0.0], half_width=0.0), r"^half_width must be a number in \(0, inf\] m"),
+    (lambda: ozone.tent_profile([25e3, 0.0], half_width=0.0), r"^half_width must be a finite number > 0 m, got 0$"),
     (lambda: ozone.tent_profile([25e3, 0.0], half_width=-1.0), r"^half_width must be"),   # 25001 times the peak
     (lambda: ozone.tent_profile([math.nan]), r"^altitude must be finite altitudes \[m\]"),
     (lambda: ozone.tent_profile(["a"]), r"^altitude must be finite altitudes \[m\]"),
-    (lambda: ozone.tent_number_density_max(-300.0), r"^column_du must be a number in \[0, inf\] DU"),
+    (lambda: ozone.tent_number_density_max(-300.0), r"^column_du must be a finite number >= 0 DU, got -300$"),
     (lambda: ozone.tent_number_density_max(300.0, half_width=0), r"^half_width must be"),  # ZeroDivisionError
     (lambda: ozone.tent_number_density_max("300"), r"^column_du must be"),                 # TypeError
+    (lambda: ozone.tent_number_density_max(math.inf), r"^column_du must be a finite number >= 0 DU, got inf$"),
 ])
 def test_the_tent_refuses_what_no_atmosphere_has(call, message):
     """The public tent and its peak density took a zero or negative half width (NaN, a density 25001 times

@@ -143,7 +143,9 @@ def test_the_default_animation_plan(cl_context):
     ((-6.0, 60.0), "at the lowest sun, -6 deg (as measured at -4 deg, the lowest measured)", "the path's -6 to 60 deg"),
     ((89.99, 90.0), "at the lowest sun, 89.99 deg (as measured at 45 deg, the highest measured)",
      "the path's 89.99 to 90 deg"),
-    ((8.0, 30.0), "at the lowest sun, 8 deg,", "the path's 8 to 30 deg")])
+    ((8.0, 30.0), "at the lowest sun, 8 deg,", "the path's 8 to 30 deg"),
+    ((89.99999, 90.0), "at the lowest sun, 89.99999 deg", "the path's 89.99999 to 90 deg")])     # ':g': '90 to 90'
+
 def test_the_plan_names_the_sun_path_as_given_and_where_the_lookup_error_was_measured(cl_context, path, lookup,
                                                                                       sun_path):
     """Plan.describe() printed a path of 89.99 to 90 deg as '90.0 to 90.0', and quoted the lookup's error at -4

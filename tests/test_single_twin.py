@@ -242,8 +242,8 @@ def test_column_density_table_kernel_matches_twin(transmittance_engine, dtype, s
 
 
 @pytest.mark.parametrize("change, message", [
-    (dict(length=-50_000.0), r"^length must be finite and in \[0, "),                  # T was 3.5
-    (dict(altitude=np.nan), r"^altitude must be finite and in \[0, "),                   # T was NaN
+    (dict(length=-50_000.0), r"^length must be finite and in \[0, 1.2942e\+07\] m, got -50000$"),   # T was 3.5
+    (dict(altitude=np.nan), r"^altitude must be finite and in \[0, 100000\] m, got nan$"),           # T was NaN
     (dict(steps=0), r"^steps must be an integer in \[1, 1000000\], got 0$"),              # T was 1
     (dict(sampling="bogus"), r"^sampling must be one of "),                               # taken as uniform
 ])

@@ -254,8 +254,8 @@ def test_render_frame_of_method_skyview_is_the_renderers_skyview(cl_context):
 def test_maps_of_several_suns_are_each_suns_own_map(renderer):
     """skyview_maps marches the map's nodes once for several suns: each map the same bits as skyview_map
     of its sun alone, and render_skyview given that map (sky_map=) the same frame as without it; a map of
-    the wrong shape, not numbers, or with a NaN, a negative value or one above MAX_TABLE_VALUE, is refused
-    before the kernel (ValueError)."""
+    the wrong shape, not numbers, or with a NaN, a negative value or one beyond the renderer's real type (a
+    16th of its largest), is refused before the kernel (ValueError)."""
     sky_renderer = renderer()
     suns = [sun_direction(zenith, SUN_AZIMUTH + 7.0 * k) for k, zenith in enumerate((30.0, 85.0, 93.0, 97.0))]
     for altitude in (0.0, 10e3):
@@ -266,13 +266,18 @@ def test_maps_of_several_suns_are_each_suns_own_map(renderer):
             assert_array_equal(sky_map, sky_renderer.skyview_map(sun, altitude, MAP))
             assert_array_equal(sky_renderer.render_skyview(directions, sun, altitude, settings=MAP, sky_map=sky_map),
                                sky_renderer.render_skyview(directions, sun, altitude, settings=MAP))
-    # beyond MAX_TABLE_VALUE (1e12): 1e39 is finite in float64 and infinite in a float32 renderer's map,
-    # whose every pixel was then NaN
-    bad_maps = [maps[0][:-1], maps[0].copy(), -maps[0], np.full_like(maps[0], 1e39), [["a"]]]
+    bad_maps = [maps[0][:-1], maps[0].copy(), -maps[0], np.full_like(maps[0], 1e308), [["a"]]]
     bad_maps[1][3, 2, 1] = np.nan
     for bad in bad_maps:
         with pytest.raises(ValueError, match=r"sky_map must be a sky-view map of shape \(\d+, \d+, 3\) "):
             sky_renderer.render_skyview(directions, suns[0], 0.0, settings=MAP, sky_map=bad)
+    # a map's radiance carries the incident light (up to 1e12) and the Mie peak: 1e17 is a valid map's
+    # (a reviewer's atmosphere), which a table's bound (1e12) refused
+    bright = sky_renderer.render_skyview(directions, suns[0], 0.0, settings=MAP, sky_map=np.full_like(maps[0], 1e17))
+    assert np.isfinite(bright).all()
+    # 1e39 is finite in float64 and infinite in a float32 renderer's map, whose every pixel was then NaN
+    with pytest.raises(ValueError, match=r"with finite values in \[0, 2.13e\+37\]"):
+        renderer("float32").render_skyview(directions, suns[0], 0.0, settings=MAP, sky_map=np.full_like(maps[0], 1e39))
     with pytest.raises(ValueError, match="at least one sun"):
         sky_renderer.skyview_maps([], 0.0, MAP)
 

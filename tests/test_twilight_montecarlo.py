@@ -72,11 +72,27 @@ def test_single_scattering_quadrature_is_converged(atmosphere):
     (lambda a: twilight.monte_carlo(a, 5.0, "zenith", max_orders=0), "max_orders"),
     (lambda a: twilight.monte_carlo(3, 5.0, "zenith"), "atmosphere"),                  # an AttributeError
     (lambda a: twilight.black_ground_without_ozone(3), "atmosphere"),
+    (lambda a: twilight.single_scattering(3, 5.0, "zenith"), "atmosphere"),              # an AttributeError
+    (lambda a: twilight.monte_carlo("bogus", 5.0, "zenith"), "atmosphere"),               # named 'preset'
     (lambda a: twilight.view_directions(["zenith", "up"]), "view"),
 ])
 def test_bad_input_names_the_parameter(atmosphere, call, name):
     with pytest.raises(ValueError, match=f"^{name} must be"):
         call(atmosphere)
+
+
+def test_the_default_batch_follows_a_smaller_max_photons(atmosphere):
+    """max_photons below the default batch (200 000): the batch is max_photons, where the default batch was
+    refused as a batch the caller never gave ('batch must be an integer in [2, 20], got 200000')."""
+    pooled = twilight.monte_carlo(atmosphere, 5.0, "zenith", max_photons=20)
+    assert pooled.photons == 20 and pooled.batches == 1
+
+
+def test_single_scattering_takes_a_preset_name():
+    from clsky import preset
+
+    np.testing.assert_array_equal(twilight.single_scattering("physical", 5.0, "zenith"),
+                                  twilight.single_scattering(preset("physical"), 5.0, "zenith"))
 
 
 def test_monte_carlo_takes_a_preset_name(atmosphere):
