@@ -675,14 +675,15 @@ def _as_float(value) -> float:
 
 def _shown(value) -> str:
     """A value as the messages show it: a number by %g where that is the number itself, else by every
-    digit it takes (1.0000001 is not its bound 1), a huge integer by its order of magnitude, anything
+    digit it takes (1.0000001 is not its bound 1), an integer whole up to 16 digits and by its order of
+    magnitude beyond (10**400), anything
     else by its repr and type (clsky.errors.short's rule, written here: the tracer imports nothing from
     clsky)."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
         return f"{value!r:.40} ({type(value).__name__})"
     if isinstance(value, (int, np.integer)):
         digits = str(abs(int(value)))
-        return str(value) if len(digits) < 8 else f"{'-' if value < 0 else ''}{digits[0]}e+{len(digits) - 1}"
+        return str(value) if len(digits) <= 16 else f"{'-' if value < 0 else ''}{digits[0]}e+{len(digits) - 1}"
     text = f"{float(value):g}"
     return text if not math.isfinite(value) or float(text) == float(value) else repr(float(value))
 
