@@ -67,8 +67,9 @@ def _add_scene_arguments(parser, frames=True):
     _add_display_arguments(parser)
     sky.add_argument("--wavelengths", type=int, metavar="N",
                      help="N wavelengths in [12, 47] (fewer integrate to wrong colours) in absolute units, "
-                          "frames converted spectral -> XYZ -> linear sRGB [cd/m^2] (default: the table's three, converted the same way in cd/m^2; "
-                          "shown as r, g, b in the notes' units for --preset atmosphere-plus)")
+                          "frames converted spectral -> XYZ -> linear sRGB [cd/m^2] (default: the table's three, "
+                          "converted the same way in cd/m^2; shown as r, g, b in the notes' units for --preset "
+                          "atmosphere-plus)")
     if frames:
         sun = parser.add_argument_group("sun path")
         sun.add_argument("--frames", type=int, default=120, help="frames of the sweep, in [2, 100000] (default: 120)")

@@ -92,9 +92,12 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cost", action="store_true",
                         help="measure the cost of the harmonics in the default clsky animate instead")
-    parser.add_argument("--harmonics", type=listed(integer_in(0, MAX_AZIMUTH_HARMONICS)), default="0,2", help="comma-separated azimuth_harmonics to compare")
-    parser.add_argument("--quality", default="default", choices=list(QUALITY_LEVELS), help="quality level of the ray march (clsky/quality.py)")
-    parser.add_argument("--target", type=standard_error, default=0.02, help="relative standard error per channel to reach")
+    parser.add_argument("--harmonics", type=listed(integer_in(0, MAX_AZIMUTH_HARMONICS)), default="0,2",
+                        help="comma-separated azimuth_harmonics to compare")
+    parser.add_argument("--quality", default="default", choices=list(QUALITY_LEVELS),
+                        help="quality level of the ray march (clsky/quality.py)")
+    parser.add_argument("--target", type=standard_error, default=0.02,
+                        help="relative standard error per channel to reach")
     parser.add_argument("--max-photons", type=photon_count, default=40_000_000, help="most paths per channel and case")
     parser.add_argument("--elevations", type=listed(real_in(-90.0, 90.0)),
                         default=",".join(f"{e:g}" for e in twilight.SUN_ELEVATIONS_DEG),

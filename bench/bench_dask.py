@@ -129,7 +129,8 @@ def main(argv=None):
     parser = add_output_arguments(argparse.ArgumentParser(description=__doc__.splitlines()[0]))
     parser.add_argument("--frames", type=frame_count, default=48, help="frames of the animation (default: 48)")
     parser.add_argument("--size", type=frame_side, default=256, help="image height [px] (default: 256)")
-    parser.add_argument("--quality", default="default", choices=list(QUALITY_LEVELS), help="quality level (default: default)")
+    parser.add_argument("--quality", default="default", choices=list(QUALITY_LEVELS),
+                        help="quality level (default: default)")
     parser.add_argument("--repeat", type=positive_integer, default=2, help="repetitions of the three runs (default: 2)")
     args = parse_arguments(parser, argv)
     if args.smoke:

@@ -59,7 +59,8 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--size", type=table_nodes, nargs=3, default=LOOKUP4D_SIZE, metavar=("W", "H", "D"),
                         help="nodes along altitude, view (even), sun (default: 16 128 128)")
-    parser.add_argument("--azimuth-size", type=integer_in(2, 1024), default=LOOKUP4D_AZIMUTHS, help="azimuth nodes (default 16)")
+    parser.add_argument("--azimuth-size", type=integer_in(2, 1024), default=LOOKUP4D_AZIMUTHS,
+                        help="azimuth nodes (default 16)")
     parser.add_argument("--azimuth-sweep", type=integer_in(2, 1024), nargs="*", default=(4, 8, 32),
                         help="other azimuth node counts to measure (default: 4 8 32)")
     parser.add_argument("--sun-sweep", type=table_nodes, nargs="*", default=(32, 64),

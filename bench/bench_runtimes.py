@@ -208,7 +208,8 @@ def main():
                              "scripts/intel_opencl.sh wrote it, else the system's registry)")
     parser.add_argument("--vector-widths", type=int, choices=VECTOR_WIDTHS, nargs="+", default=[8], metavar="W",
                         help="the kernels' vector widths to measure on each device (1 and/or 8; default 8)")
-    parser.add_argument("--rounds", type=positive_integer, default=2, help="rounds of the configurations, alternating (default 2)")
+    parser.add_argument("--rounds", type=positive_integer, default=2,
+                        help="rounds of the configurations, alternating (default 2)")
     parser.add_argument("--repeat", type=positive_integer, default=5, help="timed frames per render (default 5)")
     parser.add_argument("--keep-outputs", type=pathlib.Path, default=None, metavar="DIR",
                         help="keep each configuration's first-round animation in DIR/<configuration index>/")

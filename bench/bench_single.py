@@ -30,7 +30,8 @@ from clsky.single import SingleScatteringEngine
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeat", type=positive_integer, default=10, help="OpenCL repetitions after a warm-up (default 10)")
+    parser.add_argument("--repeat", type=positive_integer, default=10,
+                        help="OpenCL repetitions after a warm-up (default 10)")
     parser.add_argument("--twin-repeat", type=positive_integer, default=2, help="NumPy twin repetitions (default 2)")
     add_output_arguments(parser)
     args = parse_arguments(parser)

@@ -83,7 +83,8 @@ def timed(function):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--size", type=table_nodes, nargs=3, default=list(clsky.TableSettings().size), metavar=("W", "H", "D"))
+    parser.add_argument("--size", type=table_nodes, nargs=3, default=list(clsky.TableSettings().size),
+                        metavar=("W", "H", "D"))
     parser.add_argument("--frame", type=frame_side, default=96, help="fisheye side [px]")
     parser.add_argument("--spectral", type=integer_in(MIN_COLOUR_WAVELENGTHS, MAX_WAVELENGTHS), default=15,
                         help="N of the spectral mode")

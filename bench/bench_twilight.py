@@ -63,11 +63,13 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--atmosphere", choices=("black", "physical"), default="black",
                         help="black: physical preset, no ozone, black ground (issue 11's case); physical: the preset")
-    parser.add_argument("--quality", default="default", choices=list(QUALITY_LEVELS), help="quality level of the ray march (clsky/quality.py)")
+    parser.add_argument("--quality", default="default", choices=list(QUALITY_LEVELS),
+                        help="quality level of the ray march (clsky/quality.py)")
     parser.add_argument("--azimuth-harmonics", type=integer_in(0, MAX_AZIMUTH_HARMONICS), metavar="M",
                         help="the tables' azimuth_harmonics (clsky/azimuth.py) instead of the scene planner's "
                              "(2 below +30 deg since 2026-12-02; 0 reproduces the azimuth average of issue 11)")
-    parser.add_argument("--target", type=standard_error, default=0.01, help="relative standard error per channel to reach")
+    parser.add_argument("--target", type=standard_error, default=0.01,
+                        help="relative standard error per channel to reach")
     parser.add_argument("--max-photons", type=photon_count, default=40_000_000, help="most paths per channel and case")
     add_output_arguments(parser)
     args = parse_arguments(parser)

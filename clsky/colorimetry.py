@@ -75,7 +75,8 @@ from .solar import solar_irradiance_astm_g173
 __all__ = ["MAX_LUMINOUS_EFFICACY", "SRGB_PRIMARIES_XY", "D65_WHITE_XY", "SRGB_TO_XYZ", "XYZ_TO_SRGB",
            "D65_WHITE_XYZ", "rgb_to_xyz_matrix", "CMFS_NAME", "THREE_WAVELENGTH_METHODS", "LINEAR_METHODS",
            "DEFAULT_THREE_WAVELENGTH_METHOD", "colour_matching_functions",
-           "band_widths", "spectral_to_xyz", "spectral_frame_to_xyz", "MAX_RADIANCE", "xyz_to_linear_srgb", "linear_srgb_to_xyz", "luminance",
+           "band_widths", "spectral_to_xyz", "spectral_frame_to_xyz", "MAX_RADIANCE", "xyz_to_linear_srgb",
+           "linear_srgb_to_xyz", "luminance",
            "three_wavelength_to_xyz_matrix", "three_wavelength_to_xyz", "three_wavelength_frame_to_xyz"]
 
 #: K_m, the maximum luminous efficacy of photopic vision [lm/W].

@@ -506,7 +506,8 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         "" if samples is None else f" (asked for; the {level.name} level's {level.ray.view_steps})")
     if chosen.method == "lut" and ray_march:
         decisions.append(("renderer", march,
-                          f"asked for; the table lookup alone would do: {_percent(lookup_error)} % {_at_lowest_sun(low)}"))
+                          f"asked for; the table lookup alone would do: {_percent(lookup_error)} % "
+                          f"{_at_lowest_sun(low)}"))
     elif chosen.method == "lut":
         ray = None
         decisions.append(("renderer", "table lookup", f"its error {_at_lowest_sun(low)}, is "

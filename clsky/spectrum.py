@@ -39,7 +39,8 @@ from .ozone import cross_section_serdyuchenko2014
 from .solar import ABSOLUTE_UNITS, with_solar_spectrum
 
 __all__ = ["SPECTRAL_RANGE", "MIN_WAVELENGTHS", "MAX_WAVELENGTHS", "MIN_COLOUR_WAVELENGTHS", "DATA_RANGE",
-           "spectral_wavelengths", "check_wavelengths", "wavelength_batches", "batch_atmospheres", "SpectralTable", "SpectralRenderer"]
+           "spectral_wavelengths", "check_wavelengths", "wavelength_batches", "batch_atmospheres", "SpectralTable",
+           "SpectralRenderer"]
 
 #: The visible range the default grids divide [nm].
 SPECTRAL_RANGE = (360.0, 830.0)

@@ -1,10 +1,10 @@
 """The engine export of the 4D table (clsky/export4d.py) and its GLSL lookup (docs/lookup4d.glsl).
 
 No GLSL compiler is at hand, so the snippet's own text is compiled as OpenCL C (in double precision,
-and in single precision as a shader runs it) behind a prelude that maps GLSL's types, constructors and texelFetch onto OpenCL, and run on random
-queries against clsky.reference.lookup4d, on the volumes export_texture wrote (read back from the
-file). What the prelude cannot map (structs, out parameters, C casts) the snippet avoids, which a
-test here checks too.
+and in single precision as a shader runs it) behind a prelude that maps GLSL's types, constructors and
+texelFetch onto OpenCL, and run on random queries against clsky.reference.lookup4d, on the volumes
+export_texture wrote (read back from the file). What the prelude cannot map (structs, out parameters, C
+casts) the snippet avoids, which a test here checks too.
 """
 
 from __future__ import annotations
@@ -82,7 +82,8 @@ def run_snippet(cl_context, table, directory, queries, real="double"):
     t = [cla.to_device(queue, np.ascontiguousarray(v)) for v in volumes]
     cl.Kernel(program, "run")(queue, (len(queries),), None, t[0].data, t[1].data, t[2].data, size,
                               np.int32(meta["mapping"]), sun_range, dtype(meta["planet_radius"]),
-                              dtype(meta["top_radius"]), light, dtype(meta["mie_g"]), np.int32(meta["modified_rayleigh"]),
+                              dtype(meta["top_radius"]), light, dtype(meta["mie_g"]),
+                              np.int32(meta["modified_rayleigh"]),
                               cla.to_device(queue, queries.astype(dtype)).data, out.data)
     return out.get().astype(np.float64)
 

@@ -463,16 +463,20 @@ def test_seed_reproducibility_and_independence():
 @pytest.mark.parametrize("arguments, options, message", [
     ((0.0, 0.5, math.nan), {}, r"^cos_sun must be a number in \[-1, 1\], got nan$"),          # was NaN radiance
     ((0.0, 0.5, 0.5, math.nan), {}, r"^azimuth must be a finite number \(radians\), got nan$"),
-    ((0.0, 0.5, 0.5, math.inf), {}, r"^azimuth must be a finite number \(radians\), got inf$"),     # 'math domain error'
+    # 'math domain error'
+    ((0.0, 0.5, 0.5, math.inf), {}, r"^azimuth must be a finite number \(radians\), got inf$"),
     ((0.0, math.nan, 0.5), {}, r"^cos_view must be a number in \[-1, 1\], got nan$"),         # was a silent 0
     ((0.0, 5.0, 0.5), {}, r"^cos_view must be a number in \[-1, 1\], got 5$"),                # was taken as 1
     ((-10.0, 0.5, 0.5), {}, r"^altitude must be a number in \[0, 100000\] m, got -10$"),
     ((0.0, 0.5, 0.5), dict(photons=2.7), r"^photons must be an integer in \[2, 10000000000\], got 2.7 \(float\)$"),
     ((0.0, 0.5, 0.5), dict(photons="10"), r"^photons must be an integer in \[2, 10000000000\], got '10' \(str\)$"),
-    ((0.0, 0.5, 0.5), dict(max_orders=1.9), r"^max_orders must be None or an integer in \[1, 1000000\], got 1.9 \(float\)$"),
-    ((0.0, 0.5, 0.5), dict(max_orders=True), r"^max_orders must be None or an integer in \[1, 1000000\], got True \(bool\)$"),
+    ((0.0, 0.5, 0.5), dict(max_orders=1.9),
+     r"^max_orders must be None or an integer in \[1, 1000000\], got 1.9 \(float\)$"),
+    ((0.0, 0.5, 0.5), dict(max_orders=True),
+     r"^max_orders must be None or an integer in \[1, 1000000\], got True \(bool\)$"),
     ((0.0, 0.5, 0.5), dict(seed=-1), r"^seed must be None or an integer in \[0, 18446744073709551615\], got -1$"),
-    ((0.0, 0.5, 0.5), dict(seed=1.5), r"^seed must be None or an integer in \[0, 18446744073709551615\], got 1.5 \(float\)$"),
+    ((0.0, 0.5, 0.5), dict(seed=1.5),
+     r"^seed must be None or an integer in \[0, 18446744073709551615\], got 1.5 \(float\)$"),
     ((0.0, 0.5, 0.5), dict(chunk=0), r"^chunk must be an integer in \[1, 2147483647\], got 0$"),
 ])
 def test_simulate_refuses_bad_arguments_by_name(arguments, options, message):

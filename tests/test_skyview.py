@@ -337,8 +337,8 @@ def test_an_animations_batched_maps_give_each_frame_its_own(cl_context, monkeypa
 
 def test_spectral_renderer_reads_one_map_per_batch(cl_context):
     """SpectralRenderer.render_skyview: each batch's SkyRenderer.render_skyview with the same settings,
-    assembled (12 wavelengths, the least an animation takes: four batches of three); a spectral animation's frames (frames_rendered) are
-    those, and a map computed elsewhere is refused (sky_map)."""
+    assembled (12 wavelengths, the least an animation takes: four batches of three); a spectral
+    animation's frames (frames_rendered) are those, and a map computed elsewhere is refused (sky_map)."""
     from clsky.spectrum import SpectralRenderer, SpectralTable
 
     table = SpectralTable.build("physical", 12, SMALL.replace(size=(8, 32, 8)), ctx=cl_context, keep_orders=False)
