@@ -572,7 +572,8 @@ def memory_estimate(config: AnimationConfig, positions, host_workers=None, devic
         settings = level.table.replace(mode=config.mode, size=level.table.size[:2] + (nodes,),
                                        sun_cos_range=cos_range, azimuth_harmonics=harmonics)
     batches = None if config.wavelengths is None else len(spectrum.wavelength_batches(config.wavelengths))
-    return estimate_animation_memory(_with_lookup(_with_sampling(settings, config), config), config.image_shape(),
+    return estimate_animation_memory(_with_lookup(_with_sampling(settings, config), config, config.atmosphere),
+                                     config.image_shape(),
                                      config.method,
                                      ray_settings(config), hdr_output=config.hdr is not None, batches=batches,
                                      overlapped=OVERLAP_FRAMES,
@@ -598,23 +599,27 @@ def _base(config: AnimationConfig, plan: Plan | None):
     and a full table of ``config.table_size`` (default: the quality level's size) at the level's
     other settings; with ``config.sampling`` if given."""
     if plan is not None:
-        return plan.atmosphere, _with_lookup(_with_sampling(plan.table, config), config)
+        return plan.atmosphere, _with_lookup(_with_sampling(plan.table, config), config, plan.atmosphere)
     size = tuple(config.table_size) if config.table_size is not None else quality(config).table.size
-    return config.atmosphere, _with_lookup(_with_sampling(quality(config).table.replace(size=size, mode=config.mode),
-                                                          config), config)
+    settings = _with_sampling(quality(config).table.replace(size=size, mode=config.mode), config)
+    return config.atmosphere, _with_lookup(settings, config, config.atmosphere)
 
 
-def _with_lookup(settings: clsky.TableSettings, config: AnimationConfig) -> clsky.TableSettings:
+def _with_lookup(settings: clsky.TableSettings, config: AnimationConfig, atmosphere) -> clsky.TableSettings:
     """``settings`` as the 4D table for the 4D methods (:data:`LUT4D_HARMONICS` azimuth harmonics when
     the level has none; at most :data:`LUT4D_MAX_SIZE` altitude and view nodes, an even number of the
     latter: a plan's grid reduced to that, a ``table_size`` already within it, AnimationConfig refusing
-    any other), else unchanged. The table's higher orders are computed on that grid too."""
+    any other), else unchanged. The table's higher orders are computed on that grid too. Over a reflecting
+    ground (``atmosphere``'s) the 4D table keeps at least 2 orders, whose channels carry the ground's light
+    (:func:`clsky.table4d.check_atmosphere`): a plan that dropped the higher orders, as it does for an
+    observer far above the air (--altitude 1e5), ended in an error about 'orders' after its work."""
     if not config.lookup4d:
         return settings
     width = min(settings.size[0], LUT4D_MAX_SIZE[0])
     height = max(4, min(settings.size[1], LUT4D_MAX_SIZE[1]))
     height += height % 2
-    return settings.replace(parameterization="4d", size=(width, height, settings.size[2]),
+    orders = 2 if settings.orders == 1 and atmosphere.has_ground else settings.orders
+    return settings.replace(parameterization="4d", size=(width, height, settings.size[2]), orders=orders,
                             azimuth_harmonics=settings.azimuth_harmonics or LUT4D_HARMONICS)
 
 
