@@ -22,6 +22,7 @@ import logging
 import os
 import pathlib
 import re
+import stat
 import tempfile
 import threading
 import warnings
@@ -125,11 +126,15 @@ def cgroup_cpu_limit() -> int | None:
 #
 # PoCL keeps compiled kernels in $POCL_CACHE_DIR, else $XDG_CACHE_HOME/pocl, else ~/.cache/pocl. When
 # that directory cannot be created or written (a read-only HOME, as in some containers and CI sandboxes),
-# PoCL lists its platform with no device at all, which looked like a missing driver. Before the first
-# device query, clsky checks the directory; if it is the default one (POCL_CACHE_DIR unset), clsky sets
-# POCL_CACHE_DIR to a private directory under the system's temporary directory and says so once on
-# stderr: the run works, only the compiled kernels are kept there instead. A POCL_CACHE_DIR the user set
-# is never overridden: the no-device error then names it.
+# PoCL lists its platform with no device at all, which looked like a missing driver (or, a file named by
+# POCL_CACHE_DIR, a device that fails every build). Before the first device query, clsky checks the
+# directory; if it is the default one (POCL_CACHE_DIR unset), clsky sets POCL_CACHE_DIR to a private
+# directory under the system's temporary directory, and XDG_CACHE_HOME too where it came from HOME
+# (PyOpenCL's own cache, pytools', lives under it: it failed there next), and says so once on stderr: the
+# run works, only the compiled kernels are kept there instead. The private directory is clsky's only if it
+# is a directory (not a link) of this user's, which no one else may write: a name in /tmp that another
+# user made first would have received the kernels and supplied binaries to load. A POCL_CACHE_DIR the
+# user set is never overridden: the error then names it, before any work (make_context).
 
 _logger = logging.getLogger("clsky")
 
@@ -154,6 +159,21 @@ def _writable(directory: pathlib.Path) -> bool:
         return False
 
 
+def _private_directory(directory: pathlib.Path) -> bool:
+    """True if ``directory`` is (or is now made) a directory of this user's that no one else can write,
+    not a symbolic link, and a file can be written in it (the fallback cache, in a shared directory)."""
+    try:
+        directory.mkdir(mode=0o700, exist_ok=True)
+        status = os.lstat(directory)
+    except OSError:
+        return False
+    if not stat.S_ISDIR(status.st_mode) or status.st_mode & 0o022:
+        return False
+    if hasattr(os, "getuid") and status.st_uid != os.getuid():
+        return False
+    return _writable(directory)
+
+
 @functools.lru_cache(maxsize=1)
 def pocl_cache_problem():
     """None when PoCL's kernel cache is usable (after falling back to a temporary one if needed, see
@@ -162,11 +182,13 @@ def pocl_cache_problem():
     if _writable(directory):
         return None
     if source == "POCL_CACHE_DIR":
-        return (f"PoCL's kernel cache POCL_CACHE_DIR={directory} is not writable (PoCL then finds no device); "
-                f"set POCL_CACHE_DIR to a writable directory")
+        return (f"PoCL's kernel cache POCL_CACHE_DIR={directory} is not a writable directory (PoCL then finds no "
+                f"device, or fails every build); set POCL_CACHE_DIR to a writable directory")
     fallback = pathlib.Path(tempfile.gettempdir()) / f"clsky-pocl-cache-{getattr(os, 'getuid', lambda: 'user')()}"
-    if _writable(fallback):
+    if _private_directory(fallback):
         os.environ["POCL_CACHE_DIR"] = str(fallback)
+        if source == "HOME":             # PyOpenCL's cache (pytools') is under XDG_CACHE_HOME, else ~/.cache
+            os.environ["XDG_CACHE_HOME"] = str(fallback / "xdg")
         _logger.warning(f"clsky: note: PoCL's kernel cache {directory} is not writable (from {source}); "
                         f"using {fallback} (set POCL_CACHE_DIR or XDG_CACHE_HOME to choose)")
         return None
@@ -247,18 +269,22 @@ def make_context(dtype=np.float64):
     built once are found in the in-process cache); NoDeviceError if that device lacks fp64 when
     float64 is asked."""
     selector = os.environ.get("PYOPENCL_CTX")
-    pocl_cache_problem()
+    problem = pocl_cache_problem()
     if selector not in _shared_contexts:
         if selector:
             try:
                 context = cl.create_some_context(interactive=False)
             except (cl.Error, RuntimeError, ValueError) as error:
                 raise NoDeviceError(f"PYOPENCL_CTX={selector!r} selects no device: {error}; "
-                                    f"run `clsky devices` to list them") from error
+                                    + (f"{problem}" if problem else "run `clsky devices` to list them")) from error
         else:
             context = cl.Context([default_device()])
         _shared_contexts[selector] = context
     context = _shared_contexts[selector]
+    if problem and context.devices[0].platform.name.startswith("Portable Computing Language"):
+        # PoCL may list its device with a cache it cannot write (POCL_CACHE_DIR a file): every build failed,
+        # in a PyOpenCL traceback after the checks
+        raise NoDeviceError(problem)
     check_dtype(context.devices[0], dtype)
     return context
 

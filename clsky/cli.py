@@ -481,7 +481,7 @@ def build_parser(extensions=()):
 
 
 def run_devices(args):
-    from ._cl import list_devices, no_device_hint
+    from ._cl import list_devices, no_device_hint, pocl_cache_problem
 
     devices = list_devices()
     if not devices:
@@ -496,6 +496,11 @@ def run_devices(args):
     if not any(d["chosen"] for d in devices):       # only where PYOPENCL_CTX names none of them
         raise UsageError(f"PYOPENCL_CTX={os.environ.get('PYOPENCL_CTX', '')!r} selects none of the devices above: "
                          f"unset it (clsky then picks one), or give PLATFORM:DEVICE by their order (0:0 the first)")
+    problem = pocl_cache_problem()
+    if problem and any(d["chosen"] and d["platform"].startswith("Portable Computing Language") for d in devices):
+        # PoCL lists its device with a cache it cannot write (POCL_CACHE_DIR a file), and fails every build
+        print(f"clsky: error: {problem}", file=sys.stderr)
+        return EXIT_FAILURE
     return 0
 
 

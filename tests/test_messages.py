@@ -184,10 +184,63 @@ def test_unwritable_pocl_cache_dir_is_named(tmp_path):
     env = {"PATH": "/usr/bin:/bin", "HOME": str(tmp_path), "POCL_CACHE_DIR": UNWRITABLE}
     result = clsky("devices", cwd=tmp_path, env=env)
     assert result.returncode == 1
-    assert "POCL_CACHE_DIR" in result.stdout and "not writable" in result.stdout, result.stdout
+    assert "POCL_CACHE_DIR" in result.stdout and "not a writable directory" in result.stdout, result.stdout
     result = clsky("table", "--size", "4", "8", "4", "--progress", "none", cwd=tmp_path, env=env)
     assert result.returncode == 1
     assert "POCL_CACHE_DIR" in result.stderr and "install" not in result.stderr, result.stderr
+
+
+def test_a_pocl_cache_dir_that_is_a_file_is_one_line_before_any_work(tmp_path):
+    """POCL_CACHE_DIR naming a regular file: PoCL lists its device but fails every build, which ended in a
+    77-line PyOpenCL traceback after the checks; now one line naming it, before the table."""
+    (tmp_path / "afile").write_text("hi")
+    env = {"PATH": "/usr/bin:/bin", "HOME": str(tmp_path), "POCL_CACHE_DIR": str(tmp_path / "afile")}
+    result = clsky("table", "--size", "4", "8", "4", "--progress", "none", "-o", "t.npz", cwd=tmp_path, env=env)
+    assert result.returncode == 1 and len(result.stderr.splitlines()) == 1, result.stderr
+    assert result.stderr.startswith(f"clsky: error: PoCL's kernel cache POCL_CACHE_DIR={tmp_path / 'afile'} is not "
+                                    f"a writable directory")
+    assert not (tmp_path / "t.npz").exists()
+    devices = clsky("devices", cwd=tmp_path, env=env)          # it listed the device as usable, exit 0
+    assert devices.returncode == 1 and "POCL_CACHE_DIR" in devices.stderr, devices.stderr
+
+
+def test_an_unusable_home_falls_back_for_pyopencls_cache_too(tmp_path):
+    """HOME unusable and XDG_CACHE_HOME unset: clsky's fallback covered PoCL's cache but not PyOpenCL's
+    (pytools', under ~/.cache): a render ended in '[Errno 2] No such file or directory' and two stray
+    tracebacks. Now the run works, with the note."""
+    env = {"PATH": "/usr/bin:/bin", "HOME": UNWRITABLE, "TMPDIR": str(tmp_path),
+           "CLSKY_CACHE_DIR": str(tmp_path / "clsky-cache")}
+    result = clsky("render", "--size", "16", "--quality", "draft", "--method", "lut", "-o", "x.png", cwd=tmp_path,
+                   env=env)
+    assert result.returncode == 0, result.stderr
+    assert (tmp_path / "x.png").exists() and "Traceback" not in result.stderr
+    assert result.stderr.startswith("clsky: note: PoCL's kernel cache"), result.stderr
+
+
+@pytest.mark.parametrize("planted", ["symlink", "world-writable"])
+def test_a_fallback_cache_someone_else_made_is_not_used(monkeypatch, tmp_path, planted):
+    """The fallback's name in the shared temporary directory is predictable: a directory made there first
+    by someone else (here a link to another directory, or a directory anyone may write) would have received
+    the compiled kernels and supplied binaries to load. It is refused: the problem is named instead."""
+    import os
+    import tempfile
+
+    from clsky import _cl
+
+    shared = tmp_path / "shared"
+    shared.mkdir()
+    fallback = shared / f"clsky-pocl-cache-{os.getuid()}"
+    if planted == "symlink":
+        (tmp_path / "elsewhere").mkdir(mode=0o700)
+        fallback.symlink_to(tmp_path / "elsewhere")
+    else:
+        fallback.mkdir()
+        fallback.chmod(0o777)
+    monkeypatch.delenv("POCL_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", UNWRITABLE)
+    monkeypatch.setattr(tempfile, "tempdir", str(shared))
+    problem = _cl.pocl_cache_problem.__wrapped__()
+    assert problem is not None and str(fallback) in problem and "POCL_CACHE_DIR" not in _cl.os.environ
 
 
 def test_pocl_cache_problem_in_process(monkeypatch, tmp_path):
