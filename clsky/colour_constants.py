@@ -34,6 +34,7 @@ import functools
 import hashlib
 import importlib.metadata
 import pathlib
+import zipfile
 
 import numpy as np
 
@@ -114,8 +115,26 @@ def _valid(arrays: dict, version: str) -> bool:
     if any(value.dtype != np.float64 or not np.isfinite(value).all() for value in reals):
         return False
     return (int(arrays["format"]) == _FORMAT and str(arrays["version"]) == version
-            and bool(np.all(np.diff(arrays["cmfs_wavelengths"]) > 0))
-            and np.array_equal(arrays["digest"], _digest(arrays)))
+            and np.array_equal(arrays["digest"], _digest(arrays)) and _plausible(arrays))
+
+
+#: What colour-science's CIE 1931 2-degree functions are: 1 nm from 360 to 830 nm, each function's sum
+#: (its integral at 1 nm) 106.86, 106.86 and 106.89 (colour-science 0.4.x). A file holding others is no
+#: copy of them, whatever its digest (which the file itself holds: it finds damage, not a wrong table).
+_CMFS_WAVELENGTHS = np.arange(360.0, 831.0)
+_CMFS_SUMS = (106.865, 106.857, 106.892)
+
+
+def _plausible(arrays: dict) -> bool:
+    """Whether the constants are colour-science's kind of values: its CMFs' wavelengths, non-negative
+    functions with their sums within 0.1 %, and invertible 3 x 3 matrices (Oklab's, the adaptations'). A
+    self-consistent file of negated CMFs or zero matrices was used, and every render failed after its
+    table with a message about sun_white or a singular matrix."""
+    values = arrays["cmfs_values"]
+    matrices = [arrays["oklab_xyz_to_lms"], arrays["oklab_lms_to_lab"], *arrays["adaptation_matrices"]]
+    return (np.array_equal(arrays["cmfs_wavelengths"], _CMFS_WAVELENGTHS) and bool(np.all(values >= 0.0))
+            and np.allclose(values.sum(axis=0), _CMFS_SUMS, rtol=1e-3, atol=0.0)
+            and all(abs(np.linalg.det(matrix)) > 1e-3 for matrix in matrices))
 
 
 #: The largest constants file read [bytes] (it takes 19 kB).
@@ -127,6 +146,9 @@ def _read(path: pathlib.Path, version: str):
     try:
         if not path.is_file() or path.stat().st_size > _MAX_BYTES:   # a FIFO there blocked np.load for ever
             return None
+        with zipfile.ZipFile(path) as archive:       # what the members inflate to, before any is read:
+            if sum(info.file_size for info in archive.infolist()) > _MAX_BYTES:   # 400 kB of zeros took 382 MiB
+                return None
         with np.load(path, allow_pickle=False) as data:
             arrays = {name: data[name] for name in data.files}
         return arrays if _valid(arrays, version) else None

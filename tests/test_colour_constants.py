@@ -106,8 +106,43 @@ def damage_not_a_zip(path):
     path.write_text("not an npz file")
 
 
+def _forged(path, **changes):
+    """The file with ``changes`` made and its digest recomputed: consistent, and wrong."""
+    with np.load(path) as data:
+        arrays = {name: data[name] for name in data.files}
+    arrays.update(changes)
+    arrays["digest"] = colour_constants._digest(arrays)
+    np.savez(path, **arrays)
+
+
+def forge_negated_cmfs(path):
+    """Every later render failed after its table: 'sun_white must be three finite values >= 0'."""
+    with np.load(path) as data:
+        _forged(path, cmfs_values=-data["cmfs_values"])
+
+
+def forge_singular_oklab(path):
+    """'Singular matrix' after the table."""
+    _forged(path, oklab_xyz_to_lms=np.zeros((3, 3)))
+
+
+def forge_two_wavelengths(path):
+    """Two CMF rows (360 and 361 nm): accepted, and rendered."""
+    with np.load(path) as data:
+        _forged(path, cmfs_wavelengths=data["cmfs_wavelengths"][:2].copy(), cmfs_values=data["cmfs_values"][:2].copy())
+
+
+def inflate_a_member(path):
+    """400 kB of deflated zeros declaring a 400 MB member: rejected, but only after 382 MiB were allocated."""
+    with np.load(path) as data:
+        arrays = {name: data[name] for name in data.files}
+    arrays["cmfs_wavelengths"] = np.zeros(50_000_000)
+    np.savez_compressed(path, **arrays)
+
+
 @pytest.mark.parametrize("damage", [damage_truncated, damage_one_value, damage_version, damage_missing_array,
-                                    damage_not_a_zip])
+                                    damage_not_a_zip, forge_negated_cmfs, forge_singular_oklab,
+                                    forge_two_wavelengths, inflate_a_member])
 def test_a_damaged_file_is_ignored_and_rewritten(cache_home, damage):
     colour_constants.cie_1931_cmfs()
     path = colour_constants.cache_path()
@@ -244,3 +279,21 @@ def test_a_fifo_in_the_cache_is_passed_by(tmp_path):
     os.mkfifo(fifo)
     assert colour_constants._read(fifo, colour_constants.colour_science_version()) is None
     assert planner._kept_share(fifo, "any key") is None
+
+
+def test_an_inflating_member_is_refused_before_it_is_read(cache_home):
+    """The file's 1 MiB cap bounds what its members inflate to, read from the archive's directory first:
+    a 400 kB file of deflated zeros made one read allocate 382 MiB before it was rejected (tracemalloc
+    sees NumPy's allocations; a valid read takes well under 1 MB)."""
+    import tracemalloc
+
+    colour_constants.cie_1931_cmfs()
+    path = colour_constants.cache_path()
+    inflate_a_member(path)
+    tracemalloc.start()
+    try:
+        assert colour_constants._read(path, colour_constants.colour_science_version()) is None
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 10 * 2**20
