@@ -385,7 +385,8 @@ def pilot_share(atmosphere: AtmosphereParameters, table: TableSettings, scene: S
     NumPy's version, the device (name, vendor, versions of device, driver and platform), the kernels' form
     (``clsky._cl.VECTOR_WIDTH``, ``CUBE_ROOT``), the atmosphere, the pilot's table and ray settings, the
     path's sun elevations, the cameras' view elevations and the lowest altitude. A file is read only
-    when its key is the whole key and its share a finite number in [-1, 1] (JSON keeps a float's every
+    when its key is the whole key and its share a number in [0, 1] (a kept -1 dropped the higher orders
+    as adding "at most -100 %"; JSON keeps a float's every
     bit); anything else is computed again and rewritten. Without a cache directory, or where it cannot be
     written, the pilot runs every time. A process-wide setting added later that changes the pilot's values
     must join the key."""
@@ -419,7 +420,7 @@ def _kept_share(path, key):
     if not isinstance(kept, dict) or kept.get("key") != key:
         return None
     share = kept.get("share")
-    if type(share) is not float or not math.isfinite(share) or not -1.0 <= share <= 1.0:
+    if type(share) is not float or not math.isfinite(share) or not 0.0 <= share <= 1.0:     # a share's range
         return None
     return share
 

@@ -440,11 +440,11 @@ def test_pilot_share_key_holds_every_input(cl_context, tmp_path, monkeypatch):
 
 
 @pytest.mark.parametrize("content", [b"", b"\xff\xfe not UTF-8", b"[1, 2]", b'{"share": 0.25}',
-                                     "wrong key", "share NaN", "share 2.0", "share as text"])
+                                     "wrong key", "share NaN", "share 2.0", "share -1.0", "share as text"])
 def test_a_damaged_or_foreign_pilot_file_is_computed_again_and_rewritten(cl_context, tmp_path, monkeypatch,
                                                                          content):
-    """A kept file that is not the whole key with a finite share in [-1, 1] is not read: the pilot runs,
-    and its share replaces the file."""
+    """A kept file that is not the whole key with a share in [0, 1] is not read: the pilot runs, and its
+    share replaces the file (a share of -1.0 dropped the higher orders, "at most -100 %")."""
     import json
 
     monkeypatch.setenv("CLSKY_CACHE_DIR", str(tmp_path))
@@ -457,7 +457,8 @@ def test_a_damaged_or_foreign_pilot_file_is_computed_again_and_rewritten(cl_cont
         if content == "wrong key":
             kept["key"]["altitude_m"] = 1.0
         else:
-            kept["share"] = {"share NaN": float("nan"), "share 2.0": 2.0, "share as text": "0.25"}[content]
+            kept["share"] = {"share NaN": float("nan"), "share 2.0": 2.0, "share -1.0": -1.0,
+                             "share as text": "0.25"}[content]
         content = json.dumps(kept).encode()
     path.write_bytes(content)
     runs[:] = []
