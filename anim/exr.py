@@ -268,15 +268,24 @@ def save_exr(file, pixels, attributes=None):
     OpenEXR.File(header, {"RGB": pixels}).write(str(file))
 
 
+#: The most pixels :func:`read_exr` reads: its header's data window is checked first (a 3.5 kB file declaring
+#: 100000 x 100000 pixels had the bindings allocate 56 GiB); clsky's largest frame, an 8192-row panorama, has
+#: 2**27.
+MAX_READ_PIXELS = 2**28
+
+
 def read_exr(path):
-    """(pixels (H, W, 3) float16 or float32 as stored, header dict) of an RGB EXR file.
+    """(pixels (H, W, 3) float16 or float32 as stored, header dict) of an RGB (or RGBA: its R, G, B) EXR
+    file whose pixels are radiance, as clsky's frames are: finite and >= 0.
 
     Raises
     ------
     FileNotFoundError, IsADirectoryError
         No such file, or a directory.
     ValueError
-        Not a readable EXR file (the bindings' RuntimeError, named), or one without R, G, B channels.
+        Not a readable EXR file (the bindings' RuntimeError, named), a data window of more than
+        :data:`MAX_READ_PIXELS`, no R, G, B channels, or pixels that are not half or float numbers, finite
+        and >= 0 (NaN, infinities, negative or integer pixels were returned as they were).
     """
     OpenEXR = require_openexr()
     path = as_path(path)
@@ -284,15 +293,37 @@ def read_exr(path):
         raise IsADirectoryError(f"{path}: a directory, not an EXR file")
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file" if not path.exists() else f"{path}: not a regular file")
+    def read(header_only):
+        """(header, channels' names, R, G, B pixels or None) by the bindings, their errors (RuntimeError and
+        others for a bad file) named as the file's."""
+        try:
+            with OpenEXR.File(str(path), header_only=header_only) as exr:
+                header = dict(exr.header())
+                if header_only:
+                    return header, [], None
+                channels = exr.channels()         # emptied when the file closes: its names taken now
+                rgb = next((channels[name].pixels for name in ("RGB", "RGBA") if name in channels), None)
+                return header, sorted(channels), None if rgb is None else np.array(rgb)[..., :3]
+        except MemoryError:
+            raise
+        except Exception as error:  # noqa: BLE001
+            raise ValueError(f"{path}: not a readable EXR file "
+                             f"({str(error).splitlines()[0] if str(error) else error})") from None
+
+    window = read(header_only=True)[0].get("dataWindow")
     try:
-        with OpenEXR.File(str(path)) as exr:
-            channels, header = exr.channels(), dict(exr.header())
-            pixels = channels["RGB"].pixels if "RGB" in channels else None
-    except MemoryError:
-        raise
-    except Exception as error:  # noqa: BLE001  (the bindings raise RuntimeError and others for a bad file)
-        raise ValueError(f"{path}: not a readable EXR file ({str(error).splitlines()[0] if str(error) else error})") \
-            from None
+        (x0, y0), (x1, y1) = window
+        pixel_count = (int(x1) - int(x0) + 1) * (int(y1) - int(y0) + 1)
+    except (TypeError, ValueError):
+        raise ValueError(f"{path}: not a readable EXR file (no data window)") from None
+    if not 0 < pixel_count <= MAX_READ_PIXELS:
+        raise ValueError(f"{path}: its data window holds {pixel_count} pixels, the reader takes 1 to "
+                         f"{MAX_READ_PIXELS}")
+    header, names, pixels = read(header_only=False)
     if pixels is None:
-        raise ValueError(f"{path}: no R, G, B channels (has {sorted(channels)})")
-    return np.array(pixels), header
+        raise ValueError(f"{path}: no R, G, B channels (has {names})")
+    if pixels.dtype not in (np.float16, np.float32):
+        raise ValueError(f"{path}: its pixels are {pixels.dtype}, not half or float radiance")
+    if pixels.size and not (pixels.min() >= 0 and pixels.max() <= np.finfo(pixels.dtype).max):   # NaN fails both
+        raise ValueError(f"{path}: its pixels hold NaN, infinite or negative values: no radiance")
+    return pixels, header

@@ -33,6 +33,7 @@ Examples
 
 from __future__ import annotations
 
+import os
 import pathlib
 import re
 
@@ -111,6 +112,8 @@ def save_rgbe(file, rgbe, attributes=None):
             raise ValueError(f"attribute name {name!r} is the file's own header line")
         lines.append(f"{name}= {_header_value(value)}")
     head = ("\n".join(lines) + f"\n\n-Y {height} +X {width}\n").encode("ascii", "replace")
+    if len(head) > _MAX_HEADER:          # clsky's readers read the header from the first 64 KiB
+        raise ValueError(f"attributes must make a header of at most {_MAX_HEADER} bytes, got {len(head)}")
     if width in _RLE_WIDTHS:
         body = b"".join(_scanline_bytes(row) for row in rgbe)
     else:
@@ -158,27 +161,57 @@ _MAX_HEADER = 1 << 16
 
 def _parse_header(data, path):
     """(height, width, header {NAME: text}, offset of the pixels) from the bytes ``data`` that begin a
-    Radiance picture; ValueError naming ``path`` without the signature or a ``-Y H +X W`` resolution line."""
+    Radiance picture; ValueError naming ``path`` without the signature or a ``-Y H +X W`` resolution line
+    of at least one pixel each way, or with a FORMAT other than RGBE's or an EXPOSURE other than 1: an XYZE
+    picture's X, Y, Z were read as R, G, B, and a scale factor ignored."""
     if not data.startswith(b"#?"):
         raise ValueError(f"{path}: not a Radiance picture (no '#?' signature)")
     end = data.find(b"\n\n")
     newline = data.find(b"\n", end + 2) if end >= 0 else -1
     match = None if newline < 0 else re.fullmatch(rb"-Y (\d{1,9}) \+X (\d{1,9})", data[end + 2:newline])
     if match is None:
-        raise ValueError(f"{path}: no '-Y H +X W' resolution line")
+        more = f" in its first {_MAX_HEADER} bytes" if end < 0 and len(data) >= _MAX_HEADER else ""
+        raise ValueError(f"{path}: no '-Y H +X W' resolution line{more}")
+    height, width = int(match.group(1)), int(match.group(2))
+    if height < 1 or width < 1:
+        raise ValueError(f"{path}: its resolution {height} x {width} holds no pixel")
     head = data[:end].decode("ascii", "replace").split("\n")[1:]
     header = dict(line.split("=", 1) for line in head if "=" in line and not line.startswith("#"))
     header = {name: value.strip() for name, value in header.items()}
-    return int(match.group(1)), int(match.group(2)), header, newline + 1
+    if header.get("FORMAT", "32-bit_rle_rgbe") != "32-bit_rle_rgbe":
+        raise ValueError(f"{path}: its FORMAT is {header['FORMAT']!r:.40}: only 32-bit_rle_rgbe (R, G, B) is read")
+    if "EXPOSURE" in header and _number(header["EXPOSURE"]) != 1.0:
+        raise ValueError(f"{path}: its EXPOSURE is {header['EXPOSURE']!r:.40}: only pixels at their own scale "
+                         f"(EXPOSURE 1 or none) are read")
+    return height, width, header, newline + 1
+
+
+def _number(text):
+    """``text`` as a float, or None."""
+    try:
+        return float(text)
+    except ValueError:
+        return None
 
 
 def read_rgbe_header(path):
     """(height, width, header {NAME: text}) of the Radiance picture at ``path``, from its first 64 KiB
     alone (``clsky info``); ValueError as :func:`read_rgbe`."""
+    height, width, header, _, _ = _open_header(path)
+    return height, width, header
+
+
+def _open_header(path):
+    """(height, width, header, offset of the pixels, file size) of a regular file's Radiance header, read
+    from its first 64 KiB: a FIFO blocked, /dev/zero exhausted the memory and a 1 GiB file took 1 GiB
+    before its signature was checked (FileNotFoundError for a file that is not a regular one)."""
+    path = as_path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: not a regular file")
     with open(path, "rb") as stream:
         data = stream.read(_MAX_HEADER)
-    height, width, header, _ = _parse_header(data, path)
-    return height, width, header
+        size = os.fstat(stream.fileno()).st_size
+    return (*_parse_header(data, path), size)
 
 
 def read_rgbe(path):
@@ -187,28 +220,34 @@ def read_rgbe(path):
     run-length format is not read. ValueError naming the file for one without the signature or resolution
     line, whose resolution its bytes cannot hold, or whose scan lines are damaged (cut short, runs past
     the line's end)."""
-    data = as_path(path).read_bytes()
-    height, width, header, offset = _parse_header(data, path)
-    body = memoryview(data)[offset:]
-    # the fewest bytes a scan line takes: 4 of header and 4 runs of 127 pixels in 2 bytes, or 4 a pixel flat
+    height, width, header, offset, size = _open_header(path)
+    # the fewest bytes a scan line takes: 4 of header and 4 runs of 127 pixels in 2 bytes, or 4 a pixel flat;
+    # checked before the pixels are read (or their array made)
     least = height * (4 + 8 * -(-width // 127) if width in _RLE_WIDTHS else 4 * width)
-    if len(body) < least:
-        raise ValueError(f"{path}: its {height} x {width} pixels need at least {least} bytes, it holds {len(body)}")
+    if size - offset < least:
+        raise ValueError(f"{path}: its {height} x {width} pixels need at least {least} bytes, it holds "
+                         f"{size - offset}")
+    body = memoryview(as_path(path).read_bytes())[offset:]
     rgbe = np.empty((height, width, 4), np.uint8)
     try:
-        _decode_scanlines(body, rgbe)
+        used = _decode_scanlines(body, rgbe)
     except (IndexError, ValueError) as error:
         raise ValueError(f"{path}: damaged pixel data ({error})") from None
+    if used != len(body):
+        raise ValueError(f"{path}: {len(body) - used} bytes after its {height} x {width} pixels (damaged or not "
+                         f"this resolution's)")
     return decode_rgbe(rgbe), header
 
 
 def _decode_scanlines(body, rgbe):
-    """Fill ``rgbe`` (H, W, 4) from the scan lines in ``body``; IndexError or ValueError where they are
-    damaged."""
+    """Fill ``rgbe`` (H, W, 4) from the scan lines in ``body``; returns the bytes they took. IndexError or
+    ValueError where they are damaged (a run-length line's own width other than the picture's too)."""
     height, width = rgbe.shape[:2]
     at = 0
     for row in range(height):
         if width in _RLE_WIDTHS and bytes(body[at:at + 2]) == b"\x02\x02" and body[at + 2] < 128:
+            if (body[at + 2] << 8 | body[at + 3]) != width:
+                raise ValueError(f"scan line {row}: its width {body[at + 2] << 8 | body[at + 3]}, not {width}")
             at += 4
             for component in range(4):
                 column = 0
@@ -228,3 +267,4 @@ def _decode_scanlines(body, rgbe):
         else:
             rgbe[row] = np.frombuffer(body[at:at + 4 * width], np.uint8).reshape(width, 4)
             at += 4 * width
+    return at

@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 import math
+import os
 import pathlib
 import subprocess
 import sys
@@ -552,19 +553,66 @@ def test_damaged_or_missing_hdr_files_are_refused_by_name(tmp_path):
     write_rgbe(tmp_path / "good.hdr", np.ones((2, 16, 3)))
     data = (tmp_path / "good.hdr").read_bytes()
     body = data.index(b"+X 16\n") + 6
+    line = data.index(b"\x02\x02\x00\x10")
     damaged = {"cut.hdr": data[:body + 9],
                "run.hdr": data[:body + 4] + bytes([128 + 100]) + data[body + 5:],    # a run of 100 in 16
-               "huge.hdr": b"#?RADIANCE\n\n-Y 999999999 +X 999999999\n"}
+               "huge.hdr": b"#?RADIANCE\n\n-Y 999999999 +X 999999999\n",
+               # read before: XYZ as R, G, B; a scale ignored; an empty picture; a row dropped; bytes after the
+               # pixels; a run-length line of another width than the picture's
+               "xyze.hdr": data.replace(b"FORMAT=32-bit_rle_rgbe", b"FORMAT=32-bit_rle_xyze"),
+               "exposure.hdr": data.replace(b"SOFTWARE", b"EXPOSURE=2.0\nSOFTWARE"),
+               "empty.hdr": data.replace(b"-Y 2 +X 16", b"-Y 0 +X 16"),
+               "short.hdr": data.replace(b"-Y 2 +X 16", b"-Y 1 +X 16"),
+               "tail.hdr": data + b"\0" * 1000,
+               "width.hdr": data[:line] + b"\x02\x02\x00\x11" + data[line + 4:]}
     for name, content in damaged.items():
         (tmp_path / name).write_bytes(content)
         with pytest.raises(ValueError, match=rf"^{tmp_path / name}: "):
             read_rgbe(tmp_path / name)
+    # a FIFO blocked the reader, and /dev/zero exhausted the memory: a regular file or nothing
+    os.mkfifo(tmp_path / "fifo.hdr")
+    for path in (tmp_path / "fifo.hdr", "/dev/zero"):
+        with pytest.raises(FileNotFoundError, match="not a regular file"):
+            read_rgbe(path)
     pytest.importorskip("OpenEXR")
     (tmp_path / "junk.exr").write_bytes(b"v/1\x01junk")
     with pytest.raises(ValueError, match=rf"^{tmp_path / 'junk.exr'}: not a readable EXR file"):
         read_exr(tmp_path / "junk.exr")
     with pytest.raises(FileNotFoundError, match="no such file"):
         read_exr(tmp_path / "missing.exr")
+
+
+def test_read_exr_takes_radiance_only(tmp_path):
+    """read_exr returned NaN, infinite, negative and integer pixels as they were, said 'has []' for any file
+    without an RGB layer (the bindings empty their channels when the file closes) and refused an RGBA file;
+    a 3.5 kB file declaring 100000 x 100000 pixels had the bindings allocate 56 GiB."""
+    OpenEXR = pytest.importorskip("OpenEXR")
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+
+    def written(name, channels):
+        OpenEXR.File(header, channels).write(str(tmp_path / name))
+        return tmp_path / name
+
+    for value, message in ((np.nan, "NaN, infinite or negative"), (np.inf, "NaN, infinite or negative"),
+                           (-5.0, "NaN, infinite or negative")):
+        rgb = np.ones((4, 8, 3), np.float32)
+        rgb[1, 1, 1] = value
+        with pytest.raises(ValueError, match=message):
+            read_exr(written("bad.exr", {"RGB": rgb}))
+    with pytest.raises(ValueError, match="its pixels are uint32, not half or float radiance"):
+        read_exr(written("uint.exr", {"RGB": np.ones((4, 8, 3), np.uint32)}))
+    with pytest.raises(ValueError, match=r"no R, G, B channels \(has \['Y'\]\)"):
+        read_exr(written("y.exr", {"Y": np.ones((4, 8), np.float32)}))
+    rgba = np.full((4, 8, 4), 0.5, np.float32)
+    pixels, _ = read_exr(written("rgba.exr", {"RGBA": rgba}))
+    assert pixels.shape == (4, 8, 3) and np.all(pixels == 0.5)
+    data = bytearray(written("small.exr", {"RGB": np.ones((4, 8, 3), np.float32)}).read_bytes())
+    for name in (b"dataWindow\0box2i\0", b"displayWindow\0box2i\0"):
+        at = data.index(name) + len(name) + 4
+        data[at:at + 16] = np.array([0, 0, 99999, 99999], "<i4").tobytes()
+    (tmp_path / "huge.exr").write_bytes(bytes(data))
+    with pytest.raises(ValueError, match=r"its data window holds 10000000000 pixels, the reader takes 1 to"):
+        read_exr(tmp_path / "huge.exr")
 
 
 def test_rgbe_refuses_an_attribute_named_as_its_own_header_lines(tmp_path):
