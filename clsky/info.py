@@ -178,11 +178,61 @@ def _metrics(path):
     return _block(f"{path}:", items)
 
 
+#: The attributes every EXR header holds (OpenEXR's "Technical Introduction", required attributes) and clsky's
+#: own, with their types.
+_EXR_TYPES = {"channels": "chlist", "compression": "compression", "dataWindow": "box2i", "displayWindow": "box2i",
+              "lineOrder": "lineOrder", "pixelAspectRatio": "float", "screenWindowCenter": "v2f",
+              "screenWindowWidth": "float"}
+_CLSKY_EXR_TYPES = {"clskyVersion": "string", "scene": "string"}
+#: The most bytes of an EXR file's header read to check its attributes' types.
+_EXR_MAX_HEADER = 16 * 2**20
+
+
+def _exr_attribute_types(path) -> dict:
+    """{name: type name} of the attributes in the header of the EXR file at ``path`` (its first part), read
+    from the file's bytes (name, type, size, value, until an empty name); TableFormatError naming the file
+    where those bytes are no such header. The bindings' header_only read stopped at an attribute of a
+    damaged type and filled in defaults: a 56 x 32 frame whose dataWindow was typed box2f was described as
+    64 x 64 pixels, 'not written by clsky'."""
+    def damaged(why):
+        return TableFormatError(f"{path}: not a readable EXR file ({why})")
+
+    with open(path, "rb") as stream:
+        data = stream.read(_EXR_MAX_HEADER)
+    if data[:4] != b"\x76\x2f\x31\x01":
+        raise damaged("no EXR magic number")
+    types, at = {}, 8
+    while True:
+        end = data.find(b"\0", at)
+        if end < 0:
+            raise damaged("its header is cut short")
+        name = data[at:end].decode("latin-1")
+        at = end + 1
+        if not name:
+            return types
+        end = data.find(b"\0", at)
+        if end < 0 or end + 5 > len(data):
+            raise damaged(f"its attribute {name!r:.40} is cut short")
+        kind = data[at:end].decode("latin-1")
+        size = int.from_bytes(data[end + 1:end + 5], "little", signed=True)
+        if size < 0:
+            raise damaged(f"its attribute {name!r:.40} has a negative size")
+        types[name] = kind
+        at = end + 5 + size
+
+
 def _exr(path):
     try:
         import OpenEXR
     except ImportError as error:
         raise ImportError("describing an EXR file needs the OpenEXR bindings: pip install 'clsky[anim]'") from error
+    types = _exr_attribute_types(path)
+    for name, kind in {**_EXR_TYPES, **_CLSKY_EXR_TYPES}.items():
+        if name in _EXR_TYPES and name not in types:
+            raise TableFormatError(f"{path}: not a readable EXR file (no {name} attribute)")
+        if name in types and types[name] != kind:
+            raise TableFormatError(f"{path}: not a readable EXR file (its {name} attribute is a {types[name]!r:.40}, "
+                                   f"not a {kind}: damaged)")
     try:                            # the header alone: damaged pixels are not info's to decode
         with OpenEXR.File(str(path), header_only=True) as exr:
             header = dict(exr.header())
@@ -190,9 +240,6 @@ def _exr(path):
     except Exception as error:  # noqa: BLE001  (the bindings raise RuntimeError and others for a bad file)
         raise TableFormatError(f"{path}: not a readable EXR file ({str(error).splitlines()[0] if str(error) else error})") \
             from None
-    for name in ("clskyVersion", "scene"):          # clsky writes both as strings
-        if name in header and not isinstance(header[name], str):
-            raise TableFormatError(f"{path}: not a readable EXR file (its {name} attribute is no string: damaged)")
     window = header.get("dataWindow")
     items = [("kind", "OpenEXR image"),
              ("size", "-" if window is None else f"{window[1][0] - window[0][0] + 1} x {window[1][1] - window[0][1] + 1}"

@@ -352,8 +352,14 @@ def test_info_reads_an_exr_header_alone_and_refuses_damaged_attribute_types(tmp_
     for attribute in ("scene", "clskyVersion"):
         at = data.find(attribute.encode() + b"\0string\0") + len(attribute) + 1
         with pytest.raises(TableFormatError, match=rf"^{re.escape(str(tmp_path))}/{attribute}.exr: not a readable "
-                                                   rf"EXR file \(its {attribute} attribute is no string: damaged\)$"):
+                                                   rf"EXR file \(its {attribute} attribute is a '\\x97tring', not a "
+                                                   rf"string: damaged\)$"):
             describe(damaged(f"{attribute}.exr", at, 0x97))
+    # a standard attribute of another type: the bindings' header read stopped there and filled in defaults
+    # ('64 x 64 pixels', 'not written by clsky', exit 0)
+    at = data.find(b"dataWindow\0box2i\0") + len("dataWindow\0box2")
+    with pytest.raises(TableFormatError, match=r"\(its dataWindow attribute is a 'box2f', not a box2i: damaged\)$"):
+        describe(damaged("window.exr", at, ord("f")))
     other = data.find(b"note\0string\0") + len("note") + 1             # "xtring": a type the bindings lack
     assert "\n  note                - (an attribute of a type the OpenEXR bindings do not read)\n" in \
         describe(damaged("other.exr", other, ord("x")))
