@@ -32,8 +32,17 @@ __all__ = ["describe"]
 
 
 def _block(title, items):
+    """The lines of a file's description: each value one line of printable text (a line break, a tab or a
+    terminal's escape in a file's value is shown escaped: a metrics JSON's or an EXR attribute's newline
+    added lines of its own to the description, and an escape sequence reached the terminal)."""
     width = max(len(name) for name, _ in items)
-    return "\n".join([title] + [f"  {name:<{width}}  {value}" for name, value in items])
+    return "\n".join([title] + [f"  {name:<{width}}  {_printable(value)}" for name, value in items])
+
+
+def _printable(value) -> str:
+    """``str(value)`` with every character that is not printable escaped as Python writes it."""
+    text = str(value)
+    return text if text.isprintable() else "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 def _scene_lines(scene):
@@ -150,9 +159,14 @@ def _first_line(error) -> str:
     return str(error).splitlines()[0] if str(error) else type(error).__name__
 
 
+def _no_constant(name):
+    """json's hook for NaN, Infinity and -Infinity, which clsky's strict JSON never writes."""
+    raise ValueError(f"{name} is no JSON number (clsky writes strict JSON)")
+
+
 def _metrics(path):
     try:
-        document = json.loads(read_user_text(path))
+        document = json.loads(read_user_text(path), parse_constant=_no_constant)
     except OSError as error:
         raise TableFormatError(f"{path}: cannot read it ({error.strerror or error})") from None
     except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as error:
@@ -169,10 +183,16 @@ def _metrics(path):
     orders = _json_member(path, table, "orders", dict) or {}
     size = _json_member(path, settings, "size", list) or []
     scene = _json_member(path, document, "scene", str)
+    if not all(isinstance(frame, dict) for frame in frames):
+        raise TableFormatError(f"{path}: not an animation's metrics JSON (its frames must be objects)")
+    version = _json_member(path, document, "clsky_version", str)
+    units = _json_member(path, table, "frame_units", str)
+    if not all(type(n) is int for n in size):
+        raise TableFormatError(f"{path}: not an animation's metrics JSON (the table's size must be integers)")
     items = [("kind", "animation metrics (JSON)"), ("frames", len(frames)),
-             ("clsky version", document.get("clsky_version", "- (older clsky)")),
+             ("clsky version", "- (older clsky)" if version is None else version),
              ("table", f"{' x '.join(map(str, size))} ({settings.get('mode')}, {_orders_text(orders.get('orders'))})"),
-             ("frame units", table.get("frame_units", "-"))]
+             ("frame units", "-" if units is None else units)]
     if scene is not None:
         items += _scene_lines(scene)
     return _block(f"{path}:", items)

@@ -409,12 +409,30 @@ def test_info_refuses_other_files(tmp_path, capsys):
     ('{"frames": 3}', "'frames' must be a list, got int"),
     ('{"frames": [], "table": "x"}', "'table' must be an object, got str"),
     ('{"frames": [], "table": {"settings": 5}}', "'settings' must be an object, got int"),
+    # accepted before, as they were (clsky writes none of them)
+    ('{"frames": [1, 1]}', "its frames must be objects"),
+    ('{"frames": [], "clsky_version": ["x"]}', "'clsky_version' must be a string, got list"),
+    ('{"frames": [], "table": {"frame_units": {"a": 1}}}', "'frame_units' must be a string, got dict"),
+    ('{"frames": [], "table": {"settings": {"size": [[1, 2], 3]}}}', "the table's size must be integers"),
 ])
 def test_info_of_a_malformed_metrics_json_is_one_line(tmp_path, capsys, document, message):
     path = tmp_path / "sky_metrics.json"
     path.write_text(document)
     line = one_line_error(*run(capsys, "info", path)[::2])
     assert line == f"clsky: error: {path}: not an animation's metrics JSON ({message})"
+
+
+def test_info_refuses_nan_and_shows_line_breaks_and_escapes_as_text(tmp_path, capsys):
+    """clsky writes strict JSON: a NaN in a metrics file is refused (it was read). A value's line break or
+    a terminal's escape sequence is shown escaped, on its own line (a newline forged lines of the
+    description, an escape sequence cleared the terminal)."""
+    path = tmp_path / "sky_metrics.json"
+    path.write_text('{"frames": [NaN]}')
+    assert "NaN is no JSON number" in one_line_error(*run(capsys, "info", path)[::2])
+    path.write_text(json.dumps({"frames": [], "clsky_version": "1.0\n  size  9999 x 9999 \x1b[2J"}))
+    status, out, _ = run(capsys, "info", path)
+    assert status == 0 and "\x1b" not in out and len(out.strip().splitlines()) == 6
+    assert "clsky version  1.0\\n  size  9999 x 9999 \\x1b[2J" in out
 
 
 def _png_with(chunks):
