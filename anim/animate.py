@@ -200,10 +200,12 @@ class AnimationConfig:
         auto-exposure by default (or an EV near -13 by day).
     hdr : {None, 'exr', 'hdr', 'npy'} or bool
         Also write each frame's HDR values beside the PNGs: the ray march's frame (with
-        ``method='compare'`` or 'compare4d', the reference the lookup is compared with) or the lookup's. 'exr': an
+        ``method='compare'`` or 'compare4d', the reference the lookup is compared with), else the frame the
+        method renders. 'exr': an
         OpenEXR image per frame with its units, the clsky version and the sun in the header (an
         equirectangular panorama is tagged as a latitude-longitude environment map:
-        :mod:`clsky.anim.exr`); 'hdr': a Radiance RGBE image with the same header lines (:mod:`clsky.anim.rgbe`,
+        :mod:`clsky.anim.exr`); 'hdr': a Radiance RGBE image with the same header lines but the scene
+        (:mod:`clsky.anim.rgbe`,
         8-bit mantissas); 'npy': a float32 NumPy array. None or False (default): none; True is 'npy'
         (the former flag).
     hdr_precision : {'float', 'half'}

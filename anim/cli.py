@@ -135,10 +135,11 @@ def register(commands):
     output.add_argument("--no-dither", action="store_true", help="do not dither the 8-bit frames")
     formats = [name for name in HDR_FORMATS if name is not None]
     output.add_argument("--hdr", nargs="?", const="npy", choices=formats, metavar="{" + ",".join(formats) + "}",
-                        help="also write HDR frames: the ray march's (with --method compare or compare4d) or the "
-                             "lookup's; exr: OpenEXR with units, version and sun in the header, a latitude-longitude "
-                             "environment map for --camera equirectangular (docs/exr.md); hdr: Radiance RGBE, the "
-                             "same header (8-bit mantissas); npy (the default of a bare --hdr): float32 NumPy arrays")
+                        help="also write HDR frames: the ray march's (with --method compare or compare4d), else the "
+                             "frame the method renders; exr: OpenEXR with units, version and sun in the header, a "
+                             "latitude-longitude environment map for --camera equirectangular (docs/exr.md); hdr: "
+                             "Radiance RGBE, the same header but the scene (8-bit mantissas); npy (the default of a "
+                             "bare --hdr): float32 NumPy arrays")
     output.add_argument("--hdr-precision", choices=list(PRECISIONS), default="float",
                         help="pixel type of the EXR frames: float (32-bit, default) or half (16-bit; values above "
                              "65504, the sun's disc, are clipped to it and counted in the header)")

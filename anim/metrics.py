@@ -328,7 +328,7 @@ def compare_frames(reference, test, valid=None, exposure=1.0, display=None, retu
     dict of str -> float (JSON-serialisable; ``pixels`` is an int), or (that dict, error map (H, W)) with
     ``return_error_map``
         ``rmse``: sqrt(mean over valid pixels and channels of (test - ref)^2) [HDR units];
-        ``rmse_relative``: rmse / mean(Y_ref) [-];
+        ``rmse_relative``: rmse / max(mean(Y_ref), floor) [-] (the floor of :func:`relative_error_floor`);
         ``median_rel``, ``p95_rel``, ``max_rel``: statistics of the relative luminance error e of
         :func:`relative_error_map` over the valid pixels [-];
         ``mean_delta_e``: mean CIE76 Delta E between the displayed frames;

@@ -347,12 +347,13 @@ def _check_video(part, target, frames):
 
 
 class FrameWriter:
-    """Context manager storing an animation as PNG frames, HDR frames (EXR or .npy) and/or an MP4.
+    """Context manager storing an animation as PNG frames, HDR frames (EXR, Radiance .hdr or .npy) and/or an
+    MP4.
 
     Parameters
     ----------
     directory : str or os.PathLike, optional
-        Directory of the PNG (and .npy) frames, created if missing; None for no frames.
+        Directory of the PNG (and HDR) frames, created if missing; None for no frames.
     mp4_path : str or os.PathLike, optional
         Target MP4 file (its directory must exist); None for no video.
     fps : float
@@ -624,7 +625,7 @@ class FrameWriter:
         display_u8 : numpy.ndarray of uint8, shape (H, W, 3)
             Tone-mapped pixels; every frame has the same size.
         hdr : numpy.ndarray, shape (H', W', 3), optional
-            HDR values, stored when the writer was made with ``hdr='exr'`` or ``'npy'`` (then
+            HDR values, stored when the writer was made with ``hdr='exr'``, ``'hdr'`` or ``'npy'`` (then
             required); ignored otherwise. Its shape need not be the display's (a display frame may be
             a composite of several renders), but it is the same for every frame. EXR frames must be
             finite (ValueError before anything of the frame is written); with
