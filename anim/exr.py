@@ -67,7 +67,7 @@ import numpy as np
 
 import clsky
 from clsky._files import as_path, atomic_write, output_target
-from clsky.errors import as_real_array, check_real, require_extra, short
+from clsky.errors import as_real_array, check_integer, check_real, require_extra, short
 
 __all__ = ["HDR_FORMATS", "PRECISIONS", "HALF_MAX", "ENVMAP_ORIENTATION", "write_exr", "read_exr", "exr_pixels",
            "save_exr", "frame_attributes", "enu_to_envmap", "envmap_pixel", "require_openexr"]
@@ -118,8 +118,14 @@ def envmap_pixel(zenith_deg, azimuth_deg, width, height):
 
     >>> envmap_pixel(90.0, 180.0, 64, 32)                     # south, on the horizon: the centre
     (32.0, 16.0)
+
+    ValueError naming an argument that is no such value: the zenith angle in [0, 180] degrees, a finite
+    azimuth, a size of at least one pixel (a NaN or 200 deg gave positions outside the image).
     """
-    return width * ((float(azimuth_deg) % 360.0) / 360.0), height * (float(zenith_deg) / 180.0)
+    zenith = check_real("zenith_deg", zenith_deg, 0.0, 180.0, unit=" degrees")
+    azimuth = check_real("azimuth_deg", azimuth_deg)
+    width, height = (check_integer(name, value, 1, 2**31 - 1) for name, value in (("width", width), ("height", height)))
+    return width * ((azimuth % 360.0) / 360.0), height * (zenith / 180.0)
 
 
 def frame_attributes(units, camera, width, height, sun_zenith_deg, sun_azimuth_deg, altitude_m=0.0,
@@ -156,6 +162,8 @@ def frame_attributes(units, camera, width, height, sun_zenith_deg, sun_azimuth_d
         ``'latlong'`` (:func:`save_exr` stores it as ``OpenEXR.ENVMAP_LATLONG``), so that the
         attributes need no OpenEXR (the Radiance frames of :mod:`clsky.anim.rgbe` take them as text).
     """
+    for name, value in (("width", width), ("height", height)):      # a NaN or negative one made sunPixel so
+        check_integer(name, value, 1, 2**31 - 1)
     zenith = math.radians(check_real("sun_zenith_deg", sun_zenith_deg, 0.0, 180.0))      # NaN made the sun NaN
     azimuth = math.radians(check_real("sun_azimuth_deg", sun_azimuth_deg))             # any finite, as SunPosition
     check_real("altitude_m", altitude_m, 0.0)

@@ -637,3 +637,18 @@ def test_frame_writer_rgbe_frames(tmp_path):
     assert (np.abs(pixels - hdr.astype(np.float32)) <= hdr.max(axis=2, keepdims=True) / 256.0).all()
     assert header["camera"] == "fisheye" and "envmap" not in header
     assert frame_files(tmp_path) == [tmp_path / "frame_00000.hdr", tmp_path / "frame_00000.png"]
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: frame_attributes("cd/m^2", "equirectangular", -5, 2, 45.0, 10.0), r"^width must be an integer"),
+    (lambda: frame_attributes("cd/m^2", "equirectangular", 4, float("nan"), 45.0, 10.0), r"^height must be"),
+    (lambda: frame_attributes("cd/m^2", "equirectangular", "abc", 2, 45.0, 10.0), r"^width must be"),  # TypeError
+    (lambda: envmap_pixel(float("nan"), 10.0, 8, 4), r"^zenith_deg must be a number in \[0, 180\] degrees"),
+    (lambda: envmap_pixel(200.0, 10.0, 8, 4), r"^zenith_deg must be"),          # below the image's last row
+    (lambda: envmap_pixel(90.0, float("inf"), 8, 4), r"^azimuth_deg must be a finite number, got inf"),
+])
+def test_header_positions_refuse_what_is_no_size_or_angle(call, message):
+    """frame_attributes checked the sun's angles but not the size, whose NaN or negative value made a NaN or
+    negative sunPixel; envmap_pixel (public) checked nothing."""
+    with pytest.raises(ValueError, match=message):
+        call()
