@@ -62,6 +62,8 @@ Examples
 from __future__ import annotations
 
 import math
+import pathlib
+import tempfile
 
 import numpy as np
 
@@ -246,7 +248,9 @@ def write_exr(path, rgb, precision="float", attributes=None, force=False, stagin
     Raises
     ------
     ValueError
-        A bad shape or precision; NaN or infinite values. Nothing is written then.
+        A bad shape or precision; NaN or infinite values; attributes the bindings do not store (an int
+        beyond 32 bits was stored as 0; None or a value for one of the file's own attributes raised their
+        RuntimeError). Nothing is written then.
     ImportError
         The OpenEXR bindings are missing.
     FileExistsError, IsADirectoryError, FileNotFoundError, NotADirectoryError, PermissionError
@@ -254,12 +258,34 @@ def write_exr(path, rgb, precision="float", attributes=None, force=False, stagin
     """
     path, force = output_target(path, force)
     require_openexr()
+    check_attributes(attributes)
     pixels, clipped = exr_pixels(rgb, precision)
     if precision == "half":
         attributes = {**(attributes or {}), "halfClippedPixels": clipped}
     with atomic_write(path, overwrite=force, suffix=".exr", staging=staging) as temporary:
         save_exr(temporary, pixels, attributes)
     return path
+
+
+def check_attributes(attributes):
+    """ValueError naming ``attributes`` unless the bindings store each of them as given: written with a
+    one-pixel image into a temporary directory first (their errors come only at the write), an int within
+    EXR's 32 bits (a larger one was stored as 0)."""
+    if attributes is None:
+        return
+    if not isinstance(attributes, dict) or not all(isinstance(name, str) for name in attributes):
+        raise ValueError(f"attributes must be a dict of names to values, got {short(attributes)}")
+    for name, value in attributes.items():
+        if isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)) \
+                and not -2**31 <= value < 2**31:
+            raise ValueError(f"attributes[{name!r}] must be an int in [-2147483648, 2147483647] (EXR's int), "
+                             f"got {short(value)}")
+    with tempfile.TemporaryDirectory(prefix="clsky-exr-") as directory:
+        try:
+            save_exr(pathlib.Path(directory) / "attributes.exr", np.zeros((1, 1, 3), np.float32), attributes)
+        except (RuntimeError, TypeError) as error:
+            raise ValueError(f"attributes: the OpenEXR bindings store them not as given "
+                             f"({str(error).splitlines()[0] if str(error) else type(error).__name__})") from None
 
 
 def save_exr(file, pixels, attributes=None):

@@ -652,3 +652,15 @@ def test_header_positions_refuse_what_is_no_size_or_angle(call, message):
     negative sunPixel; envmap_pixel (public) checked nothing."""
     with pytest.raises(ValueError, match=message):
         call()
+
+
+@pytest.mark.parametrize("attributes, message", [
+    ({"x": None}, r"^attributes: the OpenEXR bindings store them not as given \(unrecognized type"),   # RuntimeError
+    ({"compression": 0}, r"^attributes: the OpenEXR bindings store them not as given"),
+    ({"x": 2**40}, r"^attributes\['x'\] must be an int in \[-2147483648, 2147483647\] \(EXR's int\), got 1"),  # 0
+])
+def test_write_exr_refuses_attributes_it_cannot_store(tmp_path, attributes, message):
+    pytest.importorskip("OpenEXR")
+    with pytest.raises(ValueError, match=message):
+        write_exr(tmp_path / "a.exr", np.ones((2, 2, 3)), attributes=attributes)
+    assert not (tmp_path / "a.exr").exists()
