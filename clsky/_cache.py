@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import logging
 import os
 import pathlib
 
@@ -31,6 +32,8 @@ def cache_directory(*parts: str) -> pathlib.Path | None:
     explicit = os.environ.get("CLSKY_CACHE_DIR", "")
     if os.path.isabs(explicit):
         return pathlib.Path(explicit, *parts)
+    if explicit:
+        _ignored_once(explicit)
     base = os.environ.get("XDG_CACHE_HOME", "")
     if not os.path.isabs(base):
         home = os.path.expanduser("~")
@@ -38,6 +41,14 @@ def cache_directory(*parts: str) -> pathlib.Path | None:
             return None
         base = os.path.join(home, ".cache")
     return pathlib.Path(base, "clsky", *parts)
+
+
+@functools.lru_cache(maxsize=None)
+def _ignored_once(value: str):
+    """Say once a process, on stderr, that a relative CLSKY_CACHE_DIR is ignored (it was, without a word,
+    and the cache went where the user had set it not to go)."""
+    logging.getLogger("clsky").warning(f"clsky: note: CLSKY_CACHE_DIR={value!r} is not an absolute path: ignored "
+                                       f"(the cache goes to $XDG_CACHE_HOME/clsky or ~/.cache/clsky)")
 
 
 def store(path: pathlib.Path, write) -> bool:

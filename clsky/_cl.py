@@ -56,6 +56,11 @@ class NoDeviceError(RuntimeError):
     """No usable OpenCL device (or none with the requested precision)."""
 
 
+class DeviceSelectionError(NoDeviceError, ValueError):
+    """PYOPENCL_CTX, the user's choice of device, selects none: bad input (the command line's exit status 2,
+    as `clsky devices` gives it), not a missing driver."""
+
+
 @dataclasses.dataclass(frozen=True)
 class Source:
     """Generated OpenCL C text placed among the kernel files of a program (e.g. a struct declaration)."""
@@ -272,10 +277,11 @@ def make_context(dtype=np.float64):
     problem = pocl_cache_problem()
     if selector not in _shared_contexts:
         if selector:
+            _check_selector_indices(selector, problem)
             try:
                 context = cl.create_some_context(interactive=False)
             except (cl.Error, RuntimeError, ValueError) as error:
-                raise NoDeviceError(f"PYOPENCL_CTX={selector!r} selects no device: {error}; "
+                raise DeviceSelectionError(f"PYOPENCL_CTX={selector!r} selects no device: {error}; "
                                     + (f"{problem}" if problem else "run `clsky devices` to list them")) from error
         else:
             context = cl.Context([default_device()])
@@ -287,6 +293,24 @@ def make_context(dtype=np.float64):
         raise NoDeviceError(problem)
     check_dtype(context.devices[0], dtype)
     return context
+
+
+def _check_selector_indices(selector, problem):
+    """DeviceSelectionError for a PYOPENCL_CTX of indices, PLATFORM[:DEVICE], that names no platform or
+    device: PyOpenCL then matches the digits in the devices' names ('0:5' chose 'pthread-skylake-avx512-...',
+    '0:9' none). A selector of names is PyOpenCL's to match."""
+    match = re.fullmatch(r"\s*(\d+)\s*(?::\s*(\d+)\s*)?", selector)
+    if match is None:
+        return
+    platforms = cl.get_platforms()
+    platform = int(match.group(1))
+    devices = platforms[platform].get_devices() if platform < len(platforms) else []
+    device = None if match.group(2) is None else int(match.group(2))
+    if platform >= len(platforms) or (device is not None and device >= len(devices)):
+        where = (f"platform {platform} of {len(platforms)}" if platform >= len(platforms)
+                 else f"device {device} of platform {platform}'s {len(devices)}")
+        raise DeviceSelectionError(f"PYOPENCL_CTX={selector!r} selects no device: there is no {where} (indices count "
+                                   f"from 0); " + (problem or "run `clsky devices` to list them"))
 
 
 def check_dtype(device, dtype):

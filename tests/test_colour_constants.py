@@ -207,6 +207,22 @@ def test_a_relative_xdg_cache_home_is_ignored(cache_home, monkeypatch):
     assert colour_constants.cache_path("1.2.3") == cache_home / ".cache" / "clsky" / "colour-science-1.2.3.npz"
 
 
+def test_a_relative_clsky_cache_dir_is_ignored_with_a_note(cache_home, monkeypatch, caplog):
+    """CLSKY_CACHE_DIR must be an absolute path (README): a relative one is ignored, as before, but no longer
+    without a word (the cache went where the user had set it not to go)."""
+    from clsky import _cache
+
+    monkeypatch.setenv("CLSKY_CACHE_DIR", "relative/cache")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(cache_home))
+    _cache._ignored_once.cache_clear()
+    with caplog.at_level("WARNING", logger="clsky"):
+        assert _cache.cache_directory("x") == cache_home / "clsky" / "x"
+        _cache.cache_directory("y")
+    assert [r.getMessage() for r in caplog.records] == [
+        "clsky: note: CLSKY_CACHE_DIR='relative/cache' is not an absolute path: ignored (the cache goes to "
+        "$XDG_CACHE_HOME/clsky or ~/.cache/clsky)"]
+
+
 def test_without_a_home_directory_nothing_is_written(cache_home, monkeypatch):
     monkeypatch.delenv("XDG_CACHE_HOME")
     monkeypatch.setattr(clsky._cache.os.path, "expanduser", lambda path: path)     # "~" stays "~"

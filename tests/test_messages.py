@@ -1,6 +1,7 @@
 """Issue 9, class 6: messages name what the user typed, print numbers short, and say when PoCL's
 kernel cache is what is missing (the command line through a subprocess)."""
 
+import os
 import pathlib
 import subprocess
 import sys
@@ -222,7 +223,6 @@ def test_a_fallback_cache_someone_else_made_is_not_used(monkeypatch, tmp_path, p
     """The fallback's name in the shared temporary directory is predictable: a directory made there first
     by someone else (here a link to another directory, or a directory anyone may write) would have received
     the compiled kernels and supplied binaries to load. It is refused: the problem is named instead."""
-    import os
     import tempfile
 
     from clsky import _cl
@@ -241,6 +241,16 @@ def test_a_fallback_cache_someone_else_made_is_not_used(monkeypatch, tmp_path, p
     monkeypatch.setattr(tempfile, "tempdir", str(shared))
     problem = _cl.pocl_cache_problem.__wrapped__()
     assert problem is not None and str(fallback) in problem and "POCL_CACHE_DIR" not in _cl.os.environ
+
+
+@pytest.mark.parametrize("selector", ["0:5", "9"])
+def test_a_pyopencl_ctx_that_names_no_device_is_bad_input(tmp_path, selector):
+    """PYOPENCL_CTX selecting nothing: exit status 2 as `clsky devices` gives it (the computing commands gave
+    1), and an index beyond the devices is refused (PyOpenCL matched '0:5' to a device whose name holds a 5)."""
+    env = {**os.environ, "PYOPENCL_CTX": selector}
+    result = clsky("render", "--size", "16", "--quality", "draft", "-o", "r.png", cwd=tmp_path, env=env)
+    assert one_line_error(result).startswith(f"clsky: error: PYOPENCL_CTX='{selector}' selects no device")
+    assert clsky("devices", cwd=tmp_path, env=env).returncode == 2 and not (tmp_path / "r.png").exists()
 
 
 def test_pocl_cache_problem_in_process(monkeypatch, tmp_path):
@@ -267,8 +277,6 @@ def test_pocl_cache_problem_in_process(monkeypatch, tmp_path):
 def _without(tmp_path, *packages):
     """An environment in which importing each of ``packages`` fails as if it were not installed: a
     package of that name that raises ImportError, first on PYTHONPATH."""
-    import os
-
     blocked = tmp_path / "blocked"
     for package in packages:
         (blocked / package).mkdir(parents=True)
