@@ -290,9 +290,17 @@ def check_output(path, force=False, option=None, suffix=None, probe=True):
                                 f"{_label(option)}{typed} names a directory (its trailing '/', '/.' or '/..'), "
                                 f"not a file")
     if os.path.lexists(path) and not force:
-        raise FileExistsError(f"{_label(option)}{path} exists; {_force_hint(option)}")
+        raise _exists(f"{_label(option)}{path} exists; {_force_hint(option)}", path)
     _check_parent(path.parent, option, probe=probe)
     return path
+
+
+def _exists(message, path) -> FileExistsError:
+    """FileExistsError(``message``) whose ``filename`` is ``path`` (its text unchanged): a command line maps
+    it to the option that named the file (clsky.cli.written_since_checked, the animation's run)."""
+    error = FileExistsError(message)
+    error.filename = str(path)
+    return error
 
 
 def check_output_directory(path, option=None, names=()):
@@ -367,12 +375,12 @@ def _place(temporary, target, overwrite):
     try:
         os.link(temporary, target)
     except FileExistsError:
-        raise FileExistsError(f"{target} exists (it appeared during the run); {_API_FORCE_HINT}") from None
+        raise _exists(f"{target} exists (it appeared during the run); {_API_FORCE_HINT}", target) from None
     except OSError as error:
         if error.errno not in (errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.EXDEV, errno.EMLINK):
             raise
         if os.path.lexists(target):
-            raise FileExistsError(f"{target} exists (it appeared during the run); {_API_FORCE_HINT}") from None
+            raise _exists(f"{target} exists (it appeared during the run); {_API_FORCE_HINT}", target) from None
         os.replace(temporary, target)
         return
     os.unlink(temporary)

@@ -255,3 +255,24 @@ def test_clsky_script_runs_without_the_anim_extra(tmp_path, args, expected):
     assert result.returncode == 0, result.stderr
     assert expected in result.stdout
     assert result.stderr == ""
+
+
+def test_an_animation_whose_output_another_run_wrote_meanwhile_names_the_option(tmp_path, monkeypatch, capsys):
+    """Two `clsky animate` runs on one -o: the one that lands second was refused in the library's words
+    ('pass force=True (a table's save and exports: overwrite=True)'); now one line naming --output."""
+    from clsky import _files
+    from clsky.anim import cli as anim_cli
+
+    commit = _files.StagedWrites.commit
+
+    def the_other_run_writes_then_commit(self):
+        (tmp_path / "c_metrics.csv").write_text("the other run's")
+        return commit(self)
+
+    monkeypatch.setattr(_files.StagedWrites, "commit", the_other_run_writes_then_commit)
+    monkeypatch.chdir(tmp_path)
+    assert anim_cli.main(["animate", "--size", "16", "--frames", "2", "--table-size", "8", "32", "8", "--method",
+                          "lut", "--progress", "none", "-o", "c.mp4"]) == 2
+    assert capsys.readouterr().err == ("clsky: error: --output: c_metrics.csv exists: another "
+                                       "process wrote it during this run; use --force to overwrite it\n")
+    assert (tmp_path / "c_metrics.csv").read_text() == "the other run's"
