@@ -323,9 +323,9 @@ def run_animate(args):
         with clsky_cli.running_farm(farm):
             result = render_animation(config, progress=progress, report=print, farm=farm)
     except FileExistsError as error:      # another run wrote an output since the check: named as the option's
-        if config.force or error.filename is None:
+        if config.force or getattr(error, "path", None) is None:
             raise
-        raise clsky_cli.UsageError(f"{option}: {error.filename} exists: another process wrote it during this run; "
+        raise clsky_cli.UsageError(f"{option}: {error.path} exists: another process wrote it during this run; "
                                    f"use --force to overwrite it") from None
     finally:
         close()

@@ -296,10 +296,10 @@ def check_output(path, force=False, option=None, suffix=None, probe=True):
 
 
 def _exists(message, path) -> FileExistsError:
-    """FileExistsError(``message``) whose ``filename`` is ``path`` (its text unchanged): a command line maps
-    it to the option that named the file (clsky.cli.written_since_checked, the animation's run)."""
+    """FileExistsError(``message``) carrying ``path`` as its ``path`` attribute (``filename`` would change its
+    text): a command line maps it to the option that named the file (the animation's run)."""
     error = FileExistsError(message)
-    error.filename = str(path)
+    error.path = str(path)
     return error
 
 
