@@ -494,8 +494,10 @@ class StagedWrites:
                     if not isinstance(error, OSError) or not self.committed:
                         raise                    # nothing is in place yet: the error says it all
                     done = ", ".join(str(path) for path in self.committed) or "none"
-                    raise type(error)(f"could not put {target} in place ({error}); "
-                                      f"new files already in place: {done}") from error
+                    wrapped = type(error)(f"could not put {target} in place ({error}); "
+                                          f"new files already in place: {done}")
+                    wrapped.path, wrapped.committed = getattr(error, "path", None), list(self.committed)
+                    raise wrapped from error
                 self.committed.append(target)
             self._staged = []
             for path in self._removals:
