@@ -164,7 +164,7 @@ def frame_attributes(units, camera, width, height, sun_zenith_deg, sun_azimuth_d
         ``'latlong'`` (:func:`save_exr` stores it as ``OpenEXR.ENVMAP_LATLONG``), so that the
         attributes need no OpenEXR (the Radiance frames of :mod:`clsky.anim.rgbe` take them as text).
     """
-    for name, value in (("width", width), ("height", height)):      # a NaN or negative one made sunPixel so
+    for name, value in (("width", width), ("height", height)):      # a NaN or negative size: a NaN or negative sunPixel
         check_integer(name, value, 1, 2**31 - 1)
     zenith = math.radians(check_real("sun_zenith_deg", sun_zenith_deg, 0.0, 180.0))      # NaN made the sun NaN
     azimuth = math.radians(check_real("sun_azimuth_deg", sun_azimuth_deg))             # any finite, as SunPosition
