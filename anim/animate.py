@@ -410,7 +410,9 @@ def _hdr(name, value):
         return "npy"
     formats = [f for f in writers.FrameWriter.HDR_FORMATS if f is not None]
     if not isinstance(value, str) or value not in formats:
-        raise ParameterError(name, f"None, False, True or one of {formats}", value)
+        # the formats first: a scene's output.hdr (TOML) can hold a string only, and None or False no key
+        raise ParameterError(name, f"one of {formats} (in the API also None or False for none, True for 'npy')",
+                             value)
     return value
 
 

@@ -161,6 +161,8 @@ def test_the_command_line_wins_and_says_so(tmp_path, capsys, monkeypatch):
     ("animate", "[sun]\nsun_elevation_deg = 3.0\n", "s.toml: unknown key sun.sun_elevation_deg (a key of clsky render only)"),
     ("animate", "[display]\ndither = 1\n", "s.toml: display.dither must be true or false, got 1"),
     ("animate", '[output]\noutput = "sky.avi"\n', "s.toml: output.output must be a path ending in .mp4"),
+    # its formats first ('None, False, True or one of ...' named values a scene cannot hold or refuses)
+    ("animate", '[output]\nhdr = "foo"\n', "s.toml: output.hdr must be one of ['exr', 'hdr', 'npy'] (in the API"),
     ("animate", "[camera\n", "--scene s.toml: not a valid TOML file"),
     # TOML integers have any size: one beyond float's range, for a number, was an OverflowError traceback
     ("render", f"[display]\nexposure = {'9' * 400}\n",
