@@ -479,8 +479,11 @@ def plan_animation(config: AnimationConfig, positions, directions, valid, ctx=No
     error budget or quality; the ray march is planned for whenever the animation renders it."""
     if config.table_size is not None:
         return None
+    # the 4D table over a reflecting ground carries the ground's light in its higher orders' channels: a plan
+    # that dropped them (an observer far above the air) ended in an error about 'orders' after its work
     return plan_scene(_scene(config, positions, directions, valid), config.atmosphere, config.mode, ctx=ctx,
-                      ray_march=config.method not in ("lut", "lut4d"), samples=config.samples)
+                      ray_march=config.method not in ("lut", "lut4d"), samples=config.samples,
+                      keep_orders=config.lookup4d and config.atmosphere.has_ground)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -576,8 +579,7 @@ def memory_estimate(config: AnimationConfig, positions, host_workers=None, devic
         settings = level.table.replace(mode=config.mode, size=level.table.size[:2] + (nodes,),
                                        sun_cos_range=cos_range, azimuth_harmonics=harmonics)
     batches = None if config.wavelengths is None else len(spectrum.wavelength_batches(config.wavelengths))
-    return estimate_animation_memory(_with_lookup(_with_sampling(settings, config), config, config.atmosphere),
-                                     config.image_shape(),
+    return estimate_animation_memory(_with_lookup(_with_sampling(settings, config), config), config.image_shape(),
                                      config.method,
                                      ray_settings(config), hdr_output=config.hdr is not None, batches=batches,
                                      overlapped=OVERLAP_FRAMES,
@@ -603,27 +605,24 @@ def _base(config: AnimationConfig, plan: Plan | None):
     and a full table of ``config.table_size`` (default: the quality level's size) at the level's
     other settings; with ``config.sampling`` if given."""
     if plan is not None:
-        return plan.atmosphere, _with_lookup(_with_sampling(plan.table, config), config, plan.atmosphere)
+        return plan.atmosphere, _with_lookup(_with_sampling(plan.table, config), config)
     size = tuple(config.table_size) if config.table_size is not None else quality(config).table.size
     settings = _with_sampling(quality(config).table.replace(size=size, mode=config.mode), config)
-    return config.atmosphere, _with_lookup(settings, config, config.atmosphere)
+    return config.atmosphere, _with_lookup(settings, config)
 
 
-def _with_lookup(settings: clsky.TableSettings, config: AnimationConfig, atmosphere) -> clsky.TableSettings:
+def _with_lookup(settings: clsky.TableSettings, config: AnimationConfig) -> clsky.TableSettings:
     """``settings`` as the 4D table for the 4D methods (:data:`LUT4D_HARMONICS` azimuth harmonics when
     the level has none; at most :data:`LUT4D_MAX_SIZE` altitude and view nodes, an even number of the
     latter: a plan's grid reduced to that, a ``table_size`` already within it, AnimationConfig refusing
-    any other), else unchanged. The table's higher orders are computed on that grid too. Over a reflecting
-    ground (``atmosphere``'s) the 4D table keeps at least 2 orders, whose channels carry the ground's light
-    (:func:`clsky.table4d.check_atmosphere`): a plan that dropped the higher orders, as it does for an
-    observer far above the air (--altitude 1e5), ended in an error about 'orders' after its work."""
+    any other), else unchanged. The table's higher orders are computed on that grid too (a plan keeps them
+    over a reflecting ground: :func:`plan_animation`)."""
     if not config.lookup4d:
         return settings
     width = min(settings.size[0], LUT4D_MAX_SIZE[0])
     height = max(4, min(settings.size[1], LUT4D_MAX_SIZE[1]))
     height += height % 2
-    orders = 2 if settings.orders == 1 and atmosphere.has_ground else settings.orders
-    return settings.replace(parameterization="4d", size=(width, height, settings.size[2]), orders=orders,
+    return settings.replace(parameterization="4d", size=(width, height, settings.size[2]),
                             azimuth_harmonics=settings.azimuth_harmonics or LUT4D_HARMONICS)
 
 

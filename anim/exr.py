@@ -198,8 +198,9 @@ def exr_pixels(rgb, precision="float"):
     or float16), and the number of pixels with a channel above :data:`HALF_MAX` clipped to it with
     'half' (0 with 'float'). A sky's half-float file can hold everything but the sun's disc (I_I / 6.8e-5
     sr, 3e5 in relative units, 1e9 cd/m^2): those few pixels are clipped rather than made infinite.
-    ValueError for a bad shape, precision or kind of number, NaN or infinite values, and with 'float'
-    values beyond float32's range (3.4e38: infinite once stored)."""
+    ValueError for a bad shape, precision or kind of number, NaN, infinite or negative values (a frame is
+    radiance: :func:`read_exr` takes no other), and with 'float' values beyond float32's range (3.4e38:
+    infinite once stored)."""
     if not isinstance(precision, str) or precision not in PRECISIONS:
         raise ValueError(f"precision must be one of {list(PRECISIONS)}, got {precision!r}")
     rgb = np.asarray(rgb)
@@ -209,6 +210,9 @@ def exr_pixels(rgb, precision="float"):
         raise ValueError(f"rgb must have shape (H, W, 3), got {rgb.shape}")
     if not np.isfinite(rgb).all():
         raise ValueError("rgb holds NaN or infinite values: an EXR frame holds finite values only")
+    if rgb.min() < 0:
+        raise ValueError(f"rgb holds negative values (the least {short(rgb.min())}): an EXR frame holds radiance, "
+                         f">= 0")
     if precision == "float" and np.abs(rgb).max() > np.finfo(np.float32).max:
         raise ValueError(f"rgb holds values beyond float32's range ({np.finfo(np.float32).max:.3g}), "
                          f"infinite once stored: {short(np.abs(rgb).max())}")

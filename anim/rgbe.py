@@ -108,7 +108,7 @@ def save_rgbe(file, rgbe, attributes=None):
             continue
         if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", name):
             raise ValueError(f"attribute names must be identifiers, got {name!r}")
-        if name in ("FORMAT", "SOFTWARE"):                 # a second line of the file's own would win on reading
+        if name in ("FORMAT", "SOFTWARE", "EXPOSURE"):     # the file's own lines (EXPOSURE would scale its pixels)
             raise ValueError(f"attribute name {name!r} is the file's own header line")
         lines.append(f"{name}= {_header_value(value)}")
     head = ("\n".join(lines) + f"\n\n-Y {height} +X {width}\n").encode("ascii", "replace")
@@ -162,8 +162,7 @@ _MAX_HEADER = 1 << 16
 def _parse_header(data, path):
     """(height, width, header {NAME: text}, offset of the pixels) from the bytes ``data`` that begin a
     Radiance picture; ValueError naming ``path`` without the signature or a ``-Y H +X W`` resolution line
-    of at least one pixel each way, or with a FORMAT other than RGBE's or an EXPOSURE other than 1: an XYZE
-    picture's X, Y, Z were read as R, G, B, and a scale factor ignored."""
+    of at least one pixel each way."""
     if not data.startswith(b"#?"):
         raise ValueError(f"{path}: not a Radiance picture (no '#?' signature)")
     end = data.find(b"\n\n")
@@ -178,11 +177,6 @@ def _parse_header(data, path):
     head = data[:end].decode("ascii", "replace").split("\n")[1:]
     header = dict(line.split("=", 1) for line in head if "=" in line and not line.startswith("#"))
     header = {name: value.strip() for name, value in header.items()}
-    if header.get("FORMAT", "32-bit_rle_rgbe") != "32-bit_rle_rgbe":
-        raise ValueError(f"{path}: its FORMAT is {header['FORMAT']!r:.40}: only 32-bit_rle_rgbe (R, G, B) is read")
-    if "EXPOSURE" in header and _number(header["EXPOSURE"]) != 1.0:
-        raise ValueError(f"{path}: its EXPOSURE is {header['EXPOSURE']!r:.40}: only pixels at their own scale "
-                         f"(EXPOSURE 1 or none) are read")
     return height, width, header, newline + 1
 
 
@@ -206,8 +200,10 @@ def _open_header(path):
     from its first 64 KiB: a FIFO blocked, /dev/zero exhausted the memory and a 1 GiB file took 1 GiB
     before its signature was checked (FileNotFoundError for a file that is not a regular one)."""
     path = as_path(path)
+    if path.is_dir():
+        raise IsADirectoryError(f"{path}: a directory, not a Radiance picture")
     if not path.is_file():
-        raise FileNotFoundError(f"{path}: not a regular file")
+        raise FileNotFoundError(f"{path}: no such file" if not path.exists() else f"{path}: not a regular file")
     with open(path, "rb") as stream:
         data = stream.read(_MAX_HEADER)
         size = os.fstat(stream.fileno()).st_size
@@ -221,6 +217,12 @@ def read_rgbe(path):
     line, whose resolution its bytes cannot hold, or whose scan lines are damaged (cut short, runs past
     the line's end)."""
     height, width, header, offset, size = _open_header(path)
+    # pixels clsky decodes as they are: an XYZE picture's X, Y, Z were read as R, G, B, and a scale ignored
+    if header.get("FORMAT", "32-bit_rle_rgbe") != "32-bit_rle_rgbe":
+        raise ValueError(f"{path}: its FORMAT is {header['FORMAT']!r:.40}: only 32-bit_rle_rgbe (R, G, B) is read")
+    if "EXPOSURE" in header and _number(header["EXPOSURE"]) != 1.0:
+        raise ValueError(f"{path}: its EXPOSURE is {header['EXPOSURE']!r:.40}: only pixels at their own scale "
+                         f"(EXPOSURE 1 or none) are read")
     # the fewest bytes a scan line takes: 4 of header and 4 runs of 127 pixels in 2 bytes, or 4 a pixel flat;
     # checked before the pixels are read (or their array made)
     least = height * (4 + 8 * -(-width // 127) if width in _RLE_WIDTHS else 4 * width)

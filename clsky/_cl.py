@@ -164,19 +164,26 @@ def _writable(directory: pathlib.Path) -> bool:
         return False
 
 
-def _private_directory(directory: pathlib.Path) -> bool:
-    """True if ``directory`` is (or is now made) a directory of this user's that no one else can write,
-    not a symbolic link, and a file can be written in it (the fallback cache, in a shared directory)."""
+def _private_directory(directory: pathlib.Path):
+    """None if ``directory`` is (or is now made) a directory of this user's that no one else can write, not
+    a symbolic link, where a file can be written (the fallback cache, in a shared directory): one of this
+    user's that others may write (an earlier clsky's, made under a umask of 002) is made private; else why
+    not, in words."""
     try:
         directory.mkdir(mode=0o700, exist_ok=True)
         status = os.lstat(directory)
-    except OSError:
-        return False
-    if not stat.S_ISDIR(status.st_mode) or status.st_mode & 0o022:
-        return False
+    except OSError as error:
+        return f"it cannot be made ({error.strerror or error})"
+    if not stat.S_ISDIR(status.st_mode):
+        return "it is a link or a file, not a directory"
     if hasattr(os, "getuid") and status.st_uid != os.getuid():
-        return False
-    return _writable(directory)
+        return "another user owns it"
+    if status.st_mode & 0o022:
+        try:
+            os.chmod(directory, stat.S_IMODE(status.st_mode) & ~0o022)
+        except OSError:
+            return "others may write it"
+    return None if _writable(directory) else "no file can be written in it"
 
 
 @functools.lru_cache(maxsize=1)
@@ -190,15 +197,21 @@ def pocl_cache_problem():
         return (f"PoCL's kernel cache POCL_CACHE_DIR={directory} is not a writable directory (PoCL then finds no "
                 f"device, or fails every build); set POCL_CACHE_DIR to a writable directory")
     fallback = pathlib.Path(tempfile.gettempdir()) / f"clsky-pocl-cache-{getattr(os, 'getuid', lambda: 'user')()}"
-    if _private_directory(fallback):
+    unusable = _private_directory(fallback)
+    if unusable is None:
         os.environ["POCL_CACHE_DIR"] = str(fallback)
-        if source == "HOME":             # PyOpenCL's cache (pytools') is under XDG_CACHE_HOME, else ~/.cache
+        also = ""
+        cache_home = directory.parent
+        if source == "HOME" and not _writable(cache_home):
+            # PyOpenCL's own cache (pytools') is under XDG_CACHE_HOME, else ~/.cache: it failed there next
             os.environ["XDG_CACHE_HOME"] = str(fallback / "xdg")
+            also = f", and {fallback / 'xdg'} for the caches under {cache_home}"
         _logger.warning(f"clsky: note: PoCL's kernel cache {directory} is not writable (from {source}); "
-                        f"using {fallback} (set POCL_CACHE_DIR or XDG_CACHE_HOME to choose)")
+                        f"using {fallback}{also} (set POCL_CACHE_DIR or XDG_CACHE_HOME to choose)")
         return None
-    return (f"PoCL's kernel cache {directory} (from {source}) is not writable, nor is {fallback} (PoCL then "
-            f"finds no device); set POCL_CACHE_DIR or XDG_CACHE_HOME to a writable directory")
+    return (f"PoCL's kernel cache {directory} (from {source}) is not writable, and the fallback {fallback} is "
+            f"not usable: {unusable} (PoCL then finds no device); set POCL_CACHE_DIR or XDG_CACHE_HOME to a "
+            f"writable directory")
 
 
 def no_device_hint() -> str:
@@ -277,12 +290,13 @@ def make_context(dtype=np.float64):
     problem = pocl_cache_problem()
     if selector not in _shared_contexts:
         if selector:
-            _check_selector_indices(selector, problem)
             try:
                 context = cl.create_some_context(interactive=False)
             except (cl.Error, RuntimeError, ValueError) as error:
+                if not _all_devices():        # no driver, or PoCL's cache: not the selector's fault
+                    raise NoDeviceError(f"no OpenCL device found; {no_device_hint()}") from error
                 raise DeviceSelectionError(f"PYOPENCL_CTX={selector!r} selects no device: {error}; "
-                                    + (f"{problem}" if problem else "run `clsky devices` to list them")) from error
+                                           "run `clsky devices` to list them") from error
         else:
             context = cl.Context([default_device()])
         _shared_contexts[selector] = context
@@ -293,24 +307,6 @@ def make_context(dtype=np.float64):
         raise NoDeviceError(problem)
     check_dtype(context.devices[0], dtype)
     return context
-
-
-def _check_selector_indices(selector, problem):
-    """DeviceSelectionError for a PYOPENCL_CTX of indices, PLATFORM[:DEVICE], that names no platform or
-    device: PyOpenCL then matches the digits in the devices' names ('0:5' chose 'pthread-skylake-avx512-...',
-    '0:9' none). A selector of names is PyOpenCL's to match."""
-    match = re.fullmatch(r"\s*(\d+)\s*(?::\s*(\d+)\s*)?", selector)
-    if match is None:
-        return
-    platforms = cl.get_platforms()
-    platform = int(match.group(1))
-    devices = platforms[platform].get_devices() if platform < len(platforms) else []
-    device = None if match.group(2) is None else int(match.group(2))
-    if platform >= len(platforms) or (device is not None and device >= len(devices)):
-        where = (f"platform {platform} of {len(platforms)}" if platform >= len(platforms)
-                 else f"device {device} of platform {platform}'s {len(devices)}")
-        raise DeviceSelectionError(f"PYOPENCL_CTX={selector!r} selects no device: there is no {where} (indices count "
-                                   f"from 0); " + (problem or "run `clsky devices` to list them"))
 
 
 def check_dtype(device, dtype):

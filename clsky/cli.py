@@ -493,14 +493,16 @@ def run_devices(args):
               f"fp64 {'yes' if d['fp64'] else 'no'}]\n    platform: {d['platform']} "
               f"({d['platform_version']}), {d['device_version']}")
     print("(*: the device clsky uses; choose another with PYOPENCL_CTX)")
-    if not any(d["chosen"] for d in devices):       # only where PYOPENCL_CTX names none of them
-        raise UsageError(f"PYOPENCL_CTX={os.environ.get('PYOPENCL_CTX', '')!r} selects none of the devices above: "
-                         f"unset it (clsky then picks one), or give PLATFORM:DEVICE by their order (0:0 the first)")
     problem = pocl_cache_problem()
-    if problem and any(d["chosen"] and d["platform"].startswith("Portable Computing Language") for d in devices):
+    if problem and any(d["platform"].startswith("Portable Computing Language") for d in devices):
         # PoCL lists its device with a cache it cannot write (POCL_CACHE_DIR a file), and fails every build
+        # (make_context refuses it, so that PYOPENCL_CTX would seem to select none below)
         print(f"clsky: error: {problem}", file=sys.stderr)
         return EXIT_FAILURE
+    if not any(d["chosen"] for d in devices):       # only where PYOPENCL_CTX names none of them
+        raise UsageError(f"PYOPENCL_CTX={os.environ.get('PYOPENCL_CTX', '')!r} selects none of the devices above: "
+                         f"unset it (clsky then picks one), or give PLATFORM:DEVICE by their order (0:0 the first; "
+                         f"PyOpenCL matches other numbers and words in the devices' names)")
     return 0
 
 

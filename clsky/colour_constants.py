@@ -164,8 +164,10 @@ def _constants() -> dict:
     if arrays is None:
         arrays = _from_colour_science()
         # kept only when the imported colour-science is the installed distribution (not another copy
-        # earlier on the path): the file's name and label say which version its values are
-        if path is not None and str(arrays["version"]) == version:
+        # earlier on the path): the file's name and label say which version its values are; and only values
+        # the reader takes (another version's of another kind would be written, refused, and recomputed
+        # every run)
+        if path is not None and str(arrays["version"]) == version and _plausible(arrays):
             store(path, lambda file: np.savez(file, **arrays))
     for value in arrays.values():
         value.setflags(write=False)

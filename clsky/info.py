@@ -296,7 +296,9 @@ def _hdr(path):
     except (ValueError, OSError) as error:
         raise TableFormatError(f"{path}: not a readable Radiance HDR file "
                                f"({str(error).removeprefix(f'{path}: ')})") from None
-    items = [("kind", "Radiance RGBE image"), ("size", f"{width} x {height} pixels"),
+    picture_format = header.get("FORMAT", "32-bit_rle_rgbe")
+    kind = "Radiance RGBE image" if picture_format == "32-bit_rle_rgbe" else f"Radiance image ({picture_format})"
+    items = [("kind", kind), ("size", f"{width} x {height} pixels"),
              ("clsky version", header.get("clskyVersion", "- (not written by clsky)"))]
     items += [(name, header[name]) for name in sorted(header) if name != "clskyVersion"]
     return _block(f"{path}:", items)

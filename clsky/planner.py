@@ -453,7 +453,8 @@ def _costlier(method, chosen, pixels) -> str:
             f"{chosen.frame_cpu_ms(pixels):.3g} CPU-ms, measured)")
 
 
-def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, ray_march=None, samples=None) -> Plan:
+def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, ray_march=None, samples=None,
+               keep_orders=False) -> Plan:
     """The least table (and ray march) that renders ``scene`` within its error budget.
 
     Parameters
@@ -472,6 +473,10 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         The ray march's samples per ray when the caller sets them (``clsky animate --samples``), in [2,
         4096], instead of the quality level's: the plan's ray march and its printed line say so (its
         error estimates stay those measured with the level's samples).
+    keep_orders : bool
+        The caller's table needs the higher orders whatever the pilot finds they add (a 4D table over a
+        reflecting ground carries the ground's light in their channels): kept, with the sun axis' margins
+        they need.
     """
     check_instance("scene", scene, Scene, "a Scene (sun path, altitudes, views, components, error budget)")
     atmosphere = as_atmosphere(atmosphere)
@@ -479,6 +484,7 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     _cl.check_context(ctx)
     ray_march = ray_march is not None and check_flag("ray_march", ray_march)     # 'no' was true
     samples = check_integer("samples", samples, 2, 4096, optional=True)
+    keep_orders = check_flag("keep_orders", keep_orders)
     check_ground_mode(atmosphere, mode)     # before the pilot: a plan the build would refuse is no plan
     level = quality_level(scene.quality) if scene.quality else level_for_budget(scene.error_budget)
     budget = level.budget if scene.quality else scene.error_budget
@@ -544,7 +550,12 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         decisions.append(("higher orders", "dropped", "not wanted by the scene"))
     else:
         share = pilot_share(atmosphere, table, scene, ctx=ctx)
-        if share < 0.5 * budget:
+        if share < 0.5 * budget and keep_orders:
+            decisions.append(("higher orders", f"until an order adds < {table.order_tolerance:g}",
+                              f"they add at most {100 * share:.3g} % (pilot), kept: the table carries a reflecting "
+                              f"ground's light in them (a 4D table's)"))
+            decisions.append(("azimuth harmonics", f"M = {harmonics}", harmonics_because))
+        elif share < 0.5 * budget:
             table, elevations, margins = on_sun_axis(table.replace(orders=1, azimuth_harmonics=0), orders=False)
             decisions.append(("higher orders", "dropped", f"they add at most {100 * share:.3g} % (pilot), "
                               f"under half the budget"))

@@ -83,7 +83,9 @@ def test_half_round_trip_within_its_rounding(tmp_path):
                                        (np.zeros((2, 2)), "shape"), (np.zeros((2, 2, 4)), "shape"),
                                        # stored as float32, 1e39 was an infinity in the file
                                        (np.full((2, 2, 3), 1e39), "beyond float32's range"),
-                                       (np.full((2, 2, 3), 1 + 1j), "real numbers")])
+                                       (np.full((2, 2, 3), 1 + 1j), "real numbers"),
+                                       # written, then refused by read_exr (radiance only)
+                                       (np.full((2, 2, 3), -1e-3), "negative values")])
 def test_bad_pixels_are_refused_before_writing(tmp_path, bad, match):
     with pytest.raises(ValueError, match=match):
         write_exr(tmp_path / "x.exr", bad)
@@ -574,6 +576,15 @@ def test_damaged_or_missing_hdr_files_are_refused_by_name(tmp_path):
     for path in (tmp_path / "fifo.hdr", "/dev/zero"):
         with pytest.raises(FileNotFoundError, match="not a regular file"):
             read_rgbe(path)
+    with pytest.raises(FileNotFoundError, match="no such file"):
+        read_rgbe(tmp_path / "missing.hdr")
+    with pytest.raises(IsADirectoryError):
+        read_rgbe(tmp_path)
+    # clsky info describes a valid picture whose pixels read_rgbe does not decode (XYZE, an EXPOSURE)
+    from clsky.info import describe
+
+    assert "Radiance image (32-bit_rle_xyze)" in describe(tmp_path / "xyze.hdr")
+    assert "Radiance RGBE image" in describe(tmp_path / "exposure.hdr")
     pytest.importorskip("OpenEXR")
     (tmp_path / "junk.exr").write_bytes(b"v/1\x01junk")
     with pytest.raises(ValueError, match=rf"^{tmp_path / 'junk.exr'}: not a readable EXR file"):

@@ -203,6 +203,9 @@ def test_a_pocl_cache_dir_that_is_a_file_is_one_line_before_any_work(tmp_path):
     assert not (tmp_path / "t.npz").exists()
     devices = clsky("devices", cwd=tmp_path, env=env)          # it listed the device as usable, exit 0
     assert devices.returncode == 1 and "POCL_CACHE_DIR" in devices.stderr, devices.stderr
+    # with PYOPENCL_CTX naming that device: the cache, not "PYOPENCL_CTX selects none of the devices" (exit 2)
+    devices = clsky("devices", cwd=tmp_path, env={**env, "PYOPENCL_CTX": "0:0"})
+    assert devices.returncode == 1 and "POCL_CACHE_DIR" in devices.stderr, devices.stderr
 
 
 def test_an_unusable_home_falls_back_for_pyopencls_cache_too(tmp_path):
@@ -221,8 +224,9 @@ def test_an_unusable_home_falls_back_for_pyopencls_cache_too(tmp_path):
 @pytest.mark.parametrize("planted", ["symlink", "world-writable"])
 def test_a_fallback_cache_someone_else_made_is_not_used(monkeypatch, tmp_path, planted):
     """The fallback's name in the shared temporary directory is predictable: a directory made there first
-    by someone else (here a link to another directory, or a directory anyone may write) would have received
-    the compiled kernels and supplied binaries to load. It is refused: the problem is named instead."""
+    by someone else (here a link to another directory) would have received the compiled kernels and
+    supplied binaries to load. It is refused, and the problem says why. One of this user's that others may
+    write (an earlier clsky's, made under a umask of 002) is made private and used."""
     import tempfile
 
     from clsky import _cl
@@ -240,17 +244,41 @@ def test_a_fallback_cache_someone_else_made_is_not_used(monkeypatch, tmp_path, p
     monkeypatch.setenv("XDG_CACHE_HOME", UNWRITABLE)
     monkeypatch.setattr(tempfile, "tempdir", str(shared))
     problem = _cl.pocl_cache_problem.__wrapped__()
-    assert problem is not None and str(fallback) in problem and "POCL_CACHE_DIR" not in _cl.os.environ
+    if planted == "symlink":
+        assert problem is not None and str(fallback) in problem and "it is a link or a file" in problem
+        assert "POCL_CACHE_DIR" not in _cl.os.environ
+    else:
+        assert problem is None and _cl.os.environ["POCL_CACHE_DIR"] == str(fallback)
+        assert fallback.stat().st_mode & 0o777 == 0o755
 
 
-@pytest.mark.parametrize("selector", ["0:5", "9"])
+@pytest.mark.parametrize("selector", ["0:9", "9"])
 def test_a_pyopencl_ctx_that_names_no_device_is_bad_input(tmp_path, selector):
     """PYOPENCL_CTX selecting nothing: exit status 2 as `clsky devices` gives it (the computing commands gave
-    1), and an index beyond the devices is refused (PyOpenCL matched '0:5' to a device whose name holds a 5)."""
+    1). (An index beyond the devices that matches a device's name is PyOpenCL's to take: '0:4090' names an
+    RTX 4090.)"""
     env = {**os.environ, "PYOPENCL_CTX": selector}
     result = clsky("render", "--size", "16", "--quality", "draft", "-o", "r.png", cwd=tmp_path, env=env)
     assert one_line_error(result).startswith(f"clsky: error: PYOPENCL_CTX='{selector}' selects no device")
     assert clsky("devices", cwd=tmp_path, env=env).returncode == 2 and not (tmp_path / "r.png").exists()
+
+
+def test_the_fallback_moves_xdg_cache_home_only_where_the_cache_home_is_unwritable(monkeypatch, tmp_path):
+    """~/.cache writable but ~/.cache/pocl not (a file there): PoCL's cache moves, XDG_CACHE_HOME stays (it
+    moved clsky's own cache and PyOpenCL's to the temporary directory mid-run)."""
+    import tempfile
+
+    from clsky import _cl
+
+    home = tmp_path / "home"
+    (home / ".cache").mkdir(parents=True)
+    (home / ".cache" / "pocl").write_text("a file")
+    monkeypatch.setenv("HOME", str(home))
+    for name in ("POCL_CACHE_DIR", "XDG_CACHE_HOME"):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    assert _cl.pocl_cache_problem.__wrapped__() is None
+    assert _cl.os.environ["POCL_CACHE_DIR"].startswith(str(tmp_path)) and "XDG_CACHE_HOME" not in _cl.os.environ
 
 
 def test_pocl_cache_problem_in_process(monkeypatch, tmp_path):

@@ -166,6 +166,19 @@ def test_the_plan_says_the_samples_asked_for(cl_context):
         plan_scene(Scene((-6.0, 60.0)), ctx=cl_context, samples=1)
 
 
+def test_the_higher_orders_are_kept_where_the_table_needs_them(cl_context):
+    """An observer at 100 km sees almost no higher orders: the pilot drops them (orders = 1, no margins on the
+    sun axis). A 4D table over a reflecting ground carries the ground's light in their channels, and refused
+    orders = 1 after the plan's work (clsky render --method lut4d --altitude 1e5): keep_orders keeps them,
+    with the sun axis' margins they need."""
+    scene = Scene((10.0, 20.0), altitudes_m=(1e5, 1e5))
+    dropped = plan_scene(scene, ctx=cl_context)
+    kept = plan_scene(scene, ctx=cl_context, keep_orders=True)
+    assert dropped.table.orders == 1 and kept.table.orders == "auto"
+    assert kept.table.sun_cos_range[0] < dropped.table.sun_cos_range[0]       # the orders' margin below
+    assert "kept: the table carries a reflecting ground's light in them" in kept.describe()
+
+
 def test_a_day_scene_with_a_loose_budget_needs_the_lookup_only(cl_context):
     plan = plan_scene(Scene((20.0, 60.0), error_budget=0.1), ctx=cl_context)
     assert plan.level.name == "draft" and plan.ray is None

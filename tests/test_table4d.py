@@ -326,13 +326,8 @@ def test_animation_4d_methods():
     assert config.compares and config.lookup4d
     _, settings = _base(config, None)
     assert settings.is_4d and settings.size == (16, 128, 20) and settings.azimuth_harmonics == LUT4D_HARMONICS
-    planned = _with_lookup(TableSettings(size=(32, 255, 20), mode="physical"), config, config.atmosphere)  # a plan's
+    planned = _with_lookup(TableSettings(size=(32, 255, 20), mode="physical"), config)      # a plan's grid
     assert planned.is_4d and planned.size == (16, 128, 20)
-    # a plan that dropped the higher orders (an observer far above the air): 2 over a reflecting ground, whose
-    # light the higher orders' channels carry (the 4D table refused 1 after the plan's work), else 1
-    single = TableSettings(size=(16, 32, 8), mode="physical", orders=1)
-    assert _with_lookup(single, config, preset("physical")).orders == 2
-    assert _with_lookup(single, config, preset("physical").replace(ground_albedo=0.0)).orders == 1
     for size in ((32, 128, 20), (16, 130, 20), (8, 31, 8), (8, 2, 8)):
         with pytest.raises(ParameterError, match=r"^table_size must be W <= 16 altitude nodes and an even number H "
                                                  r"in \[4, 128\] of view nodes with method 'compare4d'"):
