@@ -35,7 +35,8 @@ def test_devices_says_when_pyopencl_ctx_selects_none(tmp_path):
     assert "fp64" in result.stdout and not any(line.startswith("* ") for line in result.stdout.splitlines())
     assert result.stderr.strip().splitlines() == [
         "clsky: error: PYOPENCL_CTX='no-such-platform' selects none of the devices above: unset it (clsky then picks "
-        "one), or give PLATFORM:DEVICE by their order (0:0 the first)"]
+        "one), or give PLATFORM:DEVICE by their order (0:0 the first; PyOpenCL matches other numbers and words in "
+        "the devices' names)"]
 
 
 def test_table_writes_a_loadable_file_and_raw_export(tmp_path):
