@@ -76,7 +76,7 @@ from ._cache import cache_directory, source_digest, store
 from ._files import read_user_text
 from .atmosphere import AtmosphereParameters, as_atmosphere
 from .ground import check_ground_mode
-from .errors import check_choice, check_flag, check_instance, check_integer, check_range, short
+from .errors import check_choice, check_flag, check_instance, check_integer, check_range
 from .mapping import cos_to_v
 from .quality import QualityLevel, level_for_budget, quality_level
 from .renderer_choice import DEFAULT_PIXELS, LOOKUP_ERROR, choose_renderer, renderer_row
@@ -431,17 +431,30 @@ def _percent(fraction) -> str:
     return f"{100 * fraction:.0f}" if fraction >= 10.0 else f"{100 * fraction:.3g}"
 
 
-def _at_lowest_sun(low) -> str:
-    """'at the lowest sun, ``low`` deg' for a plan's reasons, saying so where the table lookup's error was not
-    measured that low or that high (:data:`clsky.renderer_choice.LOOKUP_ERROR`: the estimate then is the
-    nearest measured sun's, :func:`clsky.renderer_choice.error_over`)."""
+def path_ends(low, high) -> tuple[str, str]:
+    """A sun path's ends [deg] as the plan prints them: 6 significant digits (a path computed from the sun's
+    positions ends at 59.99425... deg, not at 60: '59.9943'), more only where 6 would show two different ends
+    as one (89.99999 to 90 deg, not '90 to 90')."""
+    for digits in range(6, 18):
+        shown = f"{low:.{digits}g}", f"{high:.{digits}g}"
+        if low == high or shown[0] != shown[1]:
+            return shown
+    return shown
+
+
+def _at_lowest_sun(path) -> str:
+    """'at the lowest sun, ``low`` deg' for a plan's reasons (``path``: (low, high) [deg], its low end as
+    :func:`path_ends` prints it), saying so where the table lookup's error was not measured that low or that
+    high (:data:`clsky.renderer_choice.LOOKUP_ERROR`: the estimate then is the nearest measured sun's,
+    :func:`clsky.renderer_choice.error_over`)."""
+    low, high = path
     measured = [elevation for elevation, _ in LOOKUP_ERROR]
     beyond = ""
     if low < min(measured):
         beyond = f" (as measured at {min(measured):g} deg, the lowest measured)"
     elif low > max(measured):
         beyond = f" (as measured at {max(measured):g} deg, the highest measured)"
-    return f"at the lowest sun, {short(low)} deg{beyond}"
+    return f"at the lowest sun, {path_ends(low, high)[0]} deg{beyond}"
 
 
 def _costlier(method, chosen, pixels) -> str:
@@ -514,13 +527,13 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     if chosen.method == "lut" and ray_march:
         decisions.append(("renderer", march,
                           f"asked for; the table lookup alone would do: {_percent(lookup_error)} % "
-                          f"{_at_lowest_sun(low)}"))
+                          f"{_at_lowest_sun(scene.sun_elevations_deg)}"))
     elif chosen.method == "lut":
         ray = None
-        decisions.append(("renderer", "table lookup", f"its error {_at_lowest_sun(low)}, is "
+        decisions.append(("renderer", "table lookup", f"its error {_at_lowest_sun(scene.sun_elevations_deg)}, is "
                           f"{_percent(lookup_error)} % (measured)"))
     elif chosen.method == "raymarch":
-        reason = f"the table lookup's {_percent(lookup_error)} % {_at_lowest_sun(low)}, exceeds the budget"
+        reason = f"the table lookup's {_percent(lookup_error)} % {_at_lowest_sun(scene.sun_elevations_deg)}, exceeds the budget"
         if estimates["skyview"] <= budget:              # tiny frames: marching every pixel costs less than the map
             reason += (f"; the sky-view map's {100 * estimates['skyview']:.2g} % fits, but "
                        + _costlier("skyview", chosen, scene.pixels))
@@ -529,7 +542,7 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         would = (f"the {chosen.description}'s {100 * estimate:.2g} % (estimated: the ray march's + its own, "
                  f"measured) fits; " + ("so does the table lookup, but " + _costlier("lut", chosen, scene.pixels)
                                         if lookup_error <= budget else
-                                        f"the table lookup's {_percent(lookup_error)} % {_at_lowest_sun(low)}, "
+                                        f"the table lookup's {_percent(lookup_error)} % {_at_lowest_sun(scene.sun_elevations_deg)}, "
                                         f"exceeds the budget"))
         decisions.append(("renderer", march, f"asked for; {would}") if ray_march
                          else ("renderer", f"{chosen.description} (--method {chosen.method}), {march} at its nodes",
@@ -567,7 +580,7 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     w_low, w_high = table.sun_w_range
     decisions.append(("sun axis", f"elevations {elevations[0]:.1f} to {elevations[1]:.1f} deg, "
                       f"{table.size[2]} nodes ({100 * (w_high - w_low):.2g} % of the axis)",
-                      f"the path's {short(scene.sun_elevations_deg[0])} to {short(scene.sun_elevations_deg[1])} deg "
+                      f"the path's {' to '.join(path_ends(*scene.sun_elevations_deg))} deg "
                       f"+ {margins[1]:.1f} deg above and {margins[0]:.1f} deg below for curvature and orders"))
     whole_because = {"altitude": "view rays cross every altitude", "view": "the gather integrates every direction"}
     if table.orders == 1:

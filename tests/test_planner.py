@@ -4,6 +4,7 @@ planned table against frames from the full table of the same quality."""
 from __future__ import annotations
 
 import math
+import pathlib
 
 import numpy as np
 import pytest
@@ -139,18 +140,32 @@ def test_the_default_animation_plan(cl_context):
         assert f"  {topic} " in text
 
 
+def test_the_readme_shows_the_main_jobs_plan_as_clsky_prints_it(cl_context):
+    """README "Scene plan" shows the plan of its main job "as `clsky animate` prints it", its text the current
+    code's (bench/bench_quality.py writes it; the timings beside it are the dated run's): a change of the plan's
+    text without a rerun left it printing a path the code no longer printed."""
+    from clsky.anim.animate import AnimationConfig, planned_animation
+
+    readme = (pathlib.Path(__file__).parents[1] / "README.md").read_text(encoding="utf-8")
+    section = readme.split("<!-- bench:plan -->")[1].split("<!-- /bench:plan -->")[0]
+    shown = section.split("```\n")[1]
+    assert shown == planned_animation(AnimationConfig(), ctx=cl_context).plan.describe() + "\n"
+
+
 @pytest.mark.parametrize("path, lookup, sun_path", [
     ((-6.0, 60.0), "at the lowest sun, -6 deg (as measured at -4 deg, the lowest measured)", "the path's -6 to 60 deg"),
     ((89.99, 90.0), "at the lowest sun, 89.99 deg (as measured at 45 deg, the highest measured)",
      "the path's 89.99 to 90 deg"),
     ((8.0, 30.0), "at the lowest sun, 8 deg,", "the path's 8 to 30 deg"),
-    ((89.99999, 90.0), "at the lowest sun, 89.99999 deg", "the path's 89.99999 to 90 deg")])     # ':g': '90 to 90'
+    ((89.99999, 90.0), "at the lowest sun, 89.99999 deg", "the path's 89.99999 to 90 deg"),    # ':g': '90 to 90'
+    ((-6.0, 59.994250190379105), "at the lowest sun, -6 deg", "the path's -6 to 59.9943 deg")])  # the frames' path
 
 def test_the_plan_names_the_sun_path_as_given_and_where_the_lookup_error_was_measured(cl_context, path, lookup,
                                                                                       sun_path):
     """Plan.describe() printed a path of 89.99 to 90 deg as '90.0 to 90.0', and quoted the lookup's error at -4
     deg, the lowest measured (LOOKUP_ERROR), as that of a lower sun: now the path as given, and where the
-    estimate comes from when the sun is beyond the measured elevations."""
+    estimate comes from when the sun is beyond the measured elevations. A path's computed end (the default
+    animation's highest sun, 59.99425... deg) is shown to 6 significant digits, not with its 17 (path_ends)."""
     text = plan_scene(Scene(path), ctx=cl_context).describe()
     assert lookup in text and sun_path in text
 
