@@ -49,7 +49,7 @@ MIN_WAVELENGTHS, MAX_WAVELENGTHS = 3, 47
 #: Least N of a default grid whose spectra become colours (``clsky animate --wavelengths N``, whose frames
 #: are :func:`clsky.colorimetry.spectral_to_xyz`'s midpoint rule on the grid): against 1 nm sums, the
 #: sun's spectrum, Rayleigh light (E_sun lambda^-4) and a reddened sun (30 air masses of Rayleigh) are
-#: off by 0.0041 to 0.15 in x or y or by 0.8 to 22 % in Y for every N from 3 to 11 (N = 3 turns the
+#: off by 0.0042 to 0.17 in x or y or by 0.8 to 22 % in Y for every N from 3 to 11 (N = 3 turns the
 #: sun's own spectrum magenta, xy (0.370, 0.191) for (0.324, 0.333)); by at most 0.0072 and 0.36 % from
 #: 12 to 47 (measured 2026-12-07; tests/test_spectral.py). A table of fewer wavelengths, for their
 #: radiance alone, is the API's (:class:`SpectralTable`).

@@ -658,8 +658,8 @@ def relative_to_channel_max(actual, desired):
 def test_float32_table_close_to_float64(table_of, mode, orders):
     """Default settings, 16 x 64 x 16: the float32 table within 3e-6 of each channel's maximum of the
     float64 one (measured 1.02e-6 for single scattering, 1.04e-6 with 3 orders, worst at h = 64 km on a
-    ray 6.8 deg below the horizontal, 1.3 deg above that altitude's horizon, Rayleigh b; the README gives
-    4.7e-6 for the 32 x 256 x 32 single table)."""
+    ray 6.8 deg below the horizontal, 1.3 deg above that altitude's horizon, Rayleigh b; the 32 x 256 x 32
+    single table: the next test)."""
     grid = MEDIUM.replace(mode=mode, orders=orders)
     double = table_of(BASE[mode], grid)
     single = table_of(BASE[mode], grid.replace(dtype="float32"))
@@ -667,6 +667,22 @@ def test_float32_table_close_to_float64(table_of, mode, orders):
     error, where = relative_to_channel_max(single.data, double.data)
     logger.info("%s orders=%d: float32 - float64 = %.3g of the channel max at %s", mode, orders, error, where)
     assert error <= 3e-6
+
+
+@pytest.mark.parametrize("mode, measured", [("atmosphere-plus", 4.84e-6), ("physical", 4.11e-6)])
+def test_the_default_float32_single_table_is_within_the_readme_figure(cl_context, mode, measured):
+    """README "Physics": the float32 default single-scattering table (32 x 256 x 32) is within 5e-6 of the
+    float64 one's maximum (measured with PoCL on the Intel Xeon: 4.84e-6 atmosphere-plus, 4.11e-6 physical;
+    the README said 4.7e-6, which did not reproduce there). The bound 5e-6 is the README's figure; the
+    measurement is logged, so that a device rounding float32 another way shows how far it is from it."""
+    settings = TableSettings(orders=1, mode=mode)
+    double = ScatteringTable.build(preset(mode), settings, ctx=cl_context).data
+    single = ScatteringTable.build(preset(mode), settings.replace(dtype="float32"), ctx=cl_context).data
+    assert_finite_nonnegative(single, "float32")
+    error = float(np.abs(single - double).max() / np.abs(double).max())
+    logger.info("%s: float32 - float64 = %.3g of the table's maximum (%.3g measured on the Intel Xeon)", mode,
+                error, measured)
+    assert error <= 5e-6
 
 
 @pytest.mark.parametrize("case", sorted(EXTREMES))

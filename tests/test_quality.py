@@ -102,8 +102,8 @@ def reference_frames():
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["default", "high"])
 def test_level_keeps_its_promise(reference_frames, cl_context, name):
-    """The reference itself has converged to about 0.03 % in twilight and 0.007 % by day (README, "Quality
-    levels"), so the levels are held to their budget itself. Measured at 64 x 64 against the reference
+    """The reference itself resolves errors to about 0.09 % in civil twilight and 0.02 % by day (README,
+    "Quality levels"), so the levels are held to their budget itself. Measured at 64 x 64 against the reference
     with the azimuth harmonics: default 0.62 % (2026-12-02; 0.70 % since its table's 128 view nodes,
     2026-12-05), high 0.081 %, worst frame (civil twilight)."""
     reference, valid = reference_frames

@@ -245,6 +245,13 @@ def test_colour_needs_at_least_twelve_wavelengths():
     xy, y = _colour_errors(spectrum.MIN_COLOUR_WAVELENGTHS - 1)
     assert y > 0.007
     assert _colour_errors(3)[0] > 0.1
+    # README "Spectral radiance" and spectrum.MIN_COLOUR_WAVELENGTHS: fewer are off by 0.004 to 0.17 in x or
+    # y and 0.8 to 22 % in Y (measured 0.0042 (N = 10) to 0.171 (N = 4); 0.80 % (N = 11) to 22.2 % (N = 4)):
+    # the printed figures' last digits (the README said 0.15, N = 3's, until 2026-12-07)
+    fewer = np.array([_colour_errors(count) for count in range(spectrum.MIN_WAVELENGTHS,
+                                                               spectrum.MIN_COLOUR_WAVELENGTHS)])
+    assert 0.0035 <= fewer[:, 0].min() and fewer[:, 0].max() < 0.175
+    assert 0.0075 <= fewer[:, 1].min() and fewer[:, 1].max() < 0.225
     from clsky.anim.animate import AnimationConfig
 
     with pytest.raises(ValueError, match=r"wavelengths must be None or an integer in \[12, 47\], got 11"):
