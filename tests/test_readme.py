@@ -329,6 +329,30 @@ def test_the_first_lines_are_the_two_commands():
     assert '"animate", "--progress", "none"]' in main_job
 
 
+@pytest.mark.parametrize("failing", ["setup", "tests"])
+def test_ci_run_stops_at_a_failed_setup_or_default_suite(tmp_path, failing):
+    """.ci/run under ``set -e``: bash does not stop for a failure on the left of ``&&``, so a failed
+    scripts/setup.sh skipped the default suite and the run went on (exit 0 with CLSKY_CI_SLOW=0: green
+    with no test run). A copy of .ci/run with stand-ins for setup.sh and the venv's python (each records
+    its call and fails as asked) must stop with the failing step's status and run nothing after it."""
+    for folder in (".ci", "scripts", ".venv/bin"):
+        (tmp_path / folder).mkdir(parents=True)
+    (tmp_path / ".ci" / "run").write_text((ROOT / ".ci" / "run").read_text())
+    calls = tmp_path / "calls"
+    for stand_in, name, status in ((tmp_path / "scripts" / "setup.sh", "setup", 3),
+                                   (tmp_path / ".venv" / "bin" / "python", "tests", 5)):
+        stand_in.write_text(f'#!/usr/bin/env bash\necho "{name} $*" >> "{calls}"\n'
+                            f'exit {status if failing == name else 0}\n')
+        stand_in.chmod(0o755)
+    for slow in ("0", "1"):
+        calls.unlink(missing_ok=True)
+        done = subprocess.run(["bash", str(tmp_path / ".ci" / "run")], env={"PATH": "/usr/bin:/bin",
+                              "CLSKY_CI_SLOW": slow}, capture_output=True, text=True, timeout=60)
+        ran = calls.read_text().splitlines()
+        assert done.returncode == (3 if failing == "setup" else 5), (slow, done.returncode, ran, done.stderr)
+        assert ran == (["setup "] if failing == "setup" else ["setup ", "tests -m pytest -q"]), (slow, ran)
+
+
 #: (README text, reduced text) for the Python examples; each left side must occur in the README.
 PYTHON_REDUCTIONS = [
     ("TableSettings(size=(32, 256, 32), mode=\"physical\", orders=\"auto\")",
