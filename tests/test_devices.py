@@ -216,6 +216,35 @@ def test_gpu_checks_script_runs_only_the_steps_asked(tmp_path):
                                                                              "machine.txt", "profile.txt"]
 
 
+def test_intel_opencl_script_installs_where_its_argument_says_from_where_it_was_given(tmp_path):
+    """scripts/intel_opencl.sh DIR: a relative DIR is the caller's (it was resolved after the script's cd to
+    the checkout: an 800 MB install landed in the checkout, outside .gitignore); without DIR, .intel-opencl
+    in the checkout. A copy of the script in a stand-in checkout whose .venv's python and clsky record their
+    calls (pip's install makes the library the script looks for; the platform check passes)."""
+    checkout, caller = tmp_path / "checkout", tmp_path / "caller"
+    for folder in (checkout / "scripts", checkout / ".venv" / "bin", caller):
+        folder.mkdir(parents=True)
+    script = checkout / "scripts" / "intel_opencl.sh"
+    script.write_text((pathlib.Path(__file__).resolve().parent.parent / "scripts" / "intel_opencl.sh").read_text())
+    calls = tmp_path / "calls"
+    stand_ins = {"python": 'if [ "$1" = -m ]; then\n'
+                           '    while [ "$1" != --prefix ]; do shift; done\n'
+                           '    mkdir -p "$2/lib" && touch "$2/lib/libintelocl.so"\n'
+                           'fi\n',
+                 "clsky": ""}
+    for name, body in stand_ins.items():
+        stand_in = checkout / ".venv" / "bin" / name
+        stand_in.write_text(f'#!/usr/bin/env bash\necho "{name} $*" >> "{calls}"\n{body}exit 0\n')
+        stand_in.chmod(0o755)
+    script.chmod(0o755)
+    for argument, expected in (["my-intel"], caller / "my-intel"), ([], checkout / ".intel-opencl"):
+        result = subprocess.run([str(script), *argument], cwd=caller, capture_output=True, text=True, timeout=60)
+        assert result.returncode == 0, result.stderr
+        assert (expected / "vendors" / "intel-cpu.icd").read_text().strip() == str(expected / "lib" / "libintelocl.so")
+        assert f"OCL_ICD_VENDORS={expected}/vendors" in result.stderr
+    assert not (checkout / "my-intel").exists() and not (caller / ".intel-opencl").exists()
+
+
 def test_an_engine_builds_its_plain_program_only_when_it_launches_from_it(cl_context):
     """clsky._cl.Engine builds its plain program (no compile-time features) at its first use: a table of
     the physical preset (ozone, a ground) launches only the feature variants of the single-scattering and
