@@ -15,7 +15,8 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["rayleigh", "rayleigh_modified_atmosphereplus", "mie_cornette_shanks",
-           "RAYLEIGH_PHASES", "MIE_PHASES", "PHASE_MEANS", "rayleigh_phase", "mie_phase"]
+           "RAYLEIGH_PHASES", "MIE_PHASES", "PHASE_MEANS", "PHASE_FORMULAS", "rayleigh_phase", "mie_phase",
+           "phase_description"]
 
 
 def rayleigh(c):
@@ -53,6 +54,10 @@ def mie_cornette_shanks(c, g):
 #: normalised for every g by its prefactor; the modified Rayleigh is 0.8 (7/5 + 1/6).
 PHASE_MEANS = {"rayleigh": 1.0, "modified_atmosphereplus": 0.8 * (1.4 + 1.0 / 6.0), "cornette_shanks": 1.0}
 
+#: Each phase function written out, for the headers of exported tables (an engine's own lookup applies them).
+PHASE_FORMULAS = {"rayleigh": "3/4 (1 + c^2)", "modified_atmosphereplus": "0.8 (7/5 + c^2/2)",
+                  "cornette_shanks": "3 (1 - g^2) / (2 (2 + g^2)) (1 + c^2) / (1 + g^2 + 2 g c)^(3/2)"}
+
 #: Registries, keyed by AtmosphereParameters.rayleigh_phase / .mie_phase.
 RAYLEIGH_PHASES = {"rayleigh": rayleigh, "modified_atmosphereplus": rayleigh_modified_atmosphereplus}
 MIE_PHASES = {"cornette_shanks": mie_cornette_shanks}
@@ -66,3 +71,20 @@ def rayleigh_phase(atmosphere, c):
 def mie_phase(atmosphere, c):
     """The Mie phase function chosen by ``atmosphere``, at cosine c."""
     return MIE_PHASES[atmosphere.mie_phase](c, atmosphere.mie_g)
+
+
+def phase_description(atmosphere) -> dict:
+    """The phase functions of ``atmosphere`` as an exported table's header gives them (JSON-ready): F_R and
+    F_M written out (:data:`PHASE_FORMULAS`) with g, and their conventions: c = dot(Sun, V), no 1 / (4 pi),
+    and the notes' sign of g, for which a negative g peaks toward the sun (the usual 1 + g^2 - 2 g c with
+    this g would put the Mie peak opposite the sun)."""
+    return {
+        "F_R": PHASE_FORMULAS[atmosphere.rayleigh_phase],
+        "F_M": PHASE_FORMULAS[atmosphere.mie_phase],
+        "g": atmosphere.mie_g,
+        "c": "cos theta = dot(sun direction, view direction): 1 looking straight at the sun",
+        "normalization": (f"no 1/(4 pi): F_R's mean over the sphere is {PHASE_MEANS[atmosphere.rayleigh_phase]:.4f}, "
+                          f"F_M's {PHASE_MEANS[atmosphere.mie_phase]:.4f}"),
+        "sign_of_g": ("the notes' convention, + 2 g c in F_M's base: g < 0 peaks toward the sun (c = 1); the "
+                      "usual Henyey-Greenstein form 1 + g^2 - 2 g c takes -g"),
+    }

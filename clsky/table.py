@@ -69,6 +69,7 @@ from ._files import StagedWrites, as_path, atomic_write, binary_and_header, chec
 from .atmosphere import AtmosphereParameters, as_atmosphere
 from .errors import check_flag, check_instance, is_integer, is_real_number, short
 from .lookup import check_queries, check_table_values
+from .phase import phase_description
 from .settings import TableSettings
 from .solar import radiance_units
 
@@ -604,6 +605,7 @@ class ScatteringTable:
             "radiance": ("I = I_I * (F_R(cos theta) * Ibar_R + F_M(cos theta) * Ibar_M [+ multiple]), "
                          "all channels interpolated trilinearly in (u, v, w); the multiple_* channels "
                          "(physical mode) already include their phase"),
+            "phase_functions": phase_description(self.atmosphere),
             "orders_record": self.orders_record,
             "incident_light": list(self.atmosphere.incident_light),
             "units": radiance_units(self.atmosphere),
@@ -621,6 +623,9 @@ class ScatteringTable:
                 "rho = sqrt(h(2Rp+h)), K = sqrt(Ha(2Rp+Ha)); ground (mu < -rho/(Rp+h)): y = (H/2-1)(d_ground-h)/(rho-h); "
                 "space: y = H/2 + (H/2-1)(1 - (d_top-(Ha-h))/(rho+K-(Ha-h)))")
             description["mapping_formulas"]["azimuth_4d"] = "a = (A-1) phi / pi, phi in [0, pi] the view-sun azimuth"
+            description["mapping_formulas"]["nodes"] = (
+                "u = x/(W-1), y: view_4d (not v), w = w_low + (w_high - w_low) * z/(D-1), a: azimuth_4d; the "
+                "view mappings v above and v = y/(H-1) are those of the 3D grid of azimuth_harmonics only")
             description["radiance"] = ("I = I_I * (F_R(nu) * Ibar_R + F_M(nu) * Ibar_M + multiple), channels "
                                        "interpolated quadrilinearly, never across the horizon (y = H/2-1 to H/2)")
         harmonics = self.settings.azimuth_harmonics if self.gathered is not None else 0

@@ -4,6 +4,7 @@ import json
 
 import numpy as np
 import pytest
+from numpy.testing import assert_allclose
 
 from clsky import ScatteringTable, TableFormatError, TableSettings, preset
 from clsky.table import FORMAT_VERSION, array_checksum
@@ -128,6 +129,37 @@ def test_raw_export_layout(table, tmp_path):
     assert description["parameters_hash"] == table.parameters_hash
     with pytest.raises(FileExistsError):
         table.export_raw(tmp_path / "sky")
+
+
+@pytest.mark.parametrize("name", ["physical", "atmosphere-plus"])
+def test_raw_export_says_what_its_phase_functions_are(name, cl_context, tmp_path):
+    """The raw header named F_R and F_M without saying what they are: their formulas (no 1/(4 pi)), what c
+    is, and the sign of g, which with the usual 1 + g^2 - 2 g c puts the Mie peak opposite the sun. The
+    header's formulas, evaluated as written (^ as a power, juxtaposition as a product), are clsky's phase
+    functions to rounding, and their Mie peak is toward the sun."""
+    import re
+
+    from clsky.phase import mie_phase, rayleigh_phase
+
+    atmosphere = black_preset(name)
+    mode = "physical" if name == "physical" else "atmosphere-plus"
+    table = ScatteringTable.build(atmosphere, SETTINGS.replace(mode=mode, orders=1), ctx=cl_context)
+    _, header = table.export_raw(tmp_path / "sky")
+    phases = json.loads(header.read_text())["phase_functions"]
+    assert phases["g"] == atmosphere.mie_g and "no 1/(4 pi)" in phases["normalization"]
+
+    def evaluated(formula, c, g):
+        code = re.sub(r"\)\s*\(", ")*(", formula.replace("^", "**"))
+        code = re.sub(r"(\d)\s*\(", r"\1*(", code)
+        code = re.sub(r"(\d|\))\s+([cg])\b", r"\1*\2", code)
+        code = re.sub(r"\b([cg])\s+([cg(])", r"\1*\2", code)
+        return eval(code, {"c": c, "g": g})
+
+    c = np.linspace(-1.0, 1.0, 41)
+    assert_allclose(evaluated(phases["F_R"], c, atmosphere.mie_g), rayleigh_phase(atmosphere, c), rtol=1e-14)
+    mie = evaluated(phases["F_M"], c, atmosphere.mie_g)
+    assert_allclose(mie, mie_phase(atmosphere, c), rtol=1e-14)
+    assert np.argmax(mie) == c.size - 1 and "g < 0 peaks toward the sun" in phases["sign_of_g"]
 
 
 def test_invalid_build_arguments(table):

@@ -392,11 +392,16 @@ def test_cli_builds_and_describes_a_4d_table(tmp_path):
 def test_raw_export_of_a_4d_table_says_what_its_channels_and_harmonics_are(table4d, tmp_path):
     """The raw header of a 4D table with harmonics described it as a 3D table's: multiple_* channels "the
     azimuth average" (they vary by ~1000x across the azimuth axis of a dusk table) and the harmonics on "the
-    table's nodes" (they lie on the 3D grid, its view mapping not view_4d)."""
+    table's nodes" (they lie on the 3D grid, its view mapping not view_4d); its nodes' formula gave the 3D
+    view axis, v = y/(H-1)."""
     import json
 
     _, header = table4d.export_raw(tmp_path / "sky")
-    block = json.loads(header.read_text())["azimuth_harmonics"]
+    description = json.loads(header.read_text())
+    # its nodes' formula said v = y/(H-1) beside view_4d: y follows view_4d, the 3D v the harmonics' grid alone
+    assert "y: view_4d (not v)" in description["mapping_formulas"]["nodes"]
+    assert "3D grid of azimuth_harmonics only" in description["mapping_formulas"]["nodes"]
+    block = description["azimuth_harmonics"]
     assert "the nodes of the 3D grid of the same W x H x D" in block["layout"]
     assert "integrated along each 4D node's own ray" in block["radiance"]
     assert "are the azimuth average" not in block["radiance"]
