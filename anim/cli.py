@@ -241,6 +241,9 @@ def _unused_options(args):
         unused.append(("skyview_size", f"sets the sky-view map, which method 'compare' does not read with "
                                        f"{where('table_size', '--table-size')}: without a scene plan it compares "
                                        f"the ray march with the 3D table lookup"))
+    if getattr(args, "hdr", None) != "exr" and hasattr(args, "hdr_precision"):     # animate's HDR frames
+        frames = f"{where('hdr', '--hdr')} {args.hdr} writes" if args.hdr else "without --hdr clsky writes"
+        unused.append(("hdr_precision", f"sets the EXR frames' pixel type, and {frames} no EXR frames (--hdr exr)"))
     if args.quality is not None:
         unused.append(("error_budget", f"picks a quality level, and {where('quality', '--quality')} names one "
                                        f"({args.quality}): give one of them"))
@@ -304,11 +307,12 @@ def run_animate(args):
 
     reuse_freed_memory()                         # before the frames' threads: their memory kept for the next frames
     scene.apply_scene(args, args.scene_parser)
+    if not args.print_scene:                     # which writes every option typed (README "Command line")
+        _check_options_used(args)                # before the values: an unused option is named as such
     config = _config(args)
     farm = clsky_cli.farm_of(args)               # --workers / --scheduler: checked, started after the checks
     if _printed_scene(args, config):
         return 0
-    _check_options_used(args)
     option = scene.source_of(args, "output") or "--output"
     clsky_cli.check_not_inputs([(option, path) for path in (config.output_path, config.metrics_path(".csv"),
                                                             config.metrics_path(".json")) if path is not None],
@@ -360,11 +364,12 @@ def run_render(args):
         output = check_suffix(args.output, ".png", name("output", "--output"))
     except ValueError as error:
         raise clsky_cli.UsageError(str(error)) from None
+    if not args.print_scene:
+        _check_options_used(args)
     config = _config(args)
     extra = {"sun_elevation_deg": args.sun_elevation, "sun_azimuth_deg": args.sun_azimuth, "output": args.output}
     if _printed_scene(args, config, **extra):
         return 0
-    _check_options_used(args)
     clsky_cli.check_not_inputs([(name("output", "--output"), output)], [("the --scene file", args.scene)])
     clsky_cli.check_outputs([(name("output", "--output"), output)], args.force)
     try:

@@ -471,6 +471,12 @@ def test_cli_hdr_exr_panorama(tmp_path):
     (["--hdr-precision", "half"], "--hdr-precision"),
     (["--hdr", "npy", "--hdr-precision", "half"], "--hdr-precision"),
     (["--hdr", "hdr", "--hdr-precision", "half"], "--hdr-precision"),
+    # an option the frames would not use is refused, whatever its value (the default 'float' typed ran)
+    (["--hdr", "hdr", "--hdr-precision", "float"], "--hdr-precision sets the EXR frames' pixel type, and --hdr hdr "
+                                                   "writes no EXR frames (--hdr exr)"),
+    (["--hdr-precision", "float"], "--hdr-precision sets the EXR frames' pixel type, and without --hdr clsky writes "
+                                   "no EXR frames (--hdr exr)"),
+    (["--hdr", "npy", "--hdr-precision", "half"], "--hdr-precision sets the EXR frames' pixel type, and --hdr npy"),
 ], ids=lambda value: " ".join(value) if isinstance(value, list) else value)
 def test_cli_bad_hdr_options_one_line_exit_2(tmp_path, args, named):
     result = forked_cli.run("clsky.anim", "animate", *args, "--progress", "none", cwd=tmp_path, timeout=120)

@@ -65,7 +65,9 @@ def test_table_errors_name_the_option(tmp_path, args, named):
     (["--table-size", "1", "33", "7"], "--table-size W must be"),
     (["--table-size", "9", "33", "5000"], "--table-size D must be"),
     (["--size", "8"], "--size must be"),
-    (["--hours", "10", "5"], "--hours END must be"),
+    (["--location", "45", "5", "--hours", "10", "5"], "--hours END must be"),
+    # an option the frames would not use is named as such before its value is looked at
+    (["--hours", "10", "5"], "--hours sets real sun positions: give --location LAT LON too"),
     (["--error-budget", "nan"], "--error-budget must be"),
     (["--preset", "venus"], "--preset must be"),
     (["--location", "45", "5", "--step-minutes", "0.001"], "--step-minutes must be"),
