@@ -294,6 +294,21 @@ def test_a_bad_sweep_line_is_one_line_before_any_work(line, message, tmp_path, c
     assert sorted(p.name for p in tmp_path.iterdir()) == ["weather.txt"]
 
 
+def test_the_readme_sweep_message_on_the_example_file(tmp_path, capsys):
+    """README "Frame farms": a bad line is named by its line in the file, comments counted: the README gave
+    'line 3' for the third table line of examples/weather.txt, which its three comment lines make line 6."""
+    lines = (pathlib.Path(__file__).resolve().parents[1] / "examples" / "weather.txt").read_text().splitlines()
+    table_lines = [n for n, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")]
+    lines[table_lines[2]] = "--preset physical --ground-albedo 2 -o ozone_high.npz"
+    (tmp_path / "weather.txt").write_text("\n".join(lines) + "\n")
+    with inside(tmp_path):
+        assert main(["table", "--sweep", "weather.txt", *SWEEP_OPTIONS]) == 2
+    shown = "weather.txt line 6: --ground-albedo must be a number in [0, 1], got 2"
+    assert capsys.readouterr().err == f"clsky: error: {shown}\n"
+    readme = (pathlib.Path(__file__).resolve().parents[1] / "README.md").read_text()
+    assert " ".join(shown.split()) in " ".join(readme.replace("`", "").split())
+
+
 def test_a_sweep_refuses_what_it_would_ignore_or_overwrite(tmp_path, capsys):
     """The command line's -o was dropped without a word (every line names its own); a line whose output was
     the sweep file itself replaced it with --force."""

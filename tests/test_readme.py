@@ -329,6 +329,13 @@ def test_the_first_lines_are_the_two_commands():
     assert '"animate", "--progress", "none"]' in main_job
 
 
+def test_the_readme_names_the_python_that_pyproject_requires():
+    """The README said nothing of the Python it needs (setup.sh's pip then failed on an older one)."""
+    required = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["requires-python"]
+    assert required.startswith(">=")
+    assert f"Python {required[2:]} or later" in " ".join(TEXT.split())
+
+
 @pytest.mark.parametrize("failing", ["setup", "tests"])
 def test_ci_run_stops_at_a_failed_setup_or_default_suite(tmp_path, failing):
     """.ci/run under ``set -e``: bash does not stop for a failure on the left of ``&&``, so a failed
