@@ -62,6 +62,15 @@ def _check_modules(source: pathlib.Path) -> None:
             sys.exit(f"record_pins: module {name} came from {path}, not from --source {source}: values void")
 
 
+def _commit_of(checkout, what) -> str:
+    """The commit ``checkout`` is at; exits with git's own reason (one line) where it is no git checkout."""
+    done = subprocess.run(["git", "-C", str(checkout), "rev-parse", "HEAD"], capture_output=True, text=True)
+    if done.returncode != 0:
+        reason = (done.stderr.strip().splitlines() or ["git rev-parse failed"])[-1]
+        sys.exit(f"record_pins: {what} {checkout} is no git checkout with a commit: {reason}")
+    return done.stdout.strip()
+
+
 def main(argv=None) -> int:
     pins = _load_pins()
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -70,16 +79,14 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if args.source is not None:
         source = args.source.resolve()
-        head = subprocess.run(["git", "-C", str(source), "rev-parse", "HEAD"], capture_output=True, text=True,
-                              check=True).stdout.strip()
+        head = _commit_of(source, "--source")
         for name in args.names:
             if not head.startswith(pins.PINS[name].commit):
                 sys.exit(f"record_pins: pin {name!r} belongs to commit {pins.PINS[name].commit}; "
                          f"--source is at {head[:7]}")
         _use_source(source)
     else:
-        head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True,
-                              check=True).stdout.strip()
+        head = _commit_of(ROOT, "this checkout")
     import clsky
     from clsky import _cl
 

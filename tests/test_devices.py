@@ -245,6 +245,17 @@ def test_intel_opencl_script_installs_where_its_argument_says_from_where_it_was_
     assert not (checkout / "my-intel").exists() and not (caller / ".intel-opencl").exists()
 
 
+def test_record_pins_names_a_source_that_is_no_checkout(tmp_path):
+    """scripts/record_pins.py --source DIR where DIR is no git checkout: one line with git's reason (it was a
+    CalledProcessError traceback, git's reason captured and never shown), before any pin is computed."""
+    script = pathlib.Path(__file__).resolve().parent.parent / "scripts" / "record_pins.py"
+    result = subprocess.run([sys.executable, str(script), "ground", "--source", str(tmp_path)], capture_output=True,
+                            text=True, timeout=120, env={**os.environ, "GIT_CEILING_DIRECTORIES": str(tmp_path.parent)})
+    assert result.returncode == 1 and result.stdout == ""
+    assert result.stderr.startswith(f"record_pins: --source {tmp_path} is no git checkout with a commit: ")
+    assert result.stderr.count("\n") == 1 and "not a git repository" in result.stderr, result.stderr
+
+
 def test_an_engine_builds_its_plain_program_only_when_it_launches_from_it(cl_context):
     """clsky._cl.Engine builds its plain program (no compile-time features) at its first use: a table of
     the physical preset (ozone, a ground) launches only the feature variants of the single-scattering and
