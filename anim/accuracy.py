@@ -203,14 +203,20 @@ def render_frames(renderer, method, prepared, skyview=None):
     return frames
 
 
-def render_reference(size=128, doubled=(), atmosphere="physical", level="reference"):
-    """The reference frames {name: HDR (size, size, 3)} and the fisheye's valid mask."""
+def render_reference(size=128, doubled=(), atmosphere="physical", level="reference", progress=None):
+    """The reference frames {name: HDR (size, size, 3)} and the fisheye's valid mask. ``progress(stage,
+    done, total)``: stage 'reference', reported before the first frame's table (the longest stage of a
+    sweep: minutes) and after each frame."""
     directions, valid = FisheyeCamera(size).directions()
     frames = {}
-    for name, elevation in SUN_ELEVATIONS.items():
+    if progress is not None:
+        progress("reference", 0, len(SUN_ELEVATIONS))
+    for index, (name, elevation) in enumerate(SUN_ELEVATIONS.items()):
         with reference_renderer(elevation, doubled, atmosphere, level) as renderer:
             frames[name] = renderer.render_raymarch(renderer.prepare(directions, valid),
                                                     sun_direction(90.0 - elevation, SUN_AZIMUTH), 0.0)
+        if progress is not None:
+            progress("reference", index + 1, len(SUN_ELEVATIONS))
     return frames, valid
 
 
@@ -246,6 +252,8 @@ def measure(candidates, reference, valid, atmosphere="physical", progress=None):
     size = valid.shape[0]
     directions, _ = FisheyeCamera(size).directions()
     rows = []
+    if progress is not None:            # the bar from the start: the first candidate's table takes seconds
+        progress("candidates", 0, len(candidates))
     for index, candidate in enumerate(candidates):
         settings = candidate.table
         start, cpu = time.perf_counter(), time.process_time()

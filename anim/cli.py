@@ -426,7 +426,7 @@ def run_bench(args):
                                                            "sky-view 32 x 64")]
     progress, close = clsky_cli.progress_bar(args.progress)
     try:
-        reference, valid = accuracy.render_reference(args.size, level=args.reference_quality)
+        reference, valid = accuracy.render_reference(args.size, level=args.reference_quality, progress=progress)
         rows = accuracy.measure(candidates, reference, valid, progress=progress)
     finally:
         close()

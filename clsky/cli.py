@@ -130,7 +130,9 @@ class _Parser(argparse.ArgumentParser):
 
 
 STAGE_LABELS = {"single": ("single scattering", "slab"), "orders": ("scattering orders", "order"),
-                "frames": ("frames", "frame"), "tables": ("tables", "table")}
+                "frames": ("frames", "frame"), "tables": ("tables", "table"),
+                "reference": ("reference frames", "frame"), "candidates": ("candidates", "candidate"),
+                "reference convergence": ("reference convergence", "group")}
 #: --progress's choices; "auto", the default, is "leave" where stderr is a terminal and "none" elsewhere.
 PROGRESS_MODES = ("auto", "display", "leave", "none")
 #: The bar of a stage whose total is unknown (the orders, iterated to convergence): how many, and since when

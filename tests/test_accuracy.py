@@ -57,6 +57,47 @@ def _tiny_rows(reference, valid, march_table=None):
     return rows
 
 
+def test_the_sweep_reports_progress_from_its_first_table(monkeypatch, draft_stand_in_reference):
+    """`clsky bench accuracy` showed no bar through the reference's four tables (minutes) and the first
+    candidate: its first report came after that candidate. The reference now reports before its first
+    table and after each frame, the candidates before the first table and after each."""
+    import clsky
+
+    calls = []
+
+    class Renderer:                                  # the reference's renderer, recording what it does
+        def __init__(self, elevation, *args):
+            calls.append(("table", elevation))
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return False
+
+        def prepare(self, directions, valid):
+            return None
+
+        def render_raymarch(self, prepared, sun, altitude):
+            return np.zeros((16, 16, 3))
+
+    with monkeypatch.context() as patch:
+        patch.setattr(accuracy, "reference_renderer", Renderer)
+        accuracy.render_reference(16, progress=lambda *report: calls.append(report))
+    frames = len(accuracy.SUN_ELEVATIONS)
+    expected = [("reference", 0, frames)]
+    for index, elevation in enumerate(accuracy.SUN_ELEVATIONS.values()):
+        expected += [("table", elevation), ("reference", index + 1, frames)]
+    assert calls == expected
+    calls.clear()
+    build = clsky.ScatteringTable.build
+    monkeypatch.setattr(clsky.ScatteringTable, "build", lambda *a, **k: calls.append(("build",)) or build(*a, **k))
+    reference, valid = draft_stand_in_reference
+    tiny = accuracy.Candidate("tiny", "table size", clsky.TableSettings(size=(8, 32, 8), orders=1, mode="physical"))
+    accuracy.measure([tiny, tiny], reference, valid, progress=lambda *report: calls.append(report))
+    assert calls == [("candidates", 0, 2), ("build",), ("candidates", 1, 2), ("build",), ("candidates", 2, 2)]
+
+
 def test_measure_gives_every_column(draft_stand_in_reference):
     """The sweep's rows: the renderer, times, and the worst p95 as the maximum over the elevations
     (the draft stand-in and a small table under the ray march: plumbing, not numbers)."""

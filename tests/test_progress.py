@@ -52,6 +52,22 @@ def test_bars_on_a_terminal_or_when_asked(monkeypatch, mode, stream):
     assert not any("order/s" in line or "3order" in line for line in lines)
 
 
+def test_the_accuracy_sweeps_stages_name_their_steps(monkeypatch):
+    """`clsky bench accuracy`'s stages (anim/accuracy.py) counted a generic "step": the reference's frames
+    and the candidates are named, each with its unit."""
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    update, close = cli.progress_bar("leave")
+    update("reference", 0, 4)
+    update("reference", 2, 4)
+    update("candidates", 0, 3)
+    update("candidates", 1, 3)
+    close()
+    lines = sys.stderr.getvalue().replace("\r", "\n").splitlines()
+    assert any(line.startswith("reference frames:") and "2/4" in line and "frame/s" in line for line in lines), lines
+    assert any(line.startswith("candidates:") and "1/3" in line and "candidate/s" in line for line in lines), lines
+    assert not any("step" in line for line in lines), lines
+
+
 def test_command_line_in_a_pipe_prints_only_its_summary(tmp_path):
     result = subprocess.run([sys.executable, "-m", "clsky", "table", "--size", "4", "8", "4", "--orders", "2",
                              "-o", "t.npz"], cwd=tmp_path, capture_output=True, text=True)
