@@ -406,10 +406,12 @@ def run_bench(args):
 
     if not 16 <= args.size <= 2048:
         raise clsky_cli.UsageError(f"--size must be an integer in [16, 2048], got {short(args.size)}")
-    elevation_plot = args.elevation_plot or str(accuracy_plot.elevation_plot_path(args.plot))
-    try:
+    try:                                           # the elevation plot's default comes from a checked --plot
         targets = {option: check_suffix(path, suffix, option) for option, path, suffix in (
-            ("--output", args.output, ".csv"), ("--plot", args.plot, ".png"), ("--elevation-plot", elevation_plot, ".png"))}
+            ("--output", args.output, ".csv"), ("--plot", args.plot, ".png"))}
+        elevation_plot = (args.elevation_plot if args.elevation_plot is not None else
+                          str(accuracy_plot.elevation_plot_path(targets["--plot"])))
+        targets["--elevation-plot"] = check_suffix(elevation_plot, ".png", "--elevation-plot")
     except ValueError as error:
         raise clsky_cli.UsageError(str(error)) from None
     if targets["--elevation-plot"].resolve() == targets["--plot"].resolve():

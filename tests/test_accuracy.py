@@ -126,11 +126,18 @@ def test_measure_on_tiny_frames(stand_in_reference):
 @pytest.mark.parametrize("args,named", [(["--size", "8"], "--size"), (["-o", "x.txt"], "--output"),
                                         (["--plot", "x.jpg"], "--plot"),
                                         (["--elevation-plot", "x.jpg"], "--elevation-plot"),
-                                        (["--elevation-plot", "accuracy.png"], "--elevation-plot")])
+                                        (["--elevation-plot", "accuracy.png"], "--elevation-plot"),
+                                        # "PosixPath('.') has an empty name", the elevation plot's derived from
+                                        # an unchecked --plot; an empty --elevation-plot took the default
+                                        (["--plot", ""], "--plot must be a file path, got an empty one"),
+                                        (["--plot", "."], "--plot must end in .png"),
+                                        (["--plot", "/"], "--plot must end in .png"),
+                                        (["--elevation-plot", ""], "--elevation-plot must be a file path")])
 def test_bench_accuracy_bad_arguments(tmp_path, args, named):
     result = forked_cli.run("clsky.anim", "bench", "accuracy", *args, cwd=tmp_path)
     assert result.returncode == 2
-    assert result.stderr.count("\n") == 1 and named in result.stderr
+    assert result.stderr.count("\n") == 1 and named in result.stderr, result.stderr
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_bench_accuracy_checks_the_derived_elevation_plot_before_work(tmp_path):
