@@ -108,6 +108,47 @@ photon_count = integer_in(2, 10**10)
 standard_error = real_in(0.0, 1.0, high_open=True)
 
 
+def npz_file(text: str) -> pathlib.Path:
+    """An argparse type: a path ending in .npz (NumPy's savez adds the suffix to a name without it, so a cache
+    named without it was written under another name and never read again)."""
+    path = pathlib.Path(text)
+    if path.suffix != ".npz" or path.name == ".npz":
+        raise argparse.ArgumentTypeError(f"must end in .npz after a file name (NAME.npz), got {text!r}")
+    return path
+
+
+def save_reference_cache(path: pathlib.Path, level: str, reference: dict, valid, **extra):
+    """The accuracy reference's frames (``reference``: {frame name: HDR}, ``valid``: the fisheye's mask) and
+    ``extra`` arrays saved in ``path`` (bench_quality.py, read by bench_accuracy.py), with the quality level
+    that rendered them; written to a temporary beside it and renamed (an interrupted save left a torn file)."""
+    import numpy as np
+
+    from clsky._files import atomic_write
+
+    with atomic_write(path, overwrite=True) as temporary:
+        np.savez(temporary, valid=valid, level=level, **reference, **extra)
+
+
+def load_reference_cache(path: pathlib.Path, level: str, size: int, names) -> dict:
+    """The arrays of a reference cache (:func:`save_reference_cache`), after checking that its frames are
+    ``names``' at ``size`` x ``size`` rendered at the quality level ``level``; SystemExit naming the file
+    otherwise (a --smoke cache, rendered at the draft level, was taken for the 'reference' level's)."""
+    import numpy as np
+
+    with np.load(path) as cached:
+        arrays = {name: cached[name] for name in cached.files}
+    held = str(arrays["level"]) if "level" in arrays else "an unrecorded level"
+    if held != level:
+        raise SystemExit(f"--reference-cache {path} holds frames of {held}, not of the {level!r} level this run "
+                         f"compares with")
+    missing = [name for name in ("valid", *names) if name not in arrays]
+    if missing or arrays["valid"].shape != (size, size):
+        raise SystemExit(f"--reference-cache {path} holds {'no ' + ', '.join(missing) if missing else 'frames of '}"
+                         f"{'' if missing else ' x '.join(map(str, arrays['valid'].shape))}, not {size} x {size} "
+                         "frames")
+    return arrays
+
+
 def parse_arguments(parser: argparse.ArgumentParser, argv=None):
     """``parser.parse_args(argv)``, with ``--smoke`` implying ``--no-readme``."""
     args = parser.parse_args(argv)

@@ -32,14 +32,14 @@ import datetime
 import pathlib
 import tempfile
 
-import numpy as np
 
 from _report import SMOKE, add_output_arguments, load_average, load_note, machine, parse_arguments, write_readme_section
-from _report import integer_in
+from _report import integer_in, load_reference_cache, npz_file
 
 import clsky
 from clsky.anim import accuracy, accuracy_plot, writers
 from clsky._cl import default_device, describe_device
+from clsky._files import StagedWrites
 
 DOCS = pathlib.Path(__file__).resolve().parent.parent / "docs"
 #: The candidates of a --smoke run (over an SMOKE.table base): one table, one table knob, one ray march,
@@ -50,7 +50,7 @@ SMOKE_CANDIDATES = ("default", "H / 2", "ray march 16 samples", "sky-view 16 x 3
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--size", type=integer_in(16, 2048), default=128)
-    parser.add_argument("--reference-cache", type=pathlib.Path)
+    parser.add_argument("--reference-cache", type=npz_file, metavar="FILE.npz")
     parser.add_argument("--docs", type=pathlib.Path, metavar="DIR",
                         help="write accuracy.csv and the two plots into DIR (default: docs/ when writing the "
                              "README; none with --no-readme; a temporary directory with --smoke)")
@@ -59,6 +59,10 @@ def main():
                              "(default docs/); --size: that sweep's frame size")
     add_output_arguments(parser)
     args = parse_arguments(parser)
+    try:                       # the plots need matplotlib: refused before the sweep, as `clsky bench accuracy` does
+        accuracy_plot.require_plotting()
+    except ImportError as error:
+        parser.error(str(error))
     candidates, level = accuracy.default_candidates(), "reference"
     if args.smoke:
         args.size, level = SMOKE.frame, SMOKE.reference_level
@@ -86,21 +90,20 @@ def replot(csv_path, docs, size):
 def run(args, candidates, level):
 
     if args.reference_cache:
-        cached = np.load(args.reference_cache)
+        cached = load_reference_cache(args.reference_cache, level, args.size, accuracy.SUN_ELEVATIONS)
         reference, valid = {name: cached[name] for name in accuracy.SUN_ELEVATIONS}, cached["valid"]
-        if valid.shape != (args.size, args.size):
-            raise SystemExit(f"{args.reference_cache} holds {valid.shape} frames, not {args.size} x {args.size}")
     else:
         reference, valid = accuracy.render_reference(args.size, level=level)
     load_start = load_average()
     rows = accuracy.measure(candidates, reference, valid)
     load_end = load_average()
-    if args.docs is not None:
+    if args.docs is not None:       # the CSV and its plots land together (a failed plot left a new CSV beside old plots)
         args.docs.mkdir(parents=True, exist_ok=True)
-        writers.write_csv(args.docs / "accuracy.csv", rows, force=True)
-        written = [args.docs / "accuracy.csv",
-                   *accuracy_plot.plot_csv(args.docs / "accuracy.csv", args.docs / "accuracy.png",
-                                           args.docs / "accuracy_elevation.png", size=args.size, force=True)]
+        written = [args.docs / name for name in ("accuracy.csv", "accuracy.png", "accuracy_elevation.png")]
+        with StagedWrites() as staging:
+            writers.write_csv(written[0], rows, force=True, staging=staging)
+            accuracy_plot.pareto_plot(rows, written[1], force=True, size=args.size, staging=staging)
+            accuracy_plot.elevation_plot(rows, written[2], force=True, staging=staging)
         print("wrote " + ", ".join(map(str, written)), flush=True)
     front = {r["candidate"] for r in accuracy.pareto_front(rows)}
     names = list(accuracy.SUN_ELEVATIONS)

@@ -38,7 +38,7 @@ import tempfile
 import numpy as np
 from _report import (SMOKE, add_output_arguments, best_timing, load_average, load_note, machine,
                      parse_arguments, timed_with_cpu, write_readme_section)
-from _report import integer_in
+from _report import integer_in, load_reference_cache, npz_file, save_reference_cache
 
 import clsky
 from clsky.anim import accuracy, animate, metrics, writers
@@ -88,7 +88,7 @@ def main():
     parser.add_argument("--size", type=integer_in(16, 2048), default=64)
     parser.add_argument("--groups", nargs="*", choices=list(accuracy.REFERENCE_GROUPS),
                         help="default: all (with --smoke: ray march)")
-    parser.add_argument("--reference-cache", type=pathlib.Path)
+    parser.add_argument("--reference-cache", type=npz_file, metavar="FILE.npz")
     parser.add_argument("--docs", type=pathlib.Path, metavar="DIR",
                         help="write quality.csv into DIR (default: docs/ when writing the README; none with "
                              "--no-readme; a temporary directory with --smoke)")
@@ -113,24 +113,22 @@ def run(args, reference_name):
     loads = []
 
     if args.reference_cache and args.reference_cache.exists():
-        cached = np.load(args.reference_cache)
+        cached = load_reference_cache(args.reference_cache, reference_name, args.size, NAMES)
         reference, valid = {name: cached[name] for name in NAMES}, cached["valid"]
         reference_seconds, change = float(cached["seconds"]), json.loads(str(cached["convergence"]))
-        reference_cpu = float(cached["cpu_seconds"]) if "cpu_seconds" in cached.files else None
+        reference_cpu = float(cached["cpu_seconds"]) if "cpu_seconds" in cached else None
         args.groups = [g for g in change if g != "sum"]
-        if valid.shape != (args.size, args.size):
-            raise SystemExit(f"{args.reference_cache} holds {valid.shape} frames, not {args.size} x {args.size}")
     else:
         (reference, valid), reference_seconds, reference_cpu = timed_with_cpu(
             lambda: accuracy.render_reference(args.size, level=reference_name))
         loads.append(load_average())
         if args.reference_cache:    # kept even if the convergence fails (a doubled group may not fit in memory)
-            np.savez(args.reference_cache, valid=valid, seconds=reference_seconds, cpu_seconds=reference_cpu,
-                     convergence="{}", **reference)
+            save_reference_cache(args.reference_cache, reference_name, reference, valid, seconds=reference_seconds,
+                                 cpu_seconds=reference_cpu, convergence="{}")
         change = accuracy.reference_convergence(reference, valid, groups=args.groups, level=reference_name)
         if args.reference_cache:
-            np.savez(args.reference_cache, valid=valid, seconds=reference_seconds, cpu_seconds=reference_cpu,
-                     convergence=json.dumps(change), **reference)
+            save_reference_cache(args.reference_cache, reference_name, reference, valid, seconds=reference_seconds,
+                                 cpu_seconds=reference_cpu, convergence=json.dumps(change))
     print(f"reference: {reference_seconds:.0f} s", flush=True)
     for group, values in change.items():
         print(f"reference, {group} doubled: {percent(values)} %", flush=True)

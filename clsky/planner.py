@@ -520,7 +520,7 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     harmonics, harmonics_because = azimuth_harmonics(level, scene.sun_elevations_deg, mode)
     table = level.table.replace(mode=mode, sampling=sampling, azimuth_harmonics=harmonics)
     chosen, estimate, estimates = choose_renderer(scene.sun_elevations_deg, budget, level.name, pixels=scene.pixels)
-    lookup_error, low = estimates["lut"], scene.sun_elevations_deg[0]
+    lookup_error = estimates["lut"]
     ray = level.ray if samples is None else level.ray.replace(view_steps=samples)
     march = f"ray march, {ray.view_steps} samples per ray" + (
         "" if samples is None else f" (asked for; the {level.name} level's {level.ray.view_steps})")

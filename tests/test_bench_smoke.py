@@ -10,6 +10,7 @@ on a loaded 2-core machine, in the comments); .ci/run runs them after the defaul
 from __future__ import annotations
 
 import math
+import os
 import pathlib
 import re
 import subprocess
@@ -251,6 +252,12 @@ def test_readme_section_is_replaced_atomically(tmp_path):
     ("bench_twilight", ["--target", "5"], "argument --target: must be a number in [0, 1), got '5'"),
     ("bench_spectral", ["--spectral", "5"], "argument --spectral: must be an integer in [12, 47], got '5'"),
     ("bench_azimuth", ["--elevations", "5,100"], "argument --elevations: must be a number in [-90, 90], got '100'"),
+    # np.savez added .npz to a cache named without it: bench_quality recomputed its reference every run (minutes),
+    # bench_accuracy ended in a traceback
+    ("bench_quality", ["--reference-cache", "refc"], "argument --reference-cache: must end in .npz after a file "
+                                                     "name (NAME.npz), got 'refc'"),
+    ("bench_accuracy", ["--reference-cache", "refc"], "argument --reference-cache: must end in .npz after a file "
+                                                      "name (NAME.npz), got 'refc'"),
 ])
 def test_a_bad_option_is_one_line_before_any_work(name, options, message):
     """A bench script's bad option is argparse's one line naming it and its range, exit status 2, before any
@@ -261,3 +268,46 @@ def test_a_bad_option_is_one_line_before_any_work(name, options, message):
     assert result.returncode == 2 and result.stdout == "", result.stdout + result.stderr
     assert result.stderr.strip().splitlines()[-1] == f"{name}.py: error: {message}"
     assert snapshot() == before
+
+
+def test_a_reference_cache_holds_its_level_and_is_written_whole(tmp_path):
+    """bench_quality's cache of the accuracy reference's frames (read by bench_accuracy): a --smoke cache,
+    rendered at the draft level, was taken for the 'reference' level's; it now records its level, checked
+    on reading with the frames' size, and is written through a temporary (np.savez wrote in place)."""
+    import numpy as np
+
+    sys.path.insert(0, str(BENCH))
+    try:
+        import _report
+    finally:
+        sys.path.remove(str(BENCH))
+    frames = {"day": np.ones((4, 4, 3)), "dusk": np.zeros((4, 4, 3))}
+    path = tmp_path / "refc.npz"
+    _report.save_reference_cache(path, "draft", frames, np.ones((4, 4), bool), seconds=2.5)
+    assert [p.name for p in tmp_path.iterdir()] == ["refc.npz"]
+    cached = _report.load_reference_cache(path, "draft", 4, frames)
+    assert float(cached["seconds"]) == 2.5 and (cached["day"] == 1).all() and str(cached["level"]) == "draft"
+    with pytest.raises(SystemExit, match=r"refc.npz holds frames of draft, not of the 'reference' level"):
+        _report.load_reference_cache(path, "reference", 4, frames)
+    with pytest.raises(SystemExit, match=r"refc.npz holds frames of 4 x 4, not 8 x 8 frames"):
+        _report.load_reference_cache(path, "draft", 8, frames)
+    with pytest.raises(SystemExit, match=r"refc.npz holds no night, not 4 x 4 frames"):
+        _report.load_reference_cache(path, "draft", 4, [*frames, "night"])
+
+
+def test_bench_accuracy_needs_matplotlib_before_it_measures(tmp_path):
+    """bench_accuracy.py measured for minutes, replaced accuracy.csv, then failed on the plots without
+    matplotlib (a traceback; the CSV out of step with the plots): refused first, one line, nothing written."""
+    fake = tmp_path / "fake" / "matplotlib"
+    fake.mkdir(parents=True)
+    (fake / "__init__.py").write_text('raise ImportError("no matplotlib here")\n')
+    docs = tmp_path / "docs"
+    docs.mkdir()
+    (docs / "accuracy.csv").write_text("kept\n")
+    result = subprocess.run([sys.executable, "bench/bench_accuracy.py", "--smoke", "--docs", str(docs)], cwd=ROOT,
+                            capture_output=True, text=True, timeout=120,
+                            env={**os.environ, "PYTHONPATH": str(fake.parent)})
+    assert result.returncode == 2 and result.stdout == "", result.stdout + result.stderr
+    assert result.stderr.strip().splitlines()[-1].startswith("bench_accuracy.py: error: the accuracy plots need "
+                                                             "matplotlib")
+    assert (docs / "accuracy.csv").read_text() == "kept\n" and [p.name for p in docs.iterdir()] == ["accuracy.csv"]
