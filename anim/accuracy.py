@@ -279,11 +279,12 @@ def measure(candidates, reference, valid, atmosphere="physical", progress=None):
 
 
 def pareto_front(rows, cost="render_s", error="p95_rel"):
-    """The rows no other row beats in both cost and error, cheapest first."""
+    """The rows no other row dominates (no other is as cheap and as accurate and better in one of the two),
+    cheapest first; rows equal in both are all kept (the first of two equal rows alone was kept)."""
     ordered = sorted(rows, key=lambda r: (r[cost], r[error]))
     front, best = [], np.inf
     for row in ordered:
-        if row[error] < best:
+        if row[error] < best or (front and (row[cost], row[error]) == (front[-1][cost], front[-1][error])):
             front.append(row)
             best = row[error]
     return front

@@ -19,6 +19,41 @@ def test_pareto_front_keeps_only_undominated_rows():
     assert [r["candidate"] for r in accuracy.pareto_front(rows)] == ["d", "a", "e"]
 
 
+def test_pareto_front_keeps_equal_rows_and_drops_dominated_ties():
+    """Two rows equal in time and error are both undominated (the first alone was kept); a row as fast as
+    another but less accurate, or as accurate but slower, is dominated."""
+    rows = [{"candidate": name, "render_s": cost, "p95_rel": error}
+            for name, cost, error in (("a", 1.0, 1.0), ("b", 1.0, 1.0), ("c", 1.0, 2.0), ("d", 2.0, 1.0),
+                                      ("e", 0.5, 3.0))]
+    assert [r["candidate"] for r in accuracy.pareto_front(rows)] == ["e", "a", "b"]
+
+
+def test_the_published_sweep_and_its_readme_text_agree():
+    """README "Speed versus accuracy" against docs/accuracy.csv, the fronts recomputed: the table's * marks
+    are the worst-frame front; the 4D table at issue 11's size ends that front and no ray march or sky-view
+    map is on it (the README said they were); ray marches and sky-view maps are on the day panel's front."""
+    import pathlib
+
+    from clsky.anim import accuracy_plot
+
+    root = pathlib.Path(__file__).resolve().parents[1]
+    rows = accuracy_plot.read_csv(root / "docs" / "accuracy.csv")
+    front = accuracy.pareto_front(rows)
+    assert front[-1]["candidate"] == "4D table 16 x 128 x 128 x 16"
+    assert not {r["method"] for r in front} & {"raymarch", "skyview"}
+    assert max(front[-1][f"p95_rel {name}"] for name in accuracy.SUN_ELEVATIONS) < 0.03
+    slower = [r for r in rows if r["method"] in ("raymarch", "skyview")]
+    assert min(r["render_s"] for r in slower) > front[-1]["render_s"]
+    assert min(r["p95_rel civil twilight"] for r in slower) > 0.108       # "10.8 % or more"
+    day = {r["method"] for r in accuracy.pareto_front(rows, error="p95_rel day")}
+    assert {"raymarch", "skyview"} <= day
+    readme = (root / "README.md").read_text()
+    table = readme.split("<!-- bench:accuracy -->")[1].split("<!-- /bench:accuracy -->")[0]
+    starred = {line.split(" | ")[0][2:-2] for line in table.splitlines() if line.startswith("| ")
+               and line.split(" | ")[0].endswith(" *")}
+    assert starred == {r["candidate"] for r in front}
+
+
 def test_candidates_move_one_knob_each():
     candidates = accuracy.default_candidates()
     labels = [c.label for c in candidates]
