@@ -6,14 +6,14 @@ its size; the map's nodes ray-marched with the default ray march). Each candidat
 render) and compared, frame by frame, with a *reference*: the 'reference' quality level
 (:mod:`clsky.quality`): a 256-sample ray march whose higher orders come from a fine table, one per frame,
 whose sun axis covers only the sun angles that frame needs (:func:`clsky.planner.sun_axis`) with nodes
-every 0.002 in w. Frames: an all-sky fisheye from the ground at four sun elevations (day, golden hour,
+every 0.0015 in w. Frames: an all-sky fisheye from the ground at four sun elevations (day, golden hour,
 sunset, civil twilight). Errors: the 95th percentile of the relative HDR luminance error and the mean
 CIELAB Delta E (:func:`clsky.anim.metrics.compare_frames`), worst over the four frames.
 
 How far the reference has converged is measured by doubling each group of its counts in turn
 (:func:`reference_convergence`, :data:`REFERENCE_GROUPS`), frame by frame: errors below the sum of
 those changes are not resolved. The sun axis is what twilight needs most: its higher orders fall off
-steeply between sun angles, and over a whole-axis table of 32 sun nodes the ray march is 5 to 7 % off
+steeply between sun angles, and over a whole-axis table of 32 sun nodes the ray march is 11 to 13 % off
 there (README).
 """
 
