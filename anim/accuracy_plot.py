@@ -177,26 +177,73 @@ def _pareto_panel(axes, rows, error, styles, fontsize):
     axes.set_xlim(*_limits(times, 0.08))
     axes.set_ylim(*_limits(errors, 0.25))
     axes.grid(True, which="both", lw=0.3, alpha=0.6)
-    axes.tick_params(labelsize=fontsize + 1)
-    # labels: stacked in axes coordinates, at least one text line apart, right of their point (left of it
-    # in the right part of the panel) and clear of the markers in their row nearby, each on a white box
-    # with a leader line
+    for axis, (low, high) in ((axes.xaxis, axes.get_xlim()), (axes.yaxis, axes.get_ylim())):
+        if high < 10.0 * low:       # under a decade: matplotlib labels the minor ticks, '2x10^0 3x10^04x10^0'
+            _plain_ticks(axis)
+    axes.tick_params(which="both", labelsize=fontsize + 1)
+    # labels: stacked in axes coordinates, at least one label's lines apart, right of their point (left of
+    # it in the right part of the panel, or where it fits) and clear of the markers in their row nearby,
+    # inside the panel (a label too long for it is wrapped), each on a white box with a leader line
     box = axes.get_window_extent()
     line = 1.4 * fontsize * axes.figure.dpi / 72.0 / box.height      # text line height [axes fraction]
     to_axes = axes.transAxes.inverted()
     markers = to_axes.transform(axes.transData.transform(np.column_stack([times, errors])))
     points = to_axes.transform(axes.transData.transform([(1e3 * r["render_s"], 100 * r[error]) for r in front]))
-    heights = stack_labels(points[:, 1], line, low=0.02, high=0.98)
     offset = 10.0 / box.width
-    for r, (x, _), height in zip(front, points, heights):
-        side = 1.0 if x < 0.6 else -1.0
-        row = markers[(np.abs(markers[:, 1] - height) < 0.6 * line) & (side * (markers[:, 0] - x) >= 0)
-                      & (side * (markers[:, 0] - x) < CLEARANCE)]
-        edge = x if len(row) == 0 else (row[:, 0].max() if side > 0 else row[:, 0].min())
-        axes.annotate(r["candidate"], (1e3 * r["render_s"], 100 * r[error]), xytext=(edge + side * offset, height),
+    texts = [_fitted_label(axes, r["candidate"], fontsize, 1.0 - 2.0 * offset) for r in front]
+    lines = max((text.count("\n") + 1 for text in texts), default=1)
+    heights = stack_labels(points[:, 1], lines * line, low=0.02 + (lines - 1) * line / 2,
+                           high=0.98 - (lines - 1) * line / 2)
+    for r, text, (x, _), height in zip(front, texts, points, heights):
+        width = _text_width(axes, text, fontsize)
+        starts = {}                         # side: where the label begins (left side: where it ends)
+        for side in (1.0, -1.0):
+            row = markers[(np.abs(markers[:, 1] - height) < 0.6 * line) & (side * (markers[:, 0] - x) >= 0)
+                          & (side * (markers[:, 0] - x) < CLEARANCE)]
+            edge = x if len(row) == 0 else (row[:, 0].max() if side > 0 else row[:, 0].min())
+            starts[side] = edge + side * offset
+        preferred = (1.0, -1.0) if x < 0.6 else (-1.0, 1.0)
+        fitting = [side for side in preferred if 0.0 <= starts[side] - (side < 0) * width
+                   and starts[side] + (side > 0) * width <= 1.0]
+        side = fitting[0] if fitting else max(preferred, key=lambda s: 1.0 - starts[s] if s > 0 else starts[s])
+        start = min(starts[side], 1.0 - width) if side > 0 else max(starts[side], width)
+        axes.annotate(text, (1e3 * r["render_s"], 100 * r[error]), xytext=(start, height),
                       textcoords="axes fraction", ha="left" if side > 0 else "right", va="center",
                       fontsize=fontsize, bbox=dict(boxstyle="square,pad=0.1", fc="white", ec="none", alpha=0.85),
-                      arrowprops=dict(arrowstyle="-", lw=0.5, color="0.45", shrinkA=0, shrinkB=3), zorder=4)
+                      arrowprops=dict(arrowstyle="-", lw=0.5, color="0.45", shrinkA=0, shrinkB=3), zorder=4,
+                      gid=f"front:{r['candidate']}")
+
+
+def _plain_ticks(axis):
+    """Ticks at 1, 2 and 5 times the powers of ten, labelled as plain numbers, no minor labels: on a log axis
+    spanning less than a decade matplotlib labels every minor tick in scientific form, overlapping."""
+    import matplotlib.ticker as ticker
+
+    axis.set_major_locator(ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
+    axis.set_major_formatter(ticker.FormatStrFormatter("%g"))
+    axis.set_minor_formatter(ticker.NullFormatter())
+
+
+def _text_width(axes, text, fontsize):
+    """The width of ``text`` at ``fontsize`` as drawn in ``axes`` [axes fraction]."""
+    sample = axes.text(0.0, 0.0, text, fontsize=fontsize, transform=axes.transAxes)
+    try:
+        extent = sample.get_window_extent(axes.figure.canvas.get_renderer())
+    finally:
+        sample.remove()
+    return extent.width / axes.get_window_extent().width
+
+
+def _fitted_label(axes, text, fontsize, room):
+    """``text``, or it broken into lines at spaces where it is wider than ``room`` [axes fraction]: a front
+    label ran out of its panel (the day panel's longest ray-march label) and off the figure's edge."""
+    words, lines = text.split(" "), []
+    for word in words:
+        if lines and _text_width(axes, f"{lines[-1]} {word}", fontsize) <= room:
+            lines[-1] = f"{lines[-1]} {word}"
+        else:
+            lines.append(word)
+    return "\n".join(lines)
 
 
 def draw_pareto(rows, size=128, title="clsky: speed versus accuracy"):
@@ -252,14 +299,23 @@ def draw_elevation(rows, title="clsky: where each renderer fails"):
             continue
         errors = 100 * np.array([[r[f"p95_rel {n}"] for n in names] for r in mine])
         colours = matplotlib.colormaps[RENDERER_COLOURS[method]]
-        axes.fill_between(elevations, errors.min(axis=0), errors.max(axis=0), color=colours(0.5), alpha=0.18,
-                          lw=0, zorder=1, label=f"{renderer}: all {len(mine)} candidates (range)")
         on_front = [r for r in front if r["method"] == method]
+        if len(mine) > 1:
+            axes.fill_between(elevations, errors.min(axis=0), errors.max(axis=0), color=colours(0.5), alpha=0.18,
+                              lw=0, zorder=1, label=f"{renderer}: all {len(mine)} candidates (range)")
+        elif not on_front:          # a band of one candidate has no height: its numbers were drawn nowhere
+            axes.plot(elevations, errors[0], ls=":", marker=".", lw=1.0, color=colours(0.6), zorder=2,
+                      label=f"{_line_label(method, mine[0]['candidate'])} (its one candidate)",
+                      gid=f"only:{mine[0]['candidate']}")
         for index, r in enumerate(on_front):
             shade = 0.45 + 0.5 * index / max(1, len(on_front) - 1)
             axes.plot(elevations, [100 * r[f"p95_rel {n}"] for n in names], marker="os^vD<>"[index % 7], ms=4,
-                      lw=1.2, color=colours(shade), label=_line_label(renderer, r["candidate"]), zorder=3,
+                      lw=1.2, color=colours(shade), label=_line_label(method, r["candidate"]), zorder=3,
                       gid=f"front:{r['candidate']}")
+    hidden = [f"{r['candidate']} ({n})" for r in rows for n in names if not r[f"p95_rel {n}"] > 0]
+    if hidden:                  # a log axis drops them silently: named, as the Pareto panels name theirs
+        axes.text(0.99, 0.01, "not shown (0 on a log axis): " + ", ".join(hidden), transform=axes.transAxes,
+                  ha="right", va="bottom", fontsize=7, color="0.3", gid="hidden", wrap=True)
     axes.set_yscale("log")
     axes.set_xscale("symlog", linthresh=ELEVATION_LINEAR, linscale=2.0)
     axes.set_xlim(min(CIVIL_TWILIGHT[0], min(elevations)) - 2, max(elevations) + 5)
@@ -275,9 +331,14 @@ def draw_elevation(rows, title="clsky: where each renderer fails"):
     return figure
 
 
-def _line_label(renderer, candidate):
-    """'ray march 16 samples' as it is; 'linear mapping' as 'table lookup: linear mapping'."""
-    return candidate if candidate.startswith(renderer) else f"{renderer}: {candidate}"
+#: How a candidate's label names its renderer where it does (the elevation plot's legend adds it otherwise).
+RENDERER_WORDS = {"lut": "table lookup", "raymarch": "ray march", "lut4d": "4D table", "skyview": "sky-view"}
+
+
+def _line_label(method, candidate):
+    """'ray march 16 samples' and '4D table 16 x 128 x 128 x 16' as they are; 'linear mapping' as 'table
+    lookup: linear mapping' ('4D table lookup: 4D table ...' ran out of the figure)."""
+    return candidate if candidate.startswith(RENDERER_WORDS[method]) else f"{RENDERERS[method]}: {candidate}"
 
 
 def _save(figure, path, force, staging):

@@ -303,6 +303,101 @@ def test_worst_frame_front_labels_do_not_overlap_in_a_tie():
         plt.close(figure)
 
 
+def test_front_labels_stay_inside_their_panels_and_the_legend_inside_its_figure():
+    """The published sweep's plots (docs/accuracy.csv): a golden-hour label ran off the figure's edge ('4D
+    table 16 x 128 x 1'), day-panel labels into the next panel, and the elevation legend's '4D table
+    lookup: 4D table ...' off its figure. Every front label's text lies within its panel, none overlaps
+    another, and the legend lies within the figure."""
+    pytest.importorskip("matplotlib")
+    import pathlib
+
+    import matplotlib.pyplot as plt
+    from matplotlib.text import Text
+
+    from clsky.anim.accuracy_plot import draw_elevation, draw_pareto, read_csv
+
+    rows = read_csv(pathlib.Path(__file__).resolve().parents[1] / "docs" / "accuracy.csv")
+    figure = draw_pareto(rows, size=64)
+    try:
+        figure.canvas.draw()
+        renderer = figure.canvas.get_renderer()
+        for axes in figure.axes:
+            panel = axes.get_window_extent()
+            labels = [Text.get_window_extent(t, renderer) for t in axes.texts
+                      if str(t.get_gid()).startswith("front:")]
+            assert labels, axes.get_title()
+            for label in labels:        # half a pixel: the rounding of the extents
+                assert panel.x0 - 0.5 <= label.x0 and label.x1 <= panel.x1 + 0.5, (axes.get_title(), label)
+                assert panel.y0 - 0.5 <= label.y0 and label.y1 <= panel.y1 + 0.5, (axes.get_title(), label)
+            assert not any(a.overlaps(b) for i, a in enumerate(labels) for b in labels[i + 1:]), axes.get_title()
+    finally:
+        plt.close(figure)
+    figure = draw_elevation(rows)
+    try:
+        figure.canvas.draw()
+        legend = figure.axes[0].get_legend().get_window_extent(figure.canvas.get_renderer())
+        assert 0 <= legend.x0 and legend.x1 <= figure.bbox.width and 0 <= legend.y0 <= legend.y1 <= figure.bbox.height
+        assert "4D table 16 x 128 x 128 x 16" in figure.axes[0].get_legend_handles_labels()[1]
+    finally:
+        plt.close(figure)
+
+
+def test_tick_labels_of_a_narrow_panel_do_not_overlap():
+    """A --quick sweep's times span less than a decade: matplotlib labelled the minor ticks of the small
+    panels ('2x10^0 3x10^04x10^0', overlapping, larger than the major label). Such an axis has plain labels
+    at 1, 2 and 5 times the powers of ten, none overlapping, all at the panel's font size."""
+    pytest.importorskip("matplotlib")
+    import matplotlib.pyplot as plt
+
+    from clsky.anim.accuracy_plot import draw_pareto
+
+    rows = synthetic_rows()
+    for row, ms in zip(rows, (2.0, 2.2, 2.4, 2.6, 3.0, 3.5, 4.0)):
+        row["render_s"] = ms / 1e3
+    figure = draw_pareto(rows)
+    try:
+        figure.canvas.draw()
+        renderer = figure.canvas.get_renderer()
+        for axes in figure.axes:
+            shown = [label for label in axes.get_xticklabels(which="both") if label.get_text()
+                     and axes.get_xlim()[0] <= label.get_position()[0] <= axes.get_xlim()[1]]
+            assert shown, axes.get_title()
+            assert all("times" not in label.get_text() and "^" not in label.get_text() for label in shown)
+            extents = [label.get_window_extent(renderer) for label in shown]
+            assert not any(a.overlaps(b) for i, a in enumerate(extents) for b in extents[i + 1:]), axes.get_title()
+            assert len({label.get_fontsize() for label in shown}) == 1
+    finally:
+        plt.close(figure)
+
+
+def test_elevation_figure_draws_a_lone_candidate_and_names_zero_errors():
+    """A renderer with one candidate, off the front, had a band of no height: its errors were drawn nowhere,
+    while the legend listed 'all 1 candidates (range)'; a zero error vanished from the log axis unnamed."""
+    pytest.importorskip("matplotlib")
+    import matplotlib.pyplot as plt
+
+    from clsky.anim.accuracy_plot import draw_elevation
+
+    rows = synthetic_rows()
+    rows = [r for r in rows if r["method"] == "lut"] + [r for r in rows if r["candidate"] in ("slow", "march 2")]
+    rows.append(dict(rows[0], candidate="sky-view 8 x 8", knob="sky-view map size", method="skyview",
+                     render_s=0.5, p95_rel=0.9, **{"p95_rel day": 0.0}))
+    figure = draw_elevation(rows)
+    try:
+        axes = figure.axes[0]
+        lone = [line for line in axes.get_lines() if line.get_gid() == "only:sky-view 8 x 8"]
+        assert len(lone) == 1
+        order = sorted(accuracy.SUN_ELEVATIONS, key=accuracy.SUN_ELEVATIONS.get)
+        np.testing.assert_allclose(lone[0].get_ydata(), [100 * rows[-1][f"p95_rel {n}"] for n in order])
+        labels = axes.get_legend_handles_labels()[1]
+        assert "sky-view 8 x 8 (its one candidate)" in labels and not any("all 1 " in label for label in labels)
+        assert "ray march: all 2 candidates (range)" in labels
+        named = [t.get_text() for t in axes.texts if t.get_gid() == "hidden"]
+        assert named == ["not shown (0 on a log axis): sky-view 8 x 8 (day)"]
+    finally:
+        plt.close(figure)
+
+
 def test_elevation_figure_has_one_line_per_front_candidate():
     pytest.importorskip("matplotlib")
     import matplotlib.pyplot as plt
@@ -401,8 +496,8 @@ def test_a_zero_error_is_named_not_drawn_on_the_log_axes():
 
 
 def test_skyview_candidates_get_their_own_markers_and_band():
-    """Sky-view rows (method 'skyview'): purple diamonds in the Pareto plot, and their own band and front
-    line in the elevation plot, beside the lookups' and the ray marches'."""
+    """Sky-view rows (method 'skyview'): purple diamonds in the Pareto plot, and their own front line in the
+    elevation plot, beside the lookups' and the ray marches' (and their band where they are several)."""
     pytest.importorskip("matplotlib")
     import matplotlib.pyplot as plt
 
@@ -418,7 +513,8 @@ def test_skyview_candidates_get_their_own_markers_and_band():
     figure = draw_elevation(rows)
     try:
         labels = figure.axes[0].get_legend_handles_labels()[1]
-        assert "sky-view map: all 1 candidates (range)" in labels
-        assert "sky-view map: sky-view 64 x 128" in labels          # fastest and best: on the front
+        # fastest and best: on the front, its line named as the candidate names itself; one candidate draws
+        # no band (of no height, once listed as 'all 1 candidates (range)')
+        assert "sky-view 64 x 128" in labels and not any(label.startswith("sky-view map") for label in labels)
     finally:
         plt.close(figure)
