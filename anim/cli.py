@@ -174,7 +174,9 @@ def register(commands):
                           help="quality level of the reference frames (default: reference, ~5 min to build; "
                                "a cheaper one for smoke runs)")
     accuracy.add_argument("--quick", action="store_true",
-                          help="default settings, two ray marches and a 32 x 64 sky-view map only (a smoke run)")
+                          help="four candidates only: the default table, two ray marches and a 32 x 64 sky-view "
+                               "map; still against --reference-quality's frames (with --reference-quality default, "
+                               "a smoke run)")
     accuracy.add_argument("--force", action="store_true", help="overwrite existing outputs")
     clsky_cli.add_progress_argument(accuracy)
     return {"animate": run_animate, "render": run_render, "bench": run_bench}
@@ -432,15 +434,20 @@ def run_bench(args):
         rows = accuracy.measure(candidates, reference, valid, progress=progress)
     finally:
         close()
+    # the plots say what the errors are against where it is not the reference level (the CSV's rows do not)
+    against = "" if args.reference_quality == "reference" else f" (against the '{args.reference_quality}' level)"
     with StagedWrites() as staging:                # the CSV and its plots land together
         writers.write_csv(targets["--output"], rows, force=args.force, staging=staging)
-        accuracy_plot.pareto_plot(rows, targets["--plot"], force=args.force, size=args.size, staging=staging)
-        accuracy_plot.elevation_plot(rows, targets["--elevation-plot"], force=args.force, staging=staging)
+        accuracy_plot.pareto_plot(rows, targets["--plot"], title="clsky: speed versus accuracy" + against,
+                                  force=args.force, size=args.size, staging=staging)
+        accuracy_plot.elevation_plot(rows, targets["--elevation-plot"], title="clsky: where each renderer fails"
+                                     + against, force=args.force, staging=staging)
     for row in rows:
         print(f"{row['candidate']:>24}: build {row['build_s']:6.2f} s ({row['build_cpu_s']:6.2f} CPU-s), frame "
               f"{1e3 * row['render_s']:7.1f} ms ({1e3 * row['render_cpu_s']:7.1f} CPU-ms), "
               f"worst p95 error {100 * row['p95_rel']:8.2f} %, worst mean Delta E {row['mean_delta_e']:6.2f}")
-    print(f"{len(rows)} candidates -> {targets['--output']}, {targets['--plot']}, {targets['--elevation-plot']}")
+    print(f"{len(rows)} candidates on {args.size} x {args.size} frames, against the '{args.reference_quality}' "
+          f"level's -> {targets['--output']}, {targets['--plot']}, {targets['--elevation-plot']}")
     return 0
 
 

@@ -201,6 +201,9 @@ def test_bench_accuracy_quick_run_writes_csv_and_plot(tmp_path):
     assert rows[-1]["method"] == "skyview"
     for name in ("accuracy.png", "accuracy_elevation.png"):
         assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # what the numbers are against, which the CSV does not say
+    assert result.stdout.splitlines()[-1] == ("4 candidates on 16 x 16 frames, against the 'default' level's -> "
+                                              "accuracy.csv, accuracy.png, accuracy_elevation.png")
 
 
 # --- the plots (anim/accuracy_plot.py), on hand-made rows: no OpenCL, no sweep ---------------------------
