@@ -39,7 +39,7 @@ except ImportError as error:  # pragma: no cover - exercised only on broken inst
 
 from .errors import check_flag, check_instance
 
-__all__ = ["KernelBuildError", "NoDeviceError", "Source", "Engine", "memory_pool", "upload_padded", "list_devices",
+__all__ = ["KernelBuildError", "NoDeviceError", "Source", "Engine", "serialized", "memory_pool", "upload_padded", "list_devices",
            "default_device", "make_context", "check_context", "real_vector_dtype", "check_dtype",
            "INSTALL_HINT", "pocl_cache_problem", "no_device_hint", "host_blas_single_threaded", "host_cores",
            "quiet_compiler_output"]
@@ -623,11 +623,31 @@ CUBE_ROOT = "halley"
 CUBE_ROOTS = ("halley", "library")
 
 
+def serialized(method):
+    """``method`` of an engine, or of an object holding one as ``self.engine`` (a renderer), run under that
+    engine's :attr:`Engine.lock` and refused once it is closed (ValueError, as a closed file's methods are).
+
+    A kernel object's arguments are set, then it is enqueued: two threads calling one renderer swapped
+    each other's arguments in between (wrong frames without an error, or PoCL aborting the process). The
+    public methods of the renderers and lookup engines are serialized: one object may be shared by threads,
+    whose calls run one at a time (its device runs one launch at a time anyway)."""
+    @functools.wraps(method)
+    def run(self, *args, **kwargs):
+        engine = self if isinstance(self, Engine) else self.engine
+        with engine.lock:
+            if engine.closed:
+                raise ValueError(f"this {type(self).__name__} is closed (close() or the end of its with block): "
+                                 f"make a new one")
+            return method(self, *args, **kwargs)
+    return run
+
+
 class Engine:
     """Owns one OpenCL program: builds it once and fetches every kernel once.
 
-    Subclasses set :attr:`sources` and may extend :meth:`build_options`. Calls are not thread-safe: use
-    one engine per thread.
+    Subclasses set :attr:`sources` and may extend :meth:`build_options`. An engine's own calls are not
+    thread-safe (use one engine per thread) but for the methods marked :func:`serialized`, which hold
+    :attr:`lock`.
 
     Parameters
     ----------
@@ -654,6 +674,11 @@ class Engine:
         lanes per work-item of its launches.
     cube_root : str
         :data:`CUBE_ROOT` when the engine was made: how its programs take the mapping's cube roots.
+    lock : threading.RLock
+        Held by :func:`serialized` methods (of the engine, or of the renderer holding it) and by
+        :meth:`close`.
+    closed : bool
+        :meth:`close` was called: :func:`serialized` methods refuse to run.
     """
 
     sources: tuple = ()
@@ -680,6 +705,8 @@ class Engine:
         self.profile = profile
         self.events: list = []
         self._feature_kernels: dict = {}
+        self.lock = threading.RLock()
+        self.closed = False
 
     @functools.cached_property
     def program(self):
@@ -756,9 +783,15 @@ class Engine:
         return event
 
     def close(self):
-        self.queue.finish()
-        self.kernels = {}
-        self._feature_kernels = {}
+        """Wait for the queue and drop the kernels; :func:`serialized` methods refuse to run from then on.
+        Closing twice is harmless."""
+        with self.lock:
+            if self.closed:
+                return
+            self.closed = True
+            self.queue.finish()
+            self.kernels = {}
+            self._feature_kernels = {}
 
     def __enter__(self):
         return self

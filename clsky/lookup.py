@@ -141,13 +141,15 @@ def check_kernel_buffer(kernel, name, array_d, count, dtype):
 
 
 class TableLookupEngine(_cl.Engine):
-    """Trilinear lookups in a scattering table, phase functions at the true scattering angle."""
+    """Trilinear lookups in a scattering table, phase functions at the true scattering angle. Threads may
+    share one (its lookups run one at a time, :func:`clsky._cl.serialized`); closed, it refuses them."""
 
     sources = ("geometry.cl", "mapping.cl", "phase.cl", "lookup.cl")
 
     def program_sources(self):
         return ("real.cl", _atmosphere_cl.declaration(self.ctx.devices[0], self.dtype)) + self.sources
 
+    @_cl.serialized
     def radiance(self, atmosphere: AtmosphereParameters, data, altitude, cos_view, cos_sun, cos_scatter,
                  mapping="nonlinear", sun_cos_range=FULL_SUN_RANGE, *, table_checked=False):
         """Radiance I = I_I (F_R Ibar_R + F_M Ibar_M) for each query.

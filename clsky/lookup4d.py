@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import _cl
 from .atmosphere import AtmosphereParameters
 from .lookup import TableLookupEngine, check_lookup
 from .mapping import FULL_SUN_RANGE
@@ -34,6 +35,7 @@ class TableLookup4DEngine(TableLookupEngine):
 
     sources = ("geometry.cl", "mapping.cl", "mapping4d.cl", "phase.cl", "lookup.cl", "lookup4d.cl")
 
+    @_cl.serialized
     def radiance(self, atmosphere: AtmosphereParameters, data, altitude, cos_view, cos_sun, cos_scatter,
                  mapping="nonlinear", sun_cos_range=FULL_SUN_RANGE, *, table_checked=False):
         """Radiance I = I_I (F_R Ibar_R + F_M Ibar_M + Lbar) for each query.

@@ -231,6 +231,10 @@ class SkyRenderer:
     reads the table's sun axis: the lookups, and the ray march and sky-view map of a table with higher
     orders.
 
+    Threads may share a renderer: its methods run one at a time (:func:`clsky._cl.serialized`; two
+    threads' launches swapped their arguments, wrong frames or PoCL aborting). :meth:`close` (or the end
+    of a ``with`` block) releases its device memory; its methods then raise ValueError.
+
     Raises
     ------
     InsufficientMemoryError
@@ -279,6 +283,7 @@ class SkyRenderer:
         self._cos_sun_radius = math.cos(math.radians(SUN_ANGULAR_RADIUS_DEG))
         self._skyview_nodes = {}      # (settings, altitude) -> the sky-view map's prepared node directions
 
+    @_cl.serialized
     def prepare(self, directions, valid=None):
         """Upload a camera's directions (..., 3) once, for many frames: pass the result as ``directions``."""
         directions, _, _ = check_directions(directions, (0.0, 0.0, 1.0), 0.0)
@@ -375,6 +380,7 @@ class SkyRenderer:
             raise ValueError(f"sun_direction: its zenith cosine {cos_sun:.9g} is outside the table's "
                              f"sun_cos_range [{low:.9g}, {high:.9g}] (plan the table for this sun path)")
 
+    @_cl.serialized
     def render_table(self, directions, sun_direction, altitude=0.0, valid=None):
         """HDR radiance (..., 3) by table lookup; ``directions`` (..., 3) unit vectors (or
         :meth:`prepare`'s result), ``valid`` an optional mask (invalid pixels are 0)."""
@@ -423,6 +429,7 @@ class SkyRenderer:
         return ((1 - az) * ((1 - ax) * data[z0, :, x0] + ax * data[z0, :, x0 + 1])
                 + az * ((1 - ax) * data[z0 + 1, :, x0] + ax * data[z0 + 1, :, x0 + 1]))
 
+    @_cl.serialized
     def render_lut4d(self, directions, sun_direction, altitude=0.0, valid=None):
         """HDR radiance (..., 3) by lookup in a 4D table (``parameterization='4d'``, :mod:`clsky.table4d`):
         quadrilinear in altitude, view zenith (never across the horizon), sun zenith and azimuth, the
@@ -453,6 +460,7 @@ class SkyRenderer:
         buffers = [("table", table_d, math.prod(shape))]
         return self._launch("render_table4d", directions, sun_direction, altitude, valid, args, buffers)
 
+    @_cl.serialized
     def render_raymarch(self, directions, sun_direction, altitude=0.0, valid=None, sun_disc=True):
         """HDR radiance (..., 3) by per-pixel ray marching (single scattering along the true ray, higher
         orders from the table's gathered in-scatter, and a reflecting ground lit by the sun at the ground
@@ -460,6 +468,7 @@ class SkyRenderer:
         without the sun's disc (the sky-view map's nodes, :meth:`skyview_map`)."""
         return self._raymarch(directions, [sun_direction], altitude, valid, sun_disc)[0]
 
+    @_cl.serialized
     def render_raymarch_suns(self, directions, sun_directions, altitude=0.0, valid=None, sun_disc=True):
         """:meth:`render_raymarch` for each of ``sun_directions`` (a sequence of suns, each 3 values):
         frames (len(sun_directions), ..., 3), each the same as :meth:`render_raymarch` for its sun alone.
@@ -494,6 +503,7 @@ class SkyRenderer:
         return self._launch_suns("render_raymarch", directions, sun_directions, altitude, valid, args, buffers,
                                  sun_disc)
 
+    @_cl.serialized
     def skyview_map(self, sun_direction, altitude=0.0, settings=None):
         """The per-frame sky-view map (H, W, 3) of :mod:`clsky.skyview` (``settings``: a
         :class:`~clsky.skyview.SkyViewSettings`, default its defaults): :meth:`render_raymarch` without
@@ -501,6 +511,7 @@ class SkyRenderer:
         sun's azimuth along +x. The nodes of the last (settings, altitude) stay uploaded."""
         return self.skyview_maps([sun_direction], altitude, settings)[0]
 
+    @_cl.serialized
     def skyview_maps(self, sun_directions, altitude=0.0, settings=None):
         """:meth:`skyview_map` of each of ``sun_directions`` (k, H, W, 3), the nodes marched once for
         several suns (:meth:`render_raymarch_suns`: each map the same bits as its own; on the 2-core
@@ -518,6 +529,7 @@ class SkyRenderer:
         canonical = [skyview.canonical_sun(sun) for _, sun, _ in checked]
         return self.render_raymarch_suns(self._skyview_nodes[key], canonical, altitude, sun_disc=False)
 
+    @_cl.serialized
     def render_skyview(self, directions, sun_direction, altitude=0.0, valid=None, settings=None, sky_map=None):
         """HDR radiance (..., 3) from a per-frame sky-view map (Hillaire 2020; :mod:`clsky.skyview`):
         :meth:`skyview_map` for this sun and altitude (or ``sky_map``, that map computed already, e.g. by
@@ -559,6 +571,7 @@ class SkyRenderer:
                             [("sky_map", map_d, 3 * width * height),
                              ("view_zenith", view_zenith_d, directions.array.shape[0])])
 
+    @_cl.serialized
     def view_zenith_angles(self, directions: PreparedDirections) -> cla.Array:
         """The view zenith angle atan2(|V_xy|, V_z) [rad] of each of ``directions`` (a :meth:`prepare`
         result), a device array (pixels,) computed on its first call (kernels/skyview.cl: view_zenith_angles)
@@ -579,7 +592,13 @@ class SkyRenderer:
         return angles
 
     def close(self):
-        self.engine.close()
+        """Release the renderer's programs and device buffers (the table's copies, the sun table, the sky-view
+        map's nodes; a with block's end calls it); its methods then raise ValueError. Closing twice is
+        harmless. Directions it prepared keep their own buffers."""
+        with self.engine.lock:
+            self.engine.close()
+            self._atmosphere_d = self._table_d = self._gathered_d = self._ground_d = self._sun_table_d = None
+            self._skyview_nodes = {}
 
     def __enter__(self):
         return self

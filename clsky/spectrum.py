@@ -247,7 +247,7 @@ class SpectralRenderer:
 
         self.table = check_instance("spectral_table", spectral_table, SpectralTable,
                                     "a SpectralTable (SpectralTable.build)")
-        self.renderers = []
+        self.renderers, self.closed = [], False
         try:
             for table in spectral_table.tables:
                 self.renderers.append(SkyRenderer(table, ray_settings, ctx=ctx, fast_math=fast_math))
@@ -263,11 +263,17 @@ class SpectralRenderer:
     def units(self) -> str:
         return self.table.units
 
+    def _check_open(self):
+        if self.closed:
+            raise ValueError("this SpectralRenderer is closed (close() or the end of its with block): make a new one")
+
     def prepare(self, directions, valid=None):
         """The directions uploaded once for every batch's renderer (pass the result as ``directions``)."""
+        self._check_open()
         return _Prepared(tuple(r.prepare(directions, valid) for r in self.renderers))
 
     def _render(self, name, directions, sun_direction, altitude, valid, **options):
+        self._check_open()
         if not isinstance(directions, _Prepared):
             directions = self.prepare(directions, valid)
         elif valid is not None:
@@ -280,9 +286,9 @@ class SpectralRenderer:
         return self._render("render_table", directions, sun_direction, altitude, valid)
 
     def render_lut4d(self, directions, sun_direction, altitude=0.0, valid=None):
-        """Spectral radiance (..., N) by lookup in 4D tables (``parameterization='4d'``;
-        :meth:`clsky.render.SkyRenderer.render_lut4d`): a 4D SpectralTable built, but only its ray march
-        and sky-view map rendered, and render_table pointed here."""
+        """Spectral radiance (..., N) by lookup in the batches' 4D tables (a SpectralTable built with
+        ``parameterization='4d'``; :meth:`clsky.render.SkyRenderer.render_lut4d`). Such a table's render_table
+        refuses and names this method."""
         return self._render("render_lut4d", directions, sun_direction, altitude, valid)
 
     def render_raymarch(self, directions, sun_direction, altitude=0.0, valid=None, sun_disc=True):
@@ -300,6 +306,9 @@ class SpectralRenderer:
         return self._render("render_skyview", directions, sun_direction, altitude, valid, settings=settings)
 
     def close(self):
+        """Close every batch's renderer (:meth:`clsky.render.SkyRenderer.close`); the methods then raise
+        ValueError. Closing twice is harmless."""
+        self.closed = True
         for renderer in self.renderers:
             renderer.close()
 

@@ -189,7 +189,9 @@ class ScatteringTable:
     data : numpy.ndarray, shape (D, H, W, C)
         Per cell [1/sr], without I_I: channels :data:`CHANNEL_NAMES` [C]. The factored channels
         (Ibar summed over orders in the atmosphere-plus mode, single scattering in the physical mode)
-        carry no phase; the physical mode's 3 last channels hold the higher orders, phase applied.
+        carry no phase; the physical mode's 3 last channels hold the higher orders, phase applied. With
+        ``orders='auto'``, the sums over orders include the geometric tail of those not computed:
+        r / (1 - r) times the last order, r = ``orders_record['tail_ratio']`` (:mod:`clsky.orders`).
         With ``settings.parameterization`` '4d': (A, D, H, W, C), a fourth axis of A =
         ``settings.azimuth_size`` view-sun azimuths and the view axis split at the horizon
         (:mod:`clsky.table4d`); ``orders``, ``gathered`` and ``ground_irradiance`` are then those of

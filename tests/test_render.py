@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 
 import numpy as np
 import pytest
@@ -605,3 +606,98 @@ def test_suns_per_launch_in_the_scalar_form(renderer, cl_context, monkeypatch):
         assert launches == [4]
         alone = np.array([sky.render_raymarch(directions, sun, 0.0) for sun in FIVE_SUNS])
     assert_same_frames(cl_context, frames, alone)
+
+
+# Renderers shared by threads, and closed ---------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def small_tables(cl_context):
+    """A table of each preset (atmosphere-plus: no compile-time features; physical: ozone and a ground),
+    with higher orders, on a small grid."""
+    return {name: ScatteringTable.build(preset(name), SMALL.replace(mode=mode, orders=2), ctx=cl_context)
+            for name, mode in (("atmosphere-plus", "atmosphere-plus"), ("physical", "physical"))}
+
+
+@pytest.mark.parametrize("method", ["render_table", "render_skyview", "render_raymarch"])
+def test_threads_sharing_a_renderer_get_their_own_frames(small_tables, cl_context, method):
+    """Two threads calling one renderer: its launches set a shared kernel object's arguments, then
+    enqueued it, so a thread's arguments could replace the other's in between: wrong frames without an
+    error (render_table, render_skyview) or PoCL aborting the process (3 of 6 runs of the probe). Its methods
+    now run one at a time: every frame of 2 x 40 calls, the interpreter switching threads every microsecond,
+    is bit for bit the frame of the same call made alone."""
+    import sys
+    import threading
+
+    renderer = SkyRenderer(small_tables["atmosphere-plus"], RAY, ctx=cl_context)
+    cameras = [FisheyeCamera(size).directions()[0] for size in (16, 24)]
+    suns = [sun_direction(zenith, 100.0) for zenith in (40.0, 80.0)]
+    alone = [getattr(renderer, method)(cameras[k], suns[k]) for k in (0, 1)]
+    wrong, errors = [], []
+
+    def work(k):
+        try:
+            for call in range(40):
+                if not np.array_equal(getattr(renderer, method)(cameras[k], suns[k]), alone[k]):
+                    wrong.append((k, call))
+        except Exception as error:          # pragma: no cover - reported below
+            errors.append(error)
+
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)
+    try:
+        threads = [threading.Thread(target=work, args=(k,)) for k in (0, 1)]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join()
+    finally:
+        sys.setswitchinterval(interval)
+    assert errors == [] and wrong == []
+
+
+@pytest.mark.parametrize("name", ["atmosphere-plus", "physical"])
+def test_a_closed_renderer_refuses_and_frees_its_buffers(small_tables, cl_context, name):
+    """After close() (or its with block) a renderer of the atmosphere-plus table raised a bare KeyError
+    ('render_table'), one of the physical table (compile-time features) went on rendering, and neither
+    released its device copies of the table: every method now raises ValueError saying it is closed, the
+    buffers are dropped (their objects freed), and closing again is harmless."""
+    import gc
+    import weakref
+
+    directions, valid = FisheyeCamera(16).directions()
+    sun = sun_direction(60.0, 100.0)
+    with SkyRenderer(small_tables[name], RAY, ctx=cl_context) as renderer:
+        prepared = renderer.prepare(directions, valid)
+        renderer.render_skyview(prepared, sun)
+        buffers = [weakref.ref(renderer._table_d), weakref.ref(renderer._gathered_d)]
+    gc.collect()
+    assert [buffer() for buffer in buffers] == [None, None]
+    closed = "this SkyRenderer is closed (close() or the end of its with block): make a new one"
+    for call in (lambda: renderer.render_table(prepared, sun), lambda: renderer.render_raymarch(directions, sun),
+                 lambda: renderer.render_raymarch_suns(prepared, [sun, sun]), lambda: renderer.render_skyview(
+                     prepared, sun), lambda: renderer.skyview_map(sun), lambda: renderer.prepare(directions),
+                 lambda: renderer.view_zenith_angles(prepared)):
+        with pytest.raises(ValueError, match=re.escape(closed)):
+            call()
+    renderer.close()
+
+
+def test_closed_lookup_engines_and_spectral_renderers_refuse(small_tables, cl_context):
+    """A TableLookupEngine closed raised KeyError('lookup'); a SpectralRenderer's message names it."""
+    from clsky.lookup import TableLookupEngine
+    from clsky.spectrum import SpectralRenderer, SpectralTable
+
+    table = small_tables["atmosphere-plus"]
+    engine = TableLookupEngine(ctx=cl_context)
+    before = table.radiance(0.0, 0.2, 0.05, 0.9, engine=engine)
+    assert np.isfinite(before).all()
+    engine.close()
+    engine.close()
+    with pytest.raises(ValueError, match=r"^this TableLookupEngine is closed"):
+        table.radiance(0.0, 0.2, 0.05, 0.9, engine=engine)
+    spectral = SpectralTable.build("physical", wavelengths=3, settings=SMALL.replace(mode="physical", orders=1),
+                                   ctx=cl_context)
+    with SpectralRenderer(spectral, RAY, ctx=cl_context) as renderer:
+        renderer.render_table(np.array([[0.0, 0.0, 1.0]]), sun_direction(60.0, 100.0))
+    with pytest.raises(ValueError, match=r"^this SpectralRenderer is closed"):
+        renderer.render_table(np.array([[0.0, 0.0, 1.0]]), sun_direction(60.0, 100.0))
