@@ -178,9 +178,18 @@ def to_layout(data6, mie_layout):
     return data6
 
 
+def _read_only(array: np.ndarray) -> np.ndarray:
+    """A view of ``array`` that cannot be written through (``array`` itself keeps its flags)."""
+    view = array.view()
+    view.flags.writeable = False
+    return view
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class ScatteringTable:
-    """A precomputed scattering table with everything that defines it.
+    """A precomputed scattering table with everything that defines it. Its arrays are checked when it is
+    made (:meth:`validate`) and held as read-only views: a table is not edited in place (make another,
+    ``dataclasses.replace``, which checks again).
 
     Attributes
     ----------
@@ -231,6 +240,13 @@ class ScatteringTable:
         except TypeError:
             raise TableFormatError(f"orders must be a sequence of arrays, got {type(self.orders).__name__}") from None
         self.validate()
+        # read-only views once checked: data edited in place after the checks (table.data[...] = -5) reached
+        # the lookups and renderers as negative or NaN radiance; the caller's own arrays keep their flags
+        for name in ("data", "gathered", "ground_irradiance"):
+            if isinstance(getattr(self, name), np.ndarray):
+                object.__setattr__(self, name, _read_only(getattr(self, name)))
+        object.__setattr__(self, "orders", tuple(_read_only(order) if isinstance(order, np.ndarray) else order
+                                                 for order in self.orders))
 
     def validate(self, check_values=True):
         """Check every array against the settings, as :meth:`load` and construction do.

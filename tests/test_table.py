@@ -169,3 +169,21 @@ def test_invalid_build_arguments(table):
         ScatteringTable.build("mars", SETTINGS)
     with pytest.raises(ValueError, match=r"\.npz"):
         table.save("sky.txt")
+
+
+def test_a_tables_arrays_are_read_only_once_checked(table):
+    """table.data[...] = -5 after the checks reached the lookups as negative radiance (the renderers read
+    the host table for each frame's slice): the arrays are read-only views, the caller's own array keeps
+    its flags, and a table made from edited arrays is checked again."""
+    import dataclasses
+
+    for array in (table.data, table.gathered, *table.orders):
+        assert not array.flags.writeable
+        with pytest.raises(ValueError, match="read-only"):
+            array[...] = -5.0
+    own = np.array(table.data)
+    copy = dataclasses.replace(table, data=own)
+    assert own.flags.writeable and not copy.data.flags.writeable
+    np.testing.assert_array_equal(copy.data, table.data)
+    with pytest.raises(TableFormatError, match="negative"):
+        dataclasses.replace(table, data=-own)
