@@ -67,9 +67,10 @@ def sun_direction(zenith_deg, azimuth_deg):
     Parameters
     ----------
     zenith_deg : float or array_like
-        Sun zenith angle [deg], finite.
+        Sun zenith angle [deg], in [0, 180].
     azimuth_deg : float or array_like
-        Sun azimuth [deg], from north clockwise seen from above (east = 90), finite.
+        Sun azimuth [deg], from north clockwise seen from above (east = 90), in [-360, 720]
+        (:data:`AZIMUTH_RANGE_DEG`).
 
     Returns
     -------
@@ -79,7 +80,7 @@ def sun_direction(zenith_deg, azimuth_deg):
     Raises
     ------
     ValueError
-        If an angle is not finite.
+        If an angle is outside its range (NaN and infinities too).
 
     Notes
     -----
@@ -96,10 +97,12 @@ def sun_direction(zenith_deg, azimuth_deg):
     # a string was NumPy's message, 10**400 an OverflowError, 1j a TypeError, and True was 1 deg
     zenith, azimuth = (as_real_array(name, value, "a real number of degrees or an array of them")
                        for name, value in (("zenith_deg", zenith_deg), ("azimuth_deg", azimuth_deg)))
-    if not np.all(np.isfinite(zenith)):
-        raise ValueError(f"zenith_deg must be finite, got {short(zenith_deg)}")
-    if not np.all(np.isfinite(azimuth)):
-        raise ValueError(f"azimuth_deg must be finite, got {short(azimuth_deg)}")
+    # a zenith angle of -10 deg was a sun 80 deg up on the other side, 1e300 deg one of no precision
+    if not np.all((zenith >= 0.0) & (zenith <= 180.0)):
+        raise ValueError(f"zenith_deg must be in [0, 180] degrees, got {short(zenith_deg)}")
+    low, high = AZIMUTH_RANGE_DEG
+    if not np.all((azimuth >= low) & (azimuth <= high)):
+        raise ValueError(f"azimuth_deg must be in [{low:g}, {high:g}] degrees, got {short(azimuth_deg)}")
     return _direction(np.radians(zenith), np.radians(azimuth))
 
 
@@ -146,7 +149,7 @@ class FisheyeCamera(Camera):
     size : int
         Width and height [pixels], an integer in [2, 16384].
     heading_deg : float
-        Azimuth [deg] placed at the top of the image (default 0: north up), finite. Increasing it
+        Azimuth [deg] placed at the top of the image (default 0: north up), in [-360, 720]. Increasing it
         turns the image clockwise on the screen.
 
     Raises
@@ -187,7 +190,7 @@ class FisheyeCamera(Camera):
     def __post_init__(self):
         object.__setattr__(self, "size", _check_size("size", self.size))
         object.__setattr__(self, "heading_deg",
-                           check_real("heading_deg", self.heading_deg))
+                           check_real("heading_deg", self.heading_deg, *AZIMUTH_RANGE_DEG, unit=" degrees"))
 
     @property
     def width(self) -> int:
@@ -239,7 +242,7 @@ class PerspectiveCamera(Camera):
     fov_deg : float
         Horizontal field of view [deg], edge to edge of the image, in :data:`FOV_RANGE_DEG` (default 90).
     heading_deg : float
-        Azimuth of the optical axis [deg], from north clockwise (90 = east), finite (default 180:
+        Azimuth of the optical axis [deg], from north clockwise (90 = east), in [-360, 720] (default 180:
         looking south).
     pitch_deg : float
         Elevation of the optical axis [deg], in [-90, 90] (default 10).
@@ -280,7 +283,7 @@ class PerspectiveCamera(Camera):
         object.__setattr__(self, "height", _check_size("height", self.height))
         object.__setattr__(self, "fov_deg", check_real("fov_deg", self.fov_deg, *FOV_RANGE_DEG, unit=" degrees"))
         object.__setattr__(self, "heading_deg",
-                           check_real("heading_deg", self.heading_deg))
+                           check_real("heading_deg", self.heading_deg, *AZIMUTH_RANGE_DEG, unit=" degrees"))
         object.__setattr__(self, "pitch_deg", check_real("pitch_deg", self.pitch_deg, -90.0, 90.0))
 
     @property

@@ -39,13 +39,22 @@ RAYMARCH_DEFAULTS = TableSettings(view_steps=48, sun_steps=256, sampling="keller
                                   transmittance_size=(128, 512), orders=1)
 
 
+#: How far from 1 a view direction's length may be (float32 unit vectors are within 1e-7; a float16 one is not).
+DIRECTION_LENGTH_TOLERANCE = 1e-5
+
+
 def check_directions(directions, sun_direction, altitude):
     """Validated (n, 3) directions, sun direction (3,) and altitude; ValueError names the bad one."""
     directions = as_real_array("directions", directions, "unit vectors of shape (..., 3)")
     if directions.ndim < 1 or directions.shape[-1] != 3:
         raise ValueError(f"directions must have shape (..., 3), got {directions.shape}")
-    if not np.all(np.isfinite(directions)) or not np.allclose(np.linalg.norm(directions, axis=-1), 1.0, atol=1e-6):
-        raise ValueError("directions must be finite unit vectors")
+    lengths = np.linalg.norm(directions, axis=-1)
+    wrong = ~(np.abs(lengths - 1.0) <= DIRECTION_LENGTH_TOLERANCE)       # NaN and infinite lengths too
+    if wrong.any():             # which and how many: one message for NaN, zero and non-unit vectors said neither
+        first = tuple(int(i) for i in np.argwhere(wrong)[0])
+        raise ValueError(f"directions must be finite unit vectors (length within {DIRECTION_LENGTH_TOLERANCE:g} of "
+                         f"1, masked pixels too): {int(wrong.sum())} of {wrong.size} are not, the first "
+                         f"directions[{', '.join(map(str, first))}] = ({', '.join(f'{v:.9g}' for v in directions[first])})")
     sun = as_real_array("sun_direction", sun_direction, "a finite unit vector of 3 values")
     if sun.shape != (3,) or not np.all(np.isfinite(sun)) or abs(np.linalg.norm(sun) - 1.0) > 1e-6:
         raise ValueError(f"sun_direction must be a finite unit vector of 3 values, got {short(sun_direction)}")

@@ -412,9 +412,13 @@ class ScatteringTable:
         Parameters
         ----------
         altitude : array_like
-            Observer altitude [m], >= 0.
+            Observer altitude [m], in [0, 1e10] (:data:`clsky.lookup.MAX_QUERY_ALTITUDE`; above the
+            atmosphere, seen from space).
         cos_view, cos_sun, cos_scatter : array_like
-            Cosines of the view zenith, sun zenith and scattering angle.
+            Cosines of the view zenith, sun zenith and scattering angle, each in [-1, 1]. They are not
+            checked against each other: a cos_scatter that the two zenith angles do not allow (outside
+            cos_view cos_sun -+ sin_view sin_sun) gets the phase functions at that angle and the table
+            at those zeniths, a finite value of no geometry.
         backend : {'opencl', 'numpy'}
         engine : TableLookupEngine, optional
             Reused across calls to avoid rebuilding (OpenCL backend); a

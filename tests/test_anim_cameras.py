@@ -82,6 +82,14 @@ def test_sun_direction():
             sun_direction(bad, 0.0)
         with pytest.raises(ValueError, match="azimuth_deg"):
             sun_direction(0.0, bad)
+    # a zenith angle of -10 deg was a sun 80 deg up on the other side; 1e300 deg had no precision left
+    for bad in (-10.0, 180.5, 1e300, [10.0, -1e-9]):
+        with pytest.raises(ValueError, match=r"^zenith_deg must be in \[0, 180\] degrees, got"):
+            sun_direction(bad, 0.0)
+    for bad in (-360.5, 1e300):
+        with pytest.raises(ValueError, match=r"^azimuth_deg must be in \[-360, 720\] degrees, got"):
+            sun_direction(45.0, bad)
+    assert_allclose(sun_direction(180.0, 720.0), (0.0, 0.0, -1.0), rtol=0, atol=DIRECTION_ATOL)
 
 
 # Fisheye ------------------------------------------------------------------------------------------
@@ -305,6 +313,9 @@ def test_equirectangular_covers_the_sphere():
     (PerspectiveCamera, dict(width=64, height=64, pitch_deg=-91.0), "pitch_deg"),
     (PerspectiveCamera, dict(width=64, height=64, pitch_deg=math.nan), "pitch_deg"),
     (PerspectiveCamera, dict(width=64, height=64, heading_deg=-math.inf), "heading_deg"),
+    # AnimationConfig's and the command line's range (AZIMUTH_RANGE_DEG): 1e308 deg kept no precision
+    (FisheyeCamera, dict(size=64, heading_deg=1e308), r"heading_deg must be a number in \[-360, 720\] degrees"),
+    (PerspectiveCamera, dict(width=64, height=64, heading_deg=-720.0), "heading_deg"),
     (EquirectangularCamera, dict(width=0, height=64), "width"),
     (EquirectangularCamera, dict(width=128, height=2.5), "height"),
 ])
@@ -317,7 +328,8 @@ def test_boundary_values_are_accepted():
     FisheyeCamera(2)
     FisheyeCamera(np.int64(16384))
     PerspectiveCamera(2, 16384, fov_deg=179.0, pitch_deg=90.0)
-    PerspectiveCamera(16384, 2, fov_deg=1e-3, pitch_deg=-90.0, heading_deg=-720.0)
+    PerspectiveCamera(16384, 2, fov_deg=1e-3, pitch_deg=-90.0, heading_deg=-360.0)
+    FisheyeCamera(2, heading_deg=720.0)
     EquirectangularCamera(2, 2)
 
 

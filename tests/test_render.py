@@ -701,3 +701,27 @@ def test_closed_lookup_engines_and_spectral_renderers_refuse(small_tables, cl_co
         renderer.render_table(np.array([[0.0, 0.0, 1.0]]), sun_direction(60.0, 100.0))
     with pytest.raises(ValueError, match=r"^this SpectralRenderer is closed"):
         renderer.render_table(np.array([[0.0, 0.0, 1.0]]), sun_direction(60.0, 100.0))
+
+
+def test_bad_directions_are_named_with_their_count_and_the_first(small_tables, cl_context):
+    """One message ('directions must be finite unit vectors') covered NaN, zero and non-unit vectors alike,
+    without the tolerance or a pixel: it now says how many are wrong and which is the first. float32 unit
+    vectors pass (within 1e-7 of unit length); float16 ones do not (within 5e-4)."""
+    renderer = SkyRenderer(small_tables["atmosphere-plus"], RAY, ctx=cl_context)
+    sun = sun_direction(60.0, 100.0)
+    directions, _ = FisheyeCamera(8).directions()
+    cases = [((0, 1), [0.0, 0.0, 0.0], "(0, 0, 0)"), ((2, 3), [np.nan, 0.0, 1.0], "(nan, 0, 1)"),
+             ((7, 7), [0.0, 0.6, 0.81], "(0, 0.6, 0.81)")]
+    for (row, column), value, shown in cases:
+        bad = directions.copy()
+        bad[row, column] = value
+        bad[7, 0] = (0.0, 0.0, 2.0)
+        first = min((row, column), (7, 0))
+        expected = shown if first == (row, column) else "(0, 0, 2)"
+        with pytest.raises(ValueError, match=re.escape(
+                f"directions must be finite unit vectors (length within 1e-05 of 1, masked pixels too): 2 of 64 "
+                f"are not, the first directions[{first[0]}, {first[1]}] = {expected}")):
+            renderer.render_table(bad, sun)
+    assert_array_equal(renderer.render_table(directions.astype(np.float32), sun).shape, (8, 8, 3))
+    with pytest.raises(ValueError, match="of 64 are not"):
+        renderer.render_table(directions.astype(np.float16), sun)
