@@ -381,8 +381,12 @@ def test_construction_applies_the_same_checks(table, field, value, fragment):
 
 
 def test_save_refuses_a_table_edited_in_place(tmp_path):
-    table = ScatteringTable.build(black_preset("physical"), TINY.replace(orders=2), backend="numpy")
-    table.data[0, 0, 0, 0] = np.nan
+    """A table's own arrays are read-only views; edited through the array it was made from, it is checked
+    again before it is saved or exported."""
+    built = ScatteringTable.build(black_preset("physical"), TINY.replace(orders=2), backend="numpy")
+    own = np.array(built.data)
+    table = dataclasses.replace(built, data=own)
+    own[0, 0, 0, 0] = np.nan
     with pytest.raises(TableFormatError, match="NaN"):
         table.save(tmp_path / "sky.npz")
     with pytest.raises(TableFormatError, match="NaN"):
