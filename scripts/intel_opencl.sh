@@ -9,9 +9,8 @@
 # With both runtimes listed, clsky prefers Intel's on a machine without a GPU; PYOPENCL_CTX=portable
 # picks PoCL ("Portable Computing Language"). Needs ./scripts/setup.sh first. Safe to run again.
 set -euo pipefail
-if [ $# -ge 1 ]; then
-    prefix=$(realpath -m "$1")          # the directory as given, from where it was given
-fi
+# the directory as given, from where it was given (empty or absent: .intel-opencl in the checkout)
+prefix=$(realpath -m -- "${1:-$(dirname "$0")/../.intel-opencl}")
 cd "$(dirname "$0")/.."
 
 log() { printf 'intel_opencl: %s\n' "$*" >&2; }
@@ -20,7 +19,6 @@ if [ ! -x .venv/bin/python ]; then
     log "no .venv here: run ./scripts/setup.sh first"
     exit 2
 fi
-prefix=${prefix:-$(realpath -m .intel-opencl)}     # by default in the checkout
 log "installing Intel's CPU OpenCL runtime under $prefix"
 # intel-cmplr-lib-rt brings the math libraries (libimf, libsvml) that libintelocl.so needs but the
 # intel-opencl-rt wheel does not declare; without them the loader skips the runtime without a word

@@ -237,12 +237,17 @@ def test_intel_opencl_script_installs_where_its_argument_says_from_where_it_was_
         stand_in.write_text(f'#!/usr/bin/env bash\necho "{name} $*" >> "{calls}"\n{body}exit 0\n')
         stand_in.chmod(0o755)
     script.chmod(0o755)
-    for argument, expected in (["my-intel"], caller / "my-intel"), ([], checkout / ".intel-opencl"):
-        result = subprocess.run([str(script), *argument], cwd=caller, capture_output=True, text=True, timeout=60)
+    # a `prefix` in the caller's environment is no argument (it was taken for one); an empty one is the default
+    environment = {**os.environ, "prefix": str(tmp_path / "elsewhere")}
+    for argument, expected in ((["my-intel"], caller / "my-intel"), ([], checkout / ".intel-opencl"),
+                               ([""], checkout / ".intel-opencl"), (["-x"], caller / "-x")):
+        result = subprocess.run([str(script), *argument], cwd=caller, capture_output=True, text=True, timeout=60,
+                                env=environment)
         assert result.returncode == 0, result.stderr
         assert (expected / "vendors" / "intel-cpu.icd").read_text().strip() == str(expected / "lib" / "libintelocl.so")
         assert f"OCL_ICD_VENDORS={expected}/vendors" in result.stderr
     assert not (checkout / "my-intel").exists() and not (caller / ".intel-opencl").exists()
+    assert not (tmp_path / "elsewhere").exists()
 
 
 def test_record_pins_names_a_source_that_is_no_checkout(tmp_path):
