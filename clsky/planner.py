@@ -431,15 +431,17 @@ def _percent(fraction) -> str:
     return f"{100 * fraction:.0f}" if fraction >= 10.0 else f"{100 * fraction:.3g}"
 
 
-def path_ends(low, high) -> tuple[str, str]:
+def path_ends(low, high, apart=()) -> tuple[str, str]:
     """A sun path's ends [deg] as the plan prints them: 6 significant digits (a path computed from the sun's
-    positions ends at 59.99425... deg, not at 60: '59.9943'), more only where 6 would show two different ends
-    as one (89.99999 to 90 deg, not '90 to 90')."""
+    positions ends at 59.99425... deg, not at 60: '59.9943'), more only where 6 would show two different values
+    as one: the two ends (89.99999 to 90 deg, not '90 to 90'), or an end and a value of ``apart`` that the plan
+    prints beside it (a sun at -4.0000001 deg 'as measured at -4 deg', not '-4 deg as measured at -4 deg')."""
+    values = (low, high, *apart)
     for digits in range(6, 18):
-        shown = f"{low:.{digits}g}", f"{high:.{digits}g}"
-        if low == high or shown[0] != shown[1]:
-            return shown
-    return shown
+        shown = [f"{value:.{digits}g}" for value in values]
+        if all(a == b or shown[i] != shown[j] for i, a in enumerate(values) for j, b in enumerate(values) if i < j):
+            break
+    return shown[0], shown[1]
 
 
 def _at_lowest_sun(path) -> str:
@@ -448,13 +450,20 @@ def _at_lowest_sun(path) -> str:
     high (:data:`clsky.renderer_choice.LOOKUP_ERROR`: the estimate then is the nearest measured sun's,
     :func:`clsky.renderer_choice.error_over`)."""
     low, high = path
-    measured = [elevation for elevation, _ in LOOKUP_ERROR]
+    lowest, highest = _measured_suns()
     beyond = ""
-    if low < min(measured):
-        beyond = f" (as measured at {min(measured):g} deg, the lowest measured)"
-    elif low > max(measured):
-        beyond = f" (as measured at {max(measured):g} deg, the highest measured)"
-    return f"at the lowest sun, {path_ends(low, high)[0]} deg{beyond}"
+    if low < lowest:
+        beyond = f" (as measured at {lowest:g} deg, the lowest measured)"
+    elif low > highest:
+        beyond = f" (as measured at {highest:g} deg, the highest measured)"
+    return f"at the lowest sun, {path_ends(low, high, apart=(lowest, highest))[0]} deg{beyond}"
+
+
+def _measured_suns():
+    """The lowest and highest sun elevations [deg] the table lookup's error was measured at (LOOKUP_ERROR), which
+    the plan prints beside the path's ends (:func:`path_ends`'s ``apart``)."""
+    measured = [elevation for elevation, _ in LOOKUP_ERROR]
+    return min(measured), max(measured)
 
 
 def _costlier(method, chosen, pixels) -> str:
@@ -520,20 +529,19 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     harmonics, harmonics_because = azimuth_harmonics(level, scene.sun_elevations_deg, mode)
     table = level.table.replace(mode=mode, sampling=sampling, azimuth_harmonics=harmonics)
     chosen, estimate, estimates = choose_renderer(scene.sun_elevations_deg, budget, level.name, pixels=scene.pixels)
-    lookup_error = estimates["lut"]
+    lookup_error, at_lowest = estimates["lut"], _at_lowest_sun(scene.sun_elevations_deg)
     ray = level.ray if samples is None else level.ray.replace(view_steps=samples)
     march = f"ray march, {ray.view_steps} samples per ray" + (
         "" if samples is None else f" (asked for; the {level.name} level's {level.ray.view_steps})")
     if chosen.method == "lut" and ray_march:
         decisions.append(("renderer", march,
-                          f"asked for; the table lookup alone would do: {_percent(lookup_error)} % "
-                          f"{_at_lowest_sun(scene.sun_elevations_deg)}"))
+                          f"asked for; the table lookup alone would do: {_percent(lookup_error)} % {at_lowest}"))
     elif chosen.method == "lut":
         ray = None
-        decisions.append(("renderer", "table lookup", f"its error {_at_lowest_sun(scene.sun_elevations_deg)}, is "
-                          f"{_percent(lookup_error)} % (measured)"))
+        decisions.append(("renderer", "table lookup", f"its error {at_lowest}, is {_percent(lookup_error)} % "
+                          f"(measured)"))
     elif chosen.method == "raymarch":
-        reason = f"the table lookup's {_percent(lookup_error)} % {_at_lowest_sun(scene.sun_elevations_deg)}, exceeds the budget"
+        reason = f"the table lookup's {_percent(lookup_error)} % {at_lowest}, exceeds the budget"
         if estimates["skyview"] <= budget:              # tiny frames: marching every pixel costs less than the map
             reason += (f"; the sky-view map's {100 * estimates['skyview']:.2g} % fits, but "
                        + _costlier("skyview", chosen, scene.pixels))
@@ -542,8 +550,8 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         would = (f"the {chosen.description}'s {100 * estimate:.2g} % (estimated: the ray march's + its own, "
                  f"measured) fits; " + ("so does the table lookup, but " + _costlier("lut", chosen, scene.pixels)
                                         if lookup_error <= budget else
-                                        f"the table lookup's {_percent(lookup_error)} % {_at_lowest_sun(scene.sun_elevations_deg)}, "
-                                        f"exceeds the budget"))
+                                        f"the table lookup's {_percent(lookup_error)} % {at_lowest}, exceeds the "
+                                        f"budget"))
         decisions.append(("renderer", march, f"asked for; {would}") if ray_march
                          else ("renderer", f"{chosen.description} (--method {chosen.method}), {march} at its nodes",
                                would))
@@ -580,7 +588,7 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     w_low, w_high = table.sun_w_range
     decisions.append(("sun axis", f"elevations {elevations[0]:.1f} to {elevations[1]:.1f} deg, "
                       f"{table.size[2]} nodes ({100 * (w_high - w_low):.2g} % of the axis)",
-                      f"the path's {' to '.join(path_ends(*scene.sun_elevations_deg))} deg "
+                      f"the path's {' to '.join(path_ends(*scene.sun_elevations_deg, apart=_measured_suns()))} deg "
                       f"+ {margins[1]:.1f} deg above and {margins[0]:.1f} deg below for curvature and orders"))
     whole_because = {"altitude": "view rays cross every altitude", "view": "the gather integrates every direction"}
     if table.orders == 1:

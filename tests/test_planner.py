@@ -158,7 +158,12 @@ def test_the_readme_shows_the_main_jobs_plan_as_clsky_prints_it(cl_context):
      "the path's 89.99 to 90 deg"),
     ((8.0, 30.0), "at the lowest sun, 8 deg,", "the path's 8 to 30 deg"),
     ((89.99999, 90.0), "at the lowest sun, 89.99999 deg", "the path's 89.99999 to 90 deg"),    # ':g': '90 to 90'
-    ((-6.0, 59.994250190379105), "at the lowest sun, -6 deg", "the path's -6 to 59.9943 deg")])  # the frames' path
+    ((-6.0, 59.994250190379105), "at the lowest sun, -6 deg", "the path's -6 to 59.9943 deg"),  # the frames' path
+    # beside a measured bound, the digits that tell them apart ('-4 deg (as measured at -4 deg ...)' was printed)
+    ((-4.0000001, 60.0), "at the lowest sun, -4.0000001 deg (as measured at -4 deg, the lowest measured)",
+     "the path's -4.0000001 to 60 deg"),
+    ((45.0000001, 60.0), "at the lowest sun, 45.0000001 deg (as measured at 45 deg, the highest measured)",
+     "the path's 45.0000001 to 60 deg")])
 
 def test_the_plan_names_the_sun_path_as_given_and_where_the_lookup_error_was_measured(cl_context, path, lookup,
                                                                                       sun_path):
