@@ -44,6 +44,8 @@ RENDERER_COLOURS = {"lut": "Blues", "raymarch": "Oranges", "lut4d": "Greens", "s
 ELEVATION_LINEAR = 10.0
 #: How far along its row [axes fraction] a front label moves to clear the markers beside its point.
 CLEARANCE = 0.3
+#: The smallest font [pt] a panel's front labels shrink to where they do not fit its height.
+MIN_LABEL_FONTSIZE = 4.0
 
 
 def _pyplot():
@@ -92,16 +94,25 @@ def read_csv(path):
     return parsed
 
 
-def stack_labels(positions, spacing, low=0.0, high=1.0):
+def stack_labels(positions, spacing, low=0.0, high=1.0, heights=None):
     """Label positions along one axis, as close as possible to ``positions`` (least squares) with at
     least ``spacing`` between any two, then moved inside [``low``, ``high``] where they fit.
 
-    The order is kept: sorted, the labels must satisfy p[i+1] - p[i] >= spacing; with q[i] = p[i] -
-    i * spacing that is q non-decreasing, so the least-squares fit is the isotonic regression of
-    y[i] - i * spacing (pool-adjacent-violators). Returns an array in the order of ``positions``."""
+    The order is kept: sorted, the labels must satisfy p[i+1] - p[i] >= g[i] (``spacing``); with
+    q[i] = p[i] - (g[0] + ... + g[i-1]) that is q non-decreasing, so the least-squares fit is the isotonic
+    regression of those differences (pool-adjacent-violators). With ``heights`` (each label's, in the order
+    of ``positions``), the gap between two neighbours is the mean of their heights instead, and each label's
+    extent (its position -+ half its height) is kept inside [``low``, ``high``]. Returns an array in the
+    order of ``positions``."""
     positions = np.asarray(positions, dtype=float)
     order = np.argsort(positions, kind="stable")
-    target = positions[order] - spacing * np.arange(len(positions))
+    if heights is None:
+        gaps, half = np.full(max(len(positions) - 1, 0), float(spacing)), np.zeros(len(positions))
+    else:
+        sorted_heights = np.asarray(heights, dtype=float)[order]
+        gaps, half = (sorted_heights[:-1] + sorted_heights[1:]) / 2, sorted_heights / 2
+    offsets = np.concatenate([[0.0], np.cumsum(gaps)])[:len(positions)]
+    target = positions[order] - offsets
     blocks = []                                     # [mean, count] of pooled runs
     for value in target:
         blocks.append([value, 1])
@@ -110,11 +121,12 @@ def stack_labels(positions, spacing, low=0.0, high=1.0):
             blocks[-1] = [(blocks[-1][0] * blocks[-1][1] + mean * count) / (blocks[-1][1] + count),
                           blocks[-1][1] + count]
     fitted = np.concatenate([np.full(count, mean) for mean, count in blocks]) if blocks else np.empty(0)
-    stacked = fitted + spacing * np.arange(len(positions))
+    stacked = fitted + offsets
     for index in range(len(stacked)):               # inside [low, high]: push up from low, then down from high
-        stacked[index] = max(stacked[index], low if index == 0 else stacked[index - 1] + spacing)
+        stacked[index] = max(stacked[index], low + half[index] if index == 0 else stacked[index - 1] + gaps[index - 1])
     for index in reversed(range(len(stacked))):
-        stacked[index] = min(stacked[index], high if index == len(stacked) - 1 else stacked[index + 1] - spacing)
+        stacked[index] = min(stacked[index], high - half[index] if index == len(stacked) - 1
+                             else stacked[index + 1] - gaps[index])
     result = np.empty_like(stacked)
     result[order] = stacked
     return result
@@ -178,7 +190,8 @@ def _pareto_panel(axes, rows, error, styles, fontsize):
     axes.set_ylim(*_limits(errors, 0.25))
     axes.grid(True, which="both", lw=0.3, alpha=0.6)
     for axis, (low, high) in ((axes.xaxis, axes.get_xlim()), (axes.yaxis, axes.get_ylim())):
-        if high < 10.0 * low:       # under a decade: matplotlib labels the minor ticks, '2x10^0 3x10^04x10^0'
+        # fewer than two powers of ten on the axis: matplotlib labels the minor ticks, '2x10^0 3x10^04x10^0'
+        if math.floor(math.log10(high)) - math.ceil(math.log10(low)) < 1:
             _plain_ticks(axis)
     axes.tick_params(which="both", labelsize=fontsize + 1)
     # labels: stacked in axes coordinates, at least one label's lines apart, right of their point (left of
@@ -190,10 +203,14 @@ def _pareto_panel(axes, rows, error, styles, fontsize):
     markers = to_axes.transform(axes.transData.transform(np.column_stack([times, errors])))
     points = to_axes.transform(axes.transData.transform([(1e3 * r["render_s"], 100 * r[error]) for r in front]))
     offset = 10.0 / box.width
-    texts = [_fitted_label(axes, r["candidate"], fontsize, 1.0 - 2.0 * offset) for r in front]
-    lines = max((text.count("\n") + 1 for text in texts), default=1)
-    heights = stack_labels(points[:, 1], lines * line, low=0.02 + (lines - 1) * line / 2,
-                           high=0.98 - (lines - 1) * line / 2)
+    for _ in range(4):          # a smaller font where the front's labels do not fit the panel's height
+        texts = [_fitted_label(axes, r["candidate"], fontsize, 1.0 - 2.0 * offset) for r in front]
+        extents = [(text.count("\n") + 1) * line for text in texts]     # each label's height [axes fraction]
+        if sum(extents) <= 0.98 or fontsize <= MIN_LABEL_FONTSIZE:
+            break
+        fontsize = max(MIN_LABEL_FONTSIZE, fontsize * 0.98 / sum(extents))
+        line = 1.4 * fontsize * axes.figure.dpi / 72.0 / box.height
+    heights = stack_labels(points[:, 1], line, low=0.01, high=0.99, heights=extents)
     for r, text, (x, _), height in zip(front, texts, points, heights):
         width = _text_width(axes, text, fontsize)
         starts = {}                         # side: where the label begins (left side: where it ends)
@@ -206,6 +223,7 @@ def _pareto_panel(axes, rows, error, styles, fontsize):
         fitting = [side for side in preferred if 0.0 <= starts[side] - (side < 0) * width
                    and starts[side] + (side > 0) * width <= 1.0]
         side = fitting[0] if fitting else max(preferred, key=lambda s: 1.0 - starts[s] if s > 0 else starts[s])
+        width = min(width, 1.0)
         start = min(starts[side], 1.0 - width) if side > 0 else max(starts[side], width)
         axes.annotate(text, (1e3 * r["render_s"], 100 * r[error]), xytext=(start, height),
                       textcoords="axes fraction", ha="left" if side > 0 else "right", va="center",
@@ -237,7 +255,14 @@ def _text_width(axes, text, fontsize):
 def _fitted_label(axes, text, fontsize, room):
     """``text``, or it broken into lines at spaces where it is wider than ``room`` [axes fraction]: a front
     label ran out of its panel (the day panel's longest ray-march label) and off the figure's edge."""
-    words, lines = text.split(" "), []
+    words, lines = [], []
+    for word in text.split(" "):            # a word wider than the room is cut where it must be
+        while len(word) > 1 and _text_width(axes, word, fontsize) > room:
+            cut = max(1, max(n for n in range(1, len(word)) if n == 1
+                             or _text_width(axes, word[:n], fontsize) <= room))
+            words.append(word[:cut])
+            word = word[cut:]
+        words.append(word)
     for word in words:
         if lines and _text_width(axes, f"{lines[-1]} {word}", fontsize) <= room:
             lines[-1] = f"{lines[-1]} {word}"

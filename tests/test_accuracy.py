@@ -354,21 +354,55 @@ def test_tick_labels_of_a_narrow_panel_do_not_overlap():
 
     from clsky.anim.accuracy_plot import draw_pareto
 
-    rows = synthetic_rows()
-    for row, ms in zip(rows, (2.0, 2.2, 2.4, 2.6, 3.0, 3.5, 4.0)):
+    narrow = synthetic_rows()
+    for row, ms in zip(narrow, (2.0, 2.2, 2.4, 2.6, 3.0, 3.5, 4.0)):
         row["render_s"] = ms / 1e3
+    for rows in (narrow, synthetic_rows()):         # 2-4 ms, and 1-8 ms: one power of ten on the axis
+        figure = draw_pareto(rows)
+        try:
+            figure.canvas.draw()
+            renderer = figure.canvas.get_renderer()
+            for axes in figure.axes:
+                shown = [label for label in axes.get_xticklabels(which="both") if label.get_text()
+                         and axes.get_xlim()[0] <= label.get_position()[0] <= axes.get_xlim()[1]]
+                assert shown, axes.get_title()
+                assert all("times" not in label.get_text() and "^" not in label.get_text() for label in shown)
+                extents = [label.get_window_extent(renderer) for label in shown]
+                assert not any(a.overlaps(b) for i, a in enumerate(extents) for b in extents[i + 1:]), \
+                    axes.get_title()
+                assert len({label.get_fontsize() for label in shown}) == 1
+        finally:
+            plt.close(figure)
+
+
+def test_labels_of_a_long_front_and_of_a_long_name_stay_inside_their_panels():
+    """A front of 14 candidates with two-line names ran down through the panels below and off the figure,
+    and a name without spaces wider than its panel out of it: the labels shrink to fit the panel's height
+    and a word is cut where it must be."""
+    pytest.importorskip("matplotlib")
+    import matplotlib.pyplot as plt
+    from matplotlib.text import Text
+
+    from clsky.anim.accuracy_plot import draw_pareto
+
+    rows = []
+    for index in range(14):
+        row = dict(synthetic_rows()[0], candidate=f"candidate {index} with a name long enough for two lines here",
+                   render_s=(1.0 + index) / 1e3, p95_rel=0.5 / (1.0 + index))
+        row.update({f"p95_rel {name}": row["p95_rel"] for name in accuracy.SUN_ELEVATIONS})
+        rows.append(row)
+    rows[3]["candidate"] = "x" * 80
     figure = draw_pareto(rows)
     try:
         figure.canvas.draw()
         renderer = figure.canvas.get_renderer()
         for axes in figure.axes:
-            shown = [label for label in axes.get_xticklabels(which="both") if label.get_text()
-                     and axes.get_xlim()[0] <= label.get_position()[0] <= axes.get_xlim()[1]]
-            assert shown, axes.get_title()
-            assert all("times" not in label.get_text() and "^" not in label.get_text() for label in shown)
-            extents = [label.get_window_extent(renderer) for label in shown]
-            assert not any(a.overlaps(b) for i, a in enumerate(extents) for b in extents[i + 1:]), axes.get_title()
-            assert len({label.get_fontsize() for label in shown}) == 1
+            panel = axes.get_window_extent()
+            labels = [Text.get_window_extent(t, renderer) for t in axes.texts if str(t.get_gid()).startswith("front:")]
+            assert len(labels) == 14, axes.get_title()
+            for label in labels:
+                assert panel.x0 - 0.5 <= label.x0 and label.x1 <= panel.x1 + 0.5, (axes.get_title(), label)
+                assert panel.y0 - 0.5 <= label.y0 and label.y1 <= panel.y1 + 0.5, (axes.get_title(), label)
     finally:
         plt.close(figure)
 
