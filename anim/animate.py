@@ -270,8 +270,8 @@ class AnimationConfig:
         check_ground_mode(self.atmosphere, self.mode,
                           "" if self.ground_albedo is not None else f"the {self.preset} preset's ground")
         if self.hdr_precision != "float" and self.hdr != "exr":
-            raise ParameterError("hdr_precision", "'float' unless hdr is 'exr' (.npy and .hdr frames have no other "
-                                 "pixel type)", self.hdr_precision)
+            raise ParameterError("hdr_precision", "'float' unless hdr is 'exr' (--hdr exr; .npy and .hdr frames have "
+                                 "no other pixel type)", self.hdr_precision)
         if self.end_hour <= self.start_hour:
             raise ParameterError("end_hour", f"after the start hour ({self.start_hour:g})", self.end_hour)
         if self.location is not None and self.date is not None:

@@ -244,7 +244,7 @@ def _unused_options(args):
                                        f"{where('table_size', '--table-size')}: without a scene plan it compares "
                                        f"the ray march with the 3D table lookup"))
     if getattr(args, "hdr", None) != "exr" and hasattr(args, "hdr_precision"):     # animate's HDR frames
-        frames = f"{where('hdr', '--hdr')} {args.hdr} writes" if args.hdr else "without --hdr clsky writes"
+        frames = f"{where('hdr', '--hdr')} ({args.hdr}) writes" if args.hdr else "without --hdr clsky writes"
         unused.append(("hdr_precision", f"sets the EXR frames' pixel type, and {frames} no EXR frames (--hdr exr)"))
     if args.quality is not None:
         unused.append(("error_budget", f"picks a quality level, and {where('quality', '--quality')} names one "

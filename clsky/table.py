@@ -646,10 +646,12 @@ class ScatteringTable:
                 "space: y = H/2 + (H/2-1)(1 - (d_top-(Ha-h))/(rho+K-(Ha-h)))")
             description["mapping_formulas"]["azimuth_4d"] = "a = (A-1) phi / pi, phi in [0, pi] the view-sun azimuth"
             description["mapping_formulas"]["nodes"] = (
-                "u = x/(W-1), y: view_4d (not v), w = w_low + (w_high - w_low) * z/(D-1), a: azimuth_4d; the "
-                "view mappings v above and v = y/(H-1) are those of the 3D grid of azimuth_harmonics only")
-            description["radiance"] = ("I = I_I * (F_R(nu) * Ibar_R + F_M(nu) * Ibar_M + multiple), channels "
-                                       "interpolated quadrilinearly, never across the horizon (y = H/2-1 to H/2)")
+                "u = x/(W-1), y: view_4d (not v), w = w_low + (w_high - w_low) * z/(D-1), a: azimuth_4d"
+                + ("; the view mappings v above and v = y/(H-1) are those of the 3D grid of azimuth_harmonics only"
+                   if self.settings.azimuth_harmonics and self.gathered is not None else ""))
+            description["radiance"] = ("I = I_I * (F_R(c) * Ibar_R + F_M(c) * Ibar_M + multiple), c = cos theta "
+                                       "(phase_functions), channels interpolated quadrilinearly, never across the "
+                                       "horizon (y = H/2-1 to H/2)")
         harmonics = self.settings.azimuth_harmonics if self.gathered is not None else 0
         if harmonics:
             # a 4D table's higher orders come from the orders of the 3D table of its W x H x D (clsky/table4d.py)

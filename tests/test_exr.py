@@ -472,11 +472,11 @@ def test_cli_hdr_exr_panorama(tmp_path):
     (["--hdr", "npy", "--hdr-precision", "half"], "--hdr-precision"),
     (["--hdr", "hdr", "--hdr-precision", "half"], "--hdr-precision"),
     # an option the frames would not use is refused, whatever its value (the default 'float' typed ran)
-    (["--hdr", "hdr", "--hdr-precision", "float"], "--hdr-precision sets the EXR frames' pixel type, and --hdr hdr "
+    (["--hdr", "hdr", "--hdr-precision", "float"], "--hdr-precision sets the EXR frames' pixel type, and --hdr (hdr) "
                                                    "writes no EXR frames (--hdr exr)"),
     (["--hdr-precision", "float"], "--hdr-precision sets the EXR frames' pixel type, and without --hdr clsky writes "
                                    "no EXR frames (--hdr exr)"),
-    (["--hdr", "npy", "--hdr-precision", "half"], "--hdr-precision sets the EXR frames' pixel type, and --hdr npy"),
+    (["--hdr", "npy", "--hdr-precision", "half"], "--hdr-precision sets the EXR frames' pixel type, and --hdr (npy)"),
 ], ids=lambda value: " ".join(value) if isinstance(value, list) else value)
 def test_cli_bad_hdr_options_one_line_exit_2(tmp_path, args, named):
     result = forked_cli.run("clsky.anim", "animate", *args, "--progress", "none", cwd=tmp_path, timeout=120)
@@ -485,6 +485,19 @@ def test_cli_bad_hdr_options_one_line_exit_2(tmp_path, args, named):
     assert len(lines) == 1, result.stderr
     assert lines[0].startswith("clsky: error:") and named in lines[0], lines[0]
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_scenes_hdr_precision_without_exr_frames_names_the_key_and_the_option(tmp_path):
+    """A scene's output.hdr_precision = 'half' with --hdr npy typed: the scene key is named, with the option
+    that would make it apply (the message had dropped --hdr exr)."""
+    (tmp_path / "s.toml").write_text('[output]\nhdr = "exr"\nhdr_precision = "half"\n')
+    result = forked_cli.run("clsky.anim", "animate", "--scene", "s.toml", "--hdr", "npy", "--progress", "none",
+                            cwd=tmp_path, timeout=120)
+    assert result.returncode == 2
+    assert result.stderr.splitlines() == [
+        "clsky: --hdr npy overrides s.toml's output.hdr = \"exr\"",
+        "clsky: error: s.toml: output.hdr_precision must be 'float' unless hdr is 'exr' (--hdr exr; .npy and .hdr "
+        "frames have no other pixel type), got 'half'"], result.stderr
 
 
 def test_envmap_pixel_matches_the_camera():

@@ -403,6 +403,13 @@ def test_raw_export_of_a_4d_table_says_what_its_channels_and_harmonics_are(table
     assert "3D grid of azimuth_harmonics only" in description["mapping_formulas"]["nodes"]
     block = description["azimuth_harmonics"]
     assert "the nodes of the 3D grid of the same W x H x D" in block["layout"]
+    assert description["radiance"].startswith("I = I_I * (F_R(c) * Ibar_R + F_M(c) * Ibar_M + multiple), c = ")
+    # without harmonics there is no azimuth_harmonics block for the node formula to point to
+    plain = ScatteringTable.build(preset("atmosphere-plus"), TINY4D.replace(azimuth_harmonics=0))
+    _, header = plain.export_raw(tmp_path / "plain")
+    plain_description = json.loads(header.read_text())
+    assert "azimuth_harmonics" not in plain_description
+    assert plain_description["mapping_formulas"]["nodes"].endswith("a: azimuth_4d")
     assert "integrated along each 4D node's own ray" in block["radiance"]
     assert "are the azimuth average" not in block["radiance"]
     multiple = table4d.data[..., 6:9]
