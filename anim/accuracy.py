@@ -236,6 +236,8 @@ def reference_convergence(reference, valid, atmosphere="physical", progress=None
     (:func:`render_reference`; 'reference' unless a smoke run wants a cheaper stand-in)."""
     size = valid.shape[0]
     change = {}
+    if progress is not None:
+        progress("reference convergence", 0, len(groups))
     for index, group in enumerate(groups):
         finer, _ = render_reference(size, (group,), atmosphere, level)
         change[group] = {name: m["p95_rel"] for name, m in _errors(finer, reference, valid)[2].items()}

@@ -30,7 +30,7 @@ from clsky.errors import require_extra
 from .accuracy import SUN_ELEVATIONS, pareto_front
 
 __all__ = ["read_csv", "stack_labels", "knob_styles", "draw_pareto", "draw_elevation", "pareto_plot",
-           "elevation_plot", "elevation_plot_path", "plot_csv"]
+           "elevation_plot", "elevation_plot_path", "plot_csv", "sweep_titles", "write_sweep"]
 
 #: Civil twilight: the sun between 0 and 6 deg below the horizon [deg] (the usual definition).
 CIVIL_TWILIGHT = (-6.0, 0.0)
@@ -394,6 +394,29 @@ def elevation_plot(rows, path, title="clsky: where each renderer fails", force=F
 
     check_output(path, force)
     return _save(draw_elevation(rows, title), path, force, staging)
+
+
+def sweep_titles(level="reference"):
+    """The titles of a sweep's two plots (Pareto, elevation), saying what the errors are against where it is
+    not the 'reference' quality level (a smoke run's cheaper stand-in; the CSV's rows do not say)."""
+    against = "" if level == "reference" else f" (against the {level!r} level)"
+    return "clsky: speed versus accuracy" + against, "clsky: where each renderer fails" + against
+
+
+def write_sweep(rows, csv_path, plot, elevation, size, level="reference", force=False):
+    """A sweep's CSV and its two plots (:func:`pareto_plot`, :func:`elevation_plot`, titled by
+    :func:`sweep_titles`), landing together (:class:`clsky._files.StagedWrites`): `clsky bench accuracy`'s
+    and bench/bench_accuracy.py's outputs."""
+    from clsky._files import StagedWrites
+
+    from .writers import write_csv
+
+    pareto_title, elevation_title = sweep_titles(level)
+    with StagedWrites() as staging:
+        write_csv(csv_path, rows, force=force, staging=staging)
+        pareto_plot(rows, plot, title=pareto_title, force=force, size=size, staging=staging)
+        elevation_plot(rows, elevation, title=elevation_title, force=force, staging=staging)
+    return csv_path, plot, elevation
 
 
 def elevation_plot_path(plot):

@@ -402,7 +402,7 @@ def run_render(args):
 
 
 def run_bench(args):
-    from clsky._files import StagedWrites, check_suffix
+    from clsky._files import check_suffix
 
     from . import accuracy, accuracy_plot, writers
 
@@ -434,14 +434,8 @@ def run_bench(args):
         rows = accuracy.measure(candidates, reference, valid, progress=progress)
     finally:
         close()
-    # the plots say what the errors are against where it is not the reference level (the CSV's rows do not)
-    against = "" if args.reference_quality == "reference" else f" (against the '{args.reference_quality}' level)"
-    with StagedWrites() as staging:                # the CSV and its plots land together
-        writers.write_csv(targets["--output"], rows, force=args.force, staging=staging)
-        accuracy_plot.pareto_plot(rows, targets["--plot"], title="clsky: speed versus accuracy" + against,
-                                  force=args.force, size=args.size, staging=staging)
-        accuracy_plot.elevation_plot(rows, targets["--elevation-plot"], title="clsky: where each renderer fails"
-                                     + against, force=args.force, staging=staging)
+    accuracy_plot.write_sweep(rows, targets["--output"], targets["--plot"], targets["--elevation-plot"], args.size,
+                              args.reference_quality, force=args.force)
     for row in rows:
         print(f"{row['candidate']:>24}: build {row['build_s']:6.2f} s ({row['build_cpu_s']:6.2f} CPU-s), frame "
               f"{1e3 * row['render_s']:7.1f} ms ({1e3 * row['render_cpu_s']:7.1f} CPU-ms), "

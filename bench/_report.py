@@ -133,19 +133,26 @@ def load_reference_cache(path: pathlib.Path, level: str, size: int, names) -> di
     """The arrays of a reference cache (:func:`save_reference_cache`), after checking that its frames are
     ``names``' at ``size`` x ``size`` rendered at the quality level ``level``; SystemExit naming the file
     otherwise (a --smoke cache, rendered at the draft level, was taken for the 'reference' level's)."""
+    import zipfile
+
     import numpy as np
 
-    with np.load(path) as cached:
-        arrays = {name: cached[name] for name in cached.files}
-    held = str(arrays["level"]) if "level" in arrays else "an unrecorded level"
-    if held != level:
+    try:
+        with np.load(path) as cached:
+            arrays = {name: cached[name] for name in cached.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as error:
+        raise SystemExit(f"--reference-cache {path}: cannot read it ({error})") from None
+    again = "; delete it to render the reference again"
+    held = f"the {str(arrays['level'])!r} level" if "level" in arrays else "an unrecorded level (an older cache)"
+    if held != f"the {level!r} level":
         raise SystemExit(f"--reference-cache {path} holds frames of {held}, not of the {level!r} level this run "
-                         f"compares with")
+                         f"compares with{again}")
     missing = [name for name in ("valid", *names) if name not in arrays]
-    if missing or arrays["valid"].shape != (size, size):
-        raise SystemExit(f"--reference-cache {path} holds {'no ' + ', '.join(missing) if missing else 'frames of '}"
-                         f"{'' if missing else ' x '.join(map(str, arrays['valid'].shape))}, not {size} x {size} "
-                         "frames")
+    if missing:
+        raise SystemExit(f"--reference-cache {path} lacks the frames {', '.join(map(repr, missing))}{again}")
+    if arrays["valid"].shape != (size, size):
+        raise SystemExit(f"--reference-cache {path} holds {' x '.join(map(str, arrays['valid'].shape))} frames, not "
+                         f"{size} x {size} (--size){again}")
     return arrays
 
 

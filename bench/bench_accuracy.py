@@ -37,9 +37,8 @@ from _report import SMOKE, add_output_arguments, load_average, load_note, machin
 from _report import integer_in, load_reference_cache, npz_file
 
 import clsky
-from clsky.anim import accuracy, accuracy_plot, writers
+from clsky.anim import accuracy, accuracy_plot
 from clsky._cl import default_device, describe_device
-from clsky._files import StagedWrites
 
 DOCS = pathlib.Path(__file__).resolve().parent.parent / "docs"
 #: The candidates of a --smoke run (over an SMOKE.table base): one table, one table knob, one ray march,
@@ -97,13 +96,12 @@ def run(args, candidates, level):
     load_start = load_average()
     rows = accuracy.measure(candidates, reference, valid)
     load_end = load_average()
-    if args.docs is not None:       # the CSV and its plots land together (a failed plot left a new CSV beside old plots)
+    if args.docs is not None:
+        # the CSV and its plots land together (a failed plot left a new CSV beside the old plots)
         args.docs.mkdir(parents=True, exist_ok=True)
-        written = [args.docs / name for name in ("accuracy.csv", "accuracy.png", "accuracy_elevation.png")]
-        with StagedWrites() as staging:
-            writers.write_csv(written[0], rows, force=True, staging=staging)
-            accuracy_plot.pareto_plot(rows, written[1], force=True, size=args.size, staging=staging)
-            accuracy_plot.elevation_plot(rows, written[2], force=True, staging=staging)
+        written = accuracy_plot.write_sweep(rows, *(args.docs / name for name in ("accuracy.csv", "accuracy.png",
+                                                                               "accuracy_elevation.png")),
+                                            args.size, level, force=True)
         print("wrote " + ", ".join(map(str, written)), flush=True)
     front = {r["candidate"] for r in accuracy.pareto_front(rows)}
     names = list(accuracy.SUN_ELEVATIONS)

@@ -119,6 +119,13 @@ def run(args, reference_name):
         reference_cpu = float(cached["cpu_seconds"]) if "cpu_seconds" in cached else None
         args.groups = [g for g in change if g != "sum"]
     else:
+        if args.reference_cache:    # where the cache goes, checked before the minutes of the reference
+            from clsky._files import check_output
+
+            try:
+                check_output(args.reference_cache, force=True, option="--reference-cache")
+            except (OSError, ValueError) as error:
+                raise SystemExit(str(error)) from None
         (reference, valid), reference_seconds, reference_cpu = timed_with_cpu(
             lambda: accuracy.render_reference(args.size, level=reference_name))
         loads.append(load_average())

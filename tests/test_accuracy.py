@@ -407,6 +407,27 @@ def test_labels_of_a_long_front_and_of_a_long_name_stay_inside_their_panels():
         plt.close(figure)
 
 
+def test_a_sweeps_files_say_what_they_compare_with(tmp_path, monkeypatch):
+    """`clsky bench accuracy --reference-quality default` and bench_accuracy.py --smoke drew plots titled as
+    if against the reference level (only the summary line said otherwise, and the script's own copy of
+    the writing not even that): one writer (write_sweep) titles both plots by the level."""
+    pytest.importorskip("matplotlib")
+    from clsky.anim import accuracy_plot
+
+    assert accuracy_plot.sweep_titles() == ("clsky: speed versus accuracy", "clsky: where each renderer fails")
+    titles = []
+    for name in ("draw_pareto", "draw_elevation"):
+        draw = getattr(accuracy_plot, name)
+        monkeypatch.setattr(accuracy_plot, name, lambda rows, *a, _draw=draw, **k: titles.append(a[-1]) or
+                            _draw(rows, *a, **k))
+    written = accuracy_plot.write_sweep(synthetic_rows(), tmp_path / "a.csv", tmp_path / "a.png",
+                                        tmp_path / "a_elevation.png", 16, "draft")
+    assert titles == ["clsky: speed versus accuracy (against the 'draft' level)",
+                      "clsky: where each renderer fails (against the 'draft' level)"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.csv", "a.png", "a_elevation.png"]
+    assert [p.name for p in written] == ["a.csv", "a.png", "a_elevation.png"]
+
+
 def test_elevation_figure_draws_a_lone_candidate_and_names_zero_errors():
     """A renderer with one candidate, off the front, had a band of no height: its errors were drawn nowhere,
     while the legend listed 'all 1 candidates (range)'; a zero error vanished from the log axis unnamed."""

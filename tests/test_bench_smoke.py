@@ -287,12 +287,22 @@ def test_a_reference_cache_holds_its_level_and_is_written_whole(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["refc.npz"]
     cached = _report.load_reference_cache(path, "draft", 4, frames)
     assert float(cached["seconds"]) == 2.5 and (cached["day"] == 1).all() and str(cached["level"]) == "draft"
-    with pytest.raises(SystemExit, match=r"refc.npz holds frames of draft, not of the 'reference' level"):
+    again = "; delete it to render the reference again"
+    with pytest.raises(SystemExit, match=re.escape(f"refc.npz holds frames of the 'draft' level, not of the "
+                                                   f"'reference' level this run compares with{again}")):
         _report.load_reference_cache(path, "reference", 4, frames)
-    with pytest.raises(SystemExit, match=r"refc.npz holds frames of 4 x 4, not 8 x 8 frames"):
+    with pytest.raises(SystemExit, match=re.escape(f"refc.npz holds 4 x 4 frames, not 8 x 8 (--size){again}")):
         _report.load_reference_cache(path, "draft", 8, frames)
-    with pytest.raises(SystemExit, match=r"refc.npz holds no night, not 4 x 4 frames"):
+    with pytest.raises(SystemExit, match=re.escape(f"refc.npz lacks the frames 'night'{again}")):
         _report.load_reference_cache(path, "draft", 4, [*frames, "night"])
+    # a cache written before the level was recorded, a missing file, a damaged one: named, no traceback
+    np.savez(tmp_path / "old.npz", valid=np.ones((4, 4), bool), **frames)
+    with pytest.raises(SystemExit, match=re.escape("old.npz holds frames of an unrecorded level (an older cache)")):
+        _report.load_reference_cache(tmp_path / "old.npz", "draft", 4, frames)
+    (tmp_path / "torn.npz").write_bytes(path.read_bytes()[:100])
+    for name in ("torn.npz", "absent.npz"):
+        with pytest.raises(SystemExit, match=re.escape(f"--reference-cache {tmp_path / name}: cannot read it (")):
+            _report.load_reference_cache(tmp_path / name, "draft", 4, frames)
 
 
 def test_bench_accuracy_needs_matplotlib_before_it_measures(tmp_path):

@@ -61,10 +61,13 @@ def test_the_accuracy_sweeps_stages_name_their_steps(monkeypatch):
     update("reference", 2, 4)
     update("candidates", 0, 3)
     update("candidates", 1, 3)
+    update("reference convergence", 0, 4)             # bench_quality's doubled groups (anim/accuracy.py)
+    update("reference convergence", 3, 4)
     close()
     lines = sys.stderr.getvalue().replace("\r", "\n").splitlines()
     assert any(line.startswith("reference frames:") and "2/4" in line and "frame/s" in line for line in lines), lines
     assert any(line.startswith("candidates:") and "1/3" in line and "candidate/s" in line for line in lines), lines
+    assert any(line.startswith("reference convergence:") and "3/4" in line and "group/s" in line for line in lines)
     assert not any("step" in line for line in lines), lines
 
 
