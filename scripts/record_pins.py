@@ -63,8 +63,14 @@ def _check_modules(source: pathlib.Path) -> None:
 
 
 def _commit_of(checkout, what) -> str:
-    """The commit ``checkout`` is at; exits with git's own reason (one line) where it is no git checkout."""
-    done = subprocess.run(["git", "-C", str(checkout), "rev-parse", "HEAD"], capture_output=True, text=True)
+    """The commit ``checkout`` (as typed) is at; exits with one line where it is no directory, git is missing,
+    or it is no git checkout (with git's own reason)."""
+    if not pathlib.Path(checkout).is_dir():
+        sys.exit(f"record_pins: {what} {checkout} is no directory")
+    try:
+        done = subprocess.run(["git", "-C", str(checkout), "rev-parse", "HEAD"], capture_output=True, text=True)
+    except FileNotFoundError:
+        sys.exit("record_pins: git is not installed: it tells which commit the pins' code is at")
     if done.returncode != 0:
         reason = (done.stderr.strip().splitlines() or ["git rev-parse failed"])[-1]
         sys.exit(f"record_pins: {what} {checkout} is no git checkout with a commit: {reason}")
@@ -78,8 +84,8 @@ def main(argv=None) -> int:
     parser.add_argument("--source", type=pathlib.Path, help="checkout of the pins' commit (default: today's code)")
     args = parser.parse_args(argv)
     if args.source is not None:
+        head = _commit_of(args.source, "--source")
         source = args.source.resolve()
-        head = _commit_of(source, "--source")
         for name in args.names:
             if not head.startswith(pins.PINS[name].commit):
                 sys.exit(f"record_pins: pin {name!r} belongs to commit {pins.PINS[name].commit}; "

@@ -259,6 +259,10 @@ def test_record_pins_names_a_source_that_is_no_checkout(tmp_path):
     assert result.returncode == 1 and result.stdout == ""
     assert result.stderr.startswith(f"record_pins: --source {tmp_path} is no git checkout with a commit: ")
     assert result.stderr.count("\n") == 1 and "not a git repository" in result.stderr, result.stderr
+    # as typed, and a directory that is not there named as such
+    missing = subprocess.run([sys.executable, str(script), "ground", "--source", "nothere"], capture_output=True,
+                             text=True, timeout=120, cwd=tmp_path)
+    assert missing.returncode == 1 and missing.stderr == "record_pins: --source nothere is no directory\n"
 
 
 def test_an_engine_builds_its_plain_program_only_when_it_launches_from_it(cl_context):
