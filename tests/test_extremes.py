@@ -671,10 +671,11 @@ def test_float32_table_close_to_float64(table_of, mode, orders):
 
 @pytest.mark.parametrize("mode, measured", [("atmosphere-plus", 4.84e-6), ("physical", 4.11e-6)])
 def test_the_default_float32_single_table_is_within_the_readme_figure(cl_context, mode, measured):
-    """README "Physics": the float32 default single-scattering table (32 x 256 x 32) is within 5e-6 of the
+    """README "Physics": the float32 default single-scattering table (32 x 256 x 32) is within 6e-6 of the
     float64 one's maximum (measured with PoCL on the Intel Xeon: 4.84e-6 atmosphere-plus, 4.11e-6 physical;
-    the README said 4.7e-6, which did not reproduce there). The bound 5e-6 is the README's figure; the
-    measurement is logged, so that a device rounding float32 another way shows how far it is from it."""
+    the README said 4.7e-6, which did not reproduce there). The bound 6e-6 is the README's figure, a fifth
+    above the largest measurement for devices whose float32 exp() and divisions round otherwise; the
+    measurement is logged, so that such a device shows how far it is from it."""
     settings = TableSettings(orders=1, mode=mode)
     double = ScatteringTable.build(preset(mode), settings, ctx=cl_context).data
     single = ScatteringTable.build(preset(mode), settings.replace(dtype="float32"), ctx=cl_context).data
@@ -682,7 +683,7 @@ def test_the_default_float32_single_table_is_within_the_readme_figure(cl_context
     error = float(np.abs(single - double).max() / np.abs(double).max())
     logger.info("%s: float32 - float64 = %.3g of the table's maximum (%.3g measured on the Intel Xeon)", mode,
                 error, measured)
-    assert error <= 5e-6
+    assert error <= 6e-6
 
 
 @pytest.mark.parametrize("case", sorted(EXTREMES))
