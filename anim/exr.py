@@ -61,7 +61,9 @@ Examples
 
 from __future__ import annotations
 
+import errno
 import math
+import os
 import pathlib
 import tempfile
 
@@ -303,7 +305,17 @@ def save_exr(file, pixels, attributes=None):
         if header["envmap"] not in envmaps:
             raise ValueError(f"envmap must be one of {list(envmaps)}, got {header['envmap']!r}")
         header["envmap"] = envmaps[header["envmap"]]
-    OpenEXR.File(header, {"RGB": pixels}).write(str(file))
+    try:
+        OpenEXR.File(header, {"RGB": pixels}).write(str(file))
+    except RuntimeError as error:
+        # the bindings' failures are RuntimeErrors: those of the file (a full disk: a traceback naming the
+        # temporary) become an OSError of it, which the atomic writers name by their target; those of the
+        # attributes (check_attributes) stay as they are
+        message = str(error)
+        if str(file) not in message:
+            raise
+        code = errno.ENOSPC if "No space left" in message else errno.EIO
+        raise OSError(code, os.strerror(code) if code == errno.ENOSPC else message, str(file)) from None
 
 
 #: The most pixels :func:`read_exr` reads: its header's data window is checked first (a 3.5 kB file declaring

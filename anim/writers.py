@@ -330,6 +330,26 @@ def even_padded(image):
     return np.pad(image, ((0, height % 2), (0, width % 2), (0, 0)), mode="edge")
 
 
+def _check_ffmpeg():
+    """OSError unless imageio-ffmpeg's ffmpeg (its own, or IMAGEIO_FFMPEG_EXE) is an executable file: a
+    missing one was found after the scene plan and the table, at the first frame."""
+    import imageio_ffmpeg
+
+    try:
+        executable = imageio_ffmpeg.get_ffmpeg_exe()
+    except RuntimeError as error:
+        raise OSError(f"no ffmpeg for the MP4: {error}") from None
+    if not (os.path.isfile(executable) and os.access(executable, os.X_OK)):
+        raise OSError(f"no ffmpeg for the MP4: {executable} (imageio-ffmpeg's, or IMAGEIO_FFMPEG_EXE) is no "
+                      f"executable file")
+
+
+def _ffmpeg_path(part):
+    """The path ffmpeg is given for ``part``: absolute, for ffmpeg reads a relative 'x:y.mp4' (its temporary
+    '.x:y.mp4.XXXXXXXX.mp4') as a URL of protocol '.x' and wrote nothing, found after all the work."""
+    return os.path.abspath(part)
+
+
 def _check_video(part, target, frames):
     """OSError unless the MP4 ffmpeg wrote to ``part`` (for ``target``) holds ``frames`` frames: imageio-ffmpeg
     does not look at ffmpeg's exit status, so an ffmpeg that failed (a frame rate it could not parse, a full
@@ -338,7 +358,7 @@ def _check_video(part, target, frames):
     import imageio_ffmpeg
 
     try:
-        counted_frames, _ = imageio_ffmpeg.count_frames_and_secs(str(part))
+        counted_frames, _ = imageio_ffmpeg.count_frames_and_secs(_ffmpeg_path(part))
     except (RuntimeError, OSError) as error:
         raise OSError(f"ffmpeg did not write a readable MP4 for {target} ({str(error).splitlines()[0]}); "
                       f"nothing was replaced") from None
@@ -511,6 +531,7 @@ class FrameWriter:
             check_output(self.mp4_path, self.force, option, suffix=self._mp4_suffix)
             for module in ("imageio", "imageio_ffmpeg"):   # fail before writing anything
                 require_extra(module, "MP4 videos", "pip install 'clsky[anim]'")
+            _check_ffmpeg()
         if self.directory is not None:
             last = (self.total_frames or 1) - 1
             check_output_directory(self.directory, option, names=[self.frame_path(last, suffix).name
@@ -558,7 +579,11 @@ class FrameWriter:
             return False
         try:
             if video is not None:
-                video.close()
+                try:
+                    video.close()
+                except OSError as error:
+                    raise OSError(f"ffmpeg stopped while writing the MP4 for {self.mp4_path} "
+                                  f"({str(error).splitlines()[0]}); nothing was replaced") from None
                 _check_video(self._part, self.mp4_path, len(self._indices))
                 self.paths.append(self.mp4_path)
             elif self.mp4_path is not None:
@@ -591,9 +616,11 @@ class FrameWriter:
         import imageio.v2 as imageio
         self._part = self._staging.stage(self.mp4_path, self.force, suffix=self._mp4_suffix, last=True)
         self._temporaries.append(self._part)
-        self._video = imageio.get_writer(self._part, format="FFMPEG", mode="I", fps=self.fps,
+        # ffmpeg quiet: its error lines (a full disk) reached stderr before clsky's one line, naming the temporary
+        self._video = imageio.get_writer(_ffmpeg_path(self._part), format="FFMPEG", mode="I", fps=self.fps,
                                          codec="libx264", pixelformat="yuv420p", quality=None,
-                                         macro_block_size=1, output_params=list(MP4_OUTPUT_PARAMS))
+                                         macro_block_size=1, output_params=list(MP4_OUTPUT_PARAMS),
+                                         ffmpeg_log_level="quiet")
 
     def _write_files(self, index, image, hdr, hdr_attributes):
         """Stage frame ``index``'s PNG (and HDR file); returns their targets."""
@@ -677,7 +704,11 @@ class FrameWriter:
             self._hdr_shape = hdr.shape
         written = self._write_files(index, image, hdr, hdr_attributes) if self.directory is not None else []
         if self._video is not None:
-            self._video.append_data(even_padded(image))
+            try:
+                self._video.append_data(even_padded(image))
+            except OSError as error:            # ffmpeg gone (exited, killed): '[Errno 32] Broken pipe' alone
+                raise OSError(f"ffmpeg stopped while writing the MP4 for {self.mp4_path} "
+                              f"({str(error).splitlines()[0]}); nothing was replaced") from None
         self._indices.add(index)
         self.paths.extend(written)
         return written

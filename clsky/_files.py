@@ -27,6 +27,7 @@ import contextlib
 import errno
 import os
 import pathlib
+import re
 import secrets
 import signal
 import stat
@@ -468,11 +469,13 @@ class StagedWrites:
         return [entry[0] for entry in self._staged]
 
     def discard(self, temporary=None):
-        """Delete one staged temporary (``temporary``), or all of them and forget the removals."""
+        """Delete one staged temporary (``temporary``), or all of them and forget the removals; each as far
+        as it can (:func:`_unlink_if_possible`: a folder made read-only during the run stopped the deletions
+        at its first temporary, left the others behind, and its error replaced the run's own)."""
         keep = []
         for entry in self._staged:
             if temporary is None or entry[0] == pathlib.Path(temporary):
-                entry[0].unlink(missing_ok=True)
+                _unlink_if_possible(entry[0])
             else:
                 keep.append(entry)
         self._staged = keep
@@ -489,7 +492,7 @@ class StagedWrites:
                     _place(temporary, target, overwrite)
                 except BaseException as error:
                     for rest in entries[position:]:
-                        rest[0].unlink(missing_ok=True)
+                        _unlink_if_possible(rest[0])
                     self._staged = []
                     if not isinstance(error, OSError) or not self.committed:
                         raise                    # nothing is in place yet: the error says it all
@@ -504,6 +507,15 @@ class StagedWrites:
                 path.unlink(missing_ok=True)
             self._removals = []
         return list(self.committed)
+
+
+def _unlink_if_possible(path):
+    """Delete ``path`` if it exists and can be deleted: a temporary cleaned up after an error, which must
+    not replace that error (a read-only folder keeps its temporary: nothing else can be done there)."""
+    try:
+        path.unlink(missing_ok=True)
+    except OSError:
+        pass
 
 
 def output_target(path, force, name="path", flag="force"):
@@ -548,6 +560,9 @@ def atomic_write(path, overwrite=False, suffix=None, staging=None):
         yield temporary
     except OSError as error:                     # e.g. a full disk: name the target, not the temporary
         _discard_staged(writes, own, temporary)
+        if temporary is not None and error.errno is None and re.fullmatch(r"\d+ requested and \d+ written", str(error)):
+            # NumPy's short write (np.save, tofile), no errno nor file: '3072 requested and 992 written'
+            raise OSError(f"cannot write {path}: a short write ({error}): is the disk full?") from error
         # a write to an open file (a full disk: ENOSPC) names no file; the block writes the temporary
         if temporary is None or error.errno is None or error.filename not in (str(temporary), temporary, None):
             raise

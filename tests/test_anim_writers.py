@@ -473,3 +473,41 @@ def test_write_csv_atomic(tmp_path):
     with pytest.raises(ValueError, match="empty"):
         write_csv(tmp_path / "empty.csv", [])
     assert _listing(tmp_path) == ["jumps.csv"]
+
+
+# ffmpeg: the path it is given, and when it is missing or stops ------------------------------------------------
+
+def test_an_mp4_name_with_a_colon_is_written(tmp_path, monkeypatch):
+    """ffmpeg took a relative 'x:y.mp4' (its temporary '.x:y.mp4.XXXXXXXX.mp4') for a URL of protocol '.x' and
+    wrote nothing, found after all the work: it is given absolute paths."""
+    import imageio_ffmpeg
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "d:x").mkdir()
+    for name in ("x:y.mp4", "d:x/a.mp4"):
+        with FrameWriter(mp4_path=name, fps=10) as writer:
+            for index in range(3):
+                writer.write(index, np.full((16, 16, 3), 40 * index, np.uint8))
+        assert imageio_ffmpeg.count_frames_and_secs(str(tmp_path / name))[0] == 3
+
+
+def test_a_missing_or_failing_ffmpeg_is_named(tmp_path, monkeypatch):
+    """An IMAGEIO_FFMPEG_EXE that is not there was found at the first frame, after the plan and the table: the
+    check before the work names it. An ffmpeg that exits at once gave '[Errno 32] Broken pipe' or an unreadable
+    MP4: the message names ffmpeg and the MP4, nothing lands and no temporary is left."""
+    monkeypatch.setenv("IMAGEIO_FFMPEG_EXE", str(tmp_path / "nothere"))
+    with pytest.raises(OSError, match=r"^no ffmpeg for the MP4: .*nothere \(imageio-ffmpeg's, or IMAGEIO_FFMPEG_EXE\) "
+                                      r"is no executable file$"):
+        FrameWriter(mp4_path=tmp_path / "a.mp4").check()
+    failing = tmp_path / "ffmpeg"
+    failing.write_text("#!/bin/sh\nexit 1\n")
+    failing.chmod(0o755)
+    monkeypatch.setenv("IMAGEIO_FFMPEG_EXE", str(failing))
+    out = tmp_path / "out"
+    out.mkdir()
+    with pytest.raises(OSError, match=r"^ffmpeg (stopped while writing|did not write a readable) .*MP4 for .*a\.mp4 "
+                                      r".*nothing was replaced$"):
+        with FrameWriter(mp4_path=out / "a.mp4", fps=10) as writer:
+            for index in range(40):
+                writer.write(index, np.full((64, 64, 3), index, np.uint8))
+    assert list(out.iterdir()) == []

@@ -410,3 +410,58 @@ def test_a_rename_failing_midway_is_reported_and_leaves_no_temporary(tmp_path, m
                 staging.stage(tmp_path / name, overwrite=True).write_text("new " + name)
     assert {name: (tmp_path / name).read_text() for name in listing(tmp_path)} == \
         {"a.txt": "new a.txt", "b.txt": "old b"}
+
+
+# Failures during the writing: named by the output, every temporary cleaned up that can be -------------------
+
+def test_a_short_write_names_the_output(tmp_path):
+    """NumPy's short writes on a full disk (np.save, tofile) raise an OSError with neither errno nor file,
+    '3072 requested and 992 written', which reached the user as it was: now the output is named."""
+    with pytest.raises(OSError, match=r"^cannot write .*a\.npy: a short write \(3072 requested and 992 written\): "
+                                      r"is the disk full\?$"):
+        with atomic_write(tmp_path / "a.npy"):
+            raise OSError("3072 requested and 992 written")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_temporaries_are_deleted_as_far_as_possible_and_the_error_kept(tmp_path, monkeypatch):
+    """A folder made read-only during a run: the first temporary that could not be deleted stopped the
+    clean-up (the others, in folders still writable, stayed) and its PermissionError replaced the run's own
+    error. Each temporary is now deleted if it can be, and the run's error is the one raised."""
+    (tmp_path / "locked").mkdir()
+    unlink = pathlib.Path.unlink
+
+    def refuse_in_locked(path, missing_ok=False):
+        if path.parent.name == "locked":
+            raise PermissionError(13, "Permission denied", str(path))
+        return unlink(path, missing_ok=missing_ok)
+
+    monkeypatch.setattr(pathlib.Path, "unlink", refuse_in_locked)
+    with pytest.raises(RuntimeError, match="^the run's own error$"):
+        with StagedWrites() as staging:
+            for target in (tmp_path / "locked" / "a.png", tmp_path / "b.png", tmp_path / "c.png"):
+                staging.stage(target)
+            raise RuntimeError("the run's own error")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["locked"]
+    assert len(list((tmp_path / "locked").iterdir())) == 1          # the one that could not go
+
+
+def test_an_exr_the_bindings_cannot_write_is_named_by_its_output(tmp_path, monkeypatch):
+    """OpenEXR's bindings raise RuntimeError on a full disk: `--hdr exr` ended in a traceback naming the
+    hidden temporary. It is now an OSError of the file, named by its output."""
+    pytest.importorskip("OpenEXR")
+    from clsky.anim import exr
+
+    OpenEXR = exr.require_openexr()
+
+    class FullDisk:
+        def __init__(self, *args):
+            pass
+
+        def write(self, name):
+            raise RuntimeError(f'Failed to write pixel data to image file "{name}". No space left on device.')
+
+    monkeypatch.setattr(OpenEXR, "File", FullDisk)
+    with pytest.raises(OSError, match=r"^cannot write .*frame\.exr: no space left on device$"):
+        exr.write_exr(tmp_path / "frame.exr", np.ones((2, 2, 3)))
+    assert list(tmp_path.iterdir()) == []
