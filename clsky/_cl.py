@@ -153,15 +153,22 @@ def _pocl_cache_directory():
     return pathlib.Path(os.path.expanduser("~")) / ".cache" / "pocl", "HOME"
 
 
+#: Free space a kernel cache needs [bytes]: PoCL writes each program's binaries there (up to about a MB each);
+#: on a full disk an empty test file was still created, and the first build failed with PyOpenCL's traceback.
+MIN_CACHE_FREE_BYTES = 4 * 2**20
+
+
 def _writable(directory: pathlib.Path) -> bool:
-    """True if ``directory`` exists or can be made, and a file can be written in it."""
+    """True if ``directory`` exists or can be made, a file can be written in it, and it has
+    :data:`MIN_CACHE_FREE_BYTES` free."""
     try:
         directory.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryFile(dir=directory):
             pass
-        return True
+        status = os.statvfs(directory) if hasattr(os, "statvfs") else None
     except OSError:
         return False
+    return status is None or status.f_bavail * status.f_frsize >= MIN_CACHE_FREE_BYTES
 
 
 def _private_directory(directory: pathlib.Path):
@@ -194,8 +201,9 @@ def pocl_cache_problem():
     if _writable(directory):
         return None
     if source == "POCL_CACHE_DIR":
-        return (f"PoCL's kernel cache POCL_CACHE_DIR={directory} is not a writable directory (PoCL then finds no "
-                f"device, or fails every build); set POCL_CACHE_DIR to a writable directory")
+        return (f"PoCL's kernel cache POCL_CACHE_DIR={directory} is not a writable directory with "
+                f"{MIN_CACHE_FREE_BYTES // 2**20} MiB free (PoCL then finds no device, or fails every build); set "
+                f"POCL_CACHE_DIR to such a directory")
     fallback = pathlib.Path(tempfile.gettempdir()) / f"clsky-pocl-cache-{getattr(os, 'getuid', lambda: 'user')()}"
     unusable = _private_directory(fallback)
     if unusable is None:
@@ -430,7 +438,12 @@ def real_vector_dtype(dtype, width: int):
 @functools.lru_cache(maxsize=None)
 def _struct(device, name, fields, dtype_str):
     dtype = np.dtype([(fname, ftype) for fname, ftype in fields])
-    dtype, declaration = pyopencl.tools.match_dtype_to_c_struct(device, name, dtype)
+    try:                # PyOpenCL builds a small program for the layout: its failure is a build's, named so
+        dtype, declaration = pyopencl.tools.match_dtype_to_c_struct(device, name, dtype)
+    except cl.Error as error:
+        raise KernelBuildError(f"building the layout of the struct {name} on {device.name!r} "
+                               f"({device.platform.version}) failed: {str(error).splitlines()[0]} (a kernel cache "
+                               f"on a full disk fails every build: POCL_CACHE_DIR, XDG_CACHE_HOME)") from error
     dtype = pyopencl.tools.get_or_register_dtype(f"{name}_{dtype_str}", dtype)
     return dtype, declaration
 

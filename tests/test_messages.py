@@ -210,6 +210,25 @@ def test_a_pocl_cache_dir_that_is_a_file_is_one_line_before_any_work(tmp_path):
     assert devices.returncode == 1 and "POCL_CACHE_DIR" in devices.stderr, devices.stderr
 
 
+def test_a_kernel_cache_on_a_full_disk_is_named(tmp_path, monkeypatch):
+    """POCL_CACHE_DIR on a full disk: an empty test file could still be made there, and the first build ended
+    in PyOpenCL's traceback; a cache needs some free space (MIN_CACHE_FREE_BYTES) as well."""
+    import collections
+
+    from clsky import _cl
+
+    full = collections.namedtuple("statvfs", "f_bavail f_frsize")(10, 4096)
+    monkeypatch.setattr(_cl.os, "statvfs", lambda path: full)
+    monkeypatch.setenv("POCL_CACHE_DIR", str(tmp_path))
+    _cl.pocl_cache_problem.cache_clear()
+    try:
+        problem = _cl.pocl_cache_problem()
+    finally:
+        _cl.pocl_cache_problem.cache_clear()
+    assert problem == (f"PoCL's kernel cache POCL_CACHE_DIR={tmp_path} is not a writable directory with 4 MiB free "
+                       f"(PoCL then finds no device, or fails every build); set POCL_CACHE_DIR to such a directory")
+
+
 def test_an_unusable_home_falls_back_for_pyopencls_cache_too(tmp_path):
     """HOME unusable and XDG_CACHE_HOME unset: clsky's fallback covered PoCL's cache but not PyOpenCL's
     (pytools', under ~/.cache): a render ended in '[Errno 2] No such file or directory' and two stray
