@@ -342,7 +342,7 @@ def run_animate(args):
 
 
 def run_render(args):
-    from clsky._files import check_suffix
+    from clsky._files import StagedWrites, check_suffix
 
     from . import scene, writers
     from .animate import (LOOKUP_NAMES, comparison, display, display_frames, lookup_of, make_renderer,
@@ -395,7 +395,10 @@ def run_render(args):
     else:
         image, detail = images[next(iter(hdr))], ""
     text = scene.output_metadata(scene.scene_text(scene.scene_values(config, args.scene_parser, extra), "render"))
-    writers.write_png(output, image, force=args.force, text=text)
+    staging = StagedWrites()
+    # another run that wrote the frame meanwhile is named as --output's, as a table's or an animation's is
+    with clsky_cli.written_since_checked([(name("output", "--output"), output)], staging, args.force), staging:
+        writers.write_png(output, image, force=args.force, text=text, staging=staging)
     print(f"frame {camera.width}x{camera.height} ({config.method}, sun elevation {args.sun_elevation:g} deg, "
           f"azimuth {args.sun_azimuth:g} deg, {config.tone_map} at {ev:+.2f} EV){detail} -> {output}")
     return 0

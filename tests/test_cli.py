@@ -258,6 +258,27 @@ def test_clsky_script_runs_without_the_anim_extra(tmp_path, args, expected):
     assert result.stderr == ""
 
 
+def test_a_frame_whose_output_another_run_wrote_meanwhile_names_the_option(tmp_path, monkeypatch, capsys):
+    """Two `clsky render` runs on one -o without --force: the one that lands second was refused in the
+    library's words ('pass force=True ...'); now one line naming --output, as a table's and an animation's."""
+    from clsky import _files
+    from clsky.anim import cli as anim_cli
+
+    commit = _files.StagedWrites.commit
+
+    def the_other_run_writes_then_commit(self):
+        (tmp_path / "p.png").write_text("the other run's")
+        return commit(self)
+
+    monkeypatch.setattr(_files.StagedWrites, "commit", the_other_run_writes_then_commit)
+    monkeypatch.chdir(tmp_path)
+    assert anim_cli.main(["render", "--size", "16", "--table-size", "8", "32", "8", "--method", "lut",
+                          "-o", "p.png"]) == 2
+    assert capsys.readouterr().err == ("clsky: error: --output p.png exists: another process wrote it during this "
+                                       "run; use --force to overwrite it\n")
+    assert (tmp_path / "p.png").read_text() == "the other run's"
+
+
 def test_an_animation_whose_output_another_run_wrote_meanwhile_names_the_option(tmp_path, monkeypatch, capsys):
     """Two `clsky animate` runs on one -o: the one that lands second was refused in the library's words
     ('pass force=True (a table's save and exports: overwrite=True)'); now one line naming --output."""
