@@ -366,6 +366,9 @@ class SkyRenderer:
             return self.prepare(directions, valid)
         if valid is not None:
             raise ValueError("valid must be given to prepare(), not with prepared directions")
+        if directions.array.context != self.engine.ctx:     # PoCL took them; OpenCL forbids another context's buffers
+            raise ValueError("directions were prepared by a renderer of another OpenCL context: prepare them with "
+                             "this renderer")
         return directions
 
     def _work_size(self, kernel, n):

@@ -725,3 +725,18 @@ def test_bad_directions_are_named_with_their_count_and_the_first(small_tables, c
     assert_array_equal(renderer.render_table(directions.astype(np.float32), sun).shape, (8, 8, 3))
     with pytest.raises(ValueError, match="of 64 are not"):
         renderer.render_table(directions.astype(np.float16), sun)
+
+
+def test_directions_prepared_in_another_context_are_refused(small_tables, cl_context):
+    """Directions prepared by a renderer of another OpenCL context were taken (PoCL shares the memory, but
+    OpenCL forbids one context's buffers in another's kernels: a driver's error elsewhere)."""
+    import pyopencl as cl
+
+    other = cl.Context([cl_context.devices[0]])
+    directions, valid = FisheyeCamera(8).directions()
+    with SkyRenderer(small_tables["atmosphere-plus"], RAY, ctx=other) as elsewhere:
+        prepared = elsewhere.prepare(directions, valid)
+    with SkyRenderer(small_tables["atmosphere-plus"], RAY, ctx=cl_context) as renderer:
+        with pytest.raises(ValueError, match="^directions were prepared by a renderer of another OpenCL context"):
+            renderer.render_table(prepared, sun_direction(60.0, 100.0))
+        renderer.render_table(renderer.prepare(directions, valid), sun_direction(60.0, 100.0))
