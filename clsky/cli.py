@@ -253,6 +253,8 @@ def _add_table_arguments(parser):
                                                f"each line's own)")
     output.add_argument("--raw", metavar="NAME", help="also export NAME.bin (float32) + NAME.json for GPU engines "
                                                       "(NAME.bin or NAME.json names the same pair)")
+    output.add_argument("--texture", metavar="NAME", help="a 4d table: also export NAME.bin + NAME.json as the "
+                                                          "three RGBA float32 3D textures docs/lookup4d.glsl reads")
     output.add_argument("--force", action="store_true", help="overwrite existing output files")
     add_progress_argument(output)
     output.add_argument("--sweep", metavar="FILE",
@@ -413,6 +415,8 @@ def _check_table_options_used(args, settings):
     unused = []
     if settings.parameterization != "4d":
         unused.append(("azimuth_size", "--azimuth-size", "sets the 4d table's azimuth axis: give --parameterization 4d"))
+        unused.append(("texture", "--texture", "exports a 4d table as textures for docs/lookup4d.glsl: give "
+                                               "--parameterization 4d (--raw exports any table)"))
     if settings.orders != "auto":
         count = "single scattering only" if settings.orders == 1 else f"{settings.orders} orders"
         unused += [(dest, option, f"sets when --orders auto stops, and --orders {settings.orders} computes {count}")
@@ -531,10 +535,9 @@ def run_table(args):
     settings = table_settings(args, atmosphere)
     try:
         output = check_suffix(DEFAULT_TABLE_OUTPUT if args.output is None else args.output, ".npz", "--output")
-        raw = [] if args.raw is None else [("--raw", path) for path in binary_and_header(args.raw, "--raw")]
+        targets = [("--output", output)] + export_targets(args)
     except ValueError as error:
         raise UsageError(str(error)) from None
-    targets = [("--output", output)] + raw
     check_outputs(targets, args.force)
     _check_table_memory(args, settings)
     progress, close = progress_bar(args.progress)
@@ -544,13 +547,40 @@ def run_table(args):
                                       fast_math=args.fast_math, progress=progress)
     finally:
         close()
-    staging = StagedWrites()                      # the table and its raw export land together
+    staging = StagedWrites()                      # the table and its exports land together
     with written_since_checked(targets, staging, args.force), staging:
         table.save(output, overwrite=args.force, staging=staging)
-        if args.raw is not None:
-            table.export_raw(args.raw, overwrite=args.force, staging=staging)
+        write_exports(args, table, staging)
     report_table(args, table, output, time.perf_counter() - start)
     return 0
+
+
+#: A table's exports for engines, by option: (args attribute, ScatteringTable method); each writes NAME.bin and
+#: NAME.json (:func:`clsky._files.binary_and_header`).
+TABLE_EXPORTS = {"--raw": ("raw", "export_raw"), "--texture": ("texture", "export_texture")}
+
+
+def export_targets(args) -> list:
+    """[(option, path)] of the exports ``args`` asks for (:data:`TABLE_EXPORTS`), each checked; ValueError for
+    a name that is no file name, or two exports of one name (both write NAME.bin and NAME.json)."""
+    targets = []
+    for option, (attribute, _) in TABLE_EXPORTS.items():
+        name = getattr(args, attribute, None)
+        if name is not None:
+            targets += [(option, path) for path in binary_and_header(name, option)]
+    paths = [path.resolve() for _, path in targets]
+    if len(set(paths)) < len(paths):
+        raise ValueError(f"--raw and --texture must name different files, got {args.raw!r} and {args.texture!r}: "
+                         f"each writes NAME.bin and NAME.json")
+    return targets
+
+
+def write_exports(args, table, staging):
+    """Stage the exports ``args`` asks for (:data:`TABLE_EXPORTS`) of ``table`` in ``staging``."""
+    for attribute, method in TABLE_EXPORTS.values():
+        name = getattr(args, attribute, None)
+        if name is not None:
+            getattr(table, method)(name, overwrite=args.force, staging=staging)
 
 
 def orders_phrase(settings, record) -> str:
@@ -582,14 +612,14 @@ def print_report(report):
 
 
 def table_summary(args, table, output, seconds) -> str:
-    """The summary line of a table written (or, in a sweep, to be written) to ``output`` and its raw export."""
+    """The summary line of a table written (or, in a sweep, to be written) to ``output`` and its exports."""
     settings = table.settings
     grid = "x".join(map(str, settings.size + ((settings.azimuth_size,) if settings.is_4d else ())))
     return (f"table {grid} {settings.dtype} ({args.preset}, mode {settings.mode}, "
             f"{orders_phrase(settings, table.orders_record)}; "
             f"{table.metadata['device']}): built in {table.metadata['build_seconds']:.2f} s, "
             f"total {seconds:.2f} s -> {output}"
-            + ("" if args.raw is None else ", " + ", ".join(map(str, binary_and_header(args.raw)))))
+            + "".join(f", {path}" for _, path in export_targets(args)))
 
 
 def unconverged_warning(table):

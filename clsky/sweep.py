@@ -25,10 +25,10 @@ import pathlib
 import shlex
 import time
 
-from ._files import binary_and_header, check_suffix, read_user_text
-from .cli import (DEFAULT_TABLE_OUTPUT, UsageError, check_outputs, farm_of, print_report, progress_bar,
-                  running_farm, table_atmosphere, table_report, table_settings, written_since_checked,
-                  _check_table_memory)
+from ._files import check_suffix, read_user_text
+from .cli import (DEFAULT_TABLE_OUTPUT, UsageError, check_outputs, export_targets, farm_of, print_report,
+                  progress_bar, running_farm, table_atmosphere, table_report, table_settings, write_exports,
+                  written_since_checked, _check_table_memory)
 
 __all__ = ["SweepJob", "read_sweep", "sweep_jobs", "run_sweep"]
 
@@ -46,7 +46,6 @@ class SweepJob:
     atmosphere: object
     settings: object
     output: pathlib.Path
-    raw: str | None
 
 
 def read_sweep(path) -> list[tuple[int, list[str]]]:
@@ -89,11 +88,10 @@ def sweep_jobs(args) -> list[SweepJob]:
             atmosphere = table_atmosphere(line)
             settings = table_settings(line, atmosphere)
             output = check_suffix(DEFAULT_TABLE_OUTPUT if line.output is None else line.output, ".npz", "--output")
-            if line.raw is not None:
-                binary_and_header(line.raw, "--raw")
+            export_targets(line)
         except (UsageError, ValueError) as error:
             raise UsageError(error if args.sweep is None else f"{source}: {error}") from None
-        jobs.append(SweepJob(source, line, atmosphere, settings, output, line.raw))
+        jobs.append(SweepJob(source, line, atmosphere, settings, output))
     _check_jobs(args, jobs)
     return jobs
 
@@ -136,9 +134,7 @@ def _check_jobs(args, jobs):
 
 def _job_targets(args, job):
     """(the option as messages name it, path) of each output of ``job``; with --sweep, after its line."""
-    targets = [("--output", job.output)]
-    if job.raw is not None:
-        targets += [("--raw", path) for path in binary_and_header(job.raw)]
+    targets = [("--output", job.output)] + export_targets(job.args)
     return [(option if args.sweep is None else f"{job.source}: {option}", path) for option, path in targets]
 
 
@@ -163,8 +159,7 @@ def run_sweep(args):
             reports = []
             for done, (job, table) in enumerate(zip(jobs, tables), start=1):
                 table.save(job.output, overwrite=job.args.force, staging=staging)
-                if job.raw is not None:
-                    table.export_raw(job.raw, overwrite=job.args.force, staging=staging)
+                write_exports(job.args, table, staging)
                 reports.append(table_report(job.args, table, job.output, time.perf_counter() - start))
                 del table
                 if progress is not None:

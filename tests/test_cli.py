@@ -54,6 +54,32 @@ def test_table_writes_a_loadable_file_and_raw_export(tmp_path):
     assert np.isfinite(table.data).all() and (table.data >= 0).all()
 
 
+def test_table_exports_a_4d_table_as_the_glsl_snippets_textures(tmp_path):
+    """`--texture NAME` (the layout docs/lookup4d.glsl reads, which only the Python API wrote): beside the
+    table and its --raw export, in one summary line; the same files as ScatteringTable.export_texture."""
+    from clsky.export4d import texture_volumes
+
+    words = ["table", "--preset", "physical", "--parameterization", "4d", "--size", "6", "8", "6", "--azimuth-size",
+             "4", "--quality", "draft", "--progress", "none", "-o", "t.npz"]
+    result = clsky(*words, "--texture", "tex", "--raw", "raw", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip().endswith("-> t.npz, raw.bin, raw.json, tex.bin, tex.json")
+    table = ScatteringTable.load(tmp_path / "t.npz")
+    expected = texture_volumes(table.data).ravel()
+    np.testing.assert_array_equal(np.fromfile(tmp_path / "tex.bin", dtype="<f4"), expected)
+    # one name for both exports, and a 3D table's --texture: one line each, nothing written
+    three_d = ["table", "--preset", "physical", "--size", "6", "8", "6", "--quality", "draft", "--progress", "none"]
+    for line, message in (([*words[:-2], "--texture", "same", "--raw", "same.json", "-o", "u.npz"],
+                           "--raw and --texture must name different files, got 'same.json' and 'same': each "
+                           "writes NAME.bin and NAME.json"),
+                          ([*three_d, "--texture", "t3", "-o", "v.npz"],
+                           "--texture exports a 4d table as textures for docs/lookup4d.glsl: give "
+                           "--parameterization 4d (--raw exports any table)")):
+        refused = clsky(*line, cwd=tmp_path)
+        assert refused.returncode == 2 and refused.stderr == f"clsky: error: {message}\n", refused.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["raw.bin", "raw.json", "t.npz", "tex.bin", "tex.json"]
+
+
 @pytest.mark.parametrize("orders,expected", [
     ("1", "single scattering only"),
     ("3", "3 orders as asked (--orders 3)"),

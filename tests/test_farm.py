@@ -278,6 +278,9 @@ def test_a_sweep_on_an_existing_cluster_writes_the_tables_of_single_builds(farm,
     ("--preset physical -o a.npz --raw .bin", "weather.txt line 3: --raw must be a file name (NAME gives NAME.bin "
                                               "and NAME.json), got '.bin'"),
     ("--preset physical -o a.npz --raw clear.json", "weather.txt line 3: --raw clear.bin is written by weather.txt line 2 too"),
+    ("--preset physical --parameterization 4d -o a.npz --texture clear", "weather.txt line 3: --texture clear.bin is "
+                                                                           "written by weather.txt line 2 too"),
+    ("--preset physical -o a.npz --texture t3", "weather.txt line 3: --texture exports a 4d table as textures"),
     # argparse's abbreviations let run options through as --workers and --progress, silently ignored
     ("--preset physical --work 2 -o a.npz", "weather.txt line 3: unrecognized arguments: --work 2"),
     ("--preset physical --prog leave -o a.npz", "weather.txt line 3: unrecognized arguments: --prog leave"),

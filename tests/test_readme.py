@@ -152,6 +152,13 @@ def check_outputs(argv, directory):
         if raw:
             assert (directory / f"{raw}.bin").stat().st_size == table.data.size * 4
             assert (directory / f"{raw}.json").is_file()
+        texture = option_value(argv, "--texture")
+        if texture:                                 # docs/lookup4d.glsl's textures: 12 floats a cell
+            import json
+
+            header = json.loads((directory / f"{texture}.json").read_text())
+            assert header["format"].startswith("clsky 4D scattering table, RGBA textures")
+            assert (directory / f"{texture}.bin").stat().st_size == table.data[..., 0].size * 12 * 4
     elif command == "animate":
         imageio = pytest.importorskip("imageio.v3")
         movie = directory / (output or "sky.mp4")
