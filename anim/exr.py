@@ -314,8 +314,12 @@ def save_exr(file, pixels, attributes=None):
         message = str(error)
         if str(file) not in message:
             raise
-        code = errno.ENOSPC if "No space left" in message else errno.EIO
-        raise OSError(code, os.strerror(code) if code == errno.ENOSPC else message, str(file)) from None
+        known = [code for code in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT, errno.EROFS, errno.EACCES)
+                 if os.strerror(code).lower() in message.lower()]
+        code = known[0] if known else errno.EIO
+        # the file named as the writers name it (by their target): the bindings' text names the temporary
+        reason = os.strerror(code) if known else message.replace(f'"{file}"', "the file").replace(str(file), "the file")
+        raise OSError(code, reason, str(file)) from None
 
 
 #: The most pixels :func:`read_exr` reads: its header's data window is checked first (a 3.5 kB file declaring

@@ -52,7 +52,7 @@ class SunPosition:
     zenith_deg : float
         Geometric zenith angle [deg], in [0, 180].
     azimuth_deg : float
-        Azimuth [deg], from north clockwise seen from above (east = 90), finite.
+        Azimuth [deg], from north clockwise seen from above (east = 90), in [-360, 720].
     time : datetime.datetime or None
         The instant (timezone-aware) for real positions, None for synthetic ones.
 
@@ -76,7 +76,8 @@ class SunPosition:
 
     def __post_init__(self):
         object.__setattr__(self, "zenith_deg", check_real("zenith_deg", self.zenith_deg, 0.0, 180.0))
-        object.__setattr__(self, "azimuth_deg", check_real("azimuth_deg", self.azimuth_deg))
+        object.__setattr__(self, "azimuth_deg", check_real("azimuth_deg", self.azimuth_deg, *AZIMUTH_RANGE_DEG,
+                                                           unit=" degrees"))    # sun_direction's range
         if self.time is not None and not isinstance(self.time, datetime.datetime):
             raise ValueError(f"time must be a datetime.datetime or None, got {self.time!r}")
 

@@ -34,6 +34,7 @@ import io
 import json
 import math
 import os
+import shutil
 import pathlib
 import re
 import struct
@@ -339,9 +340,11 @@ def _check_ffmpeg():
         executable = imageio_ffmpeg.get_ffmpeg_exe()
     except RuntimeError as error:
         raise OSError(f"no ffmpeg for the MP4: {error}") from None
-    if not (os.path.isfile(executable) and os.access(executable, os.X_OK)):
+    # a path, or a bare name looked up on PATH as the process that runs it will (imageio-ffmpeg without a
+    # binary of its own returns 'ffmpeg')
+    if shutil.which(executable) is None:
         raise OSError(f"no ffmpeg for the MP4: {executable} (imageio-ffmpeg's, or IMAGEIO_FFMPEG_EXE) is no "
-                      f"executable file")
+                      f"executable file, nor one on PATH")
 
 
 def _ffmpeg_path(part):
@@ -616,11 +619,12 @@ class FrameWriter:
         import imageio.v2 as imageio
         self._part = self._staging.stage(self.mp4_path, self.force, suffix=self._mp4_suffix, last=True)
         self._temporaries.append(self._part)
-        # ffmpeg quiet: its error lines (a full disk) reached stderr before clsky's one line, naming the temporary
+        # ffmpeg's errors only (its warnings are the default): they say why it failed (an encoder it lacks), before
+        # clsky's own line; nothing on success
         self._video = imageio.get_writer(_ffmpeg_path(self._part), format="FFMPEG", mode="I", fps=self.fps,
                                          codec="libx264", pixelformat="yuv420p", quality=None,
                                          macro_block_size=1, output_params=list(MP4_OUTPUT_PARAMS),
-                                         ffmpeg_log_level="quiet")
+                                         ffmpeg_log_level="error")
 
     def _write_files(self, index, image, hdr, hdr_attributes):
         """Stage frame ``index``'s PNG (and HDR file); returns their targets."""

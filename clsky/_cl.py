@@ -39,7 +39,8 @@ except ImportError as error:  # pragma: no cover - exercised only on broken inst
 
 from .errors import check_flag, check_instance
 
-__all__ = ["KernelBuildError", "NoDeviceError", "Source", "Engine", "serialized", "memory_pool", "upload_padded", "list_devices",
+__all__ = ["KernelBuildError", "NoDeviceError", "Source", "Engine", "serialized", "memory_pool", "upload_padded",
+           "list_devices",
            "default_device", "make_context", "check_context", "real_vector_dtype", "check_dtype",
            "INSTALL_HINT", "pocl_cache_problem", "no_device_hint", "host_blas_single_threaded", "host_cores",
            "quiet_compiler_output"]
@@ -158,17 +159,26 @@ def _pocl_cache_directory():
 MIN_CACHE_FREE_BYTES = 4 * 2**20
 
 
-def _writable(directory: pathlib.Path) -> bool:
-    """True if ``directory`` exists or can be made, a file can be written in it, and it has
-    :data:`MIN_CACHE_FREE_BYTES` free."""
+def _cache_unusable(directory: pathlib.Path):
+    """None if ``directory`` exists or can be made, a file can be written in it, and it has
+    :data:`MIN_CACHE_FREE_BYTES` free; else why not, in words ('is not a writable directory', 'has 0.04 MiB
+    free, ...')."""
     try:
         directory.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryFile(dir=directory):
             pass
         status = os.statvfs(directory) if hasattr(os, "statvfs") else None
     except OSError:
-        return False
-    return status is None or status.f_bavail * status.f_frsize >= MIN_CACHE_FREE_BYTES
+        return "is not a writable directory"
+    free = None if status is None else status.f_bavail * status.f_frsize
+    if free is not None and free < MIN_CACHE_FREE_BYTES:
+        return f"has {free / 2**20:.2g} MiB free, under the {MIN_CACHE_FREE_BYTES // 2**20} MiB its builds need"
+    return None
+
+
+def _writable(directory: pathlib.Path) -> bool:
+    """:func:`_cache_unusable` of ``directory`` is None."""
+    return _cache_unusable(directory) is None
 
 
 def _private_directory(directory: pathlib.Path):
@@ -190,7 +200,8 @@ def _private_directory(directory: pathlib.Path):
             os.chmod(directory, stat.S_IMODE(status.st_mode) & ~0o022)
         except OSError:
             return "others may write it"
-    return None if _writable(directory) else "no file can be written in it"
+    unusable = _cache_unusable(directory)
+    return None if unusable is None else f"it {unusable}"
 
 
 @functools.lru_cache(maxsize=1)
@@ -198,12 +209,12 @@ def pocl_cache_problem():
     """None when PoCL's kernel cache is usable (after falling back to a temporary one if needed, see
     above); otherwise one sentence saying which directory is not writable and what to set."""
     directory, source = _pocl_cache_directory()
-    if _writable(directory):
+    reason = _cache_unusable(directory)
+    if reason is None:
         return None
     if source == "POCL_CACHE_DIR":
-        return (f"PoCL's kernel cache POCL_CACHE_DIR={directory} is not a writable directory with "
-                f"{MIN_CACHE_FREE_BYTES // 2**20} MiB free (PoCL then finds no device, or fails every build); set "
-                f"POCL_CACHE_DIR to such a directory")
+        return (f"PoCL's kernel cache POCL_CACHE_DIR={directory} {reason} (PoCL then finds no device, or fails every "
+                f"build); set POCL_CACHE_DIR to a writable directory with {MIN_CACHE_FREE_BYTES // 2**20} MiB free")
     fallback = pathlib.Path(tempfile.gettempdir()) / f"clsky-pocl-cache-{getattr(os, 'getuid', lambda: 'user')()}"
     unusable = _private_directory(fallback)
     if unusable is None:
@@ -214,12 +225,12 @@ def pocl_cache_problem():
             # PyOpenCL's own cache (pytools') is under XDG_CACHE_HOME, else ~/.cache: it failed there next
             os.environ["XDG_CACHE_HOME"] = str(fallback / "xdg")
             also = f", and {fallback / 'xdg'} for the caches under {cache_home}"
-        _logger.warning(f"clsky: note: PoCL's kernel cache {directory} is not writable (from {source}); "
+        _logger.warning(f"clsky: note: PoCL's kernel cache {directory} (from {source}) {reason}; "
                         f"using {fallback}{also} (set POCL_CACHE_DIR or XDG_CACHE_HOME to choose)")
         return None
-    return (f"PoCL's kernel cache {directory} (from {source}) is not writable, and the fallback {fallback} is "
+    return (f"PoCL's kernel cache {directory} (from {source}) {reason}, and the fallback {fallback} is "
             f"not usable: {unusable} (PoCL then finds no device); set POCL_CACHE_DIR or XDG_CACHE_HOME to a "
-            f"writable directory")
+            f"writable directory with {MIN_CACHE_FREE_BYTES // 2**20} MiB free")
 
 
 def no_device_hint() -> str:

@@ -566,7 +566,8 @@ def atomic_write(path, overwrite=False, suffix=None, staging=None):
         # a write to an open file (a full disk: ENOSPC) names no file; the block writes the temporary
         if temporary is None or error.errno is None or error.filename not in (str(temporary), temporary, None):
             raise
-        raise type(error)(f"cannot write {path}: {error.strerror.lower()}") from error
+        reason = error.strerror or str(error)
+        raise type(error)(f"cannot write {path}: {reason[:1].lower()}{reason[1:]}") from error
     except BaseException:
         _discard_staged(writes, own, temporary)
         raise

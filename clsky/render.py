@@ -51,10 +51,12 @@ def check_directions(directions, sun_direction, altitude):
     lengths = np.linalg.norm(directions, axis=-1)
     wrong = ~(np.abs(lengths - 1.0) <= DIRECTION_LENGTH_TOLERANCE)       # NaN and infinite lengths too
     if wrong.any():             # which and how many: one message for NaN, zero and non-unit vectors said neither
-        first = tuple(int(i) for i in np.argwhere(wrong)[0])
+        first = tuple(int(i) for i in np.argwhere(wrong)[0]) if wrong.ndim else ()
+        where = f"[{', '.join(map(str, first))}]" if first else ""
+        shown = ", ".join(f"{v:.9g}" for v in directions[first])
         raise ValueError(f"directions must be finite unit vectors (length within {DIRECTION_LENGTH_TOLERANCE:g} of "
                          f"1, masked pixels too): {int(wrong.sum())} of {wrong.size} are not, the first "
-                         f"directions[{', '.join(map(str, first))}] = ({', '.join(f'{v:.9g}' for v in directions[first])})")
+                         f"directions{where} = ({shown})")
     sun = as_real_array("sun_direction", sun_direction, "a finite unit vector of 3 values")
     if sun.shape != (3,) or not np.all(np.isfinite(sun)) or abs(np.linalg.norm(sun) - 1.0) > 1e-6:
         raise ValueError(f"sun_direction must be a finite unit vector of 3 values, got {short(sun_direction)}")

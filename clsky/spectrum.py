@@ -278,8 +278,12 @@ class SpectralRenderer:
             directions = self.prepare(directions, valid)
         elif valid is not None:
             raise ValueError("valid must be given to prepare(), not with prepared directions")
-        return self.table.assemble(getattr(renderer, name)(prepared, sun_direction, altitude, **options)
-                                   for renderer, prepared in zip(self.renderers, directions.per_renderer))
+        try:
+            return self.table.assemble(getattr(renderer, name)(prepared, sun_direction, altitude, **options)
+                                       for renderer, prepared in zip(self.renderers, directions.per_renderer))
+        except ValueError:
+            self._check_open()          # closed by another thread during the call: named as this renderer
+            raise
 
     def render_table(self, directions, sun_direction, altitude=0.0, valid=None):
         """Spectral radiance (..., N) by table lookup (:meth:`clsky.render.SkyRenderer.render_table`)."""

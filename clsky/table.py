@@ -240,13 +240,22 @@ class ScatteringTable:
         except TypeError:
             raise TableFormatError(f"orders must be a sequence of arrays, got {type(self.orders).__name__}") from None
         self.validate()
-        # read-only views once checked: data edited in place after the checks (table.data[...] = -5) reached
-        # the lookups and renderers as negative or NaN radiance; the caller's own arrays keep their flags
+        self._hold_read_only()
+
+    def _hold_read_only(self):
+        """Hold the arrays as read-only views once checked: data edited in place after the checks
+        (table.data[...] = -5) reached the lookups and renderers as negative or NaN radiance; the caller's own
+        arrays keep their flags."""
         for name in ("data", "gathered", "ground_irradiance"):
             if isinstance(getattr(self, name), np.ndarray):
                 object.__setattr__(self, name, _read_only(getattr(self, name)))
         object.__setattr__(self, "orders", tuple(_read_only(order) if isinstance(order, np.ndarray) else order
                                                  for order in self.orders))
+
+    def __setstate__(self, state):
+        """Unpickled and deep-copied tables (which skip ``__post_init__``) hold read-only arrays too."""
+        self.__dict__.update(state)
+        self._hold_read_only()
 
     def validate(self, check_values=True):
         """Check every array against the settings, as :meth:`load` and construction do.

@@ -278,3 +278,13 @@ def test_real_positions_without_pvlib_says_how_to_install_it(monkeypatch):
     start = datetime.datetime(2024, 6, 21, tzinfo=UTC)
     with pytest.raises(ImportError, match="pip install pvlib"):
         real_positions(48.0, 11.6, start, start + datetime.timedelta(hours=1))
+
+
+def test_a_position_takes_the_azimuths_its_direction_does():
+    """SunPosition took any finite azimuth while its direction (sun_direction) refuses those outside
+    [-360, 720]: a bad position was found at render time, after the plan and the table."""
+    from clsky.anim.sunpath import SunPosition
+
+    with pytest.raises(ValueError, match=r"^azimuth_deg must be a number in \[-360, 720\] degrees, got 1000"):
+        SunPosition(zenith_deg=60.0, azimuth_deg=1000.0)
+    assert SunPosition(zenith_deg=60.0, azimuth_deg=720.0).direction.shape == (3,)

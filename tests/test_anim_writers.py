@@ -495,10 +495,20 @@ def test_a_missing_or_failing_ffmpeg_is_named(tmp_path, monkeypatch):
     """An IMAGEIO_FFMPEG_EXE that is not there was found at the first frame, after the plan and the table: the
     check before the work names it. An ffmpeg that exits at once gave '[Errno 32] Broken pipe' or an unreadable
     MP4: the message names ffmpeg and the MP4, nothing lands and no temporary is left."""
+    import imageio_ffmpeg
+
     monkeypatch.setenv("IMAGEIO_FFMPEG_EXE", str(tmp_path / "nothere"))
     with pytest.raises(OSError, match=r"^no ffmpeg for the MP4: .*nothere \(imageio-ffmpeg's, or IMAGEIO_FFMPEG_EXE\) "
-                                      r"is no executable file$"):
+                                      r"is no executable file, nor one on PATH$"):
         FrameWriter(mp4_path=tmp_path / "a.mp4").check()
+    # a bare name is looked up on PATH, as imageio-ffmpeg without a binary of its own gives it ('ffmpeg')
+    monkeypatch.delenv("IMAGEIO_FFMPEG_EXE")
+    real = imageio_ffmpeg.get_ffmpeg_exe()
+    (tmp_path / "bin").mkdir()
+    (tmp_path / "bin" / "my-ffmpeg").symlink_to(real)
+    monkeypatch.setenv("PATH", f"{tmp_path / 'bin'}{os.pathsep}{os.environ['PATH']}")
+    monkeypatch.setenv("IMAGEIO_FFMPEG_EXE", "my-ffmpeg")
+    FrameWriter(mp4_path=tmp_path / "a.mp4").check()
     failing = tmp_path / "ffmpeg"
     failing.write_text("#!/bin/sh\nexit 1\n")
     failing.chmod(0o755)

@@ -225,8 +225,22 @@ def test_a_kernel_cache_on_a_full_disk_is_named(tmp_path, monkeypatch):
         problem = _cl.pocl_cache_problem()
     finally:
         _cl.pocl_cache_problem.cache_clear()
-    assert problem == (f"PoCL's kernel cache POCL_CACHE_DIR={tmp_path} is not a writable directory with 4 MiB free "
-                       f"(PoCL then finds no device, or fails every build); set POCL_CACHE_DIR to such a directory")
+    assert problem == (f"PoCL's kernel cache POCL_CACHE_DIR={tmp_path} has 0.039 MiB free, under the 4 MiB its builds "
+                       f"need (PoCL then finds no device, or fails every build); set POCL_CACHE_DIR to a writable "
+                       f"directory with 4 MiB free")
+    # without POCL_CACHE_DIR, the default cache and its fallback say the same, not "not writable"
+    monkeypatch.delenv("POCL_CACHE_DIR")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    monkeypatch.setenv("TMPDIR", str(tmp_path / "tmp"))
+    (tmp_path / "tmp").mkdir()
+    _cl.pocl_cache_problem.cache_clear()
+    try:
+        problem = _cl.pocl_cache_problem()
+    finally:
+        _cl.pocl_cache_problem.cache_clear()
+    assert problem.startswith(f"PoCL's kernel cache {tmp_path / 'xdg' / 'pocl'} (from XDG_CACHE_HOME) has 0.039 MiB "
+                              f"free, under the 4 MiB its builds need, and the fallback "), problem
+    assert "not usable: it has 0.039 MiB free" in problem, problem
 
 
 def test_an_unusable_home_falls_back_for_pyopencls_cache_too(tmp_path):

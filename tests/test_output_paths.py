@@ -465,3 +465,13 @@ def test_an_exr_the_bindings_cannot_write_is_named_by_its_output(tmp_path, monke
     with pytest.raises(OSError, match=r"^cannot write .*frame\.exr: no space left on device$"):
         exr.write_exr(tmp_path / "frame.exr", np.ones((2, 2, 3)))
     assert list(tmp_path.iterdir()) == []
+
+    class Failing(FullDisk):             # another failure of the file: its words, the temporary not named
+        def write(self, name):
+            raise RuntimeError(f'Failed to write pixel data to image file "{name}". Something Else.')
+
+    monkeypatch.setattr(OpenEXR, "File", Failing)
+    (tmp_path / "MyFrames").mkdir()
+    with pytest.raises(OSError, match=r"^cannot write .*MyFrames/Frame\.exr: failed to write pixel data to image file "
+                                      r"the file\. Something Else\.$"):
+        exr.write_exr(tmp_path / "MyFrames" / "Frame.exr", np.ones((2, 2, 3)))

@@ -187,3 +187,10 @@ def test_a_tables_arrays_are_read_only_once_checked(table):
     np.testing.assert_array_equal(copy.data, table.data)
     with pytest.raises(TableFormatError, match="negative"):
         dataclasses.replace(table, data=-own)
+    # pickled and deep-copied tables skip __post_init__: theirs are read-only too
+    import copy
+    import pickle
+
+    for twin in (pickle.loads(pickle.dumps(table)), copy.deepcopy(table)):
+        assert not any(array.flags.writeable for array in (twin.data, twin.gathered, *twin.orders))
+        np.testing.assert_array_equal(twin.data, table.data)
