@@ -284,19 +284,25 @@ def test_clsky_script_runs_without_the_anim_extra(tmp_path, args, expected):
     assert result.stderr == ""
 
 
-def test_a_frame_whose_output_another_run_wrote_meanwhile_names_the_option(tmp_path, monkeypatch, capsys):
-    """Two `clsky render` runs on one -o without --force: the one that lands second was refused in the
-    library's words ('pass force=True ...'); now one line naming --output, as a table's and an animation's."""
+def another_run_writes_before_commit(monkeypatch, path):
+    """Every StagedWrites.commit of the test finds ``path`` written by another run just before it."""
     from clsky import _files
-    from clsky.anim import cli as anim_cli
 
     commit = _files.StagedWrites.commit
 
     def the_other_run_writes_then_commit(self):
-        (tmp_path / "p.png").write_text("the other run's")
+        path.write_text("the other run's")
         return commit(self)
 
     monkeypatch.setattr(_files.StagedWrites, "commit", the_other_run_writes_then_commit)
+
+
+def test_a_frame_whose_output_another_run_wrote_meanwhile_names_the_option(tmp_path, monkeypatch, capsys):
+    """Two `clsky render` runs on one -o without --force: the one that lands second was refused in the
+    library's words ('pass force=True ...'); now one line naming --output, as a table's and an animation's."""
+    from clsky.anim import cli as anim_cli
+
+    another_run_writes_before_commit(monkeypatch, tmp_path / "p.png")
     monkeypatch.chdir(tmp_path)
     assert anim_cli.main(["render", "--size", "16", "--table-size", "8", "32", "8", "--method", "lut",
                           "-o", "p.png"]) == 2
@@ -308,16 +314,9 @@ def test_a_frame_whose_output_another_run_wrote_meanwhile_names_the_option(tmp_p
 def test_an_animation_whose_output_another_run_wrote_meanwhile_names_the_option(tmp_path, monkeypatch, capsys):
     """Two `clsky animate` runs on one -o: the one that lands second was refused in the library's words
     ('pass force=True (a table's save and exports: overwrite=True)'); now one line naming --output."""
-    from clsky import _files
     from clsky.anim import cli as anim_cli
 
-    commit = _files.StagedWrites.commit
-
-    def the_other_run_writes_then_commit(self):
-        (tmp_path / "c_metrics.csv").write_text("the other run's")
-        return commit(self)
-
-    monkeypatch.setattr(_files.StagedWrites, "commit", the_other_run_writes_then_commit)
+    another_run_writes_before_commit(monkeypatch, tmp_path / "c_metrics.csv")
     monkeypatch.chdir(tmp_path)
     assert anim_cli.main(["animate", "--size", "16", "--frames", "2", "--table-size", "8", "32", "8", "--method",
                           "lut", "--progress", "none", "-o", "c.mp4"]) == 2
