@@ -372,7 +372,7 @@ def _higher_orders_share(atmosphere, table, scene, ctx=None):
 # The pilot's share, kept on disk ---------------------------------------------------------------------
 
 #: Layout of a kept pilot share; a file of another layout is not read (and is rewritten).
-PILOT_FORMAT = 1
+PILOT_FORMAT = 2
 
 
 def pilot_share(atmosphere: AtmosphereParameters, table: TableSettings, scene: Scene, ctx=None) -> float:
@@ -407,12 +407,21 @@ def pilot_share(atmosphere: AtmosphereParameters, table: TableSettings, scene: S
     if share is None:
         share = float(_higher_orders_share(atmosphere, table, scene, ctx=ctx))
         if path is not None:
-            store(path, lambda file: file.write(json.dumps({"key": key, "share": share}, sort_keys=True).encode()))
+            kept = {"key": key, "share": share}
+            store(path, lambda file: file.write(json.dumps({**kept, "sha256": _digest(kept)}, sort_keys=True).encode()))
     return share
 
 
+def _digest(kept) -> str:
+    """SHA-256 (hex) of a kept share's key and share, as JSON: a digit of the share changed on disk (0.33 to
+    0.03) was read, and a render dropped its higher orders without a word (clsky._cache: each reader checks
+    its files' digests)."""
+    return hashlib.sha256(json.dumps(kept, sort_keys=True).encode()).hexdigest()
+
+
 def _kept_share(path, key):
-    """The share kept at ``path`` for exactly ``key``, or None (no file, another key, a damaged file)."""
+    """The share kept at ``path`` for exactly ``key``, or None (no file, another key, a damaged file: one
+    whose digest is not its key's and share's)."""
     try:
         kept = json.loads(read_user_text(path, limit=2**16))
     except (OSError, ValueError, RecursionError):      # missing, unreadable, a FIFO, not UTF-8, not JSON
@@ -421,6 +430,8 @@ def _kept_share(path, key):
         return None
     share = kept.get("share")
     if type(share) is not float or not math.isfinite(share) or not 0.0 <= share <= 1.0:     # a share's range
+        return None
+    if kept.get("sha256") != _digest({"key": key, "share": share}):
         return None
     return share
 

@@ -473,11 +473,13 @@ def test_pilot_share_key_holds_every_input(cl_context, tmp_path, monkeypatch):
 
 
 @pytest.mark.parametrize("content", [b"", b"\xff\xfe not UTF-8", b"[1, 2]", b'{"share": 0.25}',
-                                     "wrong key", "share NaN", "share 2.0", "share -1.0", "share as text"])
+                                     "wrong key", "share NaN", "share 2.0", "share -1.0", "share as text",
+                                     "share 0.03", "no digest"])
 def test_a_damaged_or_foreign_pilot_file_is_computed_again_and_rewritten(cl_context, tmp_path, monkeypatch,
                                                                          content):
-    """A kept file that is not the whole key with a share in [0, 1] is not read: the pilot runs, and its
-    share replaces the file (a share of -1.0 dropped the higher orders, "at most -100 %")."""
+    """A kept file that is not the whole key with a share in [0, 1] and their digest is not read: the pilot
+    runs, and its share replaces the file (a share of -1.0 dropped the higher orders, "at most -100 %"; one
+    digit changed, 0.25 to 0.03, a share within the range, was read)."""
     import json
 
     monkeypatch.setenv("CLSKY_CACHE_DIR", str(tmp_path))
@@ -489,9 +491,11 @@ def test_a_damaged_or_foreign_pilot_file_is_computed_again_and_rewritten(cl_cont
     if isinstance(content, str):
         if content == "wrong key":
             kept["key"]["altitude_m"] = 1.0
+        elif content == "no digest":
+            del kept["sha256"]
         else:
             kept["share"] = {"share NaN": float("nan"), "share 2.0": 2.0, "share -1.0": -1.0,
-                             "share as text": "0.25"}[content]
+                             "share as text": "0.25", "share 0.03": 0.03}[content]
         content = json.dumps(kept).encode()
     path.write_bytes(content)
     runs[:] = []
