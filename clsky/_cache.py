@@ -10,7 +10,7 @@ ignored, as the XDG Base Directory specification asks); without a home directory
 writers leave one writer's whole file and one that raises (KeyboardInterrupt included) leaves nothing;
 each reader validates what it reads (its own format, a SHA-256 digest) and ignores a file that fails. A
 directory that cannot be written is no error: the thing is then recomputed by every process, as without
-the cache. Nothing is ever deleted from it (README "Known limits").
+the cache, and a note says so once a process. Nothing is ever deleted from it (README "Known limits").
 """
 
 from __future__ import annotations
@@ -59,9 +59,26 @@ def store(path: pathlib.Path, write) -> bool:
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_write(path, overwrite=True) as temporary, open(temporary, "wb") as file:
             write(file)
-    except (OSError, ValueError):
+    except (OSError, ValueError) as error:
+        _unwritable_once(str(cache_directory()), str(error))
         return False
     return True
+
+
+#: The cache directories a note has been given for in this process (:func:`_unwritable_once`).
+_NOTED = set()
+
+
+def _unwritable_once(directory: str, reason: str):
+    """Say once a process and directory, on stderr, that the cache could not be written (a read-only or full
+    disk): the run is right, but computes again what it would have read (about a second), which it did
+    without a word."""
+    if directory in _NOTED:
+        return
+    _NOTED.add(directory)
+    logging.getLogger("clsky").warning(f"clsky: note: clsky's cache {directory} cannot be written ({reason}): what "
+                                       f"it keeps is computed again each run (set CLSKY_CACHE_DIR to a writable "
+                                       f"directory)")
 
 
 @functools.lru_cache(maxsize=1)

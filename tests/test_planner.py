@@ -506,13 +506,21 @@ def test_a_damaged_or_foreign_pilot_file_is_computed_again_and_rewritten(cl_cont
     assert runs == [0.25]
 
 
-def test_without_a_writable_cache_directory_the_pilot_runs_every_time(cl_context, tmp_path, monkeypatch):
+def test_without_a_writable_cache_directory_the_pilot_runs_every_time(cl_context, tmp_path, monkeypatch, caplog):
     """A cache directory that cannot be made (a file stands at its path) is no error: every plan runs the
-    pilot, as before the share was kept."""
+    pilot, as before the share was kept, and one note a process says so (it cost a second a run silently)."""
+    import logging
+
+    from clsky import _cache
+
     blocker = tmp_path / "not-a-directory"
     blocker.write_text("a file")
     monkeypatch.setenv("CLSKY_CACHE_DIR", str(blocker))
+    monkeypatch.setattr(_cache, "_NOTED", set())
     runs = _counted_pilot(monkeypatch, share=0.25)
-    for _ in range(2):
-        plan_scene(Scene((20.0, 60.0), error_budget=0.1), ctx=cl_context)
+    with caplog.at_level(logging.WARNING, logger="clsky"):
+        for _ in range(2):
+            plan_scene(Scene((20.0, 60.0), error_budget=0.1), ctx=cl_context)
     assert runs == [0.25, 0.25] and blocker.read_text() == "a file"
+    notes = [record.getMessage() for record in caplog.records if "cannot be written" in record.getMessage()]
+    assert len(notes) == 1 and notes[0].startswith(f"clsky: note: clsky's cache {blocker} cannot be written (")
