@@ -28,15 +28,16 @@ Examples
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import importlib
 import io
 import json
 import math
 import os
-import shutil
 import pathlib
 import re
+import shutil
 import struct
 import warnings
 import zlib
@@ -353,6 +354,17 @@ def _ffmpeg_path(part):
     return os.path.abspath(part)
 
 
+@contextlib.contextmanager
+def _ffmpeg_failures(target):
+    """An OSError of the block (ffmpeg gone, exited or killed: '[Errno 32] Broken pipe' alone) as one naming
+    ffmpeg and the MP4 for ``target``."""
+    try:
+        yield
+    except OSError as error:
+        raise OSError(f"ffmpeg stopped while writing the MP4 for {target} ({str(error).splitlines()[0]}); "
+                      f"nothing was replaced") from None
+
+
 def _check_video(part, target, frames):
     """OSError unless the MP4 ffmpeg wrote to ``part`` (for ``target``) holds ``frames`` frames: imageio-ffmpeg
     does not look at ffmpeg's exit status, so an ffmpeg that failed (a frame rate it could not parse, a full
@@ -582,11 +594,8 @@ class FrameWriter:
             return False
         try:
             if video is not None:
-                try:
+                with _ffmpeg_failures(self.mp4_path):
                     video.close()
-                except OSError as error:
-                    raise OSError(f"ffmpeg stopped while writing the MP4 for {self.mp4_path} "
-                                  f"({str(error).splitlines()[0]}); nothing was replaced") from None
                 _check_video(self._part, self.mp4_path, len(self._indices))
                 self.paths.append(self.mp4_path)
             elif self.mp4_path is not None:
@@ -708,11 +717,8 @@ class FrameWriter:
             self._hdr_shape = hdr.shape
         written = self._write_files(index, image, hdr, hdr_attributes) if self.directory is not None else []
         if self._video is not None:
-            try:
+            with _ffmpeg_failures(self.mp4_path):
                 self._video.append_data(even_padded(image))
-            except OSError as error:            # ffmpeg gone (exited, killed): '[Errno 32] Broken pipe' alone
-                raise OSError(f"ffmpeg stopped while writing the MP4 for {self.mp4_path} "
-                              f"({str(error).splitlines()[0]}); nothing was replaced") from None
         self._indices.add(index)
         self.paths.extend(written)
         return written
