@@ -176,11 +176,6 @@ def _cache_unusable(directory: pathlib.Path):
     return None
 
 
-def _writable(directory: pathlib.Path) -> bool:
-    """:func:`_cache_unusable` of ``directory`` is None."""
-    return _cache_unusable(directory) is None
-
-
 def _private_directory(directory: pathlib.Path):
     """None if ``directory`` is (or is now made) a directory of this user's that no one else can write, not
     a symbolic link, where a file can be written (the fallback cache, in a shared directory): one of this
@@ -221,7 +216,7 @@ def pocl_cache_problem():
         os.environ["POCL_CACHE_DIR"] = str(fallback)
         also = ""
         cache_home = directory.parent
-        if source == "HOME" and not _writable(cache_home):
+        if source == "HOME" and _cache_unusable(cache_home) is not None:
             # PyOpenCL's own cache (pytools') is under XDG_CACHE_HOME, else ~/.cache: it failed there next
             os.environ["XDG_CACHE_HOME"] = str(fallback / "xdg")
             also = f", and {fallback / 'xdg'} for the caches under {cache_home}"
