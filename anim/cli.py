@@ -331,10 +331,7 @@ def run_animate(args):
     except FileExistsError as error:      # another run wrote an output since the check: named as the option's
         if config.force or getattr(error, "path", None) is None:
             raise
-        placed = getattr(error, "committed", None)
-        placed = f"; this run's files already in place: {', '.join(map(str, placed))}" if placed else ""
-        raise clsky_cli.UsageError(f"{option}: {error.path} exists: another process wrote it during this run; "
-                                   f"use --force to overwrite it{placed}") from None
+        raise clsky_cli.written_meanwhile(option, error.path, getattr(error, "committed", ())) from None
     finally:
         close()
     print(result.summary)

@@ -78,12 +78,18 @@ def written_since_checked(targets, staging, force):
         ours = {os.path.abspath(path) for path in staging.committed}
         for option, path in targets:
             if os.path.lexists(path) and os.path.abspath(path) not in ours:
-                placed = ""
-                if staging.committed:
-                    placed = f"; this run's files already in place: {', '.join(map(str, staging.committed))}"
-                raise UsageError(f"{option} {path} exists: another process wrote it during this run; use --force "
-                                 f"to overwrite it{placed}") from None
+                raise written_meanwhile(option, path, staging.committed) from None
         raise
+
+
+def written_meanwhile(option, path, committed=()):
+    """The UsageError of an output at ``path`` that was absent when :func:`check_outputs` looked and that
+    another run wrote before this one put its own in place: named as ``option``'s (the file may be one
+    derived from it, an animation's metrics from its --output), in :func:`clsky._files.check_output`'s form
+    ('--output: FILE exists'), with the files this run had already put in place (``committed``)."""
+    placed = f"; this run's files already in place: {', '.join(map(str, committed))}" if committed else ""
+    return UsageError(f"{option}: {path} exists: another process wrote it during this run; use --force to "
+                      f"overwrite it{placed}")
 
 
 def check_not_inputs(targets, inputs):

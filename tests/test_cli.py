@@ -192,7 +192,7 @@ def test_an_output_another_run_wrote_meanwhile_is_refused_by_option(tmp_path, mo
     where = "lines.txt line 1: " if sweep else ""
     placed = "; this run's files already in place: sky.npz, sky.bin" if when == "commit" else ""
     printed = capsys.readouterr()
-    assert printed.err == (f"clsky: error: {where}--raw sky.json exists: another process wrote it "
+    assert printed.err == (f"clsky: error: {where}--raw: sky.json exists: another process wrote it "
                            f"during this run; use --force to overwrite it{placed}\n")
     # no summary line says '-> sky.npz' for a table that was not written (a sweep printed them as it built)
     assert "->" not in printed.out
@@ -306,7 +306,7 @@ def test_a_frame_whose_output_another_run_wrote_meanwhile_names_the_option(tmp_p
     monkeypatch.chdir(tmp_path)
     assert anim_cli.main(["render", "--size", "16", "--table-size", "8", "32", "8", "--method", "lut",
                           "-o", "p.png"]) == 2
-    assert capsys.readouterr().err == ("clsky: error: --output p.png exists: another process wrote it during this "
+    assert capsys.readouterr().err == ("clsky: error: --output: p.png exists: another process wrote it during this "
                                        "run; use --force to overwrite it\n")
     assert (tmp_path / "p.png").read_text() == "the other run's"
 
