@@ -375,7 +375,7 @@ def _optional_flag(name, value):
     return None if value is None else check_flag(name, value)
 
 
-def _location(name, value):
+def check_location(name, value):
     """None or (latitude in [-90, 90], longitude in [-180, 180]) degrees, from any pair of numbers."""
     if value is None:
         return None
@@ -445,7 +445,7 @@ _FIELD_CHECKS = {
     "error_budget": _real(0.0, 1.0, low_open=True),
     "quality": _choice(tuple(QUALITY_LEVELS), optional=True),
     "start_elevation_deg": _real(-90.0, 90.0, " degrees"), "max_elevation_deg": _real(-90.0, 90.0, " degrees"),
-    "location": _location, "date": _date, "start_hour": _real(0.0, 48.0, " h"), "end_hour": _real(0.0, 48.0, " h"),
+    "location": check_location, "date": _date, "start_hour": _real(0.0, 48.0, " h"), "end_hour": _real(0.0, 48.0, " h"),
     "step_minutes": _real(0.0, 1440.0, " minutes", low_open=True), "fps": _real(*FPS_RANGE),
     "exposure": _real(-40.0, 40.0, " EV"), "tone_map": _choice(tuple(display_pipeline.TONE_CURVES), optional=True),
     "auto_exposure": _optional_flag, "white_balance": _choice(display_pipeline.WHITE_BALANCES, optional=True),

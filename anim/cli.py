@@ -201,11 +201,18 @@ def _config(args):
     try:
         return AnimationConfig(force=args.force, **fields)
     except ParameterError as error:
-        where = scene.source_of(args, error.field)
-        if where is not None:
-            raise clsky_cli.UsageError(error.reworded(where if error.index is None else f"{where}[{error.index}]")) \
-                from None
-        raise clsky_cli.UsageError(clsky_cli.option_message(error, scene.field_options(args.scene_parser))) from None
+        raise _usage_error(args, error) from None
+
+
+def _usage_error(args, error):
+    """The UsageError of a ParameterError of a config field: naming the option typed, or the scene file and
+    key its value came from."""
+    from . import scene
+
+    where = scene.source_of(args, error.field)
+    if where is not None:
+        return clsky_cli.UsageError(error.reworded(where if error.index is None else f"{where}[{error.index}]"))
+    return clsky_cli.UsageError(clsky_cli.option_message(error, scene.field_options(args.scene_parser)))
 
 
 #: The options of each sun path (their dests): the sweep's, and the real positions' but --location.
@@ -264,7 +271,16 @@ def _check_options_used(args):
     """UsageError (exit 2) for an option typed on the command line that the frames would not use
     (:func:`_unused_options`): refused, not ignored. A scene file's keys are not refused: a scene holds
     every key (``--print-scene`` writes them all, both sun paths' among them)."""
+    from clsky.errors import ParameterError
+
+    from . import scene
+    from .animate import check_location
+
     given = getattr(args, "given_options", {}) or {}
+    try:                 # the sweep's options are refused in --location's name: a bad --location is named first
+        check_location("location", scene.field_values(args, args.scene_parser).get("location"))
+    except ParameterError as error:
+        raise _usage_error(args, error) from None
     for dest, why in _unused_options(args):
         if dest in given:
             raise clsky_cli.UsageError(f"{given[dest]} {why}")

@@ -270,10 +270,14 @@ DUSK_SCENE = pathlib.Path(__file__).resolve().parents[1] / "examples" / "dusk.to
                             "sweep takes --frames, --start-elevation and --max-elevation)"),
     (["--date", "2026-06-21"], "clsky: error: --date sets real sun positions"),
     (["--step-minutes", "5"], "clsky: error: --step-minutes sets real sun positions"),
+    # the sweep's option is refused in --location's name: a --location out of range is named first
+    (["--location", "999", "5", "--frames", "3"], "clsky: error: --location must be (latitude in [-90, 90], "
+                                                  "longitude in [-180, 180]) degrees, got (999, 5)"),
 ], ids=lambda value: " ".join(value) if isinstance(value, list) else None)
 def test_cli_refuses_options_of_the_sun_path_not_taken(tmp_path, args, expected):
     """An option of the sweep with real positions (or the reverse) would be ignored: it is refused, in one
-    line naming the option, before any work (the scene file's own keys of both paths are not)."""
+    line naming the option, before any work (the scene file's own keys of both paths are not); the option
+    its message names is checked before it."""
     _refused(tmp_path, ["animate", "--progress", "none", *args], expected)
 
 
