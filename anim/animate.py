@@ -838,6 +838,26 @@ def convert_frames(renderer: SkyRenderer, config: AnimationConfig, frames):
     return frames
 
 
+#: How near auto-exposure's limit a frame's EV counts as at it [EV]: the smoothing (:func:`clsky.anim.display.
+#: smoothed_ev`) halves the distance a frame, so a path that stays too dark to meter is within it in 6 frames.
+EXPOSURE_LIMIT_MARGIN_EV = 0.05
+
+
+def exposure_limit_note(config: AnimationConfig, evs) -> str:
+    """'' or the note that frames of exposures ``evs`` [EV] were metered at auto-exposure's upper limit
+    (:class:`clsky.anim.display.AutoExposure`'s ``max_ev``, with the --exposure compensation): a sky too dark to
+    meter (the sun far below the horizon, a polar night: some 3e-7 cd/m^2 on average at +20 EV), lifted to the
+    display's key as if it were a dim day sky, grey instead of black."""
+    if not config.auto_exposure:
+        return ""
+    limit = display_pipeline.AutoExposure().max_ev
+    at_limit = sum(ev >= limit + config.exposure - EXPOSURE_LIMIT_MARGIN_EV for ev in evs)
+    if not at_limit:
+        return ""
+    return (f"{counted(at_limit, 'frame')} at auto-exposure's {limit:+g} EV limit: a sky too dark to meter, "
+            f"shown brighter than it is (--no-auto-exposure --exposure EV fixes one exposure)")
+
+
 def display(config: AnimationConfig, table) -> display_pipeline.Display:
     """The display pipeline of the animation's frames (:class:`clsky.anim.display.Display`) for ``table`` (a
     ScatteringTable, or with ``config.wavelengths`` a :class:`clsky.spectrum.SpectralTable`)."""
@@ -1061,6 +1081,8 @@ def _render_animation(config, ctx, progress, report, farm) -> AnimationResult:
                     f"(sun zenith {worst['sun_zenith_deg']:.1f} deg): "
                     f"95th-percentile error {100 * worst['p95_rel']:.1f} %, mean Delta E {worst['mean_delta_e']:.2f}; "
                     f"worst temporal jumps at frames {temporal['worst_frames'][:3]}")
+    if note := exposure_limit_note(config, [row["exposure_ev"] for row in rows]):
+        summary += f"; {note}"
     if removed:
         summary += f"; deleted {counted(len(removed), 'stale frame file')} of an earlier run"
     summary += f" -> {config.output_path}"

@@ -358,8 +358,8 @@ def run_render(args):
     from clsky._files import StagedWrites, check_suffix
 
     from . import scene, writers
-    from .animate import (LOOKUP_NAMES, comparison, display, display_frames, lookup_of, make_renderer,
-                          planned_animation, render_frame)
+    from .animate import (LOOKUP_NAMES, comparison, display, display_frames, exposure_limit_note, lookup_of,
+                          make_renderer, planned_animation, render_frame)
     from .cameras import AZIMUTH_RANGE_DEG, sun_direction
     from .sunpath import SunPosition
 
@@ -412,6 +412,8 @@ def run_render(args):
     # another run that wrote the frame meanwhile is named as --output's, as a table's or an animation's is
     with clsky_cli.written_since_checked([(name("output", "--output"), output)], staging, args.force), staging:
         writers.write_png(output, image, force=args.force, text=text, staging=staging)
+    if note := exposure_limit_note(config, [ev]):
+        detail += f"; {note}"
     print(f"frame {camera.width}x{camera.height} ({config.method}, sun elevation {args.sun_elevation:g} deg, "
           f"azimuth {args.sun_azimuth:g} deg, {config.tone_map} at {ev:+.2f} EV){detail} -> {output}")
     return 0

@@ -229,6 +229,35 @@ def test_cli_render_plans_for_its_one_sun(tmp_path):
     lines = result.stdout.splitlines()
     assert lines[0].startswith("scene plan (draft quality, error budget 10 %)") and lines[-1].startswith("frame ")
     assert any("elevations -6.0 to 32.2 deg" in line for line in lines), result.stdout
+    assert "auto-exposure's" not in lines[-1]             # a day sky meters well inside the limit
+
+
+def test_cli_render_says_a_night_sky_meets_the_exposure_limit(tmp_path):
+    """The sun 30 deg down: a sky of some 1e-7 cd/m^2, which auto-exposure lifts by its whole +20 EV to a
+    grey like a dim day's (a polar night's animation did so with no word); the frame's line says so."""
+    result = clsky("render", "--size", "16", "--quality", "draft", "--sun-elevation", "-30", "-o", "night.png",
+                   cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    line = result.stdout.splitlines()[-1]
+    assert "at +20.00 EV)" in line and line.endswith(
+        "; 1 frame at auto-exposure's +20 EV limit: a sky too dark to meter, shown brighter than it is "
+        "(--no-auto-exposure --exposure EV fixes one exposure) -> night.png"), line
+
+
+@pytest.mark.parametrize("evs,exposure,auto,expected", [
+    ([20.0, 19.96, 19.9, 3.0], 0.0, None, "2 frames"),       # within EXPOSURE_LIMIT_MARGIN_EV of +20
+    ([18.0], -2.0, None, "1 frame"),                          # the compensation moves the limit
+    ([19.9, 3.0], 0.0, None, None),
+    ([20.0], 0.0, False, None),                               # a fixed exposure has no limit
+])
+def test_exposure_limit_note_counts_the_frames_at_the_limit(evs, exposure, auto, expected):
+    from clsky.anim.animate import exposure_limit_note
+
+    note = exposure_limit_note(AnimationConfig(exposure=exposure, auto_exposure=auto), evs)
+    if expected is None:
+        assert note == ""
+    else:
+        assert note.startswith(f"{expected} at auto-exposure's +20 EV limit: a sky too dark to meter"), note
 
 
 @pytest.mark.parametrize("command,args,named", [
