@@ -586,7 +586,8 @@ def memory_estimate(config: AnimationConfig, positions, host_workers=None, devic
                                      host_workers=min(host_frame_workers() if host_workers is None else host_workers,
                                                       len(positions)), packed_reads=packed_reads(device),
                                      ray_march_suns=min(ray_march_suns_of(config, device), len(positions)),
-                                     device_conversion=config.absolute and config.wavelengths is None)
+                                     device_conversion=config.absolute and config.wavelengths is None,
+                                     frames=len(positions))
 
 
 def build_table(config: AnimationConfig, plan: Plan | None = None, ctx=None, progress=None) -> clsky.ScatteringTable:

@@ -305,7 +305,8 @@ def _memory_options(args, config):
     else:
         typed = "" if args.error_budget is not None else " (the default)"
         table = f"--error-budget {config.error_budget:g}{typed}"
-    return {"table": table, "frames": f"--size {config.size}"}
+    sequence = f"--frames {config.frames}" if config.location is None else f"--step-minutes {config.step_minutes:g}"
+    return {"table": table, "frames": f"--size {config.size}", "sequence": sequence}
 
 
 def _check_memory(args, config, positions):

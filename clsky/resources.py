@@ -83,6 +83,12 @@ FRAME_BYTES_PER_PIXEL = {"compare": 287, "lut": 165, "raymarch": 75, "skyview": 
 #: render's conversion beside this frame's processing) overstated it. With two host threads the estimate
 #: is 1.03 (compare), 0.94 (lut), 1.09 (raymarch) and 1.00 (skyview) of the largest of 3 runs.
 NEXT_FRAME_BYTES_PER_PIXEL = {"compare": 10, "lut": 15, "raymarch": 0, "skyview": 30}
+#: Host bytes an animation keeps of each frame until its end, whatever its pixels: its metrics row (some 470
+#: bytes of Python objects), the names of its staged files, the means of the temporal jumps. Measured as the
+#: resident memory's growth over the frames of 16 x 16 animations (2026-12-07, Intel Xeon): 1.7 kB a frame
+#: over 20 000 and over 100 000 frames (344 to 378 MB and 351 to 520 MB); rounded up. The metrics JSON is
+#: streamed to its file at the end (``clsky.anim.writers.write_json``), no copy of them all as one string.
+FRAME_RECORD_BYTES = 2048
 
 _GIB = 2**30
 
@@ -105,8 +111,9 @@ class Allocation:
         How many such arrays are alive at once.
     on_device : bool
         An OpenCL buffer (else a NumPy array).
-    source : {'table', 'frames'}
-        The part of the request it grows with (names the option in messages).
+    source : {'table', 'frames', 'sequence'}
+        The part of the request it grows with (names the option in messages): the table, the frames'
+        pixels, or an animation's frame count.
     """
 
     label: str
@@ -654,14 +661,16 @@ def estimate_spectral_table_memory(settings: TableSettings, batches: int, packed
 def estimate_animation_memory(settings: TableSettings, image_shape, method="compare",
                               ray_settings: TableSettings | None = None, hdr_output=False,
                               batches=None, overlapped=True, host_workers=1,
-                              packed_reads=False, ray_march_suns=1, device_conversion=False) -> MemoryEstimate:
+                              packed_reads=False, ray_march_suns=1, device_conversion=False,
+                              frames=0) -> MemoryEstimate:
     """The table build, then the frames (:func:`estimate_table_memory`, :func:`estimate_render_memory`
     without the higher orders, which an animation drops once the table is built). ``batches``: None
     for the three-wavelength animation, else the spectral one's ceil(N / 3) batches
     (:func:`estimate_spectral_table_memory`, ``estimate_render_memory(..., batches=B)``).
     ``overlapped``, ``host_workers``: the frames go through the overlapped pipeline with that many host
     threads, and ``ray_march_suns``, ``device_conversion``: ``estimate_render_memory``'s. ``packed_reads``:
-    :func:`estimate_table_memory`'s."""
+    :func:`estimate_table_memory`'s. ``frames``: the animation's frame count, whose records it keeps to its
+    end (:data:`FRAME_RECORD_BYTES` each, in the last phase; source 'sequence' for the messages)."""
     if batches is None:
         build = estimate_table_memory(settings, packed_reads=packed_reads)
     else:
@@ -670,10 +679,15 @@ def estimate_animation_memory(settings: TableSettings, image_shape, method="comp
                                     hdr_output=hdr_output, batches=batches or 1, overlapped=overlapped,
                                     host_workers=host_workers, ray_march_suns=ray_march_suns,
                                     device_conversion=device_conversion)
+    phases = build.phases + render.phases
+    if frames:
+        records = Allocation("the frames' records (metrics rows, staged file names)", FRAME_RECORD_BYTES,
+                             count=int(frames), source="sequence")
+        phases = phases[:-1] + (Phase(phases[-1].name, phases[-1].allocations + (records,)),)
     width, height = image_shape
     w, h, d = settings.size
     tables = f"table {w} x {h} x {d}" if batches is None else f"{counted(batches, 'table')} {w} x {h} x {d}"
-    return MemoryEstimate(f"the animation ({width} x {height} frames, {tables})", build.phases + render.phases)
+    return MemoryEstimate(f"the animation ({width} x {height} frames, {tables})", phases)
 
 
 def host_available_bytes() -> int | None:
@@ -746,7 +760,8 @@ def check_memory(estimate: MemoryEstimate, limits: MemoryLimits | None = None, d
     device : pyopencl.Device, optional
         The device the work will run on (None: host memory only).
     options : dict, optional
-        {'table': ..., 'frames': ...}: the command-line option each part of the request comes from;
+        {'table': ..., 'frames': ..., 'sequence': ...}: the command-line option each part of the request
+        comes from (:class:`Allocation`'s ``source``);
         the message starts with the one of the largest allocation.
 
     Raises

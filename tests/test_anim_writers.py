@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import math
 import os
 import zlib
 
@@ -13,6 +14,7 @@ import pytest
 from numpy.testing import assert_array_equal
 from PIL import Image
 
+from clsky._files import StagedWrites
 from clsky.anim.writers import FrameWriter, encode_png, even_padded, write_csv, write_json, write_png
 
 try:
@@ -451,9 +453,18 @@ def test_write_json_atomic_strict(tmp_path):
     assert json.loads(target.read_text()) == {"rmse": 0.25, "frames": [0, 1, 2], "pixels": 7, "name": "table"}
     with pytest.raises(FileExistsError, match="metrics.json"):
         write_json(target, {})
-    with pytest.raises(ValueError):                   # NaN is not JSON: refused before any file
+    with pytest.raises(ValueError):                   # NaN is not JSON: refused, no file left
         write_json(tmp_path / "nan.json", {"x": float("nan")})
     write_json(target, {"a": 1}, force=True)
+    assert json.loads(target.read_text()) == {"a": 1}
+    assert _listing(tmp_path) == ["metrics.json"]
+    # the text is streamed to the temporary: a value found late (after a MB of rows) still leaves the file
+    # there as it was and no temporary, alone and in a staging set
+    late = {"frames": [{"frame": i, "mean": 0.5} for i in range(20_000)] + [{"frame": -1, "mean": math.inf}]}
+    with pytest.raises(ValueError):
+        write_json(target, late, force=True)
+    with pytest.raises(ValueError), StagedWrites() as staging:
+        write_json(target, late, force=True, staging=staging)
     assert json.loads(target.read_text()) == {"a": 1}
     assert _listing(tmp_path) == ["metrics.json"]
 

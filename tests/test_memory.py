@@ -14,6 +14,7 @@ import subprocess
 import sys
 import time
 import tracemalloc
+import types
 
 import numpy as np
 import pytest
@@ -325,6 +326,30 @@ def test_animation_estimate_drops_the_higher_orders():
     frames = memory_estimate(config, sun_positions(config)).phases[-1]
     assert not any("higher orders" in a.label for a in frames.allocations)
     assert np.isfinite(frames.bytes())
+
+
+def test_animation_estimate_counts_the_frames_records():
+    """A 100 000-frame animation keeps some 1.7 kB of each frame to its end (its metrics row, its staged
+    files' names: 351 to 520 MB at 16 x 16, resources.FRAME_RECORD_BYTES), which the estimate left out: the
+    frames' phase now counts them, and a message that they top names the frame count's option."""
+    from clsky.anim import cli as anim_cli
+    from clsky.anim.animate import AnimationConfig, memory_estimate, sun_positions
+
+    def frames_phase(frames):
+        config = AnimationConfig(frames=frames, size=16, quality="draft", table_size=(8, 32, 8))
+        return memory_estimate(config, sun_positions(config), host_workers=1).phases[-1]
+
+    growth = frames_phase(100_000).bytes() - frames_phase(1_000).bytes()
+    assert growth == 99_000 * resources.FRAME_RECORD_BYTES
+    records = resources._largest(frames_phase(100_000).allocations)
+    assert records.source == "sequence" and records.total == 100_000 * resources.FRAME_RECORD_BYTES
+    estimate = MemoryEstimate("the animation", (frames_phase(100_000),))
+    args = types.SimpleNamespace(table_size=None, quality="draft", error_budget=None)    # what the options read
+    config = AnimationConfig(frames=100_000, size=16, quality="draft")
+    with pytest.raises(InsufficientMemoryError, match=r"^--frames 100000: the animation needs .* most: the "
+                                                      r"frames' records \(metrics rows, staged file names\), 195 MiB"):
+        check_memory(estimate, MemoryLimits(host_available=100 * 2**20),
+                               options=anim_cli._memory_options(args, config))
 
 
 @pytest.mark.parametrize("wavelengths", [None, 12])
