@@ -13,7 +13,9 @@ File format (``.npz``, uncompressed: compression saves little on these values an
     format version did not change (a clsky without it refuses a 4D file: "unknown table settings").
 ``order_1``, ``order_2``, ..., ``order_K``
     Every scattering order, stored as float32 for inspection: order 1 (D, H, W, 6) factored, higher
-    orders (D, H, W, 6) factored (atmosphere-plus) or (D, H, W, 3) phased (physical); finite, >= 0.
+    orders (D, H, W, 6) factored (atmosphere-plus) or (D, H, W, 3) phased (physical); finite, >= 0. Or
+    none: a table whose orders were dropped (an animation's, ``dataclasses.replace(table, orders=())``,
+    which its frame farm sends to the workers as a file); ``orders_record`` still counts those computed.
 ``gathered``
     (D, H, W, 6), the sum of the gathered in-scatter tables for the ray march, finite, >= 0; with
     ``azimuth_harmonics`` = M > 0, (M + 1, D, H, W, 6), its cosine harmonics (harmonic 0 >= 0); absent
@@ -37,11 +39,13 @@ any file that is not such an archive, has another version (older files: rebuild 
 or adds a member, fails a checksum or the parameters hash, or holds arrays whose shape, dtype or
 values (:meth:`ScatteringTable.validate`: finite, >= 0 but for the harmonics m >= 1, at most
 :data:`clsky.lookup.MAX_TABLE_VALUE` in size) do not fit its settings. Against a forged file, whose checksums the
-forger recomputes: before any member is read, the archive's directory must list no foreign member and
-no member that inflates beyond twice its settings' float64 values (:func:`_array_limits`; a 2 MB
-file of deflated zeros took 2 GB of memory); ``gathered`` must be present exactly when
-``orders_record`` counts higher orders (without it the ray march drops them); the metadata clsky reads
-back (version, backend, device, units, build seconds, fast_math) must be what a build writes.
+forger recomputes: before any member is read, the archive's directory must list no foreign member, no
+compressed member (:func:`_check_stored`: a 1.7 MB file of deflated zeros took 1.8 GB of memory under
+settings that declared a large grid) and no member that inflates beyond twice its settings' float64 values
+(:func:`_array_limits`), and before the orders are read their count must be one the settings compute;
+``gathered`` must be present exactly when ``orders_record`` counts higher orders (without it the ray march
+drops them); the metadata clsky reads back (version, backend, device, units, build seconds, fast_math)
+must be what a build writes.
 
 Raw export (:meth:`ScatteringTable.export_raw`): ``<name>.bin`` holds little-endian float32 values,
 cell after cell in the order i = x + y W + z W H (x: altitude, y: view zenith, z: sun zenith), C
@@ -262,7 +266,7 @@ class ScatteringTable:
 
         ``data`` (D, H, W, C) with C = ``settings.channels``, float64 (as built) or ``settings.dtype``;
         ``orders[k - 1]`` (D, H, W, :func:`order_channels`), float32 (as stored) or float64, at most
-        :func:`max_orders_kept` of them, as many as ``orders_record["orders"]`` says; ``gathered``
+        :func:`max_orders_kept` of them, as many as ``orders_record["orders"]`` says (or none: dropped); ``gathered``
         None or (D, H, W, 6), dtype as ``data``; ``ground_irradiance`` (D, 3) float64 with a reflecting
         ground, None without; with ``check_values``, every value finite and >= 0 (the gathered harmonics m >= 1,
         of either sign, finite).
@@ -761,12 +765,14 @@ def _read_members(path) -> dict:
     try:
         with archive:
             _check_names(archive.files, path)
+            _check_stored(archive, path)
             sizes = _member_sizes(archive)
             small = [name for name in archive.files if name not in _ARRAY_MEMBERS and not name.startswith("order_")]
             for name in small:
                 _check_size(path, name, sizes[name], _MAX_TEXT_BYTES)
             contents = {name: archive[name] for name in small}
             limits = _array_limits(contents)
+            _check_order_count(archive.files, contents, path)
             for name in sorted(set(archive.files) - set(small)):
                 _check_size(path, name, sizes[name], limits.get(name.split("_")[0], limits["data"]))
                 contents[name] = archive[name]
@@ -802,6 +808,34 @@ def _check_size(path, name, size, limit):
     if size > limit:
         raise TableFormatError(f"{path}: member {name} inflates to {size} bytes, more than the {limit} its table's "
                                f"settings allow (damaged or forged file)")
+
+
+def _check_stored(archive, path):
+    """TableFormatError naming ``path`` for a compressed member, from the archive's directory before any
+    member is read: clsky writes its tables' members stored (``np.savez``), so that what a file takes in
+    memory is what it takes on disk. A forged file's settings may declare any grid up to their limits, and
+    so allow a member of gigabytes, which a few MB of deflated zeros held (1.7 MB of them took 1.8 GB of
+    memory before the checks after them, 2026-12-07)."""
+    import zipfile
+
+    for info in archive.zip.infolist():
+        if info.compress_type != zipfile.ZIP_STORED:
+            name = info.filename[:-len(".npy")] if info.filename.endswith(".npy") else info.filename
+            raise TableFormatError(f"{path}: member {name} is compressed (zip method {info.compress_type}); clsky's "
+                                   f"table files store their members uncompressed, as ScatteringTable.save writes "
+                                   f"them (damaged or forged file)")
+
+
+def _check_order_count(names, contents, path):
+    """TableFormatError naming ``path`` for more order_K members than the settings (read from ``contents``)
+    compute, before they are read (each was read first, then counted: 5 forged orders took 3.6 GB)."""
+    try:
+        limit = max_orders_kept(TableSettings.from_dict(_json_member(contents, "settings")))
+    except (ValueError, TypeError, KeyError, AttributeError):
+        return                                         # the checks after name the settings
+    count = len(_order_numbers(names))
+    if count > limit:
+        raise TableFormatError(f"{path}: {count} orders kept, the settings compute at most {limit}")
 
 
 def _array_limits(contents) -> dict:

@@ -27,7 +27,7 @@ import pytest
 from clsky import ScatteringTable, TableFormatError, TableSettings
 from clsky.lookup import TableLookupEngine, check_kernel_buffer
 from clsky.render import RAYMARCH_DEFAULTS, PreparedDirections, SkyRenderer
-from clsky.table import FORMAT_VERSION, array_checksum
+from clsky.table import FORMAT_VERSION, array_checksum, max_orders_kept
 
 from conftest import black_preset
 
@@ -577,14 +577,14 @@ def test_check_kernel_buffer(cl_context):
 
 # A probe of the files clsky reads (2026-12-07) ---------------------------------------------------------
 
-def _with_deflated_member(path, name, nbytes):
+def _with_deflated_member(path, name, nbytes, deflated=True):
     """Add to the archive at ``path`` a member ``name`` of ``nbytes`` zeros (a float64 array), deflated:
-    a few kB on disk for megabytes once read."""
+    a few kB on disk for megabytes once read (or stored, as clsky stores its members)."""
     import zipfile
 
     header = np.lib.format.header_data_from_array_1_0(np.zeros(0))
     header["shape"] = (nbytes // 8,)
-    with zipfile.ZipFile(path, "a", compression=zipfile.ZIP_DEFLATED) as archive:
+    with zipfile.ZipFile(path, "a", compression=zipfile.ZIP_DEFLATED if deflated else zipfile.ZIP_STORED) as archive:
         with archive.open(name + ".npy", "w", force_zip64=True) as stream:
             np.lib.format.write_array_header_1_0(stream, header)
             chunk = bytes(2**20)
@@ -592,22 +592,65 @@ def _with_deflated_member(path, name, nbytes):
                 stream.write(chunk)
 
 
-@pytest.mark.parametrize("name", ["zjunk", "gathered"])
-def test_a_member_that_inflates_beyond_its_settings_is_refused_unread(saved, name, monkeypatch):
-    """A 2 MB file whose deflated member held 2 GB of zeros took 2 GB of memory and 12 s before the member
-    was refused. Names come from the archive's directory and sizes with them, before any member is read:
-    a 64 MB member here, where the 4 x 8 x 4 table's gathered sum takes 6 kB."""
-    if name == "gathered":
-        rewrite(saved, drop=("gathered",), recompute_checksums=False)
-    _with_deflated_member(saved, name, 64 * 2**20)
-    assert saved.stat().st_size < 2**20
+def _reads_of(monkeypatch):
+    """The members read from now on (NpzFile.__getitem__), in order."""
     read = []
     original = np.lib.npyio.NpzFile.__getitem__
     monkeypatch.setattr(np.lib.npyio.NpzFile, "__getitem__", lambda self, key: read.append(key) or original(self, key))
-    message = refused(saved, "unexpected members ['zjunk']" if name == "zjunk" else "member gathered inflates to")
+    return read
+
+
+@pytest.mark.parametrize("name,deflated,expected", [
+    ("zjunk", True, "unexpected members ['zjunk']"),
+    ("gathered", True, "member gathered is compressed (zip method 8); clsky's table files store their members "
+                       "uncompressed"),
+    ("gathered", False, "member gathered inflates to"),
+], ids=["foreign", "deflated", "stored"])
+def test_a_member_that_inflates_beyond_its_settings_is_refused_unread(saved, name, deflated, expected, monkeypatch):
+    """A 2 MB file whose deflated member held 2 GB of zeros took 2 GB of memory and 12 s before the member
+    was refused. Names come from the archive's directory and sizes and compression with them, before any
+    member is read: a deflated member is refused (clsky stores its members), and a stored one beyond its
+    settings' size (8 or 64 MB here, where the 4 x 8 x 4 table's gathered sum takes 6 kB)."""
+    if name == "gathered":
+        rewrite(saved, drop=("gathered",), recompute_checksums=False)
+    _with_deflated_member(saved, name, (64 if deflated else 8) * 2**20, deflated)
+    assert saved.stat().st_size < (2**20 if deflated else 9 * 2**20)
+    read = _reads_of(monkeypatch)
+    message = refused(saved, expected)
     assert name not in read, message
-    if name == "zjunk":
-        assert read == []                               # refused by its name alone
+    if name == "zjunk" or deflated:
+        assert read == []                               # refused by its name or its compression alone
+
+
+def test_a_forged_grid_cannot_inflate_deflated_members(saved, monkeypatch):
+    """The probe's forgery (2026-12-07): settings that declare a grid of 256 x 1024 x 96 allow a data member
+    of 1.6 GB, which 1.7 MB of deflated zeros held (1.8 GB of memory before any check after the sizes).
+    Refused for its compression, from the archive's directory, before any member is read."""
+    import zipfile
+
+    contents = members_of(saved)
+    settings = json.loads(contents["settings"].item())
+    settings["size"] = [256, 1024, 96]
+    contents["settings"] = np.array(json.dumps(settings))
+    with zipfile.ZipFile(saved, "w", compression=zipfile.ZIP_DEFLATED) as archive:     # np.savez_compressed's way
+        for member, value in contents.items():
+            with archive.open(member + ".npy", "w", force_zip64=True) as stream:
+                np.lib.format.write_array(stream, np.asanyarray(value), allow_pickle=False)
+    read = _reads_of(monkeypatch)
+    refused(saved, "is compressed")
+    assert read == []
+
+
+def test_more_orders_than_the_settings_compute_are_refused_unread(saved, monkeypatch):
+    """Every member was read, then the orders counted: a forged file of 5 orders of 340 MB each took 3.6 GB
+    before 'the settings compute at most 1'. The count is checked from the directory, the orders unread."""
+    contents = members_of(saved)
+    limit = max_orders_kept(TableSettings.from_dict(json.loads(contents["settings"].item())))
+    extra = {f"order_{k}": contents["order_1"] for k in range(1, limit + 2)}
+    rewrite(saved, **extra)
+    read = _reads_of(monkeypatch)
+    refused(saved, f"{limit + 1} orders kept, the settings compute at most {limit}")
+    assert not any(name.startswith("order_") for name in read), read
 
 
 @pytest.mark.parametrize("member", ["data", "gathered", "order_2"])
