@@ -27,7 +27,7 @@ from clsky.multiple import MultipleScatteringEngine
 from clsky.render import SkyRenderer, sun_disc_radiance
 from clsky.single import SingleScatteringEngine
 
-from conftest import black_preset, TOLERANCES, compute_single, max_error_report, require_dtype
+from conftest import black_preset, TOLERANCES, compute_single, max_error_report
 import pins
 from pins import pinned_for_device
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from clsky import ScatteringTable, TableSettings, colorimetry, montecarlo, preset, reference, solar, spectrum
+from clsky import ScatteringTable, TableSettings, colorimetry, montecarlo, reference, solar, spectrum
 from clsky import multiple
 from clsky.atmosphere import AtmosphereParameters
 from clsky.errors import ParameterError

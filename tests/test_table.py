@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from clsky import ScatteringTable, TableFormatError, TableSettings, preset
+from clsky import ScatteringTable, TableFormatError, TableSettings
 from clsky.table import FORMAT_VERSION, array_checksum
 
 from conftest import black_preset

@@ -26,7 +26,7 @@ import pytest
 
 from clsky import ScatteringTable, TableFormatError, TableSettings
 from clsky.lookup import TableLookupEngine, check_kernel_buffer
-from clsky.render import RAYMARCH_DEFAULTS, PreparedDirections, SkyRenderer
+from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
 from clsky.table import FORMAT_VERSION, array_checksum, max_orders_kept
 
 from conftest import black_preset

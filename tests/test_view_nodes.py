@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from clsky import ScatteringTable, TableSettings, montecarlo, preset, reference
+from clsky import ScatteringTable, TableSettings, montecarlo, reference
 from clsky.mapping import grid_coordinates
 from clsky.phase import mie_phase, rayleigh_phase
 from clsky.ray_quadrature import single_scattering_ray
