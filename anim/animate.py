@@ -33,7 +33,7 @@ import numpy as np
 
 import clsky
 from clsky._cl import check_context, host_blas_single_threaded, host_cores, packed_reads
-from clsky._files import StagedWrites, check_output
+from clsky._files import StagedWrites, check_output, check_suffix
 from clsky.atmosphere import OVERRIDE_RANGES
 from clsky.errors import (ParameterError, check_choice, check_flag, check_instance, check_integer, check_real, counted,
                           is_real_number)
@@ -417,8 +417,18 @@ def _hdr(name, value):
 
 
 def _output(name, value):
-    if not isinstance(value, (str, pathlib.PurePath)) or pathlib.PurePath(value).suffix != ".mp4":
-        raise ParameterError(name, "a path ending in .mp4 after a file name (NAME.mp4)", value)
+    """A path NAME.mp4 (:func:`clsky._files.check_suffix`: no NUL character, UTF-8 text), as typed."""
+    valid = "a path ending in .mp4 after a file name (NAME.mp4)"
+    if not isinstance(value, (str, pathlib.PurePath)):
+        raise ParameterError(name, valid, value)
+    try:
+        check_suffix(value, ".mp4", name)
+    except ValueError as error:
+        if "NUL" in str(error):
+            valid += " without a NUL character"
+        elif "UTF-8" in str(error):
+            valid += " in UTF-8 text (its name goes into the frames' metadata)"
+        raise ParameterError(name, valid, value) from None
     return value
 
 

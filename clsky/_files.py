@@ -92,8 +92,10 @@ def temporary_prefix(path, suffix):
 
 def _check_names(path, option, suffix):
     """Name components too long for the file system (the target's, and those of the directories
-    still to be created), or a temporary name that cannot fit: ValueError."""
+    still to be created), a temporary name that cannot fit, or a path that is not UTF-8 text
+    (:func:`_check_utf8`): ValueError."""
     path = pathlib.Path(path)
+    _check_utf8(path, _label(option))
     existing = _nearest_existing(path.parent)
     name_max = _limit(existing, "PC_NAME_MAX", _DEFAULT_NAME_MAX)
     path_max = _limit(existing, "PC_PATH_MAX", _DEFAULT_PATH_MAX)
@@ -108,6 +110,20 @@ def _check_names(path, option, suffix):
     if longest >= path_max:
         raise ValueError(f"{_label(option)}path {str(path)[:24]}... is too long ({longest} bytes with its "
                          f"temporary name; at most {path_max - 1})")
+
+
+def _check_utf8(path, prefix=""):
+    """ValueError (its message starting with ``prefix``) for an output path that is not UTF-8 text: clsky
+    writes an output's name into text that must be UTF-8 (a frame's PNG text and EXR attributes hold its
+    scene, whose TOML names the output; ``--print-scene``'s TOML), and a name of other bytes
+    (``-o $'caf\\xe9.png'``) failed there, after the work, in Python's words ('surrogates not allowed')."""
+    text = os.fspath(path)
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        shown = os.fsencode(text).decode("utf-8", "backslashreplace")
+        raise ValueError(f"{prefix}{shown} is not UTF-8 text: clsky writes its outputs' names into their "
+                         f"metadata and scene files, which are UTF-8; rename it") from None
 
 
 def _probe_directory(directory, option):
@@ -209,6 +225,7 @@ def check_suffix(path, suffix: str, name: str = "path") -> pathlib.Path:
     result = as_path(path, name)
     if result.suffix != suffix or _names_a_directory(path):
         raise ValueError(f"{name} must end in {suffix} after a file name (NAME{suffix}), got {str(path)!r}")
+    _check_utf8(result, f"{name}: ")                    # an output's name, written into its metadata
     return result
 
 
@@ -280,8 +297,8 @@ def check_output(path, force=False, option=None, suffix=None, probe=True):
         No file can be created in its parent (read-only file system, permissions, immutable
         directory, a pseudo file system such as /proc or /sys).
     ValueError
-        A name longer than the file system's NAME_MAX, or a path (with its temporary name) longer
-        than PATH_MAX.
+        A name longer than the file system's NAME_MAX, a path (with its temporary name) longer
+        than PATH_MAX, or a path that is not UTF-8 text (:func:`_check_names`).
     """
     typed, path = path, as_path(path, option or "path")
     suffix = path.suffix if suffix is None else suffix

@@ -337,6 +337,21 @@ def test_cli_refuses_an_output_named_by_its_suffix_alone(tmp_path, command, outp
     assert listing(tmp_path) == ["dir"] and listing(tmp_path / "dir") == []
 
 
+@pytest.mark.parametrize("command,output", [("render", "caf\udce9.png"), ("table", "caf\udce9.npz"),
+                                            ("render", "d\udcff/x.png")])
+def test_cli_refuses_an_output_name_that_is_not_utf8(tmp_path, command, output):
+    """A name of bytes that are not UTF-8 (``-o $'caf\\xe9.png'``; Python reads such a byte as a lone
+    surrogate) failed after the work, where clsky wrote it into the frame's metadata ('surrogates not
+    allowed'): refused before any, naming the option and the bytes."""
+    args = {"render": ("render", "--size", "16"), "table": ("table", *SLOW_TABLE)}[command]
+    result = clsky(*args, "-o", output, cwd=tmp_path)
+    shown = os.fsencode(output).decode("utf-8", "backslashreplace")
+    assert_usage_error(result, f"--output: {shown} is not UTF-8 text: clsky writes its outputs' names")
+    assert listing(tmp_path) == []
+    with pytest.raises(ValueError, match="is not UTF-8 text"):
+        check_output(tmp_path / output)
+
+
 def test_cli_animate_refuses_old_frames_without_force(tmp_path):
     (tmp_path / "sky_frames").mkdir()
     (tmp_path / "sky_frames" / "frame_00007.png").write_bytes(b"old")

@@ -124,6 +124,43 @@ def test_render_scene_round_trip(tmp_path, capsys, monkeypatch):
     assert run(capsys, "render", "--scene", "one.toml", "--print-scene")[1] == text
 
 
+def test_print_scene_round_trips_a_name_with_del(tmp_path, capsys, monkeypatch):
+    """TOML forbids a raw DEL (U+007F) in a string, which JSON's escaping (the scene's strings) leaves: the
+    scene of ``-o $'a\\x7fb.mp4'`` could not be read back. Now escaped, as the other control characters."""
+    monkeypatch.chdir(tmp_path)
+    status, text, _ = run(capsys, "animate", "-o", "a\x7fb.mp4", "--print-scene")
+    assert status == 0 and 'output = "a\\u007fb.mp4"' in text
+    assert tomllib.loads(text)["output"]["output"] == "a\x7fb.mp4"
+    (tmp_path / "d.toml").write_text(text)
+    assert run(capsys, "animate", "--scene", "d.toml", "--print-scene")[1] == text
+
+
+@pytest.mark.parametrize("output,expected", [
+    ("a\0b.mp4", "output must be a path ending in .mp4 after a file name (NAME.mp4) without a NUL character"),
+    ("caf\udce9.mp4", "output must be a path ending in .mp4 after a file name (NAME.mp4) in UTF-8 text"),
+])
+def test_an_animation_output_that_no_file_or_scene_can_hold_is_refused(tmp_path, capsys, monkeypatch, output,
+                                                                       expected):
+    """A NUL from a scene file (``output = "a\\u0000b.mp4"``) was taken by AnimationConfig and failed later
+    as 'embedded null byte', naming nothing; a name of bytes that are not UTF-8 (``-o $'caf\\xe9.mp4'``,
+    read by Python as a lone surrogate) failed after the work, where its scene went into the frames'
+    metadata. Both are refused by the config, and on the command line before any work, naming the
+    option or the scene's key."""
+    from clsky.anim.animate import AnimationConfig
+
+    with pytest.raises(ValueError, match=re.escape(expected)):
+        AnimationConfig(output=output)
+    monkeypatch.chdir(tmp_path)
+    if "\0" in output:           # a TOML string can hold a NUL, not a lone surrogate
+        (tmp_path / "o.toml").write_text('[output]\noutput = "a\\u0000b.mp4"\n')
+        status, _, err = run(capsys, "animate", "--scene", "o.toml")
+        assert (status, err) == (2, f"clsky: error: o.toml: output.{expected}, got 'a\\x00b.mp4'\n")
+    else:
+        status, _, err = run(capsys, "animate", "-o", output, "--print-scene")
+        assert status == 2 and err.startswith(f"clsky: error: --{expected}"), err
+    assert sorted(p.name for p in tmp_path.iterdir()) == (["o.toml"] if "\0" in output else [])
+
+
 def test_the_command_line_wins_and_says_so(tmp_path, capsys, monkeypatch):
     """An option typed wins over the scene, even typed with its default value (--pitch 10), and one
     line on stderr per option names it, its value and the scene's value it replaces."""
