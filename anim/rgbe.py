@@ -33,6 +33,8 @@ Examples
 
 from __future__ import annotations
 
+import errno
+import math
 import os
 import pathlib
 import re
@@ -40,7 +42,7 @@ import re
 import numpy as np
 
 import clsky
-from clsky._files import as_path, atomic_write, output_target
+from clsky._files import as_path, atomic_write, open_regular_file, output_target
 
 __all__ = ["encode_rgbe", "decode_rgbe", "write_rgbe", "read_rgbe", "read_rgbe_header", "save_rgbe"]
 
@@ -162,21 +164,30 @@ _MAX_HEADER = 1 << 16
 def _parse_header(data, path):
     """(height, width, header {NAME: text}, offset of the pixels) from the bytes ``data`` that begin a
     Radiance picture; ValueError naming ``path`` without the signature or a ``-Y H +X W`` resolution line
-    of at least one pixel each way."""
+    of at least one pixel each way (spaces between its words as Radiance's own reader takes them). A name
+    on several lines (Radiance's tools add an ``EXPOSURE=`` line per step, which multiply) has their values
+    joined by '; ', in order."""
     if not data.startswith(b"#?"):
         raise ValueError(f"{path}: not a Radiance picture (no '#?' signature)")
     end = data.find(b"\n\n")
     newline = data.find(b"\n", end + 2) if end >= 0 else -1
-    match = None if newline < 0 else re.fullmatch(rb"-Y (\d{1,9}) \+X (\d{1,9})", data[end + 2:newline])
+    line = b"" if newline < 0 else data[end + 2:newline]
+    match = re.fullmatch(rb"-Y\s+(\d{1,9})\s+\+X\s+(\d{1,9})\s*", line)
     if match is None:
+        other = re.fullmatch(rb"([-+][XY])\s+\d{1,9}\s+([-+][XY])\s+\d{1,9}\s*", line)
+        if other is not None:
+            raise ValueError(f"{path}: its orientation {line.decode().strip()!r} is not read: only '-Y H +X W' "
+                             f"(the top row first, left to right)")
         more = f" in its first {_MAX_HEADER} bytes" if end < 0 and len(data) >= _MAX_HEADER else ""
         raise ValueError(f"{path}: no '-Y H +X W' resolution line{more}")
     height, width = int(match.group(1)), int(match.group(2))
     if height < 1 or width < 1:
         raise ValueError(f"{path}: its resolution {height} x {width} holds no pixel")
-    head = data[:end].decode("ascii", "replace").split("\n")[1:]
-    header = dict(line.split("=", 1) for line in head if "=" in line and not line.startswith("#"))
-    header = {name: value.strip() for name, value in header.items()}
+    header = {}
+    for text in data[:end].decode("ascii", "replace").split("\n")[1:]:
+        if "=" in text and not text.startswith("#"):
+            name, value = text.split("=", 1)
+            header[name] = f"{header[name]}; {value.strip()}" if name in header else value.strip()
     return height, width, header, newline + 1
 
 
@@ -190,46 +201,79 @@ def _number(text):
 
 def read_rgbe_header(path):
     """(height, width, header {NAME: text}) of the Radiance picture at ``path``, from its first 64 KiB
-    alone (``clsky info``); ValueError as :func:`read_rgbe`."""
-    height, width, header, _, _ = _open_header(path)
+    alone (``clsky info``), the file's size checked against what its pixels need at the least; ValueError
+    as :func:`read_rgbe`."""
+    with _open_picture(path) as stream:
+        height, width, header, offset, size = _read_header(stream, path)
+    _check_size(path, height, width, size - offset)
     return height, width, header
 
 
-def _open_header(path):
-    """(height, width, header, offset of the pixels, file size) of a regular file's Radiance header, read
-    from its first 64 KiB: a FIFO blocked, /dev/zero exhausted the memory and a 1 GiB file took 1 GiB
-    before its signature was checked (FileNotFoundError for a file that is not a regular one)."""
+def _open_picture(path):
+    """The file at ``path`` open for reading, once (:func:`clsky._files.open_regular_file`): a FIFO blocked,
+    also one swapped in after a check of the name; FileNotFoundError for a file that is not a regular one."""
     path = as_path(path)
-    if path.is_dir():
-        raise IsADirectoryError(f"{path}: a directory, not a Radiance picture")
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such file" if not path.exists() else f"{path}: not a regular file")
-    with open(path, "rb") as stream:
-        data = stream.read(_MAX_HEADER)
-        size = os.fstat(stream.fileno()).st_size
-    return (*_parse_header(data, path), size)
+    try:
+        return open_regular_file(path)
+    except IsADirectoryError:
+        raise IsADirectoryError(f"{path}: a directory, not a Radiance picture") from None
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path}: no such file") from None
+    except OSError as error:
+        if error.errno == errno.EINVAL:
+            raise FileNotFoundError(f"{path}: not a regular file") from None
+        raise
+
+
+def _read_header(stream, path):
+    """(height, width, header, offset of the pixels, file size) of the Radiance header of the file open as
+    ``stream``, read from its first 64 KiB: /dev/zero exhausted the memory and a 1 GiB file took 1 GiB
+    before its signature was checked."""
+    data = stream.read(_MAX_HEADER)
+    return (*_parse_header(data, path), os.fstat(stream.fileno()).st_size)
+
+
+def _check_size(path, height, width, held):
+    """ValueError unless ``held`` bytes can hold ``height`` x ``width`` pixels: at the least 4 bytes of
+    header and 4 runs of 127 pixels in 2 bytes a scan line, or 4 a pixel flat (before the pixels are read,
+    or their array made)."""
+    least = height * (4 + 8 * -(-width // 127) if width in _RLE_WIDTHS else 4 * width)
+    if held < least:
+        raise ValueError(f"{path}: its {height} x {width} pixels need at least {least} bytes, it holds {held}")
+
+
+def _check_scale(path, header):
+    """ValueError unless the pixels are at their own scale: every ``EXPOSURE=`` line multiplies them (their
+    product must be 1) and every ``COLORCORR=`` line multiplies each channel (each must be 1 1 1). Only the
+    last EXPOSURE line was checked, and COLORCORR not at all: pixels at half or twice their values were read
+    as they were."""
+    exposures = [_number(text) for text in header.get("EXPOSURE", "1").split(";")]
+    if None in exposures or not math.isclose(math.prod(exposures), 1.0, rel_tol=1e-9):
+        raise ValueError(f"{path}: its EXPOSURE is {header['EXPOSURE']!r:.40}: only pixels at their own scale "
+                         f"(EXPOSURE 1 or none, the product of its lines) are read")
+    for line in header.get("COLORCORR", "1 1 1").split(";"):
+        factors = [_number(text) for text in line.split()]
+        if len(factors) != 3 or factors != [1.0, 1.0, 1.0]:
+            raise ValueError(f"{path}: its COLORCORR is {header['COLORCORR']!r:.40}: only pixels at their own "
+                             f"scale (COLORCORR 1 1 1 or none) are read")
 
 
 def read_rgbe(path):
     """(pixels (H, W, 3) float64, header {NAME: text}) of a Radiance file with a ``-Y H +X W``
     resolution line, its scan lines flat or in the new run-length format (runs and literals); the old
     run-length format is not read. ValueError naming the file for one without the signature or resolution
-    line, whose resolution its bytes cannot hold, or whose scan lines are damaged (cut short, runs past
-    the line's end)."""
-    height, width, header, offset, size = _open_header(path)
-    # pixels clsky decodes as they are: an XYZE picture's X, Y, Z were read as R, G, B, and a scale ignored
-    if header.get("FORMAT", "32-bit_rle_rgbe") != "32-bit_rle_rgbe":
-        raise ValueError(f"{path}: its FORMAT is {header['FORMAT']!r:.40}: only 32-bit_rle_rgbe (R, G, B) is read")
-    if "EXPOSURE" in header and _number(header["EXPOSURE"]) != 1.0:
-        raise ValueError(f"{path}: its EXPOSURE is {header['EXPOSURE']!r:.40}: only pixels at their own scale "
-                         f"(EXPOSURE 1 or none) are read")
-    # the fewest bytes a scan line takes: 4 of header and 4 runs of 127 pixels in 2 bytes, or 4 a pixel flat;
-    # checked before the pixels are read (or their array made)
-    least = height * (4 + 8 * -(-width // 127) if width in _RLE_WIDTHS else 4 * width)
-    if size - offset < least:
-        raise ValueError(f"{path}: its {height} x {width} pixels need at least {least} bytes, it holds "
-                         f"{size - offset}")
-    body = memoryview(as_path(path).read_bytes())[offset:]
+    line, not at its own scale (EXPOSURE, COLORCORR), whose resolution its bytes cannot hold, or whose scan
+    lines are damaged (cut short, runs past the line's end). The file is opened once."""
+    with _open_picture(path) as stream:
+        height, width, header, offset, size = _read_header(stream, path)
+        # pixels clsky decodes as they are: an XYZE picture's X, Y, Z were read as R, G, B, and a scale ignored
+        if header.get("FORMAT", "32-bit_rle_rgbe") != "32-bit_rle_rgbe":
+            raise ValueError(f"{path}: its FORMAT is {header['FORMAT']!r:.40}: only 32-bit_rle_rgbe (R, G, B) is "
+                             f"read")
+        _check_scale(path, header)
+        _check_size(path, height, width, size - offset)
+        stream.seek(offset)
+        body = memoryview(stream.read())
     rgbe = np.empty((height, width, 4), np.uint8)
     try:
         used = _decode_scanlines(body, rgbe)

@@ -183,6 +183,30 @@ def as_path(value, name: str = "path") -> pathlib.Path:
 MAX_TEXT_FILE_BYTES = 64 * 2**20
 
 
+def open_regular_file(path):
+    """The file at ``path`` opened for binary reading, once, without blocking, and checked on the open file
+    to be a regular one: a FIFO without a writer blocked a read for ever (also one swapped in between a
+    check of the name and its open), and ``/dev/zero`` filled the memory.
+
+    Raises
+    ------
+    OSError
+        Unreadable (FileNotFoundError, PermissionError, ...; its ``strerror`` says why), a directory
+        (IsADirectoryError), or not a regular file (errno EINVAL, its ``strerror`` says so).
+    """
+    descriptor = os.open(as_path(path), os.O_RDONLY | os.O_NONBLOCK)
+    try:
+        mode = os.fstat(descriptor).st_mode     # before open(): it names a directory's descriptor ('3'), not path
+        if stat.S_ISDIR(mode):
+            raise IsADirectoryError(errno.EISDIR, "Is a directory", str(path))
+        if not stat.S_ISREG(mode):
+            raise OSError(errno.EINVAL, "not a regular file (a FIFO, a device or a socket)", str(path))
+        return open(descriptor, "rb")
+    except BaseException:
+        os.close(descriptor)
+        raise
+
+
 def read_user_text(path, limit: int = MAX_TEXT_FILE_BYTES) -> str:
     """The UTF-8 text of the file at ``path`` (a leading byte-order mark dropped: editors on Windows write
     one), for files the user names (a scene, a sweep, a metrics JSON).
@@ -198,13 +222,7 @@ def read_user_text(path, limit: int = MAX_TEXT_FILE_BYTES) -> str:
     UnicodeDecodeError
         Not UTF-8 text.
     """
-    descriptor = os.open(as_path(path), os.O_RDONLY | os.O_NONBLOCK)
-    with open(descriptor, "rb") as stream:
-        mode = os.fstat(descriptor).st_mode
-        if stat.S_ISDIR(mode):
-            raise IsADirectoryError(errno.EISDIR, "Is a directory", str(path))
-        if not stat.S_ISREG(mode):
-            raise OSError(errno.EINVAL, "not a regular file (a FIFO, a device or a socket)", str(path))
+    with open_regular_file(path) as stream:
         data = stream.read(limit + 1)
     if len(data) > limit:
         raise OSError(errno.EFBIG, f"larger than {limit // 2**20} MiB (no file clsky reads is so large)", str(path))

@@ -285,6 +285,8 @@ def _exr_value(value):
         return " ".join(f"{v:g}" for v in np.asarray(value).tolist())
     if type(value).__name__ == "OpaqueAttribute":
         return "- (an attribute of a type the OpenEXR bindings do not read)"
+    if type(value).__module__ == "OpenEXR" and isinstance(getattr(value, "name", None), str):
+        return value.name              # an enum: ZIP_COMPRESSION, not the repr Compression.ZIP_COMPRESSION
     return str(value)
 
 

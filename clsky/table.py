@@ -56,6 +56,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import errno
 import hashlib
 import json
 import math
@@ -69,7 +70,8 @@ from typing import Callable
 import numpy as np
 
 from . import __version__
-from ._files import StagedWrites, as_path, atomic_write, binary_and_header, check_output, check_suffix
+from ._files import (StagedWrites, as_path, atomic_write, binary_and_header, check_output, check_suffix,
+                     open_regular_file)
 from .atmosphere import AtmosphereParameters, as_atmosphere
 from .errors import check_flag, check_instance, is_integer, is_real_number, short
 from .lookup import check_queries, check_table_values
@@ -750,15 +752,26 @@ def _describe_member(member) -> str:
 def _read_members(path) -> dict:
     """Every member of the .npz archive at ``path``, read whole; TableFormatError (naming ``path``)
     if it is not a readable one, FileNotFoundError if it does not exist."""
-    if not path.exists():
-        raise FileNotFoundError(f"{path} does not exist")
-    if not path.is_file():
-        raise TableFormatError(f"{path} is not a clsky table file (not a regular file)")
-    what = _not_an_archive(path)
+    try:
+        stream = open_regular_file(path)    # once: a FIFO swapped in after a check of the name blocked its open
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path} does not exist") from None
+    except OSError as error:
+        what = ("not a regular file" if isinstance(error, IsADirectoryError) or error.errno == errno.EINVAL
+                else f"not readable: {_describe_error(error)}")
+        raise TableFormatError(f"{path} is not a clsky table file ({what})") from None
+    with stream:
+        return _read_archive(stream, path)
+
+
+def _read_archive(stream, path) -> dict:
+    """:func:`_read_members` of the file open as ``stream``."""
+    what = _not_an_archive(stream)
     if what:
         raise TableFormatError(f"{path} is not a clsky table file ({what})")
     try:
-        archive = np.load(path, allow_pickle=False)
+        stream.seek(0)
+        archive = np.load(stream, allow_pickle=False)
     except _READ_ERRORS as error:
         raise TableFormatError(f"{path} is not a clsky table file (not a readable .npz archive: "
                                f"{_describe_error(error)})") from error
@@ -863,13 +876,12 @@ _ZIP_MAGICS = (b"PK\x03\x04", b"PK\x05\x06")
 _NPY_MAGIC = b"\x93NUMPY"
 
 
-def _not_an_archive(path) -> str | None:
-    """What the file at ``path`` is, judged by its first bytes, when it is not a zip archive; None when it
-    may be one. Without it, numpy took any other file for a pickle and told the user that it "contains
-    pickled (object) data" they could "load unsafely" (a text file, random bytes)."""
+def _not_an_archive(stream) -> str | None:
+    """What the file open as ``stream`` is, judged by its first bytes, when it is not a zip archive; None
+    when it may be one. Without it, numpy took any other file for a pickle and told the user that it
+    "contains pickled (object) data" they could "load unsafely" (a text file, random bytes)."""
     try:
-        with open(path, "rb") as stream:
-            head = stream.read(len(_NPY_MAGIC))
+        head = stream.read(len(_NPY_MAGIC))
     except OSError as error:
         return f"not readable: {_describe_error(error)}"
     if not head:

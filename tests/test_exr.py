@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 import os
 import pathlib
+import re
 import subprocess
 import sys
 
@@ -610,6 +611,40 @@ def test_damaged_or_missing_hdr_files_are_refused_by_name(tmp_path):
         read_exr(tmp_path / "junk.exr")
     with pytest.raises(FileNotFoundError, match="no such file"):
         read_exr(tmp_path / "missing.exr")
+
+
+def test_radiance_scales_and_resolution_lines_as_radiance_reads_them(tmp_path):
+    """Radiance multiplies every EXPOSURE line (its tools add one a step) and applies COLORCORR per channel:
+    only the last EXPOSURE line was checked and COLORCORR not at all, so pixels at half their values or
+    with their red doubled were read as they were (probe of HDR files, 2026-12-07). Their product must be 1
+    now; spaces in the resolution line as Radiance's reader takes them, and another orientation named."""
+    from clsky.anim.rgbe import read_rgbe, read_rgbe_header, write_rgbe
+    from clsky.info import describe
+
+    write_rgbe(tmp_path / "good.hdr", np.full((2, 16, 3), 0.75))
+    data = (tmp_path / "good.hdr").read_bytes()
+
+    def variant(name, old, new):
+        (tmp_path / name).write_bytes(data.replace(old, new))
+        return tmp_path / name
+
+    refused = {"two.hdr": (b"SOFTWARE", b"EXPOSURE=0.5\nEXPOSURE=1\nSOFTWARE", "its EXPOSURE is '0.5; 1'"),
+               "colorcorr.hdr": (b"SOFTWARE", b"COLORCORR= 2 1 0.5\nSOFTWARE", "its COLORCORR is '2 1 0.5'"),
+               "flipped.hdr": (b"-Y 2 +X 16", b"+Y 2 +X 16", "its orientation '+Y 2 +X 16' is not read")}
+    for name, (old, new, message) in refused.items():
+        with pytest.raises(ValueError, match=rf"^{variant(name, old, new)}: {re.escape(message)}"):
+            read_rgbe(tmp_path / name)
+    assert "EXPOSURE       0.5; 1" in describe(tmp_path / "two.hdr")      # info shows every line
+    expected, _ = read_rgbe(tmp_path / "good.hdr")
+    for name, old, new in (("product.hdr", b"SOFTWARE", b"EXPOSURE=2\nEXPOSURE= 0.5\nSOFTWARE"),
+                           ("unit.hdr", b"SOFTWARE", b"COLORCORR= 1 1 1\nSOFTWARE"),
+                           ("spaces.hdr", b"-Y 2 +X 16", b"-Y  2 +X 16 \r")):
+        pixels, _ = read_rgbe(variant(name, old, new))
+        assert np.array_equal(pixels, expected), name
+    # clsky info checks that the file can hold the pixels its header declares (a 3.5 kB file of 30000 x 1e9)
+    (tmp_path / "huge.hdr").write_bytes(data.replace(b"-Y 2 +X 16", b"-Y 999999999 +X 30000"))
+    with pytest.raises(ValueError, match="pixels need at least"):
+        read_rgbe_header(tmp_path / "huge.hdr")
 
 
 def test_read_exr_takes_radiance_only(tmp_path):

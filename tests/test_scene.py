@@ -356,6 +356,8 @@ def test_exr_frames_carry_the_scene_and_info_reads_them(tmp_path, capsys, monkey
     assert "OpenEXR image" in out and "16 x 16 pixels, channels B, G, R" in out
     assert re.search(rf"\n  clsky version +{re.escape(clsky.__version__)}\n", out), out
     assert "size = 16" in out and 'hdr = "exr"' in out and "radianceUnits" in out
+    # the bindings' enums by name, as exrheader prints them (their repr 'Compression.ZIP_COMPRESSION' before)
+    assert re.search(r"\n  compression +ZIP_COMPRESSION\n", out) and re.search(r"\n  lineOrder +INCREASING_Y\n", out)
     with Image.open(tmp_path / "sky_frames" / "frame_00001.png") as image:
         assert image.text["scene"].splitlines()[-1] in out
     broken = tmp_path / "broken.exr"
