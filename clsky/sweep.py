@@ -25,7 +25,7 @@ import pathlib
 import shlex
 import time
 
-from ._files import check_suffix, read_user_text
+from ._files import as_path, check_suffix, read_user_text
 from .cli import (DEFAULT_TABLE_OUTPUT, UsageError, check_outputs, export_targets, farm_of, print_report,
                   progress_bar, running_farm, table_atmosphere, table_report, table_settings, write_exports,
                   written_since_checked, _check_table_memory)
@@ -48,10 +48,42 @@ class SweepJob:
     output: pathlib.Path
 
 
+def without_comment(line: str) -> str:
+    """``line`` up to its comment, as the shell reads one: a ``#`` that begins a word outside quotes and
+    escapes (shlex's ``comments=True`` ends a word at any ``#``: ``--raw sky#2`` wrote sky.bin).
+
+    >>> without_comment("--raw sky#2 'a #b' # the rest")
+    "--raw sky#2 'a #b' "
+    """
+    quote, escaped, word_start = None, False, True
+    for index, character in enumerate(line):
+        if escaped:
+            escaped, word_start = False, False
+        elif quote is not None:
+            if character == quote:
+                quote = None
+            elif character == "\\" and quote == '"':
+                escaped = True
+        elif character == "\\":
+            escaped, word_start = True, False
+        elif character in "'\"":
+            quote, word_start = character, False
+        elif character.isspace():
+            word_start = True
+        elif character == "#" and word_start:
+            return line[:index]
+        else:
+            word_start = False
+    return line
+
+
 def read_sweep(path) -> list[tuple[int, list[str]]]:
     """(line number, words) of each table line of the sweep file at ``path``; UsageError for a file
     that cannot be read, a line shlex cannot split, or a file without a table line."""
-    path = pathlib.Path(path)
+    try:
+        path = as_path(path, "--sweep")
+    except ValueError as error:
+        raise UsageError(str(error)) from None
     try:
         text = read_user_text(path)
     except OSError as error:                            # as --scene's (anim/scene.py)
@@ -61,7 +93,7 @@ def read_sweep(path) -> list[tuple[int, list[str]]]:
     lines = []
     for number, line in enumerate(text.splitlines(), start=1):
         try:
-            words = shlex.split(line, comments=True)
+            words = shlex.split(without_comment(line))
         except ValueError as error:
             raise UsageError(f"{path} line {number}: {error}") from None
         if words:

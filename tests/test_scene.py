@@ -527,6 +527,32 @@ def test_scene_and_sweep_files_that_are_no_regular_files_are_one_line(tmp_path, 
         assert line == f"clsky: error: {command[1]}: cannot read {path}: not a regular file (a FIFO, a device or a socket)"
 
 
+def test_scene_and_sweep_paths_that_name_no_file_are_one_line(tmp_path, capsys):
+    """A directory's error named its descriptor ('Is a directory: 3' from the library's reader), and an
+    empty --sweep was read as the current directory ('cannot read .'): named as typed, as --scene is."""
+    from clsky._files import read_user_text
+
+    with pytest.raises(IsADirectoryError) as error:
+        read_user_text(tmp_path)
+    assert error.value.filename == str(tmp_path)
+    assert one_line_error(*run(capsys, "table", "--sweep", tmp_path)[::2]) == (
+        f"clsky: error: --sweep: cannot read {tmp_path}: Is a directory")
+    assert one_line_error(*run(capsys, "table", "--sweep", "")[::2]) == (
+        "clsky: error: --sweep must be a file path, got an empty one")
+
+
+def test_a_sweep_comment_begins_a_word_as_in_the_shell(tmp_path, capsys):
+    """shlex ended a word at any '#': '--raw sky#2' wrote sky.bin without a word. As in the shell, a '#'
+    begins a comment only where it begins a word outside quotes."""
+    from clsky.sweep import read_sweep, without_comment
+
+    (tmp_path / "lines.txt").write_text("-o a.npz --raw sky#2 # a comment\n# a line of comment\n"
+                                        "-o 'b #1.npz' --raw c\\ #3 #\n")
+    assert read_sweep(tmp_path / "lines.txt") == [(1, ["-o", "a.npz", "--raw", "sky#2"]),
+                                                  (3, ["-o", "b #1.npz", "--raw", "c #3"])]
+    assert without_comment('"a # b" c#d #e') == '"a # b" c#d '
+
+
 def test_a_scene_with_a_byte_order_mark_and_one_nested_too_deeply(tmp_path, capsys):
     """A scene saved with a byte-order mark (Windows editors) read "Invalid statement (at line 1, column 1)";
     a value nested 100 000 deep ended in RecursionError."""
