@@ -153,6 +153,13 @@ def load_reference_cache(path: pathlib.Path, level: str, size: int, names) -> di
     if arrays["valid"].shape != (size, size):
         raise SystemExit(f"--reference-cache {path} holds {' x '.join(map(str, arrays['valid'].shape))} frames, not "
                          f"{size} x {size} (--size){again}")
+    for name in names:              # a damaged or edited frame reached the comparison (a traceback there)
+        frame = arrays[name]
+        if frame.shape != (size, size, 3) or frame.dtype.kind != "f":
+            raise SystemExit(f"--reference-cache {path}: frame {name!r} is {frame.dtype} of shape {frame.shape}, not "
+                             f"{size} x {size} x 3 radiances{again}")
+        if not (np.isfinite(frame).all() and (frame >= 0).all()):
+            raise SystemExit(f"--reference-cache {path}: frame {name!r} holds NaN, infinite or negative values{again}")
     return arrays
 
 

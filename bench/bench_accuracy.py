@@ -69,7 +69,12 @@ def main():
         candidates = [c for c in accuracy.default_candidates(base) if c.label in SMOKE_CANDIDATES]
     with tempfile.TemporaryDirectory() as temporary:
         if args.replot is not None:
-            replot(args.replot, args.docs or (pathlib.Path(temporary) if args.smoke else DOCS), args.size)
+            try:               # the CSV's own errors name it, its line and column: one line, not a traceback
+                replot(args.replot, args.docs or (pathlib.Path(temporary) if args.smoke else DOCS), args.size)
+            except OSError as error:
+                raise SystemExit(f"--replot {args.replot}: cannot read it ({error.strerror or error})") from None
+            except ValueError as error:
+                raise SystemExit(f"--replot: {error}") from None
             return
         if args.docs is None and args.smoke:
             args.docs = pathlib.Path(temporary)

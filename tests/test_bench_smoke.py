@@ -303,6 +303,13 @@ def test_a_reference_cache_holds_its_level_and_is_written_whole(tmp_path):
     for name in ("torn.npz", "absent.npz"):
         with pytest.raises(SystemExit, match=re.escape(f"--reference-cache {tmp_path / name}: cannot read it (")):
             _report.load_reference_cache(tmp_path / name, "draft", 4, frames)
+    # frames of another shape or with NaN reached the comparison, a traceback there (probe of input files)
+    for name, frame, message in (
+            ("shape.npz", np.ones(3), "frame 'day' is float64 of shape (3,), not 4 x 4 x 3 radiances"),
+            ("nan.npz", np.full((4, 4, 3), np.nan), "frame 'day' holds NaN, infinite or negative values")):
+        _report.save_reference_cache(tmp_path / name, "draft", {**frames, "day": frame}, np.ones((4, 4), bool))
+        with pytest.raises(SystemExit, match=re.escape(f"--reference-cache {tmp_path / name}: {message}{again}")):
+            _report.load_reference_cache(tmp_path / name, "draft", 4, frames)
 
 
 def test_bench_accuracy_needs_matplotlib_before_it_measures(tmp_path):
@@ -321,3 +328,18 @@ def test_bench_accuracy_needs_matplotlib_before_it_measures(tmp_path):
     assert result.stderr.strip().splitlines()[-1].startswith("bench_accuracy.py: error: the accuracy plots need "
                                                              "matplotlib")
     assert (docs / "accuracy.csv").read_text() == "kept\n" and [p.name for p in docs.iterdir()] == ["accuracy.csv"]
+
+
+def test_bench_accuracy_replot_of_a_bad_csv_is_one_line(tmp_path):
+    """--replot of a CSV its reader refuses (naming the file, line and column) or of a directory ended in a
+    traceback: one line now, nothing drawn."""
+    pytest.importorskip("matplotlib")
+    (tmp_path / "nan.csv").write_text("candidate,knob\nx,y\n")
+    for csv_path, expected in ((tmp_path / "nan.csv", f"--replot: {tmp_path / 'nan.csv'}: no rows, or missing "
+                                                      f"columns"),
+                               (tmp_path, f"--replot {tmp_path}: cannot read it (Is a directory)")):
+        result = subprocess.run([sys.executable, "bench/bench_accuracy.py", "--replot", str(csv_path), "--docs",
+                                 str(tmp_path / "plots")], cwd=ROOT, capture_output=True, text=True, timeout=120)
+        assert result.returncode == 1 and result.stdout == "", result.stdout + result.stderr
+        assert result.stderr.count("\n") == 1 and result.stderr.startswith(expected), result.stderr
+    assert not (tmp_path / "plots").exists() or list((tmp_path / "plots").iterdir()) == []
