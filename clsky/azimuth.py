@@ -84,7 +84,8 @@ from .atmosphere import AtmosphereParameters
 from .errors import ParameterError, is_integer
 from .mapping import altitude_to_u, cos_to_sun_t, cos_to_v, grid_coordinates
 from .multiple import SPECIES, _gather_key, _gather_parts, _phase, _quadrature_key, _read_only, gather_quadrature
-from .orders import _total, check_finite, geometric_ratio, per_channel, species_sum, tail_factor
+from .orders import (_diverging, _total, check_finite, diverging_reason, geometric_ratio, per_channel, species_sum,
+                     tail_factor)
 from .settings import MAX_AZIMUTH_HARMONICS, TableSettings
 from .stopping import DeviceStoppingTest, HostStoppingTest
 
@@ -838,6 +839,9 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
             addition, error = stopping.result()
             record["relative_additions"].append(addition)
             record["estimated_errors"].append(error)
+            if _diverging(totals):      # as clsky.orders: the orders grow, a quadrature's artefact; G^(k) left out
+                record["reason"] = diverging_reason(k)
+                break
             if progress is not None:
                 progress(k, addition)
             converged = settings.orders == "auto" and error < settings.order_tolerance
@@ -879,7 +883,7 @@ def orders_result(atmosphere: AtmosphereParameters, settings: TableSettings, bac
     has no azimuth), ``gathered`` the (M + 1, D, H, W, 6) harmonics for the ray march."""
     import time
 
-    from .orders import OrdersResult, convergence_reason, order_shares
+    from .orders import OrdersResult, convergence_reason, last_order_reason, orders_record
 
     start = time.perf_counter()
     result = compute_orders(atmosphere, settings, backend=backend, ctx=ctx, fast_math=fast_math,
@@ -887,19 +891,16 @@ def orders_result(atmosphere: AtmosphereParameters, settings: TableSettings, bac
                             keep_nodes=False)
     orders = [result.single] + result.orders
     additions, errors = result.record["relative_additions"], result.record["estimated_errors"]
-    ratio = result.record["tail_ratio"]
-    if settings.orders == "auto" and result.record["converged"]:
+    ratio, converged = result.record["tail_ratio"], result.record["converged"]
+    if "reason" in result.record:                       # diverging (compute_orders)
+        reason = result.record["reason"]
+    elif converged:
         reason = convergence_reason(len(orders), additions[-1], errors[-1], ratio, settings.order_tolerance)
-    elif settings.orders == "auto":
-        reason = f"not converged: stopped at max_orders = {settings.max_orders}"
     else:
-        reason = f"orders={settings.orders} requested"
-    record = {"mode": settings.mode, "orders": len(orders), "requested": settings.orders,
-              "tolerance": settings.order_tolerance, "max_orders": settings.max_orders,
-              "converged": result.record["converged"], "reason": reason, "relative_additions": additions,
-              "estimated_errors": errors, "tail_ratio": ratio,
-              "shares": order_shares([_total(order) for order in orders]), "seconds": time.perf_counter() - start,
-              "device": result.record["device"], "azimuth_harmonics": settings.azimuth_harmonics}
+        reason = last_order_reason(settings, additions)
+    record = orders_record(settings, converged, reason, additions, errors, ratio,
+                           [_total(order) for order in orders], time.perf_counter() - start, result.record["device"])
+    record["azimuth_harmonics"] = settings.azimuth_harmonics
     return OrdersResult(orders, record, result.gathered, result.ground_irradiance,
                         None if ratio is None else tail_factor(np.array(ratio)))
 

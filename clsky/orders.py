@@ -418,11 +418,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
             errors.append(additions[-1] if ratio is None else
                            relative_addition(new, running, previous=orders[-2], ratio=ratio))
             if _diverging(totals):
-                reason = (f"diverging: orders {k - 1} and {k} each carry more light than the one before, "
-                          f"which a dissipative atmosphere cannot do with phase functions of mean 1: either "
-                          f"a phase function adds light (the modified Rayleigh phase's mean is 1.2533, so an "
-                          f"optically thick atmosphere-plus sky grows) or the view-ray quadrature is too "
-                          f"coarse for this optical depth (more view_steps / multiple_view_steps)")
+                reason = diverging_reason(k)
                 break
             if progress is not None:
                 progress("orders", k, wanted)
@@ -436,21 +432,47 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
                         ground_sky = ground_sky + sky * tail
                 break
         else:
-            if settings.orders == "auto":
-                reason = (f"not converged: stopped at max_orders = {settings.max_orders}; the last order "
-                          f"added {additions[-1]:.2e} (tolerance {settings.order_tolerance:g})")
-            else:
-                reason = f"orders={settings.orders} requested; the last order added {additions[-1]:.2e}"
+            reason = last_order_reason(settings, additions)
     result = OrdersResult(orders, {}, None if gathered_sum is None else to_host(gathered_sum), ground_sky, tail)
-    result.record = {
-        "mode": settings.mode, "orders": len(orders), "requested": settings.orders,
-        "tolerance": settings.order_tolerance, "max_orders": settings.max_orders,
-        "converged": converged, "reason": reason, "relative_additions": additions,
-        "estimated_errors": errors, "tail_ratio": None if tail is None else ratio.tolist(),
-        "shares": order_shares(totals), "seconds": time.perf_counter() - start,
-        "device": device,
-    }
+    result.record = orders_record(settings, converged, reason, additions, errors, None if tail is None else ratio,
+                                  totals, time.perf_counter() - start, device)
     return result
+
+
+def orders_record(settings: TableSettings, converged, reason, additions, errors, tail_ratio, totals, seconds,
+                  device) -> dict:
+    """The orders record of a build (:class:`OrdersResult`'s ``record``, a table's ``orders_record``): how
+    the loop ended (``reason``, :func:`convergence_reason`, :func:`diverging_reason`,
+    :func:`last_order_reason`), each order k >= 2's relative addition and estimated error, the geometric
+    tail's ratio (r, g, b; None without a tail), the orders' shares of the light (from their
+    :func:`_total`), the build's seconds and device. The one form of both orders loops (this module's and
+    :mod:`clsky.azimuth`'s, which adds ``azimuth_harmonics``)."""
+    return {"mode": settings.mode, "orders": len(totals), "requested": settings.orders,
+            "tolerance": settings.order_tolerance, "max_orders": settings.max_orders,
+            "converged": converged, "reason": reason, "relative_additions": list(additions),
+            "estimated_errors": list(errors),
+            "tail_ratio": None if tail_ratio is None else np.asarray(tail_ratio).tolist(),
+            "shares": order_shares(totals), "seconds": seconds, "device": device}
+
+
+def last_order_reason(settings: TableSettings, additions) -> str:
+    """The record's reason for stopping after the last order the settings allow: single scattering alone,
+    ``max_orders`` reached without converging (``orders="auto"``), or the fixed count asked for."""
+    if not additions:
+        return "orders=1: single scattering only"
+    if settings.orders == "auto":
+        return (f"not converged: stopped at max_orders = {settings.max_orders}; the last order added "
+                f"{additions[-1]:.2e} (tolerance {settings.order_tolerance:g})")
+    return f"orders={settings.orders} requested; the last order added {additions[-1]:.2e}"
+
+
+def diverging_reason(k) -> str:
+    """The record's reason for stopping at order k because it and the order before it each carry more light
+    than the one before (:func:`_diverging`)."""
+    return (f"diverging: orders {k - 1} and {k} each carry more light than the one before, which a dissipative "
+            f"atmosphere cannot do with phase functions of mean 1: either a phase function adds light (the "
+            f"modified Rayleigh phase's mean is 1.2533, so an optically thick atmosphere-plus sky grows) or the "
+            f"view-ray quadrature is too coarse for this optical depth (more view_steps / multiple_view_steps)")
 
 
 def convergence_reason(k, addition, error, ratio, tolerance):
@@ -477,8 +499,8 @@ def _total(order):
 
 
 def _diverging(totals):
-    """True when the last two orders (from the third on) each carry more light (per-order totals,
-    :func:`_total`) than the one before in some wavelength: in an atmosphere that absorbs (black
+    """True when the last two orders (orders 4 and 5 at the earliest) each carry more light (per-order
+    totals, :func:`_total`) than the one before in some wavelength: in an atmosphere that absorbs (black
     ground, Mie absorption, escape to space) the orders must decrease, so this only happens when the
     quadrature amplifies (optically thick steps)."""
     if len(totals) < 5:

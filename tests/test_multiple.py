@@ -960,3 +960,17 @@ def test_table_round_trip_with_orders(cl_context, tmp_path):
     # same trilinear weights and phases (test_lookup.py): a few ulps of the largest radiance
     assert_allclose(kernel, twin, rtol=1e-12, atol=1e-14 * twin.max())
     assert np.array_equal(loaded.radiance(*queries, backend="numpy"), table.radiance(*queries, backend="numpy"))
+
+
+def test_uniform_sampling_on_thick_atmosphere_is_reported_diverging_with_harmonics(cl_context):
+    """The harmonic orders loop (clsky/azimuth.py), which every planned twilight table takes, had no
+    divergence stop: on the x20 atmosphere it ran to max_orders and said 'not converged'. It now stops
+    as the azimuth-average loop does, with the same reason, and its record has the same form."""
+    settings = SMALL.replace(sampling="uniform", max_orders=50, mode="physical")
+    plain = compute_orders(thick(black_preset("physical")), settings, ctx=cl_context).record
+    record = compute_orders(thick(black_preset("physical")), settings.replace(azimuth_harmonics=2),
+                            ctx=cl_context).record
+    assert record["converged"] is False and record["reason"].startswith("diverging: orders "), record["reason"]
+    assert record["orders"] < 50
+    assert set(record) == set(plain) | {"azimuth_harmonics"}
+    assert len(record["relative_additions"]) == len(record["estimated_errors"]) == record["orders"] - 1
