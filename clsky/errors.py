@@ -318,3 +318,11 @@ class ParameterError(ValueError):
 class NumericalError(ArithmeticError):
     """A computation gave non-finite values (NaN or infinity) where the inputs were valid: the result
     is refused rather than returned or saved."""
+
+
+def ordered_items(value):
+    """``value``'s items as a tuple if it is an ordered sequence (a tuple, a list, a 1D array), else None: a
+    set gave its items in hash order ({4, 8, 6} became (8, 4, 6)), a dict its keys."""
+    if isinstance(value, (tuple, list)) or (isinstance(value, np.ndarray) and value.ndim == 1):
+        return tuple(value)
+    return None

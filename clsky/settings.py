@@ -6,7 +6,8 @@ import dataclasses
 
 import numpy as np
 
-from .errors import ParameterError, check_choice, check_instance, check_integer, is_finite_real, is_real_number
+from .errors import (ParameterError, check_choice, check_instance, check_integer, is_finite_real, is_real_number,
+                     ordered_items)
 
 __all__ = ["TableSettings", "MAPPINGS", "SAMPLINGS", "SUN_TRANSMITTANCE_METHODS", "MIE_LAYOUTS",
            "SCATTERING_MODES", "PARAMETERIZATIONS"]
@@ -38,20 +39,12 @@ MAX_AZIMUTH_HARMONICS = 64
 _MAX_CELLS = 2**31 // 8   # keeps every flat index (times channels) inside a signed 32-bit int
 
 
-def _ordered(value):
-    """``value``'s items as a tuple if it is an ordered sequence (a tuple, a list, a 1D array), else None: a
-    set gave its items in hash order ({4, 8, 6} became (8, 4, 6)), a dict its keys."""
-    if isinstance(value, (tuple, list)) or (isinstance(value, np.ndarray) and value.ndim == 1):
-        return tuple(value)
-    return None
-
-
 def check_sun_cos_range(value, name="sun_cos_range"):
     """``value`` as (low, high), the sun cosines a table's sun axis covers: two cosines -1 <= low < high <= 1,
     at least 1e-3 apart; ParameterError naming ``name`` otherwise (TableSettings, and the lookup engines,
     which took a reversed, NaN or out-of-range one and returned 1e-12 where their NumPy twin gave NaN)."""
     error = ParameterError(name, "two cosines -1 <= low < high <= 1, high - low >= 1e-3", value)
-    items = _ordered(value)
+    items = ordered_items(value)
     if items is None or len(items) != 2 or not all(is_finite_real(v) for v in items):
         raise error
     low, high = (float(v) for v in items)
@@ -193,7 +186,7 @@ class TableSettings:
         object.__setattr__(self, "gather_phi_steps", check_integer("gather_phi_steps", self.gather_phi_steps, 2, 8192))
         object.__setattr__(self, "multiple_view_steps",
                            check_integer("multiple_view_steps", self.multiple_view_steps, 1, 4096, optional=True))
-        object.__setattr__(self, "sun_cos_range", self._check_sun_cos_range(self.sun_cos_range))
+        object.__setattr__(self, "sun_cos_range", check_sun_cos_range(self.sun_cos_range))
         object.__setattr__(self, "azimuth_harmonics",
                            check_integer("azimuth_harmonics", self.azimuth_harmonics, 0, MAX_AZIMUTH_HARMONICS))
         if self.azimuth_harmonics and self.mode != "physical":
@@ -242,14 +235,10 @@ class TableSettings:
 
     @staticmethod
     def _check_size(name, value, count):
-        items = _ordered(value)
+        items = ordered_items(value)
         if items is None or len(items) != count:
             raise ParameterError(name, f"{count} integers", value)
         return tuple(check_integer(name, v, 2, 4096, index=i) for i, v in enumerate(items))
-
-    @staticmethod
-    def _check_sun_cos_range(value):
-        return check_sun_cos_range(value)
 
     @property
     def sun_w_range(self) -> tuple:

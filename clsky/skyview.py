@@ -41,7 +41,7 @@ import math
 
 import numpy as np
 
-from .errors import ParameterError, check_choice, check_integer
+from .errors import ParameterError, check_choice, check_integer, ordered_items
 
 __all__ = ["SkyViewSettings", "AZIMUTH_MAPPINGS", "horizon", "row_angles", "column_azimuths",
            "node_directions", "canonical_sun", "check_size", "DEFAULT_SIZE", "HORIZON_EDGE_RAD"]
@@ -98,13 +98,10 @@ class SkyViewSettings:
 
 
 def check_size(name, value):
-    """(W, H) ints, W in [2, 4096] and H in [4, 4096], from any pair of integers; ParameterError names
-    ``name`` (and the item)."""
-    try:
-        items = tuple(value)
-    except TypeError:
-        raise ParameterError(name, "two integers (W, H)", value) from None
-    if len(items) != 2:
+    """(W, H) ints, W in [2, 4096] and H in [4, 4096], from an ordered pair of integers (a tuple, a list, a
+    1D array: :func:`clsky.errors.ordered_items`); ParameterError names ``name`` (and the item)."""
+    items = ordered_items(value)         # a set's items in hash order: {33, 128} was (128, 33)
+    if items is None or len(items) != 2:
         raise ParameterError(name, "two integers (W, H)", value)
     return (check_integer(name, items[0], 2, MAX_SIDE, index=0), check_integer(name, items[1], 4, MAX_SIDE, index=1))
 

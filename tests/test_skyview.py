@@ -216,6 +216,9 @@ def test_animation_config_refuses_a_bad_map_size_naming_the_field():
         AnimationConfig(method="skyview", skyview_size=(64, 2))
     assert AnimationConfig(method="skyview").skyview_size is None      # the default map, DEFAULT_SIZE
     assert AnimationConfig(method="skyview", skyview_size=[8, np.int64(6)]).skyview_size == (8, 6)
+    # a set gave its items in hash order: {33, 128} became (128, 33), width and height swapped (code review)
+    with pytest.raises(ParameterError, match=r"^skyview_size must be two integers \(W, H\), got \{"):
+        AnimationConfig(method="skyview", skyview_size={33, 128})
 
 
 @pytest.mark.parametrize("args, named", [(["--skyview-size", "1", "64"], "--skyview-size W"),
