@@ -163,7 +163,7 @@ def field_options(parser):
     return options
 
 
-def _type_error(path, key, action, value):
+def _type_error(key, action, value):
     """None, or what ``value`` of TOML should have been for the option ``action`` of ``key``."""
     def is_number(v):          # TOML integers have any size: one beyond float's range is no number here
         return isinstance(v, float) or (is_integer(v) and is_finite_real(v))
@@ -245,7 +245,7 @@ def load_scene(path, parser):
                 raise UsageError(f"{path}: unknown key {full}{other}; valid keys of [{section}] for "
                                  f"clsky {command}: {valid}")
             key, action = keys[full]
-            expected = _type_error(path, key, action, value)
+            expected = _type_error(key, action, value)
             if expected is not None:
                 raise UsageError(f"{path}: {full} must be {expected}, got {_shown_value(value)}")
             values[full] = value
@@ -268,7 +268,7 @@ def apply_scene(args, parser):
             typed = getattr(args, key.dest)
             typed = typed[key.index] if key.index is not None else typed
             shown = (not typed) if key.inverted else typed
-            print(f"clsky: {given[key.dest]} {_shown(typed, action)} overrides {args.scene}'s {name} = "
+            print(f"clsky: {given[key.dest]} {_shown(typed)} overrides {args.scene}'s {name} = "
                   f"{_toml_value(value)}" if not _is_flag(action) else
                   f"clsky: {given[key.dest]} overrides {args.scene}'s {name} = {_toml_value(value)}"
                   f" (now {_toml_value(shown)})", file=sys.stderr)
@@ -288,10 +288,12 @@ def apply_scene(args, parser):
     return args
 
 
-def _shown(value, action):
+def _shown(value):
+    """An option's typed value as the override's line shows it: numbers as :func:`clsky.errors.short` does
+    (``--exposure 1.0000001`` was shown as '1', its default's bound), a list's items spaced."""
     if isinstance(value, (list, tuple)):
-        return " ".join(f"{v:g}" if isinstance(v, float) else str(v) for v in value)
-    return f"{value:g}" if isinstance(value, float) else str(value)
+        return " ".join(map(_shown, value))
+    return short(value) if isinstance(value, float) else str(value)
 
 
 def source_of(args, field):

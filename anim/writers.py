@@ -627,7 +627,8 @@ class FrameWriter:
                 pass
 
     # Writing --------------------------------------------------------------------------------------
-    def _open_video(self, height, width):
+    def _open_video(self):
+        """Stage the MP4 and start ffmpeg on it (imageio takes the frame size from the first frame)."""
         import imageio.v2 as imageio
         self._part = self._staging.stage(self.mp4_path, self.force, suffix=self._mp4_suffix, last=True)
         self._temporaries.append(self._part)
@@ -714,7 +715,7 @@ class FrameWriter:
             if self._hdr_shape is not None and hdr.shape != self._hdr_shape:
                 raise ValueError(f"frame {index}: hdr has shape {hdr.shape}, the first frame's had {self._hdr_shape}")
         if self._size is None and self.mp4_path is not None:
-            self._open_video(*image.shape[:2])
+            self._open_video()
         self._size = image.shape
         if self.hdr is not None:
             self._hdr_shape = hdr.shape

@@ -195,7 +195,8 @@ def phase_mean(kind: str, g: float = 0.0) -> float:
     kind : {"rayleigh", "modified_atmosphereplus", "cornette_shanks"}
         Phase function.
     g : float, optional
-        Unused (Cornette-Shanks and Rayleigh are normalised for every g).
+        The Mie asymmetry, which no mean here depends on (Cornette-Shanks and Rayleigh are normalised for
+        every g): kept so that a caller states the phase it means, as the samplers take it.
 
     Returns
     -------

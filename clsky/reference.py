@@ -620,7 +620,7 @@ def render_table4d(atmosphere, data, mapping, directions, sun_direction, altitud
 
 def _ground_reflection(atmosphere, ray_settings, grid_settings, ground_irradiance, sun_table, h0, mu_v, mu_s, nu):
     """What rays (n,) see of a Lambertian ground [units of I_I] (n, 3): T(Pa, Pb) a / pi (mu_sun T_sun +
-    E_sky(mu_sun)) at the ground point, 0 for rays that do not end on it (``ground_reflection`` of
+    E_sky(mu_sun)) at the ground point, 0 for rays that do not end on it (``add_ground_reflection`` of
     kernels/view_ray.cl); E_sky ``ground_irradiance`` (D, 3) on the sun axis of ``grid_settings``."""
     from .ground import interpolate_sun_axis
 

@@ -308,7 +308,7 @@ class SkyRenderer:
                                   cla.to_device(self.queue, np.ascontiguousarray(mask.ravel(), dtype=np.uint8)))
 
     def _launch(self, name, directions, sun_direction, altitude, valid, extra_args, buffers, sun_disc=True):
-        """Launch kernel ``name`` (render_table, render_table4d) for one sun: :meth:`_launch_suns`."""
+        """Launch kernel ``name`` (render_table, render_table4d, render_skyview) for one sun: :meth:`_launch_suns`."""
         return self._launch_suns(name, directions, [sun_direction], altitude, valid, extra_args, buffers, sun_disc)[0]
 
     def _launch_suns(self, name, directions, sun_directions, altitude, valid, extra_args, buffers, sun_disc=True):

@@ -73,7 +73,7 @@ FIRST_ORDERS, ORDERS_PER_DECADE = 3, 1.6
 #: threads, the largest of 3 and of 5 runs): 0.97 (compare), 1.10-1.15 (lut), 1.06 (raymarch), 1.10-1.18
 #: (skyview); kept (README "Memory": an over-estimate is the safe side).
 FRAME_BYTES_PER_PIXEL = {"compare": 287, "lut": 165, "raymarch": 75, "skyview": 175}
-#: Host bytes per pixel that an animation's overlapped pipeline (clsky/anim/pipeline.py) adds with one
+#: Host bytes per pixel that an animation's overlapped pipeline (anim/pipeline.py) adds with one
 #: host thread beyond the frames it holds (one more set of HDR frames, waiting for the thread): the next
 #: frame, rendered on the worker thread while this one is processed. Measured as FRAME_BYTES_PER_PIXEL
 #: with the overlap and one host thread, less the listed arrays and FRAME_BYTES_PER_PIXEL: 588 bytes per
@@ -89,8 +89,6 @@ NEXT_FRAME_BYTES_PER_PIXEL = {"compare": 10, "lut": 15, "raymarch": 0, "skyview"
 #: over 20 000 and over 100 000 frames (344 to 378 MB and 351 to 520 MB); rounded up. The metrics JSON is
 #: streamed to its file at the end (``clsky.anim.writers.write_json``), no copy of them all as one string.
 FRAME_RECORD_BYTES = 2048
-
-_GIB = 2**30
 
 
 class InsufficientMemoryError(ValueError):

@@ -1,10 +1,10 @@
 """The 4D scattering table: altitude x view zenith x sun zenith x view-sun azimuth (issue 11, item 3).
 
 ``TableSettings(parameterization="4d")``. The 3D table (Elek 2009, Atmosphere Plus) drops the view-sun
-azimuth: its lookup is 32 % off at sunset and about 500 % in civil twilight (README, "Lookup at
-dusk"). This table keeps it, as Bruneton (2017) does with (r, mu, mu_s, nu), and stores, at every
-node (h, mu, mu_s, phi) along the true ray of that geometry (nu = mu mu_s + sqrt(1 - mu^2)
-sqrt(1 - mu_s^2) cos phi):
+azimuth: its lookup is 22 to 43 % off at sunset and 860 to 1740 % in civil twilight, whatever the
+knob (README, "Speed versus accuracy"). This table keeps it, as Bruneton (2017) does with (r, mu,
+mu_s, nu), and stores, at every node (h, mu, mu_s, phi) along the true ray of that geometry
+(nu = mu mu_s + sqrt(1 - mu^2) sqrt(1 - mu_s^2) cos phi):
 
 * channels 0-5: single scattering's Ibar_R, Ibar_M (r, g, b each), without phase: the lookup applies
   F_R(nu), F_M(nu) with the exact nu (kernels/lookup4d.cl), so the sharp Mie peak toward the sun never

@@ -57,7 +57,7 @@ inline real3 table_radiance(__constant const atmosphere_t *atm, __global const r
     return radiance_of_channels(atm, ibar, channels, nu);
 }
 
-#if VECTOR_WIDTH == 1   /* render.cl includes this file for table_radiance, with VECTOR_WIDTH 8 */
+#if VECTOR_WIDTH == 1   /* the render program (RenderEngine.program_sources) joins this file for table_radiance */
 __kernel void lookup(__constant const atmosphere_t *atm, __global const real *table,
                      const int width, const int height, const int depth, const int channels,
                      const int mapping, const real2 sun_range, const int n,

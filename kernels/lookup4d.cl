@@ -67,7 +67,7 @@ inline real sun4d_coordinate(const int depth, const int mapping, const real2 sun
     return depth > 1 ? MAPPING_SUN_T(mu_s, mapping, sun_range) * (real)(depth - 1) : R(0.0);
 }
 
-#if VECTOR_WIDTH == 1   /* render.cl includes this file for interpolate4d, with VECTOR_WIDTH 8 */
+#if VECTOR_WIDTH == 1   /* the render program (RenderEngine.program_sources) joins this file for interpolate4d */
 __kernel void lookup4d(__constant const atmosphere_t *atm, __global const real *table,
                        const int width, const int height, const int depth, const int azimuths, const int channels,
                        const int mapping, const real2 sun_range, const int n,

@@ -12,7 +12,6 @@ typedef double4 real4;
 typedef double8 real8;
 #define R(x) ((real)(x))
 #define CONVERT_REAL8(v) convert_double8(v)
-#define REAL_EPSILON DBL_EPSILON
 #define REAL_TINY DBL_MIN
 #else
 typedef float real;
@@ -22,7 +21,6 @@ typedef float4 real4;
 typedef float8 real8;
 #define R(x) ((real)(x##f))
 #define CONVERT_REAL8(v) convert_float8(v)
-#define REAL_EPSILON FLT_EPSILON
 #define REAL_TINY FLT_MIN
 #endif
 

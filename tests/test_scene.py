@@ -161,6 +161,16 @@ def test_an_animation_output_that_no_file_or_scene_can_hold_is_refused(tmp_path,
     assert sorted(p.name for p in tmp_path.iterdir()) == (["o.toml"] if "\0" in output else [])
 
 
+def test_an_override_shows_the_value_as_typed(tmp_path, capsys, monkeypatch):
+    """The override's line formatted a float with %g: '--exposure 1.0000001' was shown as '1', as if the
+    option had been typed equal to the scene's value (the rule of clsky.errors.short)."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "s.toml").write_text('[display]\nexposure = 1.0\n')
+    status, _, err = run(capsys, "animate", "--scene", "s.toml", "--exposure", "1.0000001", "--print-scene")
+    assert status == 0
+    assert err == "clsky: --exposure 1.0000001 overrides s.toml's display.exposure = 1.0\n"
+
+
 def test_the_command_line_wins_and_says_so(tmp_path, capsys, monkeypatch):
     """An option typed wins over the scene, even typed with its default value (--pitch 10), and one
     line on stderr per option names it, its value and the scene's value it replaces."""
