@@ -55,7 +55,8 @@ def add_output_arguments(parser: argparse.ArgumentParser):
     parser.add_argument("--smoke", action="store_true",
                         help="the same code path at a tiny size (bench/_report.py: SMOKE), to check that the "
                              "script runs; prints its table, writes nothing into README.md or docs/ "
-                             "(implies --no-readme)")
+                             "(implies --no-readme); its sizes, paths and counts replace the options that set "
+                             "them")
     return parser
 
 
@@ -163,12 +164,44 @@ def load_reference_cache(path: pathlib.Path, level: str, size: int, names) -> di
     return arrays
 
 
-def parse_arguments(parser: argparse.ArgumentParser, argv=None):
-    """``parser.parse_args(argv)``, with ``--smoke`` implying ``--no-readme``."""
+def description_of(doc: str) -> str:
+    """A script's ``--help`` description: the first sentence of its docstring's first paragraph, joined
+    across its lines (the first line alone cut three of them mid-sentence)."""
+    paragraph = " ".join(doc.strip().split("\n\n")[0].split())
+    end = paragraph.find(". ")
+    return paragraph if end < 0 else paragraph[:end + 1]
+
+
+def parse_arguments(parser: argparse.ArgumentParser, argv=None, sections=()):
+    """``parser.parse_args(argv)``, with ``--smoke`` implying ``--no-readme``. ``sections``: the README
+    sections the script writes (names, or a function of the parsed arguments that returns them), checked
+    before any work unless --no-readme (:func:`check_readme_sections`)."""
     args = parser.parse_args(argv)
     if args.smoke:
         args.no_readme = True
+    if not args.no_readme:
+        check_readme_sections(sections(args) if callable(sections) else sections)
     return args
+
+
+def _section_pattern(name):
+    begin, end = f"<!-- bench:{name} -->", f"<!-- /bench:{name} -->"
+    return begin, end, re.compile(re.escape(begin) + ".*?" + re.escape(end), re.S)
+
+
+def check_readme_sections(names, readme: pathlib.Path = README):
+    """SystemExit unless ``readme`` holds every section ``names`` and its folder takes a new file (the README
+    is replaced through a temporary there): a missing section was found after the work (minutes; up to
+    818 s for bench_twilight), and bench_dusk had replaced its picture by then."""
+    import os
+
+    text = readme.read_text()
+    for name in names:
+        begin, end, pattern = _section_pattern(name)
+        if not pattern.search(text):
+            raise SystemExit(f"README.md has no {begin} ... {end} section")
+    if names and not os.access(readme.parent, os.W_OK | os.X_OK):
+        raise SystemExit(f"cannot write in {readme.parent}, where README.md is replaced")
 
 
 def machine() -> str:
@@ -201,8 +234,7 @@ def write_readme_section(name: str, markdown: str, readme: pathlib.Path = README
     from clsky._files import atomic_write
 
     text = readme.read_text()
-    begin, end = f"<!-- bench:{name} -->", f"<!-- /bench:{name} -->"
-    pattern = re.compile(re.escape(begin) + ".*?" + re.escape(end), re.S)
+    begin, end, pattern = _section_pattern(name)
     if not pattern.search(text):
         raise SystemExit(f"README.md has no {begin} ... {end} section")
     with atomic_write(readme, overwrite=True) as temporary:

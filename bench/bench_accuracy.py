@@ -33,6 +33,7 @@ import pathlib
 import tempfile
 
 
+from _report import description_of
 from _report import SMOKE, add_output_arguments, load_average, load_note, machine, parse_arguments, write_readme_section
 from _report import integer_in, load_reference_cache, npz_file
 
@@ -47,7 +48,7 @@ SMOKE_CANDIDATES = ("default", "H / 2", "ray march 16 samples", "sky-view 16 x 3
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=description_of(__doc__))
     parser.add_argument("--size", type=integer_in(16, 2048), default=128)
     parser.add_argument("--reference-cache", type=npz_file, metavar="FILE.npz")
     parser.add_argument("--docs", type=pathlib.Path, metavar="DIR",
@@ -57,7 +58,7 @@ def main():
                         help="only draw the plots again from CSV, a sweep's accuracy.csv, into --docs DIR "
                              "(default docs/); --size: that sweep's frame size")
     add_output_arguments(parser)
-    args = parse_arguments(parser)
+    args = parse_arguments(parser, sections=("accuracy",))
     try:                       # the plots need matplotlib: refused before the sweep, as `clsky bench accuracy` does
         accuracy_plot.require_plotting()
     except ImportError as error:

@@ -48,6 +48,7 @@ import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor
 
+from _report import description_of
 from _report import SMOKE, add_output_arguments, children_cpu, exp_reading, load_average, load_note, machine, \
     parse_arguments, state_note, write_readme_section
 from _report import frame_count, frame_side
@@ -179,13 +180,13 @@ def host_half(options, thread_counts, jobs=HOST_HALF_JOBS):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=description_of(__doc__))
     parser.add_argument("--frames", type=frame_count, default=120, help="frames of the end-to-end run (default 120)")
     parser.add_argument("--size", type=frame_side, default=512, help="frame size [px] (default 512)")
     parser.add_argument("--stage-frames", type=frame_count, default=None,
                         help="frames of the stage split (default: --frames, the same animation)")
     add_output_arguments(parser)
-    args = parse_arguments(parser)
+    args = parse_arguments(parser, sections=("animate",))
     extra, options = [], {}
     if args.smoke:
         args.frames, args.stage_frames, args.size = SMOKE.animation_frames, SMOKE.animation_frames, SMOKE.frame

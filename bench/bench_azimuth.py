@@ -29,6 +29,7 @@ import time
 
 import numpy as np
 
+from _report import description_of
 from _report import (SMOKE, add_output_arguments, load_average, load_note, machine, parse_arguments,
                      timed_with_cpu, write_readme_section)
 from _report import integer_in, listed, photon_count, real_in, standard_error
@@ -89,7 +90,7 @@ def cost(args):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=description_of(__doc__))
     parser.add_argument("--cost", action="store_true",
                         help="measure the cost of the harmonics in the default clsky animate instead")
     parser.add_argument("--harmonics", type=listed(integer_in(0, MAX_AZIMUTH_HARMONICS)), default="0,2",
@@ -103,7 +104,7 @@ def main():
                         default=",".join(f"{e:g}" for e in twilight.SUN_ELEVATIONS_DEG),
                         help="comma-separated sun elevations [deg]")
     add_output_arguments(parser)
-    args = parse_arguments(parser)
+    args = parse_arguments(parser, sections=lambda a: ("twilight-cost",) if a.cost else ("twilight-azimuth",))
     if args.cost:
         markdown = cost(args)
         print(markdown)

@@ -35,6 +35,7 @@ import os
 import tempfile
 import time
 
+from _report import description_of
 from _report import SMOKE, add_output_arguments, load_average, machine, parse_arguments, write_readme_section
 from _report import frame_count, frame_side, positive_integer
 
@@ -126,13 +127,13 @@ def tables(results, frames):
 
 
 def main(argv=None):
-    parser = add_output_arguments(argparse.ArgumentParser(description=__doc__.splitlines()[0]))
+    parser = add_output_arguments(argparse.ArgumentParser(description=description_of(__doc__)))
     parser.add_argument("--frames", type=frame_count, default=48, help="frames of the animation (default: 48)")
     parser.add_argument("--size", type=frame_side, default=256, help="image height [px] (default: 256)")
     parser.add_argument("--quality", default="default", choices=list(QUALITY_LEVELS),
                         help="quality level (default: default)")
     parser.add_argument("--repeat", type=positive_integer, default=2, help="repetitions of the three runs (default: 2)")
-    args = parse_arguments(parser, argv)
+    args = parse_arguments(parser, argv, sections=("bench_dask",))
     if args.smoke:
         options = dict(frames=SMOKE.animation_frames, size=SMOKE.frame, table_size=SMOKE.table, quality="draft")
         repeat = 1

@@ -29,6 +29,7 @@ import time
 
 import numpy as np
 
+from _report import description_of
 from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
 from _report import frame_side
 
@@ -94,10 +95,10 @@ def render_sky(fields, size, smoke):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=description_of(__doc__))
     parser.add_argument("--size", type=frame_side, default=128, help="fisheye side [px] (default: 128)")
     add_output_arguments(parser)
-    args = parse_arguments(parser)
+    args = parse_arguments(parser, sections=("dusk",))
     size = SMOKE.frame if args.smoke else args.size
     load = os.getloadavg()[0]
     cpu_start, wall_start = time.process_time(), time.perf_counter()

@@ -27,6 +27,7 @@ import os
 
 import numpy as np
 
+from _report import description_of
 from _report import SMOKE, add_output_arguments, best_of, load_average, machine, parse_arguments, \
     timed_with_cpu, write_readme_section
 from _report import frame_side, integer_in, positive_integer, table_nodes
@@ -56,7 +57,7 @@ def three_d(table):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=description_of(__doc__))
     parser.add_argument("--size", type=table_nodes, nargs=3, default=LOOKUP4D_SIZE, metavar=("W", "H", "D"),
                         help="nodes along altitude, view (even), sun (default: 16 128 128)")
     parser.add_argument("--azimuth-size", type=integer_in(2, 1024), default=LOOKUP4D_AZIMUTHS,
@@ -68,7 +69,7 @@ def main():
     parser.add_argument("--frame", type=frame_side, default=256, help="side of the error frames [px] (default 256)")
     parser.add_argument("--repeat", type=positive_integer, default=5, help="timing repetitions of the 1024^2 frame")
     add_output_arguments(parser)
-    args = parse_arguments(parser)
+    args = parse_arguments(parser, sections=("lookup4d",))
     speed_side, level = 1024, "reference"
     if args.smoke:
         args.size, args.azimuth_size, args.frame, args.repeat = (8, 32, 8), 5, SMOKE.frame, SMOKE.repeat

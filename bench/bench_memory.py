@@ -26,6 +26,7 @@ import sys
 import tempfile
 import time
 
+from _report import description_of
 from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
 
 from clsky.atmosphere import OVERRIDE_RANGES
@@ -111,13 +112,13 @@ def estimate(arguments):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=description_of(__doc__))
     parser.add_argument("--reference", action="store_true", help="also the reference level (~6 min)")
     parser.add_argument("--only", nargs="+", help="run only these cases (names as printed)")
     parser.add_argument("--directory", default="/tmp/clsky_bench_memory", help="where outputs go")
     add_atmosphere_overrides(parser.add_argument_group("atmosphere (every case)"))
     add_output_arguments(parser)
-    args = parse_arguments(parser)
+    args = parse_arguments(parser, sections=("memory",))
     if args.smoke:                               # a temporary directory, removed afterwards
         with tempfile.TemporaryDirectory(prefix="clsky_bench_memory_") as directory:
             measure(args, directory)

@@ -18,6 +18,7 @@ import datetime
 
 import numpy as np
 
+from _report import description_of
 from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
 from _report import photon_count
 
@@ -36,22 +37,45 @@ CONVERGED = dict(view_steps=200, multiple_view_steps=None, sun_steps=600, sun_tr
 DEFAULT = clsky.TableSettings()
 
 
-def compare(table, atmosphere, photons):
+#: Most paths per channel of one tracer run (about 0.9 kB each alive at once): --photons beyond it runs in
+#: batches, pooled (one run of 5 M paths took more than 3 GB).
+BATCH = 200_000
+
+
+def tracer(atmosphere, case, photons, seed):
+    """(radiance, standard error) of the tracer for ``case`` (altitude, cos view, sun zenith [deg]) over
+    ``photons`` paths per channel, in batches of at most :data:`BATCH` paths (seeds seed, seed + 1, ...),
+    pooled: the paths' mean, and its standard error from each batch's (independent batches)."""
+    altitude, cos_view, sun_zenith = case
+    cos_sun = np.cos(np.radians(sun_zenith))
+    counts = [min(BATCH, photons - start) for start in range(0, photons, BATCH)]
+    if counts[-1] < 2:                                          # the tracer takes 2 paths at least
+        counts[-2:] = [counts[-2] - 1, 2]
+    means, variances = [], []
+    for k, count in enumerate(counts):
+        mean, error = montecarlo.sky_radiance(atmosphere, altitude, cos_view, cos_sun, 0.0, photons=count,
+                                              seed=seed + k)
+        means.append(count * mean)
+        variances.append((count * error) ** 2)
+    return np.sum(means, axis=0) / photons, np.sqrt(np.sum(variances, axis=0)) / photons
+
+
+def compare(table, atmosphere, traced):
+    """The rows of ``table`` against the tracer's ``traced`` {case: (radiance, standard error)}."""
     rows = []
-    for altitude, cos_view, sun_zenith in CASES:
+    for (altitude, cos_view, sun_zenith), (mc, error) in traced.items():
         cos_sun = np.cos(np.radians(sun_zenith))
         nu = cos_view * cos_sun + np.sqrt((1 - cos_view**2) * (1 - cos_sun**2))
         value = table.radiance(altitude, cos_view, cos_sun, nu) / atmosphere.incident_light
-        mc, error = montecarlo.sky_radiance(atmosphere, altitude, cos_view, cos_sun, 0.0, photons=photons, seed=1)
         rows.append(((altitude, cos_view, sun_zenith), value, mc, error))
     return rows
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=description_of(__doc__))
     parser.add_argument("--photons", type=photon_count, default=200_000, help="paths per channel and case")
     add_output_arguments(parser)
-    args = parse_arguments(parser)
+    args = parse_arguments(parser, sections=("montecarlo",))
     size = SMOKE.table if args.smoke else clsky.TableSettings().size
     if args.smoke:
         args.photons = SMOKE.photons
@@ -65,9 +89,12 @@ def main():
              "deviation [SE] |", "|---|---|---:|---:|---:|---|---|"]
     for mode in ("physical", "atmosphere-plus"):
         atmosphere = clsky.preset(mode)
+        # once a case, for both quadratures (it was run twice, with one seed for every case)
+        traced = {case: tracer(atmosphere, case, args.photons, seed=1 + 10**6 * index)
+                  for index, case in enumerate(CASES)}
         for label, settings in (("converged", CONVERGED), ("default", {})):
             table = clsky.ScatteringTable.build(atmosphere, clsky.TableSettings(mode=mode, size=size, **settings))
-            for (altitude, cos_view, sun_zenith), value, mc, error in compare(table, atmosphere, args.photons):
+            for (altitude, cos_view, sun_zenith), value, mc, error in compare(table, atmosphere, traced):
                 deviation = ", ".join(f"{d:+.1f}" for d in 100 * (value / mc - 1))
                 sigmas = ", ".join(f"{s:+.1f}" for s in (value - mc) / error)
                 lines.append(f"| {mode} | {label} | {altitude:.0f} | {cos_view:.2f} | {sun_zenith:.0f} | "

@@ -44,6 +44,7 @@ import sys
 
 import numpy as np
 
+from _report import description_of
 from _report import (SMOKE, add_output_arguments, best_timing, exp_reading, load_average, load_note, machine,
                      parse_arguments, positive_integer, state_note, timed_in_turn, timed_with_cpu,
                      write_readme_section)
@@ -111,7 +112,7 @@ def shares_at_sun_nodes(result, settings, atmosphere):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=description_of(__doc__))
     parser.add_argument("--repeat", type=positive_integer, default=3,
                         help="repeated OpenCL builds of each table (rounds, in turn), and of the full table (a batch)")
     parser.add_argument("--fresh-runs", type=positive_integer, default=3,
@@ -119,7 +120,7 @@ def main():
     parser.add_argument("--twin-runs", type=positive_integer, default=2,
                         help="runs of the NumPy twins, each after a batch of OpenCL runs (in turn)")
     add_output_arguments(parser)
-    args = parse_arguments(parser)
+    args = parse_arguments(parser, sections=("builds", "orders", "shares"))
     size = SMOKE.table if args.smoke else clsky.TableSettings().size
     if args.smoke:
         args.repeat, args.fresh_runs, args.twin_runs = SMOKE.repeat, 1, 1

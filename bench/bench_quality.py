@@ -36,6 +36,7 @@ import pathlib
 import tempfile
 
 import numpy as np
+from _report import description_of
 from _report import (SMOKE, add_output_arguments, best_timing, load_average, load_note, machine,
                      parse_arguments, timed_with_cpu, write_readme_section)
 from _report import integer_in, load_reference_cache, npz_file, save_reference_cache
@@ -84,7 +85,7 @@ def percent(values):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=description_of(__doc__))
     parser.add_argument("--size", type=integer_in(16, 2048), default=64)
     parser.add_argument("--groups", nargs="*", choices=list(accuracy.REFERENCE_GROUPS),
                         help="default: all (with --smoke: ray march)")
@@ -93,7 +94,7 @@ def main():
                         help="write quality.csv into DIR (default: docs/ when writing the README; none with "
                              "--no-readme; a temporary directory with --smoke)")
     add_output_arguments(parser)
-    args = parse_arguments(parser)
+    args = parse_arguments(parser, sections=("quality", "plan"))
     reference_name = "reference"
     if args.smoke:
         args.size, reference_name = SMOKE.frame, SMOKE.reference_level

@@ -35,6 +35,7 @@ import time
 import numpy as np
 
 from _bound import EXPS_PER_NODE, march_exps
+from _report import description_of
 from _report import SMOKE, add_output_arguments, exp_reading, load_average, machine, parse_arguments, \
     positive_integer, timed_in_turn, timed_with_cpu, write_readme_section
 
@@ -103,11 +104,11 @@ def bound_sentence(label, pairs, exps, timed="frames"):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=description_of(__doc__))
     parser.add_argument("--repeat", type=positive_integer, default=9)
     parser.add_argument("--skip-animation", action="store_true")
     add_output_arguments(parser)
-    args = parse_arguments(parser)
+    args = parse_arguments(parser, sections=("render",))
     sizes, animate = (1024, 512), [sys.executable, "-m", "clsky.anim", "animate", "--progress", "none"]
     settings = clsky.TableSettings(mode="physical")
     if args.smoke:

@@ -30,6 +30,7 @@ import datetime
 
 import numpy as np
 
+from _report import description_of
 from _report import SMOKE, add_output_arguments, exp_reading, load_average, machine, parse_arguments, \
     positive_integer, state_note, timed_in_turn, timed_with_cpu, write_readme_section
 
@@ -77,10 +78,10 @@ def line_through(pixels, cpu):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=description_of(__doc__))
     parser.add_argument("--rounds", type=positive_integer, default=7)
     add_output_arguments(parser)
-    args = parse_arguments(parser)
+    args = parse_arguments(parser, sections=("renderer_costs",))
     config, sides, march_rounds = AnimationConfig(), SIDES, MARCH_ROUNDS
     if args.smoke:
         config = dataclasses.replace(config, table_size=SMOKE.table)

@@ -46,6 +46,7 @@ import time
 
 import numpy as np
 
+from _report import description_of
 from _report import SMOKE, add_output_arguments, best_of, children_cpu, load_average, load_note, machine, \
     parse_arguments, write_readme_section
 from _report import positive_integer
@@ -202,7 +203,7 @@ def keep_outputs(scratch: pathlib.Path, count: int, target: pathlib.Path):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=description_of(__doc__))
     parser.add_argument("--vendors", type=pathlib.Path, default=None,
                         help="OpenCL vendors directory listing the devices (default .intel-opencl/vendors when "
                              "scripts/intel_opencl.sh wrote it, else the system's registry)")
@@ -215,7 +216,7 @@ def main():
                         help="keep each configuration's first-round animation in DIR/<configuration index>/")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     add_output_arguments(parser)
-    args = parse_arguments(parser)
+    args = parse_arguments(parser, sections=("runtimes",))
     if not set(args.vector_widths) <= {1, 8}:
         parser.error(f"--vector-widths {' '.join(map(str, args.vector_widths))}: each must be 1 or 8")
     if args.smoke:

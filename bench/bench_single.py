@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import datetime
 
+from _report import description_of
 from _report import (SMOKE, add_output_arguments, best_timing, load_average, load_note, machine,
                      parse_arguments, write_readme_section)
 from _report import positive_integer
@@ -29,12 +30,12 @@ from clsky.single import SingleScatteringEngine
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=description_of(__doc__))
     parser.add_argument("--repeat", type=positive_integer, default=10,
                         help="OpenCL repetitions after a warm-up (default 10)")
     parser.add_argument("--twin-repeat", type=positive_integer, default=2, help="NumPy twin repetitions (default 2)")
     add_output_arguments(parser)
-    args = parse_arguments(parser)
+    args = parse_arguments(parser, sections=("single",))
     size = SMOKE.table if args.smoke else TableSettings().size
     if args.smoke:
         args.repeat = args.twin_repeat = SMOKE.repeat

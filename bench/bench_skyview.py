@@ -20,6 +20,7 @@ import datetime
 
 import numpy as np
 
+from _report import description_of
 from _report import SMOKE, add_output_arguments, load_average, machine, parse_arguments, timed_with_cpu, \
     write_readme_section
 from _report import positive_integer
@@ -44,10 +45,10 @@ def best(function, repeat):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=description_of(__doc__))
     parser.add_argument("--repeat", type=positive_integer, default=3)
     add_output_arguments(parser)
-    args = parse_arguments(parser)
+    args = parse_arguments(parser, sections=("skyview",))
     frame_sizes, map_sizes, settings = (512, 1024), MAP_SIZES, clsky.TableSettings(mode="physical")
     if args.smoke:
         args.repeat, frame_sizes, map_sizes = SMOKE.repeat, (SMOKE.frame,), ((16, 32),)

@@ -32,6 +32,7 @@ import time
 
 import numpy as np
 
+from _report import description_of
 from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
 from _report import frame_side, integer_in, table_nodes
 
@@ -82,18 +83,21 @@ def timed(function):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=description_of(__doc__))
     parser.add_argument("--size", type=table_nodes, nargs=3, default=list(clsky.TableSettings().size),
                         metavar=("W", "H", "D"))
     parser.add_argument("--frame", type=frame_side, default=96, help="fisheye side [px]")
     parser.add_argument("--spectral", type=integer_in(MIN_COLOUR_WAVELENGTHS, MAX_WAVELENGTHS), default=15,
                         help="N of the spectral mode")
     add_output_arguments(parser)
-    args = parse_arguments(parser)
+    args = parse_arguments(parser, sections=("spectral",))
     reference_count = spectrum.MAX_WAVELENGTHS
     if args.smoke:
         args.size, args.frame, args.spectral, reference_count = list(SMOKE.table), SMOKE.frame, 4, 6
-    settings = clsky.TableSettings(size=tuple(args.size), mode="physical")
+    try:                        # each axis in [2, 4096] passed argparse, their product is checked here
+        settings = clsky.TableSettings(size=tuple(args.size), mode="physical")
+    except ValueError as error:
+        parser.error(f"--size: {error}")
     ctx = make_context()
     load_before = os.getloadavg()[0]
     three_atmosphere = with_solar_spectrum(clsky.preset("physical"))

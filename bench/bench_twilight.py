@@ -26,6 +26,7 @@ import time
 
 import numpy as np
 
+from _report import description_of
 from _report import SMOKE, add_output_arguments, machine, parse_arguments, write_readme_section
 from _report import integer_in, photon_count, standard_error
 
@@ -60,7 +61,7 @@ def cells(values, digits=1, sign="+"):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=description_of(__doc__))
     parser.add_argument("--atmosphere", choices=("black", "physical"), default="black",
                         help="black: physical preset, no ozone, black ground (issue 11's case); physical: the preset")
     parser.add_argument("--quality", default="default", choices=list(QUALITY_LEVELS),
@@ -72,17 +73,29 @@ def main():
                         help="relative standard error per channel to reach")
     parser.add_argument("--max-photons", type=photon_count, default=40_000_000, help="most paths per channel and case")
     add_output_arguments(parser)
-    args = parse_arguments(parser)
+    args = parse_arguments(parser, sections=lambda a: (
+        "twilight" if a.atmosphere == "black" else "twilight-physical",))
     elevations = twilight.SUN_ELEVATIONS_DEG
-    # a first batch above the cap is refused (twilight.monte_carlo)
-    batch, single_max = min(BATCH, args.max_photons), SINGLE_MAX_PHOTONS
+    # a first batch above the cap is refused (twilight.monte_carlo); --max-photons caps single scattering's
+    # runs too (with --max-photons 1000 they ran to 1 M paths, 1000 batches of 1000)
+    batch, single_max = min(BATCH, args.max_photons), min(SINGLE_MAX_PHOTONS, args.max_photons)
     if args.smoke:
         args.quality, elevations = SMOKE.reference_level, (5.0, -6.0)
         batch = single_max = args.max_photons = SMOKE.photons
+    if args.azimuth_harmonics is not None:      # [0, 64] passed argparse; the level's quadrature bounds it
+        try:
+            QUALITY_LEVELS[args.quality].table.replace(mode="physical", azimuth_harmonics=args.azimuth_harmonics)
+        except ValueError as error:
+            parser.error(f"--azimuth-harmonics: {error}")
     atmosphere = (twilight.black_ground_without_ozone() if args.atmosphere == "black" else clsky.preset("physical"))
 
     wall, cpu = time.perf_counter(), time.process_time()
     rows, full, single, exact, settings = [], {}, {}, {}, {}
+    # each run's seeds its own: run n (an elevation's view, all orders or single scattering) takes seeds n span
+    # to (n + 1) span - 1, one a batch (1000 i and 1000 i + 500 overlapped beyond 500 batches, and every
+    # elevation took the same)
+    span = -(-max(args.max_photons, single_max) // batch)
+    runs = iter(range(0, 2 * len(elevations) * len(twilight.VIEWS) * span, span))
     for elevation in elevations:
         marched, settings[elevation] = twilight.ray_march(atmosphere, elevation, quality=args.quality,
                                                           azimuth_harmonics=args.azimuth_harmonics)
@@ -93,9 +106,9 @@ def main():
             with np.errstate(divide="ignore", invalid="ignore"):   # a view wholly in the shadow: 0 / 0
                 exact[elevation].append(np.where(quadrature > 0, marched_single[i] / quadrature - 1.0, np.nan))
             pooled = twilight.monte_carlo(atmosphere, elevation, view, target=args.target, batch=batch,
-                                          max_photons=args.max_photons, seed=1000 * i)
+                                          max_photons=args.max_photons, seed=next(runs))
             pooled_single = twilight.monte_carlo(atmosphere, elevation, view, target=args.target, batch=batch,
-                                                 max_photons=single_max, seed=1000 * i + 500, max_orders=1)
+                                                 max_photons=single_max, seed=next(runs), max_orders=1)
             relative, sigmas = twilight.deviation(marched[i], pooled)
             relative_single, sigmas_single = twilight.deviation(marched_single[i], pooled_single)
             full[elevation].append(relative)

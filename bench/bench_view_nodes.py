@@ -20,6 +20,7 @@ import datetime
 
 import numpy as np
 
+from _report import description_of
 from _report import (SMOKE, add_output_arguments, load_average, load_note, machine, parse_arguments,
                      timed_with_cpu, write_readme_section)
 from _report import positive_integer
@@ -127,10 +128,10 @@ def cost_rows(size, frame, repeat):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=description_of(__doc__))
     parser.add_argument("--repeat", type=positive_integer, default=3, help="timing repetitions")
     add_output_arguments(parser)
-    args = parse_arguments(parser)
+    args = parse_arguments(parser, sections=("view_nodes",))
     size, frame = (SMOKE.table, SMOKE.frame) if args.smoke else (TableSettings().size, 256)
     if args.smoke:
         args.repeat = SMOKE.repeat

@@ -22,6 +22,10 @@ __all__ = ["ParameterError", "NumericalError", "short", "counted", "is_real_numb
 _MAX_ECHO = 60
 
 
+#: Most digits of an integer that :func:`short` writes whole where %g would round it (64-bit bounds take 20).
+_MAX_INTEGER_DIGITS = 30
+
+
 def short(value) -> str:
     """``value`` as a short text for a message: numbers with at most 6 significant digits where that is
     the number itself (a 300-digit integer prints as ``1e+300``), else every digit it takes (a value just
@@ -32,6 +36,8 @@ def short(value) -> str:
     --------
     >>> short(10**300), short(4096), short(0.25), short(1.0000001), short(0.1 + 0.2), short("a")
     ('1e+300', '4096', '0.25', '1.0000001', '0.30000000000000004', "'a'")
+    >>> short(2**64), short(10**17)                        # an integer whole where %g would round it
+    ('18446744073709551616', '1e+17')
     """
     if isinstance(value, (bool, np.bool_)):
         return repr(bool(value))
@@ -40,9 +46,14 @@ def short(value) -> str:
         if abs(value) < 10**7:
             return str(value)
         try:
-            return f"{float(value):g}"
+            text = f"{float(value):g}"
         except OverflowError:                   # beyond float: its order of magnitude
-            return f"{'-' if value < 0 else ''}1e+{int(abs(value).bit_length() * math.log10(2))}"
+            text = None
+        if text is not None and int(float(text)) == value:
+            return text
+        if len(str(abs(value))) <= _MAX_INTEGER_DIGITS:    # 2**64 is not 1.84467e+19, the bound 2**64 - 1
+            return str(value)
+        return f"{'-' if value < 0 else ''}1e+{len(str(abs(value))) - 1}"
     if isinstance(value, numbers.Real):
         text = f"{float(value):g}"
         exact = not math.isfinite(value) or float(text) == float(value)

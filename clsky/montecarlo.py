@@ -574,6 +574,12 @@ def _mie_extinction(atmosphere) -> np.ndarray:
 
 # Path tracer ---------------------------------------------------------------------------------------
 
+#: Contributing paths a channel needs before its standard error is taken as its error
+#: (:attr:`MonteCarloResult.reliable`): a mean of fewer heavy-tailed values has a spread its sample
+#: deviation does not see (the usual floor of the central limit theorem's use).
+MIN_CONTRIBUTING_PATHS = 30
+
+
 @dataclasses.dataclass(frozen=True)
 class MonteCarloResult:
     """Outcome of :func:`simulate`; radiances are per unit solar irradiance [1/sr].
@@ -596,6 +602,12 @@ class MonteCarloResult:
         Paths per channel.
     real_collisions, null_collisions : int
         Event counts over all channels.
+    contributing_paths : numpy.ndarray
+        Shape (3,): paths per channel that brought any light to the eye. With fewer than
+        :data:`MIN_CONTRIBUTING_PATHS` the standard error is no measure of the error (:attr:`reliable`):
+        the estimate rests on a few heavy-tailed values (at -6 deg, 2000 paths, the 95 % interval held the
+        exact single scattering in 38 to 58 % of the seeds), and where none contributed the result is
+        0 +- 0 for a radiance these paths cannot resolve, not one that is 0.
     """
 
     radiance: np.ndarray
@@ -607,6 +619,13 @@ class MonteCarloResult:
     photons: int
     real_collisions: int
     null_collisions: int
+    contributing_paths: np.ndarray
+
+    @property
+    def reliable(self) -> np.ndarray:
+        """Shape (3,) bool: the channels whose standard error measures their error (at least
+        :data:`MIN_CONTRIBUTING_PATHS` contributing paths)."""
+        return self.contributing_paths >= MIN_CONTRIBUTING_PATHS
 
 
 def _sun_transmittance(r, mu, channel, rp, ra, beta_r, beta_me, scale_heights, beta_o, ozone_peak, ozone_half_width,
@@ -676,15 +695,15 @@ def _as_float(value) -> float:
 
 def _shown(value) -> str:
     """A value as the messages show it: a number by %g where that is the number itself, else by every
-    digit it takes (1.0000001 is not its bound 1), an integer whole up to 16 digits and by its order of
+    digit it takes (1.0000001 is not its bound 1), an integer whole up to 30 digits and by its order of
     magnitude beyond (10**400), anything
     else by its repr and type (clsky.errors.short's rule, written here: the tracer imports nothing from
     clsky)."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
         return f"{value!r:.40} ({type(value).__name__})"
-    if isinstance(value, (int, np.integer)):
+    if isinstance(value, (int, np.integer)):       # whole where %g would round it (2**64 is not 1e+19)
         digits = str(abs(int(value)))
-        return str(value) if len(digits) <= 16 else f"{'-' if value < 0 else ''}{digits[0]}e+{len(digits) - 1}"
+        return str(value) if len(digits) <= 30 else f"{'-' if value < 0 else ''}{digits[0]}e+{len(digits) - 1}"
     text = f"{float(value):g}"
     return text if not math.isfinite(value) or float(text) == float(value) else repr(float(value))
 
@@ -756,6 +775,11 @@ def simulate(atmosphere, altitude, cos_view, cos_sun, azimuth=0.0, *, photons=20
     altitude, view, sun = _checked_observer(atmosphere, altitude, cos_view, cos_sun, azimuth)
     # integers as integers: 2.7 photons ran as 2, max_orders=True as 1
     max_orders = _check_integer("max_orders", max_orders, 1, MAX_ORDERS_LIMIT, optional=True)
+    if not isinstance(single_only, (bool, np.bool_)):      # 'no' ran single scattering
+        raise ValueError(f"single_only must be True or False, got {_shown(single_only)}")
+    if single_only and max_orders not in (None, 1):        # max_orders=5 became 1 without a word
+        raise ValueError(f"single_only=True counts order 1 alone: max_orders must be None or 1 with it, got "
+                         f"{max_orders}")
     if single_only:
         max_orders = 1
     if max_orders is None:
@@ -891,7 +915,8 @@ def simulate(atmosphere, altitude, cos_view, cos_sun, azimuth=0.0, *, photons=20
     return MonteCarloResult(radiance=radiance, standard_error=standard_error, orders=orders / photons,
                             max_orders=max_orders, truncated_paths=trunc_paths,
                             truncated_weight=trunc_weight / photons, photons=photons,
-                            real_collisions=real_count, null_collisions=null_count)
+                            real_collisions=real_count, null_collisions=null_count,
+                            contributing_paths=np.count_nonzero(per_channel > 0.0, axis=1))
 
 
 def sky_radiance(atmosphere, altitude, cos_view, cos_sun, azimuth=0.0, *, photons=200_000, seed=0,
@@ -1006,7 +1031,10 @@ def single_scattering(atmosphere, altitude, cos_view, cos_sun, azimuth=0.0, *, s
     nodes = _check_integer("nodes", nodes, 1, 1000)
     r0 = rp + altitude
     if np.isfinite(ray_sphere_entry(np.array([r0]), np.array([view[2]]), rp)[0]):
-        raise ValueError("single_scattering integrates rays that reach the top: the view ray hits the ground")
+        horizon = 0.0 - math.sqrt(max(0.0, 1.0 - (rp / r0) ** 2))     # the horizon's cos_view here ('0', not '-0')
+        raise ValueError(f"cos_view must be above the horizon's {horizon:.6g} at altitude {_shown(altitude)} m "
+                         f"(single_scattering integrates rays that reach the top, not the ground's reflection), "
+                         f"got {_shown(float(view[2]))}")
     length = float(ray_sphere_exit(np.array([r0]), np.array([view[2]]), ra)[0])
     origin = np.array([0.0, 0.0, r0])
     edges = np.linspace(0.0, length, max(2, int(math.ceil(length / float(step))) + 1))

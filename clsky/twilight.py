@@ -101,6 +101,9 @@ class Pooled:
     batches : int
     truncated_weight : numpy.ndarray
         Shape (3,): weight still alive at the order cap, per photon (the bias bound of the cap).
+    contributing_paths : numpy.ndarray
+        Shape (3,): paths that brought light to the eye, over all batches
+        (:attr:`clsky.montecarlo.MonteCarloResult.contributing_paths`).
     """
 
     radiance: np.ndarray
@@ -108,12 +111,21 @@ class Pooled:
     photons: int
     batches: int
     truncated_weight: np.ndarray
+    contributing_paths: np.ndarray
+
+    @property
+    def reliable(self) -> np.ndarray:
+        """Shape (3,) bool: the channels whose standard error measures their error (at least
+        :data:`clsky.montecarlo.MIN_CONTRIBUTING_PATHS` contributing paths)."""
+        return self.contributing_paths >= montecarlo.MIN_CONTRIBUTING_PATHS
 
     @property
     def relative_error(self) -> np.ndarray:
-        """standard_error / radiance per channel (inf where the radiance is 0)."""
+        """standard_error / radiance per channel; inf where the radiance is 0 or the standard error is no
+        measure of the error (:attr:`reliable`): a few contributing paths gave 0 +- 0 or a spuriously small
+        error, which stopped :func:`monte_carlo` before its target was met."""
         with np.errstate(divide="ignore", invalid="ignore"):
-            return np.where(self.radiance > 0, self.standard_error / self.radiance, np.inf)
+            return np.where((self.radiance > 0) & self.reliable, self.standard_error / self.radiance, np.inf)
 
 
 #: Paths per channel and batch when the caller does not say (at most ``max_photons``).
@@ -164,17 +176,18 @@ def monte_carlo(atmosphere, sun_elevation_deg, view, *, target=0.01, batch=None,
     batch = min(DEFAULT_BATCH, max_photons) if batch is None else check_integer("batch", batch, 2, max_photons)
     seed = check_integer("seed", seed, 0, montecarlo.MAX_SEED - max_photons // batch)
     max_orders = check_integer("max_orders", max_orders, 1, montecarlo.MAX_ORDERS_LIMIT, optional=True)
-    means, variances, truncated = [], [], []
+    means, variances, truncated, contributing = [], [], [], 0
     while True:
         result = montecarlo.simulate(atmosphere, 0.0, cos_view, cos_sun, math.radians(azimuth), photons=batch,
                                      seed=seed + len(means), max_orders=max_orders)
         means.append(result.radiance)
         variances.append(result.standard_error ** 2)
         truncated.append(result.truncated_weight)
+        contributing = contributing + result.contributing_paths
         k = len(means)
         radiance = np.mean(means, axis=0)
         error = np.sqrt(np.mean(variances, axis=0) / k)
-        pooled = Pooled(radiance, error, k * batch, k, np.mean(truncated, axis=0))
+        pooled = Pooled(radiance, error, k * batch, k, np.mean(truncated, axis=0), contributing)
         if np.all(pooled.relative_error <= target) or (k + 1) * batch > max_photons:
             return pooled
 
@@ -221,9 +234,12 @@ def ray_march(atmosphere, sun_elevation_deg, views=None, *, quality="default", s
 
 def deviation(marched, pooled: Pooled):
     """(relative, in standard errors) of ``marched`` (3,) against ``pooled``: marched / MC - 1 and
-    (marched - MC) / SE per channel (NaN where the tracer found no light: no estimate to compare with)."""
+    (marched - MC) / SE per channel (NaN where the tracer found no light: no estimate to compare with; the
+    SEs NaN too where its standard error is no measure of its error, :attr:`Pooled.reliable`: a few paths
+    showed a deviation of '+5203.7 SE')."""
     marched = np.asarray(marched, dtype=np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):   # no path reached the sunlit air: NaN, not inf
         relative = np.where(pooled.radiance > 0, marched / pooled.radiance - 1.0, np.nan)
-        sigmas = np.where(pooled.standard_error > 0, (marched - pooled.radiance) / pooled.standard_error, np.nan)
+        sigmas = np.where((pooled.standard_error > 0) & pooled.reliable,
+                          (marched - pooled.radiance) / pooled.standard_error, np.nan)
     return relative, sigmas

@@ -343,3 +343,39 @@ def test_bench_accuracy_replot_of_a_bad_csv_is_one_line(tmp_path):
         assert result.returncode == 1 and result.stdout == "", result.stdout + result.stderr
         assert result.stderr.count("\n") == 1 and result.stderr.startswith(expected), result.stderr
     assert not (tmp_path / "plots").exists() or list((tmp_path / "plots").iterdir()) == []
+
+
+def test_readme_sections_are_checked_before_the_work(tmp_path):
+    """A README section a bench writes was looked for after its work (minutes; bench_dusk had replaced its
+    picture by then): parse_arguments checks them first unless --no-readme. The README holds every
+    section a bench names."""
+    sys.path.insert(0, str(BENCH))
+    try:
+        import _report
+    finally:
+        sys.path.remove(str(BENCH))
+    readme = tmp_path / "README.md"
+    readme.write_text("<!-- bench:dusk -->\nold\n<!-- /bench:dusk -->\n")
+    _report.check_readme_sections(["dusk"], readme)
+    with pytest.raises(SystemExit, match=re.escape("README.md has no <!-- bench:montecarlo --> ... "
+                                                   "<!-- /bench:montecarlo --> section")):
+        _report.check_readme_sections(["dusk", "montecarlo"], readme)
+    named = set()
+    for script in BENCH.glob("bench_*.py"):
+        text = script.read_text()
+        assert "sections=" in text, f"{script.name} names no README section to check"
+        call = text.split("sections=", 1)[1]
+        named |= set(re.findall(r'"([\w-]+)"', call[:call.index(")\n")]))
+    written = {name for script in BENCH.glob("bench_*.py")
+               for name in re.findall(r'write_readme_section\(\s*"([\w-]+)"', script.read_text())}
+    assert written <= named, written - named
+    _report.check_readme_sections(sorted(named - {"black"}))
+
+
+def test_bench_help_says_its_first_sentence_whole():
+    """--help's description was the docstring's first line: three stopped mid-sentence ('... with three')."""
+    result = subprocess.run([sys.executable, "bench/bench_dusk.py", "--help"], cwd=ROOT, capture_output=True,
+                            text=True, timeout=120)
+    assert result.returncode == 0
+    assert "with three and with N = 15 wavelengths, and through the old and the new display." in \
+        " ".join(result.stdout.split())
