@@ -61,10 +61,13 @@ Examples
 
 from __future__ import annotations
 
+import contextlib
 import errno
+import io
 import math
 import os
 import pathlib
+import sys
 import tempfile
 
 import numpy as np
@@ -328,18 +331,68 @@ def save_exr(file, pixels, attributes=None):
 MAX_READ_PIXELS = 2**28
 
 
+def bindings_failure(error, printed=(), path=None) -> str:
+    """Why the OpenEXR bindings could not read a file (at ``path``), for a message naming it: their exception
+    ``error`` and the lines their library ``printed`` meanwhile (the file's name and 'Warning: ' taken off).
+    A damaged or cut pixel table left the bindings with no part ('Invalid part index '0': file has 0
+    parts.', wrong about the file), the cause in a line they printed; a string attribute of other text than
+    UTF-8 (Latin-1, which exrheader and OpenImageIO read) raised Python's UnicodeDecodeError, as if the file
+    were damaged."""
+    if isinstance(error, UnicodeDecodeError):
+        return "a string attribute holds text that is not UTF-8, which the OpenEXR bindings cannot read"
+    message = str(error).splitlines()[0] if str(error) else repr(error)
+    if "has 0 parts" in message:
+        causes = (line.removeprefix(f"{path}: ").removeprefix("Warning: ").strip() for line in printed)
+        cause = next((line for line in causes if line), "")
+        return "its pixel data is damaged or cut short" + (f" ({cause})" if cause else "")
+    return message
+
+
+@contextlib.contextmanager
+def _library_output(lines):
+    """Within the block, the process's stdout and stderr (file descriptors 1 and 2) go to a temporary file,
+    whose lines are appended to ``lines`` after it: the OpenEXR library prints its read errors ('Warning:
+    Exception raised reading pixel data ...' on stdout, which 2>/dev/null kept, three lines on stderr) beside
+    the exception the bindings raise. What other threads print meanwhile goes there too."""
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    saved = [os.dup(1), os.dup(2)]
+    python = io.StringIO()      # the bindings' own warning goes through sys.stdout (pybind11's print)
+    with tempfile.TemporaryFile() as sink:
+        try:
+            os.dup2(sink.fileno(), 1)
+            os.dup2(sink.fileno(), 2)
+            with contextlib.redirect_stdout(python), contextlib.redirect_stderr(python):
+                yield
+        finally:
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            for descriptor in saved:
+                os.close(descriptor)
+            sink.seek(0)
+            lines.extend(python.getvalue().splitlines() + sink.read().decode("utf-8", "replace").splitlines())
+
+
 def read_exr(path):
-    """(pixels (H, W, 3) float16 or float32 as stored, header dict) of an RGB (or RGBA: its R, G, B) EXR
-    file whose pixels are radiance, as clsky's frames are: finite and >= 0.
+    """(pixels (H, W, 3) float16 or float32 as stored, header dict) of a single-part RGB (or RGBA: its R, G,
+    B) EXR file whose pixels are radiance, as clsky's frames are: finite and >= 0, in Rec. 709 / sRGB
+    primaries (or without ``chromaticities``), their data window the whole display window.
+
+    The OpenEXR library's own lines about a damaged file go into the error's message, not onto stdout and
+    stderr (:func:`_library_output`).
 
     Raises
     ------
     FileNotFoundError, IsADirectoryError
         No such file, or a directory.
     ValueError
-        Not a readable EXR file (the bindings' RuntimeError, named), a data window of more than
-        :data:`MAX_READ_PIXELS`, no R, G, B channels, or pixels that are not half or float numbers, finite
-        and >= 0 (NaN, infinities, negative or integer pixels were returned as they were).
+        Not a readable EXR file (the bindings' error, named: :func:`bindings_failure`), a data window of
+        more than :data:`MAX_READ_PIXELS` or that is not the display window (the pixels' place in the image
+        was dropped), more than one part (the first was read without a word), chromaticities other than
+        Rec. 709's (an ACES file's were taken for sRGB), no R, G, B channels, or pixels that are not half or
+        float numbers, finite and >= 0 (NaN, infinities, negative or integer pixels were returned as they
+        were).
     """
     OpenEXR = require_openexr()
     path = as_path(path)
@@ -348,23 +401,24 @@ def read_exr(path):
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file" if not path.exists() else f"{path}: not a regular file")
     def read(header_only):
-        """(header, channels' names, R, G, B pixels or None) by the bindings, their errors (RuntimeError and
-        others for a bad file) named as the file's."""
+        """(header, parts, channels' names, R, G, B pixels or None) by the bindings, their errors (RuntimeError
+        and others for a bad file) named as the file's."""
+        printed = []
         try:
-            with OpenEXR.File(str(path), header_only=header_only) as exr:
-                header = dict(exr.header())
+            with _library_output(printed), OpenEXR.File(str(path), header_only=header_only) as exr:
+                header, parts = dict(exr.header()), len(exr.parts)
                 if header_only:
-                    return header, [], None
+                    return header, parts, [], None
                 channels = exr.channels()         # emptied when the file closes: its names taken now
                 rgb = next((channels[name].pixels for name in ("RGB", "RGBA") if name in channels), None)
-                return header, sorted(channels), None if rgb is None else np.array(rgb)[..., :3]
+                return header, parts, sorted(channels), None if rgb is None else np.array(rgb)[..., :3]
         except MemoryError:
             raise
         except Exception as error:  # noqa: BLE001
-            raise ValueError(f"{path}: not a readable EXR file "
-                             f"({str(error).splitlines()[0] if str(error) else error})") from None
+            raise ValueError(f"{path}: not a readable EXR file ({bindings_failure(error, printed, path)})") from None
 
-    window = read(header_only=True)[0].get("dataWindow")
+    header, parts, _, _ = read(header_only=True)
+    window = header.get("dataWindow")
     try:
         (x0, y0), (x1, y1) = window
         pixel_count = (int(x1) - int(x0) + 1) * (int(y1) - int(y0) + 1)
@@ -373,7 +427,8 @@ def read_exr(path):
     if not 0 < pixel_count <= MAX_READ_PIXELS:
         raise ValueError(f"{path}: its data window holds {pixel_count} pixels, the reader takes 1 to "
                          f"{MAX_READ_PIXELS}")
-    header, names, pixels = read(header_only=False)
+    _check_placed_rgb(path, header, parts)
+    header, _, names, pixels = read(header_only=False)
     if pixels is None:
         raise ValueError(f"{path}: no R, G, B channels (has {names})")
     if pixels.dtype not in (np.float16, np.float32):
@@ -381,3 +436,24 @@ def read_exr(path):
     if pixels.size and not (pixels.min() >= 0 and pixels.max() <= np.finfo(pixels.dtype).max):   # NaN fails both
         raise ValueError(f"{path}: its pixels hold NaN, infinite or negative values: no radiance")
     return pixels, header
+
+
+def window_text(box) -> str:
+    """'(x0, y0)-(x1, y1)' of an EXR window (two int pairs), as read_exr's and clsky info's lines show it."""
+    (x0, y0), (x1, y1) = box
+    return f"({int(x0)}, {int(y0)})-({int(x1)}, {int(y1)})"
+
+
+def _check_placed_rgb(path, header, parts):
+    """ValueError naming ``path`` unless its pixels are what :func:`read_exr` returns them as: one part, the
+    data window the display window, Rec. 709 chromaticities (or none)."""
+    if parts != 1:
+        raise ValueError(f"{path}: it has {parts} parts; the reader takes single-part images")
+    display = header.get("displayWindow")
+    if display is not None and window_text(display) != window_text(header["dataWindow"]):
+        raise ValueError(f"{path}: its data window {window_text(header['dataWindow'])} is not its display window "
+                         f"{window_text(display)}; the reader takes whole images")
+    chromaticities = header.get("chromaticities")
+    if chromaticities is not None and not np.allclose(np.ravel(chromaticities), REC709_CHROMATICITIES, atol=1e-4):
+        shown = " ".join(f"{v:g}" for v in np.ravel(chromaticities))
+        raise ValueError(f"{path}: its chromaticities ({shown}) are not Rec. 709's: the reader returns linear sRGB")

@@ -9,6 +9,7 @@ to name the option the user typed (``--size W must be ...``).
 from __future__ import annotations
 
 import importlib
+import decimal
 import math
 import numbers
 
@@ -53,7 +54,8 @@ def short(value) -> str:
             return text
         if len(str(abs(value))) <= _MAX_INTEGER_DIGITS:    # 2**64 is not 1.84467e+19, the bound 2**64 - 1
             return str(value)
-        return f"{'-' if value < 0 else ''}1e+{len(str(abs(value))) - 1}"
+        mantissa, exponent = format(decimal.Decimal(value), ".5e").split("e")     # 10**400 - 1 is 1e+400
+        return f"{mantissa.rstrip('0').rstrip('.')}e{exponent}"
     if isinstance(value, numbers.Real):
         text = f"{float(value):g}"
         exact = not math.isfinite(value) or float(text) == float(value)

@@ -253,18 +253,24 @@ def _exr(path):
         if name in types and types[name] != kind:
             raise TableFormatError(f"{path}: not a readable EXR file (its {name} attribute is a {types[name]!r:.40}, "
                                    f"not a {kind}: damaged)")
+    from .anim.exr import bindings_failure, window_text
+
     try:                            # the header alone: damaged pixels are not info's to decode
         with OpenEXR.File(str(path), header_only=True) as exr:
-            header = dict(exr.header())
+            header, parts = dict(exr.header()), [part.name() for part in exr.parts]
         channels = [channel.name for channel in header.get("channels", [])]
     except Exception as error:  # noqa: BLE001  (the bindings raise RuntimeError and others for a bad file)
-        raise TableFormatError(f"{path}: not a readable EXR file ({str(error).splitlines()[0] if str(error) else error})") \
-            from None
+        raise TableFormatError(f"{path}: not a readable EXR file ({bindings_failure(error, path=path)})") from None
     window = header.get("dataWindow")
     items = [("kind", "OpenEXR image"),
              ("size", "-" if window is None else f"{window[1][0] - window[0][0] + 1} x {window[1][1] - window[0][1] + 1}"
                                                   f" pixels, channels {', '.join(channels)}"),
              ("clsky version", header.get("clskyVersion", "- (not written by clsky)"))]
+    if len(parts) > 1:              # the first part was described without a word of the others
+        items.append(("parts", f"{len(parts)} ({', '.join(map(repr, parts))}; this is the first's header)"))
+    display = header.get("displayWindow")
+    if window is not None and display is not None and window_text(window) != window_text(display):
+        items.append(("windows", f"data {window_text(window)} in display {window_text(display)}"))
     for name in sorted(header):
         if name in ("clskyVersion", "scene", "dataWindow", "displayWindow", "channels"):
             continue

@@ -67,6 +67,7 @@ atmosphere, none of 200 000 paths per channel survives 30 orders).
 from __future__ import annotations
 
 import dataclasses
+import decimal
 import math
 
 import numpy as np
@@ -703,7 +704,10 @@ def _shown(value) -> str:
         return f"{value!r:.40} ({type(value).__name__})"
     if isinstance(value, (int, np.integer)):       # whole where %g would round it (2**64 is not 1e+19)
         digits = str(abs(int(value)))
-        return str(value) if len(digits) <= 30 else f"{'-' if value < 0 else ''}{digits[0]}e+{len(digits) - 1}"
+        if len(digits) <= 30:
+            return str(value)
+        mantissa, exponent = format(decimal.Decimal(int(value)), ".5e").split("e")
+        return f"{mantissa.rstrip('0').rstrip('.')}e{exponent}"
     text = f"{float(value):g}"
     return text if not math.isfinite(value) or float(text) == float(value) else repr(float(value))
 

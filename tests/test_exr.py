@@ -647,6 +647,48 @@ def test_radiance_scales_and_resolution_lines_as_radiance_reads_them(tmp_path):
         read_rgbe_header(tmp_path / "huge.hdr")
 
 
+def test_read_exr_takes_whole_single_part_srgb_images_and_says_why_not(tmp_path, capfd):
+    """From a probe of HDR files (2026-12-07): a data window inside a larger display window was returned
+    without its place, a second part was dropped without a word and ACES chromaticities were taken for
+    sRGB; a cut file printed the library's lines on stdout and stderr and was 'Invalid part index '0': file
+    has 0 parts.'; a Latin-1 attribute made a valid file 'not a readable EXR file ('utf-8' codec ...)'.
+    Each is now one message naming the file and why, nothing printed; clsky info shows the windows and
+    parts."""
+    OpenEXR = pytest.importorskip("OpenEXR")
+    from clsky.info import describe
+
+    rgb = np.ones((24, 40, 3), np.float32)
+    plain = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+
+    def box(x0, y0, x1, y1):
+        return np.array([x0, y0], np.int32), np.array([x1, y1], np.int32)
+
+    OpenEXR.File({**plain, "dataWindow": box(10, 5, 49, 28), "displayWindow": box(0, 0, 59, 39)},
+                 {"RGB": rgb}).write(str(tmp_path / "window.exr"))
+    OpenEXR.File([OpenEXR.Part(dict(plain), {"RGB": rgb}, "beauty"), OpenEXR.Part(dict(plain), {"RGB": 9 * rgb}, "other")]) \
+        .write(str(tmp_path / "parts.exr"))
+    aces = (0.7347, 0.2653, 0.0, 1.0, 0.0001, -0.077, 0.32168, 0.33767)
+    OpenEXR.File({**plain, "chromaticities": aces}, {"RGB": rgb}).write(str(tmp_path / "aces.exr"))
+    good = write_exr(tmp_path / "good.exr", np.random.default_rng(1).random((64, 64, 3)), attributes={"note": "cafe"})
+    (tmp_path / "cut.exr").write_bytes(good.read_bytes()[:len(good.read_bytes()) * 2 // 3])
+    data = good.read_bytes()
+    at = data.index(b"cafe") + 3
+    (tmp_path / "latin1.exr").write_bytes(data[:at] + b"\xe9" + data[at + 1:])
+    capfd.readouterr()
+    for name, message in (("window", "its data window (10, 5)-(49, 28) is not its display window (0, 0)-(59, 39)"),
+                          ("parts", "it has 2 parts; the reader takes single-part images"),
+                          ("aces", "its chromaticities (0.7347 0.2653 0 1 0.0001 -0.077 0.32168 0.33767) are not "
+                                   "Rec. 709's"),
+                          ("cut", "not a readable EXR file (its pixel data is damaged or cut short ("),
+                          ("latin1", "not a readable EXR file (a string attribute holds text that is not UTF-8")):
+        with pytest.raises(ValueError, match=rf"^{re.escape(str(tmp_path / name))}.exr: {re.escape(message)}"):
+            read_exr(tmp_path / f"{name}.exr")
+    assert capfd.readouterr() == ("", "")                   # the library's lines went into the messages
+    assert "windows             data (10, 5)-(49, 28) in display (0, 0)-(59, 39)" in describe(tmp_path / "window.exr")
+    assert "parts               2 ('beauty', 'other'; this is the first's header)" in describe(tmp_path / "parts.exr")
+    assert np.array_equal(read_exr(good)[0], read_exr(good)[0]) and capfd.readouterr() == ("", "")
+
+
 def test_read_exr_takes_radiance_only(tmp_path):
     """read_exr returned NaN, infinite, negative and integer pixels as they were, said 'has []' for any file
     without an RGB layer (the bindings empty their channels when the file closes) and refused an RGBA file;
