@@ -99,6 +99,12 @@ def _header_value(value):
     return text.replace("\n", " ")
 
 
+#: EXR attributes (:func:`clsky.anim.exr.frame_attributes`) that Radiance's header has a line of its own for:
+#: the primaries and white of the pixels, read by Radiance's tools and ImageMagick (which listed an unknown
+#: 'hdr:chromaticities').
+RADIANCE_NAMES = {"chromaticities": "PRIMARIES"}
+
+
 def save_rgbe(file, rgbe, attributes=None):
     """Write ``rgbe`` (H, W, 4) uint8, from :func:`encode_rgbe`, and ``attributes`` to ``file`` as it
     is, not atomically (the step inside :func:`write_rgbe`'s and :class:`clsky.anim.writers.FrameWriter`'s
@@ -110,9 +116,9 @@ def save_rgbe(file, rgbe, attributes=None):
             continue
         if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", name):
             raise ValueError(f"attribute names must be identifiers, got {name!r}")
-        if name in ("FORMAT", "SOFTWARE", "EXPOSURE"):     # the file's own lines (EXPOSURE would scale its pixels)
-            raise ValueError(f"attribute name {name!r} is the file's own header line")
-        lines.append(f"{name}= {_header_value(value)}")
+        if name in ("FORMAT", "SOFTWARE", "EXPOSURE", "COLORCORR", "PRIMARIES"):  # the file's own lines (the
+            raise ValueError(f"attribute name {name!r} is the file's own header line")  # first two scale pixels)
+        lines.append(f"{RADIANCE_NAMES.get(name, name)}= {_header_value(value)}")
     head = ("\n".join(lines) + f"\n\n-Y {height} +X {width}\n").encode("ascii", "replace")
     if len(head) > _MAX_HEADER:          # clsky's readers read the header from the first 64 KiB
         raise ValueError(f"attributes must make a header of at most {_MAX_HEADER} bytes, got {len(head)}")
@@ -258,6 +264,20 @@ def _check_scale(path, header):
                              f"scale (COLORCORR 1 1 1 or none) are read")
 
 
+def _check_primaries(path, header):
+    """ValueError unless the pixels' ``PRIMARIES=`` (if any) are Rec. 709's and D65, as the reader returns
+    them (linear sRGB), as :func:`clsky.anim.exr.read_exr` checks an EXR's chromaticities."""
+    if "PRIMARIES" not in header:
+        return
+    from .exr import REC709_CHROMATICITIES
+
+    values = [_number(text) for text in header["PRIMARIES"].split()]
+    if len(values) != 8 or None in values or not all(math.isclose(v, w, abs_tol=1e-4)
+                                                     for v, w in zip(values, REC709_CHROMATICITIES)):
+        raise ValueError(f"{path}: its PRIMARIES ({header['PRIMARIES']!r:.60}) are not Rec. 709's: the reader "
+                         f"returns linear sRGB")
+
+
 def read_rgbe(path):
     """(pixels (H, W, 3) float64, header {NAME: text}) of a Radiance file with a ``-Y H +X W``
     resolution line, its scan lines flat or in the new run-length format (runs and literals); the old
@@ -271,6 +291,7 @@ def read_rgbe(path):
             raise ValueError(f"{path}: its FORMAT is {header['FORMAT']!r:.40}: only 32-bit_rle_rgbe (R, G, B) is "
                              f"read")
         _check_scale(path, header)
+        _check_primaries(path, header)
         _check_size(path, height, width, size - offset)
         stream.seek(offset)
         body = memoryview(stream.read())

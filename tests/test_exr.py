@@ -433,6 +433,8 @@ def test_panorama_rgbe_frames(panoramas):
         assert (np.abs(pixels - frame) <= frame.max(axis=2, keepdims=True) / 256.0).all()   # RGBE's mantissas
         assert header["envmap"] == "latlong" and header["clskyVersion"] == clsky.__version__
         assert float(header["sunElevationDeg"]) == pytest.approx(90.0 - row["sun_zenith_deg"], abs=1e-6)
+        # the primaries in Radiance's own line (an unknown 'chromaticities=' line to Radiance and ImageMagick)
+        assert header["PRIMARIES"] == "0.64 0.33 0.3 0.6 0.15 0.06 0.3127 0.329" and "chromaticities" not in header
 
 
 def test_mitsuba_loads_the_panorama(panoramas, mitsuba):
@@ -665,8 +667,8 @@ def test_read_exr_takes_whole_single_part_srgb_images_and_says_why_not(tmp_path,
 
     OpenEXR.File({**plain, "dataWindow": box(10, 5, 49, 28), "displayWindow": box(0, 0, 59, 39)},
                  {"RGB": rgb}).write(str(tmp_path / "window.exr"))
-    OpenEXR.File([OpenEXR.Part(dict(plain), {"RGB": rgb}, "beauty"), OpenEXR.Part(dict(plain), {"RGB": 9 * rgb}, "other")]) \
-        .write(str(tmp_path / "parts.exr"))
+    parts = [OpenEXR.Part(dict(plain), {"RGB": rgb}, "beauty"), OpenEXR.Part(dict(plain), {"RGB": 9 * rgb}, "other")]
+    OpenEXR.File(parts).write(str(tmp_path / "parts.exr"))
     aces = (0.7347, 0.2653, 0.0, 1.0, 0.0001, -0.077, 0.32168, 0.33767)
     OpenEXR.File({**plain, "chromaticities": aces}, {"RGB": rgb}).write(str(tmp_path / "aces.exr"))
     good = write_exr(tmp_path / "good.exr", np.random.default_rng(1).random((64, 64, 3)), attributes={"note": "cafe"})
@@ -723,13 +725,20 @@ def test_read_exr_takes_radiance_only(tmp_path):
 
 
 def test_rgbe_refuses_an_attribute_named_as_its_own_header_lines(tmp_path):
-    """An attribute FORMAT (or SOFTWARE) added a second line of that name, which won on reading."""
-    from clsky.anim.rgbe import write_rgbe
+    """An attribute FORMAT (or SOFTWARE) added a second line of that name, which won on reading; EXPOSURE,
+    COLORCORR and PRIMARIES would say the pixels are at another scale or in other primaries. A file whose
+    PRIMARIES are not Rec. 709's is refused on reading, as an EXR's chromaticities are."""
+    from clsky.anim.rgbe import read_rgbe, write_rgbe
 
-    for name in ("FORMAT", "SOFTWARE"):
+    for name in ("FORMAT", "SOFTWARE", "EXPOSURE", "COLORCORR", "PRIMARIES"):
         with pytest.raises(ValueError, match=f"attribute name '{name}' is the file's own header line"):
             write_rgbe(tmp_path / "x.hdr", np.ones((2, 8, 3)), attributes={name: "x"})
     assert _listing(tmp_path) == []
+    aces = (0.7347, 0.2653, 0.0, 1.0, 0.0001, -0.077, 0.32168, 0.33767)
+    write_rgbe(tmp_path / "aces.hdr", np.ones((2, 8, 3)), attributes={"chromaticities": aces})
+    with pytest.raises(ValueError, match=r"its PRIMARIES \('0.7347 0.2653 0.0 1.0 0.0001 -0.077 0.32168 0.33767'\) are "
+                                         r"not Rec. 709's"):
+        read_rgbe(tmp_path / "aces.hdr")
 
 
 def test_frame_writer_rgbe_frames(tmp_path):
