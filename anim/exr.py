@@ -405,13 +405,19 @@ def read_exr(path):
         and others for a bad file) named as the file's."""
         printed = []
         try:
-            with _library_output(printed), OpenEXR.File(str(path), header_only=header_only) as exr:
+            # channel by channel: the bindings' RGB view refused a valid file of half R, B and float G
+            with _library_output(printed), OpenEXR.File(str(path), header_only=header_only,
+                                                        separate_channels=True) as exr:
                 header, parts = dict(exr.header()), len(exr.parts)
                 if header_only:
                     return header, parts, [], None
                 channels = exr.channels()         # emptied when the file closes: its names taken now
-                rgb = next((channels[name].pixels for name in ("RGB", "RGBA") if name in channels), None)
-                return header, parts, sorted(channels), None if rgb is None else np.array(rgb)[..., :3]
+                if not all(name in channels for name in "RGB"):
+                    return header, parts, sorted(channels), None
+                planes = [np.asarray(channels[name].pixels) for name in "RGB"]
+                dtype = np.result_type(*planes)    # half and float together: float
+                pixels = np.stack([plane.astype(dtype, copy=False) for plane in planes], axis=-1)
+                return header, parts, sorted(channels), pixels
         except MemoryError:
             raise
         except Exception as error:  # noqa: BLE001
@@ -446,7 +452,10 @@ def window_text(box) -> str:
 
 def _check_placed_rgb(path, header, parts):
     """ValueError naming ``path`` unless its pixels are what :func:`read_exr` returns them as: one part, the
-    data window the display window, Rec. 709 chromaticities (or none)."""
+    data window the display window, Rec. 709 chromaticities (or none), flat (not deep) pixels."""
+    if "deep" in str(header.get("type", "")):
+        raise ValueError(f"{path}: its pixels are deep data (samples at several depths a pixel); the reader takes "
+                         f"flat images")
     if parts != 1:
         raise ValueError(f"{path}: it has {parts} parts; the reader takes single-part images")
     display = header.get("displayWindow")

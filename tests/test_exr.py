@@ -689,6 +689,16 @@ def test_read_exr_takes_whole_single_part_srgb_images_and_says_why_not(tmp_path,
     assert "windows             data (10, 5)-(49, 28) in display (0, 0)-(59, 39)" in describe(tmp_path / "window.exr")
     assert "parts               2 ('beauty', 'other'; this is the first's header)" in describe(tmp_path / "parts.exr")
     assert np.array_equal(read_exr(good)[0], read_exr(good)[0]) and capfd.readouterr() == ("", "")
+    # channels of mixed types make a valid file that the bindings' RGB view refused ('cannot coalesce'):
+    # read channel by channel, as float; a layer's channels are named in full when no R, G, B are there
+    half, full = np.full((24, 40), 0.5, np.float16), np.full((24, 40), 0.25, np.float32)
+    OpenEXR.File(dict(plain), {"R": half, "G": full, "B": half}).write(str(tmp_path / "mixed.exr"))
+    pixels, _ = read_exr(tmp_path / "mixed.exr")
+    assert pixels.dtype == np.float32 and pixels[0, 0].tolist() == [0.5, 0.25, 0.5]
+    OpenEXR.File(dict(plain), {f"diffuse.{c}": full for c in "RGB"}).write(str(tmp_path / "layer.exr"))
+    with pytest.raises(ValueError, match=re.escape("no R, G, B channels (has ['diffuse.B', 'diffuse.G', "
+                                                   "'diffuse.R'])")):
+        read_exr(tmp_path / "layer.exr")
 
 
 def test_read_exr_takes_radiance_only(tmp_path):
