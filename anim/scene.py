@@ -34,6 +34,7 @@ import datetime
 import json
 import math
 import pathlib
+import re
 import sys
 
 import clsky
@@ -230,6 +231,9 @@ def load_scene(path, parser):
     values = {}
     for section, table in document.items():
         sections = ", ".join(f"[{s}]" for s in SECTIONS)
+        if isinstance(table, list) and table and all(isinstance(item, dict) for item in table):
+            raise UsageError(f"{path}: [[{section}]] makes an array of tables; a scene's keys go under one "
+                             f"[{section}] section")
         if not isinstance(table, dict):
             raise UsageError(f"{path}: {section} = {_toml_value(table)} is outside a section (keys go under "
                              f"{sections})")
@@ -354,6 +358,9 @@ def _toml_value(value):
         return value.isoformat()
     if isinstance(value, (list, tuple)):
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, dict):     # a table a scene wrongly holds, shown in messages as TOML (a repr before)
+        keys = (k if re.fullmatch(r"[A-Za-z0-9_-]+", str(k)) else _toml_value(str(k)) for k in value)
+        return "{" + ", ".join(f"{k} = {_toml_value(v)}" for k, v in zip(keys, value.values())) + "}"
     # a TOML basic string: JSON's escapes are TOML's, and TOML forbids DEL too (U+007F), which JSON leaves
     return json.dumps(str(value), ensure_ascii=False).replace("\x7f", "\\u007f")
 

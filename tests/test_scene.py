@@ -219,6 +219,11 @@ def test_the_command_line_wins_and_says_so(tmp_path, capsys, monkeypatch):
     ("animate", f"[sun]\nlocation = [{'9' * 400}, 0]\n",
      "s.toml: sun.location must be a list of 2 numbers (of at most about 1.8e308 in size), got [1e+400, 0]"),
     ("animate", f"[camera]\nsize = {'9' * 400}\n", "s.toml: camera.size must be an integer in [16, 8192], got 1e+400"),
+    # a table where a value goes was shown by its Python repr in quotes ("{'x': 48}"), and [[camera]] was
+    # told to put its keys under [camera] (probe of input files)
+    ("animate", "[camera]\nsize.x = 48\n", "s.toml: camera.size must be an integer, got {x = 48}"),
+    ("animate", "[[camera]]\nsize = 48\n", "s.toml: [[camera]] makes an array of tables; a scene's keys go under "
+                                          "one [camera] section"),
     ("animate", f"[display]\nexposure = {'9' * 5000}\n",
      "--scene s.toml: not a valid TOML file: a number of more than 4300 digits"),
     ("render", "[sun]\nsun_elevation_deg = 100.0\n", "s.toml: sun.sun_elevation_deg must be in [-90, 90] degrees, got 100"),
