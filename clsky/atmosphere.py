@@ -35,7 +35,8 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ParameterError, as_real_array, check_instance, is_finite_real, is_real_number
+from .errors import (ParameterError, as_real_array, check_instance, dataclass_from_dict, is_finite_real,
+                     is_real_number)
 from .ozone import DOBSON_UNIT, cross_section_serdyuchenko2014
 
 __all__ = [
@@ -474,12 +475,7 @@ class AtmosphereParameters:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "AtmosphereParameters":
         """Inverse of :meth:`to_dict`; unknown fields raise ValueError."""
-        check_instance("an atmosphere's fields", data, dict, "a dict")
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = set(data) - known
-        if unknown:
-            raise ValueError(f"unknown atmosphere fields: {sorted(unknown)}")
-        return cls(**data)
+        return dataclass_from_dict(cls, data, "an atmosphere's fields", "atmosphere fields")
 
     def digest(self) -> str:
         """SHA-256 of the canonical JSON of every field: identifies the atmosphere of a saved table."""

@@ -9,6 +9,7 @@ to name the option the user typed (``--size W must be ...``).
 from __future__ import annotations
 
 import importlib
+import dataclasses
 import decimal
 import math
 import numbers
@@ -339,3 +340,14 @@ def ordered_items(value):
     if isinstance(value, (tuple, list)) or (isinstance(value, np.ndarray) and value.ndim == 1):
         return tuple(value)
     return None
+
+
+def dataclass_from_dict(cls, data, name: str, fields: str):
+    """``cls(**data)`` for ``data``, a dict of the dataclass ``cls``'s fields (the inverse of its
+    ``to_dict``); ValueError naming ``name`` for anything but a dict and ``fields`` for an unknown field
+    (an atmosphere's and a table's settings read back from a file)."""
+    check_instance(name, data, dict, "a dict")
+    unknown = set(data) - {field.name for field in dataclasses.fields(cls)}
+    if unknown:
+        raise ValueError(f"unknown {fields}: {sorted(unknown)}")
+    return cls(**data)

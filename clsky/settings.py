@@ -6,8 +6,8 @@ import dataclasses
 
 import numpy as np
 
-from .errors import (ParameterError, check_choice, check_instance, check_integer, is_finite_real, is_real_number,
-                     ordered_items)
+from .errors import (ParameterError, check_choice, check_integer, dataclass_from_dict, is_finite_real,
+                     is_real_number, ordered_items)
 
 __all__ = ["TableSettings", "MAPPINGS", "SAMPLINGS", "SUN_TRANSMITTANCE_METHODS", "MIE_LAYOUTS",
            "SCATTERING_MODES", "PARAMETERIZATIONS"]
@@ -283,9 +283,4 @@ class TableSettings:
     @classmethod
     def from_dict(cls, data: dict) -> "TableSettings":
         """Inverse of :meth:`to_dict`; unknown fields raise ValueError."""
-        check_instance("table settings", data, dict, "a dict")
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = set(data) - known
-        if unknown:
-            raise ValueError(f"unknown table settings: {sorted(unknown)}")
-        return cls(**data)
+        return dataclass_from_dict(cls, data, "table settings", "table settings")
