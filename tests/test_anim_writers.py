@@ -277,6 +277,27 @@ def test_mp4_is_tagged_bt709_with_the_srgb_transfer(tmp_path):
 
 
 @needs_ffmpeg
+def test_mp4_chroma_is_sited_as_decoders_assume(tmp_path):
+    """H.264 decoders take 4:2:0 chroma as sited 'left' (on the even luma columns) unless the stream says
+    otherwise; swscale centred it (the mean of each luma pair), half a pixel off at every sharp colour edge.
+    A red | blue edge after luma column 32: centred, the chroma sample of columns 32-33 is the midpoint of
+    red's U (102) and blue's (240), 171; sited at column 32, which is red, it is nearer red's (148
+    measured, the scaler's filter spreading a little of the blue; 2-3 levels of CRF 18's noise)."""
+    import subprocess
+
+    frame = np.zeros((64, 64, 3), np.uint8)
+    frame[:, :33], frame[:, 33:] = (255, 0, 0), (0, 0, 255)
+    with FrameWriter(mp4_path=tmp_path / "edge.mp4", fps=24, total_frames=2) as writer:
+        for index in range(2):
+            writer.write(index, frame)
+    raw = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-i", str(tmp_path / "edge.mp4"), "-f",
+                          "rawvideo", "-pix_fmt", "yuv420p", "-"], capture_output=True, timeout=60, check=True).stdout
+    u = np.frombuffer(raw[64 * 64:64 * 64 + 32 * 32], np.uint8).reshape(32, 32)
+    assert abs(int(u[10, 12]) - 102) <= 3 and abs(int(u[10, 20]) - 240) <= 3      # red and blue away from it
+    assert u[10, 16] < 160, u[10, 13:20]                                          # not the centred 171
+
+
+@needs_ffmpeg
 def test_mp4_refuses_to_overwrite(tmp_path):
     target = tmp_path / "sky.mp4"
     target.write_bytes(b"old movie")
@@ -391,6 +412,22 @@ def test_encode_png_decodes_to_the_same_pixels(shape, mode, deflate):
     with Image.open(io.BytesIO(data)) as decoded:
         assert decoded.mode == mode and decoded.size == (shape[1], shape[0])
         assert_array_equal(np.asarray(decoded), image)
+
+
+def test_encode_png_tags_its_images_as_srgb(tmp_path):
+    """The frames carried no colour space (a probe of the outputs): an sRGB chunk now, with the gAMA and
+    cHRM that decoders without sRGB support read (the PNG specification's values, as Pillow reads them
+    back), before the image data; clsky info still reads the file."""
+    from clsky.info import describe
+
+    data = encode_png(np.zeros((4, 5, 3), np.uint8), {"clsky_version": "9.9"})
+    with Image.open(io.BytesIO(data)) as decoded:
+        decoded.load()
+        assert decoded.info["srgb"] == 0 and decoded.info["gamma"] == pytest.approx(1 / 2.2, abs=1e-5)
+        assert decoded.info["chromaticity"] == (0.3127, 0.329, 0.64, 0.33, 0.3, 0.6, 0.15, 0.06)
+    assert data.index(b"sRGB") < data.index(b"IDAT") and data.index(b"cHRM") < data.index(b"IDAT")
+    (tmp_path / "x.png").write_bytes(data)
+    assert "clsky version  9.9" in describe(tmp_path / "x.png")
 
 
 def test_encode_png_splits_its_data_over_idat_chunks(monkeypatch):
