@@ -634,6 +634,26 @@ def _font():
     return ImageFont.load_default()
 
 
+def _fitted_label(font, label, width, height):
+    """``label`` as drawn on a panel of ``width`` x ``height`` pixels: whole where its box fits the panel,
+    else cut to the letters that do and ending in '.', none where not two letters fit (a 16-pixel frame
+    was all label; at 64 pixels 'sky-view map' ran into the next panel)."""
+    if not label:
+        return None
+    text = str(label)
+
+    def fits(candidate):
+        left, top, right, bottom = font.getbbox(candidate)
+        return 3 + right + 1 <= width and 2 + bottom <= height
+
+    if fits(text):
+        return text
+    for end in range(len(text) - 1, 1, -1):
+        if fits(text[:end].rstrip() + "."):
+            return text[:end].rstrip() + "."
+    return None
+
+
 def _percent(value):
     return f"{100.0 * value:.3g}%"
 
@@ -778,12 +798,13 @@ def composite(panels, labels=None):
             gutter = np.empty((heights[0], _GUTTER, 3), dtype=np.uint8)
             gutter[...] = _GUTTER_COLOUR
             pieces.append(gutter)
+        label = _fitted_label(font, label, panel.shape[1], panel.shape[0])
         if label:
             image = Image.fromarray(np.ascontiguousarray(panel))
             draw = ImageDraw.Draw(image)
-            left, top, right, bottom = draw.textbbox((3, 2), str(label), font=font)
+            left, top, right, bottom = draw.textbbox((3, 2), label, font=font)
             draw.rectangle((left - 2, top - 1, right + 1, bottom), fill=(0, 0, 0))
-            draw.text((3, 2), str(label), fill=_TEXT_COLOUR, font=font)
+            draw.text((3, 2), label, fill=_TEXT_COLOUR, font=font)
             panel = np.asarray(image)
         pieces.append(panel)
     return np.concatenate(pieces, axis=1)

@@ -354,6 +354,18 @@ def test_composite_shape_gutters_and_labels():
         composite(panels, ["a"])
 
 
+def test_composite_labels_stay_inside_their_panels():
+    """A label wider than its panel ran over the gutter into the next panel (64 pixels: 'sky-view map'),
+    and a 16-pixel frame was all label: a label is cut to the letters that fit, ending in '.', and left
+    out where not two fit; a panel's pixels beyond the label's width are its own."""
+    for side, drawn in ((16, False), (24, True), (64, True), (128, True)):
+        panels = [np.full((side, side, 3), 200, np.uint8) for _ in range(2)]
+        result = composite(panels, ["sky-view map", "table lookup"])
+        assert np.any(result[:, :side] != 200) == drawn, side
+        assert np.all(result[:, side:side + 4] < 40), side                   # the gutter is untouched
+    assert np.all(composite([np.full((64, 64, 3), 200, np.uint8)], ["sky-view map " * 4])[:, 62:] == 200)
+
+
 # Temporal -------------------------------------------------------------------------------------------
 
 def test_temporal_jumps_find_an_injected_jump():
