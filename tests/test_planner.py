@@ -64,19 +64,35 @@ def test_margins_of_a_ground_fisheye():
     assert sun_margins(PHYSICAL, Scene((85.0, 90.0)), ray_march=False)[0] == pytest.approx(85.0 - 90.0 + 2 * GAMMA_GROUND)
     # a camera that sees 30 deg and up only: shorter rays, a smaller margin
     assert sun_margins(PHYSICAL, Scene((0.0, 10.0), view_elevations_deg=(30.0, 90.0)))[0] < 0.2 * GAMMA_GROUND
-    # from space, rays cross the whole atmosphere
-    assert sun_margins(PHYSICAL, Scene((0.0, 10.0), altitudes_m=(0.0, 2e5)))[0] == pytest.approx(2 * GAMMA_GROUND)
+    # from space (200 km, looking down), the limb's rays graze the ground and cross the atmosphere beyond it:
+    # acos(Rp / r) + acos(Rp / Ra) (until 2026-12-07 gamma_table, 20.2 deg, whatever the altitude)
+    space = Scene((0.0, 10.0), altitudes_m=(2e5, 2e5), view_elevations_deg=(-90.0, 0.0))
+    rp, ra = PHYSICAL.planet_radius, PHYSICAL.top_radius
+    limb = math.degrees(math.acos(rp / (rp + 2e5))) + GAMMA_GROUND
+    assert sun_margins(PHYSICAL, space)[0] == pytest.approx(limb, abs=1e-9)
+    # its lookups read the table where each ray enters the atmosphere, at that point's sun, both ways
+    entry = math.degrees(math.acos(ra / (rp + 2e5)))
+    assert sun_margins(PHYSICAL, space, ray_march=False) == pytest.approx((entry, entry + 2 * GAMMA_GROUND))
+    assert sun_margins(PHYSICAL, space, orders=False, ray_march=False) == pytest.approx((entry, entry))
+    # without higher orders a ray march over a reflecting ground still reads its sky irradiance at each
+    # ground point's sun (a black ground's is never read: the lookups' margin alone)
+    ground = math.degrees(math.acos(rp / (rp + 2e5)))
+    reflecting = PHYSICAL.replace(ground_albedo=0.1)
+    assert sun_margins(reflecting, space, orders=False) == pytest.approx((ground, ground))
+    assert sun_margins(PHYSICAL, space, orders=False) == pytest.approx((entry, entry))
 
 
-def _local_sun_elevation(h0, mu_v, mu_s, nu, fraction):
-    """Sun elevation [deg] at a fraction of each ray's length (physics.md: mu_sun(s) = (r0 mu_s + s nu) / r)."""
+def _local_sun_elevation(h0, mu_v, mu_s, nu, fraction, start_at=0.0):
+    """Sun elevation [deg] at a fraction of each ray's length inside the atmosphere, from ``start_at`` [m]
+    along it (where a ray from above enters) to where it leaves or meets the ground (physics.md:
+    mu_sun(s) = (r0 mu_s + s nu) / r)."""
     rp, ra = PHYSICAL.planet_radius, PHYSICAL.top_radius
     r0 = rp + h0
     to_ground_disc = r0 * r0 * (mu_v * mu_v - 1.0) + rp * rp
     hits = (mu_v < 0.0) & (to_ground_disc >= 0.0)
     length = np.where(hits, -r0 * mu_v - np.sqrt(np.maximum(to_ground_disc, 0.0)),
-                      -r0 * mu_v + np.sqrt(r0 * r0 * (mu_v * mu_v - 1.0) + ra * ra))
-    s = fraction * length
+                      -r0 * mu_v + np.sqrt(np.maximum(r0 * r0 * (mu_v * mu_v - 1.0) + ra * ra, 0.0)))
+    s = start_at + fraction * (length - start_at)
     r = np.sqrt(r0 * r0 + 2.0 * r0 * mu_v * s + s * s)
     return np.degrees(np.arcsin(np.clip((r0 * mu_s + s * nu) / r, -1.0, 1.0)))
 
@@ -108,6 +124,44 @@ def test_pixel_rays_move_the_sun_by_at_most_gamma_view():
     start = np.degrees(np.arcsin(mu_s))
     worst = max(np.abs(_local_sun_elevation(0.0, mu_v, mu_s, nu, f) - start).max() for f in np.linspace(0, 1, 17))
     assert GAMMA_GROUND * 0.9 < worst <= GAMMA_GROUND + 1e-9
+
+
+@pytest.mark.parametrize("altitude", [1e3, 3e4, 1.5e5, 4e5, 1e6])
+def test_rays_from_altitude_move_the_sun_by_at_most_the_margins(altitude):
+    """From inside the atmosphere and above its top (a probe found the far limb 7.1 % too bright in a
+    ray march from 1000 km and 7.3-22 % in the lookups from 400-1000 km): along every ray toward the
+    atmosphere, the local sun moves by at most gamma_view (the margin below, with higher orders and a ray
+    march), and where the ray enters the atmosphere (what a lookup reads from above) by at most the
+    lookups' margin; each margin within 0.1 deg of the largest move found (it is reached)."""
+    rng = np.random.default_rng(9)
+    n = 40000
+    rp, ra = PHYSICAL.planet_radius, PHYSICAL.top_radius
+    r0 = rp + altitude
+    mu_v, mu_s = rng.uniform(-1.0, 1.0, n), rng.uniform(-1.0, 1.0, n)
+    nu = mu_v * mu_s + np.sqrt((1 - mu_v**2) * (1 - mu_s**2)) * np.cos(rng.uniform(0.0, 2 * np.pi, n))
+    # and the worst rays, a sun on the horizon in their plane: just above the ground's horizon (they go on
+    # to the top), and from above, just below the top's (they enter the atmosphere near its tangent point)
+    horizons = [-math.sqrt(1 - (rp / r0) ** 2) + 1e-9, -math.sqrt(max(0.0, 1 - (ra / r0) ** 2)) - 1e-9]
+    grazing = np.repeat(horizons, 2)
+    mu_v = np.concatenate([mu_v, grazing])
+    mu_s = np.concatenate([mu_s, np.zeros(4)])
+    nu = np.concatenate([nu, np.sqrt(1 - grazing**2) * np.array([1.0, -1.0, 1.0, -1.0])])
+    start = np.degrees(np.arcsin(mu_s))
+    # a ray from above the top that meets it: its part inside, from where it enters
+    enter = np.zeros(mu_v.size)
+    if r0 > ra:
+        disc = r0 * r0 * (mu_v * mu_v - 1.0) + ra * ra
+        keep = (mu_v < 0.0) & (disc > 0.0)
+        mu_v, mu_s, nu, start, disc = mu_v[keep], mu_s[keep], nu[keep], start[keep], disc[keep]
+        enter = -r0 * mu_v - np.sqrt(disc)
+    scene = Scene((0.0, 10.0), altitudes_m=(altitude, altitude), view_elevations_deg=(-90.0, 90.0))
+    below = sun_margins(PHYSICAL, scene)[0]
+    entry_margin = sun_margins(PHYSICAL, scene, ray_march=False)[0]
+    moves = [np.abs(_local_sun_elevation(altitude, mu_v, mu_s, nu, f, start_at=enter) - start).max()
+             for f in np.linspace(0.0, 1.0, 33)]
+    assert max(moves) <= below + 1e-9 and max(moves) > below - 0.1
+    if r0 > ra:
+        assert moves[0] <= entry_margin + 1e-9 and moves[0] > entry_margin - 0.1
 
 
 def test_sun_axis_keeps_the_levels_spacing():
@@ -190,12 +244,14 @@ def test_the_higher_orders_are_kept_where_the_table_needs_them(cl_context):
     """An observer at 100 km sees almost no higher orders: the pilot drops them (orders = 1, no margins on the
     sun axis). A 4D table over a reflecting ground carries the ground's light in their channels, and refused
     orders = 1 after the plan's work (clsky render --method lut4d --altitude 1e5): keep_orders keeps them,
-    with the sun axis' margins they need."""
+    with the sun axis' margins they need: the table's own scatter reads them up to gamma_table above (its
+    rays looking up from the top cross no air, and need none below since 2026-12-07)."""
     scene = Scene((10.0, 20.0), altitudes_m=(1e5, 1e5))
     dropped = plan_scene(scene, ctx=cl_context)
     kept = plan_scene(scene, ctx=cl_context, keep_orders=True)
     assert dropped.table.orders == 1 and kept.table.orders == "auto"
-    assert kept.table.sun_cos_range[0] < dropped.table.sun_cos_range[0]       # the orders' margin below
+    above = math.sin(math.radians(20.0 + 2 * GAMMA_GROUND))
+    assert kept.table.sun_cos_range[1] == pytest.approx(above) and above > dropped.table.sun_cos_range[1]
     assert "kept: the table carries a reflecting ground's light in them" in kept.describe()
 
 
