@@ -327,6 +327,23 @@ def test_the_pilot_looks_where_the_cameras_look(cl_context):
     assert planner._higher_orders_share(physical, plan.table, sky, ctx=cl_context) == 0.0
 
 
+@pytest.mark.parametrize("albedo, lost", [(0.1, 0.029), (1.0, 0.108)])
+def test_the_pilot_counts_the_grounds_higher_orders(cl_context, albedo, lost):
+    """A camera on the ground looking at the ground: the pilot's first-order render kept every order's
+    sky light on the ground, so it found 'at most 0 %' and the plan dropped the orders, and the frames
+    lost 2.9 % (albedo 0.1) and 10.8 % (albedo 1) of their light (95th percentile, against the full table;
+    a probe of the planner, 2026-12-07). The first order's ground irradiance now: a share near the loss
+    (from the pilot's coarser table and march: within a factor of 1.6), the orders kept at 1 %."""
+    from clsky import planner
+
+    down = Scene((30.0, 31.0), view_elevations_deg=(-75.0, -15.0))
+    atmosphere = clsky.preset("physical").replace(ground_albedo=albedo)
+    plan = plan_scene(down, atmosphere=atmosphere, ctx=cl_context)
+    share = planner._higher_orders_share(atmosphere, plan.table, down, ctx=cl_context)
+    assert lost / 1.6 < share < lost * 1.6, share
+    assert plan.table.orders == "auto"
+
+
 # 4. Planned table against the full table --------------------------------------------------------------
 
 def _ray_marched(table, level, size=24):
