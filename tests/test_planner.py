@@ -344,6 +344,25 @@ def test_the_pilot_counts_the_grounds_higher_orders(cl_context, albedo, lost):
     assert plan.table.orders == "auto"
 
 
+def test_observers_high_above_the_ground_get_the_ray_march():
+    """The lookups' and the sky-view map's errors were measured from the ground: from 30 km the map was 1.0 %
+    off the ray march at the horizon, from 1000 km 13.9 %, where the plan said its 0.45 % fits (a probe of
+    the planner). Above RENDERER_ERRORS_MEASURED_UP_TO_M the plan ray-marches and says why; up to it, the
+    choice is the cost's (the map, for these 256 x 256 frames)."""
+    from clsky.planner import RENDERER_ERRORS_MEASURED_UP_TO_M
+
+    def plan_at(altitude):
+        return plan_scene(Scene((20.0, 21.0), altitudes_m=(altitude, altitude), view_elevations_deg=(-30.0, 30.0),
+                                pixels=256 * 256))
+
+    assert plan_at(RENDERER_ERRORS_MEASURED_UP_TO_M).renderer == "skyview"
+    high = plan_at(3e4)
+    assert high.renderer == "raymarch" and high.ray is not None
+    reason = dict((name, why) for name, _, why in high.decisions)["renderer"]
+    assert reason.startswith("the sky-view map 64 x 128's error was measured from the ground and holds to 10 km, "
+                             "not from 30 km"), reason
+
+
 # 4. Planned table against the full table --------------------------------------------------------------
 
 def _ray_marched(table, level, size=24):
