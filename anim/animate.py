@@ -24,6 +24,7 @@ import contextlib
 import dataclasses
 import datetime
 import functools
+import os
 import pathlib
 import threading
 import time
@@ -33,7 +34,7 @@ import numpy as np
 
 import clsky
 from clsky._cl import check_context, host_blas_single_threaded, host_cores, packed_reads
-from clsky._files import StagedWrites, check_output, check_suffix
+from clsky._files import StagedWrites, check_output, check_suffix, is_utf8
 from clsky.atmosphere import OVERRIDE_RANGES
 from clsky.errors import (ParameterError, check_choice, check_flag, check_instance, check_integer, check_real, counted,
                           is_real_number)
@@ -423,10 +424,11 @@ def _output(name, value):
         raise ParameterError(name, valid, value)
     try:
         check_suffix(value, ".mp4", name)
-    except ValueError as error:
-        if "NUL" in str(error):
+    except ValueError:
+        text = os.fspath(value)
+        if "\0" in text:
             valid += " without a NUL character"
-        elif "UTF-8" in str(error):
+        elif not is_utf8(text):
             valid += " in UTF-8 text (its name goes into the frames' metadata)"
         raise ParameterError(name, valid, value) from None
     return value
@@ -850,7 +852,8 @@ def convert_frames(renderer: SkyRenderer, config: AnimationConfig, frames):
 
 
 #: How near auto-exposure's limit a frame's EV counts as at it [EV]: the smoothing (:func:`clsky.anim.display.
-#: smoothed_ev`) halves the distance a frame, so a path that stays too dark to meter is within it in 6 frames.
+#: smoothed_ev`) halves the distance a frame, steps of 2 EV at most, so a path that stays too dark to meter is
+#: within it in 6 frames from 3 EV below it, in 8 from 10 EV below (the sun at -18 deg).
 EXPOSURE_LIMIT_MARGIN_EV = 0.05
 
 

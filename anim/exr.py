@@ -357,9 +357,19 @@ def _library_output(lines):
     for stream in (sys.stdout, sys.stderr):
         with contextlib.suppress(Exception):
             stream.flush()
-    saved = [os.dup(1), os.dup(2)]
     python = io.StringIO()      # the bindings' own warning goes through sys.stdout (pybind11's print)
-    with tempfile.TemporaryFile() as sink:
+    saved = []
+    try:                        # a closed descriptor (a daemon's, '>&-'), no room for the file: not caught
+        saved = [os.dup(1), os.dup(2)]
+        sink = tempfile.TemporaryFile()
+    except OSError:
+        for descriptor in saved:
+            os.close(descriptor)
+        with contextlib.redirect_stdout(python), contextlib.redirect_stderr(python):
+            yield
+        lines.extend(python.getvalue().splitlines())
+        return
+    with sink:
         try:
             os.dup2(sink.fileno(), 1)
             os.dup2(sink.fileno(), 2)

@@ -170,9 +170,10 @@ _MAX_HEADER = 1 << 16
 def _parse_header(data, path):
     """(height, width, header {NAME: text}, offset of the pixels) from the bytes ``data`` that begin a
     Radiance picture; ValueError naming ``path`` without the signature or a ``-Y H +X W`` resolution line
-    of at least one pixel each way (spaces between its words as Radiance's own reader takes them). A name
-    on several lines (Radiance's tools add an ``EXPOSURE=`` line per step, which multiply) has their values
-    joined by '; ', in order."""
+    of at least one pixel each way (spaces between its words as Radiance's own reader takes them). The
+    lines that scale the pixels, ``EXPOSURE=`` and ``COLORCORR=``, which Radiance's tools add a step at a
+    time and which multiply, have their values joined by '; ', in order; any other name on several lines
+    has its last value."""
     if not data.startswith(b"#?"):
         raise ValueError(f"{path}: not a Radiance picture (no '#?' signature)")
     end = data.find(b"\n\n")
@@ -193,8 +194,13 @@ def _parse_header(data, path):
     for text in data[:end].decode("ascii", "replace").split("\n")[1:]:
         if "=" in text and not text.startswith("#"):
             name, value = text.split("=", 1)
-            header[name] = f"{header[name]}; {value.strip()}" if name in header else value.strip()
+            joined = name in _SCALING_LINES and name in header
+            header[name] = f"{header[name]}; {value.strip()}" if joined else value.strip()
     return height, width, header, newline + 1
+
+
+#: Radiance header lines that scale the pixels, each line again: every one counts (:func:`_check_scale`).
+_SCALING_LINES = ("EXPOSURE", "COLORCORR")
 
 
 def _number(text):
@@ -223,7 +229,7 @@ def _open_picture(path):
         return open_regular_file(path)
     except IsADirectoryError:
         raise IsADirectoryError(f"{path}: a directory, not a Radiance picture") from None
-    except FileNotFoundError:
+    except (FileNotFoundError, NotADirectoryError):          # a path through a file: no such file either
         raise FileNotFoundError(f"{path}: no such file") from None
     except OSError as error:
         if error.errno == errno.EINVAL:

@@ -189,12 +189,13 @@ def _section_pattern(name):
     return begin, end, re.compile(re.escape(begin) + ".*?" + re.escape(end), re.S)
 
 
-def check_readme_sections(names, readme: pathlib.Path = README):
+def check_readme_sections(names, readme: pathlib.Path | None = None):
     """SystemExit unless ``readme`` holds every section ``names`` and its folder takes a new file (the README
     is replaced through a temporary there): a missing section was found after the work (minutes; up to
     818 s for bench_twilight), and bench_dusk had replaced its picture by then."""
     import os
 
+    readme = README if readme is None else readme
     text = readme.read_text()
     for name in names:
         begin, end, pattern = _section_pattern(name)

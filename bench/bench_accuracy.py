@@ -73,7 +73,7 @@ def main():
             try:               # the CSV's own errors name it, its line and column: one line, not a traceback
                 replot(args.replot, args.docs or (pathlib.Path(temporary) if args.smoke else DOCS), args.size)
             except OSError as error:
-                raise SystemExit(f"--replot {args.replot}: cannot read it ({error.strerror or error})") from None
+                raise SystemExit(f"--replot: {args.replot}: cannot read it ({error.strerror or error})") from None
             except ValueError as error:
                 raise SystemExit(f"--replot: {error}") from None
             return

@@ -94,7 +94,7 @@ def main():
     # each run's seeds its own: run n (an elevation's view, all orders or single scattering) takes seeds n span
     # to (n + 1) span - 1, one a batch (1000 i and 1000 i + 500 overlapped beyond 500 batches, and every
     # elevation took the same)
-    span = -(-max(args.max_photons, single_max) // batch)
+    span = -(-args.max_photons // batch)            # single scattering's cap is at most --max-photons
     runs = iter(range(0, 2 * len(elevations) * len(twilight.VIEWS) * span, span))
     for elevation in elevations:
         marched, settings[elevation] = twilight.ray_march(atmosphere, elevation, quality=args.quality,

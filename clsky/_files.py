@@ -112,18 +112,27 @@ def _check_names(path, option, suffix):
                          f"temporary name; at most {path_max - 1})")
 
 
-def _check_utf8(path, prefix=""):
-    """ValueError (its message starting with ``prefix``) for an output path that is not UTF-8 text: clsky
-    writes an output's name into text that must be UTF-8 (a frame's PNG text and EXR attributes hold its
-    scene, whose TOML names the output; ``--print-scene``'s TOML), and a name of other bytes
-    (``-o $'caf\\xe9.png'``) failed there, after the work, in Python's words ('surrogates not allowed')."""
-    text = os.fspath(path)
+def is_utf8(text: str) -> bool:
+    """Whether ``text`` (a path as Python reads it: bytes that are not UTF-8 become lone surrogates) is
+    UTF-8 text."""
     try:
         text.encode("utf-8")
     except UnicodeEncodeError:
+        return False
+    return True
+
+
+def _check_utf8(path, prefix=""):
+    """ValueError (its message starting with ``prefix``) for an output path that is not UTF-8 text: clsky
+    prints its outputs' names and writes them into text that must be UTF-8 (a frame's PNG text and EXR
+    attributes hold its scene, whose TOML names the output; ``--print-scene``'s TOML), and a name of other
+    bytes (``-o $'caf\\xe9.png'``) failed there, after the work, in Python's words ('surrogates not
+    allowed'). Every output (a table's save too) takes the one rule."""
+    text = os.fspath(path)
+    if not is_utf8(text):
         shown = os.fsencode(text).decode("utf-8", "backslashreplace")
-        raise ValueError(f"{prefix}{shown} is not UTF-8 text: clsky writes its outputs' names into their "
-                         f"metadata and scene files, which are UTF-8; rename it") from None
+        raise ValueError(f"{prefix}{shown} is not UTF-8 text: clsky prints its outputs' names and records "
+                         f"them in UTF-8 text; rename it") from None
 
 
 def _probe_directory(directory, option):

@@ -8,9 +8,9 @@ to name the option the user typed (``--size W must be ...``).
 
 from __future__ import annotations
 
-import importlib
 import dataclasses
 import decimal
+import importlib
 import math
 import numbers
 
@@ -18,14 +18,14 @@ import numpy as np
 
 __all__ = ["ParameterError", "NumericalError", "short", "counted", "is_real_number", "is_finite_real",
            "is_integer", "as_real_array", "check_range", "check_integer", "check_real", "check_choice",
-           "check_instance", "check_flag", "require_extra"]
+           "check_instance", "check_flag", "require_extra", "ordered_items", "dataclass_from_dict"]
 
 #: Longest text of a value echoed in a message.
 _MAX_ECHO = 60
 
 
-#: Most digits of an integer that :func:`short` writes whole where %g would round it (64-bit bounds take 20).
-_MAX_INTEGER_DIGITS = 30
+#: Most bits of an integer that :func:`short` writes whole where %g would round it (64-bit bounds take 64).
+_MAX_INTEGER_BITS = 100
 
 
 def short(value) -> str:
@@ -53,8 +53,10 @@ def short(value) -> str:
             text = None
         if text is not None and int(float(text)) == value:
             return text
-        if len(str(abs(value))) <= _MAX_INTEGER_DIGITS:    # 2**64 is not 1.84467e+19, the bound 2**64 - 1
+        if abs(value).bit_length() <= _MAX_INTEGER_BITS:   # 2**64 is not 1.84467e+19, the bound 2**64 - 1
             return str(value)
+        if abs(value).bit_length() > 14000:     # beyond str()'s 4300 digits: its order of magnitude, from bits
+            return f"{'-' if value < 0 else ''}1e+{int(abs(value).bit_length() * math.log10(2))}"
         mantissa, exponent = format(decimal.Decimal(value), ".5e").split("e")     # 10**400 - 1 is 1e+400
         return f"{mantissa.rstrip('0').rstrip('.')}e{exponent}"
     if isinstance(value, numbers.Real):

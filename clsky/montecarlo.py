@@ -696,17 +696,25 @@ def _as_float(value) -> float:
 
 def _shown(value) -> str:
     """A value as the messages show it: a number by %g where that is the number itself, else by every
-    digit it takes (1.0000001 is not its bound 1), an integer whole up to 30 digits and by its order of
-    magnitude beyond (10**400), anything
+    digit it takes (1.0000001 is not its bound 1), an integer by %g where that is the integer itself, else
+    whole up to 100 bits and rounded beyond (10**400 - 1 is 1e+400), anything
     else by its repr and type (clsky.errors.short's rule, written here: the tracer imports nothing from
     clsky)."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
         return f"{value!r:.40} ({type(value).__name__})"
-    if isinstance(value, (int, np.integer)):       # whole where %g would round it (2**64 is not 1e+19)
-        digits = str(abs(int(value)))
-        if len(digits) <= 30:
+    if isinstance(value, (int, np.integer)):
+        value = int(value)
+        try:
+            text = f"{float(value):g}"
+        except OverflowError:
+            text = None
+        if abs(value) < 10**7 or (text is not None and int(float(text)) == value):
+            return str(value) if abs(value) < 10**7 else text
+        if abs(value).bit_length() <= 100:          # whole where %g would round it (2**64 is not 1e+19)
             return str(value)
-        mantissa, exponent = format(decimal.Decimal(int(value)), ".5e").split("e")
+        if abs(value).bit_length() > 14000:         # beyond str()'s 4300 digits: the magnitude, from bits
+            return f"{'-' if value < 0 else ''}1e+{int(abs(value).bit_length() * math.log10(2))}"
+        mantissa, exponent = format(decimal.Decimal(value), ".5e").split("e")
         return f"{mantissa.rstrip('0').rstrip('.')}e{exponent}"
     text = f"{float(value):g}"
     return text if not math.isfinite(value) or float(text) == float(value) else repr(float(value))
@@ -759,7 +767,7 @@ def simulate(atmosphere, altitude, cos_view, cos_sun, azimuth=0.0, *, photons=20
         Count only scattering orders <= max_orders (None: DEFAULT_MAX_ORDERS, a cap whose truncation
         is reported).
     single_only : bool, optional
-        Same as max_orders=1.
+        Same as max_orders=1 (with max_orders None or 1).
     chunk : int, optional
         Points per block of the sun-transmittance quadrature (memory bound).
 
@@ -772,7 +780,8 @@ def simulate(atmosphere, altitude, cos_view, cos_sun, azimuth=0.0, *, photons=20
     ValueError
         Naming an argument outside its range: the altitude in [0, Ha] m, the cosines in [-1, 1], a finite
         azimuth, integer photons in [2, :data:`MAX_PHOTONS`], max_orders in [1, :data:`MAX_ORDERS_LIMIT`] or
-        None, seed in [0, :data:`MAX_SEED`] or None, chunk >= 1 (0-d arrays of them too).
+        None, seed in [0, :data:`MAX_SEED`] or None, chunk >= 1 (0-d arrays of them too), single_only a
+        bool, and True only with max_orders None or 1.
     """
     rp = float(atmosphere.planet_radius)
     ra = float(atmosphere.top_radius)

@@ -292,9 +292,10 @@ def sun_margins(atmosphere: AtmosphereParameters, scene: Scene, orders=True, ray
     ray enters it, at that point's own sun, up to gamma_entry = acos(Ra / r) either way (r: the highest
     observer's radius; 0 inside), its single scattering too; and a ray march over a reflecting ground
     reads the sky's irradiance there at each ground point's own sun, up to acos(Rp / r) from the
-    observer's (where its cameras look below the ground's horizon), its higher orders kept or not. So below = max(gamma_view, gamma_entry, low + gamma_table -
-    90) and above = max(gamma_view, gamma_entry) + gamma_table, for the path's lowest elevation ``low``;
-    without higher orders (max(gamma_entry, the ground's), the same) both ways.
+    observer's (where its cameras look below the ground's horizon), its higher orders kept or not. So
+    below = max(gamma_view, gamma_entry, low + gamma_table - 90) and above = max(gamma_view, gamma_entry)
+    + gamma_table, for the path's lowest elevation ``low``; without higher orders max(gamma_entry, the
+    ground's) both ways.
 
     Until 2026-12-07 an observer above the top took gamma_table for gamma_view and no margin for its
     lookups: from 400 km the 3D lookup's far limb was 7.3 % too bright, from 1000 km 22 % at the draft

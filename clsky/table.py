@@ -754,7 +754,7 @@ def _read_members(path) -> dict:
     if it is not a readable one, FileNotFoundError if it does not exist."""
     try:
         stream = open_regular_file(path)    # once: a FIFO swapped in after a check of the name blocked its open
-    except FileNotFoundError:
+    except (FileNotFoundError, NotADirectoryError):          # a path through a file: none there either
         raise FileNotFoundError(f"{path} does not exist") from None
     except OSError as error:
         what = ("not a regular file" if isinstance(error, IsADirectoryError) or error.errno == errno.EINVAL

@@ -495,8 +495,8 @@ def test_write_json_atomic_strict(tmp_path):
     write_json(target, {"a": 1}, force=True)
     assert json.loads(target.read_text()) == {"a": 1}
     assert _listing(tmp_path) == ["metrics.json"]
-    # the text is streamed to the temporary: a value found late (after a MB of rows) still leaves the file
-    # there as it was and no temporary, alone and in a staging set
+    # the text goes to the temporary as it is encoded: a value found late (after a MB of rows) leaves the
+    # file there as it was and deletes the temporary, alone and in a staging set
     late = {"frames": [{"frame": i, "mean": 0.5} for i in range(20_000)] + [{"frame": -1, "mean": math.inf}]}
     with pytest.raises(ValueError):
         write_json(target, late, force=True)

@@ -334,10 +334,10 @@ def test_bench_accuracy_replot_of_a_bad_csv_is_one_line(tmp_path):
     """--replot of a CSV its reader refuses (naming the file, line and column) or of a directory ended in a
     traceback: one line now, nothing drawn."""
     pytest.importorskip("matplotlib")
-    (tmp_path / "nan.csv").write_text("candidate,knob\nx,y\n")
-    for csv_path, expected in ((tmp_path / "nan.csv", f"--replot: {tmp_path / 'nan.csv'}: no rows, or missing "
-                                                      f"columns"),
-                               (tmp_path, f"--replot {tmp_path}: cannot read it (Is a directory)")):
+    (tmp_path / "short.csv").write_text("candidate,knob\nx,y\n")
+    for csv_path, expected in ((tmp_path / "short.csv", f"--replot: {tmp_path / 'short.csv'}: no rows, or missing "
+                                                        f"columns"),
+                               (tmp_path, f"--replot: {tmp_path}: cannot read it (Is a directory)")):
         result = subprocess.run([sys.executable, "bench/bench_accuracy.py", "--replot", str(csv_path), "--docs",
                                  str(tmp_path / "plots")], cwd=ROOT, capture_output=True, text=True, timeout=120)
         assert result.returncode == 1 and result.stdout == "", result.stdout + result.stderr
@@ -345,10 +345,12 @@ def test_bench_accuracy_replot_of_a_bad_csv_is_one_line(tmp_path):
     assert not (tmp_path / "plots").exists() or list((tmp_path / "plots").iterdir()) == []
 
 
-def test_readme_sections_are_checked_before_the_work(tmp_path):
+def test_readme_sections_are_checked_before_the_work(tmp_path, monkeypatch):
     """A README section a bench writes was looked for after its work (minutes; bench_dusk had replaced its
-    picture by then): parse_arguments checks them first unless --no-readme. The README holds every
-    section a bench names."""
+    picture by then): parse_arguments checks them first unless --no-readme or --smoke. The README holds
+    every section a bench names."""
+    import argparse
+
     sys.path.insert(0, str(BENCH))
     try:
         import _report
@@ -356,10 +358,14 @@ def test_readme_sections_are_checked_before_the_work(tmp_path):
         sys.path.remove(str(BENCH))
     readme = tmp_path / "README.md"
     readme.write_text("<!-- bench:dusk -->\nold\n<!-- /bench:dusk -->\n")
-    _report.check_readme_sections(["dusk"], readme)
-    with pytest.raises(SystemExit, match=re.escape("README.md has no <!-- bench:montecarlo --> ... "
-                                                   "<!-- /bench:montecarlo --> section")):
-        _report.check_readme_sections(["dusk", "montecarlo"], readme)
+    monkeypatch.setattr(_report, "README", readme)
+    parser = _report.add_output_arguments(argparse.ArgumentParser())
+    assert not _report.parse_arguments(parser, [], sections=("dusk",)).no_readme
+    missing = re.escape("README.md has no <!-- bench:montecarlo --> ... <!-- /bench:montecarlo --> section")
+    with pytest.raises(SystemExit, match=missing):
+        _report.parse_arguments(parser, [], sections=lambda args: ("dusk", "montecarlo"))
+    for skipped in (["--no-readme"], ["--smoke"]):
+        assert _report.parse_arguments(parser, skipped, sections=("montecarlo",)).no_readme
     named = set()
     for script in BENCH.glob("bench_*.py"):
         text = script.read_text()
@@ -369,7 +375,7 @@ def test_readme_sections_are_checked_before_the_work(tmp_path):
     written = {name for script in BENCH.glob("bench_*.py")
                for name in re.findall(r'write_readme_section\(\s*"([\w-]+)"', script.read_text())}
     assert written <= named, written - named
-    _report.check_readme_sections(sorted(named - {"black"}))
+    _report.check_readme_sections(sorted(named - {"black"}), ROOT / "README.md")
 
 
 def test_bench_help_says_its_first_sentence_whole():

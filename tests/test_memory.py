@@ -349,7 +349,7 @@ def test_animation_estimate_counts_the_frames_records():
     with pytest.raises(InsufficientMemoryError, match=r"^--frames 100000: the animation needs .* most: the "
                                                       r"frames' records \(metrics rows, staged file names\), 195 MiB"):
         check_memory(estimate, MemoryLimits(host_available=100 * 2**20),
-                               options=anim_cli._memory_options(args, config))
+                     options=anim_cli._memory_options(args, config))
 
 
 @pytest.mark.parametrize("wavelengths", [None, 12])

@@ -346,7 +346,7 @@ def test_cli_refuses_an_output_name_that_is_not_utf8(tmp_path, command, output):
     args = {"render": ("render", "--size", "16"), "table": ("table", *SLOW_TABLE)}[command]
     result = clsky(*args, "-o", output, cwd=tmp_path)
     shown = os.fsencode(output).decode("utf-8", "backslashreplace")
-    assert_usage_error(result, f"--output: {shown} is not UTF-8 text: clsky writes its outputs' names")
+    assert_usage_error(result, f"--output: {shown} is not UTF-8 text: clsky prints its outputs' names")
     assert listing(tmp_path) == []
     with pytest.raises(ValueError, match="is not UTF-8 text"):
         check_output(tmp_path / output)

@@ -14,8 +14,8 @@ before) is asserted to miss them by far at -6 deg, so that a planner falling bac
 
 import ast
 import math
-import re
 import pathlib
+import re
 
 import numpy as np
 import pytest
@@ -47,7 +47,7 @@ def test_the_yardstick_imports_nothing_from_clsky():
             imported |= {alias.name.split(".")[0] for alias in node.names}
         elif isinstance(node, ast.ImportFrom):
             imported.add("." if node.level else node.module.split(".")[0])
-    assert imported == {"__future__", "dataclasses", "math", "numpy"}, imported
+    assert imported == {"__future__", "dataclasses", "decimal", "math", "numpy"}, imported
 
 
 def test_single_scattering_quadrature_is_converged(atmosphere):
