@@ -643,6 +643,12 @@ def test_radiance_scales_and_resolution_lines_as_radiance_reads_them(tmp_path):
                            ("spaces.hdr", b"-Y 2 +X 16", b"-Y  2 +X 16 \r")):
         pixels, _ = read_rgbe(variant(name, old, new))
         assert np.array_equal(pixels, expected), name
+    # another repeated line keeps its last value, as Radiance takes it (two FORMAT lines were refused)
+    pixels, header = read_rgbe(variant("formats.hdr", b"SOFTWARE", b"FORMAT=32-bit_rle_rgbe\nSOFTWARE"))
+    assert np.array_equal(pixels, expected) and header["FORMAT"] == "32-bit_rle_rgbe"
+    # a path through a file is no such file (a NotADirectoryError of the OS before)
+    with pytest.raises(FileNotFoundError, match="no such file"):
+        read_rgbe(tmp_path / "good.hdr" / "x.hdr")
     # clsky info checks that the file can hold the pixels its header declares (a 3.5 kB file of 30000 x 1e9)
     (tmp_path / "huge.hdr").write_bytes(data.replace(b"-Y 2 +X 16", b"-Y 999999999 +X 30000"))
     with pytest.raises(ValueError, match="pixels need at least"):
@@ -689,6 +695,11 @@ def test_read_exr_takes_whole_single_part_srgb_images_and_says_why_not(tmp_path,
     assert "windows             data (10, 5)-(49, 28) in display (0, 0)-(59, 39)" in describe(tmp_path / "window.exr")
     assert "parts               2 ('beauty', 'other'; this is the first's header)" in describe(tmp_path / "parts.exr")
     assert np.array_equal(read_exr(good)[0], read_exr(good)[0]) and capfd.readouterr() == ("", "")
+    # with stdout closed (a daemon's) a good file was 'not readable ([Errno 9] Bad file descriptor)'
+    script = f"from clsky.anim.exr import read_exr; read_exr({str(good)!r})"
+    closed = subprocess.run([sys.executable, "-c", script], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True, timeout=120, preexec_fn=lambda: os.close(1))
+    assert closed.returncode == 0, closed.stderr
     # channels of mixed types make a valid file that the bindings' RGB view refused ('cannot coalesce'):
     # read channel by channel, as float; a layer's channels are named in full when no R, G, B are there
     half, full = np.full((24, 40), 0.5, np.float16), np.full((24, 40), 0.25, np.float32)

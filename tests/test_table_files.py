@@ -592,6 +592,13 @@ def _with_deflated_member(path, name, nbytes, deflated=True):
                 stream.write(chunk)
 
 
+def test_a_path_through_a_file_is_no_table(saved):
+    """'sky.npz/x.npz' (ENOTDIR) was a TableFormatError 'not readable: NotADirectoryError' once the file was
+    opened at once: it does not exist, as any missing path."""
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        ScatteringTable.load(saved / "x.npz")
+
+
 def _reads_of(monkeypatch):
     """The members read from now on (NpzFile.__getitem__), in order."""
     read = []
