@@ -110,6 +110,25 @@ def _library_cube_root():
     return mock.patch.object(_cl, "CUBE_ROOT", "library")
 
 
+def _whole_labels():
+    """A context in which the composites' labels are drawn whole, clipped at their panel's edge, as every
+    commit before 2026-12-07 drew them (a label is cut to the letters its panel holds since: the 24-pixel
+    frames' labels, and nothing else of them). A tree without the cut has nothing to switch."""
+    import contextlib
+    from unittest import mock
+
+    try:
+        from clsky.anim import metrics
+    except ModuleNotFoundError:                    # before the package moved: top-level anim/
+        from anim import metrics
+    if not hasattr(metrics, "_fitted_label"):
+        return contextlib.nullcontext()
+    def whole(font, label, width, height):
+        return str(label) if label else None
+
+    return mock.patch.object(metrics, "_fitted_label", whole)
+
+
 def _source_at_every_node():
     """A context in which the quality levels' ray marches and tables look the higher orders' source up at
     every view node (``TableSettings.source_stride = 1``), as every commit before a98be11 (2026-12-03) did
@@ -204,7 +223,7 @@ def display_frames(ctx, directory, tone_map=None) -> tuple:
     """The atmosphere-plus preset's compare animation (table | ray march | error panels, dithered, 3
     frames of 24 px), written under ``directory``: SHA-256 of each PNG frame's decoded pixels, and each
     frame's METRIC_KEYS; the source of the ray march's higher orders at every node
-    (:func:`_source_at_every_node`). ``tone_map`` None leaves the config's default (the only choice before
+    (:func:`_source_at_every_node`), the labels whole (:func:`_whole_labels`). ``tone_map`` None leaves the config's default (the only choice before
     anim/display.py). Its table sums the orders plainly (:func:`_plain_sum_of_orders`), as the pinned
     commit did: so the pin also holds the orders loop without the tail to its results, bit for bit;
     cube roots by ``cbrt`` (:func:`_library_cube_root`)."""
@@ -221,7 +240,7 @@ def display_frames(ctx, directory, tone_map=None) -> tuple:
     config = AnimationConfig(frames=3, size=24, table_size=(9, 33, 7), preset="atmosphere-plus",
                              mode="atmosphere-plus", start_elevation_deg=-4.0, max_elevation_deg=30.0,
                              output=str(directory / "sky.mp4"), **options)
-    with _plain_sum_of_orders(), _library_cube_root(), _source_at_every_node():
+    with _plain_sum_of_orders(), _library_cube_root(), _source_at_every_node(), _whole_labels():
         result = render_animation(config, ctx=ctx)
     frames = sorted((directory / "sky_frames").glob("*.png"))
     hashes = [hashlib.sha256(np.asarray(Image.open(f)).tobytes()).hexdigest() for f in frames]
