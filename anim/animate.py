@@ -493,9 +493,28 @@ def plan_animation(config: AnimationConfig, positions, directions, valid, ctx=No
         return None
     # the 4D table over a reflecting ground carries the ground's light in its higher orders' channels: a plan
     # that dropped them (an observer far above the air) ended in an error about 'orders' after its work
-    return plan_scene(_scene(config, positions, directions, valid), config.atmosphere, config.mode, ctx=ctx,
+    plan = plan_scene(_scene(config, positions, directions, valid), config.atmosphere, config.mode, ctx=ctx,
                       ray_march=config.method not in ("lut", "lut4d"), samples=config.samples,
-                      keep_orders=config.lookup4d and config.atmosphere.has_ground)
+                      keep_orders=config.lookup4d and config.atmosphere.has_ground, sampling=config.sampling)
+    return _with_frames_notes(config, plan)
+
+
+def _with_frames_notes(config: AnimationConfig, plan: Plan) -> Plan:
+    """``plan`` with what the frames make of it said in its lines too: the 4D table a lookup4d method
+    builds from the plan's grid (the plan printed the 3D table's size and its azimuth harmonics), and a
+    table lookup asked for (``--method lut``) where the plan's renderer is another, which the budget needs
+    (nothing said the frames were over it)."""
+    notes = []
+    if config.lookup4d:
+        table = _with_lookup(plan.table, config)
+        w, h, d = table.size
+        notes.append(("4D table", f"{w} x {h} x {d} x {table.azimuth_size} azimuths, M = {table.azimuth_harmonics}",
+                      f"--method {config.method}: the plan's grid, at most {LUT4D_MAX_SIZE[0]} x {LUT4D_MAX_SIZE[1]} "
+                      f"altitude and view nodes (the work line is the 3D grid's)"))
+    elif config.method == "lut" and plan.renderer != "lut":
+        notes.append(("frames", "table lookup (--method lut)", "over the budget, as the renderer line says: the "
+                      "plan's renderer would hold it"))
+    return dataclasses.replace(plan, decisions=plan.decisions + tuple(notes)) if notes else plan
 
 
 @dataclasses.dataclass(frozen=True)

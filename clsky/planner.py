@@ -80,7 +80,7 @@ from .errors import check_choice, check_flag, check_instance, check_integer, che
 from .mapping import cos_to_v
 from .quality import QualityLevel, level_for_budget, quality_level
 from .renderer_choice import DEFAULT_PIXELS, LOOKUP_ERROR, choose_renderer, renderer_row
-from .settings import SCATTERING_MODES, TableSettings
+from .settings import SAMPLINGS, SCATTERING_MODES, TableSettings
 
 __all__ = ["Scene", "Plan", "plan_scene", "sun_margins", "sun_axis", "view_sampling", "azimuth_harmonics",
            "LOOKUP_ERROR", "COMPONENTS", "HARMONICS_BELOW_DEG"]
@@ -525,7 +525,7 @@ def _costlier(method, chosen, pixels) -> str:
 
 
 def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, ray_march=None, samples=None,
-               keep_orders=False) -> Plan:
+               keep_orders=False, sampling=None) -> Plan:
     """The least table (and ray march) that renders ``scene`` within its error budget.
 
     Parameters
@@ -548,6 +548,10 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         The caller's table needs the higher orders whatever the pilot finds they add (a 4D table over a
         reflecting ground carries the ground's light in their channels): kept, with the sun axis' margins
         they need.
+    sampling : {'uniform', 'keller_bohn', 'ground_end'}, optional
+        The view nodes when the caller sets them (``--sampling``), instead of :func:`view_sampling`'s: the
+        plan's table, ray march and pilot take them, and its printed line says so (it said the planner's
+        while the table took the caller's).
     """
     check_instance("scene", scene, Scene, "a Scene (sun path, altitudes, views, components, error budget)")
     atmosphere = as_atmosphere(atmosphere)
@@ -556,6 +560,7 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     ray_march = ray_march is not None and check_flag("ray_march", ray_march)     # 'no' was true
     samples = check_integer("samples", samples, 2, 4096, optional=True)
     keep_orders = check_flag("keep_orders", keep_orders)
+    check_choice("sampling", sampling, SAMPLINGS, optional=True)
     check_ground_mode(atmosphere, mode)     # before the pilot: a plan the build would refuse is no plan
     level = quality_level(scene.quality) if scene.quality else level_for_budget(scene.error_budget)
     budget = level.budget if scene.quality else scene.error_budget
@@ -574,7 +579,11 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         atmosphere = atmosphere.replace(mie_scattering=0.0)
         decisions.append(("Mie", "dropped", "not wanted by the scene"))
 
-    sampling, because = view_sampling(scene.altitudes_m)
+    planned, because = view_sampling(scene.altitudes_m)
+    if sampling is None:
+        sampling = planned
+    else:
+        because = "asked for" + (f"; the planner's: {planned}, for {because}" if sampling != planned else "")
     harmonics, harmonics_because = azimuth_harmonics(level, scene.sun_elevations_deg, mode)
     table = level.table.replace(mode=mode, sampling=sampling, azimuth_harmonics=harmonics)
     chosen, estimate, estimates = choose_renderer(scene.sun_elevations_deg, budget, level.name, pixels=scene.pixels)

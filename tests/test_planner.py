@@ -363,6 +363,26 @@ def test_observers_high_above_the_ground_get_the_ray_march():
                              "not from 30 km"), reason
 
 
+def test_the_plan_says_what_the_frames_make_of_it(cl_context):
+    """Printed plans said the planner's view nodes where --sampling set others, the 3D table's size and
+    M = 0 where --method lut4d builds a 4D table with M = 2, and nothing where --method lut renders frames
+    over the budget (a probe of the planner): each is said now."""
+    from clsky.anim.animate import AnimationConfig, planned_animation
+
+    def lines(**options):
+        config = AnimationConfig(frames=2, size=16, start_elevation_deg=20.0, max_elevation_deg=21.0, **options)
+        return dict((topic, f"{decision}  ({why})") for topic, decision, why in
+                    planned_animation(config, ctx=cl_context).plan.decisions)
+
+    assert lines(sampling="uniform", method="lut")["view nodes"] == (
+        "uniform  (asked for; the planner's: keller_bohn, for observers on the ground: no view ray hits the "
+        "ground)")
+    four = lines(method="lut4d", table_size=None)["4D table"]
+    assert four.startswith("16 x 128 x ") and " x 16 azimuths, M = 2  (--method lut4d: the plan's grid" in four
+    assert lines(method="lut")["frames"].startswith("table lookup (--method lut)  (over the budget")
+    assert "frames" not in lines(method="lut", error_budget=0.5)          # within a loose budget: nothing to say
+
+
 # 4. Planned table against the full table --------------------------------------------------------------
 
 def _ray_marched(table, level, size=24):
