@@ -512,8 +512,8 @@ def _with_frames_notes(config: AnimationConfig, plan: Plan) -> Plan:
                       f"--method {config.method}: the plan's grid, at most {LUT4D_MAX_SIZE[0]} x {LUT4D_MAX_SIZE[1]} "
                       f"altitude and view nodes (the work line is the 3D grid's)"))
     elif config.method == "lut" and plan.renderer != "lut":
-        notes.append(("frames", "table lookup (--method lut)", "over the budget, as the renderer line says: the "
-                      "plan's renderer would hold it"))
+        notes.append(("frames", "table lookup (--method lut)", "not the plan's renderer, for the renderer line's "
+                      "reason: the frames may miss the budget"))
     return dataclasses.replace(plan, decisions=plan.decisions + tuple(notes)) if notes else plan
 
 

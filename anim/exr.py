@@ -63,6 +63,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import fcntl
 import io
 import math
 import os
@@ -360,7 +361,8 @@ def _library_output(lines):
     python = io.StringIO()      # the bindings' own warning goes through sys.stdout (pybind11's print)
     saved = []
     try:                        # a closed descriptor (a daemon's, '>&-'), no room for the file: not caught
-        saved = [os.dup(1), os.dup(2)]
+        # copies above 2: with fd 2 closed, os.dup(1) returned 2, which the redirection then overwrote
+        saved = [fcntl.fcntl(descriptor, fcntl.F_DUPFD_CLOEXEC, 3) for descriptor in (1, 2)]
         sink = tempfile.TemporaryFile()
     except OSError:
         for descriptor in saved:

@@ -116,8 +116,9 @@ def save_rgbe(file, rgbe, attributes=None):
             continue
         if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", name):
             raise ValueError(f"attribute names must be identifiers, got {name!r}")
-        if name in ("FORMAT", "SOFTWARE", "EXPOSURE", "COLORCORR", "PRIMARIES"):  # the file's own lines (the
-            raise ValueError(f"attribute name {name!r} is the file's own header line")  # first two scale pixels)
+        # the file's own lines, and Radiance's that scale the pixels (EXPOSURE, COLORCORR) or name their primaries
+        if name in ("FORMAT", "SOFTWARE", "EXPOSURE", "COLORCORR", "PRIMARIES"):
+            raise ValueError(f"attribute name {name!r} is a header line of the file's own, not an attribute")
         lines.append(f"{RADIANCE_NAMES.get(name, name)}= {_header_value(value)}")
     head = ("\n".join(lines) + f"\n\n-Y {height} +X {width}\n").encode("ascii", "replace")
     if len(head) > _MAX_HEADER:          # clsky's readers read the header from the first 64 KiB

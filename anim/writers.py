@@ -61,9 +61,10 @@ __all__ = ["FrameWriter", "frame_files", "encode_png", "write_png", "write_json"
 #: override the ``-color_primaries`` and ``-color_trc`` output options, and the MP4s of imageio-ffmpeg's
 #: FFmpeg 9.0 said "bt709/unknown/unknown" (found 2026-12-05); the output options stay for older builds.
 #: The tags change no pixel (the decoded frames hash the same). The chroma samples are sited "left", on
-#: the even luma columns and between the rows, as the stream says and as H.264 decoders assume where it
-#: says nothing: swscale centred them by default, half a pixel off at every sharp colour edge (the panels'
-#: borders, labels, colour bar, the sun; a probe of the MP4, 2026-12-07).
+#: the even luma columns and between the rows, as H.264 decoders assume where the stream says nothing (x264
+#: writes no chroma location for 'left', the default: ``-chroma_sample_location`` only says what is meant):
+#: swscale centred them by default, half a pixel off at every sharp colour edge (the panels' borders,
+#: labels, colour bar, the sun; a probe of the MP4, 2026-12-07).
 MP4_OUTPUT_PARAMS = ["-crf", "18", "-vf", "scale=out_color_matrix=bt709:out_range=tv:out_h_chr_pos=0:out_v_chr_pos=128,"
                      "setparams=colorspace=bt709:color_primaries=bt709:color_trc=iec61966-2-1:range=tv",
                      "-colorspace", "bt709", "-color_primaries", "bt709", "-color_trc", "iec61966-2-1",

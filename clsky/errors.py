@@ -55,8 +55,10 @@ def short(value) -> str:
             return text
         if abs(value).bit_length() <= _MAX_INTEGER_BITS:   # 2**64 is not 1.84467e+19, the bound 2**64 - 1
             return str(value)
-        if abs(value).bit_length() > 14000:     # beyond str()'s 4300 digits: its order of magnitude, from bits
-            return f"{'-' if value < 0 else ''}1e+{int(abs(value).bit_length() * math.log10(2))}"
+        if abs(value).bit_length() > 14000:     # beyond str()'s 4300 digits: from its logarithm
+            exponent = math.floor(math.log10(abs(value)))
+            mantissa = f"{10 ** (math.log10(abs(value)) - exponent):.5g}"
+            return f"{'-' if value < 0 else ''}{mantissa}e+{exponent}"
         mantissa, exponent = format(decimal.Decimal(value), ".5e").split("e")     # 10**400 - 1 is 1e+400
         return f"{mantissa.rstrip('0').rstrip('.')}e{exponent}"
     if isinstance(value, numbers.Real):

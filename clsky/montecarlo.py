@@ -712,8 +712,10 @@ def _shown(value) -> str:
             return str(value) if abs(value) < 10**7 else text
         if abs(value).bit_length() <= 100:          # whole where %g would round it (2**64 is not 1e+19)
             return str(value)
-        if abs(value).bit_length() > 14000:         # beyond str()'s 4300 digits: the magnitude, from bits
-            return f"{'-' if value < 0 else ''}1e+{int(abs(value).bit_length() * math.log10(2))}"
+        if abs(value).bit_length() > 14000:         # beyond str()'s 4300 digits: from its logarithm
+            exponent = math.floor(math.log10(abs(value)))
+            mantissa = f"{10 ** (math.log10(abs(value)) - exponent):.5g}"
+            return f"{'-' if value < 0 else ''}{mantissa}e+{exponent}"
         mantissa, exponent = format(decimal.Decimal(value), ".5e").split("e")
         return f"{mantissa.rstrip('0').rstrip('.')}e{exponent}"
     text = f"{float(value):g}"

@@ -700,6 +700,12 @@ def test_read_exr_takes_whole_single_part_srgb_images_and_says_why_not(tmp_path,
     closed = subprocess.run([sys.executable, "-c", script], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             text=True, timeout=120, preexec_fn=lambda: os.close(1))
     assert closed.returncode == 0, closed.stderr
+    # with stderr closed, the copy of stdout took descriptor 2, which the redirection overwrote: what the
+    # process printed after the read went into a deleted temporary
+    script = f"from clsky.anim.exr import read_exr; print('before'); read_exr({str(good)!r}); print('after')"
+    closed = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120,
+                            preexec_fn=lambda: os.close(2))
+    assert closed.returncode == 0 and closed.stdout == "before\nafter\n", closed.stdout
     # channels of mixed types make a valid file that the bindings' RGB view refused ('cannot coalesce'):
     # read channel by channel, as float; a layer's channels are named in full when no R, G, B are there
     half, full = np.full((24, 40), 0.5, np.float16), np.full((24, 40), 0.25, np.float32)
@@ -752,7 +758,7 @@ def test_rgbe_refuses_an_attribute_named_as_its_own_header_lines(tmp_path):
     from clsky.anim.rgbe import read_rgbe, write_rgbe
 
     for name in ("FORMAT", "SOFTWARE", "EXPOSURE", "COLORCORR", "PRIMARIES"):
-        with pytest.raises(ValueError, match=f"attribute name '{name}' is the file's own header line"):
+        with pytest.raises(ValueError, match=f"attribute name '{name}' is a header line of the file's own, not an attribute"):
             write_rgbe(tmp_path / "x.hdr", np.ones((2, 8, 3)), attributes={name: "x"})
     assert _listing(tmp_path) == []
     aces = (0.7347, 0.2653, 0.0, 1.0, 0.0001, -0.077, 0.32168, 0.33767)

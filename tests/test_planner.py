@@ -379,8 +379,55 @@ def test_the_plan_says_what_the_frames_make_of_it(cl_context):
         "ground)")
     four = lines(method="lut4d", table_size=None)["4D table"]
     assert four.startswith("16 x 128 x ") and " x 16 azimuths, M = 2  (--method lut4d: the plan's grid" in four
-    assert lines(method="lut")["frames"].startswith("table lookup (--method lut)  (over the budget")
+    assert lines(method="lut")["frames"] == ("table lookup (--method lut)  (not the plan's renderer, for the "
+                                             "renderer line's reason: the frames may miss the budget)")
     assert "frames" not in lines(method="lut", error_budget=0.5)          # within a loose budget: nothing to say
+
+
+def test_a_lookup_that_sees_a_reflecting_ground_keeps_its_orders(cl_context):
+    """The 3D lookup reads a reflecting ground's light from the higher orders' channels, and a table of
+    orders = 1 holds none: a ground camera looking down at the draft level got the lookup and orders 1, and
+    its ground rendered black (0 against 0.25; a review of the planner). The orders are kept there, as for a
+    4D table; and the lookup is the ground observers' alone (its error was measured from the ground: from
+    3 km looking down it is 2 % off the ray march)."""
+    down = plan_scene(Scene((30.0, 31.0), view_elevations_deg=(-75.0, -15.0), quality="draft"), ctx=cl_context)
+    assert down.renderer == "lut" and down.table.orders == "auto"
+    reason = dict((name, why) for name, _, why in down.decisions)["higher orders"]
+    assert reason.endswith("kept: the table carries a reflecting ground's light in them (the table lookup's, "
+                           "which sees the ground)"), reason
+    high = plan_scene(Scene((40.0, 41.0), altitudes_m=(3e3, 3e3), view_elevations_deg=(-30.0, 30.0),
+                            error_budget=0.05, pixels=256 * 256), ctx=cl_context)
+    assert high.renderer == "skyview"
+    assert "the table lookup's 1.63 % at the lowest sun, 40 deg is measured from the ground" in \
+        dict((name, why) for name, _, why in high.decisions)["renderer"]
+
+
+def test_margins_of_a_range_of_observers_take_its_largest_ray():
+    """From 0 to 50 km looking down to -2 deg, the largest angle is where -2 deg grazes the ground (3.9 km),
+    inside the range: its ends gave 10.06 deg for 12.09 (a review of the margins)."""
+    rp, ra = PHYSICAL.planet_radius, PHYSICAL.top_radius
+    scene = Scene((10.0, 20.0), altitudes_m=(0.0, 5e4), view_elevations_deg=(-2.0, 90.0))
+    grazing = rp / math.cos(math.radians(2.0))
+    assert sun_margins(PHYSICAL, scene)[0] == pytest.approx(
+        math.degrees(math.acos(rp / grazing) + math.acos(rp / ra)), abs=1e-9)
+
+
+def test_the_pilot_builds_its_first_orders_ground_only_where_a_ray_meets_the_ground(cl_context, monkeypatch):
+    """The first order's ground irradiance is a second pilot table (orders = 1), 20-35 % of the pilot's
+    build: needed only where the cameras see the ground."""
+    from clsky import planner
+    from clsky.table import ScatteringTable
+
+    built = []
+    original = ScatteringTable.build
+    monkeypatch.setattr(ScatteringTable, "build", lambda *a, **k: built.append(a[1].orders) or original(*a, **k))
+    physical = clsky.preset("physical")
+    for views, orders in (((0.3, 86.0), ["auto"]), ((-60.0, 30.0), ["auto", 1])):
+        scene = Scene((-6.0, 60.0), view_elevations_deg=views)
+        table = plan_scene(scene, ctx=cl_context).table
+        built.clear()
+        planner._higher_orders_share(physical, table, scene, ctx=cl_context)
+        assert built == orders, (views, built)
 
 
 # 4. Planned table against the full table --------------------------------------------------------------
