@@ -223,10 +223,10 @@ def display_frames(ctx, directory, tone_map=None) -> tuple:
     """The atmosphere-plus preset's compare animation (table | ray march | error panels, dithered, 3
     frames of 24 px), written under ``directory``: SHA-256 of each PNG frame's decoded pixels, and each
     frame's METRIC_KEYS; the source of the ray march's higher orders at every node
-    (:func:`_source_at_every_node`), the labels whole (:func:`_whole_labels`). ``tone_map`` None leaves the config's default (the only choice before
-    anim/display.py). Its table sums the orders plainly (:func:`_plain_sum_of_orders`), as the pinned
-    commit did: so the pin also holds the orders loop without the tail to its results, bit for bit;
-    cube roots by ``cbrt`` (:func:`_library_cube_root`)."""
+    (:func:`_source_at_every_node`), the labels whole (:func:`_whole_labels`). ``tone_map`` None leaves the
+    config's default (the only choice before anim/display.py). Its table sums the orders plainly
+    (:func:`_plain_sum_of_orders`), as the pinned commit did: so the pin also holds the orders loop without
+    the tail to its results, bit for bit; cube roots by ``cbrt`` (:func:`_library_cube_root`)."""
     import pathlib
 
     from PIL import Image
