@@ -111,6 +111,16 @@ def assert_finite_row(rows):
     assert rows and numbers_seen, rows
 
 
+def bench_report():
+    """bench/_report.py, the benchmarks' shared module (bench/ is no package: imported from its folder)."""
+    sys.path.insert(0, str(BENCH))
+    try:
+        import _report
+    finally:
+        sys.path.remove(str(BENCH))
+    return _report
+
+
 def run_smoke(name, *extra, timeout=900):
     before = snapshot()
     result = subprocess.run([sys.executable, f"bench/{name}.py", "--smoke", *extra], cwd=ROOT, capture_output=True,
@@ -149,11 +159,7 @@ def test_every_bench_script_is_covered():
 
 
 def test_smoke_implies_no_readme():
-    sys.path.insert(0, str(BENCH))
-    try:
-        import _report
-    finally:
-        sys.path.remove(str(BENCH))
+    _report = bench_report()
     import argparse
 
     parser = _report.add_output_arguments(argparse.ArgumentParser())
@@ -227,11 +233,7 @@ def test_counts_below_one_are_refused_before_any_work(name, option, typed):
 def test_readme_section_is_replaced_atomically(tmp_path):
     """write_readme_section replaces one section's text, leaves the rest and no temporary behind, and
     refuses a README without the section before writing anything."""
-    sys.path.insert(0, str(BENCH))
-    try:
-        import _report
-    finally:
-        sys.path.remove(str(BENCH))
+    _report = bench_report()
     readme = tmp_path / "README.md"
     readme.write_text("head\n<!-- bench:x -->\nold\n<!-- /bench:x -->\ntail\n")
     _report.write_readme_section("x", "| new |\n", readme)
@@ -276,11 +278,7 @@ def test_a_reference_cache_holds_its_level_and_is_written_whole(tmp_path):
     on reading with the frames' size, and is written through a temporary (np.savez wrote in place)."""
     import numpy as np
 
-    sys.path.insert(0, str(BENCH))
-    try:
-        import _report
-    finally:
-        sys.path.remove(str(BENCH))
+    _report = bench_report()
     frames = {"day": np.ones((4, 4, 3)), "dusk": np.zeros((4, 4, 3))}
     path = tmp_path / "refc.npz"
     _report.save_reference_cache(path, "draft", frames, np.ones((4, 4), bool), seconds=2.5)
@@ -351,11 +349,7 @@ def test_readme_sections_are_checked_before_the_work(tmp_path, monkeypatch):
     every section a bench names."""
     import argparse
 
-    sys.path.insert(0, str(BENCH))
-    try:
-        import _report
-    finally:
-        sys.path.remove(str(BENCH))
+    _report = bench_report()
     readme = tmp_path / "README.md"
     readme.write_text("<!-- bench:dusk -->\nold\n<!-- /bench:dusk -->\n")
     monkeypatch.setattr(_report, "README", readme)
