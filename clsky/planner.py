@@ -325,7 +325,7 @@ def sun_margins(atmosphere: AtmosphereParameters, scene: Scene, orders=True, ray
 
 def sees_ground(atmosphere: AtmosphereParameters, scene: Scene) -> bool:
     """Whether a camera of ``scene`` sees the ground: its lowest view below the lowest observer's horizon,
-    -acos(Rp / r) (the horizon lowest from the highest observer; the lowest sees the ground first)."""
+    -acos(Rp / r) (of a range of observers, the lowest sees the ground at the highest views)."""
     radius = atmosphere.planet_radius + scene.altitudes_m[0]
     return scene.view_elevations_deg[0] < -math.degrees(math.acos(atmosphere.planet_radius / radius))
 
@@ -605,15 +605,16 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     chosen, estimate, estimates = choose_renderer(scene.sun_elevations_deg, budget, level.name, pixels=scene.pixels)
     lookup_error, at_lowest = estimates["lut"], _at_lowest_sun(scene.sun_elevations_deg)
     lookup_note = f"the table lookup's {_percent(lookup_error)} % {at_lowest}, exceeds the budget"
-    if chosen.method == "lut" and 0.0 < scene.altitudes_m[1] <= RENDERER_ERRORS_MEASURED_UP_TO_M:
+    if scene.altitudes_m[1] > 0.0 and lookup_error <= budget:
         # its error is measured from the ground, and grows from above it, looking down (a review of the
         # altitude rule, 2026-12-07: against the ray march, sun at 5 deg, 0.15 % from the ground, 2.0 % from 3
         # km, 4.2 % from 10 km): the cheapest of the others
-        others = tuple(row for row in RENDERERS if row.method != "lut")
-        chosen, estimate, _ = choose_renderer(scene.sun_elevations_deg, budget, level.name, others,
-                                              pixels=scene.pixels)
         lookup_note = (f"the table lookup's {_percent(lookup_error)} % {at_lowest} is measured from the ground, "
                        f"and grows from above it (2 % off the ray march looking down from 3 km, 4 % from 10 km)")
+        if chosen.method == "lut" and scene.altitudes_m[1] <= RENDERER_ERRORS_MEASURED_UP_TO_M:
+            others = tuple(row for row in RENDERERS if row.method != "lut")
+            chosen, estimate, _ = choose_renderer(scene.sun_elevations_deg, budget, level.name, others,
+                                                  pixels=scene.pixels)
     ray = level.ray if samples is None else level.ray.replace(view_steps=samples)
     march = f"ray march, {ray.view_steps} samples per ray" + (
         "" if samples is None else f" (asked for; the {level.name} level's {level.ray.view_steps})")
