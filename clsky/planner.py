@@ -562,8 +562,8 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         error estimates stay those measured with the level's samples).
     keep_orders : bool
         The caller's table needs the higher orders whatever the pilot finds they add (a 4D table over a
-        reflecting ground carries the ground's light in their channels): kept, with the sun axis' margins
-        they need.
+        reflecting ground carries the ground's light in their channels, and so does the 3D table for a
+        lookup whose cameras see it): kept, with the sun axis' margins they need.
     sampling : {'uniform', 'keller_bohn', 'ground_end'}, optional
         The view nodes when the caller sets them (``--sampling``), instead of :func:`view_sampling`'s: the
         plan's table, ray march and pilot take them, and its printed line says so (it said the planner's
@@ -619,11 +619,12 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     march = f"ray march, {ray.view_steps} samples per ray" + (
         "" if samples is None else f" (asked for; the {level.name} level's {level.ray.view_steps})")
     if scene.altitudes_m[1] > RENDERER_ERRORS_MEASURED_UP_TO_M and chosen.method != "raymarch":
-        would = chosen.description if chosen.method != "lut" else "table lookup"
+        reason = (lookup_note if chosen.method == "lut" else
+                  f"the {chosen.description}'s error was measured from the ground and holds to "
+                  f"{RENDERER_ERRORS_MEASURED_UP_TO_M / 1e3:g} km, not from {scene.altitudes_m[1] / 1e3:g} km (it is "
+                  f"1 % at the horizon from 30 km, 14 % from 1000 km)")
         chosen, estimate = renderer_row("raymarch"), estimates["raymarch"]
-        decisions.append(("renderer", march, f"the {would}'s error was measured from the ground and holds to "
-                          f"{RENDERER_ERRORS_MEASURED_UP_TO_M / 1e3:g} km, not from {scene.altitudes_m[1] / 1e3:g} km "
-                          f"(the sky-view map's is 1 % at the horizon from 30 km, 14 % from 1000 km)"))
+        decisions.append(("renderer", march, reason))
     elif chosen.method == "lut" and ray_march:
         decisions.append(("renderer", march,
                           f"asked for; the table lookup alone would do: {_percent(lookup_error)} % {at_lowest}"))
@@ -633,7 +634,8 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
                           f"(measured)"))
     elif chosen.method == "raymarch":
         reason = lookup_note
-        if estimates["skyview"] <= budget:              # tiny frames: marching every pixel costs less than the map
+        map_taken = scene.altitudes_m[1] <= RENDERER_ERRORS_MEASURED_UP_TO_M
+        if estimates["skyview"] <= budget and map_taken:    # tiny frames: marching every pixel costs less than the map
             reason += (f"; the sky-view map's {100 * estimates['skyview']:.2g} % fits, but "
                        + _costlier("skyview", chosen, scene.pixels))
         decisions.append(("renderer", march, reason))
@@ -665,7 +667,7 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         # holds none: the ground was black, a review found), as a 4D table does (keep_orders)
         lookup_ground = chosen.method == "lut" and atmosphere.has_ground and sees_ground(atmosphere, scene)
         if share < 0.5 * budget and (keep_orders or lookup_ground):
-            whose = "a 4D table's" if keep_orders else "the table lookup's, which sees the ground"
+            whose = "the caller's lookup's" if keep_orders else "the table lookup's, which sees the ground"
             decisions.append(("higher orders", f"until an order adds < {table.order_tolerance:g}",
                               f"they add at most {100 * share:.3g} % (pilot), kept: the table carries a reflecting "
                               f"ground's light in them ({whose})"))

@@ -382,6 +382,24 @@ def test_the_plan_says_what_the_frames_make_of_it(cl_context):
     assert lines(method="lut")["frames"] == ("table lookup (--method lut)  (not the plan's renderer, for the "
                                              "renderer line's reason: the frames may miss the budget)")
     assert "frames" not in lines(method="lut", error_budget=0.5)          # within a loose budget: nothing to say
+    # above 10 km the map is not the plan's renderer: --method skyview is said to be another's choice
+    assert lines(method="skyview", altitude=3e4)["frames"].startswith("sky-view map (--method skyview)  (not the")
+    # the 4D lookup's error was measured from the ground (17 % off the ray march from 30 km at -4 deg, draft)
+    assert "its error was measured from the ground" in lines(method="lut4d", table_size=None, altitude=3e4)["4D table"]
+
+
+def test_a_lookup_asked_for_over_a_ground_it_sees_keeps_the_orders(cl_context):
+    """--method lut from 1 km looking down at a reflecting ground: the plan (ray-marched above the ground)
+    dropped the orders, which hold the 3D lookup's ground light, and the frames' ground was black (147
+    against 9065 cd/m^2; a probe of spectral and farmed animations). The orders are kept for it."""
+    from clsky.anim.animate import AnimationConfig, planned_animation
+
+    config = AnimationConfig(frames=2, size=16, method="lut", altitude=1e3, camera="perspective", pitch_deg=-60.0,
+                             ground_albedo=0.5, error_budget=0.5, start_elevation_deg=20.0, max_elevation_deg=21.0)
+    plan = planned_animation(config, ctx=cl_context).plan
+    assert plan.table.orders == "auto"
+    assert dict((t, why) for t, _, why in plan.decisions)["higher orders"].endswith(
+        "kept: the table carries a reflecting ground's light in them (the caller's lookup's)")
 
 
 def test_a_lookup_that_sees_a_reflecting_ground_keeps_its_orders(cl_context):
