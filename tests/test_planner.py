@@ -448,6 +448,18 @@ def test_the_pilot_builds_its_first_orders_ground_only_where_a_ray_meets_the_gro
         assert built == orders, (views, built)
 
 
+def test_the_plan_says_where_its_promise_and_margins_stop():
+    """A polar night's path (-35 to -12 deg) was promised '1 % or better' where the levels were measured with
+    the sun down to -4 deg (planned and full tables 0.8-2 % apart there; a probe of the planner); a sun at the
+    zenith was given '+29.3 deg above' an axis that stops at 90."""
+    night = dict((t, why) for t, _, why in plan_scene(Scene((-30.0, -12.5))).decisions)["quality"]
+    assert night.endswith("; measured with the sun down to -4 deg: below -12 deg, down to -30 deg here, a "
+                          "planned and a full table differed by 0.8-2 %"), night
+    assert "measured" not in dict((t, why) for t, _, why in plan_scene(Scene((-6.0, 60.0))).decisions)["quality"]
+    zenith = dict((t, why) for t, _, why in plan_scene(Scene((90.0, 90.0))).decisions)["sun axis"]
+    assert zenith.startswith("the path's 90 to 90 deg + 0.0 deg above and 20.2 deg below"), zenith
+
+
 # 4. Planned table against the full table --------------------------------------------------------------
 
 def _ray_marched(table, level, size=24):
