@@ -75,7 +75,7 @@ from . import _cl
 from ._cache import cache_directory, source_digest, store
 from ._files import read_user_text
 from .atmosphere import AtmosphereParameters, as_atmosphere
-from .ground import check_ground_mode
+from .ground import check_ground_mode, sky_irradiance
 from .errors import check_choice, check_flag, check_instance, check_integer, check_range
 from .mapping import cos_to_v
 from .quality import QualityLevel, level_for_budget, quality_level
@@ -372,12 +372,13 @@ def sun_axis(atmosphere: AtmosphereParameters, scene: Scene, level: QualityLevel
 def _pilot_settings(table):
     """(table settings, ray settings) of the pilot of a plan's ``table``: the planned sun range and view
     nodes (the pilot took 'keller_bohn' whatever the plan's were: 2 points off in its share from 100 km),
-    16 x 64 nodes and enough sun nodes, 'draft' quadrature; a 16-step ray march."""
+    16 x 64 nodes and enough sun nodes, 'draft' quadrature, the azimuth average (the first order's ground
+    light is then its single scattering's, :func:`_higher_orders_share`); a 16-step ray march."""
     from .render import RAYMARCH_DEFAULTS
 
     pilot = quality_level("draft").table.replace(size=(16, 64, max(8, min(64, table.size[2]))),
                                                  sun_cos_range=table.sun_cos_range, mode=table.mode,
-                                                 sampling=table.sampling)
+                                                 sampling=table.sampling, azimuth_harmonics=0)
     return pilot, RAYMARCH_DEFAULTS.replace(view_steps=16, transmittance_size=(32, 128), sampling=table.sampling)
 
 
@@ -399,9 +400,10 @@ def _higher_orders_share(atmosphere, table, scene, ctx=None):
     # table gives what the plan renders with the higher orders dropped. With every order's irradiance the
     # ground's higher orders counted as the first's: a camera looking at the ground saw 'at most 0 %' and
     # lost 2.9 % (albedo 0.1) to 10.8 % (albedo 1) of its light (a probe of the planner, 2026-12-07)
-    first_ground = pilot_table.ground_irradiance       # read by no ray where none meets the ground
-    if first_ground is not None and sees_ground(atmosphere, scene):
-        first_ground = ScatteringTable.build(atmosphere, pilot.replace(orders=1), ctx=ctx).ground_irradiance
+    # (E_1 from the pilot's own single scattering, its first order, as a build of orders = 1 takes it: the same
+    # bits, without a second build of 0.03-0.04 s; the pilot has no azimuth harmonics, :func:`_pilot_settings`)
+    first_ground = None if pilot_table.ground_irradiance is None else \
+        sky_irradiance(atmosphere, pilot, pilot_table.orders[0], factored=True)
     single = SkyRenderer(dataclasses.replace(pilot_table, gathered=None, ground_irradiance=first_ground), ray, ctx=ctx)
     n = 24
     y, x = (np.mgrid[0:n, 0:n] + 0.5) / n * 2.0 - 1.0
