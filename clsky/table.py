@@ -784,8 +784,9 @@ def _read_archive(stream, path) -> dict:
             for name in small:
                 _check_size(path, name, sizes[name], _MAX_TEXT_BYTES)
             contents = {name: archive[name] for name in small}
-            limits = _array_limits(contents)
-            _check_order_count(archive.files, contents, path)
+            settings = _file_settings(contents)
+            limits = _array_limits(settings)
+            _check_order_count(archive.files, settings, path)
             for name in sorted(set(archive.files) - set(small)):
                 _check_size(path, name, sizes[name], limits.get(name.split("_")[0], limits["data"]))
                 contents[name] = archive[name]
@@ -839,26 +840,34 @@ def _check_stored(archive, path):
                                    f"them (damaged or forged file)")
 
 
-def _check_order_count(names, contents, path):
-    """TableFormatError naming ``path`` for more order_K members than the settings (read from ``contents``)
-    compute, before they are read (each was read first, then counted: 5 forged orders took 3.6 GB)."""
+def _file_settings(contents) -> TableSettings | None:
+    """The settings of an archive's small members ``contents``, or None where they cannot be read (the
+    checks after the members are read name what is wrong with them)."""
     try:
-        limit = max_orders_kept(TableSettings.from_dict(_json_member(contents, "settings")))
+        return TableSettings.from_dict(_json_member(contents, "settings"))
     except (ValueError, TypeError, KeyError, AttributeError):
-        return                                         # the checks after name the settings
+        return None
+
+
+def _check_order_count(names, settings, path):
+    """TableFormatError naming ``path`` for more order_K members than ``settings`` (:func:`_file_settings`;
+    None: unknown) compute, before they are read (each was read first, then counted: 5 forged orders took
+    3.6 GB)."""
+    if settings is None:
+        return
+    limit = max_orders_kept(settings)
     count = len(_order_numbers(names))
     if count > limit:
         raise TableFormatError(f"{path}: {count} orders kept, the settings compute at most {limit}")
 
 
-def _array_limits(contents) -> dict:
+def _array_limits(settings) -> dict:
     """The most bytes each kind of array member may take (``data``, ``gathered``, ``order``, ``ground``),
-    from the settings member: twice its float64 values, and a header (a member somewhat off in shape or
-    dtype is read, and the checks after name what is wrong with it); where the settings cannot be read,
-    half the host's available memory for all (those checks name the settings)."""
-    try:
-        settings = TableSettings.from_dict(_json_member(contents, "settings"))
-    except (ValueError, TypeError, KeyError, AttributeError):
+    from the file's ``settings`` (:func:`_file_settings`): twice its float64 values, and a header (a member
+    somewhat off in shape or dtype is read, and the checks after name what is wrong with it); where the
+    settings cannot be read (None), half the host's available memory for all (those checks name the
+    settings)."""
+    if settings is None:
         from .resources import host_available_bytes
 
         available = host_available_bytes() or 2**40
