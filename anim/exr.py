@@ -456,6 +456,14 @@ def read_exr(path):
     return pixels, header
 
 
+def is_rec709(chromaticities) -> bool:
+    """Whether ``chromaticities`` (x, y of red, green, blue and white, 8 numbers; an EXR's attribute, a
+    Radiance PRIMARIES line) are Rec. 709's and D65 (:data:`REC709_CHROMATICITIES`, within 1e-4: an EXR holds
+    them as float32), the primaries clsky's readers return their pixels in."""
+    values = np.ravel(np.asarray(chromaticities, dtype=np.float64))
+    return values.shape == (8,) and bool(np.all(np.abs(values - REC709_CHROMATICITIES) <= 1e-4))
+
+
 def window_text(box) -> str:
     """'(x0, y0)-(x1, y1)' of an EXR window (two int pairs), as read_exr's and clsky info's lines show it."""
     (x0, y0), (x1, y1) = box
@@ -475,6 +483,6 @@ def _check_placed_rgb(path, header, parts):
         raise ValueError(f"{path}: its data window {window_text(header['dataWindow'])} is not its display window "
                          f"{window_text(display)}; the reader takes whole images")
     chromaticities = header.get("chromaticities")
-    if chromaticities is not None and not np.allclose(np.ravel(chromaticities), REC709_CHROMATICITIES, atol=1e-4):
+    if chromaticities is not None and not is_rec709(chromaticities):
         shown = " ".join(f"{v:g}" for v in np.ravel(chromaticities))
         raise ValueError(f"{path}: its chromaticities ({shown}) are not Rec. 709's: the reader returns linear sRGB")

@@ -276,11 +276,10 @@ def _check_primaries(path, header):
     them (linear sRGB), as :func:`clsky.anim.exr.read_exr` checks an EXR's chromaticities."""
     if "PRIMARIES" not in header:
         return
-    from .exr import REC709_CHROMATICITIES
+    from .exr import is_rec709
 
     values = [_number(text) for text in header["PRIMARIES"].split()]
-    if len(values) != 8 or None in values or not all(math.isclose(v, w, abs_tol=1e-4)
-                                                     for v, w in zip(values, REC709_CHROMATICITIES)):
+    if None in values or not is_rec709(values):
         raise ValueError(f"{path}: its PRIMARIES ({header['PRIMARIES']!r:.60}) are not Rec. 709's: the reader "
                          f"returns linear sRGB")
 
