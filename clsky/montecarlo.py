@@ -704,12 +704,14 @@ def _shown(value) -> str:
         return f"{value!r:.40} ({type(value).__name__})"
     if isinstance(value, (int, np.integer)):
         value = int(value)
+        if abs(value) < 10**7:
+            return str(value)
         try:
             text = f"{float(value):g}"
         except OverflowError:
             text = None
-        if abs(value) < 10**7 or (text is not None and int(float(text)) == value):
-            return str(value) if abs(value) < 10**7 else text
+        if text is not None and int(float(text)) == value:
+            return text
         if abs(value).bit_length() <= 100:          # whole where %g would round it (2**64 is not 1e+19)
             return str(value)
         if abs(value).bit_length() > 14000:         # beyond str()'s 4300 digits: from its logarithm
