@@ -84,8 +84,8 @@ from .atmosphere import AtmosphereParameters
 from .errors import ParameterError, is_integer
 from .mapping import altitude_to_u, cos_to_sun_t, cos_to_v, grid_coordinates
 from .multiple import SPECIES, _gather_key, _gather_parts, _phase, _quadrature_key, _read_only, gather_quadrature
-from .orders import (_diverging, _total, check_finite, diverging_reason, geometric_ratio, per_channel, species_sum,
-                     tail_factor)
+from .orders import (_diverging, _total, check_finite, diverging_reason, geometric_ratio, per_channel,
+                     scatter_sun_stride, species_sum, tail_factor)
 from .settings import MAX_AZIMUTH_HARMONICS, TableSettings
 from .stopping import DeviceStoppingTest, HostStoppingTest
 
@@ -437,7 +437,7 @@ def gathered_along(atmosphere, ray_settings, gathered, grid_settings, h0, mu_v, 
 
 
 def scatter_nodes(atmosphere: AtmosphereParameters, settings: TableSettings, gathered, ground_radiance=None,
-                  source_harmonics=None):
+                  source_harmonics=None, sun_stride=1):
     """The next order L^(k+1) (M + 1, D, H, W, 3) at the azimuth nodes from the gathered harmonics
     ``gathered`` (M + 1, D, H, W, 6, or its first ``source_harmonics`` + 1 alone), phase applied and
     both species combined (M from ``settings.azimuth_harmonics``); twin of
@@ -445,7 +445,8 @@ def scatter_nodes(atmosphere: AtmosphereParameters, settings: TableSettings, gat
     reflecting ground, rays that end on it add T L_g(mu_sun there), ``ground_radiance`` L_g (D, 3) per
     sun node (:mod:`clsky.ground`), as :func:`clsky.reference.scatter` does along the true ray.
     ``source_harmonics`` (0 .. M): the rays read only that many harmonics of the source (0: its
-    azimuth average, the M = 0 kernel at each node's cos_azimuth); None: all."""
+    azimuth average, the M = 0 kernel at each node's cos_azimuth); None: all. ``sun_stride`` 2: the sun
+    nodes between every other one and the last filled (:func:`clsky.reference.fill_between_sun_nodes`)."""
     from .ground import interpolate_sun_axis
 
     count = settings.azimuth_harmonics + 1
@@ -466,7 +467,7 @@ def scatter_nodes(atmosphere: AtmosphereParameters, settings: TableSettings, gat
                 value = value + transmittance * interpolate_sun_axis(np.asarray(ground_radiance), mu_ground, settings)
             return value
         out.append(reference._cells_in_chunks(settings, (scatter_settings.view_steps + 1) * 8 * 6 * count, cells, 3))
-    return np.stack(out)
+    return reference.fill_between_sun_nodes(np.stack(out), sun_stride)
 
 
 def _to_harmonics(nodes):
@@ -511,8 +512,9 @@ class _Backend:
 
     single: Ibar^(1) at the azimuth nodes (M + 1, D, H, W, 6) on the host; upload(gathered): the
     host's gathered harmonics (M + 1, D, H, W, 6) in the backend's form; scatter(gathered,
-    ground_radiance): a pair (a callable returning the order's nodes (M + 1, D, H, W, 3) on the
-    host once they are there, valid until the next call; the same nodes in the backend's form);
+    ground_radiance, source_harmonics=None, sun_stride=1): a pair (a callable returning the order's nodes
+    (M + 1, D, H, W, 3) on the host once they are there, valid until the next call; the same nodes in the
+    backend's form);
     gather(that form, harmonics=None): the next order's gathered harmonics (backend's form), only the
     first ``harmonics`` of them computed (default all); accumulate(total, gathered, scale=None,
     harmonics=None): total + gathered, or total + scale gathered per wavelength (scale (r, g, b)), in
@@ -542,8 +544,8 @@ def _numpy_backend(atmosphere, settings, operators):
     single = single_scattering_nodes(atmosphere, settings)
     operators = operators()
 
-    def scatter(gathered, ground_radiance, source_harmonics=None):
-        nodes = scatter_nodes(atmosphere, settings, gathered, ground_radiance, source_harmonics)
+    def scatter(gathered, ground_radiance, source_harmonics=None, sun_stride=1):
+        nodes = scatter_nodes(atmosphere, settings, gathered, ground_radiance, source_harmonics, sun_stride)
         return (lambda: nodes), nodes
 
     def gather(nodes, harmonics=None):
@@ -675,10 +677,11 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math, background=
         the rows a copy queue)."""
         return _cl.upload_padded(queue, gathered, engine.dtype, allocator=pool, queues=upload_queues)
 
-    def scatter(gathered_d, ground_radiance, source_harmonics=None):
+    def scatter(gathered_d, ground_radiance, source_harmonics=None, sun_stride=1):
         """The nodes, (M + 1, D, H, W, 3) on the host and padded (M + 1, D, H, W, 8) on the device; the
         rays read ``source_harmonics`` harmonics of the source (the first ones of the padded
-        (M + 1, D, H, W, 8) buffer: a kernel built for fewer harmonics reads only those)."""
+        (M + 1, D, H, W, 8) buffer: a kernel built for fewer harmonics reads only those); the sun nodes
+        as ``sun_stride`` says (``MultipleScatteringEngine.scatter``)."""
         read = settings.azimuth_harmonics if source_harmonics is None else source_harmonics
         if built is not None:
             built.result()          # waits for the builds (done long before); re-raises a build's error
@@ -688,7 +691,7 @@ def _opencl_backend(atmosphere, settings, operators, ctx, fast_math, background=
         nodes_d = cla.empty(queue, (cosines.size,) + gathered_d.shape[1:], engine.dtype, allocator=pool)
         for node, c in enumerate(cosines):
             engines[read].scatter(atmosphere, gathered_d, combine_species=True, ground_radiance=ground_radiance,
-                                  cos_azimuth=c, out=nodes_d, node=node)
+                                  cos_azimuth=c, out=nodes_d, node=node, sun_stride=sun_stride)
         if not host_nodes:
             host_nodes.append(np.empty(nodes_d.shape[:-1] + (3,)))
         return download(nodes_d, host_nodes[0], 3), nodes_d                # after the scatters
@@ -810,7 +813,8 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
     with _cl.host_blas_single_threaded() if backend == "opencl" else contextlib.nullcontext():
         for k in range(2, wanted + 1):
             gathered_sum = run.accumulate(gathered_sum, gathered, harmonics=1 if summed else None)
-            on_host, state = run.scatter(gathered, pending_ground, None if _reads_harmonics(k) else 0)
+            on_host, state = run.scatter(gathered, pending_ground, None if _reads_harmonics(k) else 0,
+                                         scatter_sun_stride(settings, k))
             # first: the pool hands its buffer to the next gather (no more memory); the first order's is the
             # gathered sum's (accumulate), and the next gather takes the memory a copy of it would have
             del gathered

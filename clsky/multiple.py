@@ -367,10 +367,14 @@ class MultipleScatteringEngine(_cl.Engine):
         return out
 
     def scatter(self, atmosphere: AtmosphereParameters, gathered, combine_species=False, ground_radiance=None,
-                cos_azimuth=1.0, out=None, node=0):
+                cos_azimuth=1.0, out=None, node=0, sun_stride=1):
         """Next order from a gathered table, as a padded device array (D, H, W, 8): ``out`` if given,
         a padded device array (N, D, H, W, 8) whose slab ``node`` receives it (the nodes of
         :mod:`clsky.azimuth`), else a new one.
+
+        ``sun_stride`` 2 computes every other sun node and the last, and fills the nodes between with
+        the geometric mean of their neighbours (``TableSettings.orders_sun_stride``; kernels/multiple.cl:
+        scatter, fill_between_suns); 1 (default) computes every node.
 
         With ``combine_species`` (physical mode) channels 0-2 and 3-5 both hold Rayleigh + Mie. With a
         reflecting ground (``atmosphere.has_ground``, which needs ``combine_species``), rays that end on
@@ -397,17 +401,26 @@ class MultipleScatteringEngine(_cl.Engine):
             out = cla.empty(self.queue, (depth, height, width, 8), self.dtype, allocator=self.allocator)
         else:
             self._check_out(out, (depth, height, width, 8), node)
+        if sun_stride not in (1, 2):
+            raise ValueError(f"sun_stride must be 1 or 2, got {sun_stride!r}")
         atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
         kernel = self.kernels_with(_atmosphere_cl.feature_defines(atmosphere))["scatter"]
+        offset = np.uint64(node * depth * height * width)
+        computed = (depth + sun_stride - 2) // sun_stride + 1                   # every node, or every other and the last
         event = kernel(
-            self.queue, *_cl.launch_size(kernel, self.device, _scatter_items(width, height, depth, self.vector_width),
-                                         SCATTER_WORK_GROUP),
+            self.queue, *_cl.launch_size(kernel, self.device,
+                                         _scatter_items(width, height, computed, self.vector_width), SCATTER_WORK_GROUP),
             atmosphere_d, np.int32(width),
             np.int32(height), np.int32(depth), np.int32(MAPPINGS[self.settings.mapping]),
             self.real2(self.settings.sun_w_range), np.int32(bool(combine_species)), self.real(cos_azimuth),
-            gathered_d.data,
-            ground_d.data, out.data, np.uint64(node * depth * height * width))
+            gathered_d.data, ground_d.data, out.data, offset, np.int32(sun_stride))
         self._record("scatter", event)
+        between = (depth - 1) // 2 * height * width if sun_stride == 2 else 0
+        if between:
+            fill = self._featureless_kernels()["fill_between_suns"]
+            event = fill(self.queue, *self._linear_size(fill, between), out.data, offset, np.int32(depth),
+                         np.uint64(height * width))
+            self._record("fill_between_suns", event)
         out.add_event(event)
         return out
 

@@ -79,10 +79,23 @@ from .multiple import CROSSED_PAIRS, DIRECT_PAIRS, SPECIES, first_gather_stack, 
 from .settings import TableSettings
 
 __all__ = ["OrdersResult", "compute_orders", "BRIGHT_FRACTION", "relative_addition", "check_finite",
-           "geometric_ratio", "tail_factor"]
+           "geometric_ratio", "tail_factor", "SUN_STRIDE_FROM_ORDER", "scatter_sun_stride"]
 
 #: Cells whose running sum reaches this fraction of the channel's maximum form the "bright part".
 BRIGHT_FRACTION = 1e-2
+
+#: The first order whose scatter computes the sun nodes as ``TableSettings.orders_sun_stride`` says (both
+#: orders loops, this module's and :mod:`clsky.azimuth`'s). Order 2, a fifth to a third of the light, stays
+#: on every node: interpolated along the sun axis from every other node it moved the default animation's
+#: table ten times more than the orders k >= 3 did (8.4e-4 against 1.1e-4 at the bright cells' 95th
+#: percentile, docs/speed-log.md).
+SUN_STRIDE_FROM_ORDER = 3
+
+
+def scatter_sun_stride(settings, k) -> int:
+    """The sun stride of order k's scatter: ``settings.orders_sun_stride`` from order
+    :data:`SUN_STRIDE_FROM_ORDER` on, else 1 (every sun node)."""
+    return settings.orders_sun_stride if k >= SUN_STRIDE_FROM_ORDER else 1
 
 
 @dataclasses.dataclass
@@ -321,10 +334,10 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         upload = engine.upload_matrices
         copy_queue = cl.CommandQueue(engine.ctx)     # copies to the host overlap the next gather
 
-        def scatter(gathered, ground_radiance):
+        def scatter(gathered, ground_radiance, sun_stride):
             """The new order on the device, and a callable returning it on the host once copied."""
             new_d = engine.scatter(atmosphere, gathered, combine_species=settings.mode == "physical",
-                                   ground_radiance=ground_radiance)
+                                   ground_radiance=ground_radiance, sun_stride=sun_stride)
             host = np.empty(new_d.shape, dtype=new_d.dtype)
             copied = cl.enqueue_copy(copy_queue, host, new_d.data, wait_for=new_d.events, is_blocking=False)
 
@@ -359,14 +372,12 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
         def upload(matrices):
             return matrices
 
-        def scatter(gathered, ground_radiance):
-            if atmosphere.has_ground:          # physical mode (check_ground_mode): both sets combined
-                new = reference.scatter(atmosphere, settings, gathered, True, ground_radiance)
+        def scatter(gathered, ground_radiance, sun_stride):
+            # the physical mode's species combined before the nodes between are filled, as the kernel does
+            combined = settings.mode == "physical"
+            new = reference.scatter(atmosphere, settings, gathered, combined, ground_radiance, sun_stride)
+            if combined:
                 return new, lambda: np.ascontiguousarray(new[..., :3])
-            new = reference.scatter(atmosphere, settings, gathered)
-            if settings.mode == "physical":
-                phased = species_sum(new)
-                return np.concatenate([phased] * 2, axis=-1), lambda: phased
             return new, lambda: new
 
     totals = [_total(single)]
@@ -394,7 +405,7 @@ def compute_orders(atmosphere: AtmosphereParameters, settings: TableSettings, ba
             running = single.copy()
         for k in range(2, wanted + 1):
             gathered_sum = accumulate(gathered_sum, gathered)
-            next_input, on_host = scatter(gathered, pending_ground)
+            next_input, on_host = scatter(gathered, pending_ground, scatter_sun_stride(settings, k))
             del gathered                  # summed and scattered: its (D, H, W, 8) buffer may go
             # gather the next order from the new one where it is (on the device for OpenCL) before
             # looking at it on the host, so that the copy and the stopping test overlap that work

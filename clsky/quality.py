@@ -64,7 +64,9 @@ class QualityLevel:
         The scattering table's settings; its sun axis' node count (``size[2]``) is the one of a whole
         sun axis at :attr:`sun_node_spacing` (a planned table covers less and needs fewer); its scatter of
         the orders takes the higher orders' source on every ``table.source_stride``-th view node (as
-        ``ray``).
+        ``ray``), and that of the orders k >= 3 computes every ``table.orders_sun_stride``-th sun node (2 for
+        'default' and 'high': 14-16 % less of their build's CPU time for a change of their frames of at most
+        2e-4 and 6e-5; 'draft', whose build of half a second it left unchanged, and 'reference' 1).
     sun_node_spacing : float
         Largest spacing of the sun axis' nodes in texture coordinate w.
     ray : TableSettings
@@ -101,9 +103,9 @@ QUALITY_LEVELS = {
     level.name: level for level in (
         _level("draft", 0.10, (16, 128), 0.015, 16, source_stride=2, view_steps=15, multiple_view_steps=10,
                sun_steps=15, gather_theta_steps=64, gather_phi_steps=32, order_tolerance=1e-2),
-        _level("default", 0.01, (32, 128), 0.004, 48, source_stride=2),
+        _level("default", 0.01, (32, 128), 0.004, 48, source_stride=2, orders_sun_stride=2),
         _level("high", 1e-3, (32, 256), 0.002, 128, view_steps=60, multiple_view_steps=40, sun_steps=60,
-               order_tolerance=1e-5),
+               order_tolerance=1e-5, orders_sun_stride=2),
         _level("reference", 5e-4, (32, 256), 0.0015, 256, view_steps=120, multiple_view_steps=None,
                sun_steps=240, transmittance_size=(128, 512), order_tolerance=1e-5, azimuth_harmonics=2),
     )

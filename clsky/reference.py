@@ -546,15 +546,33 @@ def _ground_seen(atmosphere, rays):
     return transmittance * rays.hits_ground[:, None], np.clip(rays.mu_sun[:, -1], -1.0, 1.0)
 
 
+def fill_between_sun_nodes(table, stride=1):
+    """``table`` (..., D, H, W, C) with each sun node that a scatter of sun stride 2 left between two computed
+    ones (z odd, z < D - 1) set, per channel, to the geometric mean of nodes z - 1 and z + 1, their mean where
+    either is not positive; in place, and returned (stride 1: unchanged). Twin of kernels/multiple.cl's
+    fill_between_suns (``TableSettings.orders_sun_stride``): the orders' radiance falls off about exponentially
+    along the sun axis into the night, where the geometric mean, linear in the logarithm, is the closer guess
+    (docs/speed-log.md)."""
+    if stride == 1:
+        return table
+    depth = table.shape[-4]
+    below, above = table[..., 0:depth - 2:2, :, :, :], table[..., 2:depth:2, :, :, :]
+    with np.errstate(invalid="ignore"):
+        geometric = np.sqrt(below) * np.sqrt(above)
+    table[..., 1:depth - 1:2, :, :, :] = np.where((below > 0.0) & (above > 0.0), geometric, 0.5 * (below + above))
+    return table
+
+
 def scatter(atmosphere: AtmosphereParameters, settings: TableSettings, gathered, combine_species=False,
-            ground_radiance=None):
+            ground_radiance=None, sun_stride=1):
     """Next order from a gathered table; twin of ``MultipleScatteringEngine.scatter``.
 
     Ibar_s^(k)(lambda) = beta_s / (4 pi) Integral Gbar_s(P) rho_s(h(P)) T(P, Pa) ds, channels Rayleigh
     r, g, b and Mie r, g, b in and out; shape (D, H, W, 6). With ``combine_species`` both channel sets
     hold Rayleigh + Mie; a reflecting ground (``atmosphere.has_ground``, ``ground_radiance`` L_g (D, 3)
     per sun node, combine_species only) adds T(Pa, Pb) L_g(mu_sun(Pb)) to both along rays that end
-    on the ground (:mod:`clsky.ground`).
+    on the ground (:mod:`clsky.ground`). ``sun_stride`` 2: the nodes between every other one and the last
+    filled by :func:`fill_between_sun_nodes` (computed here, then overwritten).
     """
     from .ground import interpolate_sun_axis
 
@@ -574,7 +592,7 @@ def scatter(atmosphere: AtmosphereParameters, settings: TableSettings, gathered,
             value = value + np.concatenate([seen, seen], axis=1)
         return value
 
-    return _cells_in_chunks(settings, (settings.view_steps + 1) * 8 * 6, cells)
+    return fill_between_sun_nodes(_cells_in_chunks(settings, (settings.view_steps + 1) * 8 * 6, cells), sun_stride)
 
 
 # Per-pixel rendering (kernels/render.cl) ---------------------------------------------------------

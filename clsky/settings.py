@@ -30,9 +30,9 @@ MIE_LAYOUTS = {"per-wavelength": 6, "notes": 4}
 PARAMETERIZATIONS = ("elek3d", "4d")
 #: Settings that enter :meth:`TableSettings.to_dict` (and so the parameters hash) only away from their
 #: defaults: they came after tables were saved, whose hashes must not change; the first two after the 3D
-#: tables only, ``source_stride`` after the 4D ones too.
+#: tables only, ``source_stride`` and ``orders_sun_stride`` after the 4D ones too.
 _LATE_FIELDS = {"parameterization": "elek3d", "azimuth_size": 16}
-_LATER_FIELDS = {"source_stride": 1}
+_LATER_FIELDS = {"source_stride": 1, "orders_sun_stride": 1}
 
 #: Most azimuthal harmonics of the higher orders (``azimuth_harmonics``; clsky/azimuth.py).
 MAX_AZIMUTH_HARMONICS = 64
@@ -139,6 +139,15 @@ class TableSettings:
         2e-4 by day and up to 2e-3 in civil twilight, a scatter of its table a quarter (M = 0) to a
         third (M = 2) less for a change of the frames under 1e-3 (docs/speed-log.md); the 'draft' and
         'default' quality levels take it for both.
+    orders_sun_stride : int
+        1 (default) or 2: the sun nodes the scatter of the orders k >= 3 computes
+        (:data:`clsky.orders.SUN_STRIDE_FROM_ORDER`; kernels/multiple.cl: scatter). 2 computes every other
+        sun node and the last, and gives each node between two computed ones the geometric mean of theirs
+        (the orders' radiance falls off about exponentially along the sun axis; their mean where one is 0:
+        :func:`clsky.reference.fill_between_sun_nodes`). The orders k >= 3 carry a few per cent of the light;
+        interpolated so, they moved a bright cell by 1-2e-4 at the 95th percentile in twilight (2e-3 in the
+        worst cells near the horizon), for about a quarter of the planned table's build (docs/speed-log.md);
+        order 2 on every other node would be ten times worse. The 'draft' and 'default' quality levels take it.
     """
 
     size: tuple = (32, 256, 32)
@@ -162,6 +171,7 @@ class TableSettings:
     parameterization: str = "elek3d"
     azimuth_size: int = 16
     source_stride: int = 1
+    orders_sun_stride: int = 1
 
     def __post_init__(self):
         object.__setattr__(self, "size", self._check_size("size", self.size, 3))
@@ -199,6 +209,8 @@ class TableSettings:
                                  self.azimuth_harmonics)
         self._check_parameterization()
         object.__setattr__(self, "source_stride", check_integer("source_stride", self.source_stride, 1, 2))
+        object.__setattr__(self, "orders_sun_stride",
+                           check_integer("orders_sun_stride", self.orders_sun_stride, 1, 2))
         tolerance = self.order_tolerance
         if not is_real_number(tolerance) or not 0.0 < tolerance < 1.0:
             raise ParameterError("order_tolerance", "a number in (0, 1)", tolerance)
@@ -274,8 +286,8 @@ class TableSettings:
 
     def to_dict(self) -> dict:
         """The settings as JSON-ready values; the late fields (``parameterization``, ``azimuth_size``;
-        ``source_stride``) only where they differ from their defaults, so that a 3D table's (any table's)
-        parameters hash is what it was."""
+        ``source_stride``, ``orders_sun_stride``) only where they differ from their defaults, so that a 3D
+        table's (any table's) parameters hash is what it was."""
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(self).items()
                 if not (k in _LATE_FIELDS and v == _LATE_FIELDS[k] and self.parameterization == "elek3d")
                 and not (k in _LATER_FIELDS and v == _LATER_FIELDS[k])}

@@ -175,6 +175,9 @@ inline void integrate_gathered_suns(__constant const atmosphere_t *atm, const re
  * holds M + 1 harmonics (view_ray.cl: add_lookups; clsky/azimuth.py).
  * The result goes to table + 8 table_offset (table_offset in cells: an azimuth node's slab of a buffer
  * that holds every node, clsky/azimuth.py).
+ * sun_stride 1 computes every sun node; 2 (TableSettings.orders_sun_stride) every other one and the last,
+ * z = min(c sun_stride, D - 1) for c = 0 .. computed - 1, each as with sun_stride 1 (the same operations), and
+ * leaves the nodes between to fill_between_suns; the global size's third axis then counts the computed nodes.
  * Requires view_ray.cl (and so N_VIEW). */
 #ifndef SCATTER_SUN_NODES
 #error "SCATTER_SUN_NODES (sun nodes per scatter work-item) must be defined"
@@ -182,20 +185,21 @@ inline void integrate_gathered_suns(__constant const atmosphere_t *atm, const re
 __kernel void scatter(__constant const atmosphere_t *atm, const int width, const int height,
                       const int depth, const int mapping, const real2 sun_range, const int combine_species,
                       const real cos_azimuth, __global const real *gathered, __global const real *ground_radiance,
-                      __global real *table, const ulong table_offset)
+                      __global real *table, const ulong table_offset, const int sun_stride)
 {
     table += 8 * table_offset;
     const int gx = get_global_id(0);
     const int y = get_global_id(1);
     const int z0 = SCATTER_SUN_NODES * get_global_id(2);
-    if (gx * VECTOR_WIDTH >= width || y >= height || z0 >= depth)
+    const int computed = (depth + sun_stride - 2) / sun_stride + 1;
+    if (gx * VECTOR_WIDTH >= width || y >= height || z0 >= computed)
         return;
 
     realv h0;
     real mu_v, mu_s[SCATTER_SUN_NODES], nu[SCATTER_SUN_NODES];
     for (int b = 0; b < SCATTER_SUN_NODES; ++b)      /* nodes past the last one repeat it, unstored */
-        table_cell(atm, gx, y, min(z0 + b, depth - 1), width, height, depth, mapping, sun_range, cos_azimuth, &h0,
-                   &mu_v, &mu_s[b], &nu[b]);
+        table_cell(atm, gx, y, min(min(z0 + b, computed - 1) * sun_stride, depth - 1), width, height, depth, mapping,
+                   sun_range, cos_azimuth, &h0, &mu_v, &mu_s[b], &nu[b]);
     real8 sum[SCATTER_SUN_NODES][VECTOR_WIDTH];
     realv ground_t[3], ground_mu[SCATTER_SUN_NODES];
     integrate_gathered_suns(atm, h0, mu_v, mu_s, nu, gathered, width, height, depth, mapping, sun_range, sum,
@@ -205,8 +209,8 @@ __kernel void scatter(__constant const atmosphere_t *atm, const int width, const
     const real scale = R(1.0) / (R(4.0) * PI_REAL);
     const real4 beta_m = atm->beta_mie;
     const real8 coefficient = (real8)(beta.x, beta.y, beta.z, beta_m.x, beta_m.y, beta_m.z, R(0.0), R(0.0)) * scale;
-    for (int b = 0; b < SCATTER_SUN_NODES && z0 + b < depth; ++b) {
-        const int z = z0 + b;
+    for (int b = 0; b < SCATTER_SUN_NODES && z0 + b < computed; ++b) {
+        const int z = min((z0 + b) * sun_stride, depth - 1);
         for (int k = 0; k < VECTOR_WIDTH; ++k) {
             const int xk = gx * VECTOR_WIDTH + k;
             if (xk >= width)
@@ -224,6 +228,25 @@ __kernel void scatter(__constant const atmosphere_t *atm, const int width, const
             vstore8(value, (size_t)xk + (size_t)width * ((size_t)y + (size_t)height * (size_t)z), table);
         }
     }
+}
+
+/* The sun nodes a scatter with sun_stride 2 left between two computed ones (z odd, z < D - 1) of the padded
+ * table (D, H, W, 8) at table + 8 table_offset, each channel the geometric mean of nodes z - 1 and z + 1, their
+ * mean where either is not positive (TableSettings.orders_sun_stride; twin: clsky.reference.fill_between_sun_nodes).
+ * layer_cells = H W. Global size: at least (D - 1) / 2 layer_cells, one cell a work-item. */
+__kernel void fill_between_suns(__global real *table, const ulong table_offset, const int depth,
+                                const ulong layer_cells)
+{
+    const size_t item = get_global_id(0);
+    if (item >= (size_t)((depth - 1) / 2) * layer_cells)
+        return;
+    table += 8 * table_offset;
+    const size_t z = 2 * (item / layer_cells) + 1, cell = item % layer_cells;
+    const real8 below = vload8(cell + (z - 1) * layer_cells, table);
+    const real8 above = vload8(cell + (z + 1) * layer_cells, table);
+    const real8 mean = R(0.5) * (below + above);
+    const real8 geometric = sqrt(below) * sqrt(above);
+    vstore8(select(mean, geometric, (below > R(0.0)) & (above > R(0.0))), cell + z * layer_cells, table);
 }
 
 /* Elementwise steps of the orders with azimuth harmonics (clsky/azimuth.py), over padded tables of

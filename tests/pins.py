@@ -129,23 +129,26 @@ def _whole_labels():
     return mock.patch.object(metrics, "_fitted_label", whole)
 
 
-def _source_at_every_node():
+def _every_node():
     """A context in which the quality levels' ray marches and tables look the higher orders' source up at
     every view node (``TableSettings.source_stride = 1``), as every commit before a98be11 (2026-12-03) did
     for the ray march and every one before the scatter's stride (2026-12-03, later) for the table (the
-    'draft' and 'default' levels take 2 since). A tree without the setting has nothing to switch."""
+    'draft' and 'default' levels take 2 since), and scatter the orders at every sun node
+    (``orders_sun_stride = 1``), as every commit before 2026-12-07's did (the 'default' and 'high' levels
+    take 2 since). A tree without these settings has nothing to switch."""
     import contextlib
     import dataclasses
     from unittest import mock
 
     from clsky import settings
 
-    if not any(field.name == "source_stride" for field in dataclasses.fields(settings.TableSettings)):
+    fields = {field.name for field in dataclasses.fields(settings.TableSettings)}
+    every = {name: 1 for name in ("source_stride", "orders_sun_stride") if name in fields}
+    if not every:
         return contextlib.nullcontext()
     from clsky import quality
 
-    levels = {name: dataclasses.replace(level, ray=level.ray.replace(source_stride=1),
-                                        table=level.table.replace(source_stride=1))
+    levels = {name: dataclasses.replace(level, ray=level.ray.replace(**every), table=level.table.replace(**every))
               for name, level in quality.QUALITY_LEVELS.items()}
     return mock.patch.dict(quality.QUALITY_LEVELS, levels)
 
@@ -222,9 +225,9 @@ def _plain_sum_of_orders():
 def display_frames(ctx, directory, tone_map=None) -> tuple:
     """The atmosphere-plus preset's compare animation (table | ray march | error panels, dithered, 3
     frames of 24 px), written under ``directory``: SHA-256 of each PNG frame's decoded pixels, and each
-    frame's METRIC_KEYS; the source of the ray march's higher orders at every node
-    (:func:`_source_at_every_node`), the labels whole (:func:`_whole_labels`). ``tone_map`` None leaves the
-    config's default (the only choice before anim/display.py). Its table sums the orders plainly
+    frame's METRIC_KEYS; the source of the ray march's higher orders at every node and the orders scattered
+    at every sun node (:func:`_every_node`), the labels whole (:func:`_whole_labels`). ``tone_map`` None
+    leaves the config's default (the only choice before anim/display.py). Its table sums the orders plainly
     (:func:`_plain_sum_of_orders`), as the pinned commit did: so the pin also holds the orders loop without
     the tail to its results, bit for bit; cube roots by ``cbrt`` (:func:`_library_cube_root`)."""
     import pathlib
@@ -240,7 +243,7 @@ def display_frames(ctx, directory, tone_map=None) -> tuple:
     config = AnimationConfig(frames=3, size=24, table_size=(9, 33, 7), preset="atmosphere-plus",
                              mode="atmosphere-plus", start_elevation_deg=-4.0, max_elevation_deg=30.0,
                              output=str(directory / "sky.mp4"), **options)
-    with _plain_sum_of_orders(), _library_cube_root(), _source_at_every_node(), _whole_labels():
+    with _plain_sum_of_orders(), _library_cube_root(), _every_node(), _whole_labels():
         result = render_animation(config, ctx=ctx)
     frames = sorted((directory / "sky_frames").glob("*.png"))
     hashes = [hashlib.sha256(np.asarray(Image.open(f)).tobytes()).hexdigest() for f in frames]
