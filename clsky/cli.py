@@ -210,7 +210,8 @@ def _add_table_arguments(parser):
     grid = parser.add_argument_group("table")
     grid.add_argument("--quality", choices=list(QUALITY_LEVELS),
                       help="start from a named quality level's settings (clsky/quality.py); the options "
-                           "below override them (the defaults they state are those without --quality)")
+                           "below override them (the defaults they state are those without --quality; the "
+                           "levels' strides, TableSettings.source_stride and orders_sun_stride, have no option)")
     grid.add_argument("--size", nargs=3, type=int, metavar=("W", "H", "D"),
                       help="nodes along altitude, view zenith, sun zenith (default: 32 256 32)")
     grid.add_argument("--sun-elevations", nargs=2, type=float, metavar=("LOW", "HIGH"),

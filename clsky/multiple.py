@@ -264,10 +264,11 @@ def first_gather_matrices(atmosphere, settings):
     return {pair: first_gather_matrix(atmosphere, settings, pair) for pair in DIRECT_PAIRS + CROSSED_PAIRS}
 
 
-def _scatter_items(width, height, depth, vector_width):
+def _scatter_items(width, height, sun_nodes, vector_width):
     """The scatter kernel's work-items per axis: ``vector_width`` cells, one view row and SCATTER_SUN_NODES
-    sun nodes per work-item (the launch rounds each axis up to SCATTER_WORK_GROUP, :func:`clsky._cl.launch_size`)."""
-    return -(-width // vector_width), height, -(-depth // SCATTER_SUN_NODES)
+    of the ``sun_nodes`` computed sun nodes per work-item (the launch rounds each axis up to
+    SCATTER_WORK_GROUP, :func:`clsky._cl.launch_size`)."""
+    return -(-width // vector_width), height, -(-sun_nodes // SCATTER_SUN_NODES)
 
 
 class MultipleScatteringEngine(_cl.Engine):
@@ -294,8 +295,8 @@ class MultipleScatteringEngine(_cl.Engine):
         super().__init__(ctx, np.dtype(settings.dtype), profile, fast_math, queue, allocator)
 
     def _featureless_kernels(self):
-        """The kernels that read no compile-time feature (gather, combine_nodes, pack_channels, add_into),
-        from the program built with this engine's ``features``."""
+        """The kernels that read no compile-time feature (gather, combine_nodes, pack_channels, add_into,
+        fill_between_suns), from the program built with this engine's ``features``."""
         return self.kernels_with(self.features)
 
     def program_sources(self):
@@ -384,9 +385,11 @@ class MultipleScatteringEngine(_cl.Engine):
         (:mod:`clsky.azimuth`).
         """
         from .ground import padded4
+        from .reference import computed_sun_nodes
 
         gathered_d = gathered if isinstance(gathered, cla.Array) else self.to_device(gathered)
         depth, height, width, _ = gathered_d.shape[-4:]
+        computed = len(computed_sun_nodes(depth, sun_stride))       # checks the stride: 1 or 2
         if atmosphere.has_ground:
             if not combine_species:
                 raise ValueError("a reflecting ground (ground_albedo > 0) needs combine_species (mode 'physical')")
@@ -401,21 +404,18 @@ class MultipleScatteringEngine(_cl.Engine):
             out = cla.empty(self.queue, (depth, height, width, 8), self.dtype, allocator=self.allocator)
         else:
             self._check_out(out, (depth, height, width, 8), node)
-        if sun_stride not in (1, 2):
-            raise ValueError(f"sun_stride must be 1 or 2, got {sun_stride!r}")
         atmosphere_d = _atmosphere_cl.to_device(self.queue, atmosphere, self.dtype)
         kernel = self.kernels_with(_atmosphere_cl.feature_defines(atmosphere))["scatter"]
         offset = np.uint64(node * depth * height * width)
-        computed = (depth + sun_stride - 2) // sun_stride + 1                   # every node, or every other and the last
+        items = _scatter_items(width, height, computed, self.vector_width)
         event = kernel(
-            self.queue, *_cl.launch_size(kernel, self.device,
-                                         _scatter_items(width, height, computed, self.vector_width), SCATTER_WORK_GROUP),
+            self.queue, *_cl.launch_size(kernel, self.device, items, SCATTER_WORK_GROUP),
             atmosphere_d, np.int32(width),
             np.int32(height), np.int32(depth), np.int32(MAPPINGS[self.settings.mapping]),
             self.real2(self.settings.sun_w_range), np.int32(bool(combine_species)), self.real(cos_azimuth),
             gathered_d.data, ground_d.data, out.data, offset, np.int32(sun_stride))
         self._record("scatter", event)
-        between = (depth - 1) // 2 * height * width if sun_stride == 2 else 0
+        between = (depth - computed) * height * width            # the cells of the nodes between computed ones
         if between:
             fill = self._featureless_kernels()["fill_between_suns"]
             event = fill(self.queue, *self._linear_size(fill, between), out.data, offset, np.int32(depth),

@@ -86,9 +86,9 @@ BRIGHT_FRACTION = 1e-2
 
 #: The first order whose scatter computes the sun nodes as ``TableSettings.orders_sun_stride`` says (both
 #: orders loops, this module's and :mod:`clsky.azimuth`'s). Order 2, a fifth to a third of the light, stays
-#: on every node: interpolated along the sun axis from every other node it moved the default animation's
-#: table ten times more than the orders k >= 3 did (8.4e-4 against 1.1e-4 at the bright cells' 95th
-#: percentile, docs/speed-log.md).
+#: on every node: interpolated linearly along the sun axis from every other node it moved the default
+#: animation's table six times more than the orders k >= 3 did (8.4e-4 against 1.4e-4 at the bright cells'
+#: 95th percentile; 1.1e-4 for those interpolated in the logarithm, as the fill does: docs/speed-log.md).
 SUN_STRIDE_FROM_ORDER = 3
 
 

@@ -66,7 +66,7 @@ class QualityLevel:
         the orders takes the higher orders' source on every ``table.source_stride``-th view node (as
         ``ray``), and that of the orders k >= 3 computes every ``table.orders_sun_stride``-th sun node (2 for
         'default' and 'high': 14-16 % less of their build's CPU time for a change of their frames of at most
-        2e-4 and 6e-5; 'draft', whose build of half a second it left unchanged, and 'reference' 1).
+        3.4e-4 and 8.3e-5; 'draft', whose build of half a second it left unchanged, and 'reference' 1).
     sun_node_spacing : float
         Largest spacing of the sun axis' nodes in texture coordinate w.
     ray : TableSettings

@@ -546,6 +546,15 @@ def _ground_seen(atmosphere, rays):
     return transmittance * rays.hits_ground[:, None], np.clip(rays.mu_sun[:, -1], -1.0, 1.0)
 
 
+def computed_sun_nodes(depth, stride=1):
+    """The sun nodes of an axis of ``depth`` nodes that a scatter of sun ``stride`` (1 or 2;
+    ``TableSettings.orders_sun_stride``) computes: every one, or every other one and the last
+    (kernels/multiple.cl: scatter); the others :func:`fill_between_sun_nodes` fills."""
+    if stride not in (1, 2):
+        raise ValueError(f"sun_stride must be 1 or 2, got {stride!r}")
+    return sorted(set(range(0, depth, stride)) | {depth - 1})
+
+
 def fill_between_sun_nodes(table, stride=1):
     """``table`` (..., D, H, W, C) with each sun node that a scatter of sun stride 2 left between two computed
     ones (z odd, z < D - 1) set, per channel, to the geometric mean of nodes z - 1 and z + 1, their mean where
@@ -553,7 +562,7 @@ def fill_between_sun_nodes(table, stride=1):
     fill_between_suns (``TableSettings.orders_sun_stride``): the orders' radiance falls off about exponentially
     along the sun axis into the night, where the geometric mean, linear in the logarithm, is the closer guess
     (docs/speed-log.md)."""
-    if stride == 1:
+    if len(computed_sun_nodes(table.shape[-4], stride)) == table.shape[-4]:
         return table
     depth = table.shape[-4]
     below, above = table[..., 0:depth - 2:2, :, :, :], table[..., 2:depth:2, :, :, :]

@@ -165,8 +165,9 @@ inline void integrate_gathered_suns(__constant const atmosphere_t *atm, const re
     }
 }
 
-/* Global size (ceil(W / VECTOR_WIDTH), H, ceil(D / SCATTER_SUN_NODES)): VECTOR_WIDTH cells along the
- * altitude axis and SCATTER_SUN_NODES sun nodes per item (integrate_gathered_suns).
+/* Global size (ceil(W / VECTOR_WIDTH), H, ceil(computed / SCATTER_SUN_NODES)): VECTOR_WIDTH cells along the
+ * altitude axis and SCATTER_SUN_NODES of the computed sun nodes per item (integrate_gathered_suns; computed = D
+ * with sun_stride 1, below).
  * gathered and table are padded (D, H, W, 8). combine_species != 0 (physical mode) writes
  * Rayleigh + Mie per wavelength into channels 0-2 and again 3-5 (the next gather's input).
  * ground_radiance: D x 4 reals, L_g r, g, b (and 0) per sun node, read only with -DGROUND, where it is

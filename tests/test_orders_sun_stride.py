@@ -24,13 +24,17 @@ from clsky.multiple import MultipleScatteringEngine
 from clsky.orders import SUN_STRIDE_FROM_ORDER, compute_orders, scatter_sun_stride
 from clsky.quality import QUALITY_LEVELS
 
-from conftest import TOLERANCES, black_preset
+from conftest import TOLERANCES, black_preset, require_dtype
 import test_multiple
 
 #: The fixture ``multiple_engine(settings)`` (cached engines).
 multiple_engine = test_multiple.multiple_engine
-#: A small grid of an odd (7) and an even (8) number of sun nodes.
-GRIDS = {depth: TableSettings(size=(9, 33, depth), gather_theta_steps=64, gather_phi_steps=32) for depth in (7, 8)}
+#: Small grids of an odd and an even number of sun nodes: 3 (one node filled), 7 and 8 (4 and 5 computed,
+#: one work-item's SCATTER_SUN_NODES = 8), 18 (10 computed: a second work-item along the sun axis).
+GRIDS = {depth: TableSettings(size=(9, 33, depth), gather_theta_steps=64, gather_phi_steps=32)
+         for depth in (3, 7, 8, 18)}
+#: The kernel tests' sun axes.
+DEPTHS = (3, 8, 18)
 #: The physical preset with a bright ground, so that the rays that end on it see it.
 BRIGHT = preset("physical").replace(ground_albedo=0.3)
 #: case -> (atmosphere, mode): the scatter's species combined in the physical mode, a ground seen in "ground".
@@ -55,7 +59,8 @@ def test_fill_is_exact_for_an_exponential_along_the_sun_axis(depth):
     filled = reference.fill_between_sun_nodes(table, 2)
     assert filled is table
     assert_allclose(filled, exact, rtol=32 * np.finfo(float).eps, atol=0.0)
-    computed = sorted(set(range(0, depth, 2)) | {depth - 1})
+    computed = reference.computed_sun_nodes(depth, 2)
+    assert computed == sorted(set(range(0, depth, 2)) | {depth - 1})
     assert np.array_equal(filled[computed], exact[computed])
 
 
@@ -71,6 +76,12 @@ def test_fill_takes_the_mean_beside_a_zero_and_leaves_stride_one_alone():
     filled = reference.fill_between_sun_nodes(table.copy(), 2)
     assert np.array_equal(filled[1, 0, 0], [2.0, 3.0, 0.0])       # sqrt(4 * 1); the mean beside a 0; 0
     assert np.array_equal(filled[3, 0, 0], [0.5, np.sqrt(6.0) * np.sqrt(2.0), 0.0])
+
+
+@pytest.mark.parametrize("stride", [0, 3])
+def test_another_stride_is_refused_by_the_twin(stride):
+    with pytest.raises(ValueError, match=f"sun_stride must be 1 or 2, got {stride}"):
+        reference.fill_between_sun_nodes(np.ones((5, 1, 1, 3)), stride)
 
 
 def test_the_stride_starts_at_order_three():
@@ -96,7 +107,7 @@ def scattered(engine, case, gathered, radiance, sun_stride):
                           sun_stride=sun_stride).get()
 
 
-@pytest.mark.parametrize("depth", sorted(GRIDS))
+@pytest.mark.parametrize("depth", DEPTHS)
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_strided_scatter_matches_twin(multiple_engine, case, depth):
     """The strided scatter and its fill against reference.scatter(sun_stride=2): the stride-1 scatter's
@@ -113,22 +124,27 @@ def test_strided_scatter_matches_twin(multiple_engine, case, depth):
     assert np.all(actual[..., 6:] == 0.0) and np.all(actual >= 0.0)
 
 
-@pytest.mark.parametrize("depth", sorted(GRIDS))
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
+@pytest.mark.parametrize("depth", DEPTHS)
 @pytest.mark.parametrize("case", sorted(CASES))
-def test_strided_scatter_computes_the_same_nodes_bit_for_bit(multiple_engine, case, depth):
-    """The nodes it computes (even, and the last) are the stride-1 scatter's bit for bit: each is the same
-    operations on the same values, only fewer of them launched; the nodes between are the fill's of the
-    stride-1 scatter's nodes (so they differ from it: by up to a few per cent on this coarse axis)."""
-    settings = GRIDS[depth]
+def test_strided_scatter_computes_the_same_nodes_bit_for_bit(cl_context, multiple_engine, case, depth, dtype):
+    """The nodes it computes (even, and the last) are the stride-1 scatter's bit for bit, in float64 and
+    float32: each is the same operations on the same values, only fewer of them launched; the nodes between
+    are the fill's of the stride-1 scatter's nodes, to 4 eps in float64 (two square roots and a product) and
+    8 in float32 (OpenCL lets a float sqrt be 3 ulp off), and differ from the stride-1 scatter's (by up to a
+    few per cent on these coarse axes)."""
+    require_dtype(cl_context, dtype)
+    settings = GRIDS[depth].replace(dtype=dtype)
     gathered, radiance = scatter_inputs(settings, 10 + depth)
     engine = multiple_engine(settings)
     every = scattered(engine, case, gathered, radiance, 1)
     strided = scattered(engine, case, gathered, radiance, 2)
-    computed = sorted(set(range(0, depth, 2)) | {depth - 1})
+    computed = reference.computed_sun_nodes(depth, 2)
     assert np.array_equal(strided[computed], every[computed])
     between = [z for z in range(depth) if z not in computed]
     filled = reference.fill_between_sun_nodes(every.copy(), 2)
-    assert_allclose(strided[between], filled[between], rtol=4 * np.finfo(float).eps, atol=0.0)
+    ulps = 4 if dtype == "float64" else 8
+    assert_allclose(strided[between], filled[between], rtol=ulps * np.finfo(np.dtype(dtype)).eps, atol=0.0)
     assert not np.array_equal(strided[between], every[between])
 
 
@@ -208,8 +224,8 @@ def test_strided_orders_backends_agree(orders_builds, loop):
 #: Largest change of orders 3 and 4 by the stride on the 7-node grid over sun cosines -0.3 to 1 (relative to
 #: that order's largest value; what the fill's guess costs on so coarse an axis): measured 2026-12-07 0.064 and
 #: 0.084 (clsky.orders' loop, a ground), 0.260 and 0.258 (clsky.azimuth's, M = 2), doubled and rounded up.
-#: The default and high levels' nodes are about 20 and 40 times closer: their frames moved by 2e-4 and 6e-5 at most
-#: (docs/speed-log.md).
+#: The default and high levels' nodes are about 20 and 40 times closer: their frames moved by 3.4e-4 and 8.3e-5 at
+#: most (docs/speed-log.md).
 STRIDE_CHANGE = {"orders, ground": 0.2, "azimuth, M = 2": 0.6}
 
 
@@ -221,8 +237,7 @@ def test_the_stride_leaves_order_two_and_changes_the_rest_a_little(orders_builds
     every, strided = orders_builds(loop, 1, "opencl"), orders_builds(loop, 2, "opencl")
     for k in (0, 1):
         assert np.array_equal(strided.orders[k], every.orders[k]), f"order {k + 1}"
-    depth = every.orders[0].shape[0]
-    computed = sorted(set(range(0, depth, 2)) | {depth - 1})
+    computed = reference.computed_sun_nodes(every.orders[0].shape[0], 2)
     assert np.array_equal(strided.orders[2][computed], every.orders[2][computed])
     for k in (2, 3):
         change = np.max(np.abs(strided.orders[k] - every.orders[k])) / np.max(every.orders[k])
@@ -259,7 +274,7 @@ def test_a_strided_table_file_round_trips(cl_context, tmp_path):
 
 
 def test_quality_levels_that_stride_the_orders_sun_axis():
-    """'default' and 'high' (14-16 % less of their build's CPU time, frames moved by 2e-4 and 6e-5 at most);
+    """'default' and 'high' (14-16 % less of their build's CPU time, frames moved by 3.4e-4 and 8.3e-5 at most);
     not 'draft' (no gain on its half-second build) nor the 'reference'."""
     assert {name: level.table.orders_sun_stride for name, level in QUALITY_LEVELS.items()} == \
         {"draft": 1, "default": 2, "high": 2, "reference": 1}
