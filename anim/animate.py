@@ -735,7 +735,8 @@ def _hdr_attributes(config: AnimationConfig, table, sun) -> dict:
     # wavelengths; absolute frames are linear sRGB, whose channels are no wavelengths
     wavelengths = None if config.absolute else table.atmosphere.wavelengths
     return frame_attributes(frame_units(config, table), config.camera, width, height, sun.zenith_deg,
-                            sun.azimuth_deg, config.altitude, wavelengths_nm=wavelengths)
+                            sun.azimuth_deg, config.altitude, wavelengths_nm=wavelengths,
+                            radiance_view=_camera(config).radiance_view())
 
 
 def ray_settings(config: AnimationConfig) -> clsky.TableSettings:

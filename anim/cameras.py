@@ -106,6 +106,16 @@ def sun_direction(zenith_deg, azimuth_deg):
     return _direction(np.radians(zenith), np.radians(azimuth))
 
 
+def _radiance_view(kind, direction, up, horizontal_deg, vertical_deg):
+    """Radiance's view options of type ``-vt<kind>`` from the origin (each number to 17 significant digits,
+    so that the directions it gives are the camera's to rounding)."""
+    def numbers(values):
+        return " ".join(f"{float(v):.17g}" for v in values)
+
+    return (f"-vt{kind} -vp 0 0 0 -vd {numbers(direction)} -vu {numbers(up)} -vh {float(horizontal_deg):.17g} "
+            f"-vv {float(vertical_deg):.17g} -vs 0 -vl 0")
+
+
 def _pixel_centres(count):
     """Pixel centres along an axis of ``count`` pixels, as fractions in (0, 1): (i + 0.5) / count."""
     return (np.arange(count, dtype=np.float64) + 0.5) / count
@@ -133,6 +143,15 @@ class Camera(abc.ABC):
         valid : numpy.ndarray
             bool, shape (height, width): pixels that see the sky sphere.
         """
+
+    def radiance_view(self) -> str | None:
+        """The camera as Radiance's view options (``-vt... -vp -vd -vu -vh -vv``, the ``VIEW=`` line of a
+        Radiance picture, which tools such as evalglare and Radiance's ``vwrays`` read to know where each
+        pixel looks), in the ENU frame (x east, y north, z up), the observer at the origin; None where
+        Radiance has no view type for the projection (the equirectangular panorama). Radiance's view
+        geometry (``viewray`` of its image.c) maps the pixel centres to the directions of
+        :meth:`directions`."""
+        return None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -220,6 +239,13 @@ class FisheyeCamera(Camera):
         zenith = np.where(valid, radius, 0.0) * (0.5 * np.pi)
         azimuth = np.radians(self.heading_deg) + np.arctan2(-u, v)
         return _direction(zenith, azimuth), valid
+
+    def radiance_view(self) -> str:
+        """Radiance's angular fisheye (``-vta``, equidistant) looking up, 180 deg across: the image's top
+        toward ``heading_deg`` (``-vu``) and its right (Radiance's ``vd x vu``) 90 deg west of it, as
+        :meth:`directions` has them (east on the left: the sky seen from below)."""
+        heading = math.radians(self.heading_deg)
+        return _radiance_view("a", (0.0, 0.0, 1.0), (math.sin(heading), math.cos(heading), 0.0), 180.0, 180.0)
 
 
 #: A perspective camera's horizontal field of view [deg]: from a thousandth of a degree (a telescope's
@@ -317,6 +343,14 @@ class PerspectiveCamera(Camera):
         rays = self.focal_length * forward + x * right + y * up
         dirs = rays / np.linalg.norm(rays, axis=-1, keepdims=True)
         return dirs, np.ones((self.height, self.width), dtype=bool)
+
+    def radiance_view(self) -> str:
+        """Radiance's perspective view (``-vtv``): ``-vd`` forward, ``-vu`` the camera's up (Radiance's
+        right, ``vd x vu``, is then :meth:`basis`'s right), ``-vh`` the horizontal field of view and
+        ``-vv`` the vertical one, 2 atan((height / 2) / f)."""
+        forward, _, up = self.basis()
+        vertical = math.degrees(2.0 * math.atan(0.5 * self.height / self.focal_length))
+        return _radiance_view("v", forward, up, self.fov_deg, vertical)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -14,6 +14,8 @@ the numbers are and where they point (:func:`frame_attributes`):
   wavelengths, ``channelWavelengthsNm`` (R, G, B) instead;
 - ``camera``, ``observerAltitude`` [m], the sun as ``sunAzimuthDeg`` (from north, clockwise seen from
   above), ``sunElevationDeg`` and the unit vector ``sunDirectionENU`` (east, north, up);
+- for the fisheye and perspective cameras, ``radianceView``: the camera as Radiance's view options
+  (``-vta`` or ``-vtv``, the directions in east, north, up), a Radiance picture's ``VIEW=`` line;
 - for an equirectangular panorama: the standard ``envmap`` attribute = latitude-longitude, the sun in
   the map's own axes (``sunDirectionEnvmap``), the sun's position in the image (``sunPixel``), and the
   orientation in words (``envmapOrientation``).
@@ -137,7 +139,7 @@ def envmap_pixel(zenith_deg, azimuth_deg, width, height):
 
 
 def frame_attributes(units, camera, width, height, sun_zenith_deg, sun_azimuth_deg, altitude_m=0.0,
-                     wavelengths_nm=None):
+                     wavelengths_nm=None, radiance_view=None):
     """The EXR header attributes of one frame (module docstring).
 
     Parameters
@@ -157,6 +159,9 @@ def frame_attributes(units, camera, width, height, sun_zenith_deg, sun_azimuth_d
     wavelengths_nm : sequence of 3 float, optional
         The wavelengths of the R, G, B channels [nm], finite and > 0, for frames at the table's three
         wavelengths.
+    radiance_view : str, optional
+        The camera's view in Radiance's options (:meth:`clsky.anim.cameras.Camera.radiance_view`), stored
+        as ``radianceView`` (a Radiance picture's ``VIEW=`` line, :data:`clsky.anim.rgbe.RADIANCE_NAMES`).
 
     Raises
     ------
@@ -191,6 +196,11 @@ def frame_attributes(units, camera, width, height, sun_zenith_deg, sun_azimuth_d
         if wavelengths.shape != (3,) or not (np.isfinite(wavelengths).all() and (wavelengths > 0).all()):
             raise ValueError(f"wavelengths_nm must be 3 wavelengths [nm], finite and > 0, got {short(wavelengths_nm)}")
         attributes["channelWavelengthsNm"] = wavelengths.astype(np.float32)
+    if radiance_view is not None:
+        if not isinstance(radiance_view, str) or not radiance_view.startswith("-vt") or "\n" in radiance_view:
+            raise ValueError(f"radiance_view must be Radiance view options on one line (-vt...), got "
+                             f"{short(radiance_view)}")
+        attributes["radianceView"] = radiance_view
     if camera == "equirectangular":
         attributes["envmap"] = "latlong"
         attributes["envmapOrientation"] = ENVMAP_ORIENTATION

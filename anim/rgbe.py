@@ -101,8 +101,8 @@ def _header_value(value):
 
 #: EXR attributes (:func:`clsky.anim.exr.frame_attributes`) that Radiance's header has a line of its own for:
 #: the primaries and white of the pixels, read by Radiance's tools and ImageMagick (which listed an unknown
-#: 'hdr:chromaticities').
-RADIANCE_NAMES = {"chromaticities": "PRIMARIES"}
+#: 'hdr:chromaticities'), and the camera's view, which evalglare and vwrays read (where each pixel looks).
+RADIANCE_NAMES = {"chromaticities": "PRIMARIES", "radianceView": "VIEW"}
 
 
 def save_rgbe(file, rgbe, attributes=None):
@@ -117,7 +117,7 @@ def save_rgbe(file, rgbe, attributes=None):
         if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]*", name):
             raise ValueError(f"attribute names must be identifiers, got {name!r}")
         # the file's own lines, and Radiance's that scale the pixels (EXPOSURE, COLORCORR) or name their primaries
-        if name in ("FORMAT", "SOFTWARE", "EXPOSURE", "COLORCORR", "PRIMARIES"):
+        if name in ("FORMAT", "SOFTWARE", "EXPOSURE", "COLORCORR", "PRIMARIES", "VIEW"):
             raise ValueError(f"attribute name {name!r} is a header line of the file's own, not an attribute")
         lines.append(f"{RADIANCE_NAMES.get(name, name)}= {_header_value(value)}")
     head = ("\n".join(lines) + f"\n\n-Y {height} +X {width}\n").encode("ascii", "replace")

@@ -359,3 +359,73 @@ def test_sun_direction_refuses_what_is_no_angle(angle):
         sun_direction(angle, 0.0)
     with pytest.raises(ValueError, match=r"^azimuth_deg must be a real number of degrees"):
         sun_direction(30.0, angle)
+
+
+# Radiance's view of a camera (Camera.radiance_view) -------------------------------------------------
+
+def radiance_directions(view, width, height):
+    """The directions of the pixel centres of a ``width`` x ``height`` picture taken with Radiance's view
+    options ``view`` (-vta or -vtv), as Radiance's ``viewray`` (src/common/image.c) computes them, written
+    here from its formulas and sharing no code with the cameras: hvec = normalize(vd x vu), vvec =
+    normalize(hvec x vd); image coordinates x = (col + 0.5) / width - 0.5 (right) and y = (rows from the
+    bottom + 0.5) / height - 0.5 (up). Perspective: vd + x 2 tan(vh / 2) hvec + y 2 tan(vv / 2) vvec.
+    Angular fisheye: x, y scaled by vh / 180 and vv / 180, d = |(x, y)| (outside the picture's circle for
+    d > 1/2), the direction cos(pi d) vd + sin(pi d) (x hvec + y vvec) / d. Returns (directions, inside)."""
+    words = view.split()
+    kind = words[0]
+    options, name = {}, None
+    for word in words[1:]:
+        if word.startswith("-v"):
+            name = word
+            options[name] = []
+        else:
+            options[name].append(float(word))
+    vd, vu = np.array(options["-vd"]), np.array(options["-vu"])
+    vh, vv = options["-vh"][0], options["-vv"][0]
+    vd = vd / np.linalg.norm(vd)
+    hvec = np.cross(vd, vu)
+    hvec /= np.linalg.norm(hvec)
+    vvec = np.cross(hvec, vd)
+    x = ((np.arange(width) + 0.5) / width - 0.5)[None, :, None]
+    y = ((height - 1 - np.arange(height) + 0.5) / height - 0.5)[:, None, None]
+    if kind == "-vtv":
+        rays = vd + x * 2.0 * math.tan(math.radians(vh) / 2.0) * hvec + y * 2.0 * math.tan(math.radians(vv) / 2.0) * vvec
+        return rays / np.linalg.norm(rays, axis=-1, keepdims=True), np.ones((height, width), bool)
+    assert kind == "-vta"
+    x, y = x * vh / 180.0, y * vv / 180.0
+    d = np.hypot(x, y)
+    sine = np.sin(math.pi * d) / np.where(d > 0.0, d, 1.0)
+    rays = np.cos(math.pi * d) * vd + sine * (x * hvec + y * vvec)
+    return rays, (d <= 0.5)[..., 0]
+
+
+@pytest.mark.parametrize("size, heading", [(16, 0.0), (33, 0.0), (24, 37.5), (20, 270.0)])
+def test_fisheye_radiance_view_looks_where_the_camera_does(size, heading):
+    """Radiance's angular fisheye of the camera's VIEW= line gives its pixels' directions (to 1e-14: the
+    view's 17 digits and two formulas' roundings) and the same circle of valid pixels."""
+    camera = FisheyeCamera(size, heading_deg=heading)
+    view = camera.radiance_view()
+    assert view.startswith("-vta ") and "-vh 180 -vv 180" in view
+    directions, valid = camera.directions()
+    radiance, inside = radiance_directions(view, size, size)
+    assert_array_equal(inside, valid)
+    assert_allclose(radiance[valid], directions[valid], rtol=0.0, atol=1e-14)
+
+
+@pytest.mark.parametrize("width, height, fov, heading, pitch", [
+    (16, 12, 90.0, 180.0, 10.0), (9, 21, 30.0, 45.0, -20.0), (40, 10, 170.0, 300.0, 0.0), (8, 8, 60.0, 10.0, 90.0),
+    (8, 6, 1e-3, 0.0, -90.0)])
+def test_perspective_radiance_view_looks_where_the_camera_does(width, height, fov, heading, pitch):
+    """Radiance's perspective view of the camera's VIEW= line gives its pixels' directions, the zenith and
+    the nadir included (1e-14; the thousandth of a degree's directions agree to its tangents' rounding)."""
+    camera = PerspectiveCamera(width, height, fov_deg=fov, heading_deg=heading, pitch_deg=pitch)
+    view = camera.radiance_view()
+    assert view.startswith("-vtv ")
+    directions, _ = camera.directions()
+    radiance, _ = radiance_directions(view, width, height)
+    assert_allclose(radiance, directions, rtol=0.0, atol=1e-14)
+
+
+def test_equirectangular_has_no_radiance_view():
+    """Radiance has no view type of a latitude-longitude panorama (-vtc is cylindrical)."""
+    assert EquirectangularCamera(16, 8).radiance_view() is None

@@ -435,6 +435,34 @@ def test_panorama_rgbe_frames(panoramas):
         assert float(header["sunElevationDeg"]) == pytest.approx(90.0 - row["sun_zenith_deg"], abs=1e-6)
         # the primaries in Radiance's own line (an unknown 'chromaticities=' line to Radiance and ImageMagick)
         assert header["PRIMARIES"] == "0.64 0.33 0.3 0.6 0.15 0.06 0.3127 0.329" and "chromaticities" not in header
+        assert "VIEW" not in header and "radianceView" not in header      # Radiance has no view of a panorama
+
+
+@pytest.mark.parametrize("camera, hdr", [("fisheye", "hdr"), ("perspective", "exr")])
+def test_frames_carry_the_cameras_radiance_view(tmp_path, cl_context, camera, hdr):
+    """A fisheye's or perspective camera's frames carry its Radiance view: a Radiance picture as its VIEW=
+    line (evalglare and vwrays read it), an EXR as ``radianceView``; the view is the camera's own
+    (Camera.radiance_view, whose directions tests/test_anim_cameras.py checks against Radiance's)."""
+    from clsky.anim.animate import AnimationConfig, _camera, render_animation
+    from clsky.anim.rgbe import read_rgbe
+
+    config = AnimationConfig(hdr=hdr, output=str(tmp_path / "sky.mp4"), **{**TINY, "camera": camera},
+                             heading_deg=30.0)
+    render_animation(config, ctx=cl_context)
+    path = config.frames_directory / f"frame_00000.{hdr}"
+    header = read_rgbe(path)[1] if hdr == "hdr" else read_exr(path)[1]
+    expected = _camera(config).radiance_view()
+    assert expected.startswith("-vta" if camera == "fisheye" else "-vtv")
+    assert header["VIEW" if hdr == "hdr" else "radianceView"] == expected
+
+
+def test_radiance_view_attribute_is_checked():
+    """frame_attributes takes Radiance view options on one line, else ValueError naming radiance_view."""
+    assert frame_attributes("u", "fisheye", 4, 4, 30.0, 0.0, radiance_view="-vta -vh 180")["radianceView"] == \
+        "-vta -vh 180"
+    for bad in ("-vta\nEXPOSURE= 2", "vta", 3):
+        with pytest.raises(ValueError, match="radiance_view must be Radiance view options on one line"):
+            frame_attributes("u", "fisheye", 4, 4, 30.0, 0.0, radiance_view=bad)
 
 
 def test_mitsuba_loads_the_panorama(panoramas, mitsuba):
@@ -757,7 +785,7 @@ def test_rgbe_refuses_an_attribute_named_as_its_own_header_lines(tmp_path):
     PRIMARIES are not Rec. 709's is refused on reading, as an EXR's chromaticities are."""
     from clsky.anim.rgbe import read_rgbe, write_rgbe
 
-    for name in ("FORMAT", "SOFTWARE", "EXPOSURE", "COLORCORR", "PRIMARIES"):
+    for name in ("FORMAT", "SOFTWARE", "EXPOSURE", "COLORCORR", "PRIMARIES", "VIEW"):
         with pytest.raises(ValueError, match=f"attribute name '{name}' is a header line of the file's own"):
             write_rgbe(tmp_path / "x.hdr", np.ones((2, 8, 3)), attributes={name: "x"})
     assert _listing(tmp_path) == []
