@@ -138,7 +138,8 @@ class TableSettings:
         animation's ray march takes about a fifth less CPU time for a change of its luminance of about
         2e-4 by day and up to 2e-3 in civil twilight, a scatter of its table a quarter (M = 0) to a
         third (M = 2) less for a change of the frames under 1e-3 (docs/speed-log.md); the 'draft' and
-        'default' quality levels take it for both.
+        'default' quality levels take it for their ray marches (for their tables too until 2026-12-07, when it
+        was found to put their frames past their promises with the sun at -6 deg: :mod:`clsky.quality`).
     orders_sun_stride : int
         1 (default) or 2: the sun nodes a table's scatter of the orders k >= 3 computes
         (:data:`clsky.orders.SUN_STRIDE_FROM_ORDER`; kernels/multiple.cl: scatter). 2 computes every other
