@@ -78,8 +78,9 @@ from .atmosphere import AtmosphereParameters, as_atmosphere
 from .ground import check_ground_mode, sky_irradiance
 from .errors import check_choice, check_flag, check_instance, check_integer, check_range
 from .mapping import cos_to_v
-from .quality import QualityLevel, level_for_budget, quality_level
-from .renderer_choice import DEFAULT_PIXELS, LOOKUP_ERROR, RENDERERS, choose_renderer, renderer_row
+from .quality import QUALITY_LEVELS, QualityLevel, level_for_budget, quality_level
+from .renderer_choice import (DEFAULT_PIXELS, LOOKUP_ERROR, RAY_MARCH_ERROR, RENDERERS, choose_renderer, error_over,
+                              renderer_row)
 from .settings import SAMPLINGS, SCATTERING_MODES, TableSettings
 
 __all__ = ["Scene", "Plan", "plan_scene", "sun_margins", "sun_axis", "sees_ground", "view_sampling",
@@ -236,16 +237,26 @@ def view_sampling(altitudes_m) -> tuple:
 #: plan promised 0.45 % (a probe of the planner, 2026-12-07).
 RENDERER_ERRORS_MEASURED_UP_TO_M = 10e3
 
-#: The lowest sun [deg] down to which the quality levels' promises were measured to hold, and are taken as said
-#: without a word: against the reference level, 64 x 64 fisheyes from the ground (a probe, 2026-12-07), the
-#: draft level 9.2 % and the default 0.88 % at -6 deg, the high level 0.08 % at -4 deg ("Quality levels").
+#: The lowest sun [deg] down to which the draft and default levels' promises were measured to hold (against the
+#: reference level, 64 x 64 fisheyes from the ground, a probe of 2026-12-07: 9.2 % and 0.88 % at -6 deg; the
+#: high level was measured at -4 deg, 0.08 %, and at -8, 0.11 %). A plan whose sun goes lower says what its
+#: level measured there (:data:`ERRORS_MEASURED_BELOW`), and a plan by error budget takes the fastest level
+#: whose measured error over the path fits the budget.
 PROMISES_MEASURED_DOWN_TO_DEG = -6.0
 
-#: What the levels measured below :data:`PROMISES_MEASURED_DOWN_TO_DEG` in that probe: {level: ((sun
-#: elevation [deg], 95th percentile of the relative luminance error against the reference), ...)}; the plan
-#: of a sun path that goes lower says them.
-ERRORS_MEASURED_BELOW = {"draft": ((-8.0, 0.16),), "default": ((-8.0, 0.0091), (-10.0, 0.0123), (-12.0, 0.0155)),
-                         "high": ((-8.0, 0.0011), (-14.0, 0.0017))}
+#: The levels' ray-march errors below -4 deg, as :data:`clsky.renderer_choice.RAY_MARCH_ERROR` gives them above
+#: (p95 against the reference, 64 x 64 fisheyes from the ground; README "Quality levels", "Below civil
+#: twilight": a probe, 2026-12-07, each sun's own plan, the draft and default tables reading the orders' source at
+#: every view node as since): {level: ((sun elevation [deg], error), ...)}.
+ERRORS_MEASURED_BELOW = {"draft": ((-8.0, 0.16), (-6.0, 0.092)),
+                         "default": ((-12.0, 0.0155), (-10.0, 0.0123), (-8.0, 0.0091), (-6.0, 0.0088)),
+                         "high": ((-14.0, 0.0017), (-8.0, 0.0011))}
+
+
+def measured_errors(name):
+    """A quality level's measured ray-march errors ((sun elevation [deg], p95), ...), ascending: those below -4
+    deg (:data:`ERRORS_MEASURED_BELOW`) and the renderer choice's (:data:`clsky.renderer_choice.RAY_MARCH_ERROR`)."""
+    return tuple(sorted(ERRORS_MEASURED_BELOW.get(name, ()) + RAY_MARCH_ERROR[name]))
 
 #: A scene whose sun goes below this elevation [deg] gets the higher orders with azimuth harmonics
 #: (:func:`azimuth_harmonics`). Issue 11 asks for 2 % (95th percentile) at 0 deg and above; the azimuth
@@ -553,13 +564,34 @@ def _costlier(method, chosen, pixels) -> str:
             f"{chosen.frame_cpu_ms(pixels):.3g} CPU-ms, measured)")
 
 
+def _level_measured_within(level, budget, low, high):
+    """``level`` or the first finer one whose ray march's measured error over the sun path [low, high] [deg]
+    (:func:`measured_errors`, interpolated in log error, the nearest measured value beyond) fits ``budget``;
+    the reference level where none does. Above :data:`PROMISES_MEASURED_DOWN_TO_DEG` each level's measured
+    error is within its promise, so this only moves a path that goes lower (a default level 1.2 % off at
+    -10 deg is no level 'within 1 %')."""
+    names = list(QUALITY_LEVELS)
+    for name in names[names.index(level.name):]:
+        if error_over(measured_errors(name), low, high) <= budget:
+            return QUALITY_LEVELS[name]
+    return QUALITY_LEVELS["reference"]
+
+
 def _below_measured_note(level, lowest_deg):
     """The plan's words for a sun path down to ``lowest_deg``, below :data:`PROMISES_MEASURED_DOWN_TO_DEG`:
-    what ``level`` measured there against the reference (:data:`ERRORS_MEASURED_BELOW`), or that it was not."""
-    measured = ERRORS_MEASURED_BELOW.get(level.name, ())
+    what ``level``'s ray march measured against the reference at the suns of the path below it
+    (:func:`measured_errors`), and below which sun it was not measured."""
+    points = measured_errors(level.name)
+    # the measured suns below the promise's down to the path's lowest, and the first one below that
+    floor = max((sun for sun, _ in points if sun <= lowest_deg), default=lowest_deg)
+    measured = sorted(((sun, error) for sun, error in points if floor <= sun < PROMISES_MEASURED_DOWN_TO_DEG),
+                      reverse=True)
     said = ", ".join(f"{100 * error:.2g} % at {sun:g} deg" for sun, error in measured)
+    lowest_measured = min((sun for sun, _ in points), default=0.0)
+    unmeasured = f"not measured below {lowest_measured:g} deg" if lowest_deg < lowest_measured else ""
     return (f"; measured with the sun down to {PROMISES_MEASURED_DOWN_TO_DEG:g} deg: below it, down to "
-            f"{lowest_deg:g} deg here, " + (f"off the reference by {said}" if said else "not measured"))
+            f"{lowest_deg:g} deg here, " + "; ".join(part for part in (
+                f"off the reference by {said}" if said else "", unmeasured) if part))
 
 
 def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, ray_march=None, samples=None,
@@ -602,8 +634,15 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     check_ground_mode(atmosphere, mode)     # before the pilot: a plan the build would refuse is no plan
     level = quality_level(scene.quality) if scene.quality else level_for_budget(scene.error_budget)
     budget = level.budget if scene.quality else scene.error_budget
+    promised = level
+    if not scene.quality:
+        level = _level_measured_within(level, budget, *scene.sun_elevations_deg)
     if scene.quality:
         why = ""
+    elif level is not promised:
+        why = (f"; the fastest level whose measured error over the path fits {100 * budget:g} % ({promised.name} "
+               f"measured up to {100 * error_over(measured_errors(promised.name), *scene.sun_elevations_deg):.2g} "
+               f"% over it)")
     elif level.budget <= budget:
         why = f"; the fastest level within {100 * budget:g} %"
     else:                                   # below every level's promise: the most accurate one, said so

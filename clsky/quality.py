@@ -64,8 +64,9 @@ class QualityLevel:
         The scattering table's settings; its sun axis' node count (``size[2]``) is the one of a whole
         sun axis at :attr:`sun_node_spacing` (a planned table covers less and needs fewer); its scatter of
         the orders reads the higher orders' source at every view node (``table.source_stride`` 1: the draft
-        and default levels' tables read it at every other one until 2026-12-07, which made their frames
-        1.2 and 10.7 % off at -6 deg against 0.88 and 9.2 % now, docs/speed-log.md), and that of the orders
+        and default levels' tables read it at every other one until 2026-12-07; the default and draft levels'
+        frames were 1.2 and 10.7 % off the reference at -6 deg with it, 0.88 and 9.2 % without, README
+        "Quality levels"), and that of the orders
         k >= 3 computes every ``table.orders_sun_stride``-th sun node (2 for
         'default' and 'high': 14-16 % less of their build's CPU time for a change of their frames of at most
         3.4e-4 and 8.3e-5; 'draft', whose build of half a second it left unchanged, and 'reference' 1).

@@ -60,7 +60,10 @@ LOOKUP_ERROR = ((-4.0, 10.26), (1.0, 0.361), (8.0, 0.0419), (45.0, 0.0141))
 #: 0.0031 / 0.0037 on every node), the default again 2026-12-05 with its table's 128 view nodes (0.0067 /
 #: 0.0017 / 0.0028 / 0.0035 with 256), high 2026-12-02;
 #: the reference level's: how far the reference converged (its ray march's counts doubled; the other
-#: groups were not doubled in that run, README).
+#: groups were not doubled in that run, README). Below -4 deg the nearest value is taken here: the
+#: measurements there (:data:`clsky.planner.ERRORS_MEASURED_BELOW`, 2026-12-07) choose the quality level, not
+#: yet the renderer (with the default level's 0.88 % at -6 deg, the default animation's sky-view map would be
+#: estimated at 1.04 %, over its budget, and the plan would pick the ray march).
 RAY_MARCH_ERROR = {
     "draft": ((-4.0, 0.0627), (1.0, 0.0158), (8.0, 0.0247), (45.0, 0.0286)),
     "default": ((-4.0, 0.0070), (1.0, 0.0018), (8.0, 0.0029), (45.0, 0.0035)),

@@ -137,7 +137,8 @@ class TableSettings:
         looks it up at every other node and the last, linear in distance between: the default
         animation's ray march takes about a fifth less CPU time for a change of its luminance of about
         2e-4 by day and up to 2e-3 in civil twilight, a scatter of its table a quarter (M = 0) to a
-        third (M = 2) less for a change of the frames under 1e-3 (docs/speed-log.md); the 'draft' and
+        third (M = 2) less for a change of the frames under 1e-3 with the sun at -4 deg and above (7e-3 at -8
+        deg, README "Quality levels") (docs/speed-log.md); the 'draft' and
         'default' quality levels take it for their ray marches (for their tables too until 2026-12-07, when it
         was found to put their frames past their promises with the sun at -6 deg: :mod:`clsky.quality`).
     orders_sun_stride : int

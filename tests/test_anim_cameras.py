@@ -369,8 +369,9 @@ def radiance_directions(view, width, height):
     here from its formulas and sharing no code with the cameras: hvec = normalize(vd x vu), vvec =
     normalize(hvec x vd); image coordinates x = (col + 0.5) / width - 0.5 (right) and y = (rows from the
     bottom + 0.5) / height - 0.5 (up). Perspective: vd + x 2 tan(vh / 2) hvec + y 2 tan(vv / 2) vvec.
-    Angular fisheye: x, y scaled by vh / 180 and vv / 180, d = |(x, y)| (outside the picture's circle for
-    d > 1/2), the direction cos(pi d) vd + sin(pi d) (x hvec + y vvec) / d. Returns (directions, inside)."""
+    Angular fisheye: x, y scaled by vh / 180 and vv / 180, d = |(x, y)|, the direction cos(pi d) vd +
+    sin(pi d) (x hvec + y vvec) / d. Returns (directions, inside): inside as evalglare takes a -vta picture's
+    pixel to be (pict_is_validpixel: its direction within 90 deg of vd)."""
     words = view.split()
     kind = words[0]
     options, name = {}, None
@@ -389,14 +390,15 @@ def radiance_directions(view, width, height):
     x = ((np.arange(width) + 0.5) / width - 0.5)[None, :, None]
     y = ((height - 1 - np.arange(height) + 0.5) / height - 0.5)[:, None, None]
     if kind == "-vtv":
-        rays = vd + x * 2.0 * math.tan(math.radians(vh) / 2.0) * hvec + y * 2.0 * math.tan(math.radians(vv) / 2.0) * vvec
+        half_width, half_height = (2.0 * math.tan(math.radians(angle) / 2.0) for angle in (vh, vv))
+        rays = vd + x * half_width * hvec + y * half_height * vvec
         return rays / np.linalg.norm(rays, axis=-1, keepdims=True), np.ones((height, width), bool)
     assert kind == "-vta"
     x, y = x * vh / 180.0, y * vv / 180.0
     d = np.hypot(x, y)
     sine = np.sin(math.pi * d) / np.where(d > 0.0, d, 1.0)
     rays = np.cos(math.pi * d) * vd + sine * (x * hvec + y * vvec)
-    return rays, (d <= 0.5)[..., 0]
+    return rays, rays @ vd >= 0.0
 
 
 @pytest.mark.parametrize("size, heading", [(16, 0.0), (33, 0.0), (24, 37.5), (20, 270.0)])

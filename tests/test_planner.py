@@ -453,20 +453,26 @@ def test_the_pilots_first_order_ground_is_that_of_a_table_of_one_order(cl_contex
 
 
 def test_the_plan_says_where_its_promise_and_margins_stop():
-    """A polar night's path (-35 to -12 deg) was promised '1 % or better' where the levels were measured with
-    the sun down to -4 deg (and the default level measured 0.91 to 1.6 % off the reference from -8 to -12 deg:
-    clsky.planner.ERRORS_MEASURED_BELOW); a sun at the zenith was given '+29.3 deg above' an axis that stops
-    at 90."""
+    """A polar night's path (-35 to -12 deg) was promised '1 % or better' by the default level where the levels
+    were measured with the sun down to -4 deg (the default level measured 0.91 to 1.6 % off the reference from
+    -8 to -12 deg since: clsky.renderer_choice.RAY_MARCH_ERROR); a sun at the zenith was given '+29.3 deg above'
+    an axis that stops at 90."""
     def quality(scene):
-        return dict((t, why) for t, _, why in plan_scene(scene).decisions)["quality"]
+        return dict((t, (level, why)) for t, level, why in plan_scene(scene).decisions)["quality"]
 
-    assert quality(Scene((-30.0, -12.5))).endswith(
-        "; measured with the sun down to -6 deg: below it, down to -30 deg here, off the reference by 0.91 % at -8 "
-        "deg, 1.2 % at -10 deg, 1.6 % at -12 deg"), quality(Scene((-30.0, -12.5)))
-    assert quality(Scene((-9.0, 10.0), quality="draft")).endswith("down to -9 deg here, off the reference by 16 % "
-                                                                 "at -8 deg")
-    assert quality(Scene((-9.0, 10.0), quality="reference")).endswith("down to -9 deg here, not measured")
-    assert "measured" not in quality(Scene((-6.0, 60.0)))
+    # by budget: the fastest level whose measured error over the path fits it, said so, with what it measured
+    assert quality(Scene((-30.0, -12.5))) == ("high", (
+        "promises 0.1 % or better; the fastest level whose measured error over the path fits 1 % (default measured "
+        "up to 1.6 % over it); measured with the sun down to -6 deg: below it, down to -30 deg here, off the "
+        "reference by 0.11 % at -8 deg, 0.17 % at -14 deg; not measured below -14 deg"))
+    # by name: that level, and what it measured down to the first measured sun below the path's lowest
+    assert quality(Scene((-10.0, 5.0), quality="default"))[1].endswith(
+        "down to -10 deg here, off the reference by 0.91 % at -8 deg, 1.2 % at -10 deg")
+    assert quality(Scene((-7.0, 10.0), quality="default"))[1].endswith("off the reference by 0.91 % at -8 deg")
+    assert quality(Scene((-9.0, 10.0), quality="draft"))[1].endswith(
+        "down to -9 deg here, off the reference by 16 % at -8 deg; not measured below -8 deg")
+    assert quality(Scene((-9.0, 10.0), quality="reference"))[1].endswith("not measured below -4 deg")
+    assert quality(Scene((-6.0, 60.0))) == ("default", "promises 1 % or better; the fastest level within 1 %")
     zenith = dict((t, why) for t, _, why in plan_scene(Scene((90.0, 90.0))).decisions)["sun axis"]
     assert zenith.startswith("the path's 90 to 90 deg + 0.0 deg above and 20.2 deg below"), zenith
 
@@ -724,3 +730,13 @@ def test_without_a_writable_cache_directory_the_pilot_runs_every_time(cl_context
     assert runs == [0.25, 0.25] and blocker.read_text() == "a file"
     notes = [record.getMessage() for record in caplog.records if "cannot be written" in record.getMessage()]
     assert len(notes) == 1 and notes[0].startswith(f"clsky: note: clsky's cache {blocker} cannot be written (")
+
+
+@pytest.mark.parametrize("path, budget, level", [
+    ((-6.0, 60.0), 0.01, "default"), ((-7.0, 10.0), 0.01, "default"), ((-9.0, 10.0), 0.01, "high"),
+    ((-6.0, 10.0), 0.10, "draft"), ((-7.0, 10.0), 0.10, "default"), ((-20.0, 0.0), 1e-3, "reference")])
+def test_a_budget_takes_the_fastest_level_measured_within_it_over_the_path(path, budget, level):
+    """Below -6 deg the levels were measured past their promises (RAY_MARCH_ERROR: default 1.23 % at -10 deg,
+    interpolated in log error, 1.05 % at -9; draft 9.2 % at -6, 12 % at -7): a budget takes the fastest level
+    whose measured error over the path fits it, not the fastest promise."""
+    assert plan_scene(Scene(path, error_budget=budget)).level.name == level
