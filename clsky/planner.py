@@ -181,7 +181,8 @@ class Plan:
     def full_table(self) -> TableSettings:
         """The table of the same quality over the whole sun axis (what the plan is measured against)."""
         return self.level.table.replace(mode=self.table.mode, sampling=self.table.sampling,
-                                        azimuth_harmonics=self.table.azimuth_harmonics)
+                                        azimuth_harmonics=self.table.azimuth_harmonics,
+                                        source_stride=self.table.source_stride)
 
     @property
     def work_fraction(self) -> float:
@@ -243,6 +244,14 @@ RENDERER_ERRORS_MEASURED_UP_TO_M = 10e3
 #: level measured there (:data:`ERRORS_MEASURED_BELOW`), and a plan by error budget takes the fastest level
 #: whose measured error over the path fits the budget.
 PROMISES_MEASURED_DOWN_TO_DEG = -6.0
+
+#: A table planned for a sun path that goes below this elevation [deg] scatters its orders with their source
+#: read at every view node (``TableSettings.source_stride`` 1), whatever its level's stride: read at every other
+#: one, the draft and default levels were 10.7 and 1.2 % off the reference at -6 deg (9.2 and 0.88 % at every
+#: node), the default 1.60 % at -8 deg (0.91 %); at -4 deg the default 0.68 % against 0.60 % (a probe,
+#: 2026-12-07; README "Quality levels"). The default animation's planned table takes 25 % more CPU time for it
+#: (8.30 against 6.61-6.76 CPU-s, docs/speed-log.md).
+SOURCE_EVERY_NODE_BELOW_DEG = -4.0
 
 #: The levels' ray-march errors below -4 deg, as :data:`clsky.renderer_choice.RAY_MARCH_ERROR` gives them above
 #: (p95 against the reference, 64 x 64 fisheyes from the ground; README "Quality levels", "Below civil
@@ -664,7 +673,11 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     else:
         because = "asked for" + (f"; the planner's: {planned}, for {because}" if sampling != planned else "")
     harmonics, harmonics_because = azimuth_harmonics(level, scene.sun_elevations_deg, mode)
-    table = level.table.replace(mode=mode, sampling=sampling, azimuth_harmonics=harmonics)
+    every_node = level.table.source_stride > 1 and scene.sun_elevations_deg[0] < SOURCE_EVERY_NODE_BELOW_DEG
+    table = level.table.replace(mode=mode, sampling=sampling, azimuth_harmonics=harmonics,
+                                source_stride=1 if every_node else level.table.source_stride)
+    source_note = (f"; their source read at every view node: the sun goes below {SOURCE_EVERY_NODE_BELOW_DEG:g} deg, "
+                   f"where every other node put the level's frames past its promise" if every_node else "")
     chosen, estimate, estimates = choose_renderer(scene.sun_elevations_deg, budget, level.name, pixels=scene.pixels)
     lookup_error, at_lowest = estimates["lut"], _at_lowest_sun(scene.sun_elevations_deg)
     lookup_note = f"the table lookup's {_percent(lookup_error)} % {at_lowest}, exceeds the budget"
@@ -733,7 +746,7 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
             whose = "the caller's lookup's" if keep_orders else "the table lookup's, which sees the ground"
             decisions.append(("higher orders", f"until an order adds < {table.order_tolerance:g}",
                               f"they add at most {100 * share:.3g} % (pilot), kept: the table carries a reflecting "
-                              f"ground's light in them ({whose})"))
+                              f"ground's light in them ({whose}){source_note}"))
             decisions.append(("azimuth harmonics", f"M = {harmonics}", harmonics_because))
         elif share < 0.5 * budget:
             table, elevations, margins = on_sun_axis(table.replace(orders=1, azimuth_harmonics=0), orders=False)
@@ -741,7 +754,7 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
                               f"under half the budget"))
         else:
             decisions.append(("higher orders", f"until an order adds < {table.order_tolerance:g}",
-                              f"they add up to {100 * share:.3g} % of the light (pilot)"))
+                              f"they add up to {100 * share:.3g} % of the light (pilot){source_note}"))
             decisions.append(("azimuth harmonics", f"M = {harmonics}", harmonics_because))
 
     w_low, w_high = table.sun_w_range

@@ -63,10 +63,10 @@ class QualityLevel:
     table : TableSettings
         The scattering table's settings; its sun axis' node count (``size[2]``) is the one of a whole
         sun axis at :attr:`sun_node_spacing` (a planned table covers less and needs fewer); its scatter of
-        the orders reads the higher orders' source at every view node (``table.source_stride`` 1: the draft
-        and default levels' tables read it at every other one until 2026-12-07; the default and draft levels'
-        frames were 1.2 and 10.7 % off the reference at -6 deg with it, 0.88 and 9.2 % without, README
-        "Quality levels"), and that of the orders
+        the orders takes the higher orders' source on every ``table.source_stride``-th view node (as
+        ``ray``; a scene plan whose sun goes below :data:`clsky.planner.SOURCE_EVERY_NODE_BELOW_DEG` reads it
+        at every node: with the stride the default and draft levels' frames were 1.2 and 10.7 % off the
+        reference at -6 deg, 0.88 and 9.2 % without, README "Quality levels"), and that of the orders
         k >= 3 computes every ``table.orders_sun_stride``-th sun node (2 for
         'default' and 'high': 14-16 % less of their build's CPU time for a change of their frames of at most
         3.4e-4 and 8.3e-5; 'draft', whose build of half a second it left unchanged, and 'reference' 1).
@@ -94,9 +94,9 @@ class QualityLevel:
         return max(4, math.ceil((w_high - w_low) / self.sun_node_spacing - 1e-9) + 1)
 
 
-def _level(name, budget, size_wh, spacing, samples, ray_source_stride=1, **table):
-    base = TableSettings(mode="physical", **table)
-    ray = RAYMARCH_DEFAULTS.replace(view_steps=samples, source_stride=ray_source_stride)
+def _level(name, budget, size_wh, spacing, samples, source_stride=1, **table):
+    base = TableSettings(mode="physical", source_stride=source_stride, **table)
+    ray = RAYMARCH_DEFAULTS.replace(view_steps=samples, source_stride=source_stride)
     level = QualityLevel(name, budget, base, spacing, ray)
     return dataclasses.replace(level, table=base.replace(size=size_wh + (level.sun_nodes(),)))
 
@@ -104,9 +104,9 @@ def _level(name, budget, size_wh, spacing, samples, ray_source_stride=1, **table
 #: The levels, fastest first.
 QUALITY_LEVELS = {
     level.name: level for level in (
-        _level("draft", 0.10, (16, 128), 0.015, 16, ray_source_stride=2, view_steps=15, multiple_view_steps=10,
+        _level("draft", 0.10, (16, 128), 0.015, 16, source_stride=2, view_steps=15, multiple_view_steps=10,
                sun_steps=15, gather_theta_steps=64, gather_phi_steps=32, order_tolerance=1e-2),
-        _level("default", 0.01, (32, 128), 0.004, 48, ray_source_stride=2, orders_sun_stride=2),
+        _level("default", 0.01, (32, 128), 0.004, 48, source_stride=2, orders_sun_stride=2),
         _level("high", 1e-3, (32, 256), 0.002, 128, view_steps=60, multiple_view_steps=40, sun_steps=60,
                order_tolerance=1e-5, orders_sun_stride=2),
         _level("reference", 5e-4, (32, 256), 0.0015, 256, view_steps=120, multiple_view_steps=None,

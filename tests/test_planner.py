@@ -521,9 +521,12 @@ def test_ground_scenes_keep_keller_bohn_bit_for_bit(preset_name, mode):
         plan = plan_scene(scene, preset_name, mode, ray_march=True)
         assert plan.table.sampling == plan.ray.sampling == plan.full_table.sampling == "keller_bohn"
         assert plan.ray == plan.level.ray
+        # the one other change: the orders' source read at every view node below -4 deg (SOURCE_EVERY_NODE_BELOW_DEG)
         assert plan.table == plan.level.table.replace(mode=mode, size=plan.table.size, orders=plan.table.orders,
                                                       sun_cos_range=plan.table.sun_cos_range,
-                                                      azimuth_harmonics=plan.table.azimuth_harmonics)
+                                                      azimuth_harmonics=plan.table.azimuth_harmonics,
+                                                      source_stride=plan.table.source_stride)
+        assert plan.table.source_stride == (1 if scene.sun_elevations_deg[0] < -4.0 else plan.level.table.source_stride)
         decisions = {topic: decision for topic, decision, _ in plan.decisions}
         assert decisions["view nodes"] == "keller_bohn"
 

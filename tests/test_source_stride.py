@@ -191,12 +191,20 @@ def test_the_scatter_takes_its_tables_stride():
 
 
 def test_quality_levels_that_stride():
-    """The draft and default levels' ray marches read the source at every other node; every level's table reads
-    it at every node (with the draft and default tables' stride 2 their frames were 10.7 and 1.2 % off the
-    reference at -6 deg, past their promises; 9.2 and 0.88 % without: clsky.quality.QualityLevel)."""
+    """The draft and default levels read the source at every other node, in their ray marches and tables; a
+    plan whose sun goes below -4 deg reads it at every node in its table (with the stride the draft and default
+    levels' frames were 10.7 and 1.2 % off the reference at -6 deg, past their promises; 9.2 and 0.88 %
+    without: clsky.planner.SOURCE_EVERY_NODE_BELOW_DEG), its ray march keeping the level's."""
+    from clsky.planner import Scene, plan_scene
+
     assert {name: level.ray.source_stride for name, level in QUALITY_LEVELS.items()} == \
         {"draft": 2, "default": 2, "high": 1, "reference": 1}
-    assert all(level.table.source_stride == 1 for level in QUALITY_LEVELS.values())
+    assert all(level.table.source_stride == level.ray.source_stride for level in QUALITY_LEVELS.values())
+    for quality in ("draft", "default"):
+        assert plan_scene(Scene((-4.0, 45.0), quality=quality)).table.source_stride == 2
+        dusk = plan_scene(Scene((-4.5, 45.0), quality=quality))
+        assert dusk.table.source_stride == 1 and dusk.ray.source_stride == 2 and dusk.full_table.source_stride == 1
+        assert "their source read at every view node" in dict((t, why) for t, _, why in dusk.decisions)["higher orders"]
 
 
 # 5. The scatter of the orders ---------------------------------------------------------------------
