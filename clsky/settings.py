@@ -137,10 +137,10 @@ class TableSettings:
         looks it up at every other node and the last, linear in distance between: the default
         animation's ray march takes about a fifth less CPU time for a change of its luminance of about
         2e-4 by day and up to 2e-3 in civil twilight, a scatter of its table a quarter (M = 0) to a
-        third (M = 2) less for a change of the frames under 1e-3 with the sun at -4 deg and above (7e-3 at -8
-        deg, README "Quality levels") (docs/speed-log.md); the 'draft' and
-        'default' quality levels take it for both, but for the table of a scene plan whose sun goes below -4
-        deg, where it put their frames past their promises (:data:`clsky.planner.SOURCE_EVERY_NODE_BELOW_DEG`).
+        third (M = 2) less for a change of the frames under 1e-3 with the sun at -4 deg and above
+        (docs/speed-log.md; 7e-3 at -8 deg, README "Quality levels"). The 'draft' and 'default' quality
+        levels take it for both, but for the table of a scene plan whose sun goes below -4 deg, where it put
+        their frames past their promises (:data:`clsky.planner.SOURCE_EVERY_NODE_BELOW_DEG`).
     orders_sun_stride : int
         1 (default) or 2: the sun nodes a table's scatter of the orders k >= 3 computes
         (:data:`clsky.orders.SUN_STRIDE_FROM_ORDER`; kernels/multiple.cl: scatter). 2 computes every other

@@ -26,6 +26,7 @@ from clsky.quality import QUALITY_LEVELS
 
 from conftest import TOLERANCES, black_preset, require_dtype
 import test_multiple
+from test_source_stride import scatter_inputs     # a gathered table in [0.5, 2] and a ground radiance per sun node
 
 #: The fixture ``multiple_engine(settings)`` (cached engines).
 multiple_engine = test_multiple.multiple_engine
@@ -92,13 +93,6 @@ def test_the_stride_starts_at_order_three():
 
 
 # 2. The kernels against their twins -------------------------------------------------------------------
-
-def scatter_inputs(settings, seed):
-    """A gathered table (D, H, W, 6) of values in [0.5, 2] and a ground radiance (D, 3) per sun node."""
-    width, height, depth = settings.size
-    rng = np.random.default_rng(seed)
-    return rng.uniform(0.5, 2.0, (depth, height, width, 6)), rng.uniform(0.1, 1.0, (depth, 3))
-
 
 def scattered(engine, case, gathered, radiance, sun_stride):
     atmosphere, mode = CASES[case]
