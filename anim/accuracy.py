@@ -34,13 +34,16 @@ from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
 from . import metrics
 from .cameras import FisheyeCamera, sun_direction
 
-__all__ = ["SUN_ELEVATIONS", "REFERENCE_GROUPS", "SKYVIEW_SIZES", "Candidate", "default_candidates", "reference_level",
+__all__ = ["SUN_ELEVATIONS", "DUSK_ELEVATIONS", "REFERENCE_GROUPS", "SKYVIEW_SIZES", "Candidate", "default_candidates", "reference_level",
            "reference_renderer", "render_frames",
            "render_reference",
            "reference_convergence", "measure", "pareto_front"]
 
 #: Sun elevations [deg] of the frames: day, golden hour, sunset, civil twilight.
 SUN_ELEVATIONS = {"day": 45.0, "golden hour": 8.0, "sunset": 1.0, "civil twilight": -4.0}
+#: Sun elevations [deg] of the frames below civil twilight (bench/bench_quality_dusk.py): the default animation's
+#: lowest sun (-6 deg, the end of civil twilight) and three lower, into nautical twilight.
+DUSK_ELEVATIONS = {"-6 deg": -6.0, "-8 deg": -8.0, "-10 deg": -10.0, "-12 deg": -12.0}
 SUN_AZIMUTH = 200.0
 
 
@@ -187,36 +190,38 @@ def reference_renderer(elevation_deg, doubled=(), atmosphere="physical", level="
     return SkyRenderer(clsky.ScatteringTable.build(atmosphere, settings), level.ray)
 
 
-def render_frames(renderer, method, prepared, skyview=None):
-    """The four frames {name: HDR} of :data:`SUN_ELEVATIONS` by table lookup ('lut', or 'lut4d' in a 4D
-    table), ray march ('raymarch') or sky-view map ('skyview', of ``skyview`` = (W, H) nodes, default its
-    default size), with ``prepared`` directions (:meth:`clsky.render.SkyRenderer.prepare`)."""
+def render_frames(renderer, method, prepared, skyview=None, elevations=None):
+    """The frames {name: HDR} of ``elevations`` ({name: sun elevation [deg]}, default the four of
+    :data:`SUN_ELEVATIONS`) by table lookup ('lut', or 'lut4d' in a 4D table), ray march ('raymarch') or sky-view
+    map ('skyview', of ``skyview`` = (W, H) nodes, default its default size), with ``prepared`` directions
+    (:meth:`clsky.render.SkyRenderer.prepare`)."""
     from clsky.skyview import DEFAULT_SIZE, SkyViewSettings
 
     frames = {}
     render = {"lut": renderer.render_table, "lut4d": renderer.render_lut4d}.get(method, renderer.render_raymarch)
     if method == "skyview":
         render = functools.partial(renderer.render_skyview, settings=SkyViewSettings(skyview or DEFAULT_SIZE))
-    for name, elevation in SUN_ELEVATIONS.items():
+    for name, elevation in (SUN_ELEVATIONS if elevations is None else elevations).items():
         sun = sun_direction(90.0 - elevation, SUN_AZIMUTH)
         frames[name] = render(prepared, sun, 0.0)
     return frames
 
 
-def render_reference(size=128, doubled=(), atmosphere="physical", level="reference", progress=None):
-    """The reference frames {name: HDR (size, size, 3)} and the fisheye's valid mask. ``progress(stage,
-    done, total)``: stage 'reference', reported before the first frame's table (the longest stage of a
-    sweep: minutes) and after each frame."""
+def render_reference(size=128, doubled=(), atmosphere="physical", level="reference", progress=None, elevations=None):
+    """The reference frames {name: HDR (size, size, 3)} of ``elevations`` ({name: sun elevation [deg]}, default
+    :data:`SUN_ELEVATIONS`) and the fisheye's valid mask. ``progress(stage, done, total)``: stage 'reference',
+    reported before the first frame's table (the longest stage of a sweep: minutes) and after each frame."""
     directions, valid = FisheyeCamera(size).directions()
+    elevations = SUN_ELEVATIONS if elevations is None else elevations
     frames = {}
     if progress is not None:
-        progress("reference", 0, len(SUN_ELEVATIONS))
-    for index, (name, elevation) in enumerate(SUN_ELEVATIONS.items()):
+        progress("reference", 0, len(elevations))
+    for index, (name, elevation) in enumerate(elevations.items()):
         with reference_renderer(elevation, doubled, atmosphere, level) as renderer:
             frames[name] = renderer.render_raymarch(renderer.prepare(directions, valid),
                                                     sun_direction(90.0 - elevation, SUN_AZIMUTH), 0.0)
         if progress is not None:
-            progress("reference", index + 1, len(SUN_ELEVATIONS))
+            progress("reference", index + 1, len(elevations))
     return frames, valid
 
 
@@ -228,18 +233,19 @@ def _errors(reference, frames, valid):
 
 
 def reference_convergence(reference, valid, atmosphere="physical", progress=None, groups=tuple(REFERENCE_GROUPS),
-                          level="reference"):
+                          level="reference", elevations=None):
     """How much the reference frames change when each group of its counts (``groups``, default all of
     :data:`REFERENCE_GROUPS`) is doubled: {group: {frame name: p95 relative change}}, plus "sum": the sum
     over those groups per frame, which bounds the change of doubling them all (the changes are small,
     so they add to first order). ``level``: the quality level ``reference`` was rendered at
-    (:func:`render_reference`; 'reference' unless a smoke run wants a cheaper stand-in)."""
+    (:func:`render_reference`; 'reference' unless a smoke run wants a cheaper stand-in); ``elevations``: its
+    frames' ({name: sun elevation [deg]}, default :data:`SUN_ELEVATIONS`)."""
     size = valid.shape[0]
     change = {}
     if progress is not None:
         progress("reference convergence", 0, len(groups))
     for index, group in enumerate(groups):
-        finer, _ = render_reference(size, (group,), atmosphere, level)
+        finer, _ = render_reference(size, (group,), atmosphere, level, elevations=elevations)
         change[group] = {name: m["p95_rel"] for name, m in _errors(finer, reference, valid)[2].items()}
         if progress is not None:
             progress("reference convergence", index + 1, len(groups))

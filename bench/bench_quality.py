@@ -3,12 +3,14 @@
 1. The reference (anim/accuracy.py: the 'reference' quality level, one table per frame on the sun
    range that frame needs) and its convergence: each group of its counts doubled in turn.
 2. Each quality level, planned for the four frames' sun path (-4 to 45 deg): table build, frame render,
-   and the error of its ray-marched frames against the reference.
+   and the error of its ray-marched frames against the reference; of the same table's lookup and sky-view
+   map too (the worst frame).
 3. The scene plan of the default animation (sun from -6 to 60 deg, all-sky fisheye from the ground,
    1 % budget) against the full table of the same quality: cells, build time side by side, and the
    error of both against the reference.
 
-Writes the README sections "quality" and "plan", and docs/quality.csv.
+Writes the README sections "quality" and "plan", and docs/quality.csv. bench/bench_quality_dusk.py measures
+the same below civil twilight (:data:`DUSK`).
 
 Usage: python bench/bench_quality.py [--size 64] [--groups GROUP ...] [--reference-cache FILE] [--no-readme]
 [--docs DIR] [--smoke]
@@ -30,6 +32,7 @@ once; quality.csv goes to a temporary directory (or ``--docs DIR``); print only 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import datetime
 import json
 import pathlib
@@ -50,23 +53,65 @@ from clsky.quality import QUALITY_LEVELS
 from clsky.render import SkyRenderer
 
 DOCS = pathlib.Path(__file__).resolve().parent.parent / "docs"
-NAMES = list(accuracy.SUN_ELEVATIONS)
-#: The four frames' sun path.
-FRAMES_PATH = (min(accuracy.SUN_ELEVATIONS.values()), max(accuracy.SUN_ELEVATIONS.values()))
 
 
-def frames_of(table, ray, size, method="raymarch"):
-    """{frame name: HDR} of the four frames, and the mean wall and process CPU time of one frame [s]."""
+@dataclasses.dataclass(frozen=True)
+class FrameSet:
+    """The frames a run measures the levels on, and what it writes.
+
+    Attributes
+    ----------
+    elevations : dict
+        {frame name: sun elevation [deg]}.
+    path : tuple of float
+        The sun path [deg] each level's table is planned for (low, high).
+    sections : tuple of str
+        The README sections it writes: its levels' table, then (with "plan") the default animation's plan.
+    csv : str
+        The file under docs/ that takes its levels' rows.
+    groups : tuple of str
+        The reference's count groups doubled by default (:data:`clsky.anim.accuracy.REFERENCE_GROUPS`).
+    """
+
+    elevations: dict
+    path: tuple
+    sections: tuple
+    csv: str
+    groups: tuple
+
+    @property
+    def names(self):
+        return list(self.elevations)
+
+
+#: The four frames of :data:`clsky.anim.accuracy.SUN_ELEVATIONS` (day to civil twilight), each level planned for
+#: their path (-4 to 45 deg), the reference's convergence in every group, and the default animation's plan.
+DAY = FrameSet(accuracy.SUN_ELEVATIONS, (min(accuracy.SUN_ELEVATIONS.values()), max(accuracy.SUN_ELEVATIONS.values())),
+               ("quality", "plan"), "quality.csv", tuple(accuracy.REFERENCE_GROUPS))
+#: Below civil twilight (:data:`clsky.anim.accuracy.DUSK_ELEVATIONS`, -6 to -12 deg), each level planned for a
+#: sunset's path from the lowest of them up to the day frame's 45 deg (its tables read the orders' source at
+#: every view node: :data:`clsky.planner.SOURCE_EVERY_NODE_BELOW_DEG`). By default no count group is doubled:
+#: each would rebuild the four reference tables of these suns (13 min at the reference's own size on the
+#: 2-core Xeon), so a run measures the levels in about 20 min.
+DUSK = FrameSet(accuracy.DUSK_ELEVATIONS, (min(accuracy.DUSK_ELEVATIONS.values()), max(accuracy.SUN_ELEVATIONS.values())),
+                ("quality-dusk",), "quality_dusk.csv", ())
+
+
+def frames_of(table, ray, size, elevations, method="raymarch"):
+    """{frame name: HDR} of the frames of ``elevations`` ({name: sun elevation [deg]}), and the mean wall and
+    process CPU time of one frame [s]."""
     directions, valid = FisheyeCamera(size).directions()
     with SkyRenderer(table, ray) as renderer:
         prepared = renderer.prepare(directions, valid)
-        accuracy.render_frames(renderer, method, prepared)                  # warm-up
-        frames, wall, cpu = timed_with_cpu(lambda: accuracy.render_frames(renderer, method, prepared))
+        render = lambda: accuracy.render_frames(renderer, method, prepared, elevations=elevations)  # noqa: E731
+        render()                                                            # warm-up
+        frames, wall, cpu = timed_with_cpu(render)
         return frames, wall / len(frames), cpu / len(frames)
 
 
 def errors(reference, frames, valid):
-    return {name: metrics.compare_frames(reference[name], frames[name], valid)["p95_rel"] for name in NAMES}
+    """{frame name: p95 relative error of ``frames`` against ``reference``}."""
+    return {name: metrics.compare_frames(reference[name], frames[name], valid)["p95_rel"] for name in reference}
 
 
 def built(atmosphere, settings, repeat=1, smoke=False):
@@ -81,41 +126,45 @@ def built(atmosphere, settings, repeat=1, smoke=False):
 
 
 def percent(values):
-    return " | ".join(f"{100 * values[n]:.2f}" for n in NAMES)
+    return " | ".join(f"{100 * value:.2f}" for value in values.values())
 
 
-def main():
-    parser = argparse.ArgumentParser(description=description_of(__doc__))
+def main(frames=DAY, doc=__doc__):
+    """Parse the command line and run the benchmark on ``frames`` (:class:`FrameSet`); ``doc``: the calling
+    script's docstring, for --help."""
+    parser = argparse.ArgumentParser(description=description_of(doc))
     parser.add_argument("--size", type=integer_in(16, 2048), default=64)
+    default_groups = ("all" if frames.groups == tuple(accuracy.REFERENCE_GROUPS) else
+                      "; ".join(frames.groups) or "none")
     parser.add_argument("--groups", nargs="*", choices=list(accuracy.REFERENCE_GROUPS),
-                        help="default: all (with --smoke: ray march)")
+                        help=f"default: {default_groups} (with --smoke: " + ("ray march)" if frames.groups else "none)"))
     parser.add_argument("--reference-cache", type=npz_file, metavar="FILE.npz")
     parser.add_argument("--docs", type=pathlib.Path, metavar="DIR",
                         help="write quality.csv into DIR (default: docs/ when writing the README; none with "
                              "--no-readme; a temporary directory with --smoke)")
     add_output_arguments(parser)
-    args = parse_arguments(parser, sections=("quality", "plan"))
+    args = parse_arguments(parser, sections=frames.sections)
     reference_name = "reference"
     if args.smoke:
         args.size, reference_name = SMOKE.frame, SMOKE.reference_level
     if args.groups is None:
-        args.groups = ["ray march"] if args.smoke else list(accuracy.REFERENCE_GROUPS)
+        args.groups = (["ray march"] if frames.groups else []) if args.smoke else list(frames.groups)
     with tempfile.TemporaryDirectory() as temporary:
         if args.docs is None and args.smoke:
             args.docs = pathlib.Path(temporary)
         elif args.docs is None and not args.no_readme:
             args.docs = DOCS
-        run(args, reference_name)
+        run(args, reference_name, frames)
 
 
-def run(args, reference_name):
+def run(args, reference_name, frames=DAY):
     stamp = (f"Measured {datetime.date.today()} on {machine()}, {describe_device(default_device())} (load average "
              f"{load_average():.2f} at the start)")
     loads = []
 
     if args.reference_cache and args.reference_cache.exists():
-        cached = load_reference_cache(args.reference_cache, reference_name, args.size, NAMES)
-        reference, valid = {name: cached[name] for name in NAMES}, cached["valid"]
+        cached = load_reference_cache(args.reference_cache, reference_name, args.size, frames.names)
+        reference, valid = {name: cached[name] for name in frames.names}, cached["valid"]
         reference_seconds, change = float(cached["seconds"]), json.loads(str(cached["convergence"]))
         reference_cpu = float(cached["cpu_seconds"]) if "cpu_seconds" in cached else None
         args.groups = [g for g in change if g != "sum"]
@@ -128,12 +177,13 @@ def run(args, reference_name):
             except (OSError, ValueError) as error:
                 raise SystemExit(str(error)) from None
         (reference, valid), reference_seconds, reference_cpu = timed_with_cpu(
-            lambda: accuracy.render_reference(args.size, level=reference_name))
+            lambda: accuracy.render_reference(args.size, level=reference_name, elevations=frames.elevations))
         loads.append(load_average())
         if args.reference_cache:    # kept even if the convergence fails (a doubled group may not fit in memory)
             save_reference_cache(args.reference_cache, reference_name, reference, valid, seconds=reference_seconds,
                                  cpu_seconds=reference_cpu, convergence="{}")
-        change = accuracy.reference_convergence(reference, valid, groups=args.groups, level=reference_name)
+        change = (accuracy.reference_convergence(reference, valid, groups=args.groups, level=reference_name,
+                                                 elevations=frames.elevations) if args.groups else {})
         if args.reference_cache:
             save_reference_cache(args.reference_cache, reference_name, reference, valid, seconds=reference_seconds,
                                  cpu_seconds=reference_cpu, convergence=json.dumps(change))
@@ -145,71 +195,89 @@ def run(args, reference_name):
     for name, level in QUALITY_LEVELS.items():
         if name == "reference":
             continue
-        plan = plan_scene(Scene(FRAMES_PATH, quality=name))
+        plan = plan_scene(Scene(frames.path, quality=name))
         table, build, build_cpu = built(plan.atmosphere, plan.table, smoke=args.smoke)
-        frames, render, render_cpu = frames_of(table, level.ray, args.size)
-        lut, _, _ = frames_of(table, level.ray, args.size, method="lut")
+        marched, render, render_cpu = frames_of(table, level.ray, args.size, frames.elevations)
+        lookups = {method: errors(reference, frames_of(table, level.ray, args.size, frames.elevations, method)[0], valid)
+                   for method in ("lut", "skyview")}
         loads.append(load_average())
-        error = errors(reference, frames, valid)
+        error = errors(reference, marched, valid)
         rows.append({"level": name, "budget": level.budget, "table": "x".join(map(str, table.settings.size)),
                      "samples": level.ray.view_steps, "build_s": build, "build_cpu_s": build_cpu,
                      "render_s": render, "render_cpu_s": render_cpu, "load": loads[-1],
-                     **{f"p95_rel {n}": error[n] for n in NAMES}, "worst": max(error.values()),
-                     "lut_worst": max(errors(reference, lut, valid).values())})
+                     **{f"p95_rel {n}": error[n] for n in frames.names}, "worst": max(error.values()),
+                     "lut_worst": max(lookups["lut"].values()), "skyview_worst": max(lookups["skyview"].values()),
+                     **{f"skyview p95_rel {n}": lookups["skyview"][n] for n in frames.names}})
         print(rows[-1], flush=True)
     if args.docs is not None:
         args.docs.mkdir(parents=True, exist_ok=True)
-        writers.write_csv(args.docs / "quality.csv", rows, force=True)
-        print(f"wrote {args.docs / 'quality.csv'}", flush=True)
+        writers.write_csv(args.docs / frames.csv, rows, force=True)
+        print(f"wrote {args.docs / frames.csv}", flush=True)
 
-    lines = [f"{stamp}: {args.size} x {args.size} fisheye frames from the ground (`bench/bench_quality.py`). "
-             "Each level is planned for the four frames' sun path (-4 to 45 deg); error: 95th percentile of "
-             "the relative HDR luminance error of its ray-marched frames against the reference. Build: the "
-             "table, its wall and process CPU time (every thread, PoCL's workers included); render: one frame "
-             "by ray march, the mean of the four. The lookup column is the same table's lookup (worst frame); "
-             "load: the 1-minute load average after the row." + load_note(max(loads)),
+    script = "bench/bench_quality.py" if frames is DAY else "bench/bench_quality_dusk.py"
+    lines = [f"{stamp}: {args.size} x {args.size} fisheye frames from the ground (`{script}`). "
+             f"Each level is planned for the sun path {frames.path[0]:g} to {frames.path[1]:g} deg; error: 95th "
+             "percentile of the relative HDR luminance error of its ray-marched frames against the reference. "
+             "Build: the table, its wall and process CPU time (every thread, PoCL's workers included); render: one "
+             f"frame by ray march, the mean of the {len(frames.names)}. The lookup and sky-view map columns are "
+             "the same table's 3D lookup and default sky-view map (worst frame); load: the 1-minute load average "
+             "after the row." + load_note(max(loads)),
              "", "| level | promise | table | samples | build [s] | CPU [s] | render [ms] | CPU [ms] | "
-             + " | ".join(f"{n} [%]" for n in NAMES) + " | lookup, worst [%] | load |",
-             "|---|---:|---|---:|---:|---:|---:|---:|" + "---:|" * len(NAMES) + "---:|---:|"]
+             + " | ".join(f"{n} [%]" for n in frames.names) + " | lookup, worst [%] | sky-view map, worst [%] | load |",
+             "|---|---:|---|---:|---:|---:|---:|---:|" + "---:|" * len(frames.names) + "---:|---:|---:|"]
     for r in rows:
         lines.append(f"| {r['level']} | {100 * r['budget']:g} % | {r['table']} | {r['samples']} | {r['build_s']:.2f} | "
                      f"{r['build_cpu_s']:.2f} | {1e3 * r['render_s']:.1f} | {1e3 * r['render_cpu_s']:.1f} | "
-                     + percent({n: r[f"p95_rel {n}"] for n in NAMES})
-                     + f" | {100 * r['lut_worst']:.0f} | {r['load']:.2f} |")
+                     + percent({n: r[f"p95_rel {n}"] for n in frames.names})
+                     + f" | {100 * r['lut_worst']:.0f} | {100 * r['skyview_worst']:.2f} | {r['load']:.2f} |")
     reference_level = accuracy.reference_level(level=reference_name)
-    lines += ["", f"The reference ('{reference_name}' level: " + "{} x {} altitude x view ".format(*reference_level.table.size[:2])
-              + f"nodes, sun nodes every {reference_level.sun_node_spacing:g} in w on each frame's sun range, "
-              f"{reference_level.ray.view_steps} samples; {reference_seconds:.0f} s"
-              + ("" if reference_cpu is None else f" and {reference_cpu:.0f} CPU-s") + " for the four frames) "
-              "changes this much when each group of its counts is doubled; their sum bounds the change of "
-              "doubling them all"
-              + ("" if len(args.groups) == len(accuracy.REFERENCE_GROUPS) else
-                 " (groups not doubled in this run: " + "; ".join(accuracy.REFERENCE_GROUPS[g] for g in
-                                                                accuracy.REFERENCE_GROUPS if g not in args.groups)
-                 + ")") + ":", "",
-              "| doubled | " + " | ".join(f"{n} [%]" for n in NAMES) + " |", "|---|" + "---:|" * len(NAMES)]
-    for group, values in change.items():
-        label = accuracy.REFERENCE_GROUPS.get(group, "**sum**")
-        lines.append(f"| {label} | " + " | ".join(f"{100 * values[n]:.3f}" for n in NAMES) + " |")
+    reference_line = (f"The reference ('{reference_name}' level: "
+                      + "{} x {} altitude x view ".format(*reference_level.table.size[:2])
+                      + f"nodes, sun nodes every {reference_level.sun_node_spacing:g} in w on each frame's sun range, "
+                      f"{reference_level.ray.view_steps} samples; {reference_seconds:.0f} s"
+                      + ("" if reference_cpu is None else f" and {reference_cpu:.0f} CPU-s")
+                      + f" for the {len(frames.names)} frames)")
+    if args.groups:
+        lines += ["", reference_line + " changes this much when each group of its counts is doubled; their sum "
+                  "bounds the change of doubling them all"
+                  + ("" if len(args.groups) == len(accuracy.REFERENCE_GROUPS) else
+                     " (groups not doubled in this run: " + "; ".join(accuracy.REFERENCE_GROUPS[g] for g in
+                                                                    accuracy.REFERENCE_GROUPS if g not in args.groups)
+                     + ")") + ":", "",
+                  "| doubled | " + " | ".join(f"{n} [%]" for n in frames.names) + " |",
+                  "|---|" + "---:|" * len(frames.names)]
+        for group, values in change.items():
+            label = accuracy.REFERENCE_GROUPS.get(group, "**sum**")
+            lines.append(f"| {label} | " + " | ".join(f"{100 * values[n]:.3f}" for n in frames.names) + " |")
+    else:
+        lines += ["", reference_line + ": how far it converged at these suns was not measured in this run (no "
+                  "group of its counts doubled: `--groups`)."]
     quality_markdown = "\n".join(lines)
+    print(quality_markdown)
+    if not args.no_readme:
+        write_readme_section(frames.sections[0], quality_markdown)
+    if "plan" in frames.sections:
+        plan_report(args, reference, valid, stamp)
 
-    # The default animation's plan (exactly as `clsky animate` makes it) against the full table of the
-    # same quality, side by side.
+
+def plan_report(args, reference, valid, stamp):
+    """The default animation's plan (exactly as `clsky animate` makes it) against the full table of the same
+    quality, side by side, on the four frames (:data:`DAY`): printed, and written to the README's "plan"."""
     config = animate.AnimationConfig(size=SMOKE.frame) if args.smoke else animate.AnimationConfig()
     plan = animate.planned_animation(config).plan
     planned, planned_build, planned_cpu = built(plan.atmosphere, plan.table, repeat=3, smoke=args.smoke)
     full, full_build, full_cpu = built(plan.atmosphere, plan.full_table, repeat=3, smoke=args.smoke)
     plan_load = load_average()
-    planned_frames, _, _ = frames_of(planned, plan.level.ray, args.size)
-    full_frames, _, _ = frames_of(full, plan.level.ray, args.size)
+    planned_frames, _, _ = frames_of(planned, plan.level.ray, args.size, DAY.elevations)
+    full_frames, _, _ = frames_of(full, plan.level.ray, args.size, DAY.elevations)
     planned_error, full_error = errors(reference, planned_frames, valid), errors(reference, full_frames, valid)
     between = errors(full_frames, planned_frames, valid)
     cells = [int(np.prod(t.settings.size)) for t in (planned, full)]
     lines = [f"{stamp}. The plan of the README's main job (`clsky animate`: sun from -6 to 60 deg, all-sky "
              "fisheye from the ground, 1 % budget), as `clsky animate` prints it:", "", "```",
              plan.describe(), "```", "",
-             "| table | sun axis | cells | build [s] | CPU [s] | " + " | ".join(f"{n} [%]" for n in NAMES) + " |",
-             "|---|---|---:|---:|---:|" + "---:|" * len(NAMES),
+             "| table | sun axis | cells | build [s] | CPU [s] | " + " | ".join(f"{n} [%]" for n in DAY.names) + " |",
+             "|---|---|---:|---:|---:|" + "---:|" * len(DAY.names),
              f"| planned | {planned.settings.size[2]} nodes, elevations {np.degrees(np.arcsin(plan.table.sun_cos_range[0])):.1f} "
              f"to {np.degrees(np.arcsin(plan.table.sun_cos_range[1])):.1f} deg | {cells[0]} | {planned_build:.2f} | "
              f"{planned_cpu:.2f} | "
@@ -225,10 +293,8 @@ def run(args, reference_name):
              f"and the least process CPU time of three builds each, in the same run (load average "
              f"{plan_load:.2f} after them)."]
     plan_markdown = "\n".join(lines)
-    print(quality_markdown)
     print(plan_markdown)
     if not args.no_readme:
-        write_readme_section("quality", quality_markdown)
         write_readme_section("plan", plan_markdown)
 
 

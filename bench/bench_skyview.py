@@ -8,9 +8,16 @@ default table's higher orders; :func:`clsky.anim.metrics.compare_frames`). The t
 ``TableSettings(mode='physical')`` of the physical preset, built once. The load average is printed
 beside the times. Writes the table into README.md ("Sky-view table").
 
+Then the errors the scene planner takes for the map (clsky.renderer_choice's sky-view row): the default map
+against the per-pixel ray march of the table the planner gives each observer it takes the map for (the
+default level, sun path -12 to 45 deg, ray-marched as planned): 64 x 64 fisheyes from the ground, and from
+10 km looking up and tilted 0.8 rad (46 deg) down toward the sun's side, as tests/test_skyview.py's, the
+sun from +45 down to -12 deg. Writes README.md's "skyview-plan".
+
 Usage: python bench/bench_skyview.py [--repeat N] [--no-readme] [--smoke]
 
-``--smoke``: an 8 x 32 x 8 table, 16 x 16 frames, a 16 x 32 map, one repetition; print only.
+``--smoke``: an 8 x 32 x 8 table, 16 x 16 frames, a 16 x 32 map, one repetition; the planned tables cut to
+8 x 32 x 8; print only.
 """
 
 from __future__ import annotations
@@ -30,12 +37,19 @@ from clsky import skyview
 from clsky._cl import default_device, describe_device
 from clsky.anim import metrics
 from clsky.anim.cameras import FisheyeCamera, sun_direction
+from clsky.planner import Scene, plan_scene
 from clsky.render import SkyRenderer
 
 ELEVATIONS = (30.0, 5.0, 0.0, -4.0)
 SUN_AZIMUTH = 200.0
 #: Map sizes measured (W, H); the default first.
 MAP_SIZES = (skyview.DEFAULT_SIZE, (32, 64))
+#: The planned tables' suns [deg], their sun path, and the observers: (label, altitude [m], tilt [rad] of the
+#: fisheye's axis from the zenith toward the sun's side).
+PLAN_ELEVATIONS = (45.0, 30.0, 10.0, 5.0, 1.0, 0.0, -4.0, -6.0, -8.0, -10.0, -12.0)
+PLAN_PATH = (-12.0, 45.0)
+PLAN_OBSERVERS = (("ground", 0.0, 0.0), ("10 km", 10e3, 0.0), ("10 km, 46 deg down", 10e3, 0.8))
+PLAN_FRAME = 64
 
 
 def best(function, repeat):
@@ -48,7 +62,7 @@ def main():
     parser = argparse.ArgumentParser(description=description_of(__doc__))
     parser.add_argument("--repeat", type=positive_integer, default=3)
     add_output_arguments(parser)
-    args = parse_arguments(parser, sections=("skyview",))
+    args = parse_arguments(parser, sections=("skyview", "skyview-plan"))
     frame_sizes, map_sizes, settings = (512, 1024), MAP_SIZES, clsky.TableSettings(mode="physical")
     if args.smoke:
         args.repeat, frame_sizes, map_sizes = SMOKE.repeat, (SMOKE.frame,), ((16, 32),)
@@ -85,8 +99,64 @@ def main():
                     row["load"] = loads
     markdown = report(rows, table, frame_sizes)
     print(markdown)
+    plan_frame = SMOKE.frame if args.smoke else PLAN_FRAME
+    planned = plan_report(plan_errors(plan_frame, args.smoke), plan_frame)
+    print(planned)
     if not args.no_readme:
         write_readme_section("skyview", markdown)
+        write_readme_section("skyview-plan", planned)
+
+
+def tilted(directions, tilt):
+    """``directions`` (..., 3) turned by ``tilt`` [rad] about the x axis: a fisheye's axis from the zenith
+    toward -y (tests/test_skyview.py's turn; the sun at azimuth 200 deg is on that side)."""
+    c, s = np.cos(tilt), np.sin(tilt)
+    return directions @ np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]]).T
+
+
+def plan_errors(size, smoke=False):
+    """{observer label: {sun elevation: p95}}: the default sky-view map against the ray march of the table
+    the planner gives each of :data:`PLAN_OBSERVERS` (the default level, :data:`PLAN_PATH`), ``size`` x ``size``
+    fisheyes. ``smoke``: the tables cut to at most SMOKE.table nodes per axis."""
+    found = {}
+    for label, altitude, tilt in PLAN_OBSERVERS:
+        directions, valid = FisheyeCamera(size).directions()
+        directions = tilted(directions, tilt)
+        scene = Scene(PLAN_PATH, altitudes_m=(altitude, altitude), quality="default",
+                      view_elevations_deg=(-float(np.degrees(tilt)), 90.0))
+        plan = plan_scene(scene, ray_march=True)
+        settings = plan.table
+        if smoke:
+            settings = settings.replace(size=tuple(min(n, m) for n, m in zip(settings.size, SMOKE.table)))
+        with SkyRenderer(clsky.ScatteringTable.build(plan.atmosphere, settings), plan.ray) as renderer:
+            prepared = renderer.prepare(directions, valid)
+            found[label] = {}
+            for elevation in PLAN_ELEVATIONS:
+                sun = sun_direction(90.0 - elevation, SUN_AZIMUTH)
+                march = renderer.render_raymarch(prepared, sun, altitude)
+                frame = renderer.render_skyview(prepared, sun, altitude)
+                found[label][elevation] = metrics.compare_frames(march, frame, valid)["p95_rel"]
+        found[label]["table"] = " x ".join(map(str, settings.size))
+    return found
+
+
+def plan_report(found, size):
+    """The Markdown table of :func:`plan_errors` (``size`` x ``size`` frames): one line per observer, and the
+    worst of them per sun."""
+    lines = [f"Measured {datetime.date.today()} (`bench/bench_skyview.py`, the same run): the default sky-view map "
+             f"({skyview.DEFAULT_SIZE[0]} x {skyview.DEFAULT_SIZE[1]}) against the ray march of the table the planner "
+             f"gives each observer (default level, sun path {PLAN_PATH[0]:g} to {PLAN_PATH[1]:g} deg), "
+             f"{size} x {size} fisheyes looking up or tilted toward the sun's side: 95th percentile of "
+             "the relative luminance error [%]. The last line is what the scene planner takes "
+             "(`clsky.renderer_choice`).", "",
+             "| observer | table | " + " | ".join(f"{e:+g} deg" for e in PLAN_ELEVATIONS) + " |",
+             "|---|---|" + "---:|" * len(PLAN_ELEVATIONS)]
+    for label, errors in found.items():
+        lines.append(f"| {label} | {errors['table']} | "
+                     + " | ".join(f"{100 * errors[e]:.3f}" for e in PLAN_ELEVATIONS) + " |")
+    lines.append("| **worst** | | " + " | ".join(
+        f"{100 * max(errors[e] for errors in found.values()):.3f}" for e in PLAN_ELEVATIONS) + " |")
+    return "\n".join(lines)
 
 
 def report(rows, table, frame_sizes):
