@@ -80,11 +80,11 @@ from .errors import check_choice, check_flag, check_instance, check_integer, che
 from .mapping import cos_to_v
 from .quality import QUALITY_LEVELS, QualityLevel, level_for_budget, quality_level
 from .renderer_choice import (DEFAULT_PIXELS, LOOKUP_ERROR, RAY_MARCH_ERROR, RENDERERS, choose_renderer, error_over,
-                              renderer_row)
+                              estimate_basis, renderer_row)
 from .settings import SAMPLINGS, SCATTERING_MODES, TableSettings
 
 __all__ = ["Scene", "Plan", "plan_scene", "sun_margins", "sun_axis", "sees_ground", "view_sampling",
-           "azimuth_harmonics", "LOOKUP_ERROR", "COMPONENTS", "HARMONICS_BELOW_DEG"]
+           "azimuth_harmonics", "promise_measured_down_to", "LOOKUP_ERROR", "COMPONENTS", "HARMONICS_BELOW_DEG"]
 
 #: Light components a scene may want.
 COMPONENTS = ("rayleigh", "mie", "multiple")
@@ -238,12 +238,20 @@ def view_sampling(altitudes_m) -> tuple:
 #: plan promised 0.45 % (a probe of the planner, 2026-12-07).
 RENDERER_ERRORS_MEASURED_UP_TO_M = 10e3
 
-#: The lowest sun [deg] down to which the draft and default levels' promises were measured to hold (against the
-#: reference level, 64 x 64 fisheyes from the ground, a probe of 2026-12-07: 9.2 % and 0.88 % at -6 deg; the
-#: high level was measured at -4 deg, 0.08 %, and at -8, 0.11 %). A plan whose sun goes lower says what its
-#: level measured there (:data:`ERRORS_MEASURED_BELOW`), and a plan by error budget takes the fastest level
-#: whose measured error over the path fits the budget.
-PROMISES_MEASURED_DOWN_TO_DEG = -6.0
+def promise_measured_down_to(level) -> float:
+    """The lowest sun [deg] down to which quality ``level``'s promise was measured to hold: walking down the
+    measured elevations (:func:`measured_errors`), the last before the first whose error exceeds the level's
+    budget. Measured 2026-12-07 (bench/bench_quality_dusk.py): draft -4 deg (14 % at -6), default -8 deg (1.00 %
+    at -8, 1.30 % at -10), high -8 deg (0.14 % at -10); the reference level, measured down to -4 deg only, -4. A
+    plan whose sun goes lower says what its level measured there, and a plan by error budget takes the fastest
+    level whose measured error over the path fits the budget."""
+    points = sorted(measured_errors(level.name), reverse=True)
+    holds = points[0][0]
+    for sun, error in points:
+        if error > level.budget:
+            break
+        holds = sun
+    return holds
 
 #: A table planned for a sun path that goes below this elevation [deg] scatters its orders with their source
 #: read at every view node (``TableSettings.source_stride`` 1), whatever its level's stride: read at every other
@@ -253,19 +261,12 @@ PROMISES_MEASURED_DOWN_TO_DEG = -6.0
 #: (8.30 against 6.61-6.76 CPU-s, docs/speed-log.md).
 SOURCE_EVERY_NODE_BELOW_DEG = -4.0
 
-#: The levels' ray-march errors below -4 deg, as :data:`clsky.renderer_choice.RAY_MARCH_ERROR` gives them above
-#: (p95 against the reference, 64 x 64 fisheyes from the ground; README "Quality levels", "Below civil
-#: twilight": a probe, 2026-12-07, each sun's own plan, the draft and default tables reading the orders' source at
-#: every view node as since): {level: ((sun elevation [deg], error), ...)}.
-ERRORS_MEASURED_BELOW = {"draft": ((-8.0, 0.16), (-6.0, 0.092)),
-                         "default": ((-12.0, 0.0155), (-10.0, 0.0123), (-8.0, 0.0091), (-6.0, 0.0088)),
-                         "high": ((-14.0, 0.0017), (-8.0, 0.0011))}
-
-
 def measured_errors(name):
-    """A quality level's measured ray-march errors ((sun elevation [deg], p95), ...), ascending: those below -4
-    deg (:data:`ERRORS_MEASURED_BELOW`) and the renderer choice's (:data:`clsky.renderer_choice.RAY_MARCH_ERROR`)."""
-    return tuple(sorted(ERRORS_MEASURED_BELOW.get(name, ()) + RAY_MARCH_ERROR[name]))
+    """A quality level's measured ray-march errors ((sun elevation [deg], p95), ...), ascending
+    (:data:`clsky.renderer_choice.RAY_MARCH_ERROR`: bench/bench_quality.py from -4 deg up,
+    bench/bench_quality_dusk.py below)."""
+    return RAY_MARCH_ERROR[name]
+
 
 #: A scene whose sun goes below this elevation [deg] gets the higher orders with azimuth harmonics
 #: (:func:`azimuth_harmonics`). Issue 11 asks for 2 % (95th percentile) at 0 deg and above; the azimuth
@@ -576,8 +577,8 @@ def _costlier(method, chosen, pixels) -> str:
 def _level_measured_within(level, budget, low, high):
     """``level`` or the first finer one whose ray march's measured error over the sun path [low, high] [deg]
     (:func:`measured_errors`, interpolated in log error, the nearest measured value beyond) fits ``budget``;
-    the reference level where none does. Above :data:`PROMISES_MEASURED_DOWN_TO_DEG` each level's measured
-    error is within its promise, so this only moves a path that goes lower (a default level 1.2 % off at
+    the reference level where none does. Above :func:`promise_measured_down_to` each level's measured
+    error is within its promise, so this only moves a path that goes lower (a default level 1.3 % off at
     -10 deg is no level 'within 1 %')."""
     names = list(QUALITY_LEVELS)
     for name in names[names.index(level.name):]:
@@ -587,18 +588,18 @@ def _level_measured_within(level, budget, low, high):
 
 
 def _below_measured_note(level, lowest_deg):
-    """The plan's words for a sun path down to ``lowest_deg``, below :data:`PROMISES_MEASURED_DOWN_TO_DEG`:
+    """The plan's words for a sun path down to ``lowest_deg``, below :func:`promise_measured_down_to`:
     what ``level``'s ray march measured against the reference at the suns of the path below it
     (:func:`measured_errors`), and below which sun it was not measured."""
     points = measured_errors(level.name)
     # the measured suns below the promise's down to the path's lowest, and the first one below that
     floor = max((sun for sun, _ in points if sun <= lowest_deg), default=lowest_deg)
-    measured = sorted(((sun, error) for sun, error in points if floor <= sun < PROMISES_MEASURED_DOWN_TO_DEG),
-                      reverse=True)
+    holds = promise_measured_down_to(level)
+    measured = sorted(((sun, error) for sun, error in points if floor <= sun < holds), reverse=True)
     said = ", ".join(f"{100 * error:.2g} % at {sun:g} deg" for sun, error in measured)
     lowest_measured = min((sun for sun, _ in points), default=0.0)
     unmeasured = f"not measured below {lowest_measured:g} deg" if lowest_deg < lowest_measured else ""
-    return (f"; measured with the sun down to {PROMISES_MEASURED_DOWN_TO_DEG:g} deg: below it, down to "
+    return (f"; measured to hold with the sun down to {holds:g} deg: below it, down to "
             f"{lowest_deg:g} deg here, " + "; ".join(part for part in (
                 f"off the reference by {said}" if said else "", unmeasured) if part))
 
@@ -656,7 +657,7 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         why = f"; the fastest level within {100 * budget:g} %"
     else:                                   # below every level's promise: the most accurate one, said so
         why = f"; no level promises {100 * budget:g} %: the most accurate one"
-    if scene.sun_elevations_deg[0] < PROMISES_MEASURED_DOWN_TO_DEG:
+    if scene.sun_elevations_deg[0] < promise_measured_down_to(level):
         why += _below_measured_note(level, scene.sun_elevations_deg[0])
     decisions = [("quality", level.name, f"promises {100 * level.budget:g} % or better{why}")]
 
@@ -678,7 +679,8 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
                                 source_stride=1 if every_node else level.table.source_stride)
     source_note = (f"; their source read at every view node: the sun goes below {SOURCE_EVERY_NODE_BELOW_DEG:g} deg, "
                    f"where every other node put the level's frames past its promise" if every_node else "")
-    chosen, estimate, estimates = choose_renderer(scene.sun_elevations_deg, budget, level.name, pixels=scene.pixels)
+    chosen, estimate, estimates = choose_renderer(scene.sun_elevations_deg, budget, level.name, pixels=scene.pixels,
+                                                  altitude_m=scene.altitudes_m[1])
     lookup_error, at_lowest = estimates["lut"], _at_lowest_sun(scene.sun_elevations_deg)
     lookup_note = f"the table lookup's {_percent(lookup_error)} % {at_lowest}, exceeds the budget"
     if scene.altitudes_m[1] > 0.0 and lookup_error <= budget:
@@ -690,7 +692,7 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         if chosen.method == "lut" and scene.altitudes_m[1] <= RENDERER_ERRORS_MEASURED_UP_TO_M:
             others = tuple(row for row in RENDERERS if row.method != "lut")
             chosen, estimate, _ = choose_renderer(scene.sun_elevations_deg, budget, level.name, others,
-                                                  pixels=scene.pixels)
+                                                  pixels=scene.pixels, altitude_m=scene.altitudes_m[1])
     ray = level.ray if samples is None else level.ray.replace(view_steps=samples)
     march = f"ray march, {ray.view_steps} samples per ray" + (
         "" if samples is None else f" (asked for; the {level.name} level's {level.ray.view_steps})")
@@ -717,9 +719,10 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         decisions.append(("renderer", march, reason))
     else:
         lookup_fits = lookup_error <= budget and scene.altitudes_m[1] == 0.0
-        would = (f"the {chosen.description}'s {100 * estimate:.2g} % (estimated: the ray march's + its own, "
-                 f"measured) fits; " + ("so does the table lookup, but " + _costlier("lut", chosen, scene.pixels)
-                                        if lookup_fits else lookup_note))
+        basis = estimate_basis(chosen, level.name, scene.sun_elevations_deg, scene.altitudes_m[1])
+        would = (f"the {chosen.description}'s {100 * estimate:.2g} % ({basis}) fits; "
+                 + ("so does the table lookup, but " + _costlier("lut", chosen, scene.pixels) if lookup_fits
+                    else lookup_note))
         decisions.append(("renderer", march, f"asked for; {would}") if ray_march
                          else ("renderer", f"{chosen.description} (--method {chosen.method}), {march} at its nodes",
                                would))

@@ -28,7 +28,12 @@ A row's error is either its own error against the reference frames (``on_ray_mar
 lookup replaces the ray march; README "Speed versus accuracy") or what it adds to the ray march its
 frames are made from (``on_ray_march=True``: the sky-view map is the ray march read at its nodes,
 README "Sky-view table"). The latter is estimated as the quality level's measured ray-march error
-(:data:`RAY_MARCH_ERROR`) plus the row's: errors of one sign in the worst case, so a bound.
+(:data:`RAY_MARCH_ERROR`) plus the row's, as if the two erred with one sign at the same pixels; where the row
+was measured against the reference itself, for the level's table, with the observer on the ground
+(``on_reference``: the sky-view map below civil twilight, bench/bench_quality_dusk.py), that measurement
+instead, for a scene seen from the ground (:func:`estimated_error`). The sum is the more cautious: at -6 deg
+the default level's ray march is 0.80 % off and the map 0.31 % off the ray march (the worst observer), and
+the map measured 0.83 % off the reference (README "Quality levels", below civil twilight).
 Between the measured elevations the error is interpolated in log error; beyond them, the nearest
 value; over a sun path, the worst of the path's ends and of the measured elevations inside it.
 """
@@ -42,7 +47,8 @@ import numpy as np
 from .errors import check_choice, check_integer, check_range, check_real
 
 __all__ = ["RendererRow", "RENDERERS", "DEFAULT_PIXELS", "LOOKUP4D_ERROR", "RAY_MARCH_ERROR", "LOOKUP_ERROR",
-           "renderer_row", "choose_renderer", "error_over"]
+           "SKYVIEW_ON_REFERENCE", "renderer_row", "choose_renderer", "estimated_error", "estimate_basis", "error_at",
+           "error_over", "worst_over"]
 
 #: Measured error of the 3D table lookup (95th percentile, relative, default table, 64 x 64 all-sky fisheye
 #: from the ground, physical preset with ozone and ground, the harmonics M = 2 in the table and the
@@ -52,23 +58,39 @@ __all__ = ["RendererRow", "RENDERERS", "DEFAULT_PIXELS", "LOOKUP4D_ERROR", "RAY_
 LOOKUP_ERROR = ((-4.0, 10.26), (1.0, 0.361), (8.0, 0.0419), (45.0, 0.0141))
 
 #: Measured error of each quality level's ray march against the reference (p95, 64 x 64 fisheye from the
-#: ground, the level planned for the sun path -4 to 45 deg; README "Quality levels", bench/bench_quality.py,
-#: the reference with the azimuth harmonics at every sun and the levels with them below +30 deg) by sun
-#: elevation [deg]: draft and default 2026-12-03, with their higher orders' source on every other node in
+#: ground) by sun elevation [deg]. From -4 deg up: README "Quality levels", bench/bench_quality.py, the level
+#: planned for the sun path -4 to 45 deg, the reference with the azimuth harmonics at every sun and the levels
+#: with them below +30 deg: draft and default 2026-12-03, with their higher orders' source on every other node in
 #: the ray march and in the table's scatter (0.0607 / 0.0169 / 0.0253 / 0.0289 and 0.0060 / 0.0020 / 0.0030 /
 #: 0.0036 with the stride in the ray march alone; 0.0602 / 0.0176 / 0.0259 / 0.0289 and 0.0062 / 0.0021 /
 #: 0.0031 / 0.0037 on every node), the default again 2026-12-05 with its table's 128 view nodes (0.0067 /
-#: 0.0017 / 0.0028 / 0.0035 with 256), high 2026-12-02;
-#: the reference level's: how far the reference converged (its ray march's counts doubled; the other
-#: groups were not doubled in that run, README). Below -4 deg the nearest value is taken here: the
-#: measurements there (:data:`clsky.planner.ERRORS_MEASURED_BELOW`, 2026-12-07) choose the quality level, not
-#: yet the renderer (with the default level's 0.88 % at -6 deg, the default animation's sky-view map would be
-#: estimated at 1.04 %, over its budget, and the plan would pick the ray march).
+#: 0.0017 / 0.0028 / 0.0035 with 256), high 2026-12-02; the reference level's: how far the reference
+#: converged (its ray march's counts doubled; the other groups were not doubled in that run, README). Below
+#: -4 deg: README "Below civil twilight", bench/bench_quality_dusk.py, 2026-12-07, the levels planned for the
+#: path -12 to 45 deg (their tables reading the orders' source at every view node there); the reference level
+#: was not measured below -4 deg (the nearest value is taken). A measured error depends on where the sun falls
+#: between the plan's sun nodes, so on the path planned for: the default animation's own plan (-6 to 60 deg)
+#: was 0.89 % off at -6 deg, the draft planned for -6 deg alone 9.2 % (a probe, 2026-12-07).
 RAY_MARCH_ERROR = {
-    "draft": ((-4.0, 0.0627), (1.0, 0.0158), (8.0, 0.0247), (45.0, 0.0286)),
-    "default": ((-4.0, 0.0070), (1.0, 0.0018), (8.0, 0.0029), (45.0, 0.0035)),
-    "high": ((-4.0, 0.0008), (1.0, 0.0003), (8.0, 0.0004), (45.0, 0.0005)),
+    "draft": ((-12.0, 0.297), (-10.0, 0.236), (-8.0, 0.123), (-6.0, 0.141),
+              (-4.0, 0.0627), (1.0, 0.0158), (8.0, 0.0247), (45.0, 0.0286)),
+    "default": ((-12.0, 0.0150), (-10.0, 0.0130), (-8.0, 0.00996), (-6.0, 0.0080),
+                (-4.0, 0.0070), (1.0, 0.0018), (8.0, 0.0029), (45.0, 0.0035)),
+    "high": ((-12.0, 0.00238), (-10.0, 0.00139), (-8.0, 0.000846), (-6.0, 0.000942),
+             (-4.0, 0.0008), (1.0, 0.0003), (8.0, 0.0004), (45.0, 0.0005)),
     "reference": ((-4.0, 0.0003), (1.0, 0.00005), (8.0, 0.00007), (45.0, 0.00007)),
+}
+
+#: The sky-view map's error against the reference itself, the observer on the ground (p95, 64 x 64 fisheye,
+#: the default 64 x 128 map of each level's table planned for the sun path -12 to 45 deg; README "Below civil
+#: twilight", bench/bench_quality_dusk.py, 2026-12-07): {level: ((sun elevation [deg], p95), ...)}. Below civil
+#: twilight the map is within a few hundredths of a percent of its ray march's error (default: 0.83 against
+#: 0.80 % at -6 deg), where the sum of the two (:data:`RAY_MARCH_ERROR` and the row's own against the ray
+#: march, 0.31 % at -6 deg, the worst observer) would say 1.1 %.
+SKYVIEW_ON_REFERENCE = {
+    "draft": ((-12.0, 0.297), (-10.0, 0.236), (-8.0, 0.122), (-6.0, 0.141)),
+    "default": ((-12.0, 0.0157), (-10.0, 0.0133), (-8.0, 0.0101), (-6.0, 0.00826)),
+    "high": ((-12.0, 0.00293), (-10.0, 0.00250), (-8.0, 0.00220), (-6.0, 0.00176)),
 }
 
 
@@ -107,6 +129,10 @@ class RendererRow:
     build_cpu_s : float
         Process CPU time of the table of its own that it needs [s] (0: none, or the plan's 3D table,
         which every renderer's plan builds).
+    on_reference : dict
+        {quality level: ((sun elevation [deg], p95 relative error), ...)}: where an ``on_ray_march`` row was
+        measured against the reference itself, the observer on the ground, for that level's table, ascending
+        in elevation (:func:`estimated_error`).
     """
 
     method: str
@@ -117,6 +143,7 @@ class RendererRow:
     on_ray_march: bool
     source: str
     build_cpu_s: float = 0.0
+    on_reference: dict = dataclasses.field(default_factory=dict)
 
     def frame_cpu_ms(self, pixels):
         """Process CPU time [ms] of one frame of ``pixels`` rendered pixels."""
@@ -133,15 +160,18 @@ class RendererRow:
 #: fisheyes of 256, 512 and 1024 pixels a side (within 2 % of each); one frame a call (an animation
 #: marches its sky-view maps and ray march four suns a launch on a CPU, cheaper a frame). A run minutes
 #: before, in the machine's slow state, measured every cost 10-25 % higher and the crossovers between rows
-#: within 5 % of these. The sky-view map's errors: p95 against the per-pixel ray march, the worst of the
-#: ground and 10 km (tests/test_skyview.py: 0.080 / 0.139 % at +30 deg, 0.077 / 0.141 % at +5, 0.094 /
-#: 0.145 % at 0, 0.092 / 0.164 % at -4).
+#: within 5 % of these. The sky-view map's errors: p95 against the per-pixel ray march of the table the planner
+#: gives the observer, the worst of the ground and 10 km looking up or tilted down (README "Sky-view table",
+#: bench/bench_skyview.py, 2026-12-07; tests/test_skyview.py's small table had said 0.16 % at -4 deg, the
+#: planned tables 0.29 %); against the reference itself below civil twilight (:data:`SKYVIEW_ON_REFERENCE`).
 RENDERERS = (
     RendererRow("lut", "table lookup", 1.0, 38.5, LOOKUP_ERROR, False,
                 "README 'Speed versus accuracy' (error) and 'Scene plan' (cost)"),
     RendererRow("skyview", "sky-view map 64 x 128", 13.8, 18.2,
-                ((-4.0, 0.00164), (0.0, 0.00145), (5.0, 0.00141), (30.0, 0.00139)), True,
-                "tests/test_skyview.py (error against the ray march); README 'Scene plan' (cost)"),
+                ((-12.0, 0.00553), (-10.0, 0.00599), (-8.0, 0.00432), (-6.0, 0.00314), (-4.0, 0.00292),
+                 (0.0, 0.00145), (1.0, 0.00148), (5.0, 0.00171), (10.0, 0.00182), (30.0, 0.00187), (45.0, 0.00183)),
+                True, "README 'Sky-view table' (error against the ray march) and 'Below civil twilight' (against "
+                "the reference); README 'Scene plan' (cost)", on_reference=SKYVIEW_ON_REFERENCE),
     RendererRow("lut4d", "4D table lookup", 0.8, 45.6, LOOKUP4D_ERROR, True,
                 "README 'The 4D table' (error against the ray march of its orders); README 'Scene plan' (cost and "
                 "build)", build_cpu_s=12.4),
@@ -151,14 +181,48 @@ RENDERERS = (
 )
 
 
-def error_over(error, low, high):
-    """The worst of ``error`` ((elevation, p95), ...) over sun elevations [low, high] [deg]: at both ends
-    and at the measured elevations between them, interpolated in log error (nearest value beyond)."""
+def error_at(error, at):
+    """``error`` ((elevation [deg], p95), ..., ascending) at the sun elevations ``at`` [deg] (an array):
+    interpolated in log error between the measured elevations (linearly where one is 0), the nearest value
+    beyond them."""
     elevations, values = (np.asarray(v, dtype=float) for v in zip(*error))
-    at = np.concatenate([[low, high], elevations[(elevations > low) & (elevations < high)]])
     if np.all(values > 0.0):
-        return float(np.exp(np.interp(at, elevations, np.log(values))).max())
-    return float(np.interp(at, elevations, values).max())
+        return np.exp(np.interp(at, elevations, np.log(values)))
+    return np.interp(at, elevations, values)
+
+
+def worst_over(error, low, high):
+    """(sun elevation [deg], p95): where ``error`` ((elevation, p95), ...) is worst over sun elevations [low,
+    high] [deg], and its value there: at one of the ends or of the measured elevations between them
+    (:func:`error_at`; interpolated in log error, the worst is at one of them)."""
+    elevations = np.asarray([elevation for elevation, _ in error], dtype=float)
+    at = np.concatenate([[low, high], elevations[(elevations > low) & (elevations < high)]])
+    values = error_at(error, at)
+    return float(at[np.argmax(values)]), float(values.max())
+
+
+def error_over(error, low, high):
+    """The worst of ``error`` ((elevation, p95), ...) over sun elevations [low, high] [deg] (:func:`worst_over`)."""
+    return worst_over(error, low, high)[1]
+
+
+def estimated_error(row, level, altitude_m=0.0):
+    """A renderer row's estimated error ((sun elevation [deg], p95), ...) for quality level ``level``'s tables
+    and observers up to ``altitude_m`` [m]. A row measured against the reference (``on_ray_march`` False): its
+    own. A row whose frames are made from the ray march: at each elevation measured for either, the level's
+    ray-march error (:data:`RAY_MARCH_ERROR`) plus the row's own; over the elevations that the row's
+    measurement against the reference for the level spans (``on_reference``), that measurement instead when
+    the observers are on the ground. Interpolated between those elevations like any measured error
+    (:func:`error_at`), the two kinds of figure meet without a step."""
+    if not row.on_ray_march:
+        return row.error
+    march, direct = RAY_MARCH_ERROR[level], row.on_reference.get(level, ()) if altitude_m == 0.0 else ()
+    nodes = np.array(sorted({elevation for elevation, _ in march + row.error + direct}))
+    values = error_at(march, nodes) + error_at(row.error, nodes)
+    if direct:
+        spanned = (nodes >= direct[0][0]) & (nodes <= direct[-1][0])
+        values[spanned] = error_at(direct, nodes[spanned])
+    return tuple(zip(nodes.tolist(), values.tolist()))
 
 
 def renderer_row(method, rows=RENDERERS) -> RendererRow:
@@ -167,24 +231,39 @@ def renderer_row(method, rows=RENDERERS) -> RendererRow:
     return next(row for row in rows if row.method == method)
 
 
-def choose_renderer(sun_elevations_deg, budget, level="default", rows=RENDERERS, frames=None, pixels=DEFAULT_PIXELS):
+def estimate_basis(row, level, sun_elevations_deg, altitude_m=0.0) -> str:
+    """How ``row``'s estimated error over the sun path (low, high) [deg] was made, in the scene plan's words: at
+    its worst sun, the row's own measured error, its error against the reference (``on_reference``), or the ray
+    march's plus its own (:func:`estimated_error`)."""
+    if not row.on_ray_march:
+        return "measured"
+    estimate = estimated_error(row, level, altitude_m)
+    # the worst sun, or beyond the measured elevations the nearest one, whose value it takes
+    worst = min(max(worst_over(estimate, *sun_elevations_deg)[0], estimate[0][0]), estimate[-1][0])
+    direct = row.on_reference.get(level, ()) if altitude_m == 0.0 else ()
+    if direct and direct[0][0] <= worst <= direct[-1][0]:
+        return f"measured against the reference at {worst:g} deg"
+    return f"estimated: the ray march's + its own, measured, at {worst:g} deg"
+
+
+def choose_renderer(sun_elevations_deg, budget, level="default", rows=RENDERERS, frames=None, pixels=DEFAULT_PIXELS,
+                    altitude_m=0.0):
     """(row, estimated error, {method: estimated error}): the cheapest row of ``rows`` whose estimated
-    error over the sun path ``sun_elevations_deg`` = (low, high) [deg] fits ``budget`` (relative), for
-    the ray march of quality level ``level`` (a name of :data:`RAY_MARCH_ERROR`); the 'raymarch' row
-    when none fits. The cost of ``frames`` frames of ``pixels`` rendered pixels each
-    (:meth:`RendererRow.cost_cpu_s`) decides; with ``frames=None`` (the frame count unknown) the rows
-    with a build of their own are left out (module docstring) and the cost of one frame decides.
-    ValueError naming an argument that is no such value: the path's elevations in [-90, 90], low <=
+    error over the sun path ``sun_elevations_deg`` = (low, high) [deg] (:func:`estimated_error`, for observers
+    up to ``altitude_m`` [m]) fits ``budget`` (relative), for the ray march of quality level ``level`` (a name of
+    :data:`RAY_MARCH_ERROR`); the 'raymarch' row when none fits. The cost of ``frames`` frames of ``pixels``
+    rendered pixels each (:meth:`RendererRow.cost_cpu_s`) decides; with ``frames=None`` (the frame count
+    unknown) the rows with a build of their own are left out (module docstring) and the cost of one frame
+    decides. ValueError naming an argument that is no such value: the path's elevations in [-90, 90], low <=
     high; the budget in (0, 1]; frames and pixels at least 1 (a negative count made the dearest row
-    cheapest)."""
+    cheapest); the altitude in [0, 1e8] m."""
     low, high = check_range("sun_elevations_deg", sun_elevations_deg, -90.0, 90.0)
     check_real("budget", budget, 0.0, 1.0, low_open=True)
     check_choice("level", level, list(RAY_MARCH_ERROR))
     check_integer("frames", frames, 1, 10**9, optional=True)
     check_integer("pixels", pixels, 1, 2**31 - 1)
-    march = error_over(RAY_MARCH_ERROR[level], low, high)
-    estimates = {row.method: error_over(row.error, low, high) + (march if row.on_ray_march else 0.0)
-                 for row in rows}
+    check_real("altitude_m", altitude_m, 0.0, 1e8)
+    estimates = {row.method: error_over(estimated_error(row, level, altitude_m), low, high) for row in rows}
     candidates = [row for row in rows if frames is not None or row.build_cpu_s == 0.0]
     for row in sorted(candidates, key=lambda r: r.cost_cpu_s(1 if frames is None else frames, pixels)):
         if estimates[row.method] <= budget:
