@@ -34,10 +34,9 @@ from clsky.render import RAYMARCH_DEFAULTS, SkyRenderer
 from . import metrics
 from .cameras import FisheyeCamera, sun_direction
 
-__all__ = ["SUN_ELEVATIONS", "DUSK_ELEVATIONS", "REFERENCE_GROUPS", "SKYVIEW_SIZES", "Candidate", "default_candidates", "reference_level",
-           "reference_renderer", "render_frames",
-           "render_reference",
-           "reference_convergence", "measure", "pareto_front"]
+__all__ = ["SUN_ELEVATIONS", "DUSK_ELEVATIONS", "REFERENCE_GROUPS", "SKYVIEW_SIZES", "Candidate", "default_candidates",
+           "reference_level", "reference_renderer", "render_frames", "render_reference", "reference_convergence",
+           "measure", "pareto_front"]
 
 #: Sun elevations [deg] of the frames: day, golden hour, sunset, civil twilight.
 SUN_ELEVATIONS = {"day": 45.0, "golden hour": 8.0, "sunset": 1.0, "civil twilight": -4.0}

@@ -71,6 +71,8 @@ class FrameSet:
         The file under docs/ that takes its levels' rows.
     groups : tuple of str
         The reference's count groups doubled by default (:data:`clsky.anim.accuracy.REFERENCE_GROUPS`).
+    script : str
+        The script that runs it, as its README section names it.
     """
 
     elevations: dict
@@ -78,23 +80,32 @@ class FrameSet:
     sections: tuple
     csv: str
     groups: tuple
+    script: str
 
     @property
     def names(self):
+        """The frames' names, in order."""
         return list(self.elevations)
+
+    @property
+    def count(self):
+        """How many frames, in words (the README's sentences)."""
+        return ("no", "one", "two", "three", "four", "five", "six")[len(self.elevations)]
 
 
 #: The four frames of :data:`clsky.anim.accuracy.SUN_ELEVATIONS` (day to civil twilight), each level planned for
 #: their path (-4 to 45 deg), the reference's convergence in every group, and the default animation's plan.
-DAY = FrameSet(accuracy.SUN_ELEVATIONS, (min(accuracy.SUN_ELEVATIONS.values()), max(accuracy.SUN_ELEVATIONS.values())),
-               ("quality", "plan"), "quality.csv", tuple(accuracy.REFERENCE_GROUPS))
+DAY = FrameSet(accuracy.SUN_ELEVATIONS,
+               (min(accuracy.SUN_ELEVATIONS.values()), max(accuracy.SUN_ELEVATIONS.values())),
+               ("quality", "plan"), "quality.csv", tuple(accuracy.REFERENCE_GROUPS), "bench/bench_quality.py")
 #: Below civil twilight (:data:`clsky.anim.accuracy.DUSK_ELEVATIONS`, -6 to -12 deg), each level planned for a
 #: sunset's path from the lowest of them up to the day frame's 45 deg (its tables read the orders' source at
 #: every view node: :data:`clsky.planner.SOURCE_EVERY_NODE_BELOW_DEG`). By default no count group is doubled:
 #: each would rebuild the four reference tables of these suns (13 min at the reference's own size on the
 #: 2-core Xeon), so a run measures the levels in about 20 min.
-DUSK = FrameSet(accuracy.DUSK_ELEVATIONS, (min(accuracy.DUSK_ELEVATIONS.values()), max(accuracy.SUN_ELEVATIONS.values())),
-                ("quality-dusk",), "quality_dusk.csv", ())
+DUSK = FrameSet(accuracy.DUSK_ELEVATIONS,
+                (min(accuracy.DUSK_ELEVATIONS.values()), max(accuracy.SUN_ELEVATIONS.values())),
+                ("quality-dusk",), "quality_dusk.csv", (), "bench/bench_quality_dusk.py")
 
 
 def frames_of(table, ray, size, elevations, method="raymarch"):
@@ -129,64 +140,91 @@ def percent(values):
     return " | ".join(f"{100 * value:.2f}" for value in values.values())
 
 
-def main(frames=DAY, doc=__doc__):
-    """Parse the command line and run the benchmark on ``frames`` (:class:`FrameSet`); ``doc``: the calling
+def main(frame_set=DAY, doc=__doc__):
+    """Parse the command line and run the benchmark on ``frame_set`` (:class:`FrameSet`); ``doc``: the calling
     script's docstring, for --help."""
     parser = argparse.ArgumentParser(description=description_of(doc))
     parser.add_argument("--size", type=integer_in(16, 2048), default=64)
-    default_groups = ("all" if frames.groups == tuple(accuracy.REFERENCE_GROUPS) else
-                      "; ".join(frames.groups) or "none")
+    default_groups = ("all" if frame_set.groups == tuple(accuracy.REFERENCE_GROUPS) else
+                      "; ".join(frame_set.groups) or "none")
     parser.add_argument("--groups", nargs="*", choices=list(accuracy.REFERENCE_GROUPS),
-                        help=f"default: {default_groups} (with --smoke: " + ("ray march)" if frames.groups else "none)"))
+                        help=f"default: {default_groups} (with --smoke: "
+                             + ("ray march)" if frame_set.groups else "none)"))
     parser.add_argument("--reference-cache", type=npz_file, metavar="FILE.npz")
     parser.add_argument("--docs", type=pathlib.Path, metavar="DIR",
-                        help="write quality.csv into DIR (default: docs/ when writing the README; none with "
+                        help=f"write {frame_set.csv} into DIR (default: docs/ when writing the README; none with "
                              "--no-readme; a temporary directory with --smoke)")
     add_output_arguments(parser)
-    args = parse_arguments(parser, sections=frames.sections)
+    args = parse_arguments(parser, sections=frame_set.sections)
     reference_name = "reference"
     if args.smoke:
         args.size, reference_name = SMOKE.frame, SMOKE.reference_level
+    args.groups_given = args.groups is not None
     if args.groups is None:
-        args.groups = (["ray march"] if frames.groups else []) if args.smoke else list(frames.groups)
+        args.groups = (["ray march"] if frame_set.groups else []) if args.smoke else list(frame_set.groups)
     with tempfile.TemporaryDirectory() as temporary:
         if args.docs is None and args.smoke:
             args.docs = pathlib.Path(temporary)
         elif args.docs is None and not args.no_readme:
             args.docs = DOCS
-        run(args, reference_name, frames)
+        run(args, reference_name, frame_set)
 
 
-def run(args, reference_name, frames=DAY):
+def reference_frames(args, reference_name, frame_set, loads):
+    """(frames {name: HDR}, valid mask, wall [s], process CPU [s] or None, {group: {name: change}}) of the
+    reference at ``frame_set``'s suns, and how far it converged with each of ``args.groups`` doubled (plus their
+    "sum"): rendered, or read from ``args.reference_cache`` (saved there when rendered). A cache that lacks a
+    group ``--groups`` names gets it, measured and saved: it was ignored, and the README said it was not
+    measured. ``loads``: the load averages seen, appended to."""
+    from clsky._files import check_output
+
+    def convergence(reference, valid, groups):
+        return accuracy.reference_convergence(reference, valid, groups=groups, level=reference_name,
+                                              elevations=frame_set.elevations)
+
+    def save(reference, valid, seconds, cpu_seconds, change):
+        save_reference_cache(args.reference_cache, reference_name, reference, valid, seconds=seconds,
+                             cpu_seconds=cpu_seconds, convergence=json.dumps(change))
+
+    if args.reference_cache and args.reference_cache.exists():
+        cached = load_reference_cache(args.reference_cache, reference_name, args.size, frame_set.names)
+        reference, valid = {name: cached[name] for name in frame_set.names}, cached["valid"]
+        seconds, change = float(cached["seconds"]), json.loads(str(cached["convergence"]))
+        cpu_seconds = float(cached["cpu_seconds"]) if "cpu_seconds" in cached else None
+        missing = [group for group in args.groups if group not in change] if args.groups_given else []
+        if missing:
+            change.update({group: values for group, values in convergence(reference, valid, missing).items()
+                           if group != "sum"})
+            groups = [group for group in change if group != "sum"]
+            change["sum"] = {name: sum(change[group][name] for group in groups) for name in frame_set.names}
+            save(reference, valid, seconds, cpu_seconds, change)
+        args.groups = [group for group in change if group != "sum"]
+        return reference, valid, seconds, cpu_seconds, change
+    if args.reference_cache:    # where the cache goes, checked before the minutes of the reference
+        try:
+            check_output(args.reference_cache, force=True, option="--reference-cache")
+        except (OSError, ValueError) as error:
+            raise SystemExit(str(error)) from None
+    (reference, valid), seconds, cpu_seconds = timed_with_cpu(
+        lambda: accuracy.render_reference(args.size, level=reference_name, elevations=frame_set.elevations))
+    loads.append(load_average())
+    if args.reference_cache:        # kept even if the convergence fails (a doubled group may not fit in memory)
+        save(reference, valid, seconds, cpu_seconds, {})
+    change = convergence(reference, valid, args.groups) if args.groups else {}
+    if args.reference_cache:
+        save(reference, valid, seconds, cpu_seconds, change)
+    return reference, valid, seconds, cpu_seconds, change
+
+
+def run(args, reference_name, frame_set=DAY):
+    """Measure the levels on ``frame_set`` against the reference, and (DAY) the default animation's plan; print
+    the tables, write the CSV (``args.docs``) and, unless ``--no-readme``, the README sections, all at the
+    end."""
     stamp = (f"Measured {datetime.date.today()} on {machine()}, {describe_device(default_device())} (load average "
              f"{load_average():.2f} at the start)")
     loads = []
-
-    if args.reference_cache and args.reference_cache.exists():
-        cached = load_reference_cache(args.reference_cache, reference_name, args.size, frames.names)
-        reference, valid = {name: cached[name] for name in frames.names}, cached["valid"]
-        reference_seconds, change = float(cached["seconds"]), json.loads(str(cached["convergence"]))
-        reference_cpu = float(cached["cpu_seconds"]) if "cpu_seconds" in cached else None
-        args.groups = [g for g in change if g != "sum"]
-    else:
-        if args.reference_cache:    # where the cache goes, checked before the minutes of the reference
-            from clsky._files import check_output
-
-            try:
-                check_output(args.reference_cache, force=True, option="--reference-cache")
-            except (OSError, ValueError) as error:
-                raise SystemExit(str(error)) from None
-        (reference, valid), reference_seconds, reference_cpu = timed_with_cpu(
-            lambda: accuracy.render_reference(args.size, level=reference_name, elevations=frames.elevations))
-        loads.append(load_average())
-        if args.reference_cache:    # kept even if the convergence fails (a doubled group may not fit in memory)
-            save_reference_cache(args.reference_cache, reference_name, reference, valid, seconds=reference_seconds,
-                                 cpu_seconds=reference_cpu, convergence="{}")
-        change = (accuracy.reference_convergence(reference, valid, groups=args.groups, level=reference_name,
-                                                 elevations=frames.elevations) if args.groups else {})
-        if args.reference_cache:
-            save_reference_cache(args.reference_cache, reference_name, reference, valid, seconds=reference_seconds,
-                                 cpu_seconds=reference_cpu, convergence=json.dumps(change))
+    reference, valid, reference_seconds, reference_cpu, change = reference_frames(args, reference_name, frame_set,
+                                                                                  loads)
     print(f"reference: {reference_seconds:.0f} s", flush=True)
     for group, values in change.items():
         print(f"reference, {group} doubled: {percent(values)} %", flush=True)
@@ -195,40 +233,41 @@ def run(args, reference_name, frames=DAY):
     for name, level in QUALITY_LEVELS.items():
         if name == "reference":
             continue
-        plan = plan_scene(Scene(frames.path, quality=name))
+        plan = plan_scene(Scene(frame_set.path, quality=name))
         table, build, build_cpu = built(plan.atmosphere, plan.table, smoke=args.smoke)
-        marched, render, render_cpu = frames_of(table, level.ray, args.size, frames.elevations)
-        lookups = {method: errors(reference, frames_of(table, level.ray, args.size, frames.elevations, method)[0], valid)
+        marched, render, render_cpu = frames_of(table, level.ray, args.size, frame_set.elevations)
+        lookups = {method: errors(reference, frames_of(table, level.ray, args.size, frame_set.elevations,
+                                                       method)[0], valid)
                    for method in ("lut", "skyview")}
         loads.append(load_average())
         error = errors(reference, marched, valid)
         rows.append({"level": name, "budget": level.budget, "table": "x".join(map(str, table.settings.size)),
                      "samples": level.ray.view_steps, "build_s": build, "build_cpu_s": build_cpu,
                      "render_s": render, "render_cpu_s": render_cpu, "load": loads[-1],
-                     **{f"p95_rel {n}": error[n] for n in frames.names}, "worst": max(error.values()),
+                     **{f"p95_rel {n}": error[n] for n in frame_set.names}, "worst": max(error.values()),
                      "lut_worst": max(lookups["lut"].values()), "skyview_worst": max(lookups["skyview"].values()),
-                     **{f"skyview p95_rel {n}": lookups["skyview"][n] for n in frames.names}})
+                     **{f"skyview p95_rel {n}": lookups["skyview"][n] for n in frame_set.names}})
         print(rows[-1], flush=True)
     if args.docs is not None:
         args.docs.mkdir(parents=True, exist_ok=True)
-        writers.write_csv(args.docs / frames.csv, rows, force=True)
-        print(f"wrote {args.docs / frames.csv}", flush=True)
+        writers.write_csv(args.docs / frame_set.csv, rows, force=True)
+        print(f"wrote {args.docs / frame_set.csv}", flush=True)
 
-    script = "bench/bench_quality.py" if frames is DAY else "bench/bench_quality_dusk.py"
-    lines = [f"{stamp}: {args.size} x {args.size} fisheye frames from the ground (`{script}`). "
-             f"Each level is planned for the sun path {frames.path[0]:g} to {frames.path[1]:g} deg; error: 95th "
-             "percentile of the relative HDR luminance error of its ray-marched frames against the reference. "
-             "Build: the table, its wall and process CPU time (every thread, PoCL's workers included); render: one "
-             f"frame by ray march, the mean of the {len(frames.names)}. The lookup and sky-view map columns are "
-             "the same table's 3D lookup and default sky-view map (worst frame); load: the 1-minute load average "
-             "after the row." + load_note(max(loads)),
+    names = frame_set.names
+    lines = [f"{stamp}: {args.size} x {args.size} fisheye frames from the ground (`{frame_set.script}`). "
+             f"Each level is planned for the {frame_set.count} frames' sun path ({frame_set.path[0]:g} to "
+             f"{frame_set.path[1]:g} deg); error: 95th percentile of the relative HDR luminance error of its "
+             "ray-marched frames against the reference. Build: the table, its wall and process CPU time (every "
+             "thread, PoCL's workers included); render: one frame by ray march, the mean of the "
+             f"{frame_set.count}. The lookup and sky-view map columns are the same table's 3D lookup and default "
+             "sky-view map (worst frame); load: the 1-minute load average after the row." + load_note(max(loads)),
              "", "| level | promise | table | samples | build [s] | CPU [s] | render [ms] | CPU [ms] | "
-             + " | ".join(f"{n} [%]" for n in frames.names) + " | lookup, worst [%] | sky-view map, worst [%] | load |",
-             "|---|---:|---|---:|---:|---:|---:|---:|" + "---:|" * len(frames.names) + "---:|---:|---:|"]
+             + " | ".join(f"{n} [%]" for n in names) + " | lookup, worst [%] | sky-view map, worst [%] | load |",
+             "|---|---:|---|---:|---:|---:|---:|---:|" + "---:|" * len(names) + "---:|---:|---:|"]
     for r in rows:
         lines.append(f"| {r['level']} | {100 * r['budget']:g} % | {r['table']} | {r['samples']} | {r['build_s']:.2f} | "
                      f"{r['build_cpu_s']:.2f} | {1e3 * r['render_s']:.1f} | {1e3 * r['render_cpu_s']:.1f} | "
-                     + percent({n: r[f"p95_rel {n}"] for n in frames.names})
+                     + percent({n: r[f"p95_rel {n}"] for n in names})
                      + f" | {100 * r['lut_worst']:.0f} | {100 * r['skyview_worst']:.2f} | {r['load']:.2f} |")
     reference_level = accuracy.reference_level(level=reference_name)
     reference_line = (f"The reference ('{reference_name}' level: "
@@ -236,7 +275,7 @@ def run(args, reference_name, frames=DAY):
                       + f"nodes, sun nodes every {reference_level.sun_node_spacing:g} in w on each frame's sun range, "
                       f"{reference_level.ray.view_steps} samples; {reference_seconds:.0f} s"
                       + ("" if reference_cpu is None else f" and {reference_cpu:.0f} CPU-s")
-                      + f" for the {len(frames.names)} frames)")
+                      + f" for the {frame_set.count} frames)")
     if args.groups:
         lines += ["", reference_line + " changes this much when each group of its counts is doubled; their sum "
                   "bounds the change of doubling them all"
@@ -244,25 +283,27 @@ def run(args, reference_name, frames=DAY):
                      " (groups not doubled in this run: " + "; ".join(accuracy.REFERENCE_GROUPS[g] for g in
                                                                     accuracy.REFERENCE_GROUPS if g not in args.groups)
                      + ")") + ":", "",
-                  "| doubled | " + " | ".join(f"{n} [%]" for n in frames.names) + " |",
-                  "|---|" + "---:|" * len(frames.names)]
+                  "| doubled | " + " | ".join(f"{n} [%]" for n in names) + " |",
+                  "|---|" + "---:|" * len(names)]
         for group, values in change.items():
             label = accuracy.REFERENCE_GROUPS.get(group, "**sum**")
-            lines.append(f"| {label} | " + " | ".join(f"{100 * values[n]:.3f}" for n in frames.names) + " |")
+            lines.append(f"| {label} | " + " | ".join(f"{100 * values[n]:.3f}" for n in names) + " |")
     else:
-        lines += ["", reference_line + ": how far it converged at these suns was not measured in this run (no "
-                  "group of its counts doubled: `--groups`)."]
-    quality_markdown = "\n".join(lines)
-    print(quality_markdown)
+        lines += ["", reference_line + ": how far it converged at these suns was not measured (no group of its "
+                  "counts doubled; `--groups` names them)."]
+    markdowns = {frame_set.sections[0]: "\n".join(lines)}
+    if "plan" in frame_set.sections:
+        markdowns["plan"] = plan_report(args, reference, valid, stamp)
+    for name, markdown in markdowns.items():
+        print(markdown)
     if not args.no_readme:
-        write_readme_section(frames.sections[0], quality_markdown)
-    if "plan" in frames.sections:
-        plan_report(args, reference, valid, stamp)
+        for name, markdown in markdowns.items():
+            write_readme_section(name, markdown)
 
 
 def plan_report(args, reference, valid, stamp):
-    """The default animation's plan (exactly as `clsky animate` makes it) against the full table of the same
-    quality, side by side, on the four frames (:data:`DAY`): printed, and written to the README's "plan"."""
+    """The Markdown of the default animation's plan (exactly as `clsky animate` makes it) against the full table
+    of the same quality, side by side, on the four frames of :data:`DAY` (``reference``: theirs)."""
     config = animate.AnimationConfig(size=SMOKE.frame) if args.smoke else animate.AnimationConfig()
     plan = animate.planned_animation(config).plan
     planned, planned_build, planned_cpu = built(plan.atmosphere, plan.table, repeat=3, smoke=args.smoke)
@@ -292,10 +333,7 @@ def plan_report(args, reference, valid, stamp):
              f"{plan.level.ray.view_steps} samples, {args.size} x {args.size} frames. Build times: the least wall "
              f"and the least process CPU time of three builds each, in the same run (load average "
              f"{plan_load:.2f} after them)."]
-    plan_markdown = "\n".join(lines)
-    print(plan_markdown)
-    if not args.no_readme:
-        write_readme_section("plan", plan_markdown)
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

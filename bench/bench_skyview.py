@@ -115,9 +115,10 @@ def tilted(directions, tilt):
 
 
 def plan_errors(size, smoke=False):
-    """{observer label: {sun elevation: p95}}: the default sky-view map against the ray march of the table
-    the planner gives each of :data:`PLAN_OBSERVERS` (the default level, :data:`PLAN_PATH`), ``size`` x ``size``
-    fisheyes. ``smoke``: the tables cut to at most SMOKE.table nodes per axis."""
+    """{observer label: (table size 'W x H x D', {sun elevation [deg]: p95})}: the default sky-view map against
+    the ray march of the table the planner gives each of :data:`PLAN_OBSERVERS` (the default level,
+    :data:`PLAN_PATH`), ``size`` x ``size`` fisheyes. ``smoke``: the tables cut to at most SMOKE.table nodes per
+    axis."""
     found = {}
     for label, altitude, tilt in PLAN_OBSERVERS:
         directions, valid = FisheyeCamera(size).directions()
@@ -130,20 +131,21 @@ def plan_errors(size, smoke=False):
             settings = settings.replace(size=tuple(min(n, m) for n, m in zip(settings.size, SMOKE.table)))
         with SkyRenderer(clsky.ScatteringTable.build(plan.atmosphere, settings), plan.ray) as renderer:
             prepared = renderer.prepare(directions, valid)
-            found[label] = {}
+            errors = {}
             for elevation in PLAN_ELEVATIONS:
                 sun = sun_direction(90.0 - elevation, SUN_AZIMUTH)
                 march = renderer.render_raymarch(prepared, sun, altitude)
                 frame = renderer.render_skyview(prepared, sun, altitude)
-                found[label][elevation] = metrics.compare_frames(march, frame, valid)["p95_rel"]
-        found[label]["table"] = " x ".join(map(str, settings.size))
+                errors[elevation] = metrics.compare_frames(march, frame, valid)["p95_rel"]
+        found[label] = (" x ".join(map(str, settings.size)), errors)
     return found
 
 
 def plan_report(found, size):
     """The Markdown table of :func:`plan_errors` (``size`` x ``size`` frames): one line per observer, and the
     worst of them per sun."""
-    lines = [f"Measured {datetime.date.today()} (`bench/bench_skyview.py`, the same run): the default sky-view map "
+    lines = [f"Measured {datetime.date.today()} on {machine()}, {describe_device(default_device())} (load average "
+             f"{load_average():.2f} after it; `bench/bench_skyview.py`, the same run): the default sky-view map "
              f"({skyview.DEFAULT_SIZE[0]} x {skyview.DEFAULT_SIZE[1]}) against the ray march of the table the planner "
              f"gives each observer (default level, sun path {PLAN_PATH[0]:g} to {PLAN_PATH[1]:g} deg), "
              f"{size} x {size} fisheyes looking up or tilted toward the sun's side: 95th percentile of "
@@ -151,11 +153,10 @@ def plan_report(found, size):
              "(`clsky.renderer_choice`).", "",
              "| observer | table | " + " | ".join(f"{e:+g} deg" for e in PLAN_ELEVATIONS) + " |",
              "|---|---|" + "---:|" * len(PLAN_ELEVATIONS)]
-    for label, errors in found.items():
-        lines.append(f"| {label} | {errors['table']} | "
-                     + " | ".join(f"{100 * errors[e]:.3f}" for e in PLAN_ELEVATIONS) + " |")
+    for label, (table, errors) in found.items():
+        lines.append(f"| {label} | {table} | " + " | ".join(f"{100 * errors[e]:.3f}" for e in PLAN_ELEVATIONS) + " |")
     lines.append("| **worst** | | " + " | ".join(
-        f"{100 * max(errors[e] for errors in found.values()):.3f}" for e in PLAN_ELEVATIONS) + " |")
+        f"{100 * max(errors[e] for _, errors in found.values()):.3f}" for e in PLAN_ELEVATIONS) + " |")
     return "\n".join(lines)
 
 

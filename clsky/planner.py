@@ -233,25 +233,31 @@ def view_sampling(altitudes_m) -> tuple:
 
 
 #: The highest observer [m] for whom the lookups' and the sky-view map's measured errors
-#: (:mod:`clsky.renderer_choice`, all from the ground) are taken: above it the plan ray-marches. From 10 km the
-#: sky-view map was 0.3 % off the ray march at the horizon, from 30 km 1.0 %, from 1000 km 13.9 %, where the
-#: plan promised 0.45 % (a probe of the planner, 2026-12-07).
+#: (:mod:`clsky.renderer_choice`: the lookups' from the ground, the map's own against the ray march the worst of
+#: the ground and 10 km) are taken: above it the plan ray-marches. From 10 km the sky-view map was 0.13-0.19 % off
+#: the ray march by day and up to 0.60 % at -10 deg (README "Sky-view table"), from 30 km 1.0 % at the horizon,
+#: from 1000 km 13.9 %, where the plan promised 0.45 % (a probe of the planner, 2026-12-07).
 RENDERER_ERRORS_MEASURED_UP_TO_M = 10e3
 
-def promise_measured_down_to(level) -> float:
-    """The lowest sun [deg] down to which quality ``level``'s promise was measured to hold: walking down the
-    measured elevations (:func:`measured_errors`), the last before the first whose error exceeds the level's
-    budget. Measured 2026-12-07 (bench/bench_quality_dusk.py): draft -4 deg (14 % at -6), default -8 deg (1.00 %
-    at -8, 1.30 % at -10), high -8 deg (0.14 % at -10); the reference level, measured down to -4 deg only, -4. A
-    plan whose sun goes lower says what its level measured there, and a plan by error budget takes the fastest
-    level whose measured error over the path fits the budget."""
-    points = sorted(measured_errors(level.name), reverse=True)
-    holds = points[0][0]
-    for sun, error in points:
-        if error > level.budget:
+def promise_measured_down_to(level):
+    """The lowest sun [deg] down to which quality ``level``'s promise was measured to hold, or None where it was
+    not at the highest measured sun: walking down the measured elevations (:func:`measured_errors`), the last
+    before the first whose error exceeds the level's budget, and no lower than the lowest sun at which the
+    reference's convergence was measured (the 'reference' level's rows, -4 deg): below it a level within its
+    promise by less than the reference's own error there (unknown; 0.09 % at -4 deg, README "Quality levels")
+    is not shown to hold it. Measured 2026-12-07 (bench/bench_quality_dusk.py): the draft misses its 10 % at
+    -6 deg (14 %); the default level was within its 1 % down to -8 deg (1.00 %), the high level within its
+    0.1 % down to -8 (0.085 %, but 0.11 % at -8 deg in a probe planned for -8 alone); so every level holds down
+    to -4 deg. A plan whose sun goes lower says what its level measured there, and a plan by error budget takes
+    the fastest level whose measured error over the path fits the budget."""
+    floor = min(sun for sun, _ in RAY_MARCH_ERROR["reference"])
+    holds = None
+    for sun, error in sorted(measured_errors(level.name), reverse=True):
+        if error > level.budget or sun < floor:
             break
         holds = sun
     return holds
+
 
 #: A table planned for a sun path that goes below this elevation [deg] scatters its orders with their source
 #: read at every view node (``TableSettings.source_stride`` 1), whatever its level's stride: read at every other
@@ -595,13 +601,15 @@ def _below_measured_note(level, lowest_deg):
     # the measured suns below the promise's down to the path's lowest, and the first one below that
     floor = max((sun for sun, _ in points if sun <= lowest_deg), default=lowest_deg)
     holds = promise_measured_down_to(level)
-    measured = sorted(((sun, error) for sun, error in points if floor <= sun < holds), reverse=True)
-    said = ", ".join(f"{100 * error:.2g} % at {sun:g} deg" for sun, error in measured)
+    measured = sorted(((sun, error) for sun, error in points if floor <= sun and (holds is None or sun < holds)),
+                      reverse=True)
+    said = ", ".join(f"{100 * error:.3g} % at {sun:g} deg" for sun, error in measured)
     lowest_measured = min((sun for sun, _ in points), default=0.0)
     unmeasured = f"not measured below {lowest_measured:g} deg" if lowest_deg < lowest_measured else ""
-    return (f"; measured to hold with the sun down to {holds:g} deg: below it, down to "
-            f"{lowest_deg:g} deg here, " + "; ".join(part for part in (
-                f"off the reference by {said}" if said else "", unmeasured) if part))
+    where = ("not measured to hold at any sun" if holds is None else
+             f"measured to hold with the sun down to {holds:g} deg: below it")
+    return (f"; {where}, down to {lowest_deg:g} deg here, " + "; ".join(part for part in (
+        f"off the reference by {said}" if said else "", unmeasured) if part))
 
 
 def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, ray_march=None, samples=None,
@@ -657,7 +665,8 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         why = f"; the fastest level within {100 * budget:g} %"
     else:                                   # below every level's promise: the most accurate one, said so
         why = f"; no level promises {100 * budget:g} %: the most accurate one"
-    if scene.sun_elevations_deg[0] < promise_measured_down_to(level):
+    holds = promise_measured_down_to(level)
+    if holds is None or scene.sun_elevations_deg[0] < holds:
         why += _below_measured_note(level, scene.sun_elevations_deg[0])
     decisions = [("quality", level.name, f"promises {100 * level.budget:g} % or better{why}")]
 
@@ -716,6 +725,9 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         if estimates["skyview"] <= budget and map_taken:    # tiny frames: marching every pixel costs less than the map
             reason += (f"; the sky-view map's {100 * estimates['skyview']:.2g} % fits, but "
                        + _costlier("skyview", chosen, scene.pixels))
+        elif map_taken:                                     # the map was over the budget too: said, and why
+            basis = estimate_basis(renderer_row("skyview"), level.name, scene.sun_elevations_deg, scene.altitudes_m[1])
+            reason += f"; so does the sky-view map's {100 * estimates['skyview']:.3g} % ({basis})"
         decisions.append(("renderer", march, reason))
     else:
         lookup_fits = lookup_error <= budget and scene.altitudes_m[1] == 0.0

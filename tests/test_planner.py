@@ -457,28 +457,47 @@ def test_the_plan_says_where_its_promise_and_margins_stop():
     """A polar night's path (-35 to -12 deg) was promised '1 % or better' by the default level where the levels
     were measured with the sun down to -4 deg (the default level measured 1.0 to 1.5 % off the reference from
     -8 to -12 deg since: clsky.renderer_choice.RAY_MARCH_ERROR); a sun at the zenith was given '+29.3 deg above'
-    an axis that stops at 90. Where each level's promise was measured to hold is its own (draft -4 deg: 14 % at
-    -6; default and high -8 deg)."""
+    an axis that stops at 90. A promise is measured to hold down to -4 deg at most, where the reference's
+    convergence was last measured (the high level's 0.094 % at -6 deg against its 0.1 % is within the
+    reference's unknown error there), or to the lowest sun above the level's first miss."""
     def quality(scene):
         return dict((t, (level, why)) for t, level, why in plan_scene(scene).decisions)["quality"]
 
-    assert [promise_measured_down_to(QUALITY_LEVELS[name]) for name in QUALITY_LEVELS] == [-4.0, -8.0, -8.0, -4.0]
+    assert [promise_measured_down_to(QUALITY_LEVELS[name]) for name in QUALITY_LEVELS] == [-4.0] * 4
     # by budget: the fastest level whose measured error over the path fits it, said so, with what it measured
     assert quality(Scene((-30.0, -12.5))) == ("high", (
         "promises 0.1 % or better; the fastest level whose measured error over the path fits 1 % (default measured "
-        "up to 1.5 % over it); measured to hold with the sun down to -8 deg: below it, down to -30 deg here, off "
-        "the reference by 0.14 % at -10 deg, 0.24 % at -12 deg; not measured below -12 deg"))
+        "up to 1.5 % over it); measured to hold with the sun down to -4 deg: below it, down to -30 deg here, off "
+        "the reference by 0.0942 % at -6 deg, 0.0846 % at -8 deg, 0.139 % at -10 deg, 0.238 % at -12 deg; not "
+        "measured below -12 deg"))
     # by name: that level, and what it measured down to the first measured sun below the path's lowest
     assert quality(Scene((-10.0, 5.0), quality="default"))[1].endswith(
-        "measured to hold with the sun down to -8 deg: below it, down to -10 deg here, off the reference by 1.3 % "
-        "at -10 deg")
-    assert quality(Scene((-9.0, 10.0), quality="default"))[1].endswith("off the reference by 1.3 % at -10 deg")
-    assert quality(Scene((-7.0, 10.0), quality="default"))[1] == "promises 1 % or better"
+        "measured to hold with the sun down to -4 deg: below it, down to -10 deg here, off the reference by 0.8 % "
+        "at -6 deg, 0.996 % at -8 deg, 1.3 % at -10 deg")
+    assert quality(Scene((-7.0, 10.0), quality="default"))[1].endswith("by 0.8 % at -6 deg, 0.996 % at -8 deg")
     assert quality(Scene((-9.0, 10.0), quality="draft"))[1].endswith(
-        "down to -9 deg here, off the reference by 14 % at -6 deg, 12 % at -8 deg, 24 % at -10 deg")
-    assert quality(Scene((-13.0, 10.0), quality="draft"))[1].endswith("30 % at -12 deg; not measured below -12 deg")
+        "down to -9 deg here, off the reference by 14.1 % at -6 deg, 12.3 % at -8 deg, 23.6 % at -10 deg")
+    assert quality(Scene((-13.0, 10.0), quality="draft"))[1].endswith("29.7 % at -12 deg; not measured below -12 deg")
     assert quality(Scene((-9.0, 10.0), quality="reference"))[1].endswith("not measured below -4 deg")
-    assert quality(Scene((-6.0, 60.0))) == ("default", "promises 1 % or better; the fastest level within 1 %")
+    assert quality(Scene((-6.0, 60.0))) == ("default", "promises 1 % or better; the fastest level within 1 %; "
+                                            "measured to hold with the sun down to -4 deg: below it, down to -6 "
+                                            "deg here, off the reference by 0.8 % at -6 deg")
+    assert quality(Scene((-4.0, 60.0))) == ("default", "promises 1 % or better; the fastest level within 1 %")
+
+
+def test_a_promise_missed_at_the_highest_measured_sun_holds_nowhere(monkeypatch):
+    """promise_measured_down_to: None where the level misses its promise at its highest measured sun (it said
+    that sun), and the plan then says it holds at no measured sun; the walk stops at the first miss."""
+    from clsky import planner
+
+    tables = {"default": ((-6.0, 0.005), (-4.0, 0.02), (1.0, 0.003), (45.0, 0.002)),
+              "draft": ((-4.0, 0.05), (1.0, 0.2), (45.0, 0.3))}
+    monkeypatch.setattr(planner, "measured_errors", tables.__getitem__)
+    assert promise_measured_down_to(QUALITY_LEVELS["default"]) == 1.0
+    assert promise_measured_down_to(QUALITY_LEVELS["draft"]) is None
+    why = dict((t, w) for t, _, w in plan_scene(Scene((-5.0, 60.0), quality="draft")).decisions)["quality"]
+    assert why == ("promises 10 % or better; not measured to hold at any sun, down to -5 deg here, off the reference "
+                   "by 30 % at 45 deg, 20 % at 1 deg, 5 % at -4 deg; not measured below -4 deg")
     zenith = dict((t, why) for t, _, why in plan_scene(Scene((90.0, 90.0))).decisions)["sun axis"]
     assert zenith.startswith("the path's 90 to 90 deg + 0.0 deg above and 20.2 deg below"), zenith
 

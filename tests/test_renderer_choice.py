@@ -7,6 +7,7 @@ import dataclasses
 import math
 import pathlib
 
+import numpy as np
 import pytest
 
 from clsky.anim.cameras import FisheyeCamera
@@ -129,34 +130,59 @@ def test_nothing_fits_falls_back_to_the_ray_march():
 
 def test_the_map_measured_against_the_reference_replaces_the_sum_from_the_ground():
     """Below civil twilight the sky-view map was measured against the reference (SKYVIEW_ON_REFERENCE): from the
-    ground its estimate there is that measurement (default, -6 deg: 0.83 %, where the sum says 0.80 % + 0.31 %);
-    from 10 km, where nothing was measured against the reference, the sum. Between the measured range and the
-    next elevation the two kinds of figure meet without a step (log-interpolated like any measured error)."""
+    ground its estimate there is that measurement, no better than the level's ray march (default, -6 deg:
+    0.83 %, where the sum says 0.80 % + 0.31 %; draft, -8 deg: its ray march's 0.123 % over the map's
+    0.122 %); from above the ground, even 1 m, where nothing was measured against the reference, the sum."""
     skyview = row("skyview")
-    ground, above = (dict(estimated_error(skyview, "default", altitude)) for altitude in (0.0, 10e3))
+    ground, above, mast = (dict(estimated_error(skyview, "default", h)) for h in (0.0, 10e3, 1.0))
     own, march = dict(skyview.error), dict(RAY_MARCH_ERROR["default"])
+    assert above == mast
     for sun, measured in SKYVIEW_ON_REFERENCE["default"]:
-        assert ground[sun] == pytest.approx(measured, rel=1e-12)
+        assert ground[sun] == pytest.approx(max(measured, march[sun]), rel=1e-12)
         assert above[sun] == pytest.approx(march[sun] + own[sun], rel=1e-12)
     for sun in (-4.0, 0.0, 30.0):                               # above the measured range: the sum, both
         summed = error_at(RAY_MARCH_ERROR["default"], sun) + own[sun]
         assert ground[sun] == above[sun] == pytest.approx(summed, rel=1e-12)
     assert ground[-6.0] == pytest.approx(0.00826, rel=1e-12)
     assert above[-6.0] == pytest.approx(0.0080 + 0.00314, rel=1e-12)
-    # continuous across the measured range's end (-6 deg), the worst over a path at its ends or nodes
-    near = error_at(estimated_error(skyview, "default"), [-6.0 - 1e-9, -6.0, -6.0 + 1e-9])
-    assert near[0] == pytest.approx(near[1], rel=1e-7) and near[2] == pytest.approx(near[1], rel=1e-7)
+    assert dict(estimated_error(skyview, "draft"))[-8.0] == pytest.approx(0.123, rel=1e-12)
+    # never better than the ray march at any sun, measured or between; between the measured range's end (-6
+    # deg) and the next sum (-4 deg), between the two
+    suns = np.linspace(-14.0, 50.0, 257)
+    for level in ("draft", "default", "high"):
+        assert np.all(error_at(estimated_error(skyview, level), suns) >= error_at(RAY_MARCH_ERROR[level], suns))
+    between = error_at(estimated_error(skyview, "default"), -5.0)
+    assert ground[-6.0] < between < ground[-4.0]
     assert choose_renderer((-6.0, 60.0), 0.01, "default")[0].method == "skyview"
-    assert choose_renderer((-6.0, 60.0), 0.01, "default", altitude_m=10e3)[0].method == "raymarch"
-    # the plan's words say which figure made the worst
-    assert estimate_basis(skyview, "default", (-6.0, 60.0)) == ("estimated: the ray march's + its own, measured, "
-                                                                 "at -4 deg")
-    assert estimate_basis(skyview, "default", (-12.0, -7.0)) == "measured against the reference at -12 deg"
-    assert estimate_basis(skyview, "default", (-30.0, -20.0)) == "measured against the reference at -12 deg"
-    assert estimate_basis(skyview, "default", (-12.0, -7.0), 10e3).endswith("its own, measured, at -12 deg")
-    assert estimate_basis(row("lut"), "default", (-6.0, 60.0)) == "measured"
+    for height in (1.0, 10e3):
+        assert choose_renderer((-6.0, 60.0), 0.01, "default", altitude_m=height)[0].method == "raymarch"
     with pytest.raises(ValueError, match=r"^altitude_m must be a number in \[0, 1e\+08\]"):
         choose_renderer((-6.0, 60.0), 0.01, altitude_m=-1.0)
+
+
+@pytest.mark.parametrize("level, path, altitude, words", [
+    ("default", (-6.0, 60.0), 0.0, "estimated: the ray march's + its own, measured at -4 deg"),
+    ("default", (-12.0, -7.0), 0.0, "measured against the reference at -12 deg"),
+    ("default", (-30.0, -20.0), 0.0, "measured against the reference at -12 deg"),   # the nearest measured
+    ("default", (-12.0, -7.0), 10e3, "estimated: the ray march's + its own, measured at -12 deg"),
+    ("draft", (-5.0, 10.0), 0.0, "at -5 deg, between its measurement against the reference at -6 deg and the ray "
+                                 "march's + its own at -4 deg"),
+    ("default", (-5.0, 10.0), 10e3, "estimated: the ray march's + its own, measured at -6 and -4 deg, "
+                                    "interpolated at -5"),
+])
+def test_the_plans_words_say_which_figure_made_the_worst(level, path, altitude, words):
+    """estimate_basis: at the worst sun over the path, the measurement against the reference or the sum, or
+    between two of them (a path end between measured elevations); a row measured against the reference itself,
+    'measured'; the ray march's own row, the ray march's."""
+    assert estimate_basis(row("skyview"), level, path, altitude) == words
+    assert estimate_basis(row("lut"), level, path, altitude) == "measured"
+    assert estimate_basis(row("raymarch"), "default", (-6.0, 60.0)) == "the ray march's, measured at -6 deg"
+
+
+def test_renderer_rows_are_hashable():
+    """A row is a frozen dataclass: its measurement against the reference is kept as pairs, not a dict, which
+    made hash(row) raise."""
+    assert len({hash(r) for r in RENDERERS}) == len(RENDERERS)
 
 
 def test_the_measured_tables_are_the_benchmarks():
@@ -208,7 +234,7 @@ def test_the_default_animation_plan_picks_the_skyview_map(cl_context):
     line = dict((topic, (decision, reason)) for topic, decision, reason in asked.decisions)["renderer"]
     assert asked.renderer == "skyview" and line[0] == "ray march, 48 samples per ray"
     assert line[1].startswith("asked for; the sky-view map 64 x 128's 0.99 % (estimated: the ray march's + its own, "
-                              "measured, at -4 deg) fits")
+                              "measured at -4 deg) fits")
     # the sun axis is the ray march's: the map's nodes are ray-marched
     assert asked.table == plan.table
 
