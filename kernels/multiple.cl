@@ -183,6 +183,12 @@ inline void integrate_gathered_suns(__constant const atmosphere_t *atm, const re
 #ifndef SCATTER_SUN_NODES
 #error "SCATTER_SUN_NODES (sun nodes per scatter work-item) must be defined"
 #endif
+/* The sun node of the c-th computed one of a scatter with sun_stride: every sun_stride-th, and the last. */
+inline int computed_sun_node(const int c, const int sun_stride, const int depth)
+{
+    return min(c * sun_stride, depth - 1);
+}
+
 __kernel void scatter(__constant const atmosphere_t *atm, const int width, const int height,
                       const int depth, const int mapping, const real2 sun_range, const int combine_species,
                       const real cos_azimuth, __global const real *gathered, __global const real *ground_radiance,
@@ -199,8 +205,8 @@ __kernel void scatter(__constant const atmosphere_t *atm, const int width, const
     realv h0;
     real mu_v, mu_s[SCATTER_SUN_NODES], nu[SCATTER_SUN_NODES];
     for (int b = 0; b < SCATTER_SUN_NODES; ++b)      /* nodes past the last one repeat it, unstored */
-        table_cell(atm, gx, y, min(min(z0 + b, computed - 1) * sun_stride, depth - 1), width, height, depth, mapping,
-                   sun_range, cos_azimuth, &h0, &mu_v, &mu_s[b], &nu[b]);
+        table_cell(atm, gx, y, computed_sun_node(min(z0 + b, computed - 1), sun_stride, depth), width, height, depth,
+                   mapping, sun_range, cos_azimuth, &h0, &mu_v, &mu_s[b], &nu[b]);
     real8 sum[SCATTER_SUN_NODES][VECTOR_WIDTH];
     realv ground_t[3], ground_mu[SCATTER_SUN_NODES];
     integrate_gathered_suns(atm, h0, mu_v, mu_s, nu, gathered, width, height, depth, mapping, sun_range, sum,
@@ -211,7 +217,7 @@ __kernel void scatter(__constant const atmosphere_t *atm, const int width, const
     const real4 beta_m = atm->beta_mie;
     const real8 coefficient = (real8)(beta.x, beta.y, beta.z, beta_m.x, beta_m.y, beta_m.z, R(0.0), R(0.0)) * scale;
     for (int b = 0; b < SCATTER_SUN_NODES && z0 + b < computed; ++b) {
-        const int z = min((z0 + b) * sun_stride, depth - 1);
+        const int z = computed_sun_node(z0 + b, sun_stride, depth);
         for (int k = 0; k < VECTOR_WIDTH; ++k) {
             const int xk = gx * VECTOR_WIDTH + k;
             if (xk >= width)
