@@ -30,10 +30,10 @@ frames are made from (``on_ray_march=True``: the sky-view map is the ray march r
 README "Sky-view table"). The latter is estimated as the quality level's measured ray-march error
 (:data:`RAY_MARCH_ERROR`) plus the row's, as if the two erred with one sign at the same pixels; where the row
 was measured against the reference itself, for the level's table, with the observer on the ground
-(``on_reference``: the sky-view map below civil twilight, bench/bench_quality_dusk.py), that measurement
-instead, for a scene seen from the ground (:func:`estimated_error`). The sum is the more cautious: at -6 deg
-the default level's ray march is 0.80 % off and the map 0.31 % off the ray march (the worst observer), and
-the map measured 0.83 % off the reference (README "Quality levels", below civil twilight).
+(``on_reference``: the sky-view map, -12 to 45 deg, bench/bench_quality.py and bench_quality_dusk.py), that
+measurement instead, for a scene seen from the ground (:func:`estimated_error`). The sum is the more
+cautious: at -6 deg the default level's ray march is 0.80 % off and the map 0.31 % off the ray march (the
+worst observer), and the map measured 0.83 % off the reference (README "Quality levels").
 Between the measured elevations the error is interpolated in log error; beyond them, the nearest
 value; over a sun path, the worst of the path's ends and of the measured elevations inside it.
 """
@@ -58,40 +58,40 @@ __all__ = ["RendererRow", "RENDERERS", "DEFAULT_PIXELS", "LOOKUP4D_ERROR", "RAY_
 LOOKUP_ERROR = ((-4.0, 10.26), (1.0, 0.361), (8.0, 0.0419), (45.0, 0.0141))
 
 #: Measured error of each quality level's ray march against the reference (p95, 64 x 64 fisheye from the
-#: ground) by sun elevation [deg]. From -4 deg up: README "Quality levels", bench/bench_quality.py, the level
-#: planned for the sun path -4 to 45 deg, the reference with the azimuth harmonics at every sun and the levels
-#: with them below +30 deg: draft and default 2026-12-03, with their higher orders' source on every other node in
-#: the ray march and in the table's scatter (0.0607 / 0.0169 / 0.0253 / 0.0289 and 0.0060 / 0.0020 / 0.0030 /
-#: 0.0036 with the stride in the ray march alone; 0.0602 / 0.0176 / 0.0259 / 0.0289 and 0.0062 / 0.0021 /
-#: 0.0031 / 0.0037 on every node), the default again 2026-12-05 with its table's 128 view nodes (0.0067 /
-#: 0.0017 / 0.0028 / 0.0035 with 256), high 2026-12-02; the reference level's: how far the reference
-#: converged (its ray march's counts doubled; the other groups were not doubled in that run, README). Below
-#: -4 deg: README "Below civil twilight", bench/bench_quality_dusk.py, 2026-12-07, the levels planned for the
-#: path -12 to 45 deg (their tables reading the orders' source at every view node there); the reference level
-#: was not measured below -4 deg (the nearest value is taken). A measured error depends on where the sun falls
-#: between the plan's sun nodes, so on the path planned for: the default animation's own plan (-6 to 60 deg)
-#: was 0.89 % off at -6 deg, the draft planned for -6 deg alone 9.2 % (a probe, 2026-12-07).
+#: ground) by sun elevation [deg], the levels' tables as the scene planner gives them: from -4 deg up,
+#: bench/bench_quality.py (README "Quality levels", docs/quality.csv), each level planned for the four frames'
+#: path -4 to 45 deg; below, bench/bench_quality_dusk.py (README "Quality levels", below civil twilight,
+#: docs/quality_dusk.csv), each planned for the path -12 to 45 deg (their tables reading the orders' source at
+#: every view node there); both 2026-12-07, the Intel Xeon. The 'reference' level's: how far the reference
+#: converged, its ray march's counts doubled (the sum of every group: 0.02 % by day, 0.09 % at -4 deg), not
+#: measured below -4 deg (the nearest value is taken). A measured error depends on where the sun falls between
+#: the plan's sun nodes, so on the path planned for: the default animation's own plan (-6 to 60 deg) was 0.89 %
+#: off at -6 deg (0.80 % here) and 0.56 % at -4 deg (0.68 %), the draft planned for -6 deg alone 9.2 % (14.1 %)
+#: (probes, 2026-12-07).
 RAY_MARCH_ERROR = {
     "draft": ((-12.0, 0.297), (-10.0, 0.236), (-8.0, 0.123), (-6.0, 0.141),
               (-4.0, 0.0627), (1.0, 0.0158), (8.0, 0.0247), (45.0, 0.0286)),
     "default": ((-12.0, 0.0150), (-10.0, 0.0130), (-8.0, 0.00996), (-6.0, 0.0080),
-                (-4.0, 0.0070), (1.0, 0.0018), (8.0, 0.0029), (45.0, 0.0035)),
+                (-4.0, 0.00676), (1.0, 0.00178), (8.0, 0.00287), (45.0, 0.00351)),
     "high": ((-12.0, 0.00238), (-10.0, 0.00139), (-8.0, 0.000846), (-6.0, 0.000942),
-             (-4.0, 0.0008), (1.0, 0.0003), (8.0, 0.0004), (45.0, 0.0005)),
+             (-4.0, 0.000764), (1.0, 0.000271), (8.0, 0.000406), (45.0, 0.000516)),
     "reference": ((-4.0, 0.0003), (1.0, 0.00005), (8.0, 0.00007), (45.0, 0.00007)),
 }
 
 #: The sky-view map's error against the reference itself, the observer on the ground (p95, 64 x 64 fisheye,
-#: the default 64 x 128 map of each level's table planned for the sun path -12 to 45 deg; README "Below civil
-#: twilight", bench/bench_quality_dusk.py, 2026-12-07): {level: ((sun elevation [deg], p95), ...)}. Below civil
-#: twilight the draft and default levels' map is within 0.07 % of their ray march's error (default: 0.83 against
-#: 0.80 % at -6 deg), where the sum of the two (:data:`RAY_MARCH_ERROR` and the row's own against the ray
-#: march, 0.31 % at -6 deg, the worst observer) would say 1.1 %; the high level's is 0.05-0.14 % above its ray
-#: march's (0.18 against 0.094 % at -6 deg), past its 0.1 %.
+#: the default 64 x 128 map of each level's table as the plan gives it; the same runs and tables as
+#: :data:`RAY_MARCH_ERROR`'s, their sky-view map column): {level: ((sun elevation [deg], p95), ...)}. The
+#: draft and default levels' map is within 0.11 % of their ray march's error (default: 0.83 against 0.80 % at
+#: -6 deg, 0.79 against 0.68 % at -4), where the sum of the two (:data:`RAY_MARCH_ERROR` and the row's own
+#: against the ray march, 0.31 % at -6 deg, the worst observer) would say 1.1 %; the high level's is 0.05-0.14 %
+#: above its ray march's (0.18 against 0.094 % at -6 deg), past its 0.1 % from civil twilight down.
 SKYVIEW_ON_REFERENCE = {
-    "draft": ((-12.0, 0.297), (-10.0, 0.236), (-8.0, 0.122), (-6.0, 0.141)),
-    "default": ((-12.0, 0.0157), (-10.0, 0.0133), (-8.0, 0.0101), (-6.0, 0.00826)),
-    "high": ((-12.0, 0.00293), (-10.0, 0.00250), (-8.0, 0.00220), (-6.0, 0.00176)),
+    "draft": ((-12.0, 0.297), (-10.0, 0.236), (-8.0, 0.122), (-6.0, 0.141),
+              (-4.0, 0.0658), (1.0, 0.0156), (8.0, 0.0251), (45.0, 0.0284)),
+    "default": ((-12.0, 0.0157), (-10.0, 0.0133), (-8.0, 0.0101), (-6.0, 0.00826),
+                (-4.0, 0.00785), (1.0, 0.00177), (8.0, 0.00306), (45.0, 0.00351)),
+    "high": ((-12.0, 0.00293), (-10.0, 0.00250), (-8.0, 0.00220), (-6.0, 0.00176),
+             (-4.0, 0.00158), (1.0, 0.00084), (8.0, 0.00112), (45.0, 0.00113)),
 }
 
 
@@ -165,15 +165,15 @@ class RendererRow:
 #: gives the observer at the default level, the worst of the ground and 10 km looking up or tilted down (README
 #: "Sky-view table", bench/bench_skyview.py, 2026-12-07; tests/test_skyview.py's small table had said 0.16 % at
 #: -4 deg, the planned tables 0.29 %), taken for every level (the other levels' tables were not measured); and
-#: against the reference itself, per level, below civil twilight (:data:`SKYVIEW_ON_REFERENCE`).
+#: against the reference itself, per level, from the ground (:data:`SKYVIEW_ON_REFERENCE`).
 RENDERERS = (
     RendererRow("lut", "table lookup", 1.0, 38.5, LOOKUP_ERROR, False,
                 "README 'Speed versus accuracy' (error) and 'Scene plan' (cost)"),
     RendererRow("skyview", "sky-view map 64 x 128", 13.8, 18.2,
                 ((-12.0, 0.00553), (-10.0, 0.00599), (-8.0, 0.00432), (-6.0, 0.00314), (-4.0, 0.00292),
                  (0.0, 0.00145), (1.0, 0.00148), (5.0, 0.00171), (10.0, 0.00182), (30.0, 0.00187), (45.0, 0.00183)),
-                True, "README 'Sky-view table' (error against the ray march) and 'Below civil twilight' (against "
-                "the reference); README 'Scene plan' (cost)", on_reference=tuple(SKYVIEW_ON_REFERENCE.items())),
+                True, "README 'Sky-view table' (error against the ray march) and 'Quality levels' (against the "
+                "reference); README 'Scene plan' (cost)", on_reference=tuple(SKYVIEW_ON_REFERENCE.items())),
     RendererRow("lut4d", "4D table lookup", 0.8, 45.6, LOOKUP4D_ERROR, True,
                 "README 'The 4D table' (error against the ray march of its orders); README 'Scene plan' (cost and "
                 "build)", build_cpu_s=12.4),

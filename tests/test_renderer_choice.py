@@ -129,30 +129,26 @@ def test_nothing_fits_falls_back_to_the_ray_march():
 
 
 def test_the_map_measured_against_the_reference_replaces_the_sum_from_the_ground():
-    """Below civil twilight the sky-view map was measured against the reference (SKYVIEW_ON_REFERENCE): from the
-    ground its estimate there is that measurement, no better than the level's ray march (default, -6 deg:
-    0.83 %, where the sum says 0.80 % + 0.31 %; draft, -8 deg: its ray march's 0.123 % over the map's
+    """The sky-view map was measured against the reference from the ground (SKYVIEW_ON_REFERENCE, -12 to 45
+    deg): from the ground its estimate is that measurement, no better than the level's ray march (default, -6
+    deg: 0.83 %, where the sum says 0.80 % + 0.31 %; draft, -8 deg: its ray march's 0.123 % over the map's
     0.122 %); from above the ground, even 1 m, where nothing was measured against the reference, the sum."""
     skyview = row("skyview")
-    ground, above, mast = (dict(estimated_error(skyview, "default", h)) for h in (0.0, 10e3, 1.0))
-    own, march = dict(skyview.error), dict(RAY_MARCH_ERROR["default"])
-    assert above == mast
-    for sun, measured in SKYVIEW_ON_REFERENCE["default"]:
-        assert ground[sun] == pytest.approx(max(measured, march[sun]), rel=1e-12)
-        assert above[sun] == pytest.approx(march[sun] + own[sun], rel=1e-12)
-    for sun in (-4.0, 0.0, 30.0):                               # above the measured range: the sum, both
-        summed = error_at(RAY_MARCH_ERROR["default"], sun) + own[sun]
-        assert ground[sun] == above[sun] == pytest.approx(summed, rel=1e-12)
-    assert ground[-6.0] == pytest.approx(0.00826, rel=1e-12)
-    assert above[-6.0] == pytest.approx(0.0080 + 0.00314, rel=1e-12)
-    assert dict(estimated_error(skyview, "draft"))[-8.0] == pytest.approx(0.123, rel=1e-12)
-    # never better than the ray march at any sun, measured or between; between the measured range's end (-6
-    # deg) and the next sum (-4 deg), between the two
-    suns = np.linspace(-14.0, 50.0, 257)
     for level in ("draft", "default", "high"):
-        assert np.all(error_at(estimated_error(skyview, level), suns) >= error_at(RAY_MARCH_ERROR[level], suns))
-    between = error_at(estimated_error(skyview, "default"), -5.0)
-    assert ground[-6.0] < between < ground[-4.0]
+        ground, above, mast = (estimated_error(skyview, level, h) for h in (0.0, 10e3, 1.0))
+        suns = np.array([sun for sun, _ in ground])
+        direct, march = SKYVIEW_ON_REFERENCE[level], RAY_MARCH_ERROR[level]
+        assert [sun for sun, _ in above] == suns.tolist() and above == mast
+        assert [e for _, e in ground] == pytest.approx(np.maximum(error_at(direct, suns), error_at(march, suns)),
+                                                       rel=1e-12)
+        assert [e for _, e in above] == pytest.approx(error_at(march, suns) + error_at(skyview.error, suns),
+                                                      rel=1e-12)
+        # never better than the ray march, at any sun, measured or between
+        between = np.linspace(-14.0, 50.0, 257)
+        assert np.all(error_at(ground, between) >= error_at(march, between))
+    assert dict(estimated_error(skyview, "default"))[-6.0] == pytest.approx(0.00826, rel=1e-12)
+    assert dict(estimated_error(skyview, "default", 10e3))[-6.0] == pytest.approx(0.0080 + 0.00314, rel=1e-12)
+    assert dict(estimated_error(skyview, "draft"))[-8.0] == pytest.approx(0.123, rel=1e-12)
     assert choose_renderer((-6.0, 60.0), 0.01, "default")[0].method == "skyview"
     for height in (1.0, 10e3):
         assert choose_renderer((-6.0, 60.0), 0.01, "default", altitude_m=height)[0].method == "raymarch"
@@ -160,19 +156,36 @@ def test_the_map_measured_against_the_reference_replaces_the_sum_from_the_ground
         choose_renderer((-6.0, 60.0), 0.01, altitude_m=-1.0)
 
 
+def test_a_measurement_over_part_of_the_path_meets_the_sum_without_a_step():
+    """A row measured against the reference over part of the suns only (here -8 to -6 deg, worse than the sum
+    at -4): there the measurement, elsewhere the ray march's error plus its own, and between -6 deg and the
+    next measured sun (-4) the two interpolated in log error, no step at -6 deg; the plan's words name both."""
+    part = dataclasses.replace(row("skyview"), on_reference=(("default", ((-8.0, 0.0101), (-6.0, 0.012))),))
+    estimate = dict(estimated_error(part, "default"))
+    summed = error_at(RAY_MARCH_ERROR["default"], -4.0) + error_at(part.error, -4.0)
+    assert estimate[-6.0] == pytest.approx(0.012, rel=1e-12) and estimate[-4.0] == pytest.approx(summed, rel=1e-12)
+    assert error_at(estimated_error(part, "default"), -5.0) == pytest.approx(np.sqrt(0.012 * summed), rel=1e-12)
+    assert estimate_basis(part, "default", (-5.0, 10.0)) == (
+        "at -5 deg, between its measurement against the reference at -6 deg and the ray march's + its own at -4 deg")
+    assert estimate_basis(part, "default", (-8.0, -7.0)) == ("measured against the reference at -8 and -6 deg, "
+                                                             "interpolated at -7")
+    assert estimate_basis(part, "default", (-12.0, -7.0)) == "estimated: the ray march's + its own, measured at -12 deg"
+    assert estimate_basis(part, "default", (-3.0, 10.0)) == ("estimated: the ray march's + its own, measured at -4 "
+                                                            "and 0 deg, interpolated at -3")
+
+
 @pytest.mark.parametrize("level, path, altitude, words", [
-    ("default", (-6.0, 60.0), 0.0, "estimated: the ray march's + its own, measured at -4 deg"),
+    ("default", (-6.0, 60.0), 0.0, "measured against the reference at -6 deg"),
     ("default", (-12.0, -7.0), 0.0, "measured against the reference at -12 deg"),
     ("default", (-30.0, -20.0), 0.0, "measured against the reference at -12 deg"),   # the nearest measured
+    ("draft", (-5.0, 10.0), 0.0, "measured against the reference at -6 and -4 deg, interpolated at -5"),
     ("default", (-12.0, -7.0), 10e3, "estimated: the ray march's + its own, measured at -12 deg"),
-    ("draft", (-5.0, 10.0), 0.0, "at -5 deg, between its measurement against the reference at -6 deg and the ray "
-                                 "march's + its own at -4 deg"),
     ("default", (-5.0, 10.0), 10e3, "estimated: the ray march's + its own, measured at -6 and -4 deg, "
                                     "interpolated at -5"),
 ])
 def test_the_plans_words_say_which_figure_made_the_worst(level, path, altitude, words):
     """estimate_basis: at the worst sun over the path, the measurement against the reference or the sum, or
-    between two of them (a path end between measured elevations); a row measured against the reference itself,
+    between two measured suns (a path end between them); a row measured against the reference itself,
     'measured'; the ray march's own row, the ray march's."""
     assert estimate_basis(row("skyview"), level, path, altitude) == words
     assert estimate_basis(row("lut"), level, path, altitude) == "measured"
@@ -186,27 +199,28 @@ def test_renderer_rows_are_hashable():
 
 
 def test_the_measured_tables_are_the_benchmarks():
-    """RAY_MARCH_ERROR below -4 deg and SKYVIEW_ON_REFERENCE are docs/quality_dusk.csv's figures
-    (bench/bench_quality_dusk.py) to three significant digits, and the sky-view row's own error README
-    "Sky-view table"'s worst line (bench/bench_skyview.py): a rerun of either shows here where the code's
-    figures are no longer the benchmark's."""
+    """RAY_MARCH_ERROR's level rows and SKYVIEW_ON_REFERENCE are docs/quality.csv's (bench/bench_quality.py, the
+    four frames, -4 to 45 deg) and docs/quality_dusk.csv's (bench/bench_quality_dusk.py, -6 to -12 deg) figures to
+    three significant digits, and the sky-view row's own error README "Sky-view table"'s worst line
+    (bench/bench_skyview.py): a rerun of either shows here where the code's figures are no longer the
+    benchmark's."""
     import csv
 
+    from clsky.anim.accuracy import DUSK_ELEVATIONS, SUN_ELEVATIONS
+
     root = pathlib.Path(__file__).parents[1]
-    with open(root / "docs" / "quality_dusk.csv", newline="") as handle:
-        rows = {r["level"]: r for r in csv.DictReader(handle)}
-    assert set(rows) == {"draft", "default", "high"}
-
-    def significant(value):
-        return float(f"{float(value):.3g}")
-
-    for level, measured in rows.items():
-        suns = sorted(float(key.split()[1]) for key in measured if key.startswith("p95_rel "))
-        assert suns == [-12.0, -10.0, -8.0, -6.0]
-        below = [(sun, error) for sun, error in RAY_MARCH_ERROR[level] if sun < -4.0]
-        assert below == [(sun, significant(measured[f"p95_rel {sun:g} deg"])) for sun in suns], level
-        assert list(SKYVIEW_ON_REFERENCE[level]) == [
-            (sun, significant(measured[f"skyview p95_rel {sun:g} deg"])) for sun in suns], level
+    measured = {}                   # {level: ({sun: ray march p95}, {sun: sky-view map p95})}
+    for name, suns in (("quality.csv", SUN_ELEVATIONS), ("quality_dusk.csv", DUSK_ELEVATIONS)):
+        with open(root / "docs" / name, newline="") as handle:
+            for r in csv.DictReader(handle):
+                march, skyview = measured.setdefault(r["level"], ({}, {}))
+                march.update({sun: float(f"{float(r[f'p95_rel {frame}']):.3g}") for frame, sun in suns.items()})
+                skyview.update({sun: float(f"{float(r[f'skyview p95_rel {frame}']):.3g}")
+                                for frame, sun in suns.items()})
+    assert set(measured) == {"draft", "default", "high"}
+    for level, (march, skyview) in measured.items():
+        assert RAY_MARCH_ERROR[level] == tuple(sorted(march.items())), level
+        assert SKYVIEW_ON_REFERENCE[level] == tuple(sorted(skyview.items())), level
     readme = (root / "README.md").read_text(encoding="utf-8")
     section = readme.split("<!-- bench:skyview-plan -->")[1].split("<!-- /bench:skyview-plan -->")[0]
     header = next(line for line in section.splitlines() if line.startswith("| observer |"))
@@ -221,8 +235,8 @@ def test_the_measured_tables_are_the_benchmarks():
 # The plan ------------------------------------------------------------------------------------------
 
 def test_the_default_animation_plan_picks_the_skyview_map(cl_context):
-    """The README's main job (sun -6 to 60 deg, 1 %): the sky-view map fits (0.70 % + 0.29 % at -4 deg,
-    0.83 % measured against the reference at -6 deg), keeping the ray march's quadrature for its nodes; an
+    """The README's main job (sun -6 to 60 deg, 1 %): the sky-view map fits (0.83 % measured against the
+    reference at -6 deg, 0.79 % at -4), keeping the ray march's quadrature for its nodes; an
     animation that renders the ray march anyway (compare) still gets the ray march's line, saying the map
     would do."""
     plan = plan_scene(Scene((-6.0, 60.0)), ctx=cl_context)
@@ -233,8 +247,8 @@ def test_the_default_animation_plan_picks_the_skyview_map(cl_context):
     asked = plan_scene(Scene((-6.0, 60.0)), ctx=cl_context, ray_march=True)
     line = dict((topic, (decision, reason)) for topic, decision, reason in asked.decisions)["renderer"]
     assert asked.renderer == "skyview" and line[0] == "ray march, 48 samples per ray"
-    assert line[1].startswith("asked for; the sky-view map 64 x 128's 0.99 % (estimated: the ray march's + its own, "
-                              "measured at -4 deg) fits")
+    assert line[1].startswith("asked for; the sky-view map 64 x 128's 0.83 % (measured against the reference at -6 "
+                              "deg) fits")
     # the sun axis is the ray march's: the map's nodes are ray-marched
     assert asked.table == plan.table
 
@@ -281,7 +295,7 @@ def test_a_plan_of_tiny_frames_marches_every_pixel(cl_context):
     reason = dict((topic, r) for topic, _, r in plan.decisions)["renderer"]
     assert "table lookup's 1026 %" in reason
     march, skyview = row("raymarch").frame_cpu_ms(tiny), row("skyview").frame_cpu_ms(tiny)
-    assert reason.endswith(f"; the sky-view map's 0.99 % fits, but it costs more a frame of {tiny} pixels "
+    assert reason.endswith(f"; the sky-view map's 0.83 % fits, but it costs more a frame of {tiny} pixels "
                            f"({skyview:.3g} against {march:.3g} CPU-ms, measured)")
 
 
