@@ -73,6 +73,8 @@ class FrameSet:
         The reference's count groups doubled by default (:data:`clsky.anim.accuracy.REFERENCE_GROUPS`).
     script : str
         The script that runs it, as its README section names it.
+    path_words : str
+        The planned path as the README's sentence says it, a format string of its ends ``low`` and ``high``.
     """
 
     elevations: dict
@@ -81,6 +83,7 @@ class FrameSet:
     csv: str
     groups: tuple
     script: str
+    path_words: str
 
     @property
     def names(self):
@@ -97,7 +100,8 @@ class FrameSet:
 #: their path (-4 to 45 deg), the reference's convergence in every group, and the default animation's plan.
 DAY = FrameSet(accuracy.SUN_ELEVATIONS,
                (min(accuracy.SUN_ELEVATIONS.values()), max(accuracy.SUN_ELEVATIONS.values())),
-               ("quality", "plan"), "quality.csv", tuple(accuracy.REFERENCE_GROUPS), "bench/bench_quality.py")
+               ("quality", "plan"), "quality.csv", tuple(accuracy.REFERENCE_GROUPS), "bench/bench_quality.py",
+               "the four frames' sun path ({low:g} to {high:g} deg)")
 #: Below civil twilight (:data:`clsky.anim.accuracy.DUSK_ELEVATIONS`, -6 to -12 deg), each level planned for a
 #: sunset's path from the lowest of them up to the day frame's 45 deg (its tables read the orders' source at
 #: every view node: :data:`clsky.planner.SOURCE_EVERY_NODE_BELOW_DEG`). By default no count group is doubled:
@@ -105,7 +109,8 @@ DAY = FrameSet(accuracy.SUN_ELEVATIONS,
 #: 2-core Xeon), so a run measures the levels in about 20 min.
 DUSK = FrameSet(accuracy.DUSK_ELEVATIONS,
                 (min(accuracy.DUSK_ELEVATIONS.values()), max(accuracy.SUN_ELEVATIONS.values())),
-                ("quality-dusk",), "quality_dusk.csv", (), "bench/bench_quality_dusk.py")
+                ("quality-dusk",), "quality_dusk.csv", (), "bench/bench_quality_dusk.py",
+                "a sunset's sun path, from the lowest frame's sun up to the day frame's ({low:g} to {high:g} deg)")
 
 
 def frames_of(table, ray, size, elevations, method="raymarch"):
@@ -193,9 +198,9 @@ def reference_frames(args, reference_name, frame_set, loads):
         cpu_seconds = float(cached["cpu_seconds"]) if "cpu_seconds" in cached else None
         missing = [group for group in args.groups if group not in change] if args.groups_given else []
         if missing:
-            change.update({group: values for group, values in convergence(reference, valid, missing).items()
-                           if group != "sum"})
-            groups = [group for group in change if group != "sum"]
+            change.update(convergence(reference, valid, missing))
+            groups = [group for group in accuracy.REFERENCE_GROUPS if group in change]     # their order, sum last
+            change = {group: change[group] for group in groups}
             change["sum"] = {name: sum(change[group][name] for group in groups) for name in frame_set.names}
             save(reference, valid, seconds, cpu_seconds, change)
         args.groups = [group for group in change if group != "sum"]
@@ -255,8 +260,9 @@ def run(args, reference_name, frame_set=DAY):
 
     names = frame_set.names
     lines = [f"{stamp}: {args.size} x {args.size} fisheye frames from the ground (`{frame_set.script}`). "
-             f"Each level is planned for the {frame_set.count} frames' sun path ({frame_set.path[0]:g} to "
-             f"{frame_set.path[1]:g} deg); error: 95th percentile of the relative HDR luminance error of its "
+             f"Each level is planned for {frame_set.path_words.format(low=frame_set.path[0], high=frame_set.path[1])}"
+             "; error: 95th percentile of the relative HDR "
+             "luminance error of its "
              "ray-marched frames against the reference. Build: the table, its wall and process CPU time (every "
              "thread, PoCL's workers included); render: one frame by ray march, the mean of the "
              f"{frame_set.count}. The lookup and sky-view map columns are the same table's 3D lookup and default "

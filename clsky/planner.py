@@ -32,8 +32,9 @@ What the plan decides, and why:
   scene's pixels (:attr:`Plan.renderer`). The table lookup alone serves the scene only where its measured
   error (:data:`LOOKUP_ERROR`) fits at the path's lowest sun, and on frames where it is the cheaper (below
   about 630 000 pixels: the sky-view map's own march costs the same whatever the frame, its reading less
-  a pixel); the sky-view map (the ray march read at a map's nodes) where the level's ray-march error plus
-  the map's own fits, on frames large enough to pay for its map (about 7900 pixels); otherwise the ray
+  a pixel); the sky-view map (the ray march read at a map's nodes) where its error fits (measured against
+  the reference from the ground; from above, the level's ray-march error plus the map's own), on frames large
+  enough to pay for its map (about 7900 pixels); otherwise the ray
   march. The sky-view map and the ray march need the ray march's quadrature and margins, and so does an
   animation that renders the ray march whatever the plan picks (``plan_scene(..., ray_march=True)``; the
   plan then says which lookup would do; ``clsky animate --method compare`` compares the ray march with the
@@ -243,13 +244,15 @@ def promise_measured_down_to(level):
     """The lowest sun [deg] down to which quality ``level``'s promise was measured to hold, or None where it was
     not at the highest measured sun: walking down the measured elevations (:func:`measured_errors`), the last
     before the first whose error exceeds the level's budget, and no lower than the lowest sun at which the
-    reference's convergence was measured (the 'reference' level's rows, -4 deg): below it a level within its
-    promise by less than the reference's own error there (unknown; 0.09 % at -4 deg, README "Quality levels")
-    is not shown to hold it. Measured 2026-12-07 (bench/bench_quality_dusk.py): the draft misses its 10 % at
-    -6 deg (14 %); the default level was within its 1 % down to -8 deg (1.00 %), the high level within its
-    0.1 % down to -8 (0.085 %, but 0.11 % at -8 deg in a probe planned for -8 alone); so every level holds down
-    to -4 deg. A plan whose sun goes lower says what its level measured there, and a plan by error budget takes
-    the fastest level whose measured error over the path fits the budget."""
+    reference's convergence was measured (the 'reference' level's rows, -4 deg): below it nothing says how far
+    the reference itself is off. The rule does not ask for a margin: the high level's 0.076 % at -4 deg is
+    within its 0.1 % by less than the reference's resolution there (0.09 %, the sum of its doubled groups,
+    README "Quality levels"), and the 'reference' level's rows are its ray march's group alone. Measured
+    2026-12-07 (bench/bench_quality.py, bench_quality_dusk.py): the draft misses its 10 % at -6 deg (14 %); the
+    default level was within its 1 % down to -8 deg (0.996 %), the high level within its 0.1 % down to -8
+    (0.085 %, but 0.11 % at -8 deg in a probe planned for -8 alone); so every level holds down to -4 deg. A plan
+    whose sun goes lower says what its level measured there, and a plan by error budget takes the fastest level
+    whose measured error over the path fits the budget."""
     floor = min(sun for sun, _ in RAY_MARCH_ERROR["reference"])
     holds = None
     for sun, error in sorted(measured_errors(level.name), reverse=True):
@@ -593,22 +596,24 @@ def _level_measured_within(level, budget, low, high):
     return QUALITY_LEVELS["reference"]
 
 
-def _below_measured_note(level, lowest_deg):
-    """The plan's words for a sun path down to ``lowest_deg``, below :func:`promise_measured_down_to`:
-    what ``level``'s ray march measured against the reference at the suns of the path below it
-    (:func:`measured_errors`), and below which sun it was not measured."""
+def _below_measured_note(level, sun_elevations_deg):
+    """The plan's words for a sun path (low, high) [deg] that goes below :func:`promise_measured_down_to`: what
+    ``level``'s ray march measured against the reference at the measured suns of the path below that (and at
+    the nearest measured ones beyond its ends, whose values the plan takes there: :func:`measured_errors`),
+    and below which sun it was not measured."""
+    low, high = sun_elevations_deg
     points = measured_errors(level.name)
-    # the measured suns below the promise's down to the path's lowest, and the first one below that
-    floor = max((sun for sun, _ in points if sun <= lowest_deg), default=lowest_deg)
     holds = promise_measured_down_to(level)
-    measured = sorted(((sun, error) for sun, error in points if floor <= sun and (holds is None or sun < holds)),
-                      reverse=True)
+    floor = max((sun for sun, _ in points if sun <= low), default=low)
+    ceiling = min((sun for sun, _ in points if sun >= high), default=high)
+    measured = sorted(((sun, error) for sun, error in points
+                       if floor <= sun <= ceiling and (holds is None or sun < holds)), reverse=True)
     said = ", ".join(f"{100 * error:.3g} % at {sun:g} deg" for sun, error in measured)
     lowest_measured = min((sun for sun, _ in points), default=0.0)
-    unmeasured = f"not measured below {lowest_measured:g} deg" if lowest_deg < lowest_measured else ""
+    unmeasured = f"not measured below {lowest_measured:g} deg" if low < lowest_measured else ""
     where = ("not measured to hold at any sun" if holds is None else
              f"measured to hold with the sun down to {holds:g} deg: below it")
-    return (f"; {where}, down to {lowest_deg:g} deg here, " + "; ".join(part for part in (
+    return (f"; {where}, down to {low:g} deg here, " + "; ".join(part for part in (
         f"off the reference by {said}" if said else "", unmeasured) if part))
 
 
@@ -667,7 +672,7 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         why = f"; no level promises {100 * budget:g} %: the most accurate one"
     holds = promise_measured_down_to(level)
     if holds is None or scene.sun_elevations_deg[0] < holds:
-        why += _below_measured_note(level, scene.sun_elevations_deg[0])
+        why += _below_measured_note(level, scene.sun_elevations_deg)
     decisions = [("quality", level.name, f"promises {100 * level.budget:g} % or better{why}")]
 
     if "mie" in scene.components or atmosphere.mie_scattering == 0.0:
@@ -723,16 +728,16 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         reason = lookup_note
         map_taken = scene.altitudes_m[1] <= RENDERER_ERRORS_MEASURED_UP_TO_M
         if estimates["skyview"] <= budget and map_taken:    # tiny frames: marching every pixel costs less than the map
-            reason += (f"; the sky-view map's {100 * estimates['skyview']:.2g} % fits, but "
+            reason += (f"; the sky-view map's {_percent(estimates['skyview'])} % fits, but "
                        + _costlier("skyview", chosen, scene.pixels))
         elif map_taken:                                     # the map was over the budget too: said, and why
             basis = estimate_basis(renderer_row("skyview"), level.name, scene.sun_elevations_deg, scene.altitudes_m[1])
-            reason += f"; so does the sky-view map's {100 * estimates['skyview']:.3g} % ({basis})"
+            reason += f"; so does the sky-view map's {_percent(estimates['skyview'])} % ({basis})"
         decisions.append(("renderer", march, reason))
     else:
         lookup_fits = lookup_error <= budget and scene.altitudes_m[1] == 0.0
         basis = estimate_basis(chosen, level.name, scene.sun_elevations_deg, scene.altitudes_m[1])
-        would = (f"the {chosen.description}'s {100 * estimate:.2g} % ({basis}) fits; "
+        would = (f"the {chosen.description}'s {_percent(estimate)} % ({basis}) fits; "
                  + ("so does the table lookup, but " + _costlier("lut", chosen, scene.pixels) if lookup_fits
                     else lookup_note))
         decisions.append(("renderer", march, f"asked for; {would}") if ray_march

@@ -63,11 +63,11 @@ LOOKUP_ERROR = ((-4.0, 10.26), (1.0, 0.361), (8.0, 0.0419), (45.0, 0.0141))
 #: path -4 to 45 deg; below, bench/bench_quality_dusk.py (README "Quality levels", below civil twilight,
 #: docs/quality_dusk.csv), each planned for the path -12 to 45 deg (their tables reading the orders' source at
 #: every view node there); both 2026-12-07, the Intel Xeon. The 'reference' level's: how far the reference
-#: converged, its ray march's counts doubled (the sum of every group: 0.02 % by day, 0.09 % at -4 deg), not
-#: measured below -4 deg (the nearest value is taken). A measured error depends on where the sun falls between
-#: the plan's sun nodes, so on the path planned for: the default animation's own plan (-6 to 60 deg) was 0.89 %
-#: off at -6 deg (0.80 % here) and 0.56 % at -4 deg (0.68 %), the draft planned for -6 deg alone 9.2 % (14.1 %)
-#: (probes, 2026-12-07).
+#: converged with the ray march's counts doubled, that group alone (the sum of every group's change is 0.02 %
+#: by day, 0.09 % at -4 deg: README), not measured below -4 deg (the nearest value is taken). A measured error
+#: depends on where the sun falls between the plan's sun nodes, so on the path planned for: the default
+#: animation's own plan (-6 to 60 deg) was 0.89 % off at -6 deg (0.80 % here; a probe, 2026-12-07) and 0.56 %
+#: at -4 deg (0.68 %; README "Scene plan"), the draft planned for -6 deg alone 9.2 % (14.1 %; a probe).
 RAY_MARCH_ERROR = {
     "draft": ((-12.0, 0.297), (-10.0, 0.236), (-8.0, 0.123), (-6.0, 0.141),
               (-4.0, 0.0627), (1.0, 0.0158), (8.0, 0.0247), (45.0, 0.0286)),
@@ -81,10 +81,12 @@ RAY_MARCH_ERROR = {
 #: The sky-view map's error against the reference itself, the observer on the ground (p95, 64 x 64 fisheye,
 #: the default 64 x 128 map of each level's table as the plan gives it; the same runs and tables as
 #: :data:`RAY_MARCH_ERROR`'s, their sky-view map column): {level: ((sun elevation [deg], p95), ...)}. The
-#: draft and default levels' map is within 0.11 % of their ray march's error (default: 0.83 against 0.80 % at
-#: -6 deg, 0.79 against 0.68 % at -4), where the sum of the two (:data:`RAY_MARCH_ERROR` and the row's own
-#: against the ray march, 0.31 % at -6 deg, the worst observer) would say 1.1 %; the high level's is 0.05-0.14 %
-#: above its ray march's (0.18 against 0.094 % at -6 deg), past its 0.1 % from civil twilight down.
+#: default level's map is within 0.11 % of its ray march's error (0.83 against 0.80 % at -6 deg, 0.79 against
+#: 0.68 % at -4), where the sum of the two (:data:`RAY_MARCH_ERROR` and the row's own against the ray march,
+#: 0.31 % at -6 deg, the worst observer) would say 1.1 %; the draft's within 0.31 % (6.58 against 6.27 % at -4);
+#: the high level's 0.05-0.14 % above its ray march's, past its 0.1 % at every sun but +1 deg (0.11 % by day,
+#: 0.18 % at -6 deg). Measured for one path, like RAY_MARCH_ERROR: the default animation's own plan (-6 to 60
+#: deg) had its map 0.92 % off at -6 deg (a probe, 2026-12-07).
 SKYVIEW_ON_REFERENCE = {
     "draft": ((-12.0, 0.297), (-10.0, 0.236), (-8.0, 0.122), (-6.0, 0.141),
               (-4.0, 0.0658), (1.0, 0.0156), (8.0, 0.0251), (45.0, 0.0284)),
@@ -163,9 +165,10 @@ class RendererRow:
 #: before, in the machine's slow state, measured every cost 10-25 % higher and the crossovers between rows
 #: within 5 % of these. The sky-view map's errors: p95 against the per-pixel ray march of the table the planner
 #: gives the observer at the default level, the worst of the ground and 10 km looking up or tilted down (README
-#: "Sky-view table", bench/bench_skyview.py, 2026-12-07; tests/test_skyview.py's small table had said 0.16 % at
-#: -4 deg, the planned tables 0.29 %), taken for every level (the other levels' tables were not measured); and
-#: against the reference itself, per level, from the ground (:data:`SKYVIEW_ON_REFERENCE`).
+#: "Sky-view table", bench/bench_skyview.py, two runs of 2026-12-07 and 08, the same to the digit;
+#: tests/test_skyview.py's small table had said 0.16 % at -4 deg, the planned tables 0.29 %), taken for every
+#: level (the other levels' tables were not measured); and against the reference itself, per level, from the
+#: ground (:data:`SKYVIEW_ON_REFERENCE`).
 RENDERERS = (
     RendererRow("lut", "table lookup", 1.0, 38.5, LOOKUP_ERROR, False,
                 "README 'Speed versus accuracy' (error) and 'Scene plan' (cost)"),
@@ -216,20 +219,29 @@ def _measured_on_reference(row, level, altitude_m):
 
 
 def _estimate_nodes(row, level, altitude_m):
-    """(elevations [deg], p95, what each is) of :func:`estimated_error` at its nodes: 'reference' where the
-    measurement against the reference gives it, 'sum' where the ray march's error plus the row's does."""
+    """(elevations [deg], p95, what each is, whether it was measured there) of :func:`estimated_error` at its
+    nodes: 'reference' where the measurement against the reference gives it, 'floor' where the ray march's
+    error does (the measurement was lower), 'sum' where the ray march's error plus the row's does; measured
+    where the figures it is made of were measured at that elevation, not interpolated."""
     march, direct = RAY_MARCH_ERROR[level], _measured_on_reference(row, level, altitude_m)
     nodes = np.array(sorted({elevation for elevation, _ in march + row.error + direct}))
     values = error_at(march, nodes) + error_at(row.error, nodes)
     kinds = np.array(["sum"] * len(nodes), dtype=object)
+    measured_at = {kind: {elevation for elevation, _ in table} for kind, table in
+                   (("march", march), ("own", row.error), ("reference", direct))}
+    adds = any(error for _, error in row.error)     # a row that adds nothing (the ray march's) needs no own node
+    measured = np.array([sun in measured_at["march"] and (sun in measured_at["own"] or not adds) for sun in nodes])
     if direct:
         spanned = (nodes >= direct[0][0]) & (nodes <= direct[-1][0])
         # never better than the ray march its frames are made from (the draft's map measured 0.122 % at -8 deg
         # against its ray march's 0.123 %: a measurement on one plan's tables, whose sun nodes fall elsewhere on
         # another's)
-        values[spanned] = np.maximum(error_at(direct, nodes[spanned]), error_at(march, nodes[spanned]))
-        kinds[spanned] = "reference"
-    return nodes, values, kinds
+        on_reference, floor = error_at(direct, nodes[spanned]), error_at(march, nodes[spanned])
+        values[spanned] = np.maximum(on_reference, floor)
+        kinds[spanned] = np.where(on_reference >= floor, "reference", "floor")
+        measured[spanned] = [sun in measured_at["reference" if kind == "reference" else "march"]
+                             for sun, kind in zip(nodes[spanned], kinds[spanned])]
+    return nodes, values, kinds, measured
 
 
 def estimated_error(row, level, altitude_m=0.0):
@@ -242,7 +254,7 @@ def estimated_error(row, level, altitude_m=0.0):
     elevations like any measured error (:func:`error_at`), the two kinds of figure meet without a step."""
     if not row.on_ray_march:
         return row.error
-    nodes, values, _ = _estimate_nodes(row, level, altitude_m)
+    nodes, values, _, _ = _estimate_nodes(row, level, altitude_m)
     return tuple(zip(nodes.tolist(), values.tolist()))
 
 
@@ -255,25 +267,27 @@ def renderer_row(method, rows=RENDERERS) -> RendererRow:
 def estimate_basis(row, level, sun_elevations_deg, altitude_m=0.0) -> str:
     """How ``row``'s estimated error over the sun path (low, high) [deg] was made, in the scene plan's words:
     at its worst sun, the row's own measured error, its error against the reference (``on_reference``), the ray
-    march's plus its own, or between two measured elevations, what each of them is (:func:`estimated_error`)."""
+    march's where that was lower, or the ray march's plus its own (:func:`estimated_error`); 'measured at' a
+    sun where the figures were, 'interpolated at' one between measured suns, and between two kinds of figure,
+    both."""
     if not row.on_ray_march:
         return "measured"
-    nodes, values, kinds = _estimate_nodes(row, level, altitude_m)
+    nodes, values, kinds, measured = _estimate_nodes(row, level, altitude_m)
     own = any(error for _, error in row.error)
     said = {"reference": "measured against the reference",
+            "floor": "the ray march's, measured (the map measured less)",
             "sum": "estimated: the ray march's + its own, measured" if own else "the ray march's, measured"}
-    short = {"reference": "its measurement against the reference",
+    short = {"reference": "its measurement against the reference", "floor": "the ray march's",
              "sum": "the ray march's + its own" if own else "the ray march's"}
     # the worst sun, or beyond the measured elevations the nearest one, whose value it takes
     worst = min(max(worst_over(tuple(zip(nodes, values)), *sun_elevations_deg)[0], nodes[0]), nodes[-1])
     at = int(np.searchsorted(nodes, worst))
-    if nodes[at] == worst:
+    if nodes[at] == worst and measured[at]:
         return f"{said[kinds[at]]} at {worst:g} deg"
-    below, above = kinds[at - 1], kinds[at]
+    below, above = (kinds[at], kinds[at]) if nodes[at] == worst else (kinds[at - 1], kinds[at])
     if below == above:
-        return f"{said[above]} at {nodes[at - 1]:g} and {nodes[at]:g} deg, interpolated at {worst:g}"
-    return (f"at {worst:g} deg, between {short[below]} at {nodes[at - 1]:g} deg and {short[above]} at "
-            f"{nodes[at]:g} deg")
+        return f"{said[above]}, interpolated at {worst:g} deg"
+    return f"interpolated at {worst:g} deg between {short[below]} and {short[above]}"
 
 
 def choose_renderer(sun_elevations_deg, budget, level="default", rows=RENDERERS, frames=None, pixels=DEFAULT_PIXELS,

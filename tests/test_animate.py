@@ -164,8 +164,8 @@ def test_cli_animate_planned_run_prints_the_plan(tmp_path):
 
 def test_planned_compare_uses_the_plans_lookup_the_sky_view_map(tmp_path, cl_context):
     """'compare' with a plan compares the ray march with the plan's renderer: down to -4 deg the 3D
-    lookup's measured 1026 % exceeds the draft budget (10 %), the sky-view map's 6.6 % (draft ray march
-    6.3 % + map 0.29 %) fits; on frames this small (24 x 24) marching every pixel costs less than the
+    lookup's measured 1026 % exceeds the draft budget (10 %), the sky-view map's 6.58 % (measured against the
+    reference at -4 deg) fits; on frames this small (24 x 24) marching every pixel costs less than the
     map's 8192 rays, so the plan picks the ray march (clsky.renderer_choice), and the comparison's lookup
     is the map, the closest lookup, either way (lookup_of). Its frame is the first panel, labelled, and
     its metrics are the sky-view map's against the ray march, rendered here independently of the

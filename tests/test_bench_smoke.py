@@ -280,7 +280,8 @@ def test_a_bad_option_is_one_line_before_any_work(name, options, message):
 def test_a_cached_reference_gets_the_groups_asked_for(tmp_path):
     """A reference cache without a doubled group that --groups names: the group was ignored (the cache's own
     groups taken) and the README said the convergence was not measured; now it is measured, said, and saved
-    with the cache (a third run without --groups shows it)."""
+    with the cache (a third run without --groups shows it); a second group joins in the groups' order, the sum
+    after them (it came before the new group). The sum's cells are printed to 3 decimals: within 2e-3."""
     cache = str(tmp_path / "dusk.npz")
     run_smoke("bench_quality_dusk", "--reference-cache", cache)
     header = "| doubled | -6 deg [%] |"
@@ -288,6 +289,14 @@ def test_a_cached_reference_gets_the_groups_asked_for(tmp_path):
     assert [row[0] for row in table_rows(asked, header)] == ["the ray march's samples, sun steps and transmittance "
                                                              "table", "**sum**"]
     assert table_rows(run_smoke("bench_quality_dusk", "--reference-cache", cache), header) == table_rows(asked, header)
+    # a group added to a cache that holds one: in REFERENCE_GROUPS' order, the sum last and over both
+    both = table_rows(run_smoke("bench_quality_dusk", "--reference-cache", cache, "--groups", "table quadrature"),
+                      header)
+    assert [r[0] for r in both] == ["the table's view and sun steps and its transmittance table",
+                                    "the ray march's samples, sun steps and transmittance table", "**sum**"]
+    assert both[1] == table_rows(asked, header)[0]
+    for column in range(1, len(both[0])):
+        assert float(both[2][column]) == pytest.approx(float(both[0][column]) + float(both[1][column]), abs=2e-3)
 
 
 def test_a_reference_cache_holds_its_level_and_is_written_whole(tmp_path):
@@ -379,7 +388,8 @@ def test_readme_sections_are_checked_before_the_work(tmp_path, monkeypatch):
     for skipped in (["--no-readme"], ["--smoke"]):
         assert _report.parse_arguments(parser, skipped, sections=("montecarlo",)).no_readme
     # bench_quality.py and bench_quality_dusk.py take theirs from bench_quality's frame sets (DAY, DUSK), which
-    # name them (their smoke runs check that each runs its own set: its table's frames)
+    # name them: bench_quality checks its set's, and bench_quality_dusk runs it on DUSK (their smoke runs check
+    # each prints its own set's frames)
     sys.path.insert(0, str(BENCH))
     try:
         import bench_quality
@@ -390,6 +400,8 @@ def test_readme_sections_are_checked_before_the_work(tmp_path, monkeypatch):
     for script in BENCH.glob("bench_*.py"):
         text = script.read_text()
         if script.stem in frame_sets:
+            assert ("sections=frame_set.sections" in text if script.stem == "bench_quality"
+                    else "main(DUSK, __doc__)" in text), script.name
             continue
         assert "sections=" in text, f"{script.name} names no README section to check"
         call = text.split("sections=", 1)[1]
