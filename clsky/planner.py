@@ -732,7 +732,7 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
                        + _costlier("skyview", chosen, scene.pixels))
         elif map_taken:                                     # the map was over the budget too: said, and why
             basis = estimate_basis(renderer_row("skyview"), level.name, scene.sun_elevations_deg, scene.altitudes_m[1])
-            reason += f"; so does the sky-view map's {_percent(estimates['skyview'])} % ({basis})"
+            reason += f"; the sky-view map's {_percent(estimates['skyview'])} % ({basis}) exceeds it too"
         decisions.append(("renderer", march, reason))
     else:
         lookup_fits = lookup_error <= budget and scene.altitudes_m[1] == 0.0

@@ -491,16 +491,16 @@ def test_the_plan_says_where_its_promise_and_margins_stop():
 
 def test_a_plan_that_ray_marches_says_the_map_missed_too():
     """A plan whose lookup and sky-view map both miss the budget said only the lookup's figure: it says the
-    map's, and how it was made (from 1 m up the sum, 1.11 % at -6 deg; a path to -8 deg, the map's 1.01 %
+    map's too, and how it was made (from 1 m up the sum, 1.11 % at -6 deg; a path to -8 deg, the map's 1.01 %
     measured against the reference)."""
     def reason(scene):
         return dict((t, why) for t, _, why in plan_scene(scene).decisions)["renderer"]
 
     assert reason(Scene((-6.0, 60.0), altitudes_m=(0.0, 1.0))).endswith(
-        "exceeds the budget; so does the sky-view map's 1.11 % (estimated: the ray march's + its own, measured at "
-        "-6 deg)")
+        "exceeds the budget; the sky-view map's 1.11 % (estimated: the ray march's + its own, measured at -6 deg) "
+        "exceeds it too")
     assert reason(Scene((-8.0, 60.0))).endswith(
-        "exceeds the budget; so does the sky-view map's 1.01 % (measured against the reference at -8 deg)")
+        "exceeds the budget; the sky-view map's 1.01 % (measured against the reference at -8 deg) exceeds it too")
 
 
 def test_a_promise_missed_at_the_highest_measured_sun_holds_nowhere(monkeypatch):
