@@ -596,14 +596,13 @@ def _level_measured_within(level, budget, low, high):
     return QUALITY_LEVELS["reference"]
 
 
-def _below_measured_note(level, sun_elevations_deg):
-    """The plan's words for a sun path (low, high) [deg] that goes below :func:`promise_measured_down_to`: what
-    ``level``'s ray march measured against the reference at the measured suns of the path below that (and at
-    the nearest measured ones beyond its ends, whose values the plan takes there: :func:`measured_errors`),
-    and below which sun it was not measured."""
+def _below_measured_note(level, sun_elevations_deg, holds):
+    """The plan's words for a sun path (low, high) [deg] that goes below ``holds``, the level's
+    :func:`promise_measured_down_to` (None: nowhere): what ``level``'s ray march measured against the reference
+    at the measured suns of the path below that (and at the nearest measured ones beyond its ends, whose values
+    the plan takes there: :func:`measured_errors`), and below which sun it was not measured."""
     low, high = sun_elevations_deg
     points = measured_errors(level.name)
-    holds = promise_measured_down_to(level)
     floor = max((sun for sun, _ in points if sun <= low), default=low)
     ceiling = min((sun for sun, _ in points if sun >= high), default=high)
     measured = sorted(((sun, error) for sun, error in points
@@ -672,7 +671,7 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         why = f"; no level promises {100 * budget:g} %: the most accurate one"
     holds = promise_measured_down_to(level)
     if holds is None or scene.sun_elevations_deg[0] < holds:
-        why += _below_measured_note(level, scene.sun_elevations_deg)
+        why += _below_measured_note(level, scene.sun_elevations_deg, holds)
     decisions = [("quality", level.name, f"promises {100 * level.budget:g} % or better{why}")]
 
     if "mie" in scene.components or atmosphere.mie_scattering == 0.0:
