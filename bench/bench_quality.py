@@ -9,8 +9,8 @@
    1 % budget) against the full table of the same quality: cells, build time side by side, and the
    error of both against the reference.
 
-Writes the README sections "quality" and "plan", and docs/quality.csv. bench/bench_quality_dusk.py measures
-the same below civil twilight (:data:`DUSK`).
+Writes the README sections "quality" and "plan", docs/quality.csv and docs/quality_reference.csv (the
+reference's convergence). bench/bench_quality_dusk.py measures the same below civil twilight (:data:`DUSK`).
 
 Usage: python bench/bench_quality.py [--size 64] [--groups GROUP ...] [--reference-cache FILE] [--no-readme]
 [--docs DIR] [--smoke]
@@ -68,7 +68,8 @@ class FrameSet:
     sections : tuple of str
         The README sections it writes: its levels' table, then (with "plan") the default animation's plan.
     csv : str
-        The file under docs/ that takes its levels' rows.
+        The file under docs/ that takes its levels' rows (and, :attr:`reference_csv`, the reference's
+        convergence).
     groups : tuple of str
         The reference's count groups doubled by default (:data:`clsky.anim.accuracy.REFERENCE_GROUPS`).
     script : str
@@ -91,6 +92,12 @@ class FrameSet:
         return list(self.elevations)
 
     @property
+    def reference_csv(self):
+        """The file under docs/ that takes the reference's change with each group of its counts doubled, and
+        their sum (the scene planner's :data:`clsky.renderer_choice.REFERENCE_RESOLUTION`)."""
+        return self.csv.replace(".csv", "_reference.csv")
+
+    @property
     def count(self):
         """How many frames, in words (the README's sentences)."""
         return ("no", "one", "two", "three", "four", "five", "six")[len(self.elevations)]
@@ -104,12 +111,13 @@ DAY = FrameSet(accuracy.SUN_ELEVATIONS,
                "the four frames' sun path ({low:g} to {high:g} deg)")
 #: Below civil twilight (:data:`clsky.anim.accuracy.DUSK_ELEVATIONS`, -6 to -12 deg), each level planned for a
 #: sunset's path from the lowest of them up to the day frame's 45 deg (its tables read the orders' source at
-#: every view node: :data:`clsky.planner.SOURCE_EVERY_NODE_BELOW_DEG`). By default no count group is doubled:
-#: each would rebuild the four reference tables of these suns (13 min at the reference's own size on the
-#: 2-core Xeon), so a run measures the levels in about 20 min.
+#: every view node: :data:`clsky.planner.SOURCE_EVERY_NODE_BELOW_DEG`), the reference's convergence in every
+#: group: the scene planner's promise rule needs it (each group rebuilds the four reference tables of these
+#: suns, about 13 min at the reference's own size on the 2-core Xeon; ``--groups`` with none measures the
+#: levels alone, about 20 min).
 DUSK = FrameSet(accuracy.DUSK_ELEVATIONS,
                 (min(accuracy.DUSK_ELEVATIONS.values()), max(accuracy.SUN_ELEVATIONS.values())),
-                ("quality-dusk",), "quality_dusk.csv", (), "bench/bench_quality_dusk.py",
+                ("quality-dusk",), "quality_dusk.csv", tuple(accuracy.REFERENCE_GROUPS), "bench/bench_quality_dusk.py",
                 "a sunset's sun path, from the lowest frame's sun up to the day frame's ({low:g} to {high:g} deg)")
 
 
@@ -257,6 +265,11 @@ def run(args, reference_name, frame_set=DAY):
         args.docs.mkdir(parents=True, exist_ok=True)
         writers.write_csv(args.docs / frame_set.csv, rows, force=True)
         print(f"wrote {args.docs / frame_set.csv}", flush=True)
+        if change:
+            writers.write_csv(args.docs / frame_set.reference_csv,
+                              [{"doubled": group, **{f"change {n}": values[n] for n in frame_set.names}}
+                               for group, values in change.items()], force=True)
+            print(f"wrote {args.docs / frame_set.reference_csv}", flush=True)
 
     names = frame_set.names
     lines = [f"{stamp}: {args.size} x {args.size} fisheye frames from the ground (`{frame_set.script}`). "
