@@ -20,7 +20,10 @@ What the plan decides, and why:
   every view direction, and every view ray crosses all altitudes up to the top. The plan reports the
   part the scene itself reaches.
 * **Resolution and orders** come from the quality level the budget asks for
-  (:func:`clsky.quality.level_for_budget`).
+  (:func:`clsky.quality.level_for_budget`), or the first finer one whose ray march's error measured against
+  the reference, plus how far the reference itself is resolved (:func:`promise_bounds`), fits the budget over
+  the sun path; a level's promise is taken to hold only down to the sun where that bound was last within it
+  (:func:`promise_measured_down_to`), and a plan whose sun goes lower says what was measured there.
 * **Higher orders** are dropped when a pilot (a small table on the planned sun range, ray-marched on a
   coarse fisheye over the cameras' view elevations at the path's lowest, highest and horizon suns) shows
   that they add less than half the budget, or when the scene does not want them. The pilot's share is
@@ -80,12 +83,13 @@ from .ground import check_ground_mode, sky_irradiance
 from .errors import check_choice, check_flag, check_instance, check_integer, check_range
 from .mapping import cos_to_v
 from .quality import QUALITY_LEVELS, QualityLevel, level_for_budget, quality_level
-from .renderer_choice import (DEFAULT_PIXELS, LOOKUP_ERROR, RAY_MARCH_ERROR, RENDERERS, choose_renderer, error_over,
-                              estimate_basis, renderer_row)
+from .renderer_choice import (DEFAULT_PIXELS, LOOKUP_ERROR, RAY_MARCH_ERROR, REFERENCE_RESOLUTION, RENDERERS,
+                              choose_renderer, error_at, error_over, estimate_basis, renderer_row, with_resolution)
 from .settings import SAMPLINGS, SCATTERING_MODES, TableSettings
 
 __all__ = ["Scene", "Plan", "plan_scene", "sun_margins", "sun_axis", "sees_ground", "view_sampling",
-           "azimuth_harmonics", "promise_measured_down_to", "LOOKUP_ERROR", "COMPONENTS", "HARMONICS_BELOW_DEG"]
+           "azimuth_harmonics", "promise_bounds", "promise_measured_down_to", "LOOKUP_ERROR", "COMPONENTS",
+           "HARMONICS_BELOW_DEG"]
 
 #: Light components a scene may want.
 COMPONENTS = ("rayleigh", "mie", "multiple")
@@ -240,23 +244,30 @@ def view_sampling(altitudes_m) -> tuple:
 #: from 1000 km 13.9 %, where the plan promised 0.45 % (a probe of the planner, 2026-12-07).
 RENDERER_ERRORS_MEASURED_UP_TO_M = 10e3
 
+def promise_bounds(name):
+    """((sun elevation [deg], bound), ...), ascending: how far quality level ``name``'s ray march may be off the
+    converged sky at each measured sun, as far as the benchmarks can tell: its error measured against the
+    reference (:func:`measured_errors`) plus how far the reference itself is resolved there
+    (:func:`clsky.renderer_choice.with_resolution`; for the 'reference' level, that resolution alone)."""
+    return with_resolution(measured_errors(name), name)
+
+
 def promise_measured_down_to(level):
     """The lowest sun [deg] down to which quality ``level``'s promise was measured to hold, or None where it was
-    not at the highest measured sun: walking down the measured elevations (:func:`measured_errors`), the last
-    before the first whose error exceeds the level's budget, and no lower than the lowest sun at which the
-    reference's convergence was measured (the 'reference' level's rows, -4 deg): below it nothing says how far
-    the reference itself is off. The rule does not ask for a margin: the high level's 0.076 % at -4 deg is
-    within its 0.1 % by less than the reference's resolution there (0.09 %, the sum of its doubled groups,
-    README "Quality levels"), and the 'reference' level's rows are its ray march's group alone. Measured
-    2026-12-07 (bench/bench_quality.py, bench_quality_dusk.py): the draft misses its 10 % at -6 deg (14 %); the
-    default level was within its 1 % down to -8 deg (0.996 %), the high level within its 0.1 % down to -8
-    (0.085 %, but 0.11 % at -8 deg in a probe planned for -8 alone); so every level holds down to -4 deg. A plan
-    whose sun goes lower says what its level measured there, and a plan by error budget takes the fastest level
-    whose measured error over the path fits the budget."""
-    floor = min(sun for sun, _ in RAY_MARCH_ERROR["reference"])
+    not at the highest measured sun: walking down the measured elevations, the last before the first whose
+    bound (:func:`promise_bounds`: the measured error plus the reference's resolution) exceeds the level's
+    budget, and no lower than the lowest sun at which the reference's resolution was measured. Measured
+    2026-12-07/08 (bench/bench_quality.py, bench_quality_dusk.py): the draft holds its 10 % down to -4 deg (14 %
+    off at -6), the default level its 1 % down to -6 deg (0.80 + 0.14 % there, 0.996 + 0.18 % at -8), the high
+    level its 0.1 % down to +1 deg (0.027 + 0.018 % there; at -4 deg 0.076 % off the reference, which resolves
+    0.09 % itself), the reference its 0.05 % down to +1 deg (its resolution, 0.09 % at -4 deg). Until
+    2026-12-08 the rule took the measured error alone, down to -4 deg at most (where the reference's resolution
+    was measured): every level held to -4 deg. A plan whose sun goes lower says what its level measured there,
+    and a plan by error budget takes the fastest level whose bound over the path fits the budget."""
+    floor = min(sun for sun, _ in REFERENCE_RESOLUTION)
     holds = None
-    for sun, error in sorted(measured_errors(level.name), reverse=True):
-        if error > level.budget or sun < floor:
+    for sun, bound in sorted(promise_bounds(level.name), reverse=True):
+        if bound > level.budget or sun < floor:
             break
         holds = sun
     return holds
@@ -584,14 +595,14 @@ def _costlier(method, chosen, pixels) -> str:
 
 
 def _level_measured_within(level, budget, low, high):
-    """``level`` or the first finer one whose ray march's measured error over the sun path [low, high] [deg]
-    (:func:`measured_errors`, interpolated in log error, the nearest measured value beyond) fits ``budget``;
-    the reference level where none does. Above :func:`promise_measured_down_to` each level's measured
-    error is within its promise, so this only moves a path that goes lower (a default level 1.3 % off at
-    -10 deg is no level 'within 1 %')."""
+    """``level`` or the first finer one whose ray march's bound over the sun path [low, high] [deg]
+    (:func:`promise_bounds`, interpolated in log error, the nearest measured value beyond) fits ``budget``;
+    the reference level where none does. Above :func:`promise_measured_down_to` each level's bound is within
+    its promise, so this only moves a path that goes lower (a default level 1.3 % off at -10 deg is no level
+    'within 1 %')."""
     names = list(QUALITY_LEVELS)
     for name in names[names.index(level.name):]:
-        if error_over(measured_errors(name), low, high) <= budget:
+        if error_over(promise_bounds(name), low, high) <= budget:
             return QUALITY_LEVELS[name]
     return QUALITY_LEVELS["reference"]
 
@@ -600,7 +611,8 @@ def _below_measured_note(level, sun_elevations_deg, holds):
     """The plan's words for a sun path (low, high) [deg] that goes below ``holds``, the level's
     :func:`promise_measured_down_to` (None: nowhere): what ``level``'s ray march measured against the reference
     at the measured suns of the path below that (and at the nearest measured ones beyond its ends, whose values
-    the plan takes there: :func:`measured_errors`), and below which sun it was not measured."""
+    the plan takes there: :func:`measured_errors`), how far the reference itself was resolved there (the
+    'reference' level: that alone), and below which sun it was not measured."""
     low, high = sun_elevations_deg
     points = measured_errors(level.name)
     floor = max((sun for sun, _ in points if sun <= low), default=low)
@@ -608,12 +620,17 @@ def _below_measured_note(level, sun_elevations_deg, holds):
     measured = sorted(((sun, error) for sun, error in points
                        if floor <= sun <= ceiling and (holds is None or sun < holds)), reverse=True)
     said = ", ".join(f"{100 * error:.3g} % at {sun:g} deg" for sun, error in measured)
+    if said and level.name != "reference":
+        resolution = sorted(error_at(REFERENCE_RESOLUTION, [sun for sun, _ in measured]))
+        said += (" (the reference itself resolved to " + " to ".join(dict.fromkeys(
+            f"{100 * r:.2g}" for r in (resolution[0], resolution[-1]))) + " % there)")
     lowest_measured = min((sun for sun, _ in points), default=0.0)
     unmeasured = f"not measured below {lowest_measured:g} deg" if low < lowest_measured else ""
     where = ("not measured to hold at any sun" if holds is None else
              f"measured to hold with the sun down to {holds:g} deg: below it")
+    off = "resolved to" if level.name == "reference" else "off the reference by"    # the reference's: its own
     return (f"; {where}, down to {low:g} deg here, " + "; ".join(part for part in (
-        f"off the reference by {said}" if said else "", unmeasured) if part))
+        f"{off} {said}" if said else "", unmeasured) if part))
 
 
 def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, ray_march=None, samples=None,
@@ -662,9 +679,9 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     if scene.quality:
         why = ""
     elif level is not promised:
-        why = (f"; the fastest level whose measured error over the path fits {100 * budget:g} % ({promised.name} "
-               f"measured up to {100 * error_over(measured_errors(promised.name), *scene.sun_elevations_deg):.2g} "
-               f"% over it)")
+        why = (f"; the fastest level whose measured error, plus the reference's own resolution, fits "
+               f"{100 * budget:g} % over the path ({promised.name}: up to "
+               f"{100 * error_over(promise_bounds(promised.name), *scene.sun_elevations_deg):.2g} % over it)")
     elif level.budget <= budget:
         why = f"; the fastest level within {100 * budget:g} %"
     else:                                   # below every level's promise: the most accurate one, said so
@@ -722,7 +739,7 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     elif chosen.method == "lut":
         ray = None
         decisions.append(("renderer", "table lookup", f"its error {at_lowest}, is {_percent(lookup_error)} % "
-                          f"(measured)"))
+                          f"({estimate_basis(chosen, level.name, scene.sun_elevations_deg)})"))
     elif chosen.method == "raymarch":
         reason = lookup_note
         map_taken = scene.altitudes_m[1] <= RENDERER_ERRORS_MEASURED_UP_TO_M

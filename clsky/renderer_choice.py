@@ -35,7 +35,10 @@ measurement instead, for a scene seen from the ground (:func:`estimated_error`).
 cautious: at -6 deg the default level's ray march is 0.80 % off and the map 0.31 % off the ray march (the
 worst observer), and the map measured 0.83 % off the reference (README "Quality levels").
 Between the measured elevations the error is interpolated in log error; beyond them, the nearest
-value; over a sun path, the worst of the path's ends and of the measured elevations inside it.
+value; over a sun path, the worst of the path's ends and of the measured elevations inside it. Every
+figure was measured against the reference, which is itself off the converged sky by up to its resolution
+(:data:`REFERENCE_RESOLUTION`: 0.02 % by day, 0.09 % at -4 deg, more below): the estimate a budget is
+compared with adds it (:func:`with_resolution`).
 """
 
 from __future__ import annotations
@@ -47,8 +50,8 @@ import numpy as np
 from .errors import check_choice, check_integer, check_range, check_real
 
 __all__ = ["RendererRow", "RENDERERS", "DEFAULT_PIXELS", "LOOKUP4D_ERROR", "RAY_MARCH_ERROR", "LOOKUP_ERROR",
-           "SKYVIEW_ON_REFERENCE", "renderer_row", "choose_renderer", "estimated_error", "estimate_basis", "error_at",
-           "error_over", "worst_over"]
+           "REFERENCE_RESOLUTION", "SKYVIEW_ON_REFERENCE", "renderer_row", "choose_renderer", "estimated_error",
+           "estimate_basis", "error_at", "error_over", "worst_over", "with_resolution"]
 
 #: Measured error of the 3D table lookup (95th percentile, relative, default table, 64 x 64 all-sky fisheye
 #: from the ground, physical preset with ozone and ground, the harmonics M = 2 in the table and the
@@ -57,17 +60,28 @@ __all__ = ["RendererRow", "RENDERERS", "DEFAULT_PIXELS", "LOOKUP4D_ERROR", "RAY_
 #: against the azimuth-averaged reference, earlier that day: 4.99, 0.381, 0.0417, 0.0105).
 LOOKUP_ERROR = ((-4.0, 10.26), (1.0, 0.361), (8.0, 0.0419), (45.0, 0.0141))
 
+#: How far the reference (the 'reference' quality level, ``clsky.anim.accuracy``) is resolved, by sun elevation
+#: [deg]: the sum of the changes (p95, relative, 64 x 64 fisheye from the ground) of its frames when each group
+#: of its counts is doubled in turn (its sun nodes; its view axis with the gather's steps; its table's
+#: quadrature; its ray march's), which bounds the change of doubling them all at once, and so estimates how far
+#: the reference is off the converged sky. From -4 deg up bench/bench_quality.py (docs/quality_reference.csv,
+#: 2026-12-07), below bench/bench_quality_dusk.py (docs/quality_dusk_reference.csv, 2026-12-08), both on the
+#: Intel Xeon. The scene planner adds it to a level's measured error before it takes the level's promise to hold
+#: (:func:`clsky.planner.promise_bounds`): a level measured within its promise by less than this is within it as
+#: far as the reference can tell, and no further.
+REFERENCE_RESOLUTION = ((-12.0, 0.00278), (-10.0, 0.00247), (-8.0, 0.0018), (-6.0, 0.0014),
+                        (-4.0, 0.000902), (1.0, 0.000182), (8.0, 0.000217), (45.0, 0.000216))
+
 #: Measured error of each quality level's ray march against the reference (p95, 64 x 64 fisheye from the
 #: ground) by sun elevation [deg], the levels' tables as the scene planner gives them: from -4 deg up,
 #: bench/bench_quality.py (README "Quality levels", docs/quality.csv), each level planned for the four frames'
 #: path -4 to 45 deg; below, bench/bench_quality_dusk.py (README "Quality levels", below civil twilight,
 #: docs/quality_dusk.csv), each planned for the path -12 to 45 deg (their tables reading the orders' source at
 #: every view node there); both 2026-12-07, the Intel Xeon. The 'reference' level's: how far the reference
-#: converged with the ray march's counts doubled, that group alone (the sum of every group's change is 0.02 %
-#: by day, 0.09 % at -4 deg: README), not measured below -4 deg (the nearest value is taken). A measured error
-#: depends on where the sun falls between the plan's sun nodes, so on the path planned for: the default
-#: animation's own plan (-6 to 60 deg) was 0.89 % off at -6 deg (0.80 % here; a probe, 2026-12-07) and 0.56 %
-#: at -4 deg (0.68 %; README "Scene plan"), the draft planned for -6 deg alone 9.2 % (14.1 %; a probe).
+#: itself is resolved (:data:`REFERENCE_RESOLUTION`). A measured error depends on where the sun falls between
+#: the plan's sun nodes, so on the path planned for: the default animation's own plan (-6 to 60 deg) was 0.89 %
+#: off at -6 deg (0.80 % here; a probe, 2026-12-07) and 0.56 % at -4 deg (0.68 %; README "Scene plan"), the
+#: draft planned for -6 deg alone 9.2 % (14.1 %; a probe).
 RAY_MARCH_ERROR = {
     "draft": ((-12.0, 0.297), (-10.0, 0.236), (-8.0, 0.123), (-6.0, 0.141),
               (-4.0, 0.0627), (1.0, 0.0158), (8.0, 0.0247), (45.0, 0.0286)),
@@ -75,7 +89,7 @@ RAY_MARCH_ERROR = {
                 (-4.0, 0.00676), (1.0, 0.00178), (8.0, 0.00287), (45.0, 0.00351)),
     "high": ((-12.0, 0.00238), (-10.0, 0.00139), (-8.0, 0.000846), (-6.0, 0.000942),
              (-4.0, 0.000764), (1.0, 0.000271), (8.0, 0.000406), (45.0, 0.000516)),
-    "reference": ((-4.0, 0.0003), (1.0, 0.00005), (8.0, 0.00007), (45.0, 0.00007)),
+    "reference": REFERENCE_RESOLUTION,
 }
 
 #: The sky-view map's error against the reference itself, the observer on the ground (p95, 64 x 64 fisheye,
@@ -258,6 +272,18 @@ def estimated_error(row, level, altitude_m=0.0):
     return tuple(zip(nodes.tolist(), values.tolist()))
 
 
+def with_resolution(error, level):
+    """``error`` ((sun elevation [deg], p95), ..., ascending), measured against the reference for quality level
+    ``level``, as a bound on the error against the converged sky: plus how far the reference itself is resolved
+    (:data:`REFERENCE_RESOLUTION`) at each elevation of either, interpolated like any measured error
+    (:func:`error_at`); for the 'reference' level as it is (its figures are that resolution already). The
+    triangle inequality's bound, as if the two erred with one sign at the same pixels."""
+    if level == "reference":
+        return tuple(error)
+    nodes = sorted({sun for sun, _ in tuple(error) + REFERENCE_RESOLUTION})
+    return tuple(zip(nodes, (error_at(error, nodes) + error_at(REFERENCE_RESOLUTION, nodes)).tolist()))
+
+
 def renderer_row(method, rows=RENDERERS) -> RendererRow:
     """The row of ``rows`` whose ``--method`` name is ``method`` (ParameterError for a name of none)."""
     check_choice("method", method, [row.method for row in rows])
@@ -270,9 +296,12 @@ def estimate_basis(row, level, sun_elevations_deg, altitude_m=0.0) -> str:
     march's where that was lower, or the ray march's plus its own (:func:`estimated_error`); 'measured at' a
     sun where the figures were, 'interpolated at' one between measured suns, and between two kinds of figure,
     both."""
+    resolution = "" if level == "reference" else ", + the reference's own resolution"
     if not row.on_ray_march:
-        return "measured"
+        return "measured" + resolution
     nodes, values, kinds, measured = _estimate_nodes(row, level, altitude_m)
+    if level != "reference":        # the worst of the bound choose_renderer compares, not of the estimate
+        values = values + error_at(REFERENCE_RESOLUTION, nodes)
     own = any(error for _, error in row.error)
     said = {"reference": "measured against the reference",
             "floor": "the ray march's, measured (the map measured less)",
@@ -283,11 +312,11 @@ def estimate_basis(row, level, sun_elevations_deg, altitude_m=0.0) -> str:
     worst = min(max(worst_over(tuple(zip(nodes, values)), *sun_elevations_deg)[0], nodes[0]), nodes[-1])
     at = int(np.searchsorted(nodes, worst))
     if nodes[at] == worst and measured[at]:
-        return f"{said[kinds[at]]} at {worst:g} deg"
+        return f"{said[kinds[at]]} at {worst:g} deg{resolution}"
     below, above = (kinds[at], kinds[at]) if nodes[at] == worst else (kinds[at - 1], kinds[at])
     if below == above:
-        return f"{said[above]}, interpolated at {worst:g} deg"
-    return f"interpolated at {worst:g} deg between {short[below]} and {short[above]}"
+        return f"{said[above]}, interpolated at {worst:g} deg{resolution}"
+    return f"interpolated at {worst:g} deg between {short[below]} and {short[above]}{resolution}"
 
 
 def choose_renderer(sun_elevations_deg, budget, level="default", rows=RENDERERS, frames=None, pixels=DEFAULT_PIXELS,
@@ -296,19 +325,22 @@ def choose_renderer(sun_elevations_deg, budget, level="default", rows=RENDERERS,
     the sun path ``sun_elevations_deg`` = (low, high) [deg] fits ``budget`` (relative), for the ray march of
     quality level ``level`` (a name of :data:`RAY_MARCH_ERROR`) and observers up to ``altitude_m`` [m]; the
     'raymarch' row when none fits. The estimate is the worst over the path of :func:`estimated_error` (until
-    2026-12-07, the ray march's worst plus the row's worst, wherever each was). The cost of ``frames`` frames of
-    ``pixels`` rendered pixels each (:meth:`RendererRow.cost_cpu_s`) decides; with ``frames=None`` (the frame
-    count unknown) the rows with a build of their own are left out (module docstring) and the cost of one frame
-    decides. ValueError naming an argument that is no such value: the path's elevations in [-90, 90], low <=
-    high; the budget in (0, 1]; frames and pixels at least 1 (a negative count made the dearest row cheapest);
-    the altitude in [0, 1e8] m."""
+    2026-12-07, the ray march's worst plus the row's worst, wherever each was), plus the reference's own
+    resolution (:func:`with_resolution`, since 2026-12-08: until then the figures against the reference alone,
+    so the default animation's sky-view map, 0.83 % off it at -6 deg, fitted 1 % with no word of the
+    reference's own 0.14 % there). The cost of ``frames`` frames of ``pixels`` rendered pixels each (:meth:`RendererRow.cost_cpu_s`)
+    decides; with ``frames=None`` (the frame count unknown) the rows with a build of their own are left out
+    (module docstring) and the cost of one frame decides. ValueError naming an argument that is no such value:
+    the path's elevations in [-90, 90], low <= high; the budget in (0, 1]; frames and pixels at least 1 (a
+    negative count made the dearest row cheapest); the altitude in [0, 1e8] m."""
     low, high = check_range("sun_elevations_deg", sun_elevations_deg, -90.0, 90.0)
     check_real("budget", budget, 0.0, 1.0, low_open=True)
     check_choice("level", level, list(RAY_MARCH_ERROR))
     check_integer("frames", frames, 1, 10**9, optional=True)
     check_integer("pixels", pixels, 1, 2**31 - 1)
     check_real("altitude_m", altitude_m, 0.0, 1e8)
-    estimates = {row.method: error_over(estimated_error(row, level, altitude_m), low, high) for row in rows}
+    estimates = {row.method: error_over(with_resolution(estimated_error(row, level, altitude_m), level), low, high)
+                 for row in rows}
     candidates = [row for row in rows if frames is not None or row.build_cpu_s == 0.0]
     for row in sorted(candidates, key=lambda r: r.cost_cpu_s(1 if frames is None else frames, pixels)):
         if estimates[row.method] <= budget:

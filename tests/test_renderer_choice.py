@@ -12,12 +12,14 @@ import pytest
 
 from clsky.anim.cameras import FisheyeCamera
 from clsky.planner import Scene, plan_scene
-from clsky.renderer_choice import (DEFAULT_PIXELS, LOOKUP_ERROR, RAY_MARCH_ERROR, RENDERERS, SKYVIEW_ON_REFERENCE,
-                                   RendererRow, choose_renderer, error_at, error_over, estimate_basis, estimated_error,
-                                   renderer_row)
+from clsky.renderer_choice import (DEFAULT_PIXELS, LOOKUP_ERROR, RAY_MARCH_ERROR, REFERENCE_RESOLUTION, RENDERERS,
+                                   SKYVIEW_ON_REFERENCE, RendererRow, choose_renderer, error_at, error_over,
+                                   estimate_basis, estimated_error, renderer_row, with_resolution)
 
 
 row = renderer_row
+#: What the plan's words add to a figure measured against the reference (:func:`with_resolution`).
+MORE = ", + the reference's own resolution"
 
 
 def test_error_over_takes_the_worst_of_the_path_interpolated_in_log_error():
@@ -100,13 +102,15 @@ def test_a_new_renderer_is_one_row():
 
 
 def test_the_4d_lookup_counts_its_table_build():
-    """Down to -6 deg the 4D lookup's 3.9 % plus the default ray march's 0.80 % fits a 5 % budget; on the
+    """Down to -6 deg the 4D lookup's 3.9 % plus the default ray march's 0.80 % (and the reference's own
+    resolution there, REFERENCE_RESOLUTION) fits a 5 % budget; on the
     default frames it costs less than the sky-view map, but its table costs 12.4 CPU-s, so it wins only from
     12.4 s / (the map's cost - its own) frames on, about 1700; on 1024 x 1024 frames it costs more than the
     map and never wins. Without a frame count (the scene plan) it is left out."""
     path, budget = (-6.0, 60.0), 0.05
     chosen, _, estimates = choose_renderer(path, budget, "default")
-    assert estimates["lut4d"] == pytest.approx(0.039 + 0.0080, rel=1e-12) and estimates["lut4d"] <= budget
+    resolution = dict(REFERENCE_RESOLUTION)[-6.0]
+    assert estimates["lut4d"] == pytest.approx(0.039 + 0.0080 + resolution, rel=1e-12) and estimates["lut4d"] <= budget
     assert chosen.method == "skyview"                                    # frames unknown: no build counted
     saved_ms = row("skyview").frame_cpu_ms(DEFAULT_PIXELS) - row("lut4d").frame_cpu_ms(DEFAULT_PIXELS)
     pays_from = 1000.0 * row("lut4d").build_cpu_s / saved_ms
@@ -123,9 +127,26 @@ def test_the_4d_lookup_counts_its_table_build():
     assert choose_renderer(path, 0.01, "default", frames=100000)[0].method == "skyview"
 
 
+def test_a_bound_adds_the_references_resolution():
+    """with_resolution: a figure measured against the reference plus how far the reference itself is resolved,
+    at the elevations of both (interpolated in log error between them); the reference level's own figures as
+    they are. By day the reference resolves 0.02 %, at -4 deg 0.09 % (README "Quality levels")."""
+    measured = ((-6.0, 0.008), (1.0, 0.002), (45.0, 0.003))
+    bound = with_resolution(measured, "default")
+    assert [sun for sun, _ in bound] == sorted({sun for sun, _ in measured + REFERENCE_RESOLUTION})
+    suns = np.array([sun for sun, _ in bound])
+    assert [e for _, e in bound] == pytest.approx(error_at(measured, suns) + error_at(REFERENCE_RESOLUTION, suns),
+                                                  rel=1e-12)
+    assert dict(bound)[45.0] == pytest.approx(0.003 + 0.000216, rel=1e-2)
+    assert with_resolution(measured, "reference") == measured
+    assert 0.0001 < dict(REFERENCE_RESOLUTION)[45.0] < 0.0003 and 0.0008 < dict(REFERENCE_RESOLUTION)[-4.0] < 0.001
+
+
 def test_nothing_fits_falls_back_to_the_ray_march():
+    """The reference level's estimate is its own resolution (nothing added), worst at -6 deg on this path."""
     chosen, estimate, _ = choose_renderer((-6.0, 60.0), 1e-5, "reference")
-    assert chosen.method == "raymarch" and estimate == pytest.approx(3.0e-4)
+    assert chosen.method == "raymarch" and estimate == pytest.approx(dict(REFERENCE_RESOLUTION)[-6.0], rel=1e-12)
+    assert max(e for sun, e in REFERENCE_RESOLUTION if sun >= -6.0) == dict(REFERENCE_RESOLUTION)[-6.0]
 
 
 def test_the_map_measured_against_the_reference_replaces_the_sum_from_the_ground():
@@ -166,12 +187,14 @@ def test_a_measurement_over_part_of_the_path_meets_the_sum_without_a_step():
     assert estimate[-6.0] == pytest.approx(0.012, rel=1e-12) and estimate[-4.0] == pytest.approx(summed, rel=1e-12)
     assert error_at(estimated_error(part, "default"), -5.0) == pytest.approx(np.sqrt(0.012 * summed), rel=1e-12)
     assert estimate_basis(part, "default", (-5.0, 10.0)) == (
-        "interpolated at -5 deg between its measurement against the reference and the ray march's + its own")
-    assert estimate_basis(part, "default", (-8.0, -7.0)) == "measured against the reference, interpolated at -7 deg"
-    assert estimate_basis(part, "default", (-12.0, -7.0)) == "estimated: the ray march's + its own, measured at -12 deg"
+        "interpolated at -5 deg between its measurement against the reference and the ray march's + its own" + MORE)
+    assert estimate_basis(part, "default", (-8.0, -7.0)) == ("measured against the reference, interpolated at -7 deg"
+                                                            + MORE)
+    assert estimate_basis(part, "default", (-12.0, -7.0)) == ("estimated: the ray march's + its own, measured at -12 "
+                                                             "deg" + MORE)
     # 0 deg is a node of the map's own error, not of the ray march's: interpolated, not 'measured at 0 deg'
     assert estimate_basis(part, "default", (-3.0, 10.0)) == ("estimated: the ray march's + its own, measured, "
-                                                            "interpolated at -3 deg")
+                                                            "interpolated at -3 deg" + MORE)
 
 
 @pytest.mark.parametrize("level, path, altitude, words", [
@@ -185,14 +208,17 @@ def test_a_measurement_over_part_of_the_path_meets_the_sum_without_a_step():
 ])
 def test_the_plans_words_say_which_figure_made_the_worst(level, path, altitude, words):
     """estimate_basis: at the worst sun over the path, the measurement against the reference, the ray march's
-    where that was lower, or the sum; 'measured at' a measured sun, 'interpolated at' a path end between."""
-    assert estimate_basis(row("skyview"), level, path, altitude) == words
+    where that was lower, or the sum; 'measured at' a measured sun, 'interpolated at' a path end between; and
+    the reference's own resolution added, but to the reference level's figures (they are that resolution)."""
+    assert estimate_basis(row("skyview"), level, path, altitude) == words + MORE
+    assert estimate_basis(row("skyview"), "reference", (-6.0, 60.0)) == "estimated: the ray march's + its own, " \
+        "measured at -6 deg"
 
 
 def test_the_plans_words_for_the_other_rows():
     """The 3D lookup's error is its own measured one; the ray march's row adds nothing to the level's."""
-    assert estimate_basis(row("lut"), "default", (-6.0, 60.0)) == "measured"
-    assert estimate_basis(row("raymarch"), "default", (-6.0, 60.0)) == "the ray march's, measured at -6 deg"
+    assert estimate_basis(row("lut"), "default", (-6.0, 60.0)) == "measured" + MORE
+    assert estimate_basis(row("raymarch"), "default", (-6.0, 60.0)) == "the ray march's, measured at -6 deg" + MORE
 
 
 def test_the_maps_estimate_from_the_ground_takes_the_measured_figures():
@@ -237,6 +263,15 @@ def test_the_measured_tables_are_the_benchmarks():
     for level, (march, skyview) in measured.items():
         assert RAY_MARCH_ERROR[level] == tuple(sorted(march.items())), level
         assert SKYVIEW_ON_REFERENCE[level] == tuple(sorted(skyview.items())), level
+    # the reference's resolution: the "sum" row of its doubled groups, docs/quality_reference.csv and
+    # docs/quality_dusk_reference.csv (the same runs)
+    resolution = {}
+    for name, suns in (("quality_reference.csv", SUN_ELEVATIONS), ("quality_dusk_reference.csv", DUSK_ELEVATIONS)):
+        with open(root / "docs" / name, newline="") as handle:
+            rows = {r["doubled"]: r for r in csv.DictReader(handle)}
+        assert set(rows) == {"sun nodes", "view axis, gather", "table quadrature", "ray march", "sum"}, name
+        resolution.update({sun: float(f"{float(rows['sum'][f'change {frame}']):.3g}") for frame, sun in suns.items()})
+    assert REFERENCE_RESOLUTION == tuple(sorted(resolution.items())) == RAY_MARCH_ERROR["reference"]
     readme = (root / "README.md").read_text(encoding="utf-8")
     section = readme.split("<!-- bench:skyview-plan -->")[1].split("<!-- /bench:skyview-plan -->")[0]
     header = next(line for line in section.splitlines() if line.startswith("| observer |"))
@@ -252,9 +287,9 @@ def test_the_measured_tables_are_the_benchmarks():
 
 def test_the_default_animation_plan_picks_the_skyview_map(cl_context):
     """The README's main job (sun -6 to 60 deg, 1 %): the sky-view map fits (0.83 % measured against the
-    reference at -6 deg, 0.79 % at -4), keeping the ray march's quadrature for its nodes; an
-    animation that renders the ray march anyway (compare) still gets the ray march's line, saying the map
-    would do."""
+    reference at -6 deg, 0.79 % at -4, + the reference's own resolution: 0.97 % at -6 deg), keeping the ray
+    march's quadrature for its nodes; an animation that renders the ray march anyway (compare) still gets the
+    ray march's line, saying the map would do."""
     plan = plan_scene(Scene((-6.0, 60.0)), ctx=cl_context)
     assert plan.renderer == "skyview" and plan.ray is not None and plan.ray.view_steps == 48
     line = dict((topic, (decision, reason)) for topic, decision, reason in plan.decisions)["renderer"]
@@ -263,14 +298,16 @@ def test_the_default_animation_plan_picks_the_skyview_map(cl_context):
     asked = plan_scene(Scene((-6.0, 60.0)), ctx=cl_context, ray_march=True)
     line = dict((topic, (decision, reason)) for topic, decision, reason in asked.decisions)["renderer"]
     assert asked.renderer == "skyview" and line[0] == "ray march, 48 samples per ray"
-    assert line[1].startswith("asked for; the sky-view map 64 x 128's 0.826 % (measured against the reference at -6 "
-                              "deg) fits")
+    assert line[1].startswith("asked for; the sky-view map 64 x 128's 0.966 % (measured against the reference at -6 "
+                              "deg, + the reference's own resolution) fits")
     # the sun axis is the ray march's: the map's nodes are ray-marched
     assert asked.table == plan.table
 
 
 def test_a_tight_budget_plan_keeps_the_ray_march(cl_context):
-    plan = plan_scene(Scene((-6.0, 60.0), error_budget=1e-3, components=("rayleigh", "mie")), ctx=cl_context)
+    """By day the high level fits 0.1 % (0.052 % + the reference's 0.022 % at 45 deg), its sky-view map does not
+    (0.113 % measured against the reference at 45 deg)."""
+    plan = plan_scene(Scene((1.0, 60.0), error_budget=1e-3, components=("rayleigh", "mie")), ctx=cl_context)
     assert plan.renderer == "raymarch" and plan.level.name == "high"
     assert dataclasses.replace(plan, renderer="x").renderer == "x"      # a plain field of the frozen Plan
 
@@ -311,7 +348,7 @@ def test_a_plan_of_tiny_frames_marches_every_pixel(cl_context):
     reason = dict((topic, r) for topic, _, r in plan.decisions)["renderer"]
     assert "table lookup's 1026 %" in reason
     march, skyview = row("raymarch").frame_cpu_ms(tiny), row("skyview").frame_cpu_ms(tiny)
-    assert reason.endswith(f"; the sky-view map's 0.826 % fits, but it costs more a frame of {tiny} pixels "
+    assert reason.endswith(f"; the sky-view map's 0.966 % fits, but it costs more a frame of {tiny} pixels "
                            f"({skyview:.3g} against {march:.3g} CPU-ms, measured)")
 
 
