@@ -229,6 +229,20 @@ def reference_frames(args, reference_name, frame_set, loads):
     return reference, valid, seconds, cpu_seconds, change
 
 
+def write_reference_csv(path, change, names):
+    """Write the reference's convergence ``change`` ({group: {frame name: change}}, "sum" last) to ``path``, one
+    row a group (``doubled``, ``change <frame>`` for each of ``names``), where it holds every group of
+    :data:`clsky.anim.accuracy.REFERENCE_GROUPS` and their sum: a partial sum is no resolution for the scene
+    planner (:data:`clsky.renderer_choice.REFERENCE_RESOLUTION`), and the file keeps the last whole one. Returns
+    what it did, in words."""
+    missing = [group for group in accuracy.REFERENCE_GROUPS if group not in change]
+    if missing:
+        return f"{path} not written: {'; '.join(missing)} not doubled in this run"
+    writers.write_csv(path, [{"doubled": group, **{f"change {n}": values[n] for n in names}}
+                             for group, values in change.items()], force=True)
+    return f"wrote {path}"
+
+
 def run(args, reference_name, frame_set=DAY):
     """Measure the levels on ``frame_set`` against the reference, and (DAY) the default animation's plan; print
     the tables, write the CSV (``args.docs``) and, unless ``--no-readme``, the README sections, all at the
@@ -265,11 +279,7 @@ def run(args, reference_name, frame_set=DAY):
         args.docs.mkdir(parents=True, exist_ok=True)
         writers.write_csv(args.docs / frame_set.csv, rows, force=True)
         print(f"wrote {args.docs / frame_set.csv}", flush=True)
-        if change:
-            writers.write_csv(args.docs / frame_set.reference_csv,
-                              [{"doubled": group, **{f"change {n}": values[n] for n in frame_set.names}}
-                               for group, values in change.items()], force=True)
-            print(f"wrote {args.docs / frame_set.reference_csv}", flush=True)
+        print(write_reference_csv(args.docs / frame_set.reference_csv, change, frame_set.names), flush=True)
 
     names = frame_set.names
     lines = [f"{stamp}: {args.size} x {args.size} fisheye frames from the ground (`{frame_set.script}`). "

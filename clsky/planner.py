@@ -22,8 +22,9 @@ What the plan decides, and why:
 * **Resolution and orders** come from the quality level the budget asks for
   (:func:`clsky.quality.level_for_budget`), or the first finer one whose ray march's error measured against
   the reference, plus how far the reference itself is resolved (:func:`promise_bounds`), fits the budget over
-  the sun path; a level's promise is taken to hold only down to the sun where that bound was last within it
-  (:func:`promise_measured_down_to`), and a plan whose sun goes lower says what was measured there.
+  the sun path (the reference level where none does, said so); a level's promise is taken to hold only down to
+  the sun where that bound was last within it (:func:`promise_measured_down_to`), and a plan whose sun goes
+  lower says what was measured there.
 * **Higher orders** are dropped when a pilot (a small table on the planned sun range, ray-marched on a
   coarse fisheye over the cameras' view elevations at the path's lowest, highest and horizon suns) shows
   that they add less than half the budget, or when the scene does not want them. The pilot's share is
@@ -622,15 +623,19 @@ def _below_measured_note(level, sun_elevations_deg, holds):
     said = ", ".join(f"{100 * error:.3g} % at {sun:g} deg" for sun, error in measured)
     if said and level.name != "reference":
         resolution = sorted(error_at(REFERENCE_RESOLUTION, [sun for sun, _ in measured]))
-        said += (" (the reference itself resolved to " + " to ".join(dict.fromkeys(
-            f"{100 * r:.2g}" for r in (resolution[0], resolution[-1]))) + " % there)")
+        said += (" (the reference's own estimated error there: " + " to ".join(dict.fromkeys(
+            f"{100 * r:.2g}" for r in (resolution[0], resolution[-1]))) + " %)")
     lowest_measured = min((sun for sun, _ in points), default=0.0)
     unmeasured = f"not measured below {lowest_measured:g} deg" if low < lowest_measured else ""
+    # a path end between two measured suns: the figure the plan took there (interpolated), which a plan by
+    # budget compared with the budget and the measured figures beside it do not show
+    between = (f"{100 * error_at(promise_bounds(level.name), low):.2g} % at {low:g} deg with the reference's own "
+               f"estimated error (interpolated)" if floor < low < max(sun for sun, _ in points) else "")
     where = ("not measured to hold at any sun" if holds is None else
              f"measured to hold with the sun down to {holds:g} deg: below it")
-    off = "resolved to" if level.name == "reference" else "off the reference by"    # the reference's: its own
+    off = "its own estimated error" if level.name == "reference" else "off the reference by"
     return (f"; {where}, down to {low:g} deg here, " + "; ".join(part for part in (
-        f"{off} {said}" if said else "", unmeasured) if part))
+        f"{off} {said}" if said else "", between, unmeasured) if part))
 
 
 def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, ray_march=None, samples=None,
@@ -676,16 +681,20 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     promised = level
     if not scene.quality:
         level = _level_measured_within(level, budget, *scene.sun_elevations_deg)
+    bound = error_over(promise_bounds(level.name), *scene.sun_elevations_deg)
     if scene.quality:
         why = ""
+    elif level.budget > budget:             # below every level's promise: the most accurate one, said so
+        why = f"; no level promises {100 * budget:g} %: the most accurate one"
+    elif bound > budget:                    # no level measured within it over this path: the same, said so
+        why = (f"; no level's measured error, plus the reference's own estimated error, fits {100 * budget:g} % "
+               f"over the path: the most accurate one (up to {100 * bound:.2g} % over it)")
     elif level is not promised:
-        why = (f"; the fastest level whose measured error, plus the reference's own resolution, fits "
+        why = (f"; the fastest level whose measured error, plus the reference's own estimated error, fits "
                f"{100 * budget:g} % over the path ({promised.name}: up to "
                f"{100 * error_over(promise_bounds(promised.name), *scene.sun_elevations_deg):.2g} % over it)")
-    elif level.budget <= budget:
+    else:
         why = f"; the fastest level within {100 * budget:g} %"
-    else:                                   # below every level's promise: the most accurate one, said so
-        why = f"; no level promises {100 * budget:g} %: the most accurate one"
     holds = promise_measured_down_to(level)
     if holds is None or scene.sun_elevations_deg[0] < holds:
         why += _below_measured_note(level, scene.sun_elevations_deg, holds)
@@ -749,6 +758,10 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         elif map_taken:                                     # the map was over the budget too: said, and why
             basis = estimate_basis(renderer_row("skyview"), level.name, scene.sun_elevations_deg, scene.altitudes_m[1])
             reason += f"; the sky-view map's {_percent(estimates['skyview'])} % ({basis}) exceeds it too"
+        if estimates["raymarch"] > budget:                  # the most accurate renderer misses it as well
+            basis = estimate_basis(chosen, level.name, scene.sun_elevations_deg, scene.altitudes_m[1])
+            reason += (f"; the ray march itself, {_percent(estimates['raymarch'])} % ({basis}), exceeds it too: no "
+                       f"renderer fits the budget")
         decisions.append(("renderer", march, reason))
     else:
         lookup_fits = lookup_error <= budget and scene.altitudes_m[1] == 0.0

@@ -63,12 +63,14 @@ LOOKUP_ERROR = ((-4.0, 10.26), (1.0, 0.361), (8.0, 0.0419), (45.0, 0.0141))
 #: How far the reference (the 'reference' quality level, ``clsky.anim.accuracy``) is resolved, by sun elevation
 #: [deg]: the sum of the changes (p95, relative, 64 x 64 fisheye from the ground) of its frames when each group
 #: of its counts is doubled in turn (its sun nodes; its view axis with the gather's steps; its table's
-#: quadrature; its ray march's), which bounds the change of doubling them all at once, and so estimates how far
-#: the reference is off the converged sky. From -4 deg up bench/bench_quality.py (docs/quality_reference.csv,
-#: 2026-12-07), below bench/bench_quality_dusk.py (docs/quality_dusk_reference.csv, 2026-12-08), both on the
-#: Intel Xeon. The scene planner adds it to a level's measured error before it takes the level's promise to hold
-#: (:func:`clsky.planner.promise_bounds`): a level measured within its promise by less than this is within it as
-#: far as the reference can tell, and no further.
+#: quadrature; its ray march's), which bounds the change of doubling them all at once: the reference's own
+#: estimated error. An estimate from below: a count whose error falls as its spacing to the power p changes the
+#: frames on doubling by 1 - 2^-p of that error (three quarters for p = 2, a half for p = 1). From -4 deg up
+#: bench/bench_quality.py (docs/quality_reference.csv, 2026-12-07), below bench/bench_quality_dusk.py
+#: (docs/quality_dusk_reference.csv, 2026-12-08), both on the Intel Xeon. The scene planner adds it to a level's
+#: measured error before it takes the level's promise to hold (:func:`clsky.planner.promise_bounds`) and before
+#: a renderer's estimate is compared with a budget (:func:`choose_renderer`): a level measured within its
+#: promise by less than this is within it as far as the reference can tell, and no further.
 REFERENCE_RESOLUTION = ((-12.0, 0.00278), (-10.0, 0.00247), (-8.0, 0.0018), (-6.0, 0.0014),
                         (-4.0, 0.000902), (1.0, 0.000182), (8.0, 0.000217), (45.0, 0.000216))
 
@@ -273,11 +275,12 @@ def estimated_error(row, level, altitude_m=0.0):
 
 
 def with_resolution(error, level):
-    """``error`` ((sun elevation [deg], p95), ..., ascending), measured against the reference for quality level
-    ``level``, as a bound on the error against the converged sky: plus how far the reference itself is resolved
+    """``error`` ((sun elevation [deg], p95), ..., ascending), measured against the reference, as an estimate of
+    the error against the converged sky: plus how far the reference itself is resolved
     (:data:`REFERENCE_RESOLUTION`) at each elevation of either, interpolated like any measured error
-    (:func:`error_at`); for the 'reference' level as it is (its figures are that resolution already). The
-    triangle inequality's bound, as if the two erred with one sign at the same pixels."""
+    (:func:`error_at`), as if the two erred with one sign at the same pixels. ``level``: the quality level whose
+    ray march the figures are made from, or None for figures of their own (the 3D lookup's); for the
+    'reference' level's ray march, ``error`` as it is (its figures are that resolution already)."""
     if level == "reference":
         return tuple(error)
     nodes = sorted({sun for sun, _ in tuple(error) + REFERENCE_RESOLUTION})
@@ -296,12 +299,20 @@ def estimate_basis(row, level, sun_elevations_deg, altitude_m=0.0) -> str:
     march's where that was lower, or the ray march's plus its own (:func:`estimated_error`); 'measured at' a
     sun where the figures were, 'interpolated at' one between measured suns, and between two kinds of figure,
     both."""
-    resolution = "" if level == "reference" else ", + the reference's own resolution"
+    def resolution(at):
+        if marched_from == "reference":     # its figures are the reference's own error already
+            return ""
+        return f", + the reference's own estimated error, {100 * float(error_at(REFERENCE_RESOLUTION, at)):.2g} %"
+
+    marched_from = level if row.on_ray_march else None
     if not row.on_ray_march:
-        return "measured" + resolution
+        worst = worst_over(with_resolution(row.error, marched_from), *sun_elevations_deg)[0]
+        return "measured" + resolution(worst)
     nodes, values, kinds, measured = _estimate_nodes(row, level, altitude_m)
-    if level != "reference":        # the worst of the bound choose_renderer compares, not of the estimate
-        values = values + error_at(REFERENCE_RESOLUTION, nodes)
+    # the worst of what choose_renderer compares (with_resolution); its nodes are the estimate's, as
+    # REFERENCE_RESOLUTION's suns are among every level's ray-march suns (tested)
+    values = np.array([value for _, value in with_resolution(tuple(zip(nodes.tolist(), values.tolist())),
+                                                             marched_from)])
     own = any(error for _, error in row.error)
     said = {"reference": "measured against the reference",
             "floor": "the ray march's, measured (the map measured less)",
@@ -312,11 +323,11 @@ def estimate_basis(row, level, sun_elevations_deg, altitude_m=0.0) -> str:
     worst = min(max(worst_over(tuple(zip(nodes, values)), *sun_elevations_deg)[0], nodes[0]), nodes[-1])
     at = int(np.searchsorted(nodes, worst))
     if nodes[at] == worst and measured[at]:
-        return f"{said[kinds[at]]} at {worst:g} deg{resolution}"
+        return f"{said[kinds[at]]} at {worst:g} deg{resolution(worst)}"
     below, above = (kinds[at], kinds[at]) if nodes[at] == worst else (kinds[at - 1], kinds[at])
     if below == above:
-        return f"{said[above]}, interpolated at {worst:g} deg{resolution}"
-    return f"interpolated at {worst:g} deg between {short[below]} and {short[above]}{resolution}"
+        return f"{said[above]}, interpolated at {worst:g} deg{resolution(worst)}"
+    return f"interpolated at {worst:g} deg between {short[below]} and {short[above]}{resolution(worst)}"
 
 
 def choose_renderer(sun_elevations_deg, budget, level="default", rows=RENDERERS, frames=None, pixels=DEFAULT_PIXELS,
@@ -326,20 +337,21 @@ def choose_renderer(sun_elevations_deg, budget, level="default", rows=RENDERERS,
     quality level ``level`` (a name of :data:`RAY_MARCH_ERROR`) and observers up to ``altitude_m`` [m]; the
     'raymarch' row when none fits. The estimate is the worst over the path of :func:`estimated_error` (until
     2026-12-07, the ray march's worst plus the row's worst, wherever each was), plus the reference's own
-    resolution (:func:`with_resolution`, since 2026-12-08: until then the figures against the reference alone,
-    so the default animation's sky-view map, 0.83 % off it at -6 deg, fitted 1 % with no word of the
-    reference's own 0.14 % there). The cost of ``frames`` frames of ``pixels`` rendered pixels each (:meth:`RendererRow.cost_cpu_s`)
-    decides; with ``frames=None`` (the frame count unknown) the rows with a build of their own are left out
-    (module docstring) and the cost of one frame decides. ValueError naming an argument that is no such value:
-    the path's elevations in [-90, 90], low <= high; the budget in (0, 1]; frames and pixels at least 1 (a
-    negative count made the dearest row cheapest); the altitude in [0, 1e8] m."""
+    estimated error (:func:`with_resolution`, since 2026-12-08: until then the figures against the reference
+    alone, so the default animation's sky-view map, 0.83 % off it at -6 deg, fitted 1 % with no word of the
+    reference's own 0.14 % there). The cost of ``frames`` frames of ``pixels`` rendered pixels each
+    (:meth:`RendererRow.cost_cpu_s`) decides; with ``frames=None`` (the frame count unknown) the rows with a build
+    of their own are left out (module docstring) and the cost of one frame decides. ValueError naming an
+    argument that is no such value: the path's elevations in [-90, 90], low <= high; the budget in (0, 1];
+    frames and pixels at least 1 (a negative count made the dearest row cheapest); the altitude in [0, 1e8] m."""
     low, high = check_range("sun_elevations_deg", sun_elevations_deg, -90.0, 90.0)
     check_real("budget", budget, 0.0, 1.0, low_open=True)
     check_choice("level", level, list(RAY_MARCH_ERROR))
     check_integer("frames", frames, 1, 10**9, optional=True)
     check_integer("pixels", pixels, 1, 2**31 - 1)
     check_real("altitude_m", altitude_m, 0.0, 1e8)
-    estimates = {row.method: error_over(with_resolution(estimated_error(row, level, altitude_m), level), low, high)
+    estimates = {row.method: error_over(with_resolution(estimated_error(row, level, altitude_m),
+                                                        level if row.on_ray_march else None), low, high)
                  for row in rows}
     candidates = [row for row in rows if frames is not None or row.build_cpu_s == 0.0]
     for row in sorted(candidates, key=lambda r: r.cost_cpu_s(1 if frames is None else frames, pixels)):

@@ -46,7 +46,7 @@ HEADERS = {
                       "| doubled | day [%] |", "| table | sun axis | cells | build [s] | CPU [s] | day [%] |"],
     "bench_quality_dusk": ["| level | promise | table | samples | build [s] | CPU [s] | render [ms] | CPU [ms] | "
                            "-6 deg [%] | -8 deg [%] | -10 deg [%] | -12 deg [%] | lookup, worst [%] | "
-                           "sky-view map, worst [%] | load |"],
+                           "sky-view map, worst [%] | load |", "| doubled | -6 deg [%] |"],
     "bench_view_nodes": ["| preset | sampling | rays | n | Ibar median | Ibar p95 | Ibar max |",
                          "| preset | observer [km] | planner picks | rays hitting the ground |",
                          "| sampling | table [s] | CPU [s] | ray march [ms] | CPU [ms] |"],
@@ -297,6 +297,32 @@ def test_a_cached_reference_gets_the_groups_asked_for(tmp_path):
     assert both[1] == table_rows(asked, header)[0]
     for column in range(1, len(both[0])):
         assert float(both[2][column]) == pytest.approx(float(both[0][column]) + float(both[1][column]), abs=2e-3)
+
+
+def test_the_references_convergence_file_holds_every_group_or_is_not_written(tmp_path):
+    """bench_quality writes docs/*_reference.csv (the scene planner's REFERENCE_RESOLUTION is its "sum" row) only
+    from a run that doubled every group: a partial sum written there would have replaced the last whole one."""
+    import csv
+
+    sys.path.insert(0, str(BENCH))
+    try:
+        import bench_quality
+    finally:
+        sys.path.remove(str(BENCH))
+    groups = list(bench_quality.accuracy.REFERENCE_GROUPS)
+    change = {group: {"a": 0.001 * (i + 1), "b": 0.002} for i, group in enumerate(groups)}
+    change["sum"] = {"a": 0.01, "b": 0.008}
+    path = tmp_path / "quality_reference.csv"
+    partial = {group: change[group] for group in ("ray march", "sum")}
+    assert bench_quality.write_reference_csv(path, partial, ["a", "b"]) == (
+        f"{path} not written: sun nodes; view axis, gather; table quadrature not doubled in this run")
+    assert not path.exists()
+    assert bench_quality.write_reference_csv(path, change, ["a", "b"]) == f"wrote {path}"
+    with open(path, newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert [r["doubled"] for r in rows] == groups + ["sum"]
+    assert [float(r["change a"]) for r in rows] == [0.001, 0.002, 0.003, 0.004, 0.01]
+    assert [float(r["change b"]) for r in rows] == [0.002] * 4 + [0.008]
 
 
 def test_a_reference_cache_holds_its_level_and_is_written_whole(tmp_path):

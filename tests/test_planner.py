@@ -417,7 +417,7 @@ def test_a_lookup_that_sees_a_reflecting_ground_keeps_its_orders(cl_context):
     high = plan_scene(Scene((40.0, 41.0), altitudes_m=(3e3, 3e3), view_elevations_deg=(-30.0, 30.0),
                             error_budget=0.05, pixels=256 * 256), ctx=cl_context)
     assert high.renderer == "skyview"
-    # 1.63 % measured, + the reference's resolution by day (0.02 %)
+    # 1.63 % measured, + the reference's own estimated error by day (0.02 %)
     assert "the table lookup's 1.66 % at the lowest sun, 40 deg is measured from the ground" in \
         dict((name, why) for name, _, why in high.decisions)["renderer"]
 
@@ -459,41 +459,52 @@ def test_the_plan_says_where_its_promise_and_margins_stop():
     were measured with the sun down to -4 deg (the default level measured 1.0 to 1.5 % off the reference from
     -8 to -12 deg since: clsky.renderer_choice.RAY_MARCH_ERROR); a sun at the zenith was given '+29.3 deg above'
     an axis that stops at 90. A promise is measured to hold down to the lowest sun above the level's first miss,
-    a miss being a measured error that, with the reference's own resolution added (REFERENCE_RESOLUTION), exceeds
+    a miss being a measured error that, with the reference's own estimated error added (REFERENCE_RESOLUTION), exceeds
     the promise: the draft to -4 deg (14 % at -6), the default to -6 (0.996 + 0.18 % at -8), the high level and
     the reference to +1 deg (0.076 + 0.09 % and 0.09 % at -4 deg)."""
     def quality(scene):
         return dict((t, (level, why)) for t, level, why in plan_scene(scene).decisions)["quality"]
 
     assert [promise_measured_down_to(QUALITY_LEVELS[name]) for name in QUALITY_LEVELS] == [-4.0, -6.0, 1.0, 1.0]
-    # by budget: the fastest level whose measured error over the path fits it, said so, with what it measured
+    # by budget: the fastest level whose measured error plus the reference's own fits it, said so, with what it
+    # measured
+    own = "the reference's own estimated error there:"
     assert quality(Scene((-30.0, -12.5))) == ("high", (
-        "promises 0.1 % or better; the fastest level whose measured error, plus the reference's own resolution, "
-        "fits 1 % over the path (default: up to 1.8 % over it); measured to hold with the sun down to 1 deg: below "
-        "it, down to -30 deg here, off the reference by 0.238 % at -12 deg (the reference itself resolved to 0.28 % "
-        "there); not measured below -12 deg"))
+        "promises 0.1 % or better; the fastest level whose measured error, plus the reference's own estimated "
+        "error, fits 1 % over the path (default: up to 1.8 % over it); measured to hold with the sun down to 1 deg: "
+        f"below it, down to -30 deg here, off the reference by 0.238 % at -12 deg ({own} 0.28 %); not measured "
+        "below -12 deg"))
     # by name: that level, and what it measured down to the first measured sun below the path's lowest
     assert quality(Scene((-10.0, 5.0), quality="default"))[1].endswith(
         "measured to hold with the sun down to -6 deg: below it, down to -10 deg here, off the reference by 0.996 % "
-        "at -8 deg, 1.3 % at -10 deg (the reference itself resolved to 0.18 to 0.25 % there)")
+        f"at -8 deg, 1.3 % at -10 deg ({own} 0.18 to 0.25 %)")
+    # a path's end between two measured suns: the bound the plan took there, interpolated in log error
+    # (sqrt((0.996 + 0.18) * (0.80 + 0.14)) = 1.05 % at -7 deg)
     assert quality(Scene((-7.0, 10.0), quality="default"))[1].endswith(
-        "by 0.996 % at -8 deg (the reference itself resolved to 0.18 % there)")
+        f"by 0.996 % at -8 deg ({own} 0.18 %); 1.1 % at -7 deg with the reference's own estimated error "
+        "(interpolated)")
     assert quality(Scene((-9.0, 10.0), quality="draft"))[1].endswith(
-        "down to -9 deg here, off the reference by 14.1 % at -6 deg, 12.3 % at -8 deg, 23.6 % at -10 deg (the "
-        "reference itself resolved to 0.14 to 0.25 % there)")
+        "down to -9 deg here, off the reference by 14.1 % at -6 deg, 12.3 % at -8 deg, 23.6 % at -10 deg "
+        f"({own} 0.14 to 0.25 %); 17 % at -9 deg with the reference's own estimated error (interpolated)")
     assert quality(Scene((-13.0, 10.0), quality="draft"))[1].endswith(
-        "29.7 % at -12 deg (the reference itself resolved to 0.14 to 0.28 % there); not measured below -12 deg")
+        f"29.7 % at -12 deg ({own} 0.14 to 0.28 %); not measured below -12 deg")
     # the measured suns on the path (and the nearest beyond its ends), not those above it
     assert quality(Scene((-13.0, -11.0), quality="draft"))[1].endswith(
-        "down to -13 deg here, off the reference by 23.6 % at -10 deg, 29.7 % at -12 deg (the reference itself "
-        "resolved to 0.25 to 0.28 % there); not measured below -12 deg")
-    # the reference level's own figures are its resolution
+        f"down to -13 deg here, off the reference by 23.6 % at -10 deg, 29.7 % at -12 deg ({own} 0.25 to 0.28 %); "
+        "not measured below -12 deg")
+    # the reference level's own figures are the reference's estimated error
     assert quality(Scene((-9.0, 10.0), quality="reference"))[1].endswith(
-        "measured to hold with the sun down to 1 deg: below it, down to -9 deg here, resolved to 0.0902 % at -4 deg, "
-        "0.14 % at -6 deg, 0.18 % at -8 deg, 0.247 % at -10 deg")
+        "measured to hold with the sun down to 1 deg: below it, down to -9 deg here, its own estimated error "
+        "0.0902 % at -4 deg, 0.14 % at -6 deg, 0.18 % at -8 deg, 0.247 % at -10 deg; 0.21 % at -9 deg with the "
+        "reference's own estimated error (interpolated)")
     assert quality(Scene((-6.0, 60.0), quality="high"))[1].endswith(
-        "off the reference by 0.0764 % at -4 deg, 0.0942 % at -6 deg (the reference itself resolved to 0.09 to "
-        "0.14 % there)")
+        f"off the reference by 0.0764 % at -4 deg, 0.0942 % at -6 deg ({own} 0.09 to 0.14 %)")
+    # no level fits: the most accurate one, said so (it said 'the fastest level whose ... fits 0.1 %')
+    assert quality(Scene((-8.0, 0.0), error_budget=1e-3)) == ("reference", (
+        "promises 0.05 % or better; no level's measured error, plus the reference's own estimated error, fits "
+        "0.1 % over the path: the most accurate one (up to 0.18 % over it); measured to hold with the sun down to "
+        "1 deg: below it, down to -8 deg here, its own estimated error 0.0902 % at -4 deg, 0.14 % at -6 deg, "
+        "0.18 % at -8 deg"))
     for path in ((-6.0, 60.0), (-4.0, 60.0)):       # the default animation's path: within the promise
         assert quality(Scene(path)) == ("default", "promises 1 % or better; the fastest level within 1 %")
     zenith = dict((t, why) for t, _, why in plan_scene(Scene((90.0, 90.0))).decisions)["sun axis"]
@@ -502,17 +513,24 @@ def test_the_plan_says_where_its_promise_and_margins_stop():
 
 def test_a_plan_that_ray_marches_says_the_map_missed_too():
     """A plan whose lookup and sky-view map both miss the budget said only the lookup's figure: it says the
-    map's too, and how it was made (from 1 m up the sum, 1.11 % at -6 deg, + the reference's resolution, 0.14 %;
-    the default level on a path to -8 deg, the map's 1.01 % measured against the reference + its 0.18 %)."""
+    map's too, and how it was made (from 1 m up the sum, 1.11 % at -6 deg, + the reference's own estimated
+    error, 0.14 %; the default level on a path to -8 deg, the map's 1.01 % measured against the reference +
+    0.18 %); and where the ray march misses it too (a 0.1 % budget down to -8 deg, where no level fits), that."""
     def reason(scene):
         return dict((t, why) for t, _, why in plan_scene(scene).decisions)["renderer"]
 
     assert reason(Scene((-6.0, 60.0), altitudes_m=(0.0, 1.0))).endswith(
         "exceeds the budget; the sky-view map's 1.25 % (estimated: the ray march's + its own, measured at -6 deg, + "
-        "the reference's own resolution) exceeds it too")
+        "the reference's own estimated error, 0.14 %) exceeds it too")
+    # the default level named for a path to -8 deg: its ray march, 0.996 + 0.18 %, misses 1 % too
     assert reason(Scene((-8.0, 60.0), quality="default")).endswith(
         "exceeds the budget; the sky-view map's 1.19 % (measured against the reference at -8 deg, + the reference's "
-        "own resolution) exceeds it too")
+        "own estimated error, 0.18 %) exceeds it too; the ray march itself, 1.18 % (the ray march's, measured at -8 "
+        "deg, + the reference's own estimated error, 0.18 %), exceeds it too: no renderer fits the budget")
+    assert reason(Scene((-8.0, 0.0), error_budget=1e-3)).endswith(
+        "; the ray march itself, 0.18 % (the ray march's, measured at -8 deg), exceeds it too: no renderer fits the "
+        "budget")
+    assert "no renderer fits" not in reason(Scene((-6.0, 60.0), quality="default"))
 
 
 def test_a_promise_missed_at_the_highest_measured_sun_holds_nowhere(monkeypatch):
@@ -527,8 +545,8 @@ def test_a_promise_missed_at_the_highest_measured_sun_holds_nowhere(monkeypatch)
     assert promise_measured_down_to(QUALITY_LEVELS["draft"]) is None
     why = dict((t, w) for t, _, w in plan_scene(Scene((-5.0, 60.0), quality="draft")).decisions)["quality"]
     assert why == ("promises 10 % or better; not measured to hold at any sun, down to -5 deg here, off the reference "
-                   "by 30 % at 45 deg, 20 % at 1 deg, 5 % at -4 deg (the reference itself resolved to 0.018 to 0.09 % "
-                   "there); not measured below -4 deg")
+                   "by 30 % at 45 deg, 20 % at 1 deg, 5 % at -4 deg (the reference's own estimated error there: 0.018 "
+                   "to 0.09 %); not measured below -4 deg")
 
 
 # 4. Planned table against the full table --------------------------------------------------------------
@@ -792,13 +810,15 @@ def test_without_a_writable_cache_directory_the_pilot_runs_every_time(cl_context
 @pytest.mark.parametrize("path, budget, level", [
     ((-6.0, 60.0), 0.01, "default"), ((-6.25, 10.0), 0.01, "default"), ((-8.0, 10.0), 0.01, "high"),
     ((-5.0, 10.0), 0.10, "draft"), ((-6.0, 10.0), 0.10, "default"), ((1.0, 10.0), 1e-3, "high"),
+    ((-2.0, 10.0), 1e-3, "high"), ((-3.0, 10.0), 1e-3, "reference"), ((-4.0, 10.0), 1e-3, "reference"),
     ((-8.0, 0.0), 1e-3, "reference"), ((-20.0, 0.0), 1e-3, "reference")])
 def test_a_budget_takes_the_fastest_level_measured_within_it_over_the_path(path, budget, level):
     """Below civil twilight the levels were measured past their promises (RAY_MARCH_ERROR: default 1.30 % at -10
     deg; draft 14 % at -6, 9.4 % at -5 interpolated in log error; high 0.14 % at -10): a budget takes the
-    fastest level whose measured error plus the reference's own resolution (REFERENCE_RESOLUTION) over the path
-    fits it, not the fastest promise: the default level's 0.996 % at -8 deg (+ 0.18 %) does not fit 1 %, its
-    0.80 % at -6 (+ 0.14 %) does, and so does -6.25 deg (about 0.97 %, interpolated); the high level fits 0.1 % by
-    day only (0.027 + 0.018 % at +1 deg, 0.076 + 0.09 % at -4 deg); where no level fits (1e-3 down to -20 deg:
-    the reference resolves 0.28 % at -12 deg), the reference level."""
+    fastest level whose measured error plus the reference's own estimated error (REFERENCE_RESOLUTION) over the
+    path fits it, not the fastest promise: the default level's 0.996 % at -8 deg (+ 0.18 %) does not fit 1 %, its
+    0.80 % at -6 (+ 0.14 %) does, and so does -6.25 deg (about 0.97 %, interpolated); the high level fits 0.1 %
+    at +1 deg (0.027 + 0.018 %) and, interpolated in log error toward -4 deg (0.076 + 0.090 %), down to about
+    -2 deg (0.099 %); the reference level down to about -4.5 deg (0.090 % at -4); where no level fits (0.1 %
+    down to -8 or -20 deg: the reference's own 0.18 and 0.28 %), the reference level, said so (above)."""
     assert plan_scene(Scene(path, error_budget=budget)).level.name == level

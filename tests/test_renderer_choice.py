@@ -18,8 +18,12 @@ from clsky.renderer_choice import (DEFAULT_PIXELS, LOOKUP_ERROR, RAY_MARCH_ERROR
 
 
 row = renderer_row
-#: What the plan's words add to a figure measured against the reference (:func:`with_resolution`).
-MORE = ", + the reference's own resolution"
+
+
+def more(percent):
+    """What the plan's words add to a figure measured against the reference (:func:`with_resolution`): the
+    reference's own estimated error at the worst sun, in per cent to 2 digits."""
+    return f", + the reference's own estimated error, {percent} %"
 
 
 def test_error_over_takes_the_worst_of_the_path_interpolated_in_log_error():
@@ -128,22 +132,25 @@ def test_the_4d_lookup_counts_its_table_build():
 
 
 def test_a_bound_adds_the_references_resolution():
-    """with_resolution: a figure measured against the reference plus how far the reference itself is resolved,
-    at the elevations of both (interpolated in log error between them); the reference level's own figures as
-    they are. By day the reference resolves 0.02 %, at -4 deg 0.09 % (README "Quality levels")."""
+    """with_resolution: a figure measured against the reference plus the reference's own estimated error
+    (REFERENCE_RESOLUTION: 0.0216 % at 45 deg, 0.0182 % at +1, 0.0902 % at -4, 0.14 % at -6, 0.278 % at -12) at
+    the elevations of both, the measured figure interpolated in log error between its own (at -4 deg, 2/7 of
+    the way from -6 to +1: 0.8 % * 0.25^(2/7)) and its nearest value beyond them; the figures of the reference
+    level's ray march as they are (they are that estimate already), those of a row of its own (level None) not."""
     measured = ((-6.0, 0.008), (1.0, 0.002), (45.0, 0.003))
-    bound = with_resolution(measured, "default")
-    assert [sun for sun, _ in bound] == sorted({sun for sun, _ in measured + REFERENCE_RESOLUTION})
-    suns = np.array([sun for sun, _ in bound])
-    assert [e for _, e in bound] == pytest.approx(error_at(measured, suns) + error_at(REFERENCE_RESOLUTION, suns),
-                                                  rel=1e-12)
-    assert dict(bound)[45.0] == pytest.approx(0.003 + 0.000216, rel=1e-2)
+    bound = dict(with_resolution(measured, "default"))
+    assert list(bound) == [-12.0, -10.0, -8.0, -6.0, -4.0, 1.0, 8.0, 45.0]
+    expected = {-12.0: 0.008 + 0.00278, -6.0: 0.008 + 0.0014, -4.0: 0.008 * 0.25 ** (2 / 7) + 0.000902,
+                1.0: 0.002 + 0.000182, 45.0: 0.003 + 0.000216}
+    for sun, value in expected.items():
+        assert bound[sun] == pytest.approx(value, rel=1e-12), sun
+    assert with_resolution(measured, None) == with_resolution(measured, "high") == tuple(bound.items())
     assert with_resolution(measured, "reference") == measured
-    assert 0.0001 < dict(REFERENCE_RESOLUTION)[45.0] < 0.0003 and 0.0008 < dict(REFERENCE_RESOLUTION)[-4.0] < 0.001
 
 
 def test_nothing_fits_falls_back_to_the_ray_march():
-    """The reference level's estimate is its own resolution (nothing added), worst at -6 deg on this path."""
+    """The reference level's ray-march estimate is the reference's own estimated error (nothing added), worst at -6
+    deg on this path."""
     chosen, estimate, _ = choose_renderer((-6.0, 60.0), 1e-5, "reference")
     assert chosen.method == "raymarch" and estimate == pytest.approx(dict(REFERENCE_RESOLUTION)[-6.0], rel=1e-12)
     assert max(e for sun, e in REFERENCE_RESOLUTION if sun >= -6.0) == dict(REFERENCE_RESOLUTION)[-6.0]
@@ -186,39 +193,47 @@ def test_a_measurement_over_part_of_the_path_meets_the_sum_without_a_step():
     summed = error_at(RAY_MARCH_ERROR["default"], -4.0) + error_at(part.error, -4.0)
     assert estimate[-6.0] == pytest.approx(0.012, rel=1e-12) and estimate[-4.0] == pytest.approx(summed, rel=1e-12)
     assert error_at(estimated_error(part, "default"), -5.0) == pytest.approx(np.sqrt(0.012 * summed), rel=1e-12)
+    # the reference's own estimated error interpolated in log error between its suns: at -5 deg between 0.14 (-6)
+    # and 0.090 % (-4), sqrt(0.14 * 0.090) = 0.11 %; at -7 deg sqrt(0.14 * 0.18) = 0.16 %
     assert estimate_basis(part, "default", (-5.0, 10.0)) == (
-        "interpolated at -5 deg between its measurement against the reference and the ray march's + its own" + MORE)
+        "interpolated at -5 deg between its measurement against the reference and the ray march's + its own"
+        + more("0.11"))
     assert estimate_basis(part, "default", (-8.0, -7.0)) == ("measured against the reference, interpolated at -7 deg"
-                                                            + MORE)
+                                                            + more("0.16"))
     assert estimate_basis(part, "default", (-12.0, -7.0)) == ("estimated: the ray march's + its own, measured at -12 "
-                                                             "deg" + MORE)
+                                                             "deg" + more("0.28"))
     # 0 deg is a node of the map's own error, not of the ray march's: interpolated, not 'measured at 0 deg'
     assert estimate_basis(part, "default", (-3.0, 10.0)) == ("estimated: the ray march's + its own, measured, "
-                                                            "interpolated at -3 deg" + MORE)
+                                                            "interpolated at -3 deg" + more("0.065"))
 
 
-@pytest.mark.parametrize("level, path, altitude, words", [
-    ("default", (-6.0, 60.0), 0.0, "measured against the reference at -6 deg"),
-    ("default", (-12.0, -7.0), 0.0, "measured against the reference at -12 deg"),
-    ("default", (-30.0, -20.0), 0.0, "measured against the reference at -12 deg"),   # the nearest measured
-    ("default", (-2.0, 60.0), 0.0, "measured against the reference, interpolated at -2 deg"),  # not 'at 0 deg'
-    ("draft", (-8.0, -8.0), 0.0, "the ray march's, measured (the map measured less) at -8 deg"),  # the floor
-    ("default", (-12.0, -7.0), 10e3, "estimated: the ray march's + its own, measured at -12 deg"),
-    ("default", (-5.0, 10.0), 10e3, "estimated: the ray march's + its own, measured, interpolated at -5 deg"),
+@pytest.mark.parametrize("level, path, altitude, words, reference", [
+    ("default", (-6.0, 60.0), 0.0, "measured against the reference at -6 deg", "0.14"),
+    ("default", (-12.0, -7.0), 0.0, "measured against the reference at -12 deg", "0.28"),
+    ("default", (-30.0, -20.0), 0.0, "measured against the reference at -12 deg", "0.28"),   # the nearest measured
+    ("default", (-2.0, 60.0), 0.0, "measured against the reference, interpolated at -2 deg", "0.048"),  # not 0 deg
+    ("draft", (-8.0, -8.0), 0.0, "the ray march's, measured (the map measured less) at -8 deg", "0.18"),  # the floor
+    ("default", (-12.0, -7.0), 10e3, "estimated: the ray march's + its own, measured at -12 deg", "0.28"),
+    ("default", (-5.0, 10.0), 10e3, "estimated: the ray march's + its own, measured, interpolated at -5 deg", "0.11"),
 ])
-def test_the_plans_words_say_which_figure_made_the_worst(level, path, altitude, words):
+def test_the_plans_words_say_which_figure_made_the_worst(level, path, altitude, words, reference):
     """estimate_basis: at the worst sun over the path, the measurement against the reference, the ray march's
     where that was lower, or the sum; 'measured at' a measured sun, 'interpolated at' a path end between; and
-    the reference's own resolution added, but to the reference level's figures (they are that resolution)."""
-    assert estimate_basis(row("skyview"), level, path, altitude) == words + MORE
-    assert estimate_basis(row("skyview"), "reference", (-6.0, 60.0)) == "estimated: the ray march's + its own, " \
-        "measured at -6 deg"
+    the reference's own estimated error there, which the estimate adds (REFERENCE_RESOLUTION: at -2 deg
+    interpolated in log error between 0.090 % at -4 and 0.018 % at +1, 0.090 * 0.2^0.4 = 0.048 %)."""
+    assert estimate_basis(row("skyview"), level, path, altitude) == words + more(reference)
 
 
 def test_the_plans_words_for_the_other_rows():
-    """The 3D lookup's error is its own measured one; the ray march's row adds nothing to the level's."""
-    assert estimate_basis(row("lut"), "default", (-6.0, 60.0)) == "measured" + MORE
-    assert estimate_basis(row("raymarch"), "default", (-6.0, 60.0)) == "the ray march's, measured at -6 deg" + MORE
+    """The 3D lookup's error is its own measured one, with the reference's own estimated error added at any
+    level; the ray march's row adds nothing to the level's; the reference level's ray-march figures are the
+    reference's own estimated error already, so nothing is added to them."""
+    assert estimate_basis(row("lut"), "default", (-6.0, 60.0)) == "measured" + more("0.14")
+    assert estimate_basis(row("lut"), "reference", (-6.0, 60.0)) == "measured" + more("0.14")
+    assert estimate_basis(row("raymarch"), "default", (-6.0, 60.0)) == ("the ray march's, measured at -6 deg"
+                                                                        + more("0.14"))
+    assert estimate_basis(row("skyview"), "reference", (-6.0, 60.0)) == ("estimated: the ray march's + its own, "
+                                                                         "measured at -6 deg")
 
 
 def test_the_maps_estimate_from_the_ground_takes_the_measured_figures():
@@ -263,8 +278,8 @@ def test_the_measured_tables_are_the_benchmarks():
     for level, (march, skyview) in measured.items():
         assert RAY_MARCH_ERROR[level] == tuple(sorted(march.items())), level
         assert SKYVIEW_ON_REFERENCE[level] == tuple(sorted(skyview.items())), level
-    # the reference's resolution: the "sum" row of its doubled groups, docs/quality_reference.csv and
-    # docs/quality_dusk_reference.csv (the same runs)
+    # the reference's own estimated error: the "sum" row of its doubled groups, docs/quality_reference.csv and
+    # docs/quality_dusk_reference.csv (the same runs); its suns among every level's (estimate_basis counts on it)
     resolution = {}
     for name, suns in (("quality_reference.csv", SUN_ELEVATIONS), ("quality_dusk_reference.csv", DUSK_ELEVATIONS)):
         with open(root / "docs" / name, newline="") as handle:
@@ -272,6 +287,8 @@ def test_the_measured_tables_are_the_benchmarks():
         assert set(rows) == {"sun nodes", "view axis, gather", "table quadrature", "ray march", "sum"}, name
         resolution.update({sun: float(f"{float(rows['sum'][f'change {frame}']):.3g}") for frame, sun in suns.items()})
     assert REFERENCE_RESOLUTION == tuple(sorted(resolution.items())) == RAY_MARCH_ERROR["reference"]
+    for level in ("draft", "default", "high"):
+        assert set(resolution) <= {sun for sun, _ in RAY_MARCH_ERROR[level]}, level
     readme = (root / "README.md").read_text(encoding="utf-8")
     section = readme.split("<!-- bench:skyview-plan -->")[1].split("<!-- /bench:skyview-plan -->")[0]
     header = next(line for line in section.splitlines() if line.startswith("| observer |"))
@@ -287,7 +304,7 @@ def test_the_measured_tables_are_the_benchmarks():
 
 def test_the_default_animation_plan_picks_the_skyview_map(cl_context):
     """The README's main job (sun -6 to 60 deg, 1 %): the sky-view map fits (0.83 % measured against the
-    reference at -6 deg, 0.79 % at -4, + the reference's own resolution: 0.97 % at -6 deg), keeping the ray
+    reference at -6 deg, 0.79 % at -4, + the reference's own estimated error: 0.97 % at -6 deg), keeping the ray
     march's quadrature for its nodes; an animation that renders the ray march anyway (compare) still gets the
     ray march's line, saying the map would do."""
     plan = plan_scene(Scene((-6.0, 60.0)), ctx=cl_context)
@@ -299,7 +316,7 @@ def test_the_default_animation_plan_picks_the_skyview_map(cl_context):
     line = dict((topic, (decision, reason)) for topic, decision, reason in asked.decisions)["renderer"]
     assert asked.renderer == "skyview" and line[0] == "ray march, 48 samples per ray"
     assert line[1].startswith("asked for; the sky-view map 64 x 128's 0.966 % (measured against the reference at -6 "
-                              "deg, + the reference's own resolution) fits")
+                              "deg, + the reference's own estimated error, 0.14 %) fits")
     # the sun axis is the ray march's: the map's nodes are ray-marched
     assert asked.table == plan.table
 
