@@ -35,7 +35,7 @@ from . import _atmosphere_cl, _cl
 from .atmosphere import AtmosphereParameters
 from .mapping import cos_to_v, grid_coordinates
 from .phase import MIE_PHASES, PHASE_MEANS, RAYLEIGH_PHASES
-from .settings import MAPPINGS, TableSettings
+from .settings import MAPPINGS, TableSettings, computed_sun_nodes
 from .transmittance import COMMON_SOURCES, azimuth_defines, quadrature_defines
 
 __all__ = ["keeping_first_gather_stacks", "gather_quadrature", "phase_azimuth_integrals", "gather_matrix", "gather_matrices",
@@ -385,7 +385,6 @@ class MultipleScatteringEngine(_cl.Engine):
         (:mod:`clsky.azimuth`).
         """
         from .ground import padded4
-        from .reference import computed_sun_nodes
 
         gathered_d = gathered if isinstance(gathered, cla.Array) else self.to_device(gathered)
         depth, height, width, _ = gathered_d.shape[-4:]

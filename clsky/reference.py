@@ -19,7 +19,7 @@ import numpy as np
 from .atmosphere import AtmosphereParameters
 from .ozone import tent
 from .mapping import FULL_SUN_RANGE, grid_coordinates
-from .settings import TableSettings
+from .settings import TableSettings, computed_sun_nodes
 
 __all__ = [
     "horizon_cos", "distance_to_top", "distance_to_ground", "altitude_along",
@@ -544,15 +544,6 @@ def _ground_seen(atmosphere, rays):
     where a ray does not end on the ground, and the sun cosine at the last node (n,)."""
     transmittance = np.exp(-_optical_depth_of(atmosphere, *(view[:, -1] for view in rays.view)))
     return transmittance * rays.hits_ground[:, None], np.clip(rays.mu_sun[:, -1], -1.0, 1.0)
-
-
-def computed_sun_nodes(depth, stride=1):
-    """The sun nodes of an axis of ``depth`` nodes that a scatter of sun ``stride`` (1 or 2;
-    ``TableSettings.orders_sun_stride``) computes: every one, or every other one and the last
-    (kernels/multiple.cl: scatter); the others :func:`fill_between_sun_nodes` fills."""
-    if stride not in (1, 2):
-        raise ValueError(f"sun_stride must be 1 or 2, got {stride!r}")
-    return sorted(set(range(0, depth, stride)) | {depth - 1})
 
 
 def fill_between_sun_nodes(table, stride=1):

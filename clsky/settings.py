@@ -10,7 +10,7 @@ from .errors import (ParameterError, check_choice, check_integer, dataclass_from
                      is_real_number, ordered_items)
 
 __all__ = ["TableSettings", "MAPPINGS", "SAMPLINGS", "SUN_TRANSMITTANCE_METHODS", "MIE_LAYOUTS",
-           "SCATTERING_MODES", "PARAMETERIZATIONS"]
+           "SCATTERING_MODES", "PARAMETERIZATIONS", "computed_sun_nodes"]
 
 #: Texture mappings of the 3D table, name -> index passed to OpenCL (mapping.cl).
 MAPPINGS = {"linear": 0, "nonlinear": 1}
@@ -37,6 +37,16 @@ _LATER_FIELDS = {"source_stride": 1, "orders_sun_stride": 1}
 #: Most azimuthal harmonics of the higher orders (``azimuth_harmonics``; clsky/azimuth.py).
 MAX_AZIMUTH_HARMONICS = 64
 _MAX_CELLS = 2**31 // 8   # keeps every flat index (times channels) inside a signed 32-bit int
+
+
+def computed_sun_nodes(depth, stride=1):
+    """The sun nodes of an axis of ``depth`` nodes that a scatter of sun ``stride`` (1 or 2;
+    ``TableSettings.orders_sun_stride``) computes: every one, or every other one and the last
+    (kernels/multiple.cl: scatter); the others :func:`clsky.reference.fill_between_sun_nodes` fills (its
+    kernel: fill_between_suns). Here, beside the setting, for both the OpenCL engine and its NumPy twin."""
+    if stride not in (1, 2):
+        raise ValueError(f"sun_stride must be 1 or 2, got {stride!r}")
+    return sorted(set(range(0, depth, stride)) | {depth - 1})
 
 
 def check_sun_cos_range(value, name="sun_cos_range"):

@@ -23,6 +23,7 @@ from clsky.errors import ParameterError
 from clsky.multiple import MultipleScatteringEngine
 from clsky.orders import SUN_STRIDE_FROM_ORDER, compute_orders, scatter_sun_stride
 from clsky.quality import QUALITY_LEVELS
+from clsky.settings import computed_sun_nodes
 
 from conftest import TOLERANCES, black_preset, require_dtype
 import test_multiple
@@ -60,7 +61,7 @@ def test_fill_is_exact_for_an_exponential_along_the_sun_axis(depth):
     filled = reference.fill_between_sun_nodes(table, 2)
     assert filled is table
     assert_allclose(filled, exact, rtol=32 * np.finfo(float).eps, atol=0.0)
-    computed = reference.computed_sun_nodes(depth, 2)
+    computed = computed_sun_nodes(depth, 2)
     assert computed == sorted(set(range(0, depth, 2)) | {depth - 1})
     assert np.array_equal(filled[computed], exact[computed])
 
@@ -133,7 +134,7 @@ def test_strided_scatter_computes_the_same_nodes_bit_for_bit(cl_context, multipl
     engine = multiple_engine(settings)
     every = scattered(engine, case, gathered, radiance, 1)
     strided = scattered(engine, case, gathered, radiance, 2)
-    computed = reference.computed_sun_nodes(depth, 2)
+    computed = computed_sun_nodes(depth, 2)
     assert np.array_equal(strided[computed], every[computed])
     between = [z for z in range(depth) if z not in computed]
     filled = reference.fill_between_sun_nodes(every.copy(), 2)
@@ -231,7 +232,7 @@ def test_the_stride_leaves_order_two_and_changes_the_rest_a_little(orders_builds
     every, strided = orders_builds(loop, 1, "opencl"), orders_builds(loop, 2, "opencl")
     for k in (0, 1):
         assert np.array_equal(strided.orders[k], every.orders[k]), f"order {k + 1}"
-    computed = reference.computed_sun_nodes(every.orders[0].shape[0], 2)
+    computed = computed_sun_nodes(every.orders[0].shape[0], 2)
     assert np.array_equal(strided.orders[2][computed], every.orders[2][computed])
     for k in (2, 3):
         change = np.max(np.abs(strided.orders[k] - every.orders[k])) / np.max(every.orders[k])
