@@ -21,7 +21,7 @@ What the plan decides, and why:
   part the scene itself reaches.
 * **Resolution and orders** come from the quality level the budget asks for
   (:func:`clsky.quality.level_for_budget`), or the first finer one whose ray march's error measured against
-  the reference, plus how far the reference itself is resolved (:func:`promise_bounds`), fits the budget over
+  the reference, plus the reference's own estimated error (:func:`promise_bounds`), fits the budget over
   the sun path (the reference level where none does, said so); a level's promise is taken to hold only down to
   the sun where that bound was last within it (:func:`promise_measured_down_to`), and a plan whose sun goes
   lower says what was measured there.
@@ -629,8 +629,9 @@ def _below_measured_note(level, sun_elevations_deg, holds):
     unmeasured = f"not measured below {lowest_measured:g} deg" if low < lowest_measured else ""
     # a path end between two measured suns: the figure the plan took there (interpolated), which a plan by
     # budget compared with the budget and the measured figures beside it do not show
-    between = (f"{100 * error_at(promise_bounds(level.name), low):.2g} % at {low:g} deg with the reference's own "
-               f"estimated error (interpolated)" if floor < low < max(sun for sun, _ in points) else "")
+    added = "" if level.name == "reference" else " with the reference's own estimated error"
+    between = (f"{_percent(error_at(promise_bounds(level.name), low))} % at {low:g} deg{added} (interpolated)"
+               if floor < low < max(sun for sun, _ in points) else "")
     where = ("not measured to hold at any sun" if holds is None else
              f"measured to hold with the sun down to {holds:g} deg: below it")
     off = "its own estimated error" if level.name == "reference" else "off the reference by"
@@ -688,7 +689,7 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
         why = f"; no level promises {100 * budget:g} %: the most accurate one"
     elif bound > budget:                    # no level measured within it over this path: the same, said so
         why = (f"; no level's measured error, plus the reference's own estimated error, fits {100 * budget:g} % "
-               f"over the path: the most accurate one (up to {100 * bound:.2g} % over it)")
+               f"over the path: the most accurate one (up to {_percent(bound)} % over it)")
     elif level is not promised:
         why = (f"; the fastest level whose measured error, plus the reference's own estimated error, fits "
                f"{100 * budget:g} % over the path ({promised.name}: up to "

@@ -36,9 +36,9 @@ cautious: at -6 deg the default level's ray march is 0.80 % off and the map 0.31
 worst observer), and the map measured 0.83 % off the reference (README "Quality levels").
 Between the measured elevations the error is interpolated in log error; beyond them, the nearest
 value; over a sun path, the worst of the path's ends and of the measured elevations inside it. Every
-figure was measured against the reference, which is itself off the converged sky by up to its resolution
-(:data:`REFERENCE_RESOLUTION`: 0.02 % by day, 0.09 % at -4 deg, more below): the estimate a budget is
-compared with adds it (:func:`with_resolution`).
+figure was measured against the reference, which is itself off the converged sky by its own estimated
+error (:data:`REFERENCE_RESOLUTION`: 0.02 % by day, 0.09 % at -4 deg, more below; an estimate from below):
+the estimate a budget is compared with adds it (:func:`with_resolution`).
 """
 
 from __future__ import annotations
@@ -63,7 +63,7 @@ LOOKUP_ERROR = ((-4.0, 10.26), (1.0, 0.361), (8.0, 0.0419), (45.0, 0.0141))
 #: How far the reference (the 'reference' quality level, ``clsky.anim.accuracy``) is resolved, by sun elevation
 #: [deg]: the sum of the changes (p95, relative, 64 x 64 fisheye from the ground) of its frames when each group
 #: of its counts is doubled in turn (its sun nodes; its view axis with the gather's steps; its table's
-#: quadrature; its ray march's), which bounds the change of doubling them all at once: the reference's own
+#: quadrature; its ray march's), standing for the change of doubling them all at once: the reference's own
 #: estimated error. An estimate from below: a count whose error falls as its spacing to the power p changes the
 #: frames on doubling by 1 - 2^-p of that error (three quarters for p = 2, a half for p = 1). From -4 deg up
 #: bench/bench_quality.py (docs/quality_reference.csv, 2026-12-07), below bench/bench_quality_dusk.py
@@ -305,14 +305,19 @@ def estimate_basis(row, level, sun_elevations_deg, altitude_m=0.0) -> str:
         return f", + the reference's own estimated error, {100 * float(error_at(REFERENCE_RESOLUTION, at)):.2g} %"
 
     marched_from = level if row.on_ray_march else None
+    if marched_from == "reference" and not any(error for _, error in row.error):    # the ray march's own row
+        worst = worst_over(RAY_MARCH_ERROR["reference"], *sun_elevations_deg)[0]
+        return f"the reference's own estimated error, at {worst:g} deg"
     if not row.on_ray_march:
         worst = worst_over(with_resolution(row.error, marched_from), *sun_elevations_deg)[0]
         return "measured" + resolution(worst)
     nodes, values, kinds, measured = _estimate_nodes(row, level, altitude_m)
     # the worst of what choose_renderer compares (with_resolution); its nodes are the estimate's, as
     # REFERENCE_RESOLUTION's suns are among every level's ray-march suns (tested)
-    values = np.array([value for _, value in with_resolution(tuple(zip(nodes.tolist(), values.tolist())),
-                                                             marched_from)])
+    bound = with_resolution(tuple(zip(nodes.tolist(), values.tolist())), marched_from)
+    if [sun for sun, _ in bound] != nodes.tolist():
+        raise ValueError(f"REFERENCE_RESOLUTION has suns that the {level!r} level's RAY_MARCH_ERROR lacks")
+    values = np.array([value for _, value in bound])
     own = any(error for _, error in row.error)
     said = {"reference": "measured against the reference",
             "floor": "the ray march's, measured (the map measured less)",

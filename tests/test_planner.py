@@ -481,11 +481,11 @@ def test_the_plan_says_where_its_promise_and_margins_stop():
     # a path's end between two measured suns: the bound the plan took there, interpolated in log error
     # (sqrt((0.996 + 0.18) * (0.80 + 0.14)) = 1.05 % at -7 deg)
     assert quality(Scene((-7.0, 10.0), quality="default"))[1].endswith(
-        f"by 0.996 % at -8 deg ({own} 0.18 %); 1.1 % at -7 deg with the reference's own estimated error "
+        f"by 0.996 % at -8 deg ({own} 0.18 %); 1.05 % at -7 deg with the reference's own estimated error "
         "(interpolated)")
     assert quality(Scene((-9.0, 10.0), quality="draft"))[1].endswith(
         "down to -9 deg here, off the reference by 14.1 % at -6 deg, 12.3 % at -8 deg, 23.6 % at -10 deg "
-        f"({own} 0.14 to 0.25 %); 17 % at -9 deg with the reference's own estimated error (interpolated)")
+        f"({own} 0.14 to 0.25 %); 17.3 % at -9 deg with the reference's own estimated error (interpolated)")
     assert quality(Scene((-13.0, 10.0), quality="draft"))[1].endswith(
         f"29.7 % at -12 deg ({own} 0.14 to 0.28 %); not measured below -12 deg")
     # the measured suns on the path (and the nearest beyond its ends), not those above it
@@ -495,8 +495,8 @@ def test_the_plan_says_where_its_promise_and_margins_stop():
     # the reference level's own figures are the reference's estimated error
     assert quality(Scene((-9.0, 10.0), quality="reference"))[1].endswith(
         "measured to hold with the sun down to 1 deg: below it, down to -9 deg here, its own estimated error "
-        "0.0902 % at -4 deg, 0.14 % at -6 deg, 0.18 % at -8 deg, 0.247 % at -10 deg; 0.21 % at -9 deg with the "
-        "reference's own estimated error (interpolated)")
+        "0.0902 % at -4 deg, 0.14 % at -6 deg, 0.18 % at -8 deg, 0.247 % at -10 deg; 0.211 % at -9 deg "
+        "(interpolated)")
     assert quality(Scene((-6.0, 60.0), quality="high"))[1].endswith(
         f"off the reference by 0.0764 % at -4 deg, 0.0942 % at -6 deg ({own} 0.09 to 0.14 %)")
     # no level fits: the most accurate one, said so (it said 'the fastest level whose ... fits 0.1 %')
@@ -505,6 +505,11 @@ def test_the_plan_says_where_its_promise_and_margins_stop():
         "0.1 % over the path: the most accurate one (up to 0.18 % over it); measured to hold with the sun down to "
         "1 deg: below it, down to -8 deg here, its own estimated error 0.0902 % at -4 deg, 0.14 % at -6 deg, "
         "0.18 % at -8 deg"))
+    # at the threshold: 3 digits (2 said 'no level fits 0.1 %' beside 'up to 0.1 %'; it is 0.1007 %)
+    assert quality(Scene((-4.5, 10.0), error_budget=1e-3))[1].endswith(
+        "the most accurate one (up to 0.101 % over it); measured to hold with the sun down to 1 deg: below it, down "
+        "to -4.5 deg here, its own estimated error 0.0902 % at -4 deg, 0.14 % at -6 deg; 0.101 % at -4.5 deg "
+        "(interpolated)")
     for path in ((-6.0, 60.0), (-4.0, 60.0)):       # the default animation's path: within the promise
         assert quality(Scene(path)) == ("default", "promises 1 % or better; the fastest level within 1 %")
     zenith = dict((t, why) for t, _, why in plan_scene(Scene((90.0, 90.0))).decisions)["sun axis"]
@@ -528,8 +533,8 @@ def test_a_plan_that_ray_marches_says_the_map_missed_too():
         "own estimated error, 0.18 %) exceeds it too; the ray march itself, 1.18 % (the ray march's, measured at -8 "
         "deg, + the reference's own estimated error, 0.18 %), exceeds it too: no renderer fits the budget")
     assert reason(Scene((-8.0, 0.0), error_budget=1e-3)).endswith(
-        "; the ray march itself, 0.18 % (the ray march's, measured at -8 deg), exceeds it too: no renderer fits the "
-        "budget")
+        "; the ray march itself, 0.18 % (the reference's own estimated error, at -8 deg), exceeds it too: no "
+        "renderer fits the budget")
     assert "no renderer fits" not in reason(Scene((-6.0, 60.0), quality="default"))
 
 

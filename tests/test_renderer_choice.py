@@ -234,6 +234,8 @@ def test_the_plans_words_for_the_other_rows():
                                                                         + more("0.14"))
     assert estimate_basis(row("skyview"), "reference", (-6.0, 60.0)) == ("estimated: the ray march's + its own, "
                                                                          "measured at -6 deg")
+    # the reference level's ray march: its figure is the reference's own estimated error, not a measurement
+    assert estimate_basis(row("raymarch"), "reference", (-6.0, 60.0)) == "the reference's own estimated error, at -6 deg"
 
 
 def test_the_maps_estimate_from_the_ground_takes_the_measured_figures():
@@ -247,6 +249,23 @@ def test_the_maps_estimate_from_the_ground_takes_the_measured_figures():
     assert dict(estimated_error(skyview, "default", 10e3))[-4.0] == pytest.approx(0.00676 + 0.00292, rel=1e-12)
     assert [sun for sun, _ in estimated_error(skyview, "default")] == [
         -12.0, -10.0, -8.0, -6.0, -4.0, 0.0, 1.0, 5.0, 8.0, 10.0, 30.0, 45.0]
+
+
+def test_every_measured_table_ascends_in_sun_elevation():
+    """error_at interpolates with np.interp, which takes its elevations ascending and returns nonsense, not an
+    error, otherwise: every measured table the renderer choice and the planner read must ascend strictly, with
+    positive figures (interpolated in their logarithm)."""
+    from clsky.renderer_choice import LOOKUP4D_ERROR
+
+    tables = {"LOOKUP_ERROR": LOOKUP_ERROR, "LOOKUP4D_ERROR": LOOKUP4D_ERROR,
+              "REFERENCE_RESOLUTION": REFERENCE_RESOLUTION,
+              **{f"RAY_MARCH_ERROR[{k!r}]": v for k, v in RAY_MARCH_ERROR.items()},
+              **{f"SKYVIEW_ON_REFERENCE[{k!r}]": v for k, v in SKYVIEW_ON_REFERENCE.items()},
+              **{f"{r.method} row": r.error for r in RENDERERS if any(e for _, e in r.error)}}
+    for name, table in tables.items():
+        suns = [sun for sun, _ in table]
+        assert suns == sorted(set(suns)), name
+        assert all(error > 0.0 for _, error in table), name
 
 
 def test_renderer_rows_are_hashable():
