@@ -693,7 +693,7 @@ def plan_scene(scene: Scene, atmosphere="physical", mode="physical", ctx=None, r
     elif level is not promised:
         why = (f"; the fastest level whose measured error, plus the reference's own estimated error, fits "
                f"{100 * budget:g} % over the path ({promised.name}: up to "
-               f"{100 * error_over(promise_bounds(promised.name), *scene.sun_elevations_deg):.2g} % over it)")
+               f"{_percent(error_over(promise_bounds(promised.name), *scene.sun_elevations_deg))} % over it)")
     else:
         why = f"; the fastest level within {100 * budget:g} %"
     holds = promise_measured_down_to(level)

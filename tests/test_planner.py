@@ -471,7 +471,7 @@ def test_the_plan_says_where_its_promise_and_margins_stop():
     own = "the reference's own estimated error there:"
     assert quality(Scene((-30.0, -12.5))) == ("high", (
         "promises 0.1 % or better; the fastest level whose measured error, plus the reference's own estimated "
-        "error, fits 1 % over the path (default: up to 1.8 % over it); measured to hold with the sun down to 1 deg: "
+        "error, fits 1 % over the path (default: up to 1.78 % over it); measured to hold with the sun down to 1 deg: "
         f"below it, down to -30 deg here, off the reference by 0.238 % at -12 deg ({own} 0.28 %); not measured "
         "below -12 deg"))
     # by name: that level, and what it measured down to the first measured sun below the path's lowest

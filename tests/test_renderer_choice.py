@@ -235,7 +235,8 @@ def test_the_plans_words_for_the_other_rows():
     assert estimate_basis(row("skyview"), "reference", (-6.0, 60.0)) == ("estimated: the ray march's + its own, "
                                                                          "measured at -6 deg")
     # the reference level's ray march: its figure is the reference's own estimated error, not a measurement
-    assert estimate_basis(row("raymarch"), "reference", (-6.0, 60.0)) == "the reference's own estimated error, at -6 deg"
+    assert estimate_basis(row("raymarch"), "reference", (-6.0, 60.0)) == ("the reference's own estimated error, at "
+                                                                          "-6 deg")
 
 
 def test_the_maps_estimate_from_the_ground_takes_the_measured_figures():
