@@ -307,7 +307,8 @@ def run(args, reference_name, frame_set=DAY):
                       + f" for the {frame_set.count} frames)")
     if args.groups:
         lines += ["", reference_line + " changes this much when each group of its counts is doubled; their sum "
-                  "bounds the change of doubling them all"
+                  "stands for the change of doubling them all, the reference's own estimated error (which the scene "
+                  "plan adds to a level's)"
                   + ("" if len(args.groups) == len(accuracy.REFERENCE_GROUPS) else
                      " (groups not doubled in this run: " + "; ".join(accuracy.REFERENCE_GROUPS[g] for g in
                                                                     accuracy.REFERENCE_GROUPS if g not in args.groups)
