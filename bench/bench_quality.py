@@ -284,9 +284,8 @@ def run(args, reference_name, frame_set=DAY):
     names = frame_set.names
     lines = [f"{stamp}: {args.size} x {args.size} fisheye frames from the ground (`{frame_set.script}`). "
              f"Each level is planned for {frame_set.path_words.format(low=frame_set.path[0], high=frame_set.path[1])}"
-             "; error: 95th percentile of the relative HDR "
-             "luminance error of its "
-             "ray-marched frames against the reference. Build: the table, its wall and process CPU time (every "
+             "; error: 95th percentile of the relative HDR luminance error of its ray-marched frames against the "
+             "reference. Build: the table, its wall and process CPU time (every "
              "thread, PoCL's workers included); render: one frame by ray march, the mean of the "
              f"{frame_set.count}. The lookup and sky-view map columns are the same table's 3D lookup and default "
              "sky-view map (worst frame); load: the 1-minute load average after the row." + load_note(max(loads)),

@@ -287,6 +287,13 @@ def with_resolution(error, level):
     return tuple(zip(nodes, (error_at(error, nodes) + error_at(REFERENCE_RESOLUTION, nodes)).tolist()))
 
 
+def _compared(row, level, altitude_m):
+    """What :func:`choose_renderer` compares with a budget for ``row`` ((sun elevation [deg], p95), ...): its
+    :func:`estimated_error` plus the reference's own (:func:`with_resolution`; the figures of a row not made
+    from the ray march are its own, whatever the level)."""
+    return with_resolution(estimated_error(row, level, altitude_m), level if row.on_ray_march else None)
+
+
 def renderer_row(method, rows=RENDERERS) -> RendererRow:
     """The row of ``rows`` whose ``--method`` name is ``method`` (ParameterError for a name of none)."""
     check_choice("method", method, [row.method for row in rows])
@@ -299,25 +306,26 @@ def estimate_basis(row, level, sun_elevations_deg, altitude_m=0.0) -> str:
     march's where that was lower, or the ray march's plus its own (:func:`estimated_error`); 'measured at' a
     sun where the figures were, 'interpolated at' one between measured suns, and between two kinds of figure,
     both."""
+    marched_from = level if row.on_ray_march else None
+
     def resolution(at):
         if marched_from == "reference":     # its figures are the reference's own error already
             return ""
         return f", + the reference's own estimated error, {100 * float(error_at(REFERENCE_RESOLUTION, at)):.2g} %"
 
-    marched_from = level if row.on_ray_march else None
     if marched_from == "reference" and not any(error for _, error in row.error):    # the ray march's own row
         worst = worst_over(RAY_MARCH_ERROR["reference"], *sun_elevations_deg)[0]
         return f"the reference's own estimated error, at {worst:g} deg"
     if not row.on_ray_march:
-        worst = worst_over(with_resolution(row.error, marched_from), *sun_elevations_deg)[0]
+        worst = worst_over(_compared(row, level, altitude_m), *sun_elevations_deg)[0]
         return "measured" + resolution(worst)
-    nodes, values, kinds, measured = _estimate_nodes(row, level, altitude_m)
-    # the worst of what choose_renderer compares (with_resolution); its nodes are the estimate's, as
-    # REFERENCE_RESOLUTION's suns are among every level's ray-march suns (tested)
-    bound = with_resolution(tuple(zip(nodes.tolist(), values.tolist())), marched_from)
-    if [sun for sun, _ in bound] != nodes.tolist():
+    nodes, _, kinds, measured = _estimate_nodes(row, level, altitude_m)
+    # the worst of what choose_renderer compares; its nodes are the estimate's, as REFERENCE_RESOLUTION's suns
+    # are among every level's ray-march suns (tested)
+    compared = _compared(row, level, altitude_m)
+    if [sun for sun, _ in compared] != nodes.tolist():
         raise ValueError(f"REFERENCE_RESOLUTION has suns that the {level!r} level's RAY_MARCH_ERROR lacks")
-    values = np.array([value for _, value in bound])
+    values = np.array([value for _, value in compared])
     own = any(error for _, error in row.error)
     said = {"reference": "measured against the reference",
             "floor": "the ray march's, measured (the map measured less)",
@@ -355,9 +363,7 @@ def choose_renderer(sun_elevations_deg, budget, level="default", rows=RENDERERS,
     check_integer("frames", frames, 1, 10**9, optional=True)
     check_integer("pixels", pixels, 1, 2**31 - 1)
     check_real("altitude_m", altitude_m, 0.0, 1e8)
-    estimates = {row.method: error_over(with_resolution(estimated_error(row, level, altitude_m),
-                                                        level if row.on_ray_march else None), low, high)
-                 for row in rows}
+    estimates = {row.method: error_over(_compared(row, level, altitude_m), low, high) for row in rows}
     candidates = [row for row in rows if frames is not None or row.build_cpu_s == 0.0]
     for row in sorted(candidates, key=lambda r: r.cost_cpu_s(1 if frames is None else frames, pixels)):
         if estimates[row.method] <= budget:
